@@ -1,0 +1,1 @@
+"""Statistics of the perceptual test: rater filtering, ANOVA, Tukey HSD, mixed models, figures."""

@@ -1,0 +1,1 @@
+"""Motion generation: BVH import, features, FL and MoGlow flows, training, sampling, stimuli."""

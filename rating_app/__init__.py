@@ -1,0 +1,1 @@
+"""The crowd rating web app (Flask): sessions, familiarisation, rating trials, admin and export."""
