@@ -15,3 +15,17 @@ def shared_dir():
     if not SHARED.is_dir():
         pytest.fail(f"../shared is missing beside the checkout ({SHARED}); CI always has it")
     return SHARED
+
+
+def pytest_addoption(parser):
+    parser.addoption("--run-slow", action="store_true", help="also run tests marked slow (full-size end-to-end runs)")
+
+
+def pytest_collection_modifyitems(config, items):
+    import os
+    if config.getoption("--run-slow") or os.environ.get("RUN_SLOW") == "1":
+        return
+    skip = pytest.mark.skip(reason="slow: run with --run-slow (CI runs the short variant)")
+    for item in items:
+        if "slow" in item.keywords:
+            item.add_marker(skip)
