@@ -29,3 +29,23 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "slow" in item.keywords:
             item.add_marker(skip)
+
+
+# --- data (issue 2) ---
+def small_take_names(per_category=4):
+    """The `per_category` longest Bandai-Namco takes (by file size) of every locomotion category."""
+    from generation.prepare_data import category_of, find_takes, take_name
+    by_cat = {}
+    for f in find_takes(BANDAI):
+        by_cat.setdefault(category_of(f), []).append(f)
+    return sorted(take_name(f) for files in by_cat.values()
+                  for f in sorted(files, key=lambda p: (-p.stat().st_size, p.name))[:per_category])
+
+
+@pytest.fixture(scope="session")
+def small_dataset(tmp_path_factory):
+    """Path of a dataset.npz prepared from 4 real takes of every Bandai-Namco category (about a second)."""
+    from generation.prepare_data import prepare
+    out = tmp_path_factory.mktemp("small_dataset") / "dataset.npz"
+    prepare(BANDAI, out, takes=small_take_names(), workers=1, progress=False)
+    return out

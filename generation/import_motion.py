@@ -1,0 +1,63 @@
+"""Turn any BVH file into a motion clip .npz (CONTRACTS.md §1).
+
+    python -m generation.import_motion IN.bvh[.gz] OUT.npz [--scale 0.01] [--fps 20]
+
+All joints of the file, world positions by forward kinematics, times `--scale` (file units -> metres;
+default 0.01 for centimetre files), resampled to `--fps` when given (rotations are slerped, so bones
+keep their lengths). When the skeleton is one the project knows (Bandai-Namco, CMU/PFNN), the clip
+also gets the root `control` of its 21-joint body (features.to_features).
+"""
+import argparse
+import sys
+
+import numpy as np
+
+from .bvh import BvhError, read_bvh
+from .clip import ClipError, save_clip
+from .features import SKELETON_MAPS, bvh_world_positions, detect_skeleton, map_joints, to_features
+from .resample import clean_fps
+
+
+def import_motion(in_path, out_path, scale=0.01, fps=None):
+    """Convert one BVH file to a clip .npz; returns the joints array written [T, J, 3]."""
+    bvh = read_bvh(in_path)
+    if bvh.n_frames < 1:
+        raise BvhError(f"{in_path}:1: no frames")
+    fps_out = clean_fps(bvh.fps) if fps is None else float(fps)
+    pos = bvh_world_positions(bvh, fps_out if bvh.n_frames > 1 else None)
+    joints = (pos * scale).astype(np.float32)
+    extra = {}
+    try:
+        key = detect_skeleton(bvh)
+    except BvhError:
+        key = None
+    if key is not None and len(joints) > 1:
+        body = map_joints(pos, bvh.names, key) * SKELETON_MAPS[key]["scale"]
+        extra["control"] = to_features(body, fps_out)[1]
+    save_clip(out_path, joints, bvh.parents, bvh.names, fps_out, **extra)
+    return joints
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m generation.import_motion", description=__doc__.split("\n")[0])
+    ap.add_argument("input", help="BVH file (.bvh or .bvh.gz)")
+    ap.add_argument("output", help="clip .npz to write")
+    ap.add_argument("--scale", type=float, default=0.01, help="metres per file unit (default 0.01: centimetres)")
+    ap.add_argument("--fps", type=float, default=None, help="resample to this frame rate (default: keep the file's)")
+    args = ap.parse_args(argv)
+    try:
+        if not args.scale > 0 or (args.fps is not None and not args.fps > 0):
+            raise BvhError(f"{args.input}:0: --scale and --fps must be positive")
+        joints = import_motion(args.input, args.output, args.scale, args.fps)
+    except (BvhError, ClipError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:
+        print(f"error: {args.output}: cannot write ({e.strerror or e})", file=sys.stderr)
+        return 2
+    print(f"{args.output}: {joints.shape[0]} frames, {joints.shape[1]} joints")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,270 @@
+"""Prepare the MoGlow training data (CONTRACTS.md §2): BVH takes -> windows of features, split by take.
+
+    python -m generation.prepare_data [--data DIR] [--out FILE.npz] [--fps 20] [--window 80] [--stride 20]
+
+Per take: load (21 joints, metres, resampled), features (x [T, 63], c [T, 3]). Takes are split by take,
+seeded: from every locomotion category the same number of takes (`held_out`, fewer for small
+categories) goes to valid and to test, chosen among takes long enough for one window plus tau frames
+of history. Train takes are augmented (mirror, time reversal, both) at the take level, then every
+take is cut into windows of `window` frames every `stride` frames, plus one window ending at the last
+frame so that short takes lose no tail. Valid/test windows start at frame >= tau and carry the tau
+frames before them (`{split}_hist`, `{split}_hist_c`) so that MG can be seeded with real history.
+"""
+import argparse
+from concurrent.futures import ProcessPoolExecutor
+import os
+from pathlib import Path
+import sys
+
+import numpy as np
+
+from . import skeleton
+from .bvh import BvhError
+from .features import load_take, mirror, reverse, to_features
+
+DEFAULT_DATA = Path("..") / "shared" / "data" / "bandai-namco-locomotion"
+SPLITS = ("train", "valid", "test")
+AUG_NAMES = ("none", "mirror", "reverse", "mirror+reverse")
+
+# Bandai-Namco content name (from the file name) -> locomotion category (as in shared/data/MANIFEST.csv)
+CATEGORY_OF_CONTENT = {
+    "walk": "walk", "run": "run", "dash": "run_fast", "walk-back": "walk_backward",
+    "walk-left": "sidestep_left", "walk-right": "sidestep_right",
+    "walk-turn-left": "walk_turn_left", "walk-turn-right": "walk_turn_right",
+}
+
+
+class PrepareError(ValueError):
+    """Bad input to prepare(); the message names the file or option."""
+
+
+def take_name(path):
+    name = Path(path).name
+    for ext in (".gz", ".bvh"):
+        if name.endswith(ext):
+            name = name[: -len(ext)]
+    return name
+
+
+def category_of(path):
+    """Locomotion category of a take, from its Bandai-Namco file name `dataset-N_CONTENT_STYLE_NNN`."""
+    parts = take_name(path).split("_")
+    if len(parts) >= 3 and parts[1] in CATEGORY_OF_CONTENT:
+        return CATEGORY_OF_CONTENT[parts[1]]
+    return parts[1] if len(parts) >= 3 else "unknown"
+
+
+def find_takes(data_dir):
+    data_dir = Path(data_dir)
+    if not data_dir.is_dir():
+        raise PrepareError(f"{data_dir}: data directory not found")
+    files = sorted(p for p in data_dir.rglob("*") if p.name.endswith((".bvh", ".bvh.gz"))
+                   and not p.name.startswith("rest."))
+    if not files:
+        raise PrepareError(f"{data_dir}: no .bvh or .bvh.gz files found")
+    return files
+
+
+def default_data_dir():
+    """../shared/data/bandai-namco-locomotion relative to the cwd, or beside the repository root."""
+    for base in (Path.cwd(), Path(__file__).resolve().parents[1]):
+        cand = (base / DEFAULT_DATA).resolve()
+        if cand.is_dir():
+            return cand
+    return None
+
+
+def _load_features(args):
+    path, fps = args
+    joints = load_take(path, fps)
+    x, c = to_features(joints, fps)
+    return x, c
+
+
+def window_starts(n_frames, window, stride, first=0):
+    """Window starts first, first+stride, ... plus one window ending at the last frame (if it fits)."""
+    if n_frames - first < window:
+        return np.zeros(0, dtype=np.int64)
+    starts = list(range(first, n_frames - window + 1, stride))
+    if starts[-1] != n_frames - window:
+        starts.append(n_frames - window)
+    return np.array(starts, dtype=np.int64)
+
+
+def split_takes(categories, lengths, need, held_out, seed):
+    """Split index per take (0 train, 1 valid, 2 test): per category, k takes each to valid and test.
+
+    k = min(held_out, eligible // 3), where eligible takes have at least `need` frames; so every
+    category with three or more long-enough takes is represented in both held-out splits equally.
+    """
+    rng = np.random.default_rng(seed)
+    split = np.zeros(len(categories), dtype=np.int64)
+    for cat in sorted(set(categories)):
+        eligible = [i for i, (cc, n) in enumerate(zip(categories, lengths)) if cc == cat and n >= need]
+        k = min(held_out, len(eligible) // 3)
+        chosen = rng.permutation(np.array(eligible, dtype=np.int64))[: 2 * k]
+        split[chosen[:k]] = 1
+        split[chosen[k:]] = 2
+    return split
+
+
+def prepare(data_dir, out_path, fps=20.0, window=80, stride=20, seed=0, takes=None, tau=10, held_out=4,
+            workers=None, progress=True):
+    """Build the dataset .npz at `out_path`; returns a summary dict (see `summary_table`).
+
+    `takes`: optional subset, as paths or take names (with or without extension) under `data_dir`.
+    """
+    from tqdm import tqdm
+
+    files = find_takes(data_dir)
+    if takes is not None:
+        wanted = {take_name(t) for t in takes}
+        files = [f for f in files if take_name(f) in wanted]
+        missing = wanted - {take_name(f) for f in files}
+        if missing:
+            raise PrepareError(f"{data_dir}: takes not found: {', '.join(sorted(missing)[:5])}")
+    if window < 2 or stride < 1 or tau < 0:
+        raise PrepareError(f"window must be >= 2, stride >= 1, tau >= 0 (got {window}, {stride}, {tau})")
+
+    workers = workers or min(len(files), os.cpu_count() or 1)
+    jobs = [(str(f), float(fps)) for f in files]
+    bar = tqdm(total=len(jobs), desc="takes", unit="take", disable=not progress, file=sys.stderr)
+    feats = []
+    if workers <= 1:
+        for job in jobs:
+            feats.append(_load_features(job))
+            bar.update()
+    else:
+        with ProcessPoolExecutor(workers) as pool:
+            for res in pool.map(_load_features, jobs, chunksize=max(1, len(jobs) // (8 * workers))):
+                feats.append(res)
+                bar.update()
+    bar.close()
+
+    names = [take_name(f) for f in files]
+    cats = [category_of(f) for f in files]
+    lengths = [x.shape[0] for x, _ in feats]
+    split = split_takes(cats, lengths, tau + window, held_out, seed)
+
+    out = {s: {k: [] for k in ("x", "c", "labels", "take", "start", "aug", "hist", "hist_c")} for s in SPLITS}
+    for i, (x, c) in enumerate(feats):
+        s = SPLITS[split[i]]
+        variants = [(x, c, 0)]
+        if s == "train":
+            xm, cm = mirror(x, c)
+            variants += [(xm, cm, 1), (*reverse(x, c), 2), (*reverse(xm, cm), 3)]
+        first = 0 if s == "train" else tau
+        starts = window_starts(len(x), window, stride, first)
+        if len(starts) == 0:
+            continue
+        idx = starts[:, None] + np.arange(window)
+        for xv, cv, aug in variants:
+            d = out[s]
+            d["x"].append(xv[idx])
+            d["c"].append(cv[idx])
+            d["labels"] += [cats[i]] * len(starts)
+            d["take"] += [names[i]] * len(starts)
+            d["start"].append(starts)
+            d["aug"].append(np.full(len(starts), aug))
+            if s != "train":
+                hidx = starts[:, None] - tau + np.arange(tau)
+                d["hist"].append(xv[hidx])
+                d["hist_c"].append(cv[hidx])
+
+    arrays = {}
+    for s in SPLITS:
+        d = out[s]
+        n = len(d["labels"])
+        arrays[f"{s}_x"] = np.concatenate(d["x"]) if n else np.zeros((0, window, skeleton.POSE_DIM), np.float32)
+        arrays[f"{s}_c"] = np.concatenate(d["c"]) if n else np.zeros((0, window, skeleton.CONTROL_DIM), np.float32)
+        arrays[f"{s}_labels"] = np.array(d["labels"], dtype=str)
+        arrays[f"{s}_take"] = np.array(d["take"], dtype=str)
+        arrays[f"{s}_start"] = np.concatenate(d["start"]) if n else np.zeros(0, np.int64)
+        arrays[f"{s}_aug"] = np.concatenate(d["aug"]) if n else np.zeros(0, np.int64)
+        if s != "train":
+            arrays[f"{s}_hist"] = (np.concatenate(d["hist"]) if n
+                                   else np.zeros((0, tau, skeleton.POSE_DIM), np.float32))
+            arrays[f"{s}_hist_c"] = (np.concatenate(d["hist_c"]) if n
+                                     else np.zeros((0, tau, skeleton.CONTROL_DIM), np.float32))
+    if len(arrays["train_x"]) == 0:
+        raise PrepareError(f"{data_dir}: no training windows (takes shorter than window={window} frames?)")
+
+    # Standardisation from the training split only. Some dimensions are constant by construction
+    # (the hips' x and z in the root frame are 0), hence the floor on the standard deviation.
+    tx = arrays["train_x"].reshape(-1, skeleton.POSE_DIM).astype(np.float64)
+    tc = arrays["train_c"].reshape(-1, skeleton.CONTROL_DIM).astype(np.float64)
+    arrays.update(
+        x_mean=tx.mean(0).astype(np.float32), x_std=np.maximum(tx.std(0), 1e-3).astype(np.float32),
+        c_mean=tc.mean(0).astype(np.float32), c_std=np.maximum(tc.std(0), 1e-3).astype(np.float32),
+        fps=np.float64(fps), window=np.int64(window), tau=np.int64(tau), stride=np.int64(stride),
+        seed=np.int64(seed), joint_names=np.array(skeleton.JOINT_NAMES, dtype=str), parents=skeleton.PARENTS,
+        aug_names=np.array(AUG_NAMES, dtype=str),
+    )
+    out_path = Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out_path.with_name(out_path.name + ".tmp.npz")
+    np.savez(tmp, **arrays)  # uncompressed: mocap floats barely compress and saving stays fast
+    os.replace(tmp, out_path)
+
+    rows = []
+    for cat in sorted(set(cats)):
+        for si, s in enumerate(SPLITS):
+            members = [i for i in range(len(files)) if cats[i] == cat and split[i] == si]
+            n_win = int(np.sum((arrays[f"{s}_labels"] == cat) & (arrays[f"{s}_aug"] == 0)))
+            rows.append(dict(category=cat, split=s, takes=len(members),
+                             minutes=sum(lengths[i] for i in members) / fps / 60, windows=n_win,
+                             windows_augmented=int(np.sum(arrays[f"{s}_labels"] == cat))))
+    return dict(out=str(out_path), n_takes=len(files), rows=rows,
+                n_windows={s: int(len(arrays[f"{s}_x"])) for s in SPLITS})
+
+
+def summary_table(summary):
+    """The closing summary as text: takes, minutes and windows per category and split."""
+    import pandas as pd
+
+    df = pd.DataFrame(summary["rows"])
+    wide = df.pivot(index="category", columns="split", values=["takes", "minutes", "windows"])
+    wide = wide.reindex(columns=[(m, s) for m in ("takes", "minutes", "windows") for s in SPLITS])
+    wide.loc["total"] = wide.sum()
+    wide.columns = [f"{m}_{s}" for m, s in wide.columns]
+    for col in wide.columns:
+        wide[col] = wide[col].round(1) if col.startswith("minutes") else wide[col].astype(int)
+    n = summary["n_windows"]
+    return (wide.to_string() + f"\nwindows in file (train incl. mirror/reverse augmentation x4): "
+            f"train {n['train']}, valid {n['valid']}, test {n['test']} -> {summary['out']}")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m generation.prepare_data", description=__doc__.split("\n")[0])
+    ap.add_argument("--data", help="folder of BVH takes (default: ../shared/data/bandai-namco-locomotion)")
+    ap.add_argument("--out", default="dataset.npz", help="output .npz (default: dataset.npz)")
+    ap.add_argument("--fps", type=float, default=20.0)
+    ap.add_argument("--window", type=int, default=80, help="frames per window (default 80 = 4 s)")
+    ap.add_argument("--stride", type=int, default=20, help="frames between window starts (default 20)")
+    ap.add_argument("--tau", type=int, default=10, help="history frames before valid/test windows")
+    ap.add_argument("--held-out", type=int, default=4, help="takes per category in valid and in test")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    args = ap.parse_args(argv)
+    try:
+        data = args.data
+        if data is None:
+            data = default_data_dir()
+            if data is None:
+                raise PrepareError(f"no --data given and {DEFAULT_DATA} not found here or beside the "
+                                   "repository; pass --data DIR (a folder of .bvh/.bvh.gz takes)")
+        summary = prepare(data, args.out, fps=args.fps, window=args.window, stride=args.stride, seed=args.seed,
+                          tau=args.tau, held_out=args.held_out, workers=args.workers, progress=not args.quiet)
+    except (BvhError, PrepareError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
+    print(summary_table(summary))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,119 @@
+"""Resampling joint rotations in time, so that resampled skeletons stay rigid.
+
+Joint positions are never interpolated directly (a linearly interpolated bone is shorter than the bone);
+instead every joint's local rotation is turned into a unit quaternion, slerped (and low-passed first
+when decimating by 2 or more), and forward kinematics is run on the result.
+Quaternions are (w, x, y, z) numpy arrays in the last axis.
+"""
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from .bvh import _AXIS
+
+
+def quat_mul(a, b):
+    """Hamilton product a * b, broadcasting over leading axes."""
+    aw, ax, ay, az = np.moveaxis(a, -1, 0)
+    bw, bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz,
+                     aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw], axis=-1)
+
+
+def quat_to_matrix(q):
+    """Rotation matrices [..., 3, 3] of unit quaternions [..., 4]."""
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+
+
+def local_quaternions(bvh, frames=None):
+    """Local rotations as quaternions [T, J, 4] and translations [T, J, 3] of a `bvh.Bvh`.
+
+    Built straight from the Euler channels (product of one quaternion per rotation channel, in file
+    order, matching `bvh.local_transforms`), which is cheaper and exact compared with matrix -> quaternion.
+    """
+    motion = bvh.motion if frames is None else bvh.motion[frames]
+    T, J = motion.shape[0], len(bvh.names)
+    q = np.zeros((T, J, 4))
+    q[..., 0] = 1.0
+    trans = np.broadcast_to(bvh.offsets, (T, J, 3)).copy()
+    for j, (chans, col) in enumerate(zip(bvh.channels, bvh.channel_columns())):
+        qj = None
+        for k, ch in enumerate(chans):
+            axis = _AXIS[ch[0]]
+            if ch.endswith("position"):
+                trans[:, j, axis] = motion[:, col + k]
+                continue
+            half = np.radians(motion[:, col + k]) / 2
+            qa = np.zeros((T, 4))
+            qa[:, 0] = np.cos(half)
+            qa[:, 1 + axis] = np.sin(half)
+            qj = qa if qj is None else quat_mul(qj, qa)
+        if qj is not None:
+            q[:, j] = qj
+    return q, trans
+
+
+def make_continuous(q):
+    """Flip signs along time (axis 0) so consecutive quaternions lie in the same hemisphere."""
+    dots = np.sum(q[1:] * q[:-1], axis=-1)
+    flips = np.concatenate([np.zeros((1,) + dots.shape[1:], dtype=np.int64), np.cumsum(dots < 0, axis=0)])
+    return np.where((flips % 2 == 1)[..., None], -q, q)
+
+
+def slerp(q0, q1, w):
+    """Spherical interpolation between unit quaternions q0, q1 [..., 4] with weights w [...] in [0, 1]."""
+    dot = np.sum(q0 * q1, axis=-1)
+    q1 = np.where((dot < 0)[..., None], -q1, q1)
+    dot = np.abs(dot)
+    theta = np.arccos(np.clip(dot, -1.0, 1.0))
+    sin = np.sin(theta)
+    small = sin < 1e-8
+    safe = np.where(small, 1.0, sin)
+    a = np.where(small, 1.0 - w, np.sin((1.0 - w) * theta) / safe)
+    b = np.where(small, w, np.sin(w * theta) / safe)
+    out = a[..., None] * q0 + b[..., None] * q1
+    return out / np.linalg.norm(out, axis=-1, keepdims=True)
+
+
+def resample_times(n_frames, fps_in, fps_out):
+    """Fractional input-frame positions of the output frames (covering the same time span)."""
+    duration = (n_frames - 1) / fps_in
+    n_out = int(np.floor(duration * fps_out + 1e-6)) + 1
+    return np.arange(n_out) * (fps_in / fps_out)
+
+
+def resample_local(q, trans, fps_in, fps_out):
+    """Resample local rotations q [T, J, 4] and translations [T, J, 3] from fps_in to fps_out.
+
+    Decimating by a factor r >= 2 first low-passes both with a Gaussian of sigma r/2 input frames
+    (anti-aliasing); the quaternions are then renormalised. Any ratio is then sampled by slerp/lerp
+    at the exact output times (30 -> 20 fps interpolates between frames instead of dropping any).
+    """
+    if abs(fps_in - fps_out) < 1e-9 * fps_out:
+        return q, trans
+    q = make_continuous(q)
+    ratio = fps_in / fps_out
+    if ratio >= 2:
+        sigma = ratio / 2
+        q = gaussian_filter1d(q, sigma, axis=0, mode="nearest")
+        q /= np.linalg.norm(q, axis=-1, keepdims=True)
+        trans = gaussian_filter1d(trans, sigma, axis=0, mode="nearest")
+    u = resample_times(q.shape[0], fps_in, fps_out)
+    i0 = np.minimum(np.floor(u).astype(np.int64), q.shape[0] - 1)
+    i1 = np.minimum(i0 + 1, q.shape[0] - 1)
+    w = (u - i0)[:, None]
+    q_out = slerp(q[i0], q[i1], np.broadcast_to(w, q[i0].shape[:-1]))
+    t_out = trans[i0] * (1 - w[..., None]) + trans[i1] * w[..., None]
+    return q_out, t_out
+
+
+def clean_fps(fps):
+    """Frame rates stored as rounded frame times (0.0333333 s) snap back to the intended rate."""
+    r = round(fps)
+    return float(r) if r > 0 and abs(fps - r) < 1e-3 * r else float(fps)
