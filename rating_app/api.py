@@ -1,0 +1,224 @@
+"""The rater JSON API (CONTRACTS §5). The page uses it; so do the simulated crowd and the load tests.
+
+Every answer is committed before it is sent, so an acknowledged rating survives a crash of the server.
+The session token in the URL is the only credential (no cookies), which makes the API immune to CSRF.
+"""
+from __future__ import annotations
+
+import math
+import random
+import re
+import secrets
+
+from flask import Blueprint, abort, current_app, jsonify, request, url_for
+from sqlalchemy import select, update
+from sqlalchemy.dialects.postgresql import insert as pg_insert
+from sqlalchemy.dialects.sqlite import insert as sqlite_insert
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
+
+from .assign import StudyFull, plan_trials
+from .db import Event, Rater, Rating, Trial, is_sqlite, utcnow
+
+bp = Blueprint("api", __name__, url_prefix="/api")
+
+TOKEN = re.compile(r"^[A-Za-z0-9_-]{16,64}$")
+EXTERNAL = re.compile(r"^[A-Za-z0-9_.:@-]{1,128}$")
+EVENT_KINDS = ("video_error", "video_stalled", "page_error")
+MAX_WATCHED_MS = 24 * 3600 * 1000
+
+
+def engine():
+    return current_app.extensions["rating_app"]["engine"]
+
+
+def json_body(allowed: tuple[str, ...], required: tuple[str, ...] = (), optional_body=False) -> dict:
+    if optional_body and not request.get_data(cache=True):
+        body = {}
+    else:
+        if not request.is_json:
+            abort(415, "expected a JSON body (Content-Type: application/json)")
+        body = request.get_json(silent=True)
+        if not isinstance(body, dict):
+            abort(400, "body must be a JSON object")
+    unknown = sorted(set(body) - set(allowed))
+    if unknown:
+        abort(400, f"unknown field '{unknown[0]}'")
+    for k in required:
+        if k not in body:
+            abort(400, f"missing field '{k}'")
+    return body
+
+
+def _int_field(body, name, lo, hi, nullable=False):
+    v = body.get(name)
+    if v is None and nullable:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or (isinstance(v, float) and not (
+            math.isfinite(v) and v.is_integer())):
+        abort(400, f"field '{name}' must be an integer")
+    v = int(v)
+    if not lo <= v <= hi:
+        abort(400, f"field '{name}' must be between {lo} and {hi}")
+    return v
+
+
+def _ext(body, name):
+    v = body.get(name)
+    if v is None:
+        return None
+    if not isinstance(v, str) or not EXTERNAL.match(v):
+        abort(400, f"field '{name}' must be 1-128 characters of letters, digits and _.:@-")
+    return v
+
+
+def load_rater(s: Session, token: str) -> Rater:
+    if not TOKEN.match(token):
+        abort(404, "unknown session")
+    rater = s.scalar(select(Rater).where(Rater.token == token))
+    if rater is None:
+        abort(404, "unknown session")
+    return rater
+
+
+def _session_reply(s: Session, rater: Rater, status: int):
+    trials = s.execute(select(Trial.phase).where(Trial.rater_pk == rater.id)).scalars().all()
+    return jsonify(session=rater.token, rater_id=rater.rater_id, n_trials=len(trials),
+                   n_training=trials.count("training"), n_rating=trials.count("rating"),
+                   resumed=status == 200), status
+
+
+@bp.post("/sessions")
+def create_session():
+    body = json_body(("external_id", "study_id", "session_id"), optional_body=True)
+    external_id, study_id, ext_session = _ext(body, "external_id"), _ext(body, "study_id"), _ext(body, "session_id")
+    cfg = current_app.config
+    with Session(engine()) as s:
+        try:
+            with s.begin():
+                if external_id is not None:
+                    # The same participant again (reload, second tab, retried request): resume.
+                    old = s.scalar(select(Rater).where(Rater.external_id == external_id))
+                    if old is not None:
+                        return _session_reply(s, old, 200)
+                rng = random.Random(secrets.randbits(64))
+                try:
+                    plan = plan_trials(s, rng, cfg["RATINGS_PER_CLIP"], cfg["CLIPS_PER_RATER"],
+                                       cfg["SLOT_TIMEOUT_S"])
+                except StudyFull as e:
+                    return jsonify(error=str(e), full=True), 409
+                now = utcnow()
+                rater = Rater(token=secrets.token_urlsafe(24), rater_id="r" + secrets.token_hex(6),
+                              external_id=external_id, study_id=study_id, external_session=ext_session,
+                              created_at=now, last_seen=now,
+                              completion_code=cfg["COMPLETION_CODE"] or secrets.token_hex(4).upper())
+                s.add(rater)
+                s.flush()
+                counters = {"training": 0, "rating": 0}
+                for pos, (clip_id, phase) in enumerate(plan):
+                    counters[phase] += 1
+                    s.add(Trial(rater_pk=rater.id, clip_id=clip_id, phase=phase, position=pos,
+                                index=counters[phase], released=False))
+                s.flush()
+                return _session_reply(s, rater, 201)
+        except IntegrityError:
+            # Two concurrent requests with the same external id: the other one won; resume it.
+            if external_id is None:
+                raise
+            with s.begin():
+                old = s.scalar(select(Rater).where(Rater.external_id == external_id))
+                if old is None:
+                    raise
+                return _session_reply(s, old, 200)
+
+
+def _completion(rater: Rater) -> dict:
+    out = {"done": True, "completion_code": rater.completion_code}
+    url = current_app.config["COMPLETION_URL"]
+    if url:
+        out["redirect_url"] = url.replace("{code}", rater.completion_code)
+    return out
+
+
+@bp.get("/sessions/<token>/next")
+def next_trial(token):
+    with Session(engine()) as s, s.begin():
+        rater = load_rater(s, token)
+        now = utcnow()
+        rater.last_seen = now
+        trial = s.scalar(select(Trial).where(Trial.rater_pk == rater.id, Trial.answered_at.is_(None),
+                                             Trial.released.is_(False)).order_by(Trial.position).limit(1))
+        if trial is None:
+            if rater.completed_at is None:
+                rater.completed_at = now
+            return jsonify(_completion(rater))
+        if trial.served_at is None:
+            trial.served_at = now
+        of = s.scalar(select(Trial.index).where(Trial.rater_pk == rater.id, Trial.phase == trial.phase)
+                      .order_by(Trial.index.desc()).limit(1))
+        return jsonify(trial={
+            "trial_id": trial.id, "clip_id": trial.clip_id,
+            "video_url": url_for("pages.video", name=trial.clip_id + ".mp4"),
+            "phase": trial.phase, "index": trial.index, "of": of})
+
+
+def _insert_ignore(s: Session):
+    return (sqlite_insert if is_sqlite(s.get_bind()) else pg_insert)(Rating)
+
+
+@bp.post("/sessions/<token>/ratings")
+def post_rating(token):
+    body = json_body(("trial_id", "rating", "watched_ms"), required=("trial_id",))
+    trial_id = _int_field(body, "trial_id", 1, 2**31 - 1)
+    watched_ms = _int_field(body, "watched_ms", 0, MAX_WATCHED_MS, nullable=True)
+    with Session(engine()) as s, s.begin():
+        rater = load_rater(s, token)
+        trial = s.scalar(select(Trial).where(Trial.id == trial_id, Trial.rater_pk == rater.id))
+        if trial is None:
+            abort(404, "unknown trial for this session")
+        now = utcnow()
+        rater.last_seen = now
+        if trial.phase == "training":
+            if body.get("rating") is not None:
+                abort(400, "field 'rating' must be null for a familiarisation trial")
+            if trial.served_at is None:
+                abort(409, "this trial has not been shown yet")
+            res = s.execute(update(Trial).where(Trial.id == trial.id, Trial.answered_at.is_(None))
+                            .values(answered_at=now))
+            return (jsonify(stored=True), 201) if res.rowcount == 1 else (jsonify(stored=False, duplicate=True), 200)
+        if "rating" not in body:
+            abort(400, "missing field 'rating'")
+        rating = _int_field(body, "rating", 1, 5)
+        if trial.served_at is None:
+            abort(409, "this trial has not been shown yet")
+        stmt = _insert_ignore(s).values(trial_pk=trial.id, rater_pk=rater.id, clip_id=trial.clip_id,
+                                        rating=rating, watched_ms=watched_ms, submitted_at=now)
+        res = s.execute(stmt.on_conflict_do_nothing(index_elements=["trial_pk"]))
+        if res.rowcount == 1:
+            s.execute(update(Trial).where(Trial.id == trial.id).values(answered_at=now))
+            return jsonify(stored=True), 201
+        stored = s.scalar(select(Rating.rating).where(Rating.trial_pk == trial.id))
+        return jsonify(stored=False, duplicate=True, rating=stored), 200
+
+
+@bp.post("/sessions/<token>/events")
+def post_event(token):
+    body = json_body(("trial_id", "kind", "detail"), required=("kind",))
+    kind = body["kind"]
+    if kind not in EVENT_KINDS:
+        abort(400, f"field 'kind' must be one of {', '.join(EVENT_KINDS)}")
+    detail = body.get("detail") or ""
+    if not isinstance(detail, str):
+        abort(400, "field 'detail' must be a string")
+    detail = detail[:500]
+    trial_id = _int_field(body, "trial_id", 1, 2**31 - 1, nullable=True)
+    with Session(engine()) as s, s.begin():
+        rater = load_rater(s, token)
+        clip = None
+        if trial_id is not None:
+            clip = s.scalar(select(Trial.clip_id).where(Trial.id == trial_id, Trial.rater_pk == rater.id))
+            if clip is None:
+                abort(404, "unknown trial for this session")
+        s.add(Event(rater_pk=rater.id, trial_pk=trial_id, kind=kind, detail=detail, created_at=utcnow()))
+    current_app.logger.warning("client %s: rater %s clip %s: %s", kind, rater.rater_id, clip, detail)
+    return jsonify(logged=True), 201

@@ -1,0 +1,180 @@
+"""The store: SQLAlchemy models and engine set-up (SQLite file with WAL by default, PostgreSQL by URL).
+
+One row per rater session (`Rater`), one per planned trial (`Trial`), one per stored rating (`Rating`,
+unique per trial so a repeated submission can never be counted twice), plus playback events and the
+clip table copied from the manifest (so an export needs only the database).
+"""
+from __future__ import annotations
+
+import contextlib
+import datetime as dt
+import fcntl
+import os
+from pathlib import Path
+
+from sqlalchemy import (Boolean, CheckConstraint, DateTime, Float, ForeignKey, Integer, String,
+                        UniqueConstraint, create_engine, event, select, text)
+from sqlalchemy.engine import Engine, make_url
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+DEFAULT_DB = "sqlite:///ratings.sqlite"
+
+
+def utcnow() -> dt.datetime:
+    """Naive UTC timestamps everywhere (SQLite keeps no zone); exported with a 'Z'."""
+    return dt.datetime.now(dt.timezone.utc).replace(tzinfo=None)
+
+
+class Base(DeclarativeBase):
+    pass
+
+
+class Clip(Base):
+    __tablename__ = "clips"
+    clip_id: Mapped[str] = mapped_column(String(64), primary_key=True)
+    condition: Mapped[str] = mapped_column(String(64))
+    role: Mapped[str] = mapped_column(String(16), index=True)
+    item: Mapped[str] = mapped_column(String(128), default="")
+    frames: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    fps: Mapped[float | None] = mapped_column(Float, nullable=True)
+
+
+class Rater(Base):
+    """One rater session. `token` is the secret capability used in API URLs; `rater_id` is exported."""
+    __tablename__ = "raters"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    token: Mapped[str] = mapped_column(String(64), unique=True)
+    rater_id: Mapped[str] = mapped_column(String(32), unique=True)
+    external_id: Mapped[str | None] = mapped_column(String(128), unique=True, nullable=True)
+    study_id: Mapped[str | None] = mapped_column(String(128), nullable=True)
+    external_session: Mapped[str | None] = mapped_column(String(128), nullable=True)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime)
+    last_seen: Mapped[dt.datetime] = mapped_column(DateTime, index=True)
+    completed_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
+    completion_code: Mapped[str] = mapped_column(String(64))
+
+
+class Trial(Base):
+    """A clip planned for a rater, in the rater's own random order (`position`)."""
+    __tablename__ = "trials"
+    __table_args__ = (UniqueConstraint("rater_pk", "clip_id"), UniqueConstraint("rater_pk", "position"))
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    rater_pk: Mapped[int] = mapped_column(ForeignKey("raters.id"), index=True)
+    clip_id: Mapped[str] = mapped_column(ForeignKey("clips.clip_id"), index=True)
+    phase: Mapped[str] = mapped_column(String(16))          # training | rating
+    position: Mapped[int] = mapped_column(Integer)          # 0.. over the whole session
+    index: Mapped[int] = mapped_column(Integer)             # 1.. within the phase
+    served_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
+    answered_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
+    # An abandoned session's unanswered slots are released so other raters can take the clip.
+    released: Mapped[bool] = mapped_column(Boolean, default=False)
+
+
+class Rating(Base):
+    __tablename__ = "ratings"
+    __table_args__ = (CheckConstraint("rating BETWEEN 1 AND 5", name="rating_range"),)
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    trial_pk: Mapped[int] = mapped_column(ForeignKey("trials.id"), unique=True)   # stored once per trial
+    rater_pk: Mapped[int] = mapped_column(ForeignKey("raters.id"), index=True)
+    clip_id: Mapped[str] = mapped_column(ForeignKey("clips.clip_id"), index=True)
+    rating: Mapped[int] = mapped_column(Integer)
+    watched_ms: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    submitted_at: Mapped[dt.datetime] = mapped_column(DateTime)
+
+
+class Event(Base):
+    """Client-reported problems (failed playback, ...), also written to the server log."""
+    __tablename__ = "events"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    rater_pk: Mapped[int | None] = mapped_column(ForeignKey("raters.id"), nullable=True)
+    trial_pk: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    kind: Mapped[str] = mapped_column(String(32))
+    detail: Mapped[str] = mapped_column(String(500), default="")
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime)
+
+
+class Lock(Base):
+    """A single row taken FOR UPDATE while assigning clips, so concurrent sessions see each other's slots."""
+    __tablename__ = "locks"
+    name: Mapped[str] = mapped_column(String(32), primary_key=True)
+
+
+def normalise_url(url: str | None) -> str:
+    url = url or os.environ.get("DATABASE_URL") or DEFAULT_DB
+    if url.startswith("postgres://"):
+        url = "postgresql://" + url[len("postgres://"):]
+    if url.startswith("postgresql://"):
+        url = "postgresql+psycopg://" + url[len("postgresql://"):]
+    return url
+
+
+def is_sqlite(engine: Engine) -> bool:
+    return engine.dialect.name == "sqlite"
+
+
+def make_engine(url: str | None = None) -> Engine:
+    url = normalise_url(url)
+    if url.startswith("sqlite"):
+        engine = create_engine(url, connect_args={"timeout": 30, "check_same_thread": False})
+
+        @event.listens_for(engine, "connect")
+        def _sqlite_connect(dbapi_conn, _record):
+            dbapi_conn.isolation_level = None            # we issue BEGIN ourselves
+            cur = dbapi_conn.cursor()
+            cur.execute("PRAGMA journal_mode=WAL")
+            cur.execute("PRAGMA synchronous=FULL")       # a commit survives a crash of the machine too
+            cur.execute("PRAGMA foreign_keys=ON")
+            cur.execute("PRAGMA busy_timeout=30000")
+            cur.close()
+
+        @event.listens_for(engine, "begin")
+        def _sqlite_begin(conn):
+            # Take the write lock up front: a read-then-write transaction can then never fail on a
+            # stale snapshot when several worker processes share the file.
+            conn.exec_driver_sql("BEGIN IMMEDIATE")
+        return engine
+    return create_engine(url, pool_size=10, max_overflow=20, pool_pre_ping=True, pool_recycle=1800)
+
+
+@contextlib.contextmanager
+def _init_lock(engine: Engine):
+    """Serialise schema creation between processes starting at once (gunicorn workers)."""
+    if is_sqlite(engine):
+        db = make_url(str(engine.url)).database
+        if not db or db == ":memory:":
+            yield
+            return
+        with open(str(Path(db)) + ".init-lock", "w") as fh:
+            fcntl.flock(fh, fcntl.LOCK_EX)
+            try:
+                yield
+            finally:
+                fcntl.flock(fh, fcntl.LOCK_UN)
+    else:
+        with engine.connect() as conn:
+            conn.execute(text("SELECT pg_advisory_lock(715517)"))
+            try:
+                yield
+            finally:
+                conn.execute(text("SELECT pg_advisory_unlock(715517)"))
+                conn.commit()
+
+
+def init_db(engine: Engine, clips=None) -> None:
+    """Create the schema (idempotent) and upsert the manifest's clips."""
+    from sqlalchemy.orm import Session
+    with _init_lock(engine):
+        Base.metadata.create_all(engine)
+        with Session(engine) as s, s.begin():
+            if s.get(Lock, "assign") is None:
+                s.add(Lock(name="assign"))
+            if clips:
+                have = {c.clip_id: c for c in s.scalars(select(Clip))}
+                for c in clips:
+                    row = have.get(c.clip_id)
+                    if row is None:
+                        s.add(Clip(clip_id=c.clip_id, condition=c.condition, role=c.role, item=c.item,
+                                   frames=c.frames, fps=c.fps))
+                    else:
+                        row.condition, row.role, row.item = c.condition, c.role, c.item
+                        row.frames, row.fps = c.frames, c.fps

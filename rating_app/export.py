@@ -1,0 +1,93 @@
+"""ratings.csv (CONTRACTS §6) and progress figures, straight from the database."""
+from __future__ import annotations
+
+import csv
+import io
+
+from sqlalchemy import func, select
+from sqlalchemy.engine import Engine
+from sqlalchemy.orm import Session
+
+from .db import Clip, Event, Rater, Rating, Trial
+
+COLUMNS = ("rater_id", "clip_id", "condition", "rating", "role", "item", "trial_index", "watched_ms",
+           "submitted_at", "external_id", "study_id", "rater_completed")
+
+
+def iter_rows(s: Session):
+    q = (select(Rater.rater_id, Rating.clip_id, Clip.condition, Rating.rating, Clip.role, Clip.item, Trial.index,
+                Rating.watched_ms, Rating.submitted_at, Rater.external_id, Rater.study_id, Rater.completed_at)
+         .join(Trial, Trial.id == Rating.trial_pk).join(Rater, Rater.id == Rating.rater_pk)
+         .join(Clip, Clip.clip_id == Rating.clip_id).order_by(Rater.id, Trial.index))
+    for (rater_id, clip_id, cond, rating, role, item, idx, watched, at, ext, study, completed) in s.execute(q):
+        yield {"rater_id": rater_id, "clip_id": clip_id, "condition": cond, "rating": rating, "role": role,
+               "item": item, "trial_index": idx, "watched_ms": "" if watched is None else watched,
+               "submitted_at": at.strftime("%Y-%m-%dT%H:%M:%S.%fZ"), "external_id": ext or "",
+               "study_id": study or "", "rater_completed": int(completed is not None)}
+
+
+def export_csv(engine: Engine, out=None) -> str | int:
+    """Write ratings.csv to the file object `out` (returns the row count) or return it as a string."""
+    buf = out if out is not None else io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=COLUMNS, lineterminator="\n")
+    w.writeheader()
+    n = 0
+    with Session(engine) as s:
+        for row in iter_rows(s):
+            w.writerow(row)
+            n += 1
+    return n if out is not None else buf.getvalue()
+
+
+def progress(engine: Engine, target: int) -> dict:
+    """Counts for the dashboard: per clip, per condition, per rater (with catch failures)."""
+    with Session(engine) as s:
+        clips = s.execute(select(Clip.clip_id, Clip.condition, Clip.role, Clip.item)
+                          .where(Clip.role != "training").order_by(Clip.role, Clip.condition, Clip.clip_id)).all()
+        done = dict(s.execute(select(Rating.clip_id, func.count()).group_by(Rating.clip_id)).all())
+        mean = dict(s.execute(select(Rating.clip_id, func.avg(Rating.rating)).group_by(Rating.clip_id)).all())
+        pending = dict(s.execute(select(Trial.clip_id, func.count())
+                                 .join(Rater, Rater.id == Trial.rater_pk)
+                                 .where(Trial.phase == "rating", Trial.answered_at.is_(None),
+                                        Trial.released.is_(False), Rater.completed_at.is_(None))
+                                 .group_by(Trial.clip_id)).all())
+        per_clip = [{"clip_id": c, "condition": cond, "role": role, "item": item, "ratings": done.get(c, 0),
+                     "in_progress": pending.get(c, 0), "target": target if role == "test" else None,
+                     "mean": None if mean.get(c) is None else round(float(mean[c]), 2)}
+                    for c, cond, role, item in clips]
+        per_cond = {}
+        for r in per_clip:
+            d = per_cond.setdefault(r["condition"], {"condition": r["condition"], "role": r["role"], "clips": 0,
+                                                     "ratings": 0, "target": 0, "_sum": 0.0})
+            d["clips"] += 1
+            d["ratings"] += r["ratings"]
+            d["target"] += r["target"] or 0
+            d["_sum"] += (r["mean"] or 0) * r["ratings"]
+        for d in per_cond.values():
+            d["mean"] = round(d.pop("_sum") / d["ratings"], 2) if d["ratings"] else None
+        n_rated = dict(s.execute(select(Rating.rater_pk, func.count()).group_by(Rating.rater_pk)).all())
+        n_trials = dict(s.execute(select(Trial.rater_pk, func.count()).where(Trial.phase == "rating")
+                                  .group_by(Trial.rater_pk)).all())
+        fails = dict(s.execute(select(Rating.rater_pk, func.count()).join(Clip, Clip.clip_id == Rating.clip_id)
+                               .where(Clip.role == "catch", Rating.rating >= 3).group_by(Rating.rater_pk)).all())
+        raters = [{"rater_id": r.rater_id, "external_id": r.external_id or "", "started": r.created_at,
+                   "last_seen": r.last_seen, "completed": r.completed_at is not None,
+                   "rated": n_rated.get(r.id, 0), "of": n_trials.get(r.id, 0), "catch_failures": fails.get(r.id, 0)}
+                  for r in s.scalars(select(Rater).order_by(Rater.id))]
+        events = s.execute(select(Event.created_at, Event.kind, Event.detail).order_by(Event.id.desc())
+                           .limit(50)).all()
+    tests = [r for r in per_clip if r["role"] == "test"]
+    return {
+        "target": target,
+        "test_clips": len(tests),
+        "clips_complete": sum(r["ratings"] >= target for r in tests),
+        "ratings_test": sum(r["ratings"] for r in tests),
+        "ratings_needed": target * len(tests),
+        "full": bool(tests) and all(r["ratings"] >= target for r in tests),
+        "per_clip": per_clip,
+        "per_condition": list(per_cond.values()),
+        "raters": raters,
+        "raters_completed": sum(r["completed"] for r in raters),
+        "raters_failed_catch": sum(r["catch_failures"] > 0 for r in raters),
+        "events": [{"at": a, "kind": k, "detail": d} for a, k, d in events],
+    }

@@ -1,0 +1,53 @@
+"""The rater's page (one HTML page driven by static/study.js through the JSON API) and the videos."""
+from __future__ import annotations
+
+import re
+
+from flask import Blueprint, abort, current_app, jsonify, render_template, request, send_file
+from sqlalchemy.orm import Session
+
+from .api import EXTERNAL
+from .assign import is_full
+
+bp = Blueprint("pages", __name__)
+
+VIDEO_NAME = re.compile(r"^([a-z0-9]{12,64})\.mp4$")
+# Query parameters Prolific appends to a study URL ({{%PROLIFIC_PID%}} etc.), plus generic fallbacks.
+ID_PARAMS = {"external_id": ("PROLIFIC_PID", "participant", "worker_id", "pid"),
+             "study_id": ("STUDY_ID", "study"),
+             "session_id": ("SESSION_ID", "session")}
+
+
+@bp.get("/")
+def index():
+    ids = {}
+    for key, names in ID_PARAMS.items():
+        for n in names:
+            v = request.args.get(n)
+            if v and EXTERNAL.match(v):
+                ids[key] = v
+                break
+    ext = current_app.extensions["rating_app"]
+    with Session(ext["engine"]) as s:
+        full = is_full(s, current_app.config["RATINGS_PER_CLIP"]) or not ext["clips"]
+    return render_template("study.html", ids=ids, full=full)
+
+
+@bp.get("/videos/<name>")
+def video(name):
+    # Only files named by clip id in the manifest: no listing, no path from the client ever reaches the disk.
+    m = VIDEO_NAME.match(name)
+    path = current_app.extensions["rating_app"]["videos"].get(m.group(1)) if m else None
+    if path is None:
+        abort(404, "unknown video")
+    if not path.is_file():
+        current_app.logger.error("video file missing on the server: %s", path)
+        abort(404, "unknown video")
+    resp = send_file(path, mimetype="video/mp4", conditional=True, max_age=3600, etag=True)
+    resp.headers["Cache-Control"] = "private, max-age=3600"
+    return resp
+
+
+@bp.get("/healthz")
+def healthz():
+    return jsonify(ok=True)
