@@ -88,7 +88,8 @@ def read_bvh(path):
     if not tokens or tokens[0][0] != "HIERARCHY":
         raise BvhError(f"{name}:{tokens[0][1] if tokens else 1}: expected 'HIERARCHY' at the start of the file")
     if motion_line is None:
-        raise BvhError(f"{name}:{len(lines)}: no MOTION section (file truncated?)")
+        last = len(lines) - (1 if lines[-1].strip() == "" else 0)
+        raise BvhError(f"{name}:{last}: no MOTION section (file truncated?)")
 
     names, parents, offsets, channels, end_sites = [], [], [], [], []
     stack = []  # indices of open joints; None for an open End Site

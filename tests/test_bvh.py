@@ -1,0 +1,270 @@
+"""BVH reader and forward kinematics (issue 2): exactness against scipy, real files, malformed files."""
+import gzip
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from conftest import BANDAI, PFNN, ROOT
+from generation import import_motion
+from generation.bvh import BvhError, fk_positions, read_bvh
+
+# Mixed channel counts and rotation orders, interleaved position/rotation channels, a proper-Euler
+# order (X Z X), End Sites, tabs; written with CRLF line ends below.
+HIERARCHY = """HIERARCHY
+ROOT Hips
+{
+\tOFFSET 1 2 3
+\tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+\tJOINT Spine
+\t{
+\t\tOFFSET 0 10 0
+\t\tCHANNELS 3 Xrotation Yrotation Zrotation
+\t\tJOINT Head
+\t\t{
+\t\t\tOFFSET 0 5 1
+\t\t\tCHANNELS 3 Yrotation Zrotation Xrotation
+\t\t\tEnd Site
+\t\t\t{
+\t\t\t\tOFFSET 0 3 0
+\t\t\t}
+\t\t}
+\t\tJOINT Arm
+\t\t{
+\t\t\tOFFSET 4 8 0
+\t\t\tCHANNELS 6 Zrotation Yposition Xrotation Xposition Zposition Yrotation
+\t\t\tJOINT Hand
+\t\t\t{
+\t\t\t\tOFFSET 6 0 0
+\t\t\t\tCHANNELS 3 Xrotation Zrotation Xrotation
+\t\t\t\tEnd Site
+\t\t\t\t{
+\t\t\t\t\tOFFSET 2 0 0
+\t\t\t\t}
+\t\t\t}
+\t\t}
+\t}
+\tJOINT Leg
+\t{
+\t\tOFFSET -2 -9 0.5
+\t\tCHANNELS 3 Zrotation Yrotation Xrotation
+\t\tEnd Site
+\t\t{
+\t\t\tOFFSET 0 -8 0
+\t\t}
+\t}
+}
+"""
+# (name, parent, offset, channels) of the hierarchy above, written out independently of the reader.
+JOINTS = [
+    ("Hips", -1, [1, 2, 3], "Xposition Yposition Zposition Zrotation Xrotation Yrotation"),
+    ("Spine", 0, [0, 10, 0], "Xrotation Yrotation Zrotation"),
+    ("Head", 1, [0, 5, 1], "Yrotation Zrotation Xrotation"),
+    ("Arm", 1, [4, 8, 0], "Zrotation Yposition Xrotation Xposition Zposition Yrotation"),
+    ("Hand", 3, [6, 0, 0], "Xrotation Zrotation Xrotation"),
+    ("Leg", 0, [-2, -9, 0.5], "Zrotation Yrotation Xrotation"),
+]
+END_SITES = [(2, [0, 3, 0]), (4, [2, 0, 0]), (5, [0, -8, 0])]
+N_CHANNELS = sum(len(j[3].split()) for j in JOINTS)
+N_FRAMES = 7
+
+
+def motion_values(seed=0):
+    rng = np.random.default_rng(seed)
+    m = rng.uniform(-180, 180, size=(N_FRAMES, N_CHANNELS))
+    return np.round(m, 4)
+
+
+def bvh_text(motion, frames=None, crlf=True):
+    lines = HIERARCHY.split("\n")[:-1] + ["MOTION", f"Frames: {len(motion) if frames is None else frames}",
+                                          "Frame Time: 0.04"]
+    lines += ["\t".join(f"{v:.4f}" for v in row) + " " for row in motion]
+    return ("\r\n" if crlf else "\n").join(lines) + ("\r\n" if crlf else "\n")
+
+
+def scipy_fk(motion):
+    """Positions of joints and end sites, frame by frame with scipy's Rotation (independent reference)."""
+    out = []
+    for row in motion:
+        col, g_rot, g_pos = 0, [], []
+        for name, parent, offset, chans in JOINTS:
+            chans = chans.split()
+            vals = row[col:col + len(chans)]
+            col += len(chans)
+            trans = np.array(offset, float)
+            rot_axes, rot_angles = "", []
+            for ch, v in zip(chans, vals):
+                if ch.endswith("position"):
+                    trans["XYZ".index(ch[0])] = v
+                else:
+                    rot_axes += ch[0]
+                    rot_angles.append(v)
+            local = Rotation.from_euler(rot_axes, rot_angles, degrees=True)  # upper case = intrinsic
+            if parent < 0:
+                g_rot.append(local)
+                g_pos.append(trans)
+            else:
+                g_rot.append(g_rot[parent] * local)
+                g_pos.append(g_pos[parent] + g_rot[parent].apply(trans))
+        ends = [g_pos[p] + g_rot[p].apply(off) for p, off in END_SITES]
+        out.append(np.array(g_pos + ends))
+    return np.array(out)
+
+
+@pytest.fixture()
+def handwritten(tmp_path):
+    motion = motion_values()
+    path = tmp_path / "mixed.bvh"
+    path.write_bytes(bvh_text(motion).encode())
+    return path, motion
+
+
+def test_handwritten_structure(handwritten):
+    path, motion = handwritten
+    b = read_bvh(path)
+    assert b.names == [j[0] for j in JOINTS]
+    assert b.parents.tolist() == [j[1] for j in JOINTS]
+    assert b.channels == [j[3].split() for j in JOINTS]
+    np.testing.assert_allclose(b.offsets, [j[2] for j in JOINTS])
+    np.testing.assert_allclose(b.motion, motion)
+    assert b.frame_time == pytest.approx(0.04)
+    assert [p for p, _ in b.end_sites] == [p for p, _ in END_SITES]
+
+
+def test_fk_matches_scipy(handwritten):
+    path, motion = handwritten
+    pos = fk_positions(read_bvh(path), end_sites=True)
+    ref = scipy_fk(motion)
+    assert pos.shape == (N_FRAMES, len(JOINTS) + len(END_SITES), 3)
+    np.testing.assert_allclose(pos, ref, atol=1e-6, rtol=0)
+    assert np.ptp(ref, axis=0).max() > 1.0  # the reference really moves: the check can fail
+
+
+def test_gzip_and_lf_give_the_same(tmp_path, handwritten):
+    path, motion = handwritten
+    gz = tmp_path / "mixed.bvh.gz"
+    gz.write_bytes(gzip.compress(bvh_text(motion, crlf=False).encode()))
+    np.testing.assert_array_equal(fk_positions(read_bvh(gz)), fk_positions(read_bvh(path)))
+
+
+def test_real_bandai_and_pfnn_files():
+    b = read_bvh(next(BANDAI.glob("dataset-1/data/dataset-1_walk_*.bvh.gz")))
+    assert len(b.names) == 22 and b.names[0] == "joint_Root" and b.motion.shape[1] == 22 * 6
+    assert round(b.fps) == 30
+    p = read_bvh(PFNN / "animations" / "LocomotionFlat04_000.bvh.gz")
+    assert len(p.names) == 31 and p.motion.shape == (2428, 6 + 30 * 3) and round(p.fps) == 120
+    pos = fk_positions(p)
+    assert np.isfinite(pos).all() and pos.shape == (2428, 31, 3)
+
+
+# ---- malformed files: (name, edit of the valid text, expected line, words in the message) ----
+def _lines(motion=None):
+    return bvh_text(motion if motion is not None else motion_values(), crlf=False).split("\n")
+
+
+HEADER_LINES = len(HIERARCHY.split("\n")) - 1  # lines before MOTION
+FRAMES_LINE = HEADER_LINES + 2
+FIRST_FRAME = HEADER_LINES + 4
+
+
+def _edit(kind):
+    lines = _lines()
+    if kind == "truncated_block":          # file ends two frames early
+        return "\n".join(lines[:FIRST_FRAME - 1 + N_FRAMES - 2]) + "\n", FRAMES_LINE, "truncated"
+    if kind == "truncated_line":           # file cut in the middle of the last frame
+        last = FIRST_FRAME - 1 + N_FRAMES - 1
+        return "\n".join(lines[:last] + [lines[last][:40]]), last + 1, "truncated frame"
+    if kind == "wrong_count":              # one value too many on the third frame
+        lines[FIRST_FRAME + 1] += " 1.0"
+        return "\n".join(lines), FIRST_FRAME + 2, "expected 24 values, got 25"
+    if kind == "unknown_channel":
+        i = next(k for k, l in enumerate(lines) if "CHANNELS 3 Yrotation" in l)
+        lines[i] = lines[i].replace("Zrotation", "Wrotation")
+        return "\n".join(lines), i + 1, "unknown channel name 'Wrotation'"
+    if kind == "non_numeric":
+        parts = lines[FIRST_FRAME + 3].split("\t")
+        parts[5] = "12.x5"
+        lines[FIRST_FRAME + 3] = "\t".join(parts)
+        return "\n".join(lines), FIRST_FRAME + 4, "non-numeric value '12.x5'"
+    if kind == "frames_too_few":            # Frames says fewer than the data holds
+        lines[FRAMES_LINE - 1] = f"Frames: {N_FRAMES - 2}"
+        return "\n".join(lines), FIRST_FRAME + N_FRAMES - 2, "more frame lines"
+    if kind == "frames_too_many":           # Frames says more than the data holds
+        lines[FRAMES_LINE - 1] = f"Frames: {N_FRAMES + 3}"
+        return "\n".join(lines), FRAMES_LINE, "Frames says 10"
+    if kind == "no_motion":
+        return "\n".join(lines[:HEADER_LINES]) + "\n", HEADER_LINES, "no MOTION"
+    if kind == "bad_offset":
+        lines[3] = "\tOFFSET 1 two 3"
+        return "\n".join(lines), 4, "expected a number, got 'two'"
+    if kind == "unclosed":
+        del lines[HEADER_LINES - 1]
+        return "\n".join(lines), HEADER_LINES, "not closed"
+    if kind == "bad_frame_time":
+        lines[FRAMES_LINE] = "Frame Time: fast"
+        return "\n".join(lines), FRAMES_LINE + 1, "expected a number"
+    raise AssertionError(kind)
+
+
+CASES = ["truncated_block", "truncated_line", "wrong_count", "unknown_channel", "non_numeric",
+         "frames_too_few", "frames_too_many", "no_motion", "bad_offset", "unclosed", "bad_frame_time"]
+
+
+@pytest.mark.parametrize("kind", CASES)
+def test_malformed_file_error(tmp_path, capsys, kind):
+    text, line, words = _edit(kind)
+    path = tmp_path / f"{kind}.bvh"
+    path.write_text(text)
+    with pytest.raises(BvhError) as e:
+        read_bvh(path)
+    msg = str(e.value)
+    assert msg.startswith(f"{path}:{line}: "), msg
+    assert words in msg and "\n" not in msg
+    # the CLI: one line on stderr, exit 2, no traceback
+    assert import_motion.main([str(path), str(tmp_path / "out.npz")]) == 2
+    err = capsys.readouterr().err
+    assert err == f"error: {msg}\n"
+    assert not (tmp_path / "out.npz").exists()
+
+
+def test_cli_subprocess_no_traceback(tmp_path):
+    text, line, _ = _edit("non_numeric")
+    bad = tmp_path / "bad.bvh.gz"
+    bad.write_bytes(gzip.compress(text.encode()))
+    r = subprocess.run([sys.executable, "-m", "generation.import_motion", str(bad), str(tmp_path / "o.npz")],
+                       cwd=ROOT, capture_output=True, text=True)
+    assert r.returncode == 2
+    assert r.stderr.startswith(f"error: {bad}:{line}: non-numeric") and r.stderr.count("\n") == 1
+    assert "Traceback" not in r.stderr
+    corrupt = tmp_path / "corrupt.bvh.gz"
+    corrupt.write_bytes(gzip.compress(b"HIERARCHY\n" * 50)[:30])
+    with pytest.raises(BvhError, match=r"corrupt\.bvh\.gz:0: corrupt gzip"):
+        read_bvh(corrupt)
+    with pytest.raises(BvhError, match=r"missing\.bvh:0: cannot read"):
+        read_bvh(tmp_path / "missing.bvh")
+
+
+def test_import_motion_writes_clip(tmp_path, handwritten):
+    from generation.clip import load_clip
+    path, motion = handwritten
+    out = tmp_path / "clip.npz"
+    assert import_motion.main([str(path), str(out), "--scale", "0.5"]) == 0
+    clip = load_clip(out)
+    assert clip["joint_names"] == [j[0] for j in JOINTS] and clip["fps"] == pytest.approx(25.0)
+    np.testing.assert_allclose(clip["joints"], 0.5 * scipy_fk(motion)[:, :len(JOINTS)], atol=1e-4)
+    assert "control" not in clip  # unknown skeleton: no 21-joint body, so no control
+
+
+def test_import_motion_real_take_resampled(tmp_path):
+    from generation.clip import load_clip
+    out = tmp_path / "walk.npz"
+    take = next(BANDAI.glob("dataset-2/data/dataset-2_walk_*.bvh.gz"))
+    assert import_motion.main([str(take), str(out), "--fps", "20"]) == 0
+    clip = load_clip(out)
+    b = read_bvh(take)
+    assert clip["joints"].shape == ((b.n_frames - 1) * 2 // 3 + 1, 22, 3) and clip["fps"] == 20.0
+    # output frame 2k falls on input frame 3k exactly: plain FK positions there, in metres
+    np.testing.assert_allclose(clip["joints"][::2], fk_positions(b)[::3] * 0.01, atol=1e-5)
+    assert clip["control"].shape == (len(clip["joints"]), 3)
