@@ -1,0 +1,103 @@
+"""Objective motion metrics per clip (21-joint order of generation.skeleton), for metrics.csv.
+
+- foot_skating (m/s): mean horizontal speed of a foot (ankle and toe joints) over the frame pairs in
+  which it is in contact. Contact: in both frames the foot's ankle and toe are each less than
+  CONTACT_HEIGHT = 1 cm above the lowest height that joint reaches in the clip (the floor as that
+  foot sees it, so a clip floating a little above y = 0 is judged the same way). Real Bandai-Namco
+  walks score about 0.06 m/s (runs 0.05, backward walks 0.10), against walking speeds of 1.3 m/s.
+- bone_length_std (m): standard deviation over time of each bone's length, averaged over bones
+  (0 for any rigid skeleton; generators that output joint positions need not keep bones rigid).
+- jerk (m/s^3): mean norm of the third time derivative of joint positions (finite differences).
+- control_error (m): how far the root path implied by the body (the hips projected on the floor)
+  strays from the path that the requested control integrates to. The two paths are first aligned by
+  the rigid 2-D motion (rotation + translation on the floor) that fits them best, so a clip placed or
+  turned differently in the world (an imported system) is not penalised for that alone.
+"""
+import numpy as np
+
+from . import skeleton
+
+CONTACT_HEIGHT = 0.01  # m above each foot joint's lowest point in the clip
+METRIC_NAMES = ("foot_skating", "bone_length_std", "jerk", "control_error")
+
+
+def foot_skating(joints, fps, feet=tuple(skeleton.FEET), contact_height=CONTACT_HEIGHT):
+    """Mean horizontal speed (m/s) of the feet while in contact; NaN if no foot ever touches down.
+
+    `feet` lists (ankle, toe) joint pairs flattened, as skeleton.FEET. A foot is in contact in a frame
+    when both its ankle and its toe joint are within `contact_height` of their lowest height in the
+    clip; its speed between two contact frames is the mean horizontal speed of the two joints. (A
+    height test on the toe alone is not enough at 20 fps: a swinging toe passes 1-2 cm above the
+    floor at 2 m/s.)
+    """
+    joints = np.asarray(joints, dtype=np.float64)
+    speeds = []
+    for pair in np.asarray(feet).reshape(-1, 2):
+        foot = joints[:, pair]                                            # [T, 2, 3]
+        y = foot[..., 1]
+        contact = (y < y.min(axis=0) + contact_height).all(axis=1)       # [T]
+        both = contact[1:] & contact[:-1]
+        speed = np.linalg.norm(np.diff(foot[..., [0, 2]], axis=0), axis=-1).mean(axis=1) * fps
+        speeds.append(speed[both])
+    speeds = np.concatenate(speeds)
+    return float(speeds.mean()) if len(speeds) else float("nan")
+
+
+def bone_length_std(joints, parents=skeleton.PARENTS):
+    """Std over time of every bone's length, averaged over bones (m)."""
+    joints = np.asarray(joints, dtype=np.float64)
+    child = np.nonzero(np.asarray(parents) >= 0)[0]
+    length = np.linalg.norm(joints[:, child] - joints[:, np.asarray(parents)[child]], axis=-1)
+    return float(length.std(axis=0).mean())
+
+
+def jerk(joints, fps):
+    """Mean norm of the third derivative of joint positions (m/s^3); NaN for clips under 4 frames."""
+    joints = np.asarray(joints, dtype=np.float64)
+    if len(joints) < 4:
+        return float("nan")
+    return float(np.linalg.norm(np.diff(joints, n=3, axis=0), axis=-1).mean() * fps ** 3)
+
+
+def _rigid_align_error(a, b):
+    """Mean distance between 2-D paths a and b [T, 2] after the best rotation + translation of b onto a."""
+    ca, cb = a - a.mean(0), b - b.mean(0)
+    u, _, vt = np.linalg.svd(cb.T @ ca)
+    d = np.sign(np.linalg.det(u @ vt))
+    rot = u @ np.diag([1.0, d]) @ vt                                      # proper rotation, no reflection
+    return float(np.linalg.norm(cb @ rot - ca, axis=1).mean())
+
+
+def control_path(control):
+    """Root path on the floor [T, 2] (x, z) that control [T, 3] integrates to, from the origin, heading +Z."""
+    from .features import to_world
+
+    control = np.asarray(control, dtype=np.float64)
+    zero = np.zeros((len(control), skeleton.POSE_DIM))
+    return to_world(zero, control)[:, 0][:, [0, 2]].astype(np.float64)
+
+
+def control_error(joints, control):
+    """Mean floor distance (m) between the hips' path and the path of the requested control, rigidly aligned."""
+    hips = np.asarray(joints, dtype=np.float64)[:, skeleton.INDEX["Hips"]][:, [0, 2]]
+    return _rigid_align_error(hips, control_path(control))
+
+
+def clip_metrics(joints, fps, control=None):
+    """All metrics of one clip (joints [T, 21, 3] in metres, Y up) as a dict; control_error NaN without control."""
+    joints = np.asarray(joints, dtype=np.float64)
+    if joints.ndim != 3 or joints.shape[1:] != (skeleton.N_JOINTS, 3):
+        raise ValueError(f"clip_metrics: joints must be [T, {skeleton.N_JOINTS}, 3], got {joints.shape}")
+    return dict(
+        foot_skating=foot_skating(joints, fps),
+        bone_length_std=bone_length_std(joints),
+        jerk=jerk(joints, fps),
+        control_error=control_error(joints, control) if control is not None else float("nan"),
+    )
+
+
+def summarise(df, by=("role", "condition")):
+    """Per-group mean and standard deviation of every metric of a metrics table (pandas DataFrame)."""
+    cols = [m for m in METRIC_NAMES if m in df.columns]
+    out = df.groupby(list(by))[cols].agg(["mean", "std"])
+    return out
