@@ -1,0 +1,153 @@
+"""Figures of the report, drawn from the tables in stats.py (no statistics computed here).
+
+ratings_histogram: the paper's Fig. 5 (responses per scale point and condition, vertical lines at the means);
+per_clip_means: Fig. 6 (mean rating of every clip, sorted worst to best within each condition);
+condition_means: means with t and cluster-bootstrap 95% intervals, with and without the rater exclusion;
+metric_scatter: each objective metric against the per-clip mean rating.
+"""
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+# Okabe-Ito colour-blind-safe palette; the paper's three conditions keep fixed colours across figures.
+FIXED = {"NAT": "#009E73", "MG": "#0072B2", "FL": "#D55E00", "BAD": "#7F7F7F"}
+EXTRA = ["#CC79A7", "#E69F00", "#56B4E9", "#F0E442", "#000000"]
+STYLE = {
+    "font.size": 9, "axes.titlesize": 10, "axes.labelsize": 9, "legend.fontsize": 8, "xtick.labelsize": 8,
+    "ytick.labelsize": 8, "axes.spines.top": False, "axes.spines.right": False, "axes.linewidth": 0.8,
+    "savefig.dpi": 200, "savefig.bbox": "tight", "font.family": "DejaVu Sans",
+}
+
+
+def colours(conditions):
+    out, extra = {}, iter(EXTRA * 10)
+    for c in conditions:
+        out[c] = FIXED.get(c) or next(extra)
+    return out
+
+
+def _save(fig, path):
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def ratings_histogram(hist, means, path, title=None):
+    """hist: rating_histogram() table (rows conditions, columns 1..5); means: {condition: mean}."""
+    conds = list(hist.index)
+    col = colours(conds)
+    scale = [int(s) for s in hist.columns]
+    with plt.rc_context(STYLE):
+        fig, ax = plt.subplots(figsize=(6.4, 3.4))
+        width = 0.8 / len(conds)
+        top = hist.to_numpy().max()
+        for i, c in enumerate(conds):
+            x = np.array(scale) + (i - (len(conds) - 1) / 2) * width
+            ax.bar(x, hist.loc[c].to_numpy(), width=width * 0.95, color=col[c], alpha=0.85,
+                   label=f"{c} (n={int(hist.loc[c].sum()):,}, mean {means[c]:.2f})", zorder=2)
+            ax.axvline(means[c], color=col[c], lw=1.6, ls="--", zorder=3)
+            ax.text(means[c], top * (1.04 + 0.07 * i), f" {means[c]:.2f}", color=col[c], fontsize=7.5,
+                    ha="left", va="center")
+        ax.set_xticks(scale)
+        ax.set_xticklabels([f"{s}\n{lab}" for s, lab in zip(scale, ["very\nunnatural", "", "", "",
+                                                                     "very\nnatural"])], linespacing=0.9)
+        ax.set_xlabel("Rating")
+        ax.set_ylabel("Number of responses")
+        ax.set_ylim(0, top * (1.1 + 0.07 * len(conds)))
+        ax.set_xlim(scale[0] - 0.6, scale[-1] + 0.6)
+        ax.grid(axis="y", color="0.9", lw=0.6, zorder=0)
+        ax.legend(frameon=False, loc="upper left", title="Condition (dashed: mean)", title_fontsize=8)
+        if title:
+            ax.set_title(title, loc="left")
+        return _save(fig, path)
+
+
+def per_clip_means(clips, path, title=None):
+    """clips: per_clip_means() table (sorted within condition, with rank, mean, ci_low, ci_high)."""
+    conds = list(dict.fromkeys(clips["condition"]))
+    col = colours(conds)
+    with plt.rc_context(STYLE):
+        fig, ax = plt.subplots(figsize=(6.4, 3.4))
+        most = clips.groupby("condition").size().max()
+        ms = 3.5 if most <= 60 else 1.5 if most <= 400 else 0.0
+        for c in conds:
+            part = clips[clips["condition"] == c]
+            x = part["rank"].to_numpy()
+            ax.fill_between(x, part["ci_low"].clip(1, 5), part["ci_high"].clip(1, 5), color=col[c], alpha=0.13,
+                            lw=0, step=None)
+            ax.plot(x, part["mean"], color=col[c], lw=1.3, marker="o" if ms else None, ms=ms,
+                    label=f"{c} ({len(part)} clips)")
+        ax.set_xlabel("Clip, sorted from worst to best within condition")
+        ax.set_ylabel("Mean rating")
+        ax.set_ylim(0.9, 5.1)
+        ax.set_yticks([1, 2, 3, 4, 5])
+        ax.set_xlim(0.5, most + 0.5)
+        ax.grid(axis="y", color="0.9", lw=0.6, zorder=0)
+        ax.legend(frameon=False, loc="lower right", title="Shaded: 95% t interval per clip", title_fontsize=8)
+        if title:
+            ax.set_title(title, loc="left")
+        return _save(fig, path)
+
+
+def condition_means(panels, path):
+    """panels: list of (label, summary table with mean, t_low, t_high, boot_low, boot_high per condition)."""
+    conds = list(dict.fromkeys(c for _, t in panels for c in t.index))
+    col = colours(conds)
+    with plt.rc_context(STYLE):
+        fig, ax = plt.subplots(figsize=(6.4, 0.55 * len(conds) * len(panels) + 1.2))
+        y, ticks, labels = 0, [], []
+        markers = ["o", "s", "^", "D"]
+        for c in conds:
+            for j, (label, t) in enumerate(panels):
+                if c not in t.index:
+                    continue
+                row = t.loc[c]
+                ax.plot([row["t_low"], row["t_high"]], [y + 0.12, y + 0.12], color=col[c], lw=2.2,
+                        solid_capstyle="butt")
+                if "boot_low" in row and np.isfinite(row["boot_low"]):
+                    ax.plot([row["boot_low"], row["boot_high"]], [y - 0.12, y - 0.12], color=col[c], lw=2.2,
+                            alpha=0.45, solid_capstyle="butt")
+                ax.plot(row["mean"], y, marker=markers[j % 4], color=col[c], mec="white", ms=6, zorder=3)
+                ticks.append(y)
+                labels.append(f"{c} — {label}")
+                y -= 1
+            y -= 0.4
+        ax.set_yticks(ticks)
+        ax.set_yticklabels(labels)
+        ax.set_xlabel("Mean rating (upper bar: t 95% CI; lower, faint: cluster-bootstrap 95% CI)")
+        ax.grid(axis="x", color="0.9", lw=0.6, zorder=0)
+        ax.spines["left"].set_visible(False)
+        ax.tick_params(axis="y", length=0)
+        return _save(fig, path)
+
+
+def metric_scatter(clips, metrics, corr, path):
+    """One panel per metric: metric value vs per-clip mean rating, coloured by condition, pooled Spearman rho."""
+    merged = clips.set_index("clip_id").join(metrics, how="inner")
+    names = list(metrics.columns)
+    conds = list(dict.fromkeys(clips["condition"]))
+    col = colours(conds)
+    ncol = min(4, len(names))
+    nrow = int(np.ceil(len(names) / ncol))
+    with plt.rc_context(STYLE):
+        fig, axes = plt.subplots(nrow, ncol, figsize=(1.75 * ncol + 0.6, 1.9 * nrow + 0.4), sharey=True,
+                                 squeeze=False)
+        for ax, m in zip(axes.ravel(), names):
+            for c in conds:
+                part = merged[merged["condition"] == c]
+                ax.scatter(part[m], part["mean"], s=9, color=col[c], alpha=0.8, lw=0, label=c)
+            row = corr[(corr["metric"] == m) & (corr["scope"] == "all")]
+            rho = row["spearman_rho"].iloc[0] if len(row) else np.nan
+            ax.set_title(f"{m}\nSpearman ρ = {rho:.2f}" if np.isfinite(rho) else m, fontsize=8.5)
+            ax.set_ylim(0.9, 5.1)
+            ax.grid(color="0.92", lw=0.5)
+            ax.tick_params(labelsize=7)
+        for ax in axes.ravel()[len(names):]:
+            ax.set_visible(False)
+        for ax in axes[:, 0]:
+            ax.set_ylabel("Clip mean rating")
+        axes.ravel()[0].legend(frameon=False, fontsize=7, loc="lower left", handletextpad=0.1)
+        fig.tight_layout()
+        return _save(fig, path)

@@ -1,0 +1,161 @@
+"""Read and validate ratings.csv (CONTRACTS.md §6) and metrics.csv; every problem is one AnalysisError line.
+
+Nothing is dropped silently: a bad row stops the analysis with the file line that holds it. The returned
+frame's index is the file line number of each row (header = line 1), so later messages can name lines too.
+"""
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+REQUIRED = ("rater_id", "clip_id", "condition", "rating")
+ROLES = ("test", "catch")
+SCALE = (1, 2, 3, 4, 5)
+CATCH_CONDITION = "BAD"  # catch rows when the file has no role column
+METRIC_KEYS = ("clip_id", "condition", "role", "item")
+
+
+class AnalysisError(ValueError):
+    """Bad input for the analysis; the message is one line naming the file and the line or column."""
+
+
+def _read_csv(path):
+    path = Path(path)
+    if not path.is_file():
+        raise AnalysisError(f"{path}: no such file")
+    if path.stat().st_size == 0 or not path.read_bytes()[:4096].strip():
+        raise AnalysisError(f"{path}: file is empty (expected a CSV header and rows)")
+    try:
+        # All text, no NA guessing: "NA" or "" stay visible so we can name the line that holds them.
+        df = pd.read_csv(path, dtype=str, keep_default_na=False, na_filter=False, skip_blank_lines=False,
+                         encoding="utf-8-sig")
+    except pd.errors.ParserError as exc:
+        raise AnalysisError(f"{path}: malformed CSV: {str(exc).strip().splitlines()[-1]}") from None
+    except UnicodeDecodeError as exc:
+        raise AnalysisError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except pd.errors.EmptyDataError:
+        raise AnalysisError(f"{path}: file is empty (expected a CSV header and rows)") from None
+    df.columns = [str(c).strip() for c in df.columns]
+    df.index = np.arange(2, len(df) + 2)  # file line numbers (header is line 1)
+    # Wholly blank lines are layout, not data (a trailing newline or two); anything else is kept and checked.
+    blank = (df == "").all(axis=1)
+    if blank.any():
+        df = df[~blank]
+    return path, df
+
+
+def _first_line(mask):
+    return int(mask.index[np.flatnonzero(np.asarray(mask))[0]])
+
+
+def _check_nonempty(path, df, cols):
+    for col in cols:
+        values = df[col].str.strip()
+        empty = values == ""
+        if empty.any():
+            raise AnalysisError(f"{path}:{_first_line(empty)}: empty {col}")
+        df[col] = values
+
+
+def _parse_ratings(path, text):
+    """Integers 1..5 only; '3.0', '3.5', 'x' and '7' are all errors naming their line."""
+    stripped = text.str.strip()
+    try:
+        values = stripped.astype(np.int64)
+        bad_text = None
+    except (ValueError, OverflowError):
+        values = None
+        # Slow path, only on bad input: find the first offending line.
+        ok = stripped.str.fullmatch(r"[+-]?\d{1,18}")
+        bad_text = ~ok
+    if bad_text is not None:
+        line = _first_line(bad_text)
+        raise AnalysisError(f"{path}:{line}: rating {text.loc[line]!r} is not an integer 1-5")
+    out = (values < SCALE[0]) | (values > SCALE[-1])
+    if out.any():
+        line = _first_line(out)
+        raise AnalysisError(f"{path}:{line}: rating {values.loc[line]} is out of range 1-5")
+    return values.astype(np.int8)
+
+
+def _check_unique_attribute(path, df, attr):
+    """A clip has one condition (and one role): a clip under two of them is a corrupt export."""
+    first = df.groupby("clip_id", sort=False)[attr].transform("first")
+    clash = first != df[attr]
+    if clash.any():
+        line = _first_line(clash)
+        clip = df.at[line, "clip_id"]
+        earlier = _first_line((df["clip_id"] == clip) & (df[attr] == first.loc[line]))
+        raise AnalysisError(f"{path}:{line}: clip {clip} has {attr} {df.at[line, attr]!r} but "
+                            f"{first.loc[line]!r} at line {earlier}")
+
+
+def load_ratings(path):
+    """ratings.csv -> DataFrame (rater_id, clip_id, condition, rating int8, role 'test'/'catch', extras).
+
+    Index = file line number. Raises AnalysisError for: missing file, empty file, header only, missing
+    required columns, empty required fields, non-integer or out-of-range ratings, unknown roles, duplicate
+    (rater, clip) pairs, a clip listed under two conditions or roles, no test rows.
+    """
+    path, df = _read_csv(path)
+    missing = [c for c in REQUIRED if c not in df.columns]
+    if missing:
+        raise AnalysisError(f"{path}: missing required column{'s' if len(missing) > 1 else ''} "
+                            f"{', '.join(missing)} (header has: {', '.join(df.columns)})")
+    if len(df) == 0:
+        raise AnalysisError(f"{path}: no ratings (header only)")
+    _check_nonempty(path, df, ("rater_id", "clip_id", "condition"))
+    df["rating"] = _parse_ratings(path, df["rating"])
+    if "role" in df.columns:
+        role = df["role"].str.strip().str.lower()
+        unknown = ~role.isin(ROLES)
+        if unknown.any():
+            line = _first_line(unknown)
+            raise AnalysisError(f"{path}:{line}: unknown role {df.at[line, 'role']!r} (expected test or catch)")
+        df["role"] = role
+    else:
+        df["role"] = np.where(df["condition"] == CATCH_CONDITION, "catch", "test")
+    pair = df["rater_id"] + "\x1f" + df["clip_id"]
+    dup = pair.duplicated()
+    if dup.any():
+        line = _first_line(dup)
+        first = _first_line(pair == pair.loc[line])
+        raise AnalysisError(f"{path}:{line}: duplicate rating of clip {df.at[line, 'clip_id']} by rater "
+                            f"{df.at[line, 'rater_id']} (first at line {first})")
+    _check_unique_attribute(path, df, "condition")
+    _check_unique_attribute(path, df, "role")
+    if not (df["role"] == "test").any():
+        raise AnalysisError(f"{path}: no test ratings (every row is a catch trial)")
+    return df
+
+
+def load_metrics(path):
+    """metrics.csv (clip_id, condition, role, item, metric columns...) -> DataFrame indexed by clip_id.
+
+    Every column other than the four keys is an objective metric and must be numeric (empty = missing,
+    reported as such, never guessed).
+    """
+    path, df = _read_csv(path)
+    if "clip_id" not in df.columns:
+        raise AnalysisError(f"{path}: missing required column clip_id (header has: {', '.join(df.columns)})")
+    if len(df) == 0:
+        raise AnalysisError(f"{path}: no rows (header only)")
+    _check_nonempty(path, df, ("clip_id",))
+    dup = df["clip_id"].duplicated()
+    if dup.any():
+        line = _first_line(dup)
+        raise AnalysisError(f"{path}:{line}: duplicate clip_id {df.at[line, 'clip_id']}")
+    metric_cols = [c for c in df.columns if c not in METRIC_KEYS]
+    if not metric_cols:
+        raise AnalysisError(f"{path}: no metric columns besides {', '.join(METRIC_KEYS)}")
+    out = pd.DataFrame(index=df["clip_id"].to_numpy())
+    for col in metric_cols:
+        text = df[col].str.strip()
+        values = pd.to_numeric(text.replace("", np.nan).replace("nan", np.nan), errors="coerce")
+        bad = values.isna() & ~text.isin(["", "nan"])
+        if bad.any():
+            line = _first_line(bad)
+            raise AnalysisError(f"{path}:{line}: {col} {df.at[line, col]!r} is not a number")
+        out[col] = values.to_numpy(dtype=float)
+    out.index.name = "clip_id"
+    return out

@@ -1,0 +1,132 @@
+"""REML fit of  y ~ condition + (1|rater) + (1|clip)  — two crossed random intercepts — from sufficient statistics.
+
+statsmodels' MixedLM can fit crossed effects (one group, variance components), but its optimiser stops at
+different points for different methods on our data (REML log-likelihood off by ~0.8). This module profiles the
+REML criterion over the two relative variances exactly as lme4 does (Bates et al. 2015, J. Stat. Softw. 67(1),
+eqs. 34-42), so a fit is a smooth 2-D bounded minimisation. Every quantity is built from counts and sums —
+never an n x q matrix — so the cost depends on the number of raters and clips, not on the number of ratings.
+
+Model: y = X b + Z_r u_r + Z_c u_c + e, u_r ~ N(0, s2 t_r I), u_c ~ N(0, s2 t_c I), e ~ N(0, s2 I).
+With V* = I + t_r Z_r Z_r' + t_c Z_c Z_c' and M = I + Lambda Z'Z Lambda (q x q, Lambda = diag(sqrt t)):
+  log|V*| = log|M|  and  V*^-1 = I - Z Lambda M^-1 Lambda Z'   (determinant lemma, Woodbury),
+  -2 l_R(t) = log|M| + log|X'V*^-1 X| + (n-p) (1 + log(2 pi r2 / (n-p))),  s2 = r2 / (n-p),
+where r2 = (y - X b)'V*^-1 (y - X b) at the GLS estimate b. M is solved by eliminating its diagonal
+rater block and a dense Cholesky of the clip-block Schur complement (or the other way round if raters are fewer).
+"""
+import math
+
+import numpy as np
+from scipy import linalg, optimize, sparse
+from scipy import stats as sps
+
+
+class _Suff:
+    """Sufficient statistics of the design: counts per level, the rater x clip count table, X'X, X'y, Z'X, Z'y."""
+
+    def __init__(self, y, X, rater, clip):
+        self.n, self.p = X.shape
+        self.R, self.C = int(rater.max()) + 1, int(clip.max()) + 1
+        ybar = y.mean()
+        yc = y - ybar  # centring keeps y'y - ... free of cancellation; the intercept absorbs the shift
+        self.ybar = ybar
+        self.nr = np.bincount(rater, minlength=self.R).astype(float)
+        self.nc = np.bincount(clip, minlength=self.C).astype(float)
+        self.N = sparse.csr_matrix((np.ones(self.n), (rater, clip)), shape=(self.R, self.C))
+        self.XtX = X.T @ X
+        self.Xty = X.T @ yc
+        self.yty = float(yc @ yc)
+        self.ZrX = np.stack([np.bincount(rater, weights=X[:, j], minlength=self.R) for j in range(self.p)], 1)
+        self.ZcX = np.stack([np.bincount(clip, weights=X[:, j], minlength=self.C) for j in range(self.p)], 1)
+        self.Zry = np.bincount(rater, weights=yc, minlength=self.R)
+        self.Zcy = np.bincount(clip, weights=yc, minlength=self.C)
+
+
+def _solve_parts(s, tr, tc):
+    """log|M| and a solver for M x = v, with M = [[I + tr diag(nr), a N], [a N', I + tc diag(nc)]]."""
+    a = math.sqrt(tr * tc)
+    if s.R >= s.C:  # eliminate the (larger) rater block, Cholesky of the C x C Schur complement
+        d_big, d_small, A = 1 + tr * s.nr, 1 + tc * s.nc, s.N
+    else:
+        d_big, d_small, A = 1 + tc * s.nc, 1 + tr * s.nr, s.N.T.tocsr()
+    AtDA = (A.T @ sparse.diags(1 / d_big) @ A).toarray() * (a * a)
+    schur = np.diag(d_small) - AtDA
+    chol = linalg.cho_factor(schur, lower=True, check_finite=False)
+    logdet = float(np.log(d_big).sum() + 2 * np.log(np.diag(chol[0])).sum())
+
+    def solve(v_big, v_small):
+        rhs = v_small - a * (A.T @ (v_big / d_big[:, None] if v_big.ndim == 2 else v_big / d_big))
+        x_small = linalg.cho_solve(chol, rhs, check_finite=False)
+        x_big = (v_big - a * (A @ x_small)) / (d_big[:, None] if v_big.ndim == 2 else d_big)
+        return x_big, x_small
+
+    return logdet, solve, s.R >= s.C
+
+
+def _gls(s, tr, tc):
+    """For relative variances (tr, tc): REML deviance, b (centred y), X'V*^-1 X and r2."""
+    logdet, solve, rater_big = _solve_parts(s, tr, tc)
+    sr, sc = math.sqrt(tr), math.sqrt(tc)
+    # Lambda Z'X and Lambda Z'y, split into the eliminated ("big") and Schur ("small") blocks
+    LX_r, LX_c, Ly_r, Ly_c = sr * s.ZrX, sc * s.ZcX, sr * s.Zry, sc * s.Zcy
+    if rater_big:
+        bX, sX, by, sy = LX_r, LX_c, Ly_r, Ly_c
+    else:
+        bX, sX, by, sy = LX_c, LX_r, Ly_c, Ly_r
+    xb, xs = solve(np.column_stack([bX, by]), np.column_stack([sX, sy]))
+    W = bX.T @ xb[:, :-1] + sX.T @ xs[:, :-1]  # (Lambda Z'X)' M^-1 (Lambda Z'X)
+    w = bX.T @ xb[:, -1] + sX.T @ xs[:, -1]
+    yy = by @ xb[:, -1] + sy @ xs[:, -1]
+    XVX = s.XtX - W
+    XVy = s.Xty - w
+    yVy = s.yty - yy
+    cx = linalg.cho_factor(XVX, lower=True, check_finite=False)
+    b = linalg.cho_solve(cx, XVy, check_finite=False)
+    r2 = max(float(yVy - b @ XVy), 1e-300)
+    dof = s.n - s.p
+    dev = logdet + 2 * np.log(np.diag(cx[0])).sum() + dof * (1 + math.log(2 * math.pi * r2 / dof))
+    return float(dev), b, XVX, r2
+
+
+def fit_crossed(y, X, rater, clip, names):
+    """REML fit. y float [n]; X [n, p] fixed-effects design (first column the intercept); rater, clip int codes.
+
+    Returns dict: fixed_effects, std_errors, z, p_values (Wald, normal), ci_low/ci_high (95%),
+    variance_components {rater, clip, residual}, reml_log_likelihood, converged, iterations.
+    """
+    s = _Suff(np.asarray(y, float), np.asarray(X, float), np.asarray(rater), np.asarray(clip))
+
+    def objective(rel_sd):  # lme4's parameters: random-effect SDs relative to the residual SD, >= 0
+        return _gls(s, rel_sd[0] ** 2, rel_sd[1] ** 2)[0]
+
+    best = None
+    for start in ([0.5, 0.5], [0.1, 1.0], [1.0, 0.1]):  # a few starts guard against a flat ridge
+        res = optimize.minimize(objective, np.array(start), method="L-BFGS-B", bounds=[(0, None), (0, None)],
+                                options={"ftol": 1e-14, "gtol": 1e-9, "maxiter": 500})
+        if best is None or res.fun < best.fun - 1e-9:
+            best = res
+    # Polish: derivative-free search from the best point (robust when an SD sits on the 0 bound).
+    polish = optimize.minimize(objective, best.x, method="Nelder-Mead",
+                               options={"xatol": 1e-10, "fatol": 1e-12, "maxiter": 2000})
+    x = np.abs(polish.x) if polish.fun <= best.fun else best.x
+    dev, b, XVX, r2 = _gls(s, x[0] ** 2, x[1] ** 2)
+    sigma2 = r2 / (s.n - s.p)
+    b = b.copy()
+    b[0] += s.ybar  # undo the centring (first column is the intercept)
+    cov = sigma2 * linalg.inv(XVX)
+    se = np.sqrt(np.diag(cov))
+    z = b / se
+    p = 2 * sps.norm.sf(np.abs(z))
+    q = sps.norm.ppf(0.975)
+    return {
+        "fixed_effects": dict(zip(names, b.tolist())),
+        "std_errors": dict(zip(names, se.tolist())),
+        "z": dict(zip(names, z.tolist())),
+        "p_values": dict(zip(names, p.tolist())),
+        "ci_low": dict(zip(names, (b - q * se).tolist())),
+        "ci_high": dict(zip(names, (b + q * se).tolist())),
+        "variance_components": {"rater": float(sigma2 * x[0] ** 2), "clip": float(sigma2 * x[1] ** 2),
+                                "residual": float(sigma2)},
+        "reml_log_likelihood": -0.5 * dev,
+        "converged": bool(best.success or polish.success),
+        "iterations": int(best.nit),
+    }

@@ -1,0 +1,332 @@
+"""`python -m analysis.report ratings.csv [--out report/]`: the paper's analysis and what reviewers ask now.
+
+Writes OUT/stats.json (CONTRACTS.md §7), OUT/figures/*.png and OUT/report.html (figures embedded, opens
+offline), and prints a summary table. Every statistic is computed on the kept test rows (after the catch-trial
+rater exclusion) and again on all test rows ("without_exclusion").
+"""
+import argparse
+import base64
+import html
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from tqdm import tqdm
+
+from . import figures, stats
+from .filtering import DEFAULT_THRESHOLD, exclude_raters, test_rows
+from .load import AnalysisError, load_metrics, load_ratings
+
+MIXED_MAX_N = 100_000  # statsmodels' crossed-effects fit grows fast; beyond this it is skipped unless forced
+
+
+# ---------------------------------------------------------------------------------------------- analysis
+def analyse(test, *, n_boot=2000, seed=0, alpha=0.05, mixed=True, mixed_max_n=MIXED_MAX_N, metrics=None,
+            progress=None):
+    """All analyses of one set of test rows -> dict of tables and dicts (see to_json for the file layout)."""
+    step = progress.update if progress is not None else (lambda n=1: None)
+    conds = test["condition"].unique()
+    if len(conds) < 2:
+        raise AnalysisError(f"the test rows hold {len(conds)} condition ({', '.join(map(str, conds))}); "
+                            "comparisons need at least 2")
+    out = {"n_test_ratings": int(len(test)), "n_raters": int(test["rater_id"].nunique()),
+           "n_clips": int(test["clip_id"].nunique())}
+    summary = stats.group_summary(test)
+    out["histogram"] = stats.rating_histogram(test)
+    out["clips"] = stats.per_clip_means(test)
+    step()
+    out["anova"] = stats.one_way_anova(test)
+    out["tukey"] = stats.tukey_hsd(test, alpha=alpha)
+    step()
+    out["bootstrap"] = stats.cluster_bootstrap(test, n_boot=n_boot, seed=seed)
+    out["summary"] = summary.join(out["bootstrap"]["means"][["boot_low", "boot_high", "boot_se"]])
+    step()
+    out["kruskal"] = stats.kruskal_wallis(test)
+    out["mannwhitney"] = stats.pairwise_mannwhitney(test, alpha=alpha)
+    step()
+    if not mixed:
+        out["mixed"] = {"skipped": "--no-mixed", "fixed_effects": {}}
+    elif len(test) > mixed_max_n:
+        out["mixed"] = {"skipped": f"{len(test)} ratings > --mixed-max-n {mixed_max_n}", "fixed_effects": {}}
+    else:
+        try:
+            out["mixed"] = stats.mixed_model(test)
+        except (np.linalg.LinAlgError, ValueError) as exc:  # a degenerate design is reported, not fatal
+            out["mixed"] = {"error": f"{type(exc).__name__}: {exc}".splitlines()[0], "fixed_effects": {}}
+    step()
+    if metrics is not None:
+        out["metrics"] = stats.metric_correlations(out["clips"], metrics)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------- stats.json
+def _clean(x):
+    """numpy scalars -> Python; NaN/inf -> None (JSON has neither)."""
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, (np.bool_, bool)):
+        return bool(x)
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        x = float(x)
+        return x if math.isfinite(x) else None
+    return x
+
+
+def _records(df):
+    return [{k: v for k, v in row.items()} for row in df.to_dict(orient="records")]
+
+
+def section_json(res):
+    s = res["summary"]
+    boot = res["bootstrap"]
+    out = {
+        "n_test_ratings": res["n_test_ratings"], "n_raters": res["n_raters"], "n_clips": res["n_clips"],
+        "condition_means": {c: s.at[c, "mean"] for c in s.index},
+        "condition_counts": {c: int(s.at[c, "n"]) for c in s.index},
+        "condition_summary": {c: {k: s.at[c, k] for k in s.columns if k != "n"} for c in s.index},
+        "rating_histogram": {c: {str(k): int(v) for k, v in row.items()} for c, row in res["histogram"].iterrows()},
+        "anova": res["anova"],
+        "tukey": _records(res["tukey"][["group1", "group2", "meandiff", "lower", "upper", "p_adj", "reject", "se",
+                                        "q"]]),
+        "bootstrap": {"method": boot["method"], "n_boot": boot["n_boot"], "seed": boot["seed"],
+                      "level": boot["level"], "n_degenerate": boot["n_degenerate"],
+                      "differences": _records(boot["differences"])},
+        "kruskal": res["kruskal"],
+        "mannwhitney": _records(res["mannwhitney"]),
+        "mixed_model": res["mixed"],
+        "per_clip_means": _records(res["clips"][["clip_id", "condition", "rank", "n", "mean", "sd", "ci_low",
+                                                 "ci_high"]]),
+    }
+    if "metrics" in res:
+        out["metric_correlations"] = _records(res["metrics"])
+    return out
+
+
+def to_json(counts, kept, everyone, meta):
+    doc = {**meta}
+    doc.update({k: v for k, v in counts.items()})
+    doc.update(section_json(kept))
+    doc["without_exclusion"] = section_json(everyone)
+    return _clean(doc)
+
+
+# ---------------------------------------------------------------------------------------------- console
+def _p(p):
+    if p is None or not np.isfinite(p):
+        return "n/a"
+    return f"{p:.2e}" if p < 1e-4 else f"{p:.4f}"
+
+
+def console_summary(counts, kept, everyone):
+    lines = [f"Ratings: {counts['n_ratings_total']} total, {counts['n_ratings_removed']} removed, "
+             f"{counts['n_ratings_kept']} kept  (raters: {counts['n_raters_total']} total, "
+             f"{counts['n_raters_excluded']} excluded for a catch rating >= {counts['threshold']})", ""]
+    s, s_all = kept["summary"], everyone["summary"]
+    head = f"{'condition':<10}{'n':>7}{'mean':>8}{'95% CI (t)':>18}{'95% CI (bootstrap)':>22}{'mean, all raters':>18}"
+    lines += [head, "-" * len(head)]
+    for c in s.index:
+        r = s.loc[c]
+        all_mean = f"{s_all.at[c, 'mean']:.3f}" if c in s_all.index else "-"
+        lines.append(f"{c:<10}{int(r['n']):>7}{r['mean']:>8.3f}{f'[{r.t_low:.3f}, {r.t_high:.3f}]':>18}"
+                     f"{f'[{r.boot_low:.3f}, {r.boot_high:.3f}]':>22}{all_mean:>18}")
+    a = kept["anova"]
+    lines += ["", f"One-way ANOVA: F({a['df_between']}, {a['df_within']}) = {a['F']:.3f}, p = {_p(a['p'])}",
+              f"Kruskal-Wallis: H({kept['kruskal']['df']}) = {kept['kruskal']['H']:.3f}, "
+              f"p = {_p(kept['kruskal']['p'])}", "",
+              f"{'Tukey HSD':<14}{'diff':>8}{'95% CI':>20}{'p adj':>11}{'MWU p (Holm)':>14}"]
+    mwu = kept["mannwhitney"].set_index(["group1", "group2"])
+    for _, t in kept["tukey"].iterrows():
+        pair = f"{t.group2}-{t.group1}"
+        lines.append(f"{pair:<14}{t.meandiff:>8.3f}{f'[{t.lower:.3f}, {t.upper:.3f}]':>20}{_p(t.p_adj):>11}"
+                     f"{_p(mwu.at[(t.group1, t.group2), 'p_holm']):>14}{'  *' if t.reject else ''}")
+    m = kept["mixed"]
+    if m.get("fixed_effects"):
+        lines += ["", f"Mixed model {m['formula']} (reference {m['reference']}):"]
+        for k, v in m["fixed_effects"].items():
+            lines.append(f"  {k:<22}{v:>8.3f}  [{m['ci_low'][k]:.3f}, {m['ci_high'][k]:.3f}]  p = {_p(m['p_values'][k])}")
+        vc = m["variance_components"]
+        lines.append(f"  variance: rater {vc['rater']:.3f}, clip {vc['clip']:.3f}, residual {vc['residual']:.3f}")
+    else:
+        lines += ["", f"Mixed model: {m.get('skipped') or m.get('error')}"]
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------- report.html
+CSS = """body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;max-width:980px;margin:2em auto;
+padding:0 1em;color:#222;line-height:1.45}h1{font-size:1.6em}h2{font-size:1.2em;margin-top:1.8em;
+border-bottom:1px solid #ddd}table{border-collapse:collapse;margin:.6em 0;font-size:.88em}
+td,th{border:1px solid #ddd;padding:3px 8px;text-align:right}th{background:#f5f5f5}td:first-child,
+th:first-child{text-align:left}img{max-width:100%}.note{color:#555;font-size:.9em}.cols{display:flex;gap:2em;
+flex-wrap:wrap}"""
+
+
+def _fmt_table(df, pcols=()):
+    df = df.copy()
+    for c in df.columns:
+        if c in pcols:
+            df[c] = df[c].map(lambda v: _p(v))
+        elif df[c].dtype.kind == "f":
+            df[c] = df[c].map(lambda v: "" if not np.isfinite(v) else f"{v:.4f}")
+    return df.to_html(border=0, escape=True)
+
+
+def _img(path):
+    data = base64.b64encode(Path(path).read_bytes()).decode("ascii")
+    return f'<img alt="{html.escape(Path(path).stem)}" src="data:image/png;base64,{data}">'
+
+
+def _mixed_html(m):
+    if not m.get("fixed_effects"):
+        return f"<p>Not fitted: {html.escape(str(m.get('skipped') or m.get('error')))}</p>"
+    fe = pd.DataFrame({"estimate": m["fixed_effects"], "std. error": m["std_errors"], "95% low": m["ci_low"],
+                       "95% high": m["ci_high"], "p": m["p_values"]})
+    vc = pd.DataFrame({"variance": m["variance_components"]})
+    warn = f"<p class=note>Fit warnings: {html.escape('; '.join(m['warnings']))}</p>" if m["warnings"] else ""
+    return (f"<p>{html.escape(m['formula'])}, {html.escape(m['method'])}; reference level "
+            f"<b>{html.escape(m['reference'])}</b>; converged: {m['converged']}.</p>"
+            f"<div class=cols>{_fmt_table(fe, ('p',))}{_fmt_table(vc)}</div>{warn}")
+
+
+def _section_html(res, title, figs=None):
+    a, k = res["anova"], res["kruskal"]
+    parts = [f"<h2>{html.escape(title)}</h2>",
+             f"<p>{res['n_test_ratings']} test ratings from {res['n_raters']} raters on {res['n_clips']} clips.</p>",
+             "<h3>Condition means</h3>",
+             _fmt_table(res["summary"].rename(columns={"t_low": "t 95% low", "t_high": "t 95% high",
+                                                        "boot_low": "boot 95% low", "boot_high": "boot 95% high"})),
+             f"<p>One-way ANOVA: <b>F({a['df_between']}, {a['df_within']}) = {a['F']:.4f}</b>, "
+             f"p = {_p(a['p'])}, η² = {a['eta_squared']:.3f}. Kruskal–Wallis: H({k['df']}) = {k['H']:.3f}, "
+             f"p = {_p(k['p'])}.</p>",
+             "<h3>Tukey HSD (95% family-wise)</h3>",
+             _fmt_table(res["tukey"][["group1", "group2", "meandiff", "lower", "upper", "p_adj", "reject"]],
+                        ("p_adj",)),
+             "<h3>Pairwise Mann–Whitney U (Holm-adjusted)</h3>",
+             _fmt_table(res["mannwhitney"], ("p", "p_holm")),
+             f"<h3>Cluster bootstrap of differences ({res['bootstrap']['n_boot']} resamples of raters and clips)</h3>",
+             _fmt_table(res["bootstrap"]["differences"], ("boot_p",)),
+             "<h3>Linear mixed model</h3>", _mixed_html(res["mixed"])]
+    if figs:
+        parts += [f"<p>{_img(f)}</p>" for f in figs]
+    if "metrics" in res:
+        parts += ["<h3>Objective metrics vs per-clip mean rating</h3>",
+                  _fmt_table(res["metrics"], ("pearson_p", "spearman_p"))]
+    return "\n".join(parts)
+
+
+def write_html(path, counts, kept, everyone, fig_paths, meta):
+    a = kept["anova"]
+    s = kept["summary"]
+    means = ", ".join(f"{c} {s.at[c, 'mean']:.2f}" for c in s.index)
+    sig = [f"{t.group2}–{t.group1}" for _, t in kept["tukey"].iterrows() if t.reject]
+    body = [
+        f"<h1>Perceptual test report</h1><p class=note>{html.escape(meta['input'])} · generated "
+        f"{html.escape(meta['generated_at'])} · bootstrap seed {meta['seed']}</p>",
+        "<h2>Summary</h2>",
+        f"<p>{counts['n_ratings_total']} responses from {counts['n_raters_total']} raters. "
+        f"{counts['n_raters_excluded']} raters gave a catch (bad-example) clip a rating ≥ {counts['threshold']} and "
+        f"were excluded, removing {counts['n_ratings_removed']} responses; {counts['n_ratings_kept']} were kept "
+        f"({counts['n_test_ratings_kept']} test ratings). Mean ratings: {means}. One-way ANOVA: "
+        f"F({a['df_between']}, {a['df_within']}) = {a['F']:.2f}, p = {_p(a['p'])}. Tukey HSD pairs differing at "
+        f"the 0.05 family-wise level: {', '.join(sig) if sig else 'none'}.</p>",
+        f"<p>{_img(fig_paths['ratings_histogram'])}</p>",
+        "<p class=note>Fig. 5 of the paper: responses per scale point and condition; dashed lines at the means.</p>",
+        f"<p>{_img(fig_paths['per_clip_means'])}</p>",
+        "<p class=note>Fig. 6 of the paper: mean rating of each clip, sorted worst to best within each condition.</p>",
+        f"<p>{_img(fig_paths['condition_means'])}</p>",
+        _section_html(kept, "With the rater exclusion (primary analysis)",
+                      [fig_paths["metric_scatter"]] if "metric_scatter" in fig_paths else None),
+        _section_html(everyone, "Without the exclusion (all raters)"),
+        "<h2>Excluded raters</h2><p>" + (html.escape(", ".join(counts["excluded_raters"])) or "none") + "</p>",
+    ]
+    page = ("<!doctype html><html lang=en><head><meta charset=utf-8><title>Perceptual test report</title>"
+            f"<style>{CSS}</style></head><body>{''.join(body)}</body></html>")
+    Path(path).write_text(page, encoding="utf-8")
+
+
+# ---------------------------------------------------------------------------------------------- entry point
+def build_report(ratings_path, out_dir="report", metrics_path=None, threshold=DEFAULT_THRESHOLD, mixed=True,
+                 seed=0, n_boot=2000, alpha=0.05, mixed_max_n=MIXED_MAX_N, progress=True, quiet=False):
+    """Run the whole analysis; returns the stats.json document."""
+    t0 = time.perf_counter()
+    df = load_ratings(ratings_path)
+    metrics = load_metrics(metrics_path) if metrics_path else None
+    kept_rows, counts = exclude_raters(df, threshold)
+    kept_test, all_test = test_rows(kept_rows), test_rows(df)
+    if len(kept_test) == 0:
+        raise AnalysisError(f"{ratings_path}: every rater failed the catch trials (threshold {threshold}); "
+                            "no test ratings are left")
+    out = Path(out_dir)
+    (out / "figures").mkdir(parents=True, exist_ok=True)
+    bar = tqdm(total=14, desc="analysis", unit="step", disable=not progress, leave=False, file=sys.stderr)
+    opts = dict(n_boot=n_boot, seed=seed, alpha=alpha, mixed=mixed, mixed_max_n=mixed_max_n, metrics=metrics,
+                progress=bar)
+    kept = analyse(kept_test, **opts)
+    everyone = analyse(all_test, **opts)
+    figs = {
+        "ratings_histogram": figures.ratings_histogram(kept["histogram"], kept["summary"]["mean"].to_dict(),
+                                                       out / "figures" / "ratings_histogram.png"),
+        "per_clip_means": figures.per_clip_means(kept["clips"], out / "figures" / "per_clip_means.png"),
+        "condition_means": figures.condition_means([("kept raters", kept["summary"]),
+                                                    ("all raters", everyone["summary"])],
+                                                   out / "figures" / "condition_means.png"),
+    }
+    bar.update(3)
+    if metrics is not None:
+        figs["metric_scatter"] = figures.metric_scatter(kept["clips"], metrics, kept["metrics"],
+                                                        out / "figures" / "metric_scatter.png")
+        matched = kept["clips"]["clip_id"].isin(metrics.index)
+        counts["n_clips_with_metrics"] = int(matched.sum())
+        counts["n_clips_without_metrics"] = int((~matched).sum())
+    meta = {"input": str(ratings_path), "generated_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+            "seed": seed, "alpha": alpha, "figures": {k: str(Path(v).relative_to(out)) for k, v in figs.items()}}
+    write_html(out / "report.html", counts, kept, everyone, figs, meta)
+    doc = to_json(counts, kept, everyone, meta)
+    (out / "stats.json").write_text(json.dumps(doc, indent=1, allow_nan=False), encoding="utf-8")
+    bar.update(1)
+    bar.close()
+    if not quiet:
+        print(console_summary(counts, kept, everyone))
+        print(f"\nReport: {out / 'report.html'}  ({time.perf_counter() - t0:.1f} s)")
+    return doc
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m analysis.report", description=__doc__.splitlines()[0])
+    ap.add_argument("ratings", help="ratings.csv exported by the rating app (CONTRACTS.md §6)")
+    ap.add_argument("--out", default="report", help="report folder (default: report/)")
+    ap.add_argument("--metrics", help="metrics.csv of the stimuli: correlate each metric with the clip mean rating")
+    ap.add_argument("--threshold", type=int, default=DEFAULT_THRESHOLD,
+                    help="exclude raters who rated any catch clip at or above this (default 3, as in the paper)")
+    ap.add_argument("--no-mixed", action="store_true", help="skip the linear mixed model")
+    ap.add_argument("--mixed-max-n", type=int, default=MIXED_MAX_N,
+                    help=f"skip the mixed model above this many test ratings (default {MIXED_MAX_N})")
+    ap.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
+    ap.add_argument("--n-boot", type=int, default=2000, help="bootstrap resamples (default 2000)")
+    ap.add_argument("--alpha", type=float, default=0.05, help="family-wise error rate (default 0.05)")
+    ap.add_argument("--quiet", action="store_true", help="no console summary or progress bar")
+    args = ap.parse_args(argv)
+    if not 1 <= args.threshold <= 6:
+        ap.error("--threshold must be 1-6 (6 keeps every rater)")
+    if args.n_boot < 10:
+        ap.error("--n-boot must be at least 10")
+    if not 0 < args.alpha < 1:
+        ap.error("--alpha must be between 0 and 1")
+    try:
+        build_report(args.ratings, args.out, args.metrics, args.threshold, not args.no_mixed, args.seed,
+                     args.n_boot, args.alpha, args.mixed_max_n, progress=not args.quiet, quiet=args.quiet)
+    except AnalysisError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

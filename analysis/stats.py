@@ -1,0 +1,351 @@
+"""Statistics of a rating test as pure functions on DataFrames that return dicts or tables (pingouin style).
+
+Every function takes the long table of ratings (one row per response) and the names of its columns, so the
+same code serves ratings.csv, the NIST reference data and R's PlantGrowth in the tests. Plotting lives in
+figures.py; file handling in load.py and report.py.
+"""
+import math
+from decimal import Decimal
+from fractions import Fraction
+from itertools import combinations
+
+import numpy as np
+import pandas as pd
+from scipy import sparse
+from scipy import stats as sps
+
+PAPER_ORDER = ("NAT", "MG", "FL")  # the paper's order in tables and figures; other systems follow, BAD last
+
+
+def condition_order(conditions):
+    """NAT, MG, FL first (as in the paper), then other systems alphabetically, BAD last."""
+    conds = sorted(set(conditions))
+    head = [c for c in PAPER_ORDER if c in conds]
+    tail = [c for c in conds if c not in PAPER_ORDER and c != "BAD"]
+    return head + tail + (["BAD"] if "BAD" in conds else [])
+
+
+# ---------------------------------------------------------------------------------------------- one-way ANOVA
+def _group_moments(y, codes, k):
+    """Group sizes, means and within-group sum of squares, numerically stable.
+
+    The data are first shifted by one observation (removing the constant leading digits that defeat a naive
+    sum of squares, NIST SmLs07-09), then a corrected two-pass algorithm: means, residuals, and a second-pass
+    correction of each mean by the mean residual (Chan, Golub & LeVeque 1983). Sums are numpy's pairwise sums.
+    """
+    d = y - y[0]
+    n = np.bincount(codes, minlength=k).astype(np.int64)
+    means = np.bincount(codes, weights=d, minlength=k) / n
+    r = d - means[codes]
+    corr = np.bincount(codes, weights=r, minlength=k) / n
+    means += corr
+    r -= corr[codes]
+    ss_within = float(np.dot(r, r))
+    return n, means + y[0], means, ss_within  # shifted means kept for the between-groups sum
+
+
+def _anova_exact(values, codes, k):
+    """Exact rational arithmetic for decimal input (values that float64 cannot hold, e.g. 1000000000000.4)."""
+    q = [Fraction(v) for v in values]
+    s = [Fraction(0)] * k
+    s2 = [Fraction(0)] * k
+    n = [0] * k
+    for v, g in zip(q, codes):
+        s[g] += v
+        s2[g] += v * v
+        n[g] += 1
+    total, big_n = sum(s), sum(n)
+    ss_within = sum(s2[g] - s[g] * s[g] / n[g] for g in range(k))
+    ss_between = sum(s[g] * s[g] / n[g] for g in range(k)) - total * total / big_n
+    return np.array(n, dtype=np.int64), ss_between, ss_within
+
+
+def one_way_anova(df, dv="rating", between="condition"):
+    """One-way ANOVA -> dict(F, df_between, df_within, p, ss_between, ss_within, ms_between, ms_within,
+    eta_squared, n, k).
+
+    Float columns use a shifted, corrected two-pass algorithm; a column of decimal.Decimal or Fraction values
+    is summed exactly in rational arithmetic, so data with many constant leading digits (NIST StRD SmLs07-09)
+    give the certified F to full double precision.
+    """
+    codes, levels = pd.factorize(df[between], sort=True)
+    k = len(levels)
+    if k < 2:
+        raise ValueError(f"one-way ANOVA needs at least 2 groups in {between!r}, got {k}")
+    if len(df) - k < 1:
+        raise ValueError("one-way ANOVA needs more observations than groups")
+    values = df[dv].to_numpy()
+    exact = values.dtype == object and len(values) and isinstance(values[0], (Decimal, Fraction))
+    if exact:
+        n, ssb, ssw = _anova_exact(values, codes, k)
+        big_n = int(n.sum())
+    else:
+        y = values.astype(np.float64)
+        n, _, means, ssw = _group_moments(y, codes, k)
+        big_n = int(n.sum())
+        grand = float(np.dot(n, means)) / big_n
+        ssb = float(np.dot(n, (means - grand) ** 2))
+    df_b, df_w = k - 1, big_n - k
+    if exact:
+        f_exact = (ssb / df_b) / (ssw / df_w) if ssw else None
+        F = float(f_exact) if f_exact is not None else math.inf
+        ssb, ssw = float(ssb), float(ssw)
+    else:
+        F = (ssb / df_b) / (ssw / df_w) if ssw > 0 else math.inf
+    p = float(sps.f.sf(F, df_b, df_w)) if math.isfinite(F) else 0.0
+    return {"F": F, "df_between": df_b, "df_within": df_w, "p": p, "ss_between": ssb, "ss_within": ssw,
+            "ms_between": ssb / df_b, "ms_within": ssw / df_w, "eta_squared": ssb / (ssb + ssw) if ssb + ssw else
+            math.nan, "n": big_n, "k": k}
+
+
+# ---------------------------------------------------------------------------------------------- descriptives
+def group_summary(df, dv="rating", between="condition", level=0.95):
+    """Per group: n, mean, sd, sem and the t-based confidence interval of the mean (own-group variance)."""
+    g = df.groupby(between, sort=True)[dv]
+    out = pd.DataFrame({"n": g.size(), "mean": g.mean(), "sd": g.std(ddof=1)})
+    out["sem"] = out["sd"] / np.sqrt(out["n"])
+    tcrit = sps.t.ppf(0.5 + level / 2, out["n"] - 1)
+    out["t_low"] = out["mean"] - tcrit * out["sem"]
+    out["t_high"] = out["mean"] + tcrit * out["sem"]
+    out.index.name = between
+    return out.loc[condition_order(out.index)] if between == "condition" else out
+
+
+def rating_histogram(df, dv="rating", between="condition", scale=(1, 2, 3, 4, 5)):
+    """Counts of each scale point per group (rows: groups, columns: scale points) — the paper's Fig. 5 data."""
+    table = pd.crosstab(df[between], df[dv]).reindex(columns=list(scale), fill_value=0)
+    table.columns.name = dv
+    return table.loc[condition_order(table.index)] if between == "condition" else table
+
+
+def per_clip_means(df, dv="rating", between="condition", clip="clip_id", level=0.95):
+    """Mean rating of every clip, sorted worst to best within each condition (the paper's Fig. 6 data).
+
+    Columns: clip, condition, n, mean, sd, ci_low, ci_high (t-based, per clip), rank (1 = worst in condition).
+    """
+    g = df.groupby(clip, sort=True)
+    out = pd.DataFrame({between: g[between].first(), "n": g.size(), "mean": g[dv].mean(), "sd": g[dv].std(ddof=1)})
+    sem = out["sd"] / np.sqrt(out["n"])
+    with np.errstate(invalid="ignore"):
+        tcrit = sps.t.ppf(0.5 + level / 2, out["n"] - 1)
+    out["ci_low"] = out["mean"] - tcrit * sem
+    out["ci_high"] = out["mean"] + tcrit * sem
+    out = out.reset_index()
+    order = {c: i for i, c in enumerate(condition_order(out[between]))}
+    out["_o"] = out[between].map(order)
+    out = out.sort_values(["_o", "mean", clip], kind="mergesort").drop(columns="_o")
+    out["rank"] = out.groupby(between, sort=False).cumcount() + 1
+    return out.reset_index(drop=True)
+
+
+# ---------------------------------------------------------------------------------------------- Tukey HSD
+def tukey_hsd(df, dv="rating", between="condition", alpha=0.05):
+    """Tukey HSD (Tukey-Kramer for unequal n) over all pairs at family-wise error alpha.
+
+    statsmodels convention: group1 < group2 alphabetically, meandiff = mean(group2) - mean(group1).
+    Columns: group1, group2, meandiff, lower, upper, p_adj, reject, se, q. Pooled MSE from the one-way ANOVA;
+    studentized range quantile and tail from scipy (the same distribution as R's qtukey/ptukey).
+    """
+    codes, levels = pd.factorize(df[between], sort=True)
+    k = len(levels)
+    y = df[dv].to_numpy(dtype=np.float64)
+    n, means, _, ssw = _group_moments(y, codes, k)
+    df_w = int(n.sum()) - k
+    if k < 2 or df_w < 1:
+        raise ValueError("Tukey HSD needs at least 2 groups and more observations than groups")
+    mse = ssw / df_w
+    qcrit = float(sps.studentized_range.ppf(1 - alpha, k, df_w))
+    rows = []
+    for i, j in combinations(range(k), 2):
+        diff = means[j] - means[i]
+        se = math.sqrt(mse / 2 * (1 / n[i] + 1 / n[j]))
+        q = abs(diff) / se if se > 0 else math.inf
+        p = float(sps.studentized_range.sf(q, k, df_w)) if math.isfinite(q) else 0.0
+        rows.append({"group1": levels[i], "group2": levels[j], "meandiff": float(diff),
+                     "lower": float(diff - qcrit * se), "upper": float(diff + qcrit * se),
+                     "p_adj": min(max(p, 0.0), 1.0), "reject": bool(p < alpha), "se": se, "q": q})
+    return pd.DataFrame(rows)
+
+
+# ---------------------------------------------------------------------------------------------- rank tests
+def holm(pvalues):
+    """Holm step-down adjusted p-values (same order as the input)."""
+    p = np.asarray(pvalues, dtype=float)
+    m = len(p)
+    if m == 0:
+        return p
+    order = np.argsort(p, kind="mergesort")
+    adj = np.minimum(1.0, np.maximum.accumulate((m - np.arange(m)) * p[order]))
+    out = np.empty(m)
+    out[order] = adj
+    return out
+
+
+def kruskal_wallis(df, dv="rating", between="condition"):
+    """Kruskal-Wallis H test (tie-corrected) -> dict(H, df, p, epsilon_squared)."""
+    groups = [g.to_numpy() for _, g in df.groupby(between, sort=True)[dv]]
+    h, p = sps.kruskal(*groups)
+    n = sum(len(g) for g in groups)
+    return {"H": float(h), "df": len(groups) - 1, "p": float(p), "epsilon_squared": float(h / (n - 1))}
+
+
+def pairwise_mannwhitney(df, dv="rating", between="condition", alpha=0.05):
+    """Two-sided Mann-Whitney U for every pair (normal approximation with tie and continuity correction, as
+    R's wilcox.test with ties), Holm-adjusted over the family.
+
+    group1 < group2 alphabetically like tukey_hsd; U is group2's statistic, so cles = P(group2 > group1) +
+    P(tie)/2 and rank_biserial = 2 cles - 1 (positive: group2 rated higher).
+    """
+    by = {name: g.to_numpy() for name, g in df.groupby(between, sort=True)[dv]}
+    names = sorted(by)
+    rows = []
+    for a, b in combinations(names, 2):
+        res = sps.mannwhitneyu(by[b], by[a], alternative="two-sided", method="asymptotic", use_continuity=True)
+        cles = float(res.statistic) / (len(by[a]) * len(by[b]))
+        rows.append({"group1": a, "group2": b, "U": float(res.statistic), "p": float(res.pvalue),
+                     "cles": cles, "rank_biserial": 2 * cles - 1})
+    out = pd.DataFrame(rows)
+    out["p_holm"] = holm(out["p"].to_numpy())
+    out["reject"] = out["p_holm"] < alpha
+    return out
+
+
+# ---------------------------------------------------------------------------------------------- bootstrap
+def _resample_counts(rng, n_boot, size):
+    """n_boot rows of multiplicities of drawing `size` items with replacement from `size` items."""
+    idx = rng.integers(0, size, size=(n_boot, size))
+    idx += (np.arange(n_boot) * size)[:, None]
+    return np.bincount(idx.ravel(), minlength=n_boot * size).reshape(n_boot, size).astype(np.float64)
+
+
+def cluster_bootstrap(df, dv="rating", between="condition", rater="rater_id", clip="clip_id", n_boot=2000,
+                      seed=0, level=0.95, dense_limit=30_000_000):
+    """Two-way cluster bootstrap of the group means: raters resampled with replacement, and clips resampled
+    with replacement within their condition (clips are nested in conditions, raters are crossed with them).
+
+    A replicate weights each rating by (times its rater was drawn) x (times its clip was drawn); a group
+    mean is sum(w y) / sum(w). Vectorised: with the rater x clip table S of ratings, the weighted sums of all
+    replicates are ((W_rater @ S) * W_clip) @ onehot(condition) — one matrix product per chunk of
+    replicates (dense for tables up to `dense_limit` cells, sparse beyond). Integer weights and ratings keep
+    every sum exact, so results are bit-reproducible for a seed.
+
+    -> {"means": DataFrame per group (mean, boot_low, boot_high, boot_se), "differences": DataFrame per pair
+        (group1 < group2, meandiff = group2 - group1, boot_low, boot_high, boot_p = two-sided bootstrap
+        p-value), "n_boot", "seed", "level", "n_degenerate"}.
+    """
+    rc, raters = pd.factorize(df[rater])
+    cc, clips = pd.factorize(df[clip])
+    cond_codes, conds = pd.factorize(df[between], sort=True)
+    R, C, K = len(raters), len(clips), len(conds)
+    y = df[dv].to_numpy(dtype=np.float64)
+    clip_cond = np.zeros(C, dtype=np.int64)
+    clip_cond[cc] = cond_codes
+    onehot = np.zeros((C, K))
+    onehot[np.arange(C), clip_cond] = 1.0
+    rng = np.random.default_rng(seed)
+    w_rater = _resample_counts(rng, n_boot, R)
+    w_clip = np.zeros((n_boot, C))
+    for k in range(K):  # stratified: each condition keeps its number of clips
+        members = np.flatnonzero(clip_cond == k)
+        w_clip[:, members] = _resample_counts(rng, n_boot, len(members))
+    use_dense = R * C <= dense_limit
+    if use_dense:
+        S = np.zeros((R, C))
+        N = np.zeros((R, C))
+        S[rc, cc] = y
+        N[rc, cc] = 1.0
+    else:
+        S = sparse.csr_matrix((y, (rc, cc)), shape=(R, C))
+        N = sparse.csr_matrix((np.ones_like(y), (rc, cc)), shape=(R, C))
+        St, Nt = S.T.tocsr(), N.T.tocsr()
+    num = np.empty((n_boot, K))
+    den = np.empty((n_boot, K))
+    chunk = max(1, min(n_boot, 4_000_000 // max(R, C, 1)))
+    for s in range(0, n_boot, chunk):
+        wr, wc = w_rater[s:s + chunk], w_clip[s:s + chunk]
+        if use_dense:
+            a, b = wr @ S, wr @ N
+        else:
+            a, b = (St @ wr.T).T, (Nt @ wr.T).T
+        num[s:s + chunk] = (a * wc) @ onehot
+        den[s:s + chunk] = (b * wc) @ onehot
+    with np.errstate(invalid="ignore", divide="ignore"):
+        boot = num / den
+    degenerate = int(np.isnan(boot).any(axis=1).sum())
+    lo, hi = 50 * (1 - level), 50 * (1 + level)
+    full = pd.Series(y).groupby(cond_codes).mean().to_numpy()
+    means = pd.DataFrame({"mean": full, "boot_low": np.nanpercentile(boot, lo, axis=0),
+                          "boot_high": np.nanpercentile(boot, hi, axis=0),
+                          "boot_se": np.nanstd(boot, axis=0, ddof=1)}, index=pd.Index(conds, name=between))
+    rows = []
+    for i, j in combinations(range(K), 2):
+        d = boot[:, j] - boot[:, i]
+        d = d[~np.isnan(d)]
+        share = min((d <= 0).mean(), (d >= 0).mean()) if len(d) else math.nan
+        rows.append({"group1": conds[i], "group2": conds[j], "meandiff": float(full[j] - full[i]),
+                     "boot_low": float(np.percentile(d, lo)), "boot_high": float(np.percentile(d, hi)),
+                     "boot_p": float(min(1.0, 2 * share))})
+    if between == "condition":
+        means = means.loc[condition_order(means.index)]
+    return {"means": means, "differences": pd.DataFrame(rows), "n_boot": n_boot, "seed": seed, "level": level,
+            "n_degenerate": degenerate, "method": "two-way cluster bootstrap (raters; clips within condition), "
+                                                  "percentile intervals"}
+
+
+# ---------------------------------------------------------------------------------------------- mixed model
+def mixed_model(df, dv="rating", between="condition", rater="rater_id", clip="clip_id", reference=None):
+    """Linear mixed model  dv ~ between + (1|rater) + (1|clip)  with crossed random intercepts, REML
+    (analysis/mixed.py: lme4's profiled criterion from sufficient statistics; checked against statsmodels
+    MixedLM in the tests). Treatment coding; the reference level is NAT when present (effects read as "vs
+    natural motion"), else the first level alphabetically. Wald z tests and 95% intervals for fixed effects.
+
+    -> dict: formula, method, reference, fixed_effects {Intercept, condition[T.X]: estimate}, std_errors,
+    z, p_values, ci_low, ci_high, variance_components {rater, clip, residual}, condition_means (model-based),
+    reml_log_likelihood, converged, n, n_raters, n_clips.
+    """
+    from .mixed import fit_crossed
+
+    levels = sorted(df[between].unique())
+    if reference is None:
+        reference = "NAT" if "NAT" in levels else levels[0]
+    others = [c for c in levels if c != reference]
+    cond = df[between].to_numpy()
+    X = np.column_stack([np.ones(len(df))] + [(cond == c).astype(float) for c in others])
+    names = ["Intercept"] + [f"{between}[T.{c}]" for c in others]
+    rater_codes = pd.factorize(df[rater])[0]
+    clip_codes = pd.factorize(df[clip])[0]
+    fit = fit_crossed(df[dv].to_numpy(dtype=float), X, rater_codes, clip_codes, names)
+    fe = fit["fixed_effects"]
+    means = {reference: fe["Intercept"], **{c: fe["Intercept"] + fe[f"{between}[T.{c}]"] for c in others}}
+    return {"formula": f"{dv} ~ {between} + (1|{rater}) + (1|{clip})",
+            "method": "REML, crossed random intercepts (profiled criterion, L-BFGS-B + Nelder-Mead polish)",
+            "reference": reference, **fit,
+            "condition_means": {c: means[c] for c in condition_order(means)},
+            "n": int(len(df)), "n_raters": int(rater_codes.max() + 1), "n_clips": int(clip_codes.max() + 1),
+            "warnings": [] if fit["converged"] else ["optimiser did not report convergence"]}
+
+
+# ---------------------------------------------------------------------------------------------- objective metrics
+def metric_correlations(clip_means, metrics, between="condition"):
+    """Correlation of each per-clip objective metric with the per-clip mean rating.
+
+    clip_means: per_clip_means() table; metrics: DataFrame indexed by clip id, one column per metric.
+    Rows per metric: scope "all" (every rated clip with that metric) and one per condition. Columns: metric,
+    scope, n, pearson_r, pearson_p, spearman_rho, spearman_p.
+    """
+    merged = clip_means.set_index(clip_means.columns[0]).join(metrics, how="inner")
+    rows = []
+    for metric in metrics.columns:
+        scopes = [("all", merged)] + [(c, merged[merged[between] == c])
+                                      for c in condition_order(merged[between].unique())]
+        for scope, part in scopes:
+            part = part[np.isfinite(part[metric])]
+            row = {"metric": metric, "scope": scope, "n": int(len(part)), "pearson_r": math.nan,
+                   "pearson_p": math.nan, "spearman_rho": math.nan, "spearman_p": math.nan}
+            if len(part) >= 3 and part[metric].std() > 0 and part["mean"].std() > 0:
+                r = sps.pearsonr(part[metric], part["mean"])
+                s = sps.spearmanr(part[metric], part["mean"])
+                row.update(pearson_r=float(r.statistic), pearson_p=float(r.pvalue),
+                           spearman_rho=float(s.statistic), spearman_p=float(s.pvalue))
+            rows.append(row)
+    return pd.DataFrame(rows)
