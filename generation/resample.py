@@ -42,20 +42,27 @@ def local_quaternions(bvh, frames=None):
     q = np.zeros((T, J, 4))
     q[..., 0] = 1.0
     trans = np.broadcast_to(bvh.offsets, (T, J, 3)).copy()
+    # Joints with the same channel layout are done together (usually one or two groups per file).
+    groups = {}
     for j, (chans, col) in enumerate(zip(bvh.channels, bvh.channel_columns())):
-        qj = None
+        groups.setdefault(tuple(chans), []).append((j, col))
+    for chans, members in groups.items():
+        js = np.array([j for j, _ in members])
+        cols = np.array([col for _, col in members])
+        qg = None
         for k, ch in enumerate(chans):
             axis = _AXIS[ch[0]]
+            values = motion[:, cols + k]  # [T, G]
             if ch.endswith("position"):
-                trans[:, j, axis] = motion[:, col + k]
+                trans[:, js, axis] = values
                 continue
-            half = np.radians(motion[:, col + k]) / 2
-            qa = np.zeros((T, 4))
-            qa[:, 0] = np.cos(half)
-            qa[:, 1 + axis] = np.sin(half)
-            qj = qa if qj is None else quat_mul(qj, qa)
-        if qj is not None:
-            q[:, j] = qj
+            half = np.radians(values) / 2
+            qa = np.zeros(values.shape + (4,))
+            qa[..., 0] = np.cos(half)
+            qa[..., 1 + axis] = np.sin(half)
+            qg = qa if qg is None else quat_mul(qg, qa)
+        if qg is not None:
+            q[:, js] = qg
     return q, trans
 
 
