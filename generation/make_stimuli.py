@@ -1,0 +1,469 @@
+"""The main job: data -> models -> stimulus folder for the rating test (CONTRACTS.md §4).
+
+    python -m generation.make_stimuli [--out stimuli/] [--quick] [--mg-checkpoint CKPT --fl-checkpoint CKPT]
+                                      [--system NAME=DIR ...] [--export-items DIR]
+
+1. Data: prepares ../shared/data/bandai-namco-locomotion into a cached dataset (runs/dataset.npz) if needed.
+2. Items: held-out 4-s test windows, balanced over locomotion categories (round robin, distinct takes
+   first), seeded: `--n-items` test items, `--n-catch` catch items and `--n-training` familiarisation
+   items (from other windows).
+3. Models: MG and FL checkpoints as given, else trained (configs `cpu`, `tiny` with --quick) into
+   runs/ (an existing run there is resumed or reused). BAD clips come from the earliest MG checkpoint.
+4. Clips: per test item NAT (the real window through features.to_world, the same inverse the models'
+   output goes through), MG (seeded with the item's real preceding frames) and FL with the same control;
+   every imported system's file for the item; BAD clips on the catch items; each training item in every
+   condition except BAD. Every clip is placed to start at the origin facing +Z.
+5. Videos (in parallel, one process per core), contact sheets, metrics.csv, manifest.csv, items.csv.
+"""
+import argparse
+import csv
+import os
+import re
+import secrets
+import shutil
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from . import skeleton
+from .bvh import BvhError
+from .clip import ClipError, save_clip
+from .features import to_world
+from .metrics import METRIC_NAMES, clip_metrics
+from .systems import SystemError_, canonical_placement, find_system_files, load_system_motion, parse_system_spec
+
+BUILTIN = ("NAT", "MG", "FL")
+CLIP_ID_LEN = 16
+MANIFEST_COLUMNS = ["clip_id", "condition", "role", "item", "video", "motion", "seed", "frames", "fps"]
+METRICS_COLUMNS = ["clip_id", "condition", "role", "item", *METRIC_NAMES]
+ITEMS_COLUMNS = ["item", "role", "category", "take", "start_frame", "frames", "fps", "control"]
+
+
+class StimuliError(ValueError):
+    """Bad input to make_stimuli; one line naming the file or option."""
+
+
+def log(msg):
+    print(msg, file=sys.stderr, flush=True)
+
+
+# ---------------------------------------------------------------- data
+def quick_takes(data_dir, per_category=10):
+    """The `per_category` longest takes (by file size) of every locomotion category: enough held-out
+    windows for 30 items plus catch and training items, prepared in a few seconds."""
+    from .prepare_data import category_of, find_takes, take_name
+
+    by_cat = {}
+    for f in find_takes(data_dir):
+        by_cat.setdefault(category_of(f), []).append(f)
+    return sorted(take_name(f) for files in by_cat.values()
+                  for f in sorted(files, key=lambda p: (-p.stat().st_size, p.name))[:per_category])
+
+
+def ensure_dataset(args):
+    """The prepared dataset path: --dataset if it exists, else prepared there from --data."""
+    from .prepare_data import default_data_dir, prepare, summary_table
+
+    path = Path(args.dataset)
+    if path.is_file():
+        log(f"data: using the prepared dataset {path}")
+        return path
+    data = Path(args.data) if args.data else default_data_dir()
+    if data is None or not data.is_dir():
+        raise StimuliError(f"data folder {args.data or '../shared/data/bandai-namco-locomotion'} not found; "
+                           "pass --data DIR (a folder of .bvh/.bvh.gz takes) or --dataset FILE.npz")
+    log(f"data: preparing {data} -> {path}" + (" (quick subset)" if args.quick else ""))
+    takes = quick_takes(data) if args.quick else None
+    summary = prepare(data, path, takes=takes, seed=args.seed, progress=True)
+    log(summary_table(summary))
+    return path
+
+
+def load_splits(path):
+    """The held-out splits of a prepared dataset as {split: dict of arrays}, plus fps and window."""
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            d = {k: f[k] for k in f.files}
+    except (OSError, ValueError) as e:
+        raise StimuliError(f"{path}: not a readable dataset .npz ({e})") from None
+    splits = {}
+    for s in ("test", "valid"):
+        keys = ("x", "c", "labels", "take", "start", "hist", "hist_c")
+        if all(f"{s}_{k}" in d for k in keys):
+            splits[s] = {k: d[f"{s}_{k}"] for k in keys}
+    if "test" not in splits:
+        raise StimuliError(f"{path}: no test split with history (test_x, test_hist, ...); re-run prepare_data")
+    return splits, float(d["fps"]), int(d["window"])
+
+
+# ---------------------------------------------------------------- items
+def balanced_order(labels, takes, rng):
+    """All window indices in pick order: categories in turn; within one, a window of every take before
+    a second one of any take, takes and windows shuffled."""
+    queues = []
+    for cat in sorted(set(labels)):
+        by_take = {}
+        for i in rng.permutation(np.nonzero(labels == cat)[0]):
+            by_take.setdefault(takes[i], []).append(int(i))
+        groups = list(by_take.values())
+        order = [g[r] for r in range(max(map(len, groups))) for g in groups if r < len(g)]
+        queues.append(order)
+    out = []
+    for r in range(max(map(len, queues)) if queues else 0):
+        out += [q[r] for q in queues if r < len(q)]
+    return out
+
+
+def select_items(splits, n_items, n_catch, n_training, seed):
+    """Items as a list of dicts (id, role, split, index, category, take, start); test items come from the
+    test split, catch and training items from its remaining windows, then from the valid split."""
+    rng = np.random.default_rng(seed)
+    pool = []
+    for s in ("test", "valid"):
+        if s in splits:
+            pool += [(s, i) for i in balanced_order(splits[s]["labels"], splits[s]["take"], rng)]
+    n_test_windows = len(splits["test"]["labels"])
+    if n_items > n_test_windows:
+        raise StimuliError(f"--n-items {n_items}: the dataset's test split has only {n_test_windows} windows")
+    need = n_items + n_catch + n_training
+    if need > len(pool):
+        raise StimuliError(f"{need} items needed but the held-out splits have only {len(pool)} windows; "
+                           "lower --n-items/--n-catch/--n-training")
+    test = pool[:n_items]
+    rest = [p for p in pool if p not in set(test)]
+    # Catch and training items: other windows, preferring other takes than the test items'.
+    used_takes = {splits[s]["take"][i] for s, i in test}
+    rest.sort(key=lambda p: splits[p[0]]["take"][p[1]] in used_takes)  # stable: keeps the balanced order
+    roles = ["test"] * n_items + ["catch"] * n_catch + ["training"] * n_training
+    items = []
+    for role, (s, i) in zip(roles, test + rest[: n_catch + n_training]):
+        items.append(dict(id=f"{s}{i:04d}", role=role, split=s, index=i, category=str(splits[s]["labels"][i]),
+                          take=str(splits[s]["take"][i]), start=int(splits[s]["start"][i])))
+    return items
+
+
+def item_arrays(splits, items):
+    """Stacked window, control and history arrays of `items` (in order)."""
+    get = lambda k: np.stack([splits[it["split"]][k][it["index"]] for it in items])  # noqa: E731
+    return {k: get(k) for k in ("x", "c", "hist", "hist_c")}
+
+
+def write_items(folder, items, arrays, fps):
+    """items.csv plus items/ITEM.npz (control, real history) for the items another system must generate."""
+    folder = Path(folder)
+    (folder / "items").mkdir(parents=True, exist_ok=True)
+    with open(folder / "items.csv", "w", newline="", encoding="utf-8") as f:
+        w = csv.writer(f)
+        w.writerow(ITEMS_COLUMNS)
+        for k, it in enumerate(items):
+            if it["role"] == "catch":
+                continue
+            rel = f"items/{it['id']}.npz"
+            # The real frames just before the window, placed so that the window starts at the origin
+            # facing +Z: a system can continue them, as MG does.
+            hist_x = np.concatenate([arrays["hist"][k], arrays["x"][k][:1]])
+            hist_c = np.concatenate([arrays["hist_c"][k], arrays["c"][k][:1]])
+            hist = canonical_placement(to_world(hist_x, hist_c), fps, frame=-1)[:-1]
+            np.savez_compressed(folder / rel, control=arrays["c"][k], history=arrays["hist"][k],
+                                history_control=arrays["hist_c"][k], history_joints=hist, fps=np.float64(fps),
+                                frames=np.int64(arrays["c"][k].shape[0]), joint_names=np.array(skeleton.JOINT_NAMES),
+                                parents=skeleton.PARENTS)
+            w.writerow([it["id"], it["role"], it["category"], it["take"], it["start"], arrays["c"][k].shape[0],
+                        f"{fps:g}", rel])
+
+
+# ---------------------------------------------------------------- models
+def checkpoints_in(folder):
+    """Checkpoint files step_*.pt of a run folder (or its checkpoints/ subfolder), by step."""
+    folder = Path(folder)
+    if (folder / "checkpoints").is_dir():
+        folder = folder / "checkpoints"
+    files = [p for p in folder.glob("step_*.pt") if re.fullmatch(r"step_\d+\.pt", p.name)]
+    return sorted(files, key=lambda p: int(p.stem.split("_")[1]))
+
+
+def ensure_model(kind, args, dataset):
+    """(final, earliest) checkpoint of `kind`: from --{kind}-checkpoint, else trained into runs/."""
+    from .train import train
+
+    given = getattr(args, f"{kind}_checkpoint")
+    if given:
+        path = Path(given)
+        if not path.is_file():
+            raise StimuliError(f"--{kind}-checkpoint {path}: no such file")
+        return path, checkpoints_in(path.parent)[0] if checkpoints_in(path.parent) else path
+    run = Path(args.runs) / f"{kind}_{args.config}"
+    resume = (run / "resume.pt").is_file()
+    log(f"models: {'resuming' if resume else 'training'} {kind} (config {args.config}) in {run}")
+    train(kind, args.config, dataset, run, steps=args.train_steps, seed=args.seed, progress=True,
+          resume=resume, device=args.device)
+    ckpts = checkpoints_in(run)
+    if not ckpts:
+        raise StimuliError(f"{run}: training wrote no checkpoint")
+    return ckpts[-1], ckpts[0]
+
+
+def _numpy(a):
+    return a.detach().cpu().numpy() if hasattr(a, "detach") else np.asarray(a)
+
+
+def sample_condition(kind, ckpt, arrays, idx, temperature, seed, device):
+    """Features x [B, T, 63] sampled by the model in `ckpt` for the items at `idx`."""
+    from .sample import load_model, sample_fl, sample_mg
+
+    model = load_model(ckpt, device=device)
+    c = arrays["c"][idx]
+    if kind == "mg":
+        x = sample_mg(model, c, arrays["hist"][idx], arrays["hist_c"][idx], temperature=temperature, seed=seed)
+    else:
+        x = sample_fl(model, c, temperature=temperature, seed=seed)
+    x = _numpy(x).astype(np.float32)
+    if x.shape != arrays["x"][idx].shape:
+        raise StimuliError(f"{ckpt}: sampled {x.shape}, expected {arrays['x'][idx].shape}")
+    return x
+
+
+# ---------------------------------------------------------------- clips, videos, manifest
+def new_clip_id(taken, forbidden):
+    """A random token [a-z0-9]{16}, unique, containing no condition name (case-insensitively)."""
+    alphabet = "abcdefghijklmnopqrstuvwxyz0123456789"
+    while True:
+        cid = "".join(secrets.choice(alphabet) for _ in range(CLIP_ID_LEN))
+        if cid not in taken and not any(f in cid for f in forbidden):
+            taken.add(cid)
+            return cid
+
+
+def _render_job(job):
+    from rendering.render import render_clip
+
+    motion, video, sheet, size = job
+    return render_clip(motion, video, size=size, sheet=sheet, threads=1)
+
+
+def render_all(jobs, workers):
+    """Render (motion, video, sheet, size) jobs in a process pool, with a progress bar."""
+    from rendering.render import RenderError
+
+    bar = tqdm(total=len(jobs), desc="render", unit="clip", file=sys.stderr)
+    if workers <= 1:
+        for job in jobs:
+            _render_job(job)
+            bar.update()
+    else:
+        # spawn: the parent holds torch (threads); forked children of it can hang.
+        with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
+            futures = [pool.submit(_render_job, job) for job in jobs]
+            for fut in as_completed(futures):
+                try:
+                    fut.result()
+                except RenderError:
+                    raise
+                bar.update()
+    bar.close()
+
+
+def prepare_out(out, force):
+    out = Path(out)
+    if (out / "manifest.csv").exists() and not force:
+        raise StimuliError(f"{out}: already holds a stimulus set (manifest.csv); pass --force to replace it")
+    for sub in ("videos", "motion", "sheets", "items"):
+        if (out / sub).exists():
+            shutil.rmtree(out / sub)
+    for name in ("manifest.csv", "metrics.csv", "items.csv"):
+        (out / name).unlink(missing_ok=True)
+    for sub in ("videos", "motion", "sheets"):
+        (out / sub).mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def summary_text(metrics_rows):
+    """Per-condition means (sd) of every metric, test and catch clips, as a printable table."""
+    import pandas as pd
+
+    df = pd.DataFrame(metrics_rows)
+    df = df[df.role != "training"]
+    g = df.groupby(["role", "condition"])[list(METRIC_NAMES)]
+    mean, sd, n = g.mean(), g.std(), g.size()
+    table = mean.round(3).astype(str) + " (" + sd.round(3).astype(str) + ")"
+    table.insert(0, "n", n)
+    return table.to_string()
+
+
+# ---------------------------------------------------------------- main
+def parse_args(argv):
+    ap = argparse.ArgumentParser(prog="python -m generation.make_stimuli", description=__doc__.split("\n")[0],
+                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    ap.add_argument("--out", default="stimuli", help="stimulus folder to write")
+    ap.add_argument("--quick", action="store_true", help="tiny models on a subset of takes: a few minutes in all")
+    ap.add_argument("--data", help="folder of BVH takes (default ../shared/data/bandai-namco-locomotion)")
+    ap.add_argument("--runs", default="runs", help="folder for the cached dataset and training runs")
+    ap.add_argument("--dataset", help="prepared dataset .npz to use or create (default RUNS/dataset.npz, "
+                                      "RUNS/dataset_quick.npz with --quick)")
+    ap.add_argument("--config", help="training config for both models: tiny | cpu | paper (default cpu; tiny with --quick)")
+    ap.add_argument("--train-steps", type=int, help="override the config's training steps")
+    ap.add_argument("--mg-checkpoint", help="MG checkpoint to sample from (skips MG training)")
+    ap.add_argument("--fl-checkpoint", help="FL checkpoint to sample from (skips FL training)")
+    ap.add_argument("--bad-checkpoint", help="checkpoint for the BAD catch clips (default: the earliest MG one)")
+    ap.add_argument("--system", action="append", default=[], metavar="NAME=DIR",
+                    help="import another system's output (one ITEM.bvh[.gz] or ITEM.npz per item) as condition NAME")
+    ap.add_argument("--export-items", metavar="DIR", help="only write DIR/items.csv and DIR/items/ (what another "
+                                                           "system must generate), then stop")
+    ap.add_argument("--n-items", type=int, default=30, help="test items (each in NAT, MG, FL and every system)")
+    ap.add_argument("--n-catch", type=int, default=4, help="BAD catch clips")
+    ap.add_argument("--n-training", type=int, default=1, help="familiarisation items, each shown in every "
+                                                              "condition but BAD")
+    ap.add_argument("--temperature", type=float, default=1.0, help="sampling temperature of MG and FL")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--size", type=int, default=640, help="video width = height in pixels")
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="rendering processes")
+    ap.add_argument("--device", help="torch device (default: cuda when present, else cpu)")
+    ap.add_argument("--force", action="store_true", help="replace an existing stimulus set in --out")
+    args = ap.parse_args(argv)
+    args.config = args.config or ("tiny" if args.quick else "cpu")
+    args.dataset = args.dataset or str(Path(args.runs) / ("dataset_quick.npz" if args.quick else "dataset.npz"))
+    for name in ("n_items", "n_catch", "n_training"):
+        if getattr(args, name) < 0:
+            raise StimuliError(f"--{name.replace('_', '-')} must be >= 0")
+    if args.n_items < 1:
+        raise StimuliError("--n-items must be >= 1")
+    if args.size % 2 or args.size < 32:
+        raise StimuliError(f"--size must be even and >= 32, got {args.size}")
+    if args.jobs < 1:
+        raise StimuliError(f"--jobs must be >= 1, got {args.jobs}")
+    if args.data and not Path(args.data).is_dir():
+        raise StimuliError(f"--data {args.data}: folder not found")
+    return args
+
+
+def run(args):
+    t0 = time.perf_counter()
+    systems = dict(parse_system_spec(s) for s in args.system)
+    if len(systems) != len(args.system):
+        raise StimuliError("--system: the same NAME is given twice")
+    out = None if args.export_items else prepare_out(args.out, args.force)
+
+    dataset = ensure_dataset(args)
+    splits, fps, window = load_splits(dataset)
+    items = select_items(splits, args.n_items, args.n_catch, args.n_training, args.seed)
+    arrays = item_arrays(splits, items)
+    log(f"items: {args.n_items} test, {args.n_catch} catch, {args.n_training} training; categories "
+        + ", ".join(f"{c} {n}" for c, n in zip(*np.unique([it['category'] for it in items
+                                                              if it['role'] == 'test'], return_counts=True))))
+    if args.export_items:
+        write_items(args.export_items, items, arrays, fps)
+        log(f"wrote {Path(args.export_items) / 'items.csv'} and items/ ({sum(it['role'] != 'catch' for it in items)} "
+            "items); generate one ITEM.bvh or ITEM.npz per item, then pass --system NAME=DIR")
+        return 0
+
+    # Imported systems first: their errors should come before any training.
+    gen_items = [k for k, it in enumerate(items) if it["role"] != "catch"]
+    imported = {}
+    for name, folder in systems.items():
+        files = find_system_files(folder, [items[k]["id"] for k in gen_items])
+        imported[name] = {k: load_system_motion(files[items[k]["id"]], fps, window)
+                          for k in tqdm(gen_items, desc=f"import {name}", unit="file", file=sys.stderr)}
+
+    mg_ckpt, mg_early = ensure_model("mg", args, dataset)
+    fl_ckpt, _ = ensure_model("fl", args, dataset)
+    bad_ckpt = Path(args.bad_checkpoint) if args.bad_checkpoint else mg_early
+    if not bad_ckpt.is_file():
+        raise StimuliError(f"--bad-checkpoint {bad_ckpt}: no such file")
+    log(f"models: MG {mg_ckpt}, FL {fl_ckpt}, BAD {bad_ckpt}")
+
+    # Features per condition: {condition: (item positions, x [B, T, 63] or joints, seed)}
+    catch = [k for k, it in enumerate(items) if it["role"] == "catch"]
+    seeds = {"MG": args.seed + 1, "FL": args.seed + 2, "BAD": args.seed + 3}
+    plan = [("NAT", None, gen_items), ("MG", ("mg", mg_ckpt), gen_items), ("FL", ("fl", fl_ckpt), gen_items)]
+    if catch:
+        plan.append(("BAD", ("mg", bad_ckpt), catch))
+    clips = []  # (condition, item position, joints, seed)
+    for cond, model, idx in tqdm(plan, desc="sample", unit="condition", file=sys.stderr):
+        if model is None:
+            joints = to_world(arrays["x"][idx], arrays["c"][idx])
+            seed = ""
+        else:
+            x = sample_condition(model[0], model[1], arrays, idx, args.temperature, seeds[cond], args.device)
+            joints = to_world(x, arrays["c"][idx])
+            seed = seeds[cond]
+        clips += [(cond, k, joints[j], seed) for j, k in enumerate(idx)]
+    for name, motions in imported.items():
+        clips += [(name, k, motions[k], "") for k in gen_items]
+
+    # Write clip files and the render jobs; ids are random and never contain a condition name.
+    forbidden = [c.lower() for c in (*BUILTIN, "BAD", *systems)]
+    taken, manifest, metrics_rows, jobs = set(), [], [], []
+    for cond, k, joints, seed in tqdm(clips, desc="clips", unit="clip", file=sys.stderr):
+        it = items[k]
+        cid = new_clip_id(taken, forbidden)
+        joints = canonical_placement(joints, fps)
+        control = arrays["c"][k]
+        save_clip(out / "motion" / f"{cid}.npz", joints, skeleton.PARENTS, skeleton.JOINT_NAMES, fps, control=control)
+        jobs.append((str(out / "motion" / f"{cid}.npz"), str(out / "videos" / f"{cid}.mp4"),
+                     str(out / "sheets" / f"{cid}.png"), args.size))
+        manifest.append(dict(clip_id=cid, condition=cond, role=it["role"], item=it["id"],
+                             video=f"videos/{cid}.mp4", motion=f"motion/{cid}.npz", seed=seed,
+                             frames=len(joints), fps=f"{fps:g}"))
+        m = clip_metrics(joints, fps, control)
+        metrics_rows.append(dict(clip_id=cid, condition=cond, role=it["role"], item=it["id"], **m))
+
+    render_all(jobs, min(args.jobs, len(jobs)))
+
+    rng = np.random.default_rng(args.seed)
+    order = rng.permutation(len(manifest))  # row order tells nothing about the condition either
+    _write_csv(out / "manifest.csv", MANIFEST_COLUMNS, [manifest[i] for i in order])
+    _write_csv(out / "metrics.csv", METRICS_COLUMNS,
+               [{k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in metrics_rows[i].items()} for i in order])
+    write_items(out, items, arrays, fps)
+
+    n = {r: sum(m["role"] == r for m in manifest) for r in ("test", "catch", "training")}
+    print(f"\nobjective metrics, mean (sd) per condition: foot_skating m/s, bone_length_std m, jerk m/s^3, "
+          f"control_error m\n{summary_text(metrics_rows)}")
+    _warn_if_bad_not_bad(metrics_rows)
+    print(f"\nwrote {out / 'manifest.csv'}: {len(manifest)} clips ({n['test']} test, {n['catch']} catch, "
+          f"{n['training']} training) in {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+def _warn_if_bad_not_bad(rows):
+    """BAD clips should be plainly worse than NAT; say so when no metric shows it."""
+    def mean(cond, key):
+        v = [r[key] for r in rows if r["condition"] == cond and np.isfinite(r[key])]
+        return np.mean(v) if v else np.nan
+
+    if not any(r["condition"] == "BAD" for r in rows):
+        return
+    worse = [k for k in ("jerk", "bone_length_std", "foot_skating") if mean("BAD", k) > 2 * mean("NAT", k)]
+    if not worse:
+        log("warning: the BAD clips are not clearly worse than NAT on jerk, bone length or foot skating; "
+            "pass an earlier --bad-checkpoint")
+
+
+def _write_csv(path, columns, rows):
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        w = csv.DictWriter(f, fieldnames=columns)
+        w.writeheader()
+        w.writerows(rows)
+
+
+def main(argv=None):
+    from rendering.render import RenderError
+    from .dataset import DatasetError
+    from .prepare_data import PrepareError
+    from .train import TrainError
+
+    try:
+        return run(parse_args(argv))
+    except (StimuliError, SystemError_, PrepareError, BvhError, TrainError, DatasetError, ClipError,
+            RenderError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,86 @@
+"""Objective motion metrics on real takes and on motion spoiled in known ways."""
+import csv
+
+import numpy as np
+import pytest
+
+from conftest import DATA
+from generation import skeleton
+from generation.features import load_take, to_features
+from generation.metrics import (CONTACT_HEIGHT, bone_length_std, clip_metrics, control_error, foot_skating, jerk)
+
+
+def takes(category, n, min_seconds=5.0):
+    with open(DATA / "MANIFEST.csv", newline="") as f:
+        rows = [r for r in csv.DictReader(f) if r["locomotion"] == category and float(r["seconds"]) >= min_seconds
+                and r["path"].startswith("bandai")]
+    return [DATA / r["path"] for r in sorted(rows, key=lambda r: r["path"])[:n]]
+
+
+@pytest.fixture(scope="module")
+def walks():
+    """4-s windows (80 frames at 20 fps) of five real straight walks."""
+    return [load_take(p, 20.0)[:80] for p in takes("walk", 5)]
+
+
+def test_metrics_real_walks_are_plausible(walks):
+    for j in walks:
+        m = clip_metrics(j, 20.0, to_features(j, 20.0)[1])
+        speed = np.linalg.norm(j[-1, 0, [0, 2]] - j[0, 0, [0, 2]]) / 4.0
+        assert speed > 0.7                             # it is a walk...
+        assert m["foot_skating"] < 0.2 * speed         # ...and planted feet barely slide
+        assert m["bone_length_std"] < 1e-3            # rigid skeleton (resampling keeps bone lengths)
+        assert m["control_error"] < 0.02              # the control was measured on this very body
+        assert 10 < m["jerk"] < 300
+
+
+def test_metrics_foot_skating_sees_sliding_feet(walks):
+    j = walks[0].astype(np.float64)
+    slide = j.copy()
+    slide[..., 0] += 0.6 * np.arange(80)[:, None] / 20.0      # the whole body glides sideways at 0.6 m/s
+    assert foot_skating(slide, 20.0) > foot_skating(j, 20.0) + 0.45
+    assert foot_skating(j, 20.0) < 0.15
+
+
+def test_metrics_foot_skating_contact_threshold_and_no_contact():
+    assert CONTACT_HEIGHT == pytest.approx(0.01)
+    t = np.arange(40)[:, None] / 20.0
+    j = np.zeros((40, skeleton.N_JOINTS, 3))
+    j[:, :, 1] = 0.5 + 0.3 * np.sin(2 * np.pi * t)             # feet only pass their lowest point: in the
+    assert np.isnan(foot_skating(j, 20.0))                     # air except single frames -> no contact pair
+    j[:, :, 1] = 0.0
+    j[:, :, 0] = 2.0 * t                                       # on the floor, gliding at 2 m/s
+    assert foot_skating(j, 20.0) == pytest.approx(2.0)
+
+
+def test_metrics_bone_length_and_jerk_see_noise(walks):
+    j = walks[1].astype(np.float64)
+    noisy = j + np.random.default_rng(0).normal(0, 0.02, j.shape)
+    assert bone_length_std(noisy) > 10 * bone_length_std(j)
+    assert bone_length_std(noisy) > 0.01
+    assert jerk(noisy, 20.0) > 5 * jerk(j, 20.0)
+    line = np.zeros((30, skeleton.N_JOINTS, 3))
+    line[..., 2] = 1.5 * np.arange(30)[:, None] / 20.0 + 0.1 * (np.arange(30)[:, None] / 20.0) ** 2
+    assert jerk(line, 20.0) == pytest.approx(0.0, abs=1e-6)    # constant acceleration: no jerk
+    assert np.isnan(jerk(line[:3], 20.0))
+
+
+def test_metrics_control_error_compares_paths_up_to_placement(walks):
+    turn = load_take(takes("walk_turn_left", 1)[0], 20.0)[:80]
+    straight = walks[2]
+    c_turn, c_straight = to_features(turn)[1], to_features(straight)[1]
+    assert control_error(turn, c_turn) < 0.02
+    assert control_error(turn, c_straight) > 0.1     # a curved body path against a straight request
+    # Placement in the world does not count: rotate and move the clip.
+    a = 1.1
+    rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    moved = turn @ rot.T + np.array([4.0, 0.0, -7.0])
+    assert control_error(moved, c_turn) == pytest.approx(control_error(turn, c_turn), abs=1e-4)
+
+
+def test_metrics_clip_metrics_keys_and_bad_shape(walks):
+    m = clip_metrics(walks[0], 20.0)
+    assert set(m) == {"foot_skating", "bone_length_std", "jerk", "control_error"}
+    assert np.isnan(m["control_error"])
+    with pytest.raises(ValueError, match="21"):
+        clip_metrics(np.zeros((10, 22, 3)), 20.0)

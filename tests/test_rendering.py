@@ -1,0 +1,109 @@
+"""Stick-figure rendering: real MP4 files that decode, a fixed camera that follows the figure, the CLI."""
+import re
+import subprocess
+import sys
+
+import imageio_ffmpeg
+import numpy as np
+import pytest
+from PIL import Image
+
+from conftest import BANDAI, ROOT
+from generation import skeleton
+from generation.clip import save_clip
+from generation.features import load_take
+from rendering import Camera, RenderError, render_clip
+from rendering.render import FrameDrawer, camera_targets
+
+WALK = BANDAI / "dataset-1" / "data" / "dataset-1_walk_angry_002.bvh.gz"
+
+
+def probe(path):
+    """(frames, width, height, pix_fmt, codec, has_audio, moov_before_mdat) of a video, decoded for real."""
+    info = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-i", str(path)],
+                          capture_output=True, text=True).stderr
+    video = re.search(r"Video: (\w+).*?, (\w+)\(.*?\), (\d+)x(\d+)", info)
+    assert video, info
+    frames = sum(1 for _ in list(imageio_ffmpeg.read_frames(str(path)))[1:])
+    data = open(path, "rb").read()
+    return dict(frames=frames, width=int(video.group(3)), height=int(video.group(4)), pix_fmt=video.group(2),
+                codec=video.group(1), audio="Audio:" in info, faststart=data.find(b"moov") < data.find(b"mdat"))
+
+
+@pytest.fixture(scope="module")
+def walk_clip(tmp_path_factory):
+    joints = load_take(WALK, 20.0)[:40]
+    path = tmp_path_factory.mktemp("render") / "walk.npz"
+    save_clip(path, joints, skeleton.PARENTS, skeleton.JOINT_NAMES, 20.0)
+    return path, joints
+
+
+def test_render_real_clip_to_h264_mp4_and_contact_sheet(walk_clip, tmp_path):
+    path, joints = walk_clip
+    n = render_clip(path, tmp_path / "walk.mp4", size=320, sheet=tmp_path / "walk.png")
+    assert n == len(joints) == 40
+    p = probe(tmp_path / "walk.mp4")
+    assert p == dict(frames=40, width=320, height=320, pix_fmt="yuv420p", codec="h264", audio=False, faststart=True)
+    sheet = Image.open(tmp_path / "walk.png")
+    assert sheet.size[0] == 4 * 240 and sheet.size[1] > 2 * 240     # 8 frames, 4 per row
+
+
+def _figure_pixels(rgba):
+    """Mask of pixels drawn in the figure's colours (dark trunk, blue left, red right limbs)."""
+    rgb = rgba[..., :3].astype(int)
+    dark = rgb.max(-1) < 90
+    coloured = (np.abs(rgb[..., 0] - rgb[..., 2]) > 80)
+    return dark | coloured
+
+
+def test_render_camera_follows_so_the_figure_never_leaves_the_frame(walk_clip):
+    joints = load_take(WALK, 20.0)[:40].astype(np.float64)
+    fast = joints.copy()
+    fast[..., 2] += 8.0 * np.arange(40)[:, None] / 20.0         # pushed along at 8 m/s: 16 m in 2 s
+    drawer = FrameDrawer(skeleton.PARENTS, skeleton.JOINT_NAMES, 200)
+    targets = camera_targets(fast, 20.0)
+    for t in range(0, 40, 3):
+        mask = _figure_pixels(drawer.draw(fast[t], targets[t]))
+        rows, cols = np.nonzero(mask)
+        assert mask.sum() > 100
+        assert rows.min() > 2 and cols.min() > 2 and rows.max() < 197 and cols.max() < 197
+
+
+def test_render_same_camera_set_up_wherever_the_clip_is(walk_clip):
+    joints = walk_clip[1].astype(np.float64)
+    # Moving a clip by whole grid cells leaves every frame identical: the camera is placed relative to the
+    # clip's root path, with the same elevation, azimuth, distance and field of view.
+    moved = joints + np.array([5.0, 0.0, -3.0])
+    a = FrameDrawer(skeleton.PARENTS, skeleton.JOINT_NAMES, 160)
+    ta, tb = camera_targets(joints, 20.0), camera_targets(moved, 20.0)
+    for t in (0, 17, 39):
+        fa = a.draw(joints[t], ta[t]).copy()
+        fb = a.draw(moved[t], tb[t]).copy()
+        diff = np.abs(fa.astype(int) - fb.astype(int))
+        assert diff[1:-1, 1:-1].max() <= 2            # (lines clipped at the image border may differ by a pixel)
+    # ...while another camera does change the picture.
+    other = FrameDrawer(skeleton.PARENTS, skeleton.JOINT_NAMES, 160, camera=Camera(azimuth=150.0))
+    assert np.abs(other.draw(joints[0], ta[0]).astype(int) - a.draw(joints[0], ta[0]).astype(int)).max() > 100
+
+
+def test_render_rejects_bad_clips(tmp_path):
+    bad = np.zeros((10, skeleton.N_JOINTS, 3), np.float32)
+    bad[3, 4, 1] = np.nan
+    clip = dict(joints=bad, parents=skeleton.PARENTS, joint_names=skeleton.JOINT_NAMES, fps=20.0)
+    with pytest.raises(RenderError, match="NaN"):
+        render_clip(clip, tmp_path / "x.mp4")
+    clip["joints"] = np.zeros((10, skeleton.N_JOINTS, 3), np.float32)
+    with pytest.raises(RenderError, match="even"):
+        render_clip(clip, tmp_path / "x.mp4", size=101)
+
+
+def test_render_cli(walk_clip, tmp_path):
+    ok = subprocess.run([sys.executable, "-m", "rendering", str(walk_clip[0]), str(tmp_path / "o.mp4"),
+                         "--size", "128"], capture_output=True, text=True, cwd=ROOT)
+    assert ok.returncode == 0, ok.stderr
+    assert probe(tmp_path / "o.mp4")["frames"] == 40
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    bad = subprocess.run([sys.executable, "-m", "rendering", str(tmp_path / "junk.npz"), str(tmp_path / "j.mp4")],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert bad.returncode == 2
+    assert bad.stderr.startswith("error: ") and "junk.npz" in bad.stderr and bad.stderr.count("\n") == 1
