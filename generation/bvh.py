@@ -11,8 +11,9 @@ position channels give its local translation and replace its OFFSET (CONTRACTS.m
 """
 from dataclasses import dataclass, field
 import gzip
+import io
+import re
 from pathlib import Path
-import warnings
 
 import numpy as np
 
@@ -49,7 +50,7 @@ class Bvh:
         return np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
 
 
-def _read_text(path):
+def _read_bytes(path):
     path = Path(path)
     try:
         raw = path.read_bytes()
@@ -60,7 +61,10 @@ def _read_text(path):
             raw = gzip.decompress(raw)
         except (OSError, EOFError) as e:
             raise BvhError(f"{path}:0: corrupt gzip data ({e})") from None
-    return raw.decode("utf-8", errors="replace")
+    return raw
+
+
+_MOTION = re.compile(rb"^[ \t]*MOTION(?![^\s])", re.M)
 
 
 def _number(tok, where):
@@ -72,24 +76,27 @@ def _number(tok, where):
 
 def read_bvh(path):
     """Read a BVH file (plain or gzip) into a `Bvh`; raise `BvhError` naming file and line."""
-    text = _read_text(path)
-    lines = text.split("\n")
+    raw = _read_bytes(path)
     name = str(path)
+    # Only the header is split into lines; the MOTION block stays one buffer for the numeric parse.
+    m = _MOTION.search(raw)
+    if m is None:
+        lines = raw.decode("utf-8", errors="replace").split("\n")
+        last = len(lines) - (1 if lines[-1].strip() == "" else 0)
+        if not "".join(lines).strip():
+            raise BvhError(f"{name}:1: empty file")
+        if lines[0].split()[:1] != ["HIERARCHY"]:
+            raise BvhError(f"{name}:1: expected 'HIERARCHY' at the start of the file")
+        raise BvhError(f"{name}:{last}: no MOTION section (file truncated?)")
+    lines = raw[:m.start()].decode("utf-8", errors="replace").split("\n")
+    motion_line = len(lines) - 1  # 0-based index of the MOTION line
 
     # Header: a token stream with line numbers, so layout (braces on their own line or not) is free.
-    motion_line = None
     tokens = []
-    for i, line in enumerate(lines):
-        parts = line.split()
-        if parts and parts[0] == "MOTION":
-            motion_line = i
-            break
-        tokens.extend((t, i + 1) for t in parts)
+    for i, line in enumerate(lines[:motion_line]):
+        tokens.extend((t, i + 1) for t in line.split())
     if not tokens or tokens[0][0] != "HIERARCHY":
         raise BvhError(f"{name}:{tokens[0][1] if tokens else 1}: expected 'HIERARCHY' at the start of the file")
-    if motion_line is None:
-        last = len(lines) - (1 if lines[-1].strip() == "" else 0)
-        raise BvhError(f"{name}:{last}: no MOTION section (file truncated?)")
 
     names, parents, offsets, channels, end_sites = [], [], [], [], []
     stack = []  # indices of open joints; None for an open End Site
@@ -168,81 +175,90 @@ def read_bvh(path):
 
     # MOTION header lines: "Frames: N" and "Frame Time: dt".
     n_channels = sum(len(c) for c in channels)
-    i = motion_line + 1
+    cursor = raw.find(b"\n", m.end())
+    line_no = motion_line + 1  # 1-based number of the line `cursor` ends
     header = {}
     while len(header) < 2:
-        if i >= len(lines):
-            raise BvhError(f"{name}:{i}: MOTION block truncated before {'Frames' if 'frames' not in header else 'Frame Time'}")
-        parts = lines[i].split()
-        i += 1
+        if cursor < 0:
+            raise BvhError(f"{name}:{line_no}: MOTION block truncated before "
+                           f"{'Frames' if 'frames' not in header else 'Frame Time'}")
+        end = raw.find(b"\n", cursor + 1)
+        text = raw[cursor + 1:end if end >= 0 else len(raw)].decode("utf-8", errors="replace")
+        cursor, line_no = end, line_no + 1
+        parts = text.split()
         if not parts:
             continue
         if parts[0] == "Frames:" and len(parts) == 2 and "frames" not in header:
             if not parts[1].isdigit():
-                raise BvhError(f"{name}:{i}: Frames must be a non-negative integer, got {parts[1]!r}")
-            header["frames"] = (int(parts[1]), i)
+                raise BvhError(f"{name}:{line_no}: Frames must be a non-negative integer, got {parts[1]!r}")
+            header["frames"] = (int(parts[1]), line_no)
         elif parts[:2] == ["Frame", "Time:"] and len(parts) == 3 and "frames" in header:
-            dt = _number(parts[2], f"{name}:{i}")
+            dt = _number(parts[2], f"{name}:{line_no}")
             if not dt > 0:
-                raise BvhError(f"{name}:{i}: Frame Time must be positive, got {parts[2]!r}")
+                raise BvhError(f"{name}:{line_no}: Frame Time must be positive, got {parts[2]!r}")
             header["dt"] = dt
         else:
             want = "'Frames: N'" if "frames" not in header else "'Frame Time: SECONDS'"
-            raise BvhError(f"{name}:{i}: expected {want}, got {lines[i - 1].strip()[:60]!r}")
+            raise BvhError(f"{name}:{line_no}: expected {want}, got {text.strip()[:60]!r}")
     n_frames, frames_line = header["frames"]
-    motion = _parse_motion(lines, i, n_frames, n_channels, frames_line, name)
+    block = raw[cursor + 1:] if cursor >= 0 else b""
+    motion = _parse_motion(block, line_no + 1, n_frames, n_channels, frames_line, name)
     return Bvh(names=names, parents=np.array(parents, dtype=np.int64), offsets=np.array(offsets),
                channels=channels, motion=motion, frame_time=header["dt"], end_sites=end_sites, path=name)
 
 
-def _parse_motion(lines, first, n_frames, n_channels, frames_line, name):
-    """Parse lines[first:] as n_frames rows of n_channels numbers, vectorised; exact errors otherwise."""
-    block = "\n".join(lines[first:])
-    data = block.encode("utf-8", errors="replace")
-    b = np.frombuffer(data, dtype=np.uint8)
-    # Token count per line, without a Python loop: a token starts at a non-space after a space.
-    space = (b == 32) | (b == 9) | (b == 13) | (b == 10) | (b == 11) | (b == 12)
-    starts = ~space
-    starts[1:] &= space[:-1]
-    line_of_byte = np.cumsum(b == 10)
-    per_line = np.bincount(line_of_byte[starts], minlength=len(lines) - first)
+def _parse_motion(block, first, n_frames, n_channels, frames_line, name):
+    """Parse the bytes `block` (starting at line `first`) as n_frames rows of n_channels numbers.
+
+    Vectorised: token counts per line from byte classes, then one np.loadtxt over the block;
+    a line-by-line walk happens only to name the line of a non-numeric value.
+    """
+    b = np.frombuffer(block, dtype=np.uint8)
+    # A token starts at a non-space byte after a space byte (all bytes <= 32 count as space).
+    space = b <= 32
+    starts = np.empty(len(b), dtype=np.uint8)
+    if len(b):
+        starts[0] = not space[0]
+        np.greater(space[:-1], space[1:], out=starts[1:].view(bool))
+    line_begin = np.concatenate([[0], np.flatnonzero(b == 10) + 1])
+    line_begin = line_begin[line_begin < len(b)]
+    per_line = np.add.reduceat(starts, line_begin, dtype=np.int64) if len(b) else np.zeros(0, np.int64)
     nonempty = np.flatnonzero(per_line)
     bad = nonempty[per_line[nonempty] != n_channels]
     if len(bad):
         k = bad[0]
         got = per_line[k]
         what = "truncated frame" if k == nonempty[-1] and got < n_channels else "wrong number of values"
-        raise BvhError(f"{name}:{first + k + 1}: {what}: expected {n_channels} values, got {got}")
+        raise BvhError(f"{name}:{first + k}: {what}: expected {n_channels} values, got {got}")
     if len(nonempty) != n_frames:
         if len(nonempty) < n_frames:
             raise BvhError(f"{name}:{frames_line}: MOTION block truncated: Frames says {n_frames}, "
                            f"the file has {len(nonempty)} frame lines")
-        raise BvhError(f"{name}:{first + nonempty[n_frames] + 1}: more frame lines than Frames: {n_frames} says "
+        raise BvhError(f"{name}:{first + nonempty[n_frames]}: more frame lines than Frames: {n_frames} says "
                        f"({len(nonempty)} lines)")
     if n_frames == 0 or n_channels == 0:
         return np.zeros((n_frames, n_channels))
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")
-            values = np.fromstring(block, sep=" ")
-    except (ValueError, DeprecationWarning):
+        # numpy's C text reader: bit-identical to float() and faster than np.fromstring
+        values = np.loadtxt(io.BytesIO(block), dtype=np.float64, comments=None, ndmin=2).ravel()
+    except ValueError:
         values = None
     if values is None or values.size != n_frames * n_channels:
-        _find_bad_number(lines, first, name)
-        raise BvhError(f"{name}:{first + 1}: MOTION block could not be parsed as numbers")
+        _find_bad_number(block.decode("utf-8", errors="replace").split("\n"), first, name)
+        raise BvhError(f"{name}:{first}: MOTION block could not be parsed as numbers")
     if not np.all(np.isfinite(values)):
         k = int(np.flatnonzero(~np.isfinite(values))[0]) // n_channels
-        raise BvhError(f"{name}:{first + nonempty[k] + 1}: non-finite value in frame {k}")
+        raise BvhError(f"{name}:{first + nonempty[k]}: non-finite value in frame {k}")
     return values.reshape(n_frames, n_channels)
 
 
 def _find_bad_number(lines, first, name):
-    for k in range(first, len(lines)):
-        for tok in lines[k].split():
+    for k, line in enumerate(lines):
+        for tok in line.split():
             try:
                 float(tok)
             except ValueError:
-                raise BvhError(f"{name}:{k + 1}: non-numeric value {tok[:40]!r}") from None
+                raise BvhError(f"{name}:{first + k}: non-numeric value {tok[:40]!r}") from None
 
 
 def _axis_rotations(axis, degrees):

@@ -108,6 +108,16 @@ def split_takes(categories, lengths, need, held_out, seed):
     return split
 
 
+def _mean_std(a, chunk=512):
+    """Per-feature mean and std over all windows and frames of a [N, T, D] array, in float64 chunks."""
+    flat = a.reshape(-1, a.shape[-1])
+    n = len(flat)
+    step = chunk * a.shape[1]
+    mean = sum(flat[i:i + step].sum(0, dtype=np.float64) for i in range(0, n, step)) / n
+    var = sum(np.square(flat[i:i + step] - mean).sum(0) for i in range(0, n, step)) / n
+    return mean.astype(np.float32), np.sqrt(var).astype(np.float32)
+
+
 def prepare(data_dir, out_path, fps=20.0, window=80, stride=20, seed=0, takes=None, tau=10, held_out=4,
             workers=None, progress=True):
     """Build the dataset .npz at `out_path`; returns a summary dict (see `summary_table`).
@@ -191,11 +201,11 @@ def prepare(data_dir, out_path, fps=20.0, window=80, stride=20, seed=0, takes=No
 
     # Standardisation from the training split only. Some dimensions are constant by construction
     # (the hips' x and z in the root frame are 0), hence the floor on the standard deviation.
-    tx = arrays["train_x"].reshape(-1, skeleton.POSE_DIM).astype(np.float64)
-    tc = arrays["train_c"].reshape(-1, skeleton.CONTROL_DIM).astype(np.float64)
+    x_mean, x_std = _mean_std(arrays["train_x"])
+    c_mean, c_std = _mean_std(arrays["train_c"])
     arrays.update(
-        x_mean=tx.mean(0).astype(np.float32), x_std=np.maximum(tx.std(0), 1e-3).astype(np.float32),
-        c_mean=tc.mean(0).astype(np.float32), c_std=np.maximum(tc.std(0), 1e-3).astype(np.float32),
+        x_mean=x_mean, x_std=np.maximum(x_std, 1e-3).astype(np.float32),
+        c_mean=c_mean, c_std=np.maximum(c_std, 1e-3).astype(np.float32),
         fps=np.float64(fps), window=np.int64(window), tau=np.int64(tau), stride=np.int64(stride),
         seed=np.int64(seed), joint_names=np.array(skeleton.JOINT_NAMES, dtype=str), parents=skeleton.PARENTS,
         aug_names=np.array(AUG_NAMES, dtype=str),

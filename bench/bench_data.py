@@ -1,0 +1,96 @@
+"""Data-pipeline benchmarks (issue 2).
+
+    python bench/bench_data.py [--data DIR] [--workers 2] [--skip-baseline]
+
+1. prepare_data over every take in DIR (default: the 1067 Bandai-Namco takes), with a process pool
+   of --workers, against the same run with one process (baseline, same run). Target: < 60 s on 2 cores.
+2. Parsing a ~10 MB BVH file (real frames repeated) with generation.bvh.read_bvh, against a plain
+   line-by-line Python parser of the same MOTION block (baseline). Target: < 1 s.
+"""
+import argparse
+import gzip
+import os
+from pathlib import Path
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from generation.bvh import read_bvh  # noqa: E402
+from generation.prepare_data import default_data_dir, find_takes, prepare  # noqa: E402
+
+
+def bench_prepare(data, workers, out_dir, baseline=True):
+    rows = []
+    for w in ([workers, 1] if baseline and workers != 1 else [workers]):
+        t = time.perf_counter()
+        summary = prepare(data, Path(out_dir) / f"ds_{w}.npz", workers=w, progress=False)
+        rows.append((w, time.perf_counter() - t, summary))
+    return rows
+
+
+def make_big_bvh(src, target_bytes, path):
+    """A BVH of about target_bytes: the header of `src` and its frames repeated."""
+    text = gzip.decompress(Path(src).read_bytes()).decode() if str(src).endswith(".gz") else Path(src).read_text()
+    head, _, rest = text.partition("MOTION")
+    frames = [l for l in rest.split("\n")[3:] if l.strip()]
+    block = "\n".join(frames) + "\n"
+    reps = max(1, int(np.ceil(target_bytes / len(block))))
+    n = len(frames) * reps
+    Path(path).write_text(f"{head}MOTION\nFrames: {n}\nFrame Time: 0.0333333\n" + block * reps)
+    return n
+
+
+def naive_parse(path):
+    """Baseline: the usual loop, one float() per token, list of lists -> array."""
+    lines = Path(path).read_text().split("\n")
+    k = next(i for i, l in enumerate(lines) if l.startswith("Frame Time"))
+    return np.array([[float(v) for v in l.split()] for l in lines[k + 1:] if l.strip()])
+
+
+def best_of(fn, n=3):
+    times = []
+    for _ in range(n):
+        t = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t)
+    return min(times), out
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--data", default=None)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--skip-baseline", action="store_true")
+    args = ap.parse_args()
+    data = Path(args.data) if args.data else default_data_dir()
+    files = find_takes(data)
+    print(f"machine: {os.cpu_count()} cores; load average before: {os.getloadavg()[0]:.2f}")
+
+    with tempfile.TemporaryDirectory() as tmp:
+        big = Path(tmp) / "big.bvh"
+        frames = make_big_bvh(next(f for f in files if "_walk_" in f.name), 10_000_000, big)
+        size = big.stat().st_size
+        t_fast, b = best_of(lambda: read_bvh(big))
+        t_naive, m = best_of(lambda: naive_parse(big), 1)
+        assert np.array_equal(b.motion, m)
+        print(f"parse {size / 1e6:.1f} MB BVH ({frames} frames x {b.motion.shape[1]} channels): "
+              f"read_bvh {t_fast:.3f} s (best of 3); line-by-line Python {t_naive:.3f} s; "
+              f"speed-up x{t_naive / t_fast:.1f}  [target < 1 s]")
+
+        t = time.perf_counter()
+        for f in files:
+            read_bvh(f)
+        print(f"read_bvh of all {len(files)} takes, one process: {time.perf_counter() - t:.2f} s")
+
+        for w, secs, s in bench_prepare(data, args.workers, tmp, baseline=not args.skip_baseline):
+            n = s["n_windows"]
+            print(f"prepare_data, {len(files)} takes, {w} worker(s): {secs:.1f} s "
+                  f"(windows train {n['train']}, valid {n['valid']}, test {n['test']})  [target < 60 s]")
+    print(f"load average after: {os.getloadavg()[0]:.2f}")
+
+
+if __name__ == "__main__":
+    main()
