@@ -42,7 +42,7 @@ def exclude_raters(df, threshold=DEFAULT_THRESHOLD):
     return kept, counts
 
 
-def test_rows(df):
+def only_test_rows(df):
     """Only test rows enter the statistics; catch rows never do."""
     out = df[df["role"] == "test"]
     return pd.DataFrame(out)

@@ -18,7 +18,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from . import figures, stats
-from .filtering import DEFAULT_THRESHOLD, exclude_raters, test_rows
+from .filtering import DEFAULT_THRESHOLD, exclude_raters, only_test_rows
 from .load import AnalysisError, load_metrics, load_ratings
 
 MIXED_MAX_N = 100_000  # statsmodels' crossed-effects fit grows fast; beyond this it is skipped unless forced
@@ -259,7 +259,7 @@ def build_report(ratings_path, out_dir="report", metrics_path=None, threshold=DE
     df = load_ratings(ratings_path)
     metrics = load_metrics(metrics_path) if metrics_path else None
     kept_rows, counts = exclude_raters(df, threshold)
-    kept_test, all_test = test_rows(kept_rows), test_rows(df)
+    kept_test, all_test = only_test_rows(kept_rows), only_test_rows(df)
     if len(kept_test) == 0:
         raise AnalysisError(f"{ratings_path}: every rater failed the catch trials (threshold {threshold}); "
                             "no test ratings are left")

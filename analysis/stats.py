@@ -318,7 +318,7 @@ def mixed_model(df, dv="rating", between="condition", rater="rater_id", clip="cl
     fe = fit["fixed_effects"]
     means = {reference: fe["Intercept"], **{c: fe["Intercept"] + fe[f"{between}[T.{c}]"] for c in others}}
     return {"formula": f"{dv} ~ {between} + (1|{rater}) + (1|{clip})",
-            "method": "REML, crossed random intercepts (profiled criterion, L-BFGS-B + Nelder-Mead polish)",
+            "method": "REML, crossed random intercepts (profiled criterion, L-BFGS-B then Nelder-Mead polish)",
             "reference": reference, **fit,
             "condition_means": {c: means[c] for c in condition_order(means)},
             "n": int(len(df)), "n_raters": int(rater_codes.max() + 1), "n_clips": int(clip_codes.max() + 1),

@@ -1,0 +1,216 @@
+"""A whole study in one command (MoGlow §5.4–5.5, simulated crowd):
+
+    make_stimuli --quick  →  rating_app serve  →  rating_app simulate (until every test clip has its
+    target ratings)  →  /admin/export.csv  →  analysis.report
+
+Every stage is a real process talking through the files and HTTP API of CONTRACTS.md, exactly as a
+researcher would run them by hand. Everything started here is stopped at the end, also on Ctrl-C or error.
+
+    python -m analysis.demo [--out demo/] [--db postgresql://127.0.0.1:5432/test] [--raters 60]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import secrets
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+
+class DemoError(RuntimeError):
+    """A stage failed; the message says which and where its log is."""
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _stage(title: str):
+    print(f"\n== {title}", flush=True)
+
+
+class Processes:
+    """Children in their own process groups, so that stopping one stops everything it started
+    (make_stimuli's render pool, gunicorn's workers)."""
+
+    def __init__(self):
+        self.running: list[subprocess.Popen] = []
+
+    def start(self, cmd, **kw) -> subprocess.Popen:
+        p = subprocess.Popen(cmd, start_new_session=True, **kw)
+        self.running.append(p)
+        return p
+
+    def run(self, cmd, what: str, log: Path | None = None, env=None) -> None:
+        out = open(log, "w") if log else None
+        try:
+            p = self.start(cmd, stdout=out, stderr=subprocess.STDOUT if out else None, env=env)
+            rc = p.wait()
+        finally:
+            if out:
+                out.close()
+        self.running.remove(p)
+        if rc != 0:
+            where = f"; log: {log}" if log else ""
+            raise DemoError(f"{what} failed (exit {rc}){where}")
+
+    def stop_all(self, grace_s: float = 10.0) -> None:
+        for p in self.running:
+            if p.poll() is None:
+                _signal_group(p, signal.SIGTERM)
+        deadline = time.monotonic() + grace_s
+        for p in self.running:
+            try:
+                p.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                _signal_group(p, signal.SIGKILL)
+                p.wait()
+        # Workers that outlive their parent are still in its group: sweep it once more.
+        for p in self.running:
+            _signal_group(p, signal.SIGKILL)
+        self.running.clear()
+
+
+def _signal_group(p: subprocess.Popen, sig) -> None:
+    try:
+        os.killpg(p.pid, sig)
+    except (ProcessLookupError, PermissionError):
+        pass
+
+
+def _wait_until_up(url: str, server: subprocess.Popen, log: Path, timeout_s: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if server.poll() is not None:
+            raise DemoError(f"the rating app exited (code {server.returncode}); log: {log}")
+        try:
+            with urllib.request.urlopen(url, timeout=2) as r:
+                if r.status == 200:
+                    return
+        except (urllib.error.URLError, ConnectionError, OSError):
+            pass
+        time.sleep(0.3)
+    raise DemoError(f"the rating app did not answer at {url} within {timeout_s:.0f} s; log: {log}")
+
+
+def _export(url: str, token: str, out: Path) -> None:
+    req = urllib.request.Request(f"{url}/admin/export.csv", headers={"Authorization": f"Bearer {token}"})
+    try:
+        with urllib.request.urlopen(req, timeout=60) as r:
+            out.write_bytes(r.read())
+    except urllib.error.URLError as e:
+        raise DemoError(f"export from {url}/admin/export.csv failed: {e}") from None
+
+
+def run_demo(out: Path, db: str | None = None, raters: int = 200, seed: int = 0, careless: float = 0.1,
+             ratings_per_clip: int = 20, clips_per_rater: int | None = 30, gunicorn: bool = False,
+             stimuli: Path | None = None, timeout_s: float = 1800.0) -> dict:
+    """Run the study; returns paths and the crowd's summary. `stimuli` reuses an existing folder."""
+    out = Path(out)
+    logs = out / "logs"
+    logs.mkdir(parents=True, exist_ok=True)
+    py = sys.executable
+    procs = Processes()
+    t0 = time.monotonic()
+    try:
+        if stimuli is None:
+            stimuli = out / "stimuli"
+            _stage(f"1/5 make stimuli (--quick) → {stimuli}")
+            procs.run([py, "-m", "generation.make_stimuli", "--quick", "--out", str(stimuli),
+                       "--runs", str(out / "runs"), "--seed", str(seed)], "make_stimuli")
+        else:
+            _stage(f"1/5 stimuli: using {stimuli}")
+        manifest = Path(stimuli) / "manifest.csv"
+        if not manifest.is_file():
+            raise DemoError(f"{manifest}: no manifest (make_stimuli did not write one)")
+
+        db = db or f"sqlite:///{(out / 'ratings.sqlite').resolve()}"
+        port = _free_port()
+        url = f"http://127.0.0.1:{port}"
+        token = secrets.token_hex(16)
+        env = dict(os.environ, ADMIN_TOKEN=token)
+        serve_log = logs / "server.log"
+        _stage(f"2/5 rating app at {url} (database {db.split('@')[-1]})")
+        serve_opts = ["--ratings-per-clip", str(ratings_per_clip)]
+        if clips_per_rater:
+            serve_opts += ["--clips-per-rater", str(clips_per_rater)]
+        if gunicorn:
+            env.update(RATING_MANIFEST=str(manifest), DATABASE_URL=db, RATINGS_PER_CLIP=str(ratings_per_clip))
+            if clips_per_rater:
+                env["CLIPS_PER_RATER"] = str(clips_per_rater)
+            cmd = [py, "-m", "gunicorn", "-w", "2", "--threads", "4", "-b", f"127.0.0.1:{port}", "rating_app.wsgi:app"]
+        else:
+            cmd = [py, "-m", "rating_app", "serve", "--manifest", str(manifest), "--db", db, "--port", str(port),
+                   *serve_opts]
+        with open(serve_log, "w") as fh:
+            server = procs.start(cmd, stdout=fh, stderr=subprocess.STDOUT, env=env)
+        _wait_until_up(f"{url}/", server, serve_log)
+
+        _stage(f"3/5 simulated crowd: up to {raters} raters, {careless:.0%} careless, until every test clip has "
+               f"{ratings_per_clip} ratings")
+        summary_path = out / "crowd_summary.json"
+        procs.run([py, "-m", "rating_app", "simulate", "--url", url, "--raters", str(raters), "--seed", str(seed),
+                   "--careless", str(careless), "--manifest", str(manifest), "--summary", str(summary_path),
+                   "--timeout", str(max(60.0, timeout_s - (time.monotonic() - t0)))],
+                  "the simulated crowd", env=env)
+        summary = json.loads(summary_path.read_text())
+        if not summary.get("study_full"):
+            raise DemoError(f"the crowd of {raters} raters did not fill every clip's {ratings_per_clip} ratings; "
+                            "raise --raters")
+
+        _stage("4/5 export ratings.csv")
+        ratings = out / "ratings.csv"
+        _export(url, token, ratings)
+        procs.stop_all()
+
+        _stage(f"5/5 report → {out / 'report'}")
+        metrics = Path(stimuli) / "metrics.csv"
+        cmd = [py, "-m", "analysis.report", str(ratings), "--out", str(out / "report")]
+        if metrics.is_file():
+            cmd += ["--metrics", str(metrics)]
+        procs.run(cmd, "analysis.report")
+    finally:
+        procs.stop_all()
+    report = out / "report" / "report.html"
+    print(f"\nDone in {time.monotonic() - t0:.0f} s. Report: {report.resolve()}", flush=True)
+    return {"stimuli": Path(stimuli), "ratings": ratings, "report": out / "report", "summary": summary}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m analysis.demo", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", default="demo", help="folder for everything the demo makes (default demo/)")
+    p.add_argument("--db", default=None, help="database URL (default an SQLite file in --out), e.g. "
+                                               "postgresql://127.0.0.1:5432/test")
+    p.add_argument("--raters", type=int, default=200, help="most simulated raters (stops when the study is full)")
+    p.add_argument("--careless", type=float, default=0.1, help="share of careless raters (default 0.1)")
+    p.add_argument("--ratings-per-clip", type=int, default=20)
+    p.add_argument("--clips-per-rater", type=int, default=30, help="test clips per rater (0: all)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--stimuli", default=None, help="reuse this stimulus folder instead of making one")
+    p.add_argument("--gunicorn", action="store_true", help="serve with gunicorn (2 workers) instead of Flask's server")
+    a = p.parse_args(argv)
+    try:
+        run_demo(Path(a.out), db=a.db, raters=a.raters, seed=a.seed, careless=a.careless,
+                 ratings_per_clip=a.ratings_per_clip, clips_per_rater=a.clips_per_rater or None,
+                 gunicorn=a.gunicorn, stimuli=Path(a.stimuli) if a.stimuli else None)
+    except DemoError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted: everything the demo started has been stopped", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
