@@ -11,7 +11,7 @@ from torch import nn
 from .flows import (Chain, ConvNet, FlowStep, MotionFlow, Split, gaussian_logp, squeeze_time,
                     unsqueeze_time)
 
-DEFAULTS = dict(levels=4, steps=32, hidden=512, kernel=3)
+DEFAULTS = dict(L=4, K=32, hidden=512, kernel=3)  # the paper's names: L levels of K steps
 
 
 class FL(MotionFlow):
@@ -24,23 +24,23 @@ class FL(MotionFlow):
         self.splits = nn.ModuleList()
         ch, cc = pose_dim, control_dim
         self.level_channels = []
-        for level in range(cfg["levels"]):
+        for level in range(cfg["L"]):
             if level > 0:
                 ch, cc = 2 * ch, 2 * cc
             c_a = ch // 2
             self.levels.append(Chain(*[
                 FlowStep(ch, ConvNet(c_a, cc, 2 * (ch - c_a), cfg["hidden"], cfg["kernel"]))
-                for _ in range(cfg["steps"])]))
+                for _ in range(cfg["K"])]))
             self.level_channels.append(ch)
-            if level < cfg["levels"] - 1:
+            if level < cfg["L"] - 1:
                 keep = ch // 2
                 self.splits.append(Split(ch, ConvNet(keep, cc, 2 * (ch - keep), cfg["hidden"], cfg["kernel"])))
                 ch = keep
 
     def check_length(self, t):
-        k = 2 ** (self.config["levels"] - 1)
+        k = 2 ** (self.config["L"] - 1)
         if t % k:
-            raise ValueError(f"FL with {self.config['levels']} levels needs a window length divisible by {k}, got {t}")
+            raise ValueError(f"FL with {self.config['L']} levels needs a window length divisible by {k}, got {t}")
 
     def forward(self, x, c):
         """x [B, T, 63], c [B, T, 3] (standardised) -> (z [B, T * 63], logdet [B])."""

@@ -19,21 +19,25 @@ from torch import nn
 
 class ActNorm(nn.Module):
     """Per-channel affine map y = (x + bias) * exp(logs); initialised on the first batch it sees so
-    that y has zero mean and unit variance per channel (data-dependent initialisation)."""
+    that y has zero mean and unit variance per channel (data-dependent initialisation).
 
-    def __init__(self, channels, eps=1e-6):
+    The initial scale is capped at 1/min_std: a channel that is (nearly) constant on the first batch, like
+    the root's own x/z in root-frame poses, would otherwise get a huge scale that turns every later
+    optimiser update of its bias into a jump of the same size."""
+
+    def __init__(self, channels, min_std=0.05):
         super().__init__()
         self.bias = nn.Parameter(torch.zeros(1, channels, 1))
         self.logs = nn.Parameter(torch.zeros(1, channels, 1))
         self.register_buffer("initialized", torch.tensor(False))
-        self.eps = eps
+        self.min_std = min_std
 
     @torch.no_grad()
     def initialize(self, x):
         mean = x.mean(dim=(0, 2), keepdim=True)
         std = x.std(dim=(0, 2), keepdim=True, unbiased=False)
         self.bias.copy_(-mean)
-        self.logs.copy_(-torch.log(std + self.eps))
+        self.logs.copy_(-torch.log(std.clamp_min(self.min_std)))
         self.initialized.fill_(True)
 
     def forward(self, x, cond=None):

@@ -14,7 +14,7 @@ from torch import nn
 
 from .flows import Chain, FlowStep, MotionFlow, gaussian_logp
 
-DEFAULTS = dict(steps=16, hidden=512, lstm_layers=2, tau=10, dropout=0.95)
+DEFAULTS = dict(K=16, hidden=512, lstm_layers=2, tau=10, dropout=0.95)
 
 
 class LSTMNet(nn.Module):
@@ -28,7 +28,7 @@ class LSTMNet(nn.Module):
         nn.init.zeros_(self.out.bias)
 
     def forward(self, x_a, cond):
-        h, _ = self.lstm(torch.cat([x_a, cond], dim=1).transpose(1, 2))  # zero initial state
+        h, _ = self.lstm(torch.cat([x_a, cond], dim=1).transpose(1, 2).contiguous())  # zero initial state
         return self.out(h).transpose(1, 2)
 
 
@@ -43,7 +43,7 @@ class MoGlow(MotionFlow):
         c_a = pose_dim // 2
         self.flow = Chain(*[
             FlowStep(pose_dim, LSTMNet(c_a, self.cond_dim, 2 * (pose_dim - c_a), cfg["hidden"], cfg["lstm_layers"]))
-            for _ in range(cfg["steps"])])
+            for _ in range(cfg["K"])])
 
     def make_cond(self, x, c):
         """Conditioning of frames tau..T-1 of a window: [poses t-tau..t-1, control t-tau..t] -> [B, n, cond_dim].

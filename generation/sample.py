@@ -1,0 +1,147 @@
+"""Sample motion from trained FL / MG checkpoints.
+
+    python -m generation.sample --checkpoint CKPT --data FILE.npz --split test --n N --out DIR [--temperature 1.0]
+
+API (arrays in and out are un-standardised features, numpy or torch; outputs are numpy float32):
+    model = load_model(ckpt_path)                                     # eval mode, carries its stats/config
+    x = sample_mg(model, control [B,T,3], history [B,tau,63], history_control [B,tau,3], temperature, seed)
+    x = sample_fl(model, control [B,T,3], temperature, seed)
+    stream = mg_stream(model, history [B,tau,63], history_control [B,tau,3], temperature, seed)
+    pose = stream(control_t [B,3])                                    # one frame in, one pose out [B,63]
+"""
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from . import skeleton
+from .clip import save_clip
+from .fl import FL
+from .moglow import MGStream, MoGlow
+
+MODELS = {"fl": FL, "mg": MoGlow}
+
+
+class SampleError(ValueError):
+    """Bad sampling input (checkpoint, data, arguments); one-line message."""
+
+
+def load_model(ckpt_path, device=None):
+    """A checkpoint written by generation.train -> model in eval mode, with .kind, .config, .step, .fps,
+    .window and its data statistics (buffers x_mean/x_std/c_mean/c_std)."""
+    from .train import pick_device
+    device = pick_device(device)
+    try:
+        ck = torch.load(ckpt_path, map_location=device, weights_only=False)
+        model = MODELS[ck["kind"]](ck["model_config"])
+        model.load_state_dict(ck["state"])
+    except (OSError, RuntimeError, KeyError, EOFError) as e:
+        raise SampleError(f"{ckpt_path}: not a usable checkpoint ({type(e).__name__}: {e})".splitlines()[0]) from None
+    model.to(device).eval()
+    model.step, model.fps, model.window = ck["step"], ck["fps"], ck["window"]
+    model.checkpoint = str(ckpt_path)
+    return model
+
+
+def _tensor(a, model):
+    p = next(model.parameters())
+    return torch.as_tensor(np.asarray(a) if not torch.is_tensor(a) else a).to(p.device, p.dtype)
+
+
+def _generator(seed):
+    return torch.Generator().manual_seed(int(seed))  # CPU generator: the same samples on any device
+
+
+def mg_stream(model, history, history_control, temperature=1.0, seed=0):
+    """Real-time form of MG: returns f(control_t [B, 3]) -> pose [B, 63] (numpy, un-standardised)."""
+    tau = model.tau
+    hist = model.standardize_x(_tensor(history, model)[:, -tau:])
+    hist_c = model.standardize_c(_tensor(history_control, model)[:, -tau:])
+    stream = MGStream(model, hist, hist_c, temperature, _generator(seed))
+
+    @torch.inference_mode()
+    def step(control):
+        y = stream.step(model.standardize_c(_tensor(control, model)))
+        return model.unstandardize_x(y).cpu().numpy()
+
+    step.stream = stream
+    return step
+
+
+@torch.inference_mode()
+def sample_mg(model, control, history, history_control, temperature=1.0, seed=0):
+    """MG batch sampling: control [B, T, 3] of the frames to generate, the real frames just before them
+    (history [B, >=tau, 63], history_control [B, >=tau, 3]) -> poses [B, T, 63]. LSTM state starts at 0."""
+    if not isinstance(model, MoGlow):
+        raise SampleError("sample_mg needs an MG model")
+    control = _tensor(control, model)
+    if control.ndim != 3 or history.shape[1] < model.tau or np.shape(history_control)[1] < model.tau:
+        raise SampleError(f"sample_mg: need control [B,T,3] and >= tau={model.tau} history frames")
+    hist = model.standardize_x(_tensor(history, model)[:, -model.tau:])
+    hist_c = model.standardize_c(_tensor(history_control, model)[:, -model.tau:])
+    stream = MGStream(model, hist, hist_c, temperature, _generator(seed))
+    c = model.standardize_c(control)
+    out = torch.stack([stream.step(c[:, t]) for t in range(c.shape[1])], dim=1)
+    return model.unstandardize_x(out).cpu().numpy().astype(np.float32)
+
+
+@torch.inference_mode()
+def sample_fl(model, control, temperature=1.0, seed=0):
+    """FL: whole windows from their control [B, T, 3] (T divisible by 2^(L-1)) -> poses [B, T, 63]."""
+    if not isinstance(model, FL):
+        raise SampleError("sample_fl needs an FL model")
+    c = model.standardize_c(_tensor(control, model))
+    x = model.sample(c, temperature, _generator(seed))
+    return model.unstandardize_x(x).cpu().numpy().astype(np.float32)
+
+
+def sample_split(model, data_path, split="test", n=None, temperature=1.0, seed=0):
+    """Sample for the first n windows of a split of a prepared dataset -> (x [n,T,63], c [n,T,3])."""
+    try:
+        with np.load(data_path, allow_pickle=False) as f:
+            d = {k: f[k] for k in f.files if k.startswith(split + "_")}
+    except (OSError, ValueError) as e:
+        raise SampleError(f"{data_path}: not a readable prepared dataset ({e})") from None
+    if f"{split}_c" not in d:
+        raise SampleError(f"{data_path}: no split '{split}' (missing key '{split}_c')")
+    c = d[f"{split}_c"][:n]
+    if model.kind == "mg":
+        if f"{split}_hist" not in d:
+            raise SampleError(f"{data_path}: missing key '{split}_hist' (MG needs the frames before each window)")
+        x = sample_mg(model, c, d[f"{split}_hist"][:n], d[f"{split}_hist_c"][:n], temperature, seed)
+    else:
+        x = sample_fl(model, c, temperature, seed)
+    return x, c
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m generation.sample", description="Sample clips from a checkpoint.")
+    ap.add_argument("--checkpoint", required=True)
+    ap.add_argument("--data", required=True, help="prepared dataset .npz whose control (and history) to use")
+    ap.add_argument("--split", default="test")
+    ap.add_argument("--n", type=int, default=None, help="number of windows (default: all)")
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--temperature", type=float, default=1.0)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--device", default=None)
+    a = ap.parse_args(argv)
+    try:
+        model = load_model(a.checkpoint, a.device)
+        x, c = sample_split(model, a.data, a.split, a.n, a.temperature, a.seed)
+    except SampleError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    from .features import to_world
+    out = Path(a.out)
+    for i in range(len(x)):
+        save_clip(out / f"{model.kind}_{a.split}_{i:03d}.npz", to_world(x[i], c[i]), skeleton.PARENTS,
+                  skeleton.JOINT_NAMES, model.fps, control=c[i], seed=np.int64(a.seed),
+                  temperature=np.float64(a.temperature), checkpoint=np.str_(a.checkpoint))
+    print(f"wrote {len(x)} {model.kind.upper()} clips to {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

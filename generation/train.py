@@ -1,0 +1,213 @@
+"""Train FL or MG by exact maximum likelihood (CONTRACTS.md §3).
+
+    python -m generation.train --model mg --config cpu --data dataset.npz --out runs/mg [--steps N] [--resume]
+
+Writes OUT/config.json, OUT/checkpoints/step_XXXXXXX.pt (early ones kept: the bad examples come from them),
+OUT/metrics.csv (step, train_nll, valid_nll in nats per dimension of the standardised data) and
+OUT/resume.pt (optimiser state for --resume). Adam with linear warm-up, gradient-norm clipping; batches
+and dropout masks are functions of (seed, step), so a run is reproducible and a resumed run continues
+exactly as an uninterrupted one would.
+"""
+import argparse
+import csv
+import json
+import sys
+import time
+from pathlib import Path
+
+import torch
+from tqdm import tqdm
+
+from .dataset import DatasetError, batch_indices, eval_batches, load_dataset
+from . import fl, moglow
+
+CONFIG_DIR = Path(__file__).resolve().parent / "configs"
+MODELS = {"fl": fl.FL, "mg": moglow.MoGlow}
+MODEL_DEFAULTS = {"fl": fl.DEFAULTS, "mg": moglow.DEFAULTS}
+TRAIN_DEFAULTS = dict(batch_size=32, lr=1e-3, warmup=200, clip_grad=5.0, steps=10000, valid_every=500,
+                      valid_windows=256, ckpt_every=2000, early_ckpts=[50, 100, 200, 500], train_window=None,
+                      noise=0.01)
+
+
+class TrainError(ValueError):
+    """Bad training input (config, model name, diverged run); one-line message."""
+
+
+def pick_device(device=None):
+    if device:
+        return torch.device(device)
+    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+
+
+def load_config(model, config):
+    """`config`: a dict, 'tiny'/'cpu'/'paper' (meaning configs/{model}_{name}.json) or a JSON file path."""
+    if model not in MODELS:
+        raise TrainError(f"--model must be one of {sorted(MODELS)}, got '{model}'")
+    if isinstance(config, dict):
+        cfg, where = dict(config), "config"
+    else:
+        path = Path(config)
+        if not path.suffix and not path.exists():
+            path = CONFIG_DIR / f"{model}_{config}.json"
+        if not path.is_file():
+            raise TrainError(f"config '{config}' not found (tried {path})")
+        try:
+            cfg = json.loads(path.read_text())
+        except json.JSONDecodeError as e:
+            raise TrainError(f"{path}:{e.lineno}: invalid JSON ({e.msg})") from None
+        where = str(path)
+    if cfg.get("model", model) != model:
+        raise TrainError(f"{where}: field 'model' is '{cfg['model']}' but --model is '{model}'")
+    allowed = set(TRAIN_DEFAULTS) | set(MODEL_DEFAULTS[model]) | {"model", "name", "note"}
+    for key, value in cfg.items():
+        if key not in allowed:
+            raise TrainError(f"{where}: unknown field '{key}'")
+        if key not in ("model", "name", "note", "early_ckpts", "train_window") and not isinstance(value, (int, float)):
+            raise TrainError(f"{where}: field '{key}' must be a number, got {value!r}")
+    return {**TRAIN_DEFAULTS, **cfg, "model": model}
+
+
+def model_config(kind, cfg):
+    return {k: cfg[k] for k in MODEL_DEFAULTS[kind] if k in cfg}
+
+
+def build_model(kind, cfg, stats=None):
+    net = MODELS[kind](model_config(kind, cfg))
+    if stats is not None:
+        net.set_stats(stats["x_mean"], stats["x_std"], stats["c_mean"], stats["c_std"])
+    return net
+
+
+def save_checkpoint(path, net, cfg, ds, step, valid_nll):
+    """Everything needed to sample without the dataset."""
+    torch.save(dict(kind=net.kind, config=cfg, model_config=net.config, state=net.state_dict(), step=step,
+                    valid_nll=valid_nll, stats={k: v.tolist() for k, v in ds.stats.items()},
+                    tau=getattr(net, "tau", ds.tau), fps=ds.fps, window=ds.window), path)
+
+
+@torch.no_grad()
+def evaluate(net, split, cfg, device):
+    """Mean NLL (nats/dim) over the first valid_windows windows of a split."""
+    was = net.training
+    net.eval()
+    total, n = 0.0, 0
+    for x, c in eval_batches(split, cfg["batch_size"], cfg["valid_windows"]):
+        nll = net.nll(x.to(device), c.to(device))
+        total += nll.sum().item()
+        n += len(nll)
+    net.train(was)
+    return total / n
+
+
+def train(model, config, data_path, out_dir, steps=None, seed=0, progress=True, resume=False, device=None):
+    """Train `model` ('fl' or 'mg') with `config` on a prepared dataset; returns out_dir (see module doc)."""
+    cfg = load_config(model, config)
+    if steps is not None:
+        cfg["steps"] = int(steps)
+    ds = load_dataset(data_path)
+    if "valid" not in ds.splits or "train" not in ds.splits:
+        raise TrainError(f"{data_path}: needs 'train' and 'valid' splits")
+    device = pick_device(device)
+    out = Path(out_dir)
+    (out / "checkpoints").mkdir(parents=True, exist_ok=True)
+    train_split, valid_split = ds.splits["train"], ds.splits["valid"]
+    torch.manual_seed(seed)
+    net = build_model(model, cfg, ds.stats).to(device)
+    if model == "fl":
+        net.check_length(cfg["train_window"] or ds.window)
+    opt = torch.optim.Adam(net.parameters(), lr=cfg["lr"])
+    start, elapsed = 0, 0.0
+    resume_path = out / "resume.pt"
+    if resume and resume_path.exists():
+        state = torch.load(resume_path, map_location=device, weights_only=False)
+        net.load_state_dict(state["state"])
+        opt.load_state_dict(state["opt"])
+        start, elapsed = state["step"], state.get("elapsed", 0.0)
+    elif resume:
+        raise TrainError(f"{resume_path}: nothing to resume")
+    (out / "config.json").write_text(json.dumps(
+        {**cfg, "data": str(data_path), "seed": seed, "device": str(device)}, indent=2))
+    metrics_path = out / "metrics.csv"
+    if start == 0 or not metrics_path.exists():
+        with open(metrics_path, "w", newline="") as f:
+            csv.writer(f).writerow(["step", "train_nll", "valid_nll", "lr", "grad_norm", "elapsed_s", "steps_per_s"])
+
+    tx, tc = train_split.x.to(device), train_split.c.to(device)
+    n, window = len(train_split), tx.shape[1]
+    crop = cfg["train_window"] or window
+    early = set(cfg["early_ckpts"])
+    net.train()
+    bar = tqdm(range(start, cfg["steps"]), initial=start, total=cfg["steps"], disable=not progress,
+               desc=f"train {model}", unit="step", dynamic_ncols=True)
+    run_nll, run_n, bad, t0, valid_nll, t_row, s_row = 0.0, 0, 0, time.perf_counter(), float("nan"), \
+        time.perf_counter(), start
+    for step in bar:
+        lr = cfg["lr"] * min(1.0, (step + 1) / max(1, cfg["warmup"]))
+        for group in opt.param_groups:
+            group["lr"] = lr
+        idx = batch_indices(n, cfg["batch_size"], seed, step).to(device)
+        x, c = tx[idx], tc[idx]
+        torch.manual_seed(seed * 1_000_003 + step)  # dropout masks: a function of (seed, step)
+        if crop < window:
+            s = int(torch.randint(0, window - crop + 1, (1,)))
+            x, c = x[:, s:s + crop], c[:, s:s + crop]
+        if cfg["noise"] > 0:
+            # Small Gaussian noise (standardised units) bounds the density on (near-)deterministic dimensions,
+            # e.g. the root's own x/z in the root frame, which are exactly 0 (dequantisation, as in Glow).
+            x = x + cfg["noise"] * torch.randn_like(x)
+        loss = net.nll(x, c).mean()
+        opt.zero_grad(set_to_none=True)
+        if not torch.isfinite(loss):
+            bad += 1
+            if bad > 20:
+                raise TrainError(f"training diverged: NLL not finite at step {step + 1} (lower 'lr' in the config)")
+            continue
+        loss.backward()
+        grad_norm = float(torch.nn.utils.clip_grad_norm_(net.parameters(), cfg["clip_grad"]))
+        opt.step()
+        run_nll += loss.item()
+        run_n += 1
+        done = step + 1
+        last = done == cfg["steps"]
+        if done % cfg["valid_every"] == 0 or last or done == 1:
+            valid_nll = evaluate(net, valid_split, cfg, device)
+            now = time.perf_counter()
+            sps = (done - s_row) / max(1e-9, now - t_row)
+            t_row, s_row = now, done
+            with open(metrics_path, "a", newline="") as f:
+                csv.writer(f).writerow([done, f"{run_nll / max(1, run_n):.5f}", f"{valid_nll:.5f}", f"{lr:.3g}",
+                                        f"{grad_norm:.3f}", f"{elapsed + now - t0:.1f}", f"{sps:.3f}"])
+            run_nll, run_n = 0.0, 0
+        bar.set_postfix(nll=f"{loss.item():.3f}", valid=f"{valid_nll:.3f}")
+        if done in early or done % cfg["ckpt_every"] == 0 or last:
+            save_checkpoint(out / "checkpoints" / f"step_{done:07d}.pt", net, cfg, ds, done, valid_nll)
+            torch.save(dict(state=net.state_dict(), opt=opt.state_dict(), step=done,
+                            elapsed=elapsed + time.perf_counter() - t0), resume_path)
+    bar.close()
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m generation.train", description=__doc__.split("\n")[0])
+    ap.add_argument("--model", required=True, choices=sorted(MODELS))
+    ap.add_argument("--config", default="cpu", help="tiny | cpu | paper | path to a JSON config")
+    ap.add_argument("--data", required=True, help="prepared dataset .npz (python -m generation.prepare_data)")
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--steps", type=int, default=None, help="override the config's number of steps")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--resume", action="store_true", help="continue from OUT/resume.pt")
+    ap.add_argument("--device", default=None, help="default: cuda when present, else cpu")
+    ap.add_argument("--no-progress", action="store_true")
+    a = ap.parse_args(argv)
+    try:
+        out = train(a.model, a.config, a.data, a.out, steps=a.steps, seed=a.seed, progress=not a.no_progress,
+                    resume=a.resume, device=a.device)
+    except (TrainError, DatasetError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    print(f"trained {a.model}: {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
