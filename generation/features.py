@@ -95,7 +95,7 @@ def load_take(path, fps=20.0):
 
 def root_trajectory(joints, fps=20.0):
     """Root position on the floor [T, 2] (x, z) and unwrapped heading yaw [T] (rad) of joints [T, 21, 3]."""
-    joints = np.asarray(joints, dtype=np.float64)
+    joints = _np(joints, np.float64)
     across = (joints[:, _I["UpperLeg_L"]] - joints[:, _I["UpperLeg_R"]]
               + joints[:, _I["UpperArm_L"]] - joints[:, _I["UpperArm_R"]])
     # forward = across x up, horizontal
@@ -105,6 +105,13 @@ def root_trajectory(joints, fps=20.0):
         fwd = gaussian_filter1d(fwd, FACING_SMOOTH_S * fps, axis=0, mode="nearest")
     yaw = np.unwrap(np.arctan2(fwd[:, 0], fwd[:, 1]))
     return joints[:, _I["Hips"]][:, [0, 2]], yaw
+
+
+def _np(a, dtype=None):
+    """numpy view of an array-like; torch tensors (any device) are detached and copied to the CPU."""
+    if hasattr(a, "detach"):
+        a = a.detach().cpu().numpy()
+    return np.asarray(a, dtype=dtype)
 
 
 def _rotate_y(v, yaw):
@@ -117,7 +124,7 @@ def _rotate_y(v, yaw):
 
 def to_features(joints, fps=20.0):
     """joints [T, 21, 3] (metres) -> (x float32 [T, 63], c float32 [T, 3]); see the module docstring."""
-    joints = np.asarray(joints, dtype=np.float64)
+    joints = _np(joints, np.float64)
     if joints.ndim != 3 or joints.shape[1:] != (skeleton.N_JOINTS, 3):
         raise ValueError(f"to_features: joints must be [T, {skeleton.N_JOINTS}, 3], got {joints.shape}")
     T = joints.shape[0]
@@ -141,14 +148,14 @@ def to_world(x, c, start_xz=(0.0, 0.0), start_yaw=0.0):
 
     The root of frame 0 is placed at `start_xz` with heading `start_yaw`; c[..., 0, :] is ignored.
     """
-    x = np.asarray(x, dtype=np.float64)
-    c = np.asarray(c, dtype=np.float64)
+    x = _np(x, np.float64)
+    c = _np(c, np.float64)
     if x.shape[-1] != skeleton.POSE_DIM or c.shape[-1] != skeleton.CONTROL_DIM or x.shape[:-1] != c.shape[:-1]:
         raise ValueError(f"to_world: need x [..., T, 63] and c [..., T, 3], got {x.shape} and {c.shape}")
-    yaw = np.asarray(start_yaw, dtype=np.float64)[..., None] + np.concatenate(
+    yaw = _np(start_yaw, np.float64)[..., None] + np.concatenate(
         [np.zeros(c.shape[:-1][:-1] + (1,)), np.cumsum(c[..., 1:, 2], axis=-1)], axis=-1)
     step = _rotate_y(np.stack([c[..., 1:, 1], c[..., 1:, 0]], -1), yaw[..., :-1])  # world (x, z)
-    start = np.asarray(start_xz, dtype=np.float64)
+    start = _np(start_xz, np.float64)
     root = np.concatenate([np.zeros(step.shape[:-2] + (1, 2)), np.cumsum(step, axis=-2)], axis=-2) \
         + start[..., None, :]
     local = x.reshape(x.shape[:-1] + (skeleton.N_JOINTS, 3))
@@ -164,8 +171,8 @@ _MIRROR_SIGN = np.tile([-1.0, 1.0, 1.0], skeleton.N_JOINTS)
 
 def mirror(x, c):
     """Left/right mirror image: swap _L/_R joints, reflect x; sideways and yaw control change sign."""
-    x = np.asarray(x)
-    c = np.asarray(c)
+    x = _np(x)
+    c = _np(c)
     return ((x[..., _MIRROR_IDX] * _MIRROR_SIGN).astype(x.dtype),
             (c * np.array([1.0, -1.0, -1.0])).astype(c.dtype))
 
@@ -187,8 +194,8 @@ def reverse(x, c):
     c'[t] for t >= 1 is the reversed step c[T - t]; c'[0] (no previous frame) holds the reversed c[0],
     which keeps reverse(reverse(.)) exact; to_world ignores it.
     """
-    x = np.asarray(x)
-    c = np.asarray(c)
+    x = _np(x)
+    c = _np(c)
     rc = _reverse_step(c.astype(np.float64))
     c_new = np.concatenate([rc[..., :1, :], rc[..., 1:, :][..., ::-1, :]], axis=-2)
     return x[..., ::-1, :].copy(), c_new.astype(c.dtype)

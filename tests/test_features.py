@@ -208,3 +208,12 @@ def test_unknown_skeleton_is_a_clear_error(tmp_path):
     path.write_text(bvh_text(motion_values()))
     with pytest.raises(BvhError, match=r"odd\.bvh:1: unknown skeleton"):
         load_take(path)
+
+
+def test_accepts_torch_tensors():
+    torch = pytest.importorskip("torch")
+    rng = np.random.default_rng(2)
+    x = rng.normal(size=(2, 10, 63)).astype(np.float32)
+    c = rng.normal(scale=0.1, size=(2, 10, 3)).astype(np.float32)
+    np.testing.assert_array_equal(to_world(torch.from_numpy(x), torch.from_numpy(c)), to_world(x, c))
+    np.testing.assert_array_equal(mirror(torch.from_numpy(x), torch.from_numpy(c))[0], mirror(x, c)[0])
