@@ -75,12 +75,16 @@ class InvertibleLinearLU(nn.Module):
         upper = self.upper * self.l_mask.T + torch.diag(self.sign_s * torch.exp(self.log_s))
         return self.P @ lower @ upper
 
+    def inverse_weight(self):
+        # Inverted in float64 (the matrix is small): float32 inversion errors would add up over many steps.
+        return torch.linalg.inv(self.weight().double()).to(self.lower.dtype)
+
     def forward(self, x, cond=None):
         y = torch.einsum("ij,bjt->bit", self.weight(), x)
         return y, self.log_s.sum().expand(x.shape[0]) * x.shape[2]
 
     def inverse(self, y, cond=None):
-        x = torch.einsum("ij,bjt->bit", torch.linalg.inv(self.weight()), y)
+        x = torch.einsum("ij,bjt->bit", self.inverse_weight().to(y.dtype), y)
         return x, -self.log_s.sum().expand(y.shape[0]) * y.shape[2]
 
 

@@ -194,7 +194,7 @@ def fused_weights(model):
         # Output rows: shifts first, then scale logits with the coupling's +2 folded into the bias.
         acc["Wo"].append(torch.cat([out.weight[0::2], out.weight[1::2]]).T)
         acc["bo"].append(torch.cat([out.bias[0::2], out.bias[1::2] + 2.0]))
-        inv = torch.linalg.inv(linear.weight()) * torch.exp(-actnorm.logs[0])  # diag(e^-logs) W^-1
+        inv = linear.inverse_weight() * torch.exp(-actnorm.logs[0])  # diag(e^-logs) W^-1
         acc["Winv"].append(inv.T)
         acc["bn"].append(-actnorm.bias[0, :, 0])
     w = {n: torch.stack(v).contiguous() for n, v in acc.items()}

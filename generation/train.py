@@ -99,8 +99,12 @@ def evaluate(net, split, cfg, device):
     return total / n
 
 
-def train(model, config, data_path, out_dir, steps=None, seed=0, progress=True, resume=False, device=None):
-    """Train `model` ('fl' or 'mg') with `config` on a prepared dataset; returns out_dir (see module doc)."""
+def train(model, config, data_path, out_dir, steps=None, seed=0, progress=True, resume=False, device=None,
+          threads=None):
+    """Train `model` ('fl' or 'mg') with `config` on a prepared dataset; returns out_dir (see module doc).
+    `threads`: CPU threads for torch (default: torch's choice); 1 is faster on a machine shared with other jobs."""
+    if threads:
+        torch.set_num_threads(int(threads))
     cfg = load_config(model, config)
     if steps is not None:
         cfg["steps"] = int(steps)
@@ -197,11 +201,12 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--resume", action="store_true", help="continue from OUT/resume.pt")
     ap.add_argument("--device", default=None, help="default: cuda when present, else cpu")
+    ap.add_argument("--threads", type=int, default=None, help="CPU threads (default: all cores)")
     ap.add_argument("--no-progress", action="store_true")
     a = ap.parse_args(argv)
     try:
         out = train(a.model, a.config, a.data, a.out, steps=a.steps, seed=a.seed, progress=not a.no_progress,
-                    resume=a.resume, device=a.device)
+                    resume=a.resume, device=a.device, threads=a.threads)
     except (TrainError, DatasetError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

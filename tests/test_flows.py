@@ -1,0 +1,172 @@
+"""Flow layers and both models: invertibility and log-determinants (one generic test), ActNorm init,
+MG causality. All at small sizes."""
+import pytest
+import torch
+
+from generation.flows import (ActNorm, AffineCoupling, Chain, ConvNet, FlowStep, InvertibleLinearLU, Split,
+                              SqueezeTime)
+from generation.fl import FL
+from generation.moglow import LSTMNet, MoGlow
+
+C, CC, T, TAU = 6, 2, 4, 3
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    """Tiny models: one thread is as fast and immune to other jobs on a shared 2-core machine."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+def perturb(module, scale=0.1):
+    """Move every parameter off its initial value (zero-initialised layers would make couplings trivial)."""
+    with torch.no_grad():
+        for p in module.parameters():
+            p.add_(scale * torch.randn_like(p))
+    return module
+
+
+def layer_case(make):
+    """Case for a layer acting on x [B, C, T] with cond [B, CC, T]."""
+    def build(dtype):
+        layer = make().to(dtype)
+        cond = torch.randn(3, CC, T, dtype=dtype)
+        layer(torch.randn(3, C, T, dtype=dtype) * 2 + 1, cond)  # data-dependent init where there is one
+        perturb(layer)
+        layer.eval()
+        fwd = lambda x: layer(x.reshape(-1, C, T), cond[:x.reshape(-1, C, T).shape[0]])
+        inv = lambda y: layer.inverse(y, cond[:y.shape[0]])[0]
+        return fwd, inv, torch.randn(3, C, T, dtype=dtype)
+    return build
+
+
+def fl_case(dtype):
+    model = FL(dict(L=2, K=2, hidden=8)).to(dtype)
+    c = torch.randn(3, T, 3, dtype=dtype)
+    model(torch.randn(3, T, 63, dtype=dtype), c)
+    perturb(model, 0.05).eval()
+    fwd = lambda x: model(x.reshape(-1, T, 63), c[:x.reshape(-1, T, 63).shape[0]])
+    inv = lambda z: model.inverse(z, c[:z.shape[0]])[0]
+    return fwd, inv, torch.randn(3, T, 63, dtype=dtype)
+
+
+def mg_case(dtype):
+    """MG as a map from the frames after the history to their latents; its inverse is the streaming sampler."""
+    model = MoGlow(dict(K=2, hidden=8, tau=TAU)).to(dtype)
+    n = 3
+    hist = torch.randn(3, TAU, 63, dtype=dtype)
+    c = torch.randn(3, TAU + n, 3, dtype=dtype)
+    model(torch.randn(3, TAU + n, 63, dtype=dtype), c)
+    perturb(model, 0.05).eval()
+
+    def fwd(x):
+        x = x.reshape(-1, n, 63)
+        return model(torch.cat([hist[:len(x)], x], dim=1), c[:len(x)])
+
+    inv = lambda z: model.inverse(z, hist[:len(z)], c[:len(z)])
+    return fwd, inv, torch.randn(3, n, 63, dtype=dtype)
+
+
+CASES = {
+    "actnorm": layer_case(lambda: ActNorm(C)),
+    "lu_linear": layer_case(lambda: InvertibleLinearLU(C)),
+    "coupling_conv": layer_case(lambda: AffineCoupling(C, ConvNet(C // 2, CC, 2 * (C - C // 2), 8))),
+    "coupling_lstm": layer_case(lambda: AffineCoupling(C, LSTMNet(C // 2, CC, 2 * (C - C // 2), 8, 2))),
+    "squeeze_time": layer_case(SqueezeTime),
+    "split": layer_case(lambda: Split(C, ConvNet(C // 2, CC, 2 * (C - C // 2), 8))),
+    "flow_step": layer_case(lambda: FlowStep(C, ConvNet(C // 2, CC, 2 * (C - C // 2), 8))),
+    "chain": layer_case(lambda: Chain(*[FlowStep(C, ConvNet(C // 2, CC, 2 * (C - C // 2), 8)) for _ in range(3)])),
+    "fl_model": fl_case,
+    "mg_model": mg_case,
+}
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_invertible_and_logdet_matches_jacobian(name):
+    torch.manual_seed(0)
+    # float32: inverse(forward(x)) == x
+    fwd, inv, x = CASES[name](torch.float32)
+    with torch.no_grad():
+        y, logdet = fwd(x)
+        assert logdet.shape == (x.shape[0],)
+        err = (inv(y) - x).abs().max().item()
+        assert err < 1e-4, err
+    # float64: logdet == log|det J| from autograd, per batch element
+    torch.manual_seed(0)
+    fwd, inv, x = CASES[name](torch.float64)
+    x1 = x[:1]
+    _, logdet = fwd(x1)
+    jac = torch.autograd.functional.jacobian(lambda v: fwd(v)[0].reshape(-1), x1)
+    sign, logabsdet = torch.linalg.slogdet(jac.reshape(jac.shape[0], -1))
+    assert sign != 0
+    assert abs(logabsdet.item() - logdet[0].item()) < 1e-3, (name, logabsdet.item(), logdet[0].item())
+    # the layer is not the identity (the test would pass trivially otherwise)
+    if name != "squeeze_time":
+        assert not torch.allclose(fwd(x)[0].reshape(x.shape), x, atol=1e-3)
+
+
+def test_actnorm_initialises_to_zero_mean_unit_variance():
+    torch.manual_seed(1)
+    x = torch.randn(16, 5, 30) * torch.tensor([0.1, 1, 3, 10, 0.5])[None, :, None] + torch.arange(5.)[None, :, None]
+    layer = ActNorm(5)
+    y, _ = layer(x)
+    assert torch.allclose(y.mean(dim=(0, 2)), torch.zeros(5), atol=1e-5)
+    assert torch.allclose(y.std(dim=(0, 2), unbiased=False), torch.ones(5), atol=1e-4)
+    y2, _ = layer(x * 2)  # initialised once only
+    assert not torch.allclose(y2.std(dim=(0, 2), unbiased=False), torch.ones(5), atol=0.1)
+
+
+def test_lu_linear_starts_orthogonal_with_unit_lower():
+    torch.manual_seed(2)
+    layer = InvertibleLinearLU(7)
+    w = layer.weight()
+    assert torch.allclose(w @ w.T, torch.eye(7), atol=1e-5)
+    lower = layer.lower * layer.l_mask + torch.eye(7)
+    assert torch.equal(torch.diagonal(lower), torch.ones(7))
+    assert torch.allclose(layer(torch.randn(2, 7, 3))[1], torch.zeros(2), atol=1e-5)  # |det| = 1
+
+
+def test_coupling_starts_near_identity():
+    layer = AffineCoupling(C, ConvNet(C // 2, CC, 2 * (C - C // 2), 8))
+    x = torch.randn(2, C, T)
+    y, _ = layer(x, torch.randn(2, CC, T))
+    assert torch.equal(y[:, :C // 2], x[:, :C // 2])
+    assert torch.allclose(y[:, C // 2:], x[:, C // 2:] * torch.sigmoid(torch.tensor(2.0)))
+
+
+def test_mg_is_causal():
+    """Changing the pose or control of frame t+1 leaves everything up to frame t exactly unchanged,
+    in the likelihood pass (latents) and in sampling (generated poses)."""
+    torch.manual_seed(3)
+    model = perturb(MoGlow(dict(K=2, hidden=8, tau=TAU)), 0.05).eval()
+    x, c = torch.randn(2, TAU + 6, 63), torch.randn(2, TAU + 6, 3)
+    with torch.no_grad():
+        z, _ = model(x, c)
+        t = TAU + 2
+        x2, c2 = x.clone(), c.clone()
+        x2[:, t + 1] += 1.0
+        c2[:, t + 1] += 1.0
+        z2, _ = model(x2, c2)
+        assert torch.equal(z2[:, :t + 1 - TAU], z[:, :t + 1 - TAU])
+        assert not torch.equal(z2[:, t + 1 - TAU], z[:, t + 1 - TAU])
+        # sampling: the same latents, the control changed from frame 3 of the generated part on
+        zs = torch.randn(2, 6, 63)
+        a = model.inverse(zs, x[:, :TAU], c)
+        c3 = c.clone()
+        c3[:, TAU + 3:] += 1.0
+        b = model.inverse(zs, x[:, :TAU], c3)
+        assert torch.equal(a[:, :3], b[:, :3])
+        assert not torch.equal(a[:, 3], b[:, 3])
+
+
+def test_mg_history_dropout_only_in_training():
+    torch.manual_seed(4)
+    model = MoGlow(dict(K=1, hidden=8, tau=TAU, dropout=0.95))
+    x, c = torch.randn(64, TAU + 2, 63), torch.randn(64, TAU + 2, 3)
+    hist = model.make_cond(x, c)[..., :TAU * 63].reshape(64, 2, TAU, 63)
+    dropped = (hist == 0).all(dim=-1).float().mean().item()
+    assert 0.9 < dropped < 0.99
+    model.eval()
+    assert (model.make_cond(x, c)[..., :TAU * 63] != 0).all()
