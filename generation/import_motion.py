@@ -5,7 +5,7 @@
 All joints of the file, world positions by forward kinematics, times `--scale` (file units -> metres;
 default 0.01 for centimetre files), resampled to `--fps` when given (rotations are slerped, so bones
 keep their lengths). When the skeleton is one the project knows (Bandai-Namco, CMU/PFNN), the clip
-also gets the root `control` of its 21-joint body (features.to_features).
+also gets the root `control` of its 21-joint body (features.to_features), in the clip's units.
 """
 import argparse
 import sys
@@ -14,7 +14,7 @@ import numpy as np
 
 from .bvh import BvhError, read_bvh
 from .clip import ClipError, save_clip
-from .features import SKELETON_MAPS, bvh_world_positions, detect_skeleton, map_joints, to_features
+from .features import bvh_world_positions, detect_skeleton, map_joints, to_features
 from .resample import clean_fps
 
 
@@ -32,8 +32,8 @@ def import_motion(in_path, out_path, scale=0.01, fps=None):
     except BvhError:
         key = None
     if key is not None and len(joints) > 1:
-        body = map_joints(pos, bvh.names, key) * SKELETON_MAPS[key]["scale"]
-        extra["control"] = to_features(body, fps_out)[1]
+        # control in the clip's own units (so it integrates back onto its joints whatever --scale is)
+        extra["control"] = to_features(map_joints(joints, bvh.names, key), fps_out)[1]
     save_clip(out_path, joints, bvh.parents, bvh.names, fps_out, **extra)
     return joints
 
