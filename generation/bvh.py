@@ -61,6 +61,8 @@ def _read_bytes(path):
             raw = gzip.decompress(raw)
         except (OSError, EOFError) as e:
             raise BvhError(f"{path}:0: corrupt gzip data ({e})") from None
+    if raw[:3] == b"\xef\xbb\xbf":  # UTF-8 byte-order mark
+        raw = raw[3:]
     return raw
 
 

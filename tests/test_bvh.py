@@ -142,11 +142,14 @@ def test_fk_matches_scipy(handwritten):
     assert np.ptp(ref, axis=0).max() > 1.0  # the reference really moves: the check can fail
 
 
-def test_gzip_and_lf_give_the_same(tmp_path, handwritten):
+def test_gzip_lf_and_bom_give_the_same(tmp_path, handwritten):
     path, motion = handwritten
     gz = tmp_path / "mixed.bvh.gz"
     gz.write_bytes(gzip.compress(bvh_text(motion, crlf=False).encode()))
     np.testing.assert_array_equal(fk_positions(read_bvh(gz)), fk_positions(read_bvh(path)))
+    bom = tmp_path / "bom.bvh"
+    bom.write_bytes(b"\xef\xbb\xbf" + bvh_text(motion).encode())
+    np.testing.assert_array_equal(read_bvh(bom).motion, read_bvh(path).motion)
 
 
 def test_real_bandai_and_pfnn_files():
