@@ -208,11 +208,16 @@ def _edit(kind):
     if kind == "bad_frame_time":
         lines[FRAMES_LINE] = "Frame Time: fast"
         return "\n".join(lines), FRAMES_LINE + 1, "expected a number"
+    if kind == "empty":
+        return "\n\n", 1, "empty file"
+    if kind == "not_bvh":
+        return "time,x,y\n0,1,2\n", 1, "expected 'HIERARCHY'"
     raise AssertionError(kind)
 
 
 CASES = ["truncated_block", "truncated_line", "wrong_count", "unknown_channel", "non_numeric",
-         "frames_too_few", "frames_too_many", "no_motion", "bad_offset", "unclosed", "bad_frame_time"]
+         "frames_too_few", "frames_too_many", "no_motion", "bad_offset", "unclosed", "bad_frame_time",
+         "empty", "not_bvh"]
 
 
 @pytest.mark.parametrize("kind", CASES)
