@@ -38,9 +38,11 @@ def _read_csv(path):
     df.columns = [str(c).strip() for c in df.columns]
     df.index = np.arange(2, len(df) + 2)  # file line numbers (header is line 1)
     # Wholly blank lines are layout, not data (a trailing newline or two); anything else is kept and checked.
-    blank = (df == "").all(axis=1)
-    if blank.any():
-        df = df[~blank]
+    if len(df.columns):
+        maybe = df[df.columns[0]] == ""
+        if maybe.any():
+            blank = maybe & (df == "").all(axis=1)
+            df = df[~blank]
     return path, df
 
 
@@ -48,46 +50,53 @@ def _first_line(mask):
     return int(mask.index[np.flatnonzero(np.asarray(mask))[0]])
 
 
-def _check_nonempty(path, df, cols):
-    for col in cols:
-        values = df[col].str.strip()
-        empty = values == ""
-        if empty.any():
-            raise AnalysisError(f"{path}:{_first_line(empty)}: empty {col}")
-        df[col] = values
+def _codes(series):
+    """(codes, stripped unique values): string work is done once per distinct value, not once per row."""
+    codes, uniques = pd.factorize(series)
+    uniques = pd.Index(uniques).str.strip()
+    return codes, uniques
+
+
+def _clean_column(path, df, col):
+    """Strip blanks around every value; an empty value is an error naming its line."""
+    codes, uniques = _codes(df[col])
+    empty = np.flatnonzero(uniques == "")
+    if len(empty):
+        raise AnalysisError(f"{path}:{_first_line(pd.Series(codes == empty[0], index=df.index))}: empty {col}")
+    df[col] = np.asarray(uniques, dtype=object)[codes]
+    return codes
 
 
 def _parse_ratings(path, text):
     """Integers 1..5 only; '3.0', '3.5', 'x' and '7' are all errors naming their line."""
-    stripped = text.str.strip()
-    try:
-        values = stripped.astype(np.int64)
-        bad_text = None
-    except (ValueError, OverflowError):
-        values = None
-        # Slow path, only on bad input: find the first offending line.
-        ok = stripped.str.fullmatch(r"[+-]?\d{1,18}")
-        bad_text = ~ok
-    if bad_text is not None:
-        line = _first_line(bad_text)
-        raise AnalysisError(f"{path}:{line}: rating {text.loc[line]!r} is not an integer 1-5")
-    out = (values < SCALE[0]) | (values > SCALE[-1])
-    if out.any():
-        line = _first_line(out)
-        raise AnalysisError(f"{path}:{line}: rating {values.loc[line]} is out of range 1-5")
-    return values.astype(np.int8)
+    codes, uniques = _codes(text)
+    values = np.zeros(len(uniques), dtype=np.int64)
+    for i, u in enumerate(uniques):
+        ok = u.lstrip("+-").isdigit() and u.isascii() and len(u) <= 18
+        if not ok:
+            line = _first_line(pd.Series(codes == i, index=text.index))
+            raise AnalysisError(f"{path}:{line}: rating {text.loc[line]!r} is not an integer 1-5")
+        values[i] = int(u)
+    bad = np.flatnonzero((values < SCALE[0]) | (values > SCALE[-1]))
+    if len(bad):
+        first = np.isin(codes, bad)
+        line = _first_line(pd.Series(first, index=text.index))
+        raise AnalysisError(f"{path}:{line}: rating {values[codes[text.index.get_loc(line)]]} is out of range 1-5")
+    return pd.Series(values[codes].astype(np.int8), index=text.index)
 
 
-def _check_unique_attribute(path, df, attr):
+def _check_unique_attribute(path, df, clip_codes, attr):
     """A clip has one condition (and one role): a clip under two of them is a corrupt export."""
-    first = df.groupby("clip_id", sort=False)[attr].transform("first")
-    clash = first != df[attr]
+    codes = pd.factorize(df[attr])[0]
+    _, first_row = np.unique(clip_codes, return_index=True)  # each clip's first row (codes are 0..C-1)
+    clash = codes[first_row][clip_codes] != codes
     if clash.any():
-        line = _first_line(clash)
+        i = int(np.flatnonzero(clash)[0])
+        line = int(df.index[i])
         clip = df.at[line, "clip_id"]
-        earlier = _first_line((df["clip_id"] == clip) & (df[attr] == first.loc[line]))
+        earlier = int(df.index[np.flatnonzero(clip_codes == clip_codes[i])[0]])
         raise AnalysisError(f"{path}:{line}: clip {clip} has {attr} {df.at[line, attr]!r} but "
-                            f"{first.loc[line]!r} at line {earlier}")
+                            f"{df.at[earlier, attr]!r} at line {earlier}")
 
 
 def load_ratings(path):
@@ -104,26 +113,29 @@ def load_ratings(path):
                             f"{', '.join(missing)} (header has: {', '.join(df.columns)})")
     if len(df) == 0:
         raise AnalysisError(f"{path}: no ratings (header only)")
-    _check_nonempty(path, df, ("rater_id", "clip_id", "condition"))
+    rater_codes = _clean_column(path, df, "rater_id")
+    clip_codes = _clean_column(path, df, "clip_id")
+    _clean_column(path, df, "condition")
     df["rating"] = _parse_ratings(path, df["rating"])
     if "role" in df.columns:
-        role = df["role"].str.strip().str.lower()
-        unknown = ~role.isin(ROLES)
-        if unknown.any():
-            line = _first_line(unknown)
+        codes, uniques = _codes(df["role"])
+        uniques = uniques.str.lower()
+        unknown = np.flatnonzero(~uniques.isin(ROLES))
+        if len(unknown):
+            line = _first_line(pd.Series(codes == unknown[0], index=df.index))
             raise AnalysisError(f"{path}:{line}: unknown role {df.at[line, 'role']!r} (expected test or catch)")
-        df["role"] = role
+        df["role"] = np.asarray(uniques, dtype=object)[codes]
     else:
         df["role"] = np.where(df["condition"] == CATCH_CONDITION, "catch", "test")
-    pair = df["rater_id"] + "\x1f" + df["clip_id"]
+    pair = pd.Series(rater_codes.astype(np.int64) * (clip_codes.max() + 1) + clip_codes, index=df.index)
     dup = pair.duplicated()
     if dup.any():
         line = _first_line(dup)
         first = _first_line(pair == pair.loc[line])
         raise AnalysisError(f"{path}:{line}: duplicate rating of clip {df.at[line, 'clip_id']} by rater "
                             f"{df.at[line, 'rater_id']} (first at line {first})")
-    _check_unique_attribute(path, df, "condition")
-    _check_unique_attribute(path, df, "role")
+    _check_unique_attribute(path, df, clip_codes, "condition")
+    _check_unique_attribute(path, df, clip_codes, "role")
     if not (df["role"] == "test").any():
         raise AnalysisError(f"{path}: no test ratings (every row is a catch trial)")
     return df
@@ -140,7 +152,7 @@ def load_metrics(path):
         raise AnalysisError(f"{path}: missing required column clip_id (header has: {', '.join(df.columns)})")
     if len(df) == 0:
         raise AnalysisError(f"{path}: no rows (header only)")
-    _check_nonempty(path, df, ("clip_id",))
+    _clean_column(path, df, "clip_id")
     dup = df["clip_id"].duplicated()
     if dup.any():
         line = _first_line(dup)

@@ -125,3 +125,16 @@ def test_console_summary(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "Ratings: 1880 total, 376 removed, 1504 kept" in out
     assert "One-way ANOVA: F(2, 1437)" in out and "NAT-FL" in out and "Mixed model: --no-mixed" in out
+
+
+def test_frozen_comparison_catches_a_tiny_change():
+    """The comparison itself must fail on any change in the numbers (here 1e-7 relative in one bound)."""
+    want = json.loads((DATA / "expected_stats.json").read_text())
+    got = json.loads(json.dumps(want))
+    got["without_exclusion"]["bootstrap"]["differences"][1]["boot_low"] *= 1 + 1e-7
+    with pytest.raises(AssertionError, match="without_exclusion.bootstrap.differences"):
+        _compare(got, want)
+    got = json.loads(json.dumps(want))
+    got["tukey"][2]["reject"] = not got["tukey"][2]["reject"]
+    with pytest.raises(AssertionError, match=r"tukey\[2\].reject"):
+        _compare(got, want)

@@ -1,0 +1,96 @@
+"""Benchmark of `python -m analysis.report` (issue 6 targets).
+
+  1. 1,000,000 ratings (3,226 raters x 310 clips: 100 per NAT/MG/FL + 10 catch), mixed model off: < 20 s.
+  2. 1,880 ratings (the paper's size: 20 raters x 94 clips), everything on (2,000-resample cluster bootstrap
+     and the crossed mixed model, each with and without the exclusion): < 5 s.
+Each run is the whole report (read + validate CSV, exclusion, all statistics twice, figures, HTML, JSON).
+Also times the cluster bootstrap against a per-replicate loop baseline on the paper-size data.
+
+    python bench/bench_report.py [--quick]
+"""
+import argparse
+import importlib.util
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+from analysis import stats  # noqa: E402
+from analysis.filtering import exclude_raters, only_test_rows  # noqa: E402
+from analysis.load import load_ratings  # noqa: E402
+from analysis.report import build_report  # noqa: E402
+
+spec = importlib.util.spec_from_file_location("make_ratings", ROOT / "tests/data/analysis/make_ratings.py")
+gen = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(gen)
+
+
+def timed_report(csv, out, **kw):
+    t = time.perf_counter()
+    build_report(csv, out, progress=False, quiet=True, **kw)
+    return time.perf_counter() - t
+
+
+def loop_bootstrap(t, n_boot, seed=0):
+    """Baseline: one explicit resample per replicate (index raters and clips, recompute the means)."""
+    rng = np.random.default_rng(seed)
+    raters = t["rater_id"].unique()
+    by_cond = {c: g["clip_id"].unique() for c, g in t.groupby("condition")}
+    out = []
+    for _ in range(n_boot):
+        wr = dict(zip(*np.unique(rng.choice(raters, len(raters)), return_counts=True)))
+        wc = {}
+        for clips in by_cond.values():
+            wc.update(zip(*np.unique(rng.choice(clips, len(clips)), return_counts=True)))
+        w = t["rater_id"].map(wr).fillna(0).to_numpy() * t["clip_id"].map(wc).fillna(0).to_numpy()
+        y = t["rating"].to_numpy()
+        out.append({c: (w * y)[m].sum() / w[m].sum() for c in by_cond if (m := (t["condition"] == c).to_numpy()).any()})
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true", help="100k instead of 1M ratings")
+    args = ap.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="bench_report_"))
+
+    small = tmp / "small.csv"
+    gen.make_ratings(n_raters=20, seed=6).to_csv(small, index=False)
+    runs = [timed_report(small, tmp / "rs", mixed=True) for _ in range(3)]
+    print(f"1,880 ratings, everything on (bootstrap 2000 x2, mixed model x2): "
+          f"best {min(runs):.2f} s, median {sorted(runs)[1]:.2f} s  (target < 5 s)")
+
+    t = only_test_rows(exclude_raters(load_ratings(small))[0])
+    t0 = time.perf_counter()
+    stats.cluster_bootstrap(t, n_boot=2000)
+    vec = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    loop_bootstrap(t, 200)
+    loop = (time.perf_counter() - t0) * 10
+    print(f"cluster bootstrap, 2000 resamples of 1,440 ratings: vectorised {vec:.3f} s, "
+          f"per-replicate loop {loop:.1f} s (extrapolated from 200) -> {loop / vec:.0f}x")
+    t0 = time.perf_counter()
+    stats.mixed_model(t)
+    print(f"mixed model (REML, 16 raters x 90 clips): {time.perf_counter() - t0:.2f} s")
+
+    n_raters = 323 if args.quick else 3226
+    big = tmp / "big.csv"
+    t0 = time.perf_counter()
+    gen.make_ratings(n_raters=n_raters, clips_per_condition=100, n_catch=10, seed=1).to_csv(big, index=False)
+    print(f"(generated {big.stat().st_size / 1e6:.0f} MB CSV in {time.perf_counter() - t0:.1f} s, not timed)")
+    t0 = time.perf_counter()
+    df = load_ratings(big)
+    load_s = time.perf_counter() - t0
+    n = len(df)
+    del df
+    total = timed_report(big, tmp / "rb", mixed=False)
+    print(f"{n:,} ratings, mixed model off: {total:.2f} s total (of which read+validate {load_s:.2f} s)  "
+          f"(target < 20 s)")
+
+
+if __name__ == "__main__":
+    main()
