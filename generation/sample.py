@@ -37,7 +37,7 @@ def load_model(ckpt_path, device=None):
         ck = torch.load(ckpt_path, map_location=device, weights_only=False)
         model = MODELS[ck["kind"]](ck["model_config"])
         model.load_state_dict(ck["state"])
-    except (OSError, RuntimeError, KeyError, EOFError) as e:
+    except Exception as e:  # any unreadable or foreign file: one clear line, not a traceback
         raise SampleError(f"{ckpt_path}: not a usable checkpoint ({type(e).__name__}: {e})".splitlines()[0]) from None
     model.to(device).eval()
     model.step, model.fps, model.window = ck["step"], ck["fps"], ck["window"]

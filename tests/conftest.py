@@ -49,3 +49,19 @@ def small_dataset(tmp_path_factory):
     out = tmp_path_factory.mktemp("small_dataset") / "dataset.npz"
     prepare(BANDAI, out, takes=small_take_names(), workers=1, progress=False)
     return out
+
+
+# --- models (issue 3) ---
+@pytest.fixture(scope="session")
+def tiny_runs(small_dataset, tmp_path_factory):
+    """{'mg': run_dir, 'fl': run_dir}: mg_tiny and fl_tiny trained 150 steps on `small_dataset` (seconds)."""
+    import torch
+    from generation.train import train
+    threads = torch.get_num_threads()
+    root = tmp_path_factory.mktemp("tiny_runs")
+    try:
+        runs = {kind: train(kind, "tiny", small_dataset, root / kind, steps=150, seed=0, progress=False, threads=1)
+                for kind in ("mg", "fl")}
+    finally:
+        torch.set_num_threads(threads)
+    return runs
