@@ -122,7 +122,14 @@ def to_json(counts, kept, everyone, meta):
 def _p(p):
     if p is None or not np.isfinite(p):
         return "n/a"
+    if p == 0:  # the studentized-range tail underflows far out (R prints 0.0000000); say so honestly
+        return "<1e-16"
     return f"{p:.2e}" if p < 1e-4 else f"{p:.4f}"
+
+
+def _peq(p):
+    text = _p(p)
+    return f"p {text[0]} {text[1:]}" if text.startswith("<") else f"p = {text}"
 
 
 def console_summary(counts, kept, everyone):
@@ -138,9 +145,9 @@ def console_summary(counts, kept, everyone):
         lines.append(f"{c:<10}{int(r['n']):>7}{r['mean']:>8.3f}{f'[{r.t_low:.3f}, {r.t_high:.3f}]':>18}"
                      f"{f'[{r.boot_low:.3f}, {r.boot_high:.3f}]':>22}{all_mean:>18}")
     a = kept["anova"]
-    lines += ["", f"One-way ANOVA: F({a['df_between']}, {a['df_within']}) = {a['F']:.3f}, p = {_p(a['p'])}",
+    lines += ["", f"One-way ANOVA: F({a['df_between']}, {a['df_within']}) = {a['F']:.3f}, {_peq(a['p'])}",
               f"Kruskal-Wallis: H({kept['kruskal']['df']}) = {kept['kruskal']['H']:.3f}, "
-              f"p = {_p(kept['kruskal']['p'])}", "",
+              f"{_peq(kept['kruskal']['p'])}", "",
               f"{'Tukey HSD':<14}{'diff':>8}{'95% CI':>20}{'p adj':>11}{'MWU p (Holm)':>14}"]
     mwu = kept["mannwhitney"].set_index(["group1", "group2"])
     for _, t in kept["tukey"].iterrows():
@@ -151,7 +158,7 @@ def console_summary(counts, kept, everyone):
     if m.get("fixed_effects"):
         lines += ["", f"Mixed model {m['formula']} (reference {m['reference']}):"]
         for k, v in m["fixed_effects"].items():
-            lines.append(f"  {k:<22}{v:>8.3f}  [{m['ci_low'][k]:.3f}, {m['ci_high'][k]:.3f}]  p = {_p(m['p_values'][k])}")
+            lines.append(f"  {k:<22}{v:>8.3f}  [{m['ci_low'][k]:.3f}, {m['ci_high'][k]:.3f}]  {_peq(m['p_values'][k])}")
         vc = m["variance_components"]
         lines.append(f"  variance: rater {vc['rater']:.3f}, clip {vc['clip']:.3f}, residual {vc['residual']:.3f}")
     else:
@@ -164,7 +171,7 @@ CSS = """body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;max-
 padding:0 1em;color:#222;line-height:1.45}h1{font-size:1.6em}h2{font-size:1.2em;margin-top:1.8em;
 border-bottom:1px solid #ddd}table{border-collapse:collapse;margin:.6em 0;font-size:.88em}
 td,th{border:1px solid #ddd;padding:3px 8px;text-align:right}th{background:#f5f5f5}td:first-child,
-th:first-child{text-align:left}img{max-width:100%}.note{color:#555;font-size:.9em}.cols{display:flex;gap:2em;
+th:first-child{text-align:left}img{max-width:min(100%,780px)}.note{color:#555;font-size:.9em}.cols{display:flex;gap:2em;
 flex-wrap:wrap}"""
 
 
@@ -175,7 +182,7 @@ def _fmt_table(df, pcols=()):
             df[c] = df[c].map(lambda v: _p(v))
         elif df[c].dtype.kind == "f":
             df[c] = df[c].map(lambda v: "" if not np.isfinite(v) else f"{v:.4f}")
-    return df.to_html(border=0, escape=True)
+    return df.to_html(border=0, escape=True, index=not isinstance(df.index, pd.RangeIndex))
 
 
 def _img(path):
@@ -203,8 +210,8 @@ def _section_html(res, title, figs=None):
              _fmt_table(res["summary"].rename(columns={"t_low": "t 95% low", "t_high": "t 95% high",
                                                         "boot_low": "boot 95% low", "boot_high": "boot 95% high"})),
              f"<p>One-way ANOVA: <b>F({a['df_between']}, {a['df_within']}) = {a['F']:.4f}</b>, "
-             f"p = {_p(a['p'])}, η² = {a['eta_squared']:.3f}. Kruskal–Wallis: H({k['df']}) = {k['H']:.3f}, "
-             f"p = {_p(k['p'])}.</p>",
+             f"{_peq(a['p'])}, η² = {a['eta_squared']:.3f}. Kruskal–Wallis: H({k['df']}) = {k['H']:.3f}, "
+             f"{_peq(k['p'])}.</p>",
              "<h3>Tukey HSD (95% family-wise)</h3>",
              _fmt_table(res["tukey"][["group1", "group2", "meandiff", "lower", "upper", "p_adj", "reject"]],
                         ("p_adj",)),
@@ -234,7 +241,7 @@ def write_html(path, counts, kept, everyone, fig_paths, meta):
         f"{counts['n_raters_excluded']} raters gave a catch (bad-example) clip a rating ≥ {counts['threshold']} and "
         f"were excluded, removing {counts['n_ratings_removed']} responses; {counts['n_ratings_kept']} were kept "
         f"({counts['n_test_ratings_kept']} test ratings). Mean ratings: {means}. One-way ANOVA: "
-        f"F({a['df_between']}, {a['df_within']}) = {a['F']:.2f}, p = {_p(a['p'])}. Tukey HSD pairs differing at "
+        f"F({a['df_between']}, {a['df_within']}) = {a['F']:.2f}, {_peq(a['p'])}. Tukey HSD pairs differing at "
         f"the 0.05 family-wise level: {', '.join(sig) if sig else 'none'}.</p>",
         f"<p>{_img(fig_paths['ratings_histogram'])}</p>",
         "<p class=note>Fig. 5 of the paper: responses per scale point and condition; dashed lines at the means.</p>",

@@ -231,7 +231,7 @@ def cluster_bootstrap(df, dv="rating", between="condition", rater="rater_id", cl
 
     -> {"means": DataFrame per group (mean, boot_low, boot_high, boot_se), "differences": DataFrame per pair
         (group1 < group2, meandiff = group2 - group1, boot_low, boot_high, boot_p = two-sided bootstrap
-        p-value), "n_boot", "seed", "level", "n_degenerate"}.
+        p-value, add-one), "n_boot", "seed", "level", "n_degenerate"}.
     """
     rc, raters = pd.factorize(df[rater])
     cc, clips = pd.factorize(df[clip])
@@ -281,10 +281,12 @@ def cluster_bootstrap(df, dv="rating", between="condition", rater="rater_id", cl
     for i, j in combinations(range(K), 2):
         d = boot[:, j] - boot[:, i]
         d = d[~np.isnan(d)]
-        share = min((d <= 0).mean(), (d >= 0).mean()) if len(d) else math.nan
+        # add-one Monte Carlo p-value (Davison & Hinkley 1997, ch. 4): never 0 with finitely many resamples
+        tail = min((d <= 0).sum(), (d >= 0).sum())
+        p_boot = min(1.0, 2 * (tail + 1) / (len(d) + 1)) if len(d) else math.nan
         rows.append({"group1": conds[i], "group2": conds[j], "meandiff": float(full[j] - full[i]),
                      "boot_low": float(np.percentile(d, lo)), "boot_high": float(np.percentile(d, hi)),
-                     "boot_p": float(min(1.0, 2 * share))})
+                     "boot_p": float(p_boot)})
     if between == "condition":
         means = means.loc[condition_order(means.index)]
     return {"means": means, "differences": pd.DataFrame(rows), "n_boot": n_boot, "seed": seed, "level": level,
