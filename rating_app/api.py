@@ -193,8 +193,10 @@ def post_rating(token):
             abort(409, "this trial has not been shown yet")
         stmt = _insert_ignore(s).values(trial_pk=trial.id, rater_pk=rater.id, clip_id=trial.clip_id,
                                         rating=rating, watched_ms=watched_ms, submitted_at=now)
-        res = s.execute(stmt.on_conflict_do_nothing(index_elements=["trial_pk"]))
-        if res.rowcount == 1:
+        # INSERT .. ON CONFLICT DO NOTHING RETURNING: a concurrent duplicate waits on the unique index and
+        # then inserts nothing, so a rating is stored exactly once whatever the timing.
+        new_id = s.scalar(stmt.on_conflict_do_nothing(index_elements=["trial_pk"]).returning(Rating.id))
+        if new_id is not None:
             s.execute(update(Trial).where(Trial.id == trial.id).values(answered_at=now))
             return jsonify(stored=True), 201
         stored = s.scalar(select(Rating.rating).where(Rating.trial_pk == trial.id))

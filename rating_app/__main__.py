@@ -1,0 +1,130 @@
+"""python -m rating_app serve | export | simulate  (see --help of each)."""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+from .manifest import AppError
+
+
+def _serve(a):
+    from . import create_app
+    app = create_app(manifest=a.manifest, db_url=a.db, ratings_per_clip=a.ratings_per_clip,
+                     clips_per_rater=a.clips_per_rater, slot_timeout_s=a.slot_timeout,
+                     completion_code=a.completion_code, completion_url=a.completion_url)
+    from .db import normalise_url
+    from sqlalchemy.engine import make_url
+    db = make_url(normalise_url(a.db)).render_as_string(hide_password=True)
+    print(f"rating app on http://{a.host}:{a.port}/  (database {db}; admin at /admin"
+          f"{'' if app.config['ADMIN_TOKEN'] else ' disabled: set ADMIN_TOKEN'})", file=sys.stderr, flush=True)
+    app.run(host=a.host, port=a.port, threaded=True, debug=False, use_reloader=False)
+    return 0
+
+
+def _export(a):
+    from sqlalchemy import inspect
+    from sqlalchemy.engine import make_url
+    from sqlalchemy.exc import OperationalError, ArgumentError
+
+    from .db import make_engine, normalise_url
+    from .export import export_csv
+    url = normalise_url(a.db)
+    try:
+        parsed = make_url(url)
+    except ArgumentError:
+        raise AppError(f"--db {a.db!r} is not a database URL") from None
+    if parsed.drivername.startswith("sqlite") and not os.path.isfile(parsed.database or ""):
+        raise AppError(f"{parsed.database}: no such database file")
+    engine = make_engine(url)
+    try:
+        if "ratings" not in inspect(engine).get_table_names():
+            raise AppError(f"{parsed.render_as_string(hide_password=True)}: no ratings table (not a rating app database)")
+        if a.out == "-":
+            n = export_csv(engine, sys.stdout)
+        else:
+            with open(a.out, "w", newline="", encoding="utf-8") as fh:
+                n = export_csv(engine, fh)
+    except OperationalError as e:
+        raise AppError(f"cannot read the database: {str(e.orig).strip().splitlines()[0]}") from None
+    finally:
+        engine.dispose()
+    print(f"{n} ratings -> {a.out}", file=sys.stderr)
+    return 0
+
+
+def _simulate(a):
+    from .simulate import parse_quality, run_simulation, write_summary
+    summary = run_simulation(a.url, a.raters, seed=a.seed, careless=a.careless, manifest=a.manifest,
+                             quality=parse_quality(a.quality), concurrency=a.concurrency, timeout_s=a.timeout,
+                             admin_token=a.admin_token or os.environ.get("ADMIN_TOKEN"), think_s=a.think,
+                             prefix=a.prefix, progress=not a.quiet)
+    if a.summary:
+        write_summary(summary, a.summary)
+    short = {k: summary[k] for k in ("n_raters_started", "n_raters_completed", "study_full", "n_ratings",
+                                     "n_ratings_by_condition", "quality", "elapsed_s")}
+    short["careless_raters"] = len(summary["careless_raters"])
+    short["failed_catch_raters"] = len(summary["failed_catch_raters"])
+    short["errors"] = summary["errors"][:5]
+    print(json.dumps(short))
+    return 1 if summary["errors"] else 0
+
+
+def build_parser():
+    p = argparse.ArgumentParser(prog="python -m rating_app", description=__doc__)
+    sub = p.add_subparsers(dest="cmd", required=True)
+
+    s = sub.add_parser("serve", help="run the app (local use; production: gunicorn rating_app.wsgi:app)")
+    s.add_argument("--manifest", required=True, help="stimuli/manifest.csv")
+    s.add_argument("--db", default=None, help="database URL (default $DATABASE_URL or sqlite:///ratings.sqlite)")
+    s.add_argument("--host", default="127.0.0.1")
+    s.add_argument("--port", type=int, default=5000)
+    s.add_argument("--ratings-per-clip", type=int, default=None, help="target ratings per test clip (20)")
+    s.add_argument("--clips-per-rater", type=int, default=None, help="test clips per rater (default: all needed)")
+    s.add_argument("--slot-timeout", type=float, default=None, help="seconds before an idle rater's slots are freed (3600)")
+    s.add_argument("--completion-code", default=None, help="one code for everybody (e.g. Prolific's); default: random per rater")
+    s.add_argument("--completion-url", default=None,
+                   help="redirect after the last trial; {code} is replaced, e.g. https://app.prolific.com/submissions/complete?cc={code}")
+    s.set_defaults(fn=_serve)
+
+    e = sub.add_parser("export", help="write ratings.csv from the database")
+    e.add_argument("--db", default=None, help="database URL (default $DATABASE_URL or sqlite:///ratings.sqlite)")
+    e.add_argument("--out", default="ratings.csv", help="output file, '-' for stdout")
+    e.set_defaults(fn=_export)
+
+    m = sub.add_parser("simulate", help="a simulated crowd rating through the public API")
+    m.add_argument("--url", required=True, help="base URL of the running app")
+    m.add_argument("--raters", type=int, required=True, help="number of raters (stops early when the study is full)")
+    m.add_argument("--seed", type=int, default=0)
+    m.add_argument("--careless", type=float, default=0.1, help="share of careless raters answering at random")
+    m.add_argument("--manifest", default=None, help="manifest.csv (+ metrics.csv beside it); else /admin/clips.json")
+    m.add_argument("--quality", default=None, help="per-condition mean rating, e.g. NAT=4.3,MG=3.8,FL=2.5,BAD=1.3")
+    m.add_argument("--concurrency", type=int, default=8, help="raters at once")
+    m.add_argument("--timeout", type=float, default=600.0, help="overall time limit in seconds")
+    m.add_argument("--think", type=float, default=0.0, help="mean pause before each answer, seconds")
+    m.add_argument("--prefix", default=None, help="external id prefix (default sim{seed})")
+    m.add_argument("--admin-token", default=None, help="default $ADMIN_TOKEN")
+    m.add_argument("--summary", default=None, help="write the full summary (raters, ratings) as JSON here")
+    m.add_argument("--quiet", action="store_true", help="no progress bar")
+    m.set_defaults(fn=_simulate)
+    return p
+
+
+def main(argv=None) -> int:
+    a = build_parser().parse_args(argv)
+    try:
+        return a.fn(a)
+    except AppError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:
+        print(f"error: {e.filename or ''}: {e.strerror or e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
