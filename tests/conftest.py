@@ -65,3 +65,37 @@ def tiny_runs(small_dataset, tmp_path_factory):
     finally:
         torch.set_num_threads(threads)
     return runs
+
+
+# --- rating app (issue 5): one small real stimulus folder; every app test runs on SQLite and PostgreSQL ---
+APP_ADMIN_TOKEN = "test-admin-token"
+
+
+@pytest.fixture(scope="session")
+def app_stimuli(tmp_path_factory):
+    from rating_app.testing import make_stimuli
+    return make_stimuli(tmp_path_factory.mktemp("app_stimuli"))
+
+
+@pytest.fixture(params=["sqlite", "postgres"])
+def app_db_url(request, tmp_path):
+    if request.param == "sqlite":
+        yield f"sqlite:///{tmp_path}/ratings.sqlite"
+    else:
+        from rating_app.testing import pg_schema
+        with pg_schema() as url:          # a fresh schema per test, dropped afterwards (never skipped)
+            yield url
+
+
+@pytest.fixture
+def app(app_stimuli, app_db_url):
+    from rating_app import create_app
+    app = create_app(manifest=app_stimuli, db_url=app_db_url, admin_token=APP_ADMIN_TOKEN, ratings_per_clip=3)
+    app.config["TESTING"] = True
+    yield app
+    app.extensions["rating_app"]["engine"].dispose()
+
+
+@pytest.fixture
+def client(app):
+    return app.test_client()
