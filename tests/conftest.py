@@ -99,3 +99,20 @@ def app(app_stimuli, app_db_url):
 @pytest.fixture
 def client(app):
     return app.test_client()
+
+
+# --- stimuli (issue 4): one real `make_stimuli --quick` run per session ---
+@pytest.fixture(scope="session")
+def quick_stimuli(tmp_path_factory):
+    """Path of the stimulus folder written by one `python -m generation.make_stimuli --quick` run (prepared
+    data subset and tiny models trained in the run). Its dataset cache and checkpoints are in the sibling
+    folder `runs/` (`runs/dataset_quick.npz`, `runs/{mg,fl}_tiny/checkpoints/`)."""
+    import subprocess
+    import sys
+    root = tmp_path_factory.mktemp("quick_stimuli")
+    r = subprocess.run([sys.executable, "-m", "generation.make_stimuli", "--quick", "--out", str(root / "stimuli"),
+                        "--runs", str(root / "runs")], capture_output=True, text=True, cwd=ROOT, timeout=900)
+    if r.returncode != 0:
+        pytest.fail(f"make_stimuli --quick failed ({r.returncode}): {r.stderr[-3000:]}")
+    (root / "make_stimuli.log").write_text(r.stdout + r.stderr)
+    return root / "stimuli"
