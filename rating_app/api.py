@@ -222,5 +222,6 @@ def post_event(token):
             if clip is None:
                 abort(404, "unknown trial for this session")
         s.add(Event(rater_pk=rater.id, trial_pk=trial_id, kind=kind, detail=detail, created_at=utcnow()))
-    current_app.logger.warning("client %s: rater %s clip %s: %s", kind, rater.rater_id, clip, detail)
+        rater_id = rater.rater_id
+    current_app.logger.warning("client %s: rater %s clip %s: %s", kind, rater_id, clip, detail)
     return jsonify(logged=True), 201
