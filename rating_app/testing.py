@@ -28,7 +28,7 @@ def write_mp4(path, n_frames=6, size=64, fps=20, shade=0):
     w.close()
 
 
-def make_stimuli(folder, n_items=4, conditions=("NAT", "MG", "FL"), n_catch=2, n_training=3, n_frames=6,
+def make_stimuli(folder, n_items=4, conditions=("NAT", "MG", "FL"), n_catch=2, n_training=3, n_frames=16,
                  fps=20, metrics=True, seed=0) -> Path:
     """Write manifest.csv (+ metrics.csv) with one short MP4 per clip; return the manifest path.
 

@@ -1,0 +1,122 @@
+"""A real browser (Debian chromium, headless, phone-sized) takes a rater through the whole flow against the app
+served over HTTP; the ratings it clicked appear in the export. SAVE_SCREENSHOTS=1 writes
+docs/img/rating_page.png (SCREENSHOT_MANIFEST=path/manifest.csv to show real stimuli)."""
+import csv
+import io
+import os
+import shutil
+import threading
+from pathlib import Path
+
+import pytest
+import requests
+
+from rating_app import create_app
+
+ROOT = Path(__file__).resolve().parents[1]
+CHROMIUM, CHROMEDRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
+
+pytestmark = pytest.mark.browser
+
+
+@pytest.fixture
+def live_server(app_stimuli, app_db_url):
+    from werkzeug.serving import make_server
+    manifest = os.environ.get("SCREENSHOT_MANIFEST") or app_stimuli
+    app = create_app(manifest=manifest, db_url=app_db_url, admin_token="browser-token", ratings_per_clip=5,
+                     clips_per_rater=3)
+    server = make_server("127.0.0.1", 0, app, threaded=True)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    yield f"http://127.0.0.1:{server.server_port}"
+    server.shutdown()
+    thread.join(5)
+    app.extensions["rating_app"]["engine"].dispose()
+
+
+@pytest.fixture
+def browser(tmp_path):
+    if not (shutil.which(CHROMIUM) and shutil.which(CHROMEDRIVER)):
+        pytest.fail("Debian chromium and chromedriver are needed (apt-get install chromium chromium-driver)")
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = CHROMIUM
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-extensions",
+                "--disable-dev-shm-usage", "--mute-audio", "--window-size=390,844",
+                f"--user-data-dir={tmp_path / 'chrome-profile'}"):
+        opts.add_argument(arg)
+    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
+    driver.set_page_load_timeout(30)
+    yield driver
+    driver.quit()
+
+
+def test_rater_flow_in_a_real_browser(live_server, browser):
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support import expected_conditions as EC
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    wait = WebDriverWait(browser, 20)
+    browser.get(live_server + "/?PROLIFIC_PID=browserpid1&STUDY_ID=st1&SESSION_ID=se1")
+    start = browser.find_element(By.ID, "start")
+    assert not start.is_enabled()                                   # consent first
+    browser.find_element(By.ID, "consent").click()
+    wait.until(EC.element_to_be_clickable((By.ID, "start"))).click()
+    wait.until(EC.visibility_of_element_located((By.ID, "intro")))
+    assert "could not possibly be produced by a real person" in browser.find_element(By.ID, "intro").text
+    browser.find_element(By.ID, "intro-go").click()
+
+    clicked, seen_before_end, n_training = {}, 0, 0
+    screenshot = os.environ.get("SAVE_SCREENSHOTS") == "1"
+    for _ in range(40):
+        wait.until(lambda d: d.execute_script(
+            "return ['trial','rating-intro','done'].some(function(id){return !document.getElementById(id).hidden})"))
+        if browser.find_element(By.ID, "done").is_displayed():
+            break
+        if browser.find_element(By.ID, "rating-intro").is_displayed():
+            browser.find_element(By.ID, "rating-go").click()
+            continue
+        label = browser.find_element(By.ID, "phase-label").text
+        ended, disabled = browser.execute_script(
+            "var v=document.getElementById('video');"
+            "return [v.ended, Array.prototype.every.call(document.querySelectorAll('button.rate'),"
+            "function(b){return b.disabled})];")
+        if not ended:
+            assert disabled, "rating buttons must stay disabled until the clip has played to the end"
+            seen_before_end += 1
+        # no horizontal scrolling on a phone-sized screen
+        assert browser.execute_script("return document.documentElement.scrollWidth <= window.innerWidth + 1")
+        if label == "Example":
+            wait.until(EC.element_to_be_clickable((By.ID, "continue"))).click()
+            n_training += 1
+        else:
+            count = browser.find_element(By.ID, "trial-count").text
+            index = int(count.split()[0])
+            rating = 1 + index % 5
+            btn = wait.until(EC.element_to_be_clickable((By.CSS_SELECTOR, f'button.rate[data-rating="{rating}"]')))
+            clip_id = browser.execute_script("return document.getElementById('video').currentSrc") \
+                .rsplit("/", 1)[1].split(".")[0]
+            if screenshot and index == 2:
+                (ROOT / "docs" / "img").mkdir(parents=True, exist_ok=True)
+                browser.save_screenshot(str(ROOT / "docs" / "img" / "rating_page.png"))
+            btn.click()
+            clicked[clip_id] = rating
+            wait.until(lambda d: d.find_element(By.ID, "trial-count").text != count
+                       or d.find_element(By.ID, "done").is_displayed())
+    else:
+        raise AssertionError("never reached the completion page")
+    code = browser.find_element(By.ID, "completion-code").text
+    assert code and n_training == 3 and len(clicked) == 5       # 3 training, 3 test + 2 catch clips
+    assert seen_before_end >= 1
+    errors = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+    assert not errors, errors
+
+    r = requests.get(live_server + "/admin/export.csv", headers={"Authorization": "Bearer browser-token"}, timeout=10)
+    rows = [row for row in csv.DictReader(io.StringIO(r.text)) if row["external_id"] == "browserpid1"]
+    assert {row["clip_id"]: int(row["rating"]) for row in rows} == clicked
+    assert all(int(row["watched_ms"]) > 0 for row in rows)
+    p = requests.get(live_server + "/admin/progress.json", headers={"Authorization": "Bearer browser-token"},
+                     timeout=10).json()
+    assert not p["events"], p["events"]                            # no failed playback
