@@ -57,13 +57,20 @@ def _codes(series):
     return codes, uniques
 
 
-def _clean_column(path, df, col):
-    """Strip blanks around every value; an empty value is an error naming its line."""
+def _clean_column(path, df, col, categorical=False):
+    """Strip blanks around every value; an empty value is an error naming its line. Identifier columns become
+    pandas Categoricals, so every later groupby/factorize over a million rows is integer work."""
     codes, uniques = _codes(df[col])
     empty = np.flatnonzero(uniques == "")
     if len(empty):
         raise AnalysisError(f"{path}:{_first_line(pd.Series(codes == empty[0], index=df.index))}: empty {col}")
-    df[col] = np.asarray(uniques, dtype=object)[codes]
+    if uniques.has_duplicates:  # 'r1' and 'r1 ' are the same rater once stripped
+        remap, uniques = pd.factorize(uniques)
+        codes = remap[codes]
+    if categorical:
+        df[col] = pd.Categorical.from_codes(codes, categories=uniques)
+    else:
+        df[col] = np.asarray(uniques, dtype=object)[codes]
     return codes
 
 
@@ -100,7 +107,8 @@ def _check_unique_attribute(path, df, clip_codes, attr):
 
 
 def load_ratings(path):
-    """ratings.csv -> DataFrame (rater_id, clip_id, condition, rating int8, role 'test'/'catch', extras).
+    """ratings.csv -> DataFrame (rater_id, clip_id categorical; condition; rating int8; role 'test'/'catch';
+    extra columns as text).
 
     Index = file line number. Raises AnalysisError for: missing file, empty file, header only, missing
     required columns, empty required fields, non-integer or out-of-range ratings, unknown roles, duplicate
@@ -113,8 +121,8 @@ def load_ratings(path):
                             f"{', '.join(missing)} (header has: {', '.join(df.columns)})")
     if len(df) == 0:
         raise AnalysisError(f"{path}: no ratings (header only)")
-    rater_codes = _clean_column(path, df, "rater_id")
-    clip_codes = _clean_column(path, df, "clip_id")
+    rater_codes = _clean_column(path, df, "rater_id", categorical=True)
+    clip_codes = _clean_column(path, df, "clip_id", categorical=True)
     _clean_column(path, df, "condition")
     df["rating"] = _parse_ratings(path, df["rating"])
     if "role" in df.columns:
