@@ -11,7 +11,7 @@ import re
 import secrets
 
 from flask import Blueprint, abort, current_app, jsonify, request, url_for
-from sqlalchemy import select, update
+from sqlalchemy import func, select, update
 from sqlalchemy.dialects.postgresql import insert as pg_insert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.exc import IntegrityError
@@ -82,10 +82,8 @@ def load_rater(s: Session, token: str) -> Rater:
 
 
 def _session_reply(s: Session, rater: Rater, status: int):
-    trials = s.execute(select(Trial.phase).where(Trial.rater_pk == rater.id)).scalars().all()
-    return jsonify(session=rater.token, rater_id=rater.rater_id, n_trials=len(trials),
-                   n_training=trials.count("training"), n_rating=trials.count("rating"),
-                   resumed=status == 200), status
+    return jsonify(session=rater.token, rater_id=rater.rater_id, n_trials=rater.n_training + rater.n_rating,
+                   n_training=rater.n_training, n_rating=rater.n_rating, resumed=status == 200), status
 
 
 @bp.post("/sessions")
@@ -119,6 +117,7 @@ def create_session():
                     counters[phase] += 1
                     s.add(Trial(rater_pk=rater.id, clip_id=clip_id, phase=phase, position=pos,
                                 index=counters[phase], released=False))
+                rater.n_training, rater.n_rating = counters["training"], counters["rating"]
                 s.flush()
                 return _session_reply(s, rater, 201)
         except IntegrityError:
@@ -140,30 +139,50 @@ def _completion(rater: Rater) -> dict:
     return out
 
 
+TOUCH_EVERY_S = 30     # last_seen (for freeing abandoned slots) is refreshed at most this often
+
+
+def _rater(conn, token: str, now):
+    """The rater's row; 404 for an unknown token. Refreshes last_seen when it is older than TOUCH_EVERY_S."""
+    if not TOKEN.match(token):
+        abort(404, "unknown session")
+    row = conn.execute(select(Rater.id, Rater.rater_id, Rater.n_training, Rater.n_rating, Rater.completed_at,
+                              Rater.completion_code, Rater.last_seen).where(Rater.token == token)).first()
+    if row is None:
+        abort(404, "unknown session")
+    if (now - row.last_seen).total_seconds() > TOUCH_EVERY_S:
+        conn.execute(update(Rater).where(Rater.id == row.id).values(last_seen=now))
+    return row
+
+
+def _current(conn, rater_pk):
+    """The trial on the rater's screen: the first unanswered one in the rater's order."""
+    return conn.execute(select(Trial.id, Trial.clip_id, Trial.phase, Trial.index, Trial.position)
+                        .where(Trial.rater_pk == rater_pk, Trial.answered_at.is_(None), Trial.released.is_(False))
+                        .order_by(Trial.position).limit(1)).first()
+
+
+# The two hot calls use Core statements on a plain connection (no ORM unit of work): they are what 200
+# concurrent raters hit. GET next usually only reads; every answer is committed before it is acknowledged.
 @bp.get("/sessions/<token>/next")
 def next_trial(token):
-    with Session(engine()) as s, s.begin():
-        rater = load_rater(s, token)
-        now = utcnow()
-        rater.last_seen = now
-        trial = s.scalar(select(Trial).where(Trial.rater_pk == rater.id, Trial.answered_at.is_(None),
-                                             Trial.released.is_(False)).order_by(Trial.position).limit(1))
+    now = utcnow()
+    with engine().begin() as conn:
+        rater = _rater(conn, token, now)
+        trial = _current(conn, rater.id)
         if trial is None:
             if rater.completed_at is None:
-                rater.completed_at = now
+                conn.execute(update(Rater).where(Rater.id == rater.id).values(completed_at=now))
             return jsonify(_completion(rater))
-        if trial.served_at is None:
-            trial.served_at = now
-        of = s.scalar(select(Trial.index).where(Trial.rater_pk == rater.id, Trial.phase == trial.phase)
-                      .order_by(Trial.index.desc()).limit(1))
-        return jsonify(trial={
-            "trial_id": trial.id, "clip_id": trial.clip_id,
-            "video_url": url_for("pages.video", name=trial.clip_id + ".mp4"),
-            "phase": trial.phase, "index": trial.index, "of": of})
+    return jsonify(trial={
+        "trial_id": trial.id, "clip_id": trial.clip_id,
+        "video_url": url_for("pages.video", name=trial.clip_id + ".mp4"),
+        "phase": trial.phase, "index": trial.index,
+        "of": rater.n_training if trial.phase == "training" else rater.n_rating})
 
 
-def _insert_ignore(s: Session):
-    return (sqlite_insert if is_sqlite(s.get_bind()) else pg_insert)(Rating)
+def _insert_ignore(conn):
+    return (sqlite_insert if conn.dialect.name == "sqlite" else pg_insert)(Rating)
 
 
 @bp.post("/sessions/<token>/ratings")
@@ -171,35 +190,43 @@ def post_rating(token):
     body = json_body(("trial_id", "rating", "watched_ms"), required=("trial_id",))
     trial_id = _int_field(body, "trial_id", 1, 2**31 - 1)
     watched_ms = _int_field(body, "watched_ms", 0, MAX_WATCHED_MS, nullable=True)
-    with Session(engine()) as s, s.begin():
-        rater = load_rater(s, token)
-        trial = s.scalar(select(Trial).where(Trial.id == trial_id, Trial.rater_pk == rater.id))
+    now = utcnow()
+    with engine().begin() as conn:
+        rater = _rater(conn, token, now)
+        trial = conn.execute(select(Trial.id, Trial.phase, Trial.clip_id, Trial.position, Trial.answered_at)
+                             .where(Trial.id == trial_id, Trial.rater_pk == rater.id)).first()
         if trial is None:
             abort(404, "unknown trial for this session")
-        now = utcnow()
-        rater.last_seen = now
-        if trial.phase == "training":
-            if body.get("rating") is not None:
-                abort(400, "field 'rating' must be null for a familiarisation trial")
-            if trial.served_at is None:
-                abort(409, "this trial has not been shown yet")
-            res = s.execute(update(Trial).where(Trial.id == trial.id, Trial.answered_at.is_(None))
-                            .values(answered_at=now))
-            return (jsonify(stored=True), 201) if res.rowcount == 1 else (jsonify(stored=False, duplicate=True), 200)
-        if "rating" not in body:
-            abort(400, "missing field 'rating'")
-        rating = _int_field(body, "rating", 1, 5)
-        if trial.served_at is None:
+        training = trial.phase == "training"
+        if training and body.get("rating") is not None:
+            abort(400, "field 'rating' must be null for a familiarisation trial")
+        if not training:
+            if "rating" not in body:
+                abort(400, "missing field 'rating'")
+            rating = _int_field(body, "rating", 1, 5)
+        if trial.answered_at is not None:                       # a repeat: acknowledged, stored once
+            stored = None if training else conn.execute(
+                select(Rating.rating).where(Rating.trial_pk == trial.id)).scalar()
+            return jsonify(stored=False, duplicate=True, rating=stored), 200
+        # Only the trial on screen can be answered: the first unanswered one in the rater's order (a trial
+        # released after a long absence still counts, so a late answer is kept rather than lost).
+        first = conn.execute(select(func.min(Trial.position)).where(
+            Trial.rater_pk == rater.id, Trial.answered_at.is_(None))).scalar()
+        if trial.position != first:
             abort(409, "this trial has not been shown yet")
-        stmt = _insert_ignore(s).values(trial_pk=trial.id, rater_pk=rater.id, clip_id=trial.clip_id,
-                                        rating=rating, watched_ms=watched_ms, submitted_at=now)
+        if training:
+            res = conn.execute(update(Trial).where(Trial.id == trial.id, Trial.answered_at.is_(None))
+                               .values(answered_at=now))
+            return (jsonify(stored=True), 201) if res.rowcount == 1 else (jsonify(stored=False, duplicate=True), 200)
         # INSERT .. ON CONFLICT DO NOTHING RETURNING: a concurrent duplicate waits on the unique index and
         # then inserts nothing, so a rating is stored exactly once whatever the timing.
-        new_id = s.scalar(stmt.on_conflict_do_nothing(index_elements=["trial_pk"]).returning(Rating.id))
+        stmt = _insert_ignore(conn).values(trial_pk=trial.id, rater_pk=rater.id, clip_id=trial.clip_id,
+                                           rating=rating, watched_ms=watched_ms, submitted_at=now)
+        new_id = conn.execute(stmt.on_conflict_do_nothing(index_elements=["trial_pk"]).returning(Rating.id)).scalar()
         if new_id is not None:
-            s.execute(update(Trial).where(Trial.id == trial.id).values(answered_at=now))
+            conn.execute(update(Trial).where(Trial.id == trial.id).values(answered_at=now))
             return jsonify(stored=True), 201
-        stored = s.scalar(select(Rating.rating).where(Rating.trial_pk == trial.id))
+        stored = conn.execute(select(Rating.rating).where(Rating.trial_pk == trial.id)).scalar()
         return jsonify(stored=False, duplicate=True, rating=stored), 200
 
 

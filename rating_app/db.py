@@ -52,6 +52,8 @@ class Rater(Base):
     last_seen: Mapped[dt.datetime] = mapped_column(DateTime, index=True)
     completed_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
     completion_code: Mapped[str] = mapped_column(String(64))
+    n_training: Mapped[int] = mapped_column(Integer, default=0)
+    n_rating: Mapped[int] = mapped_column(Integer, default=0)
 
 
 class Trial(Base):
@@ -64,7 +66,6 @@ class Trial(Base):
     phase: Mapped[str] = mapped_column(String(16))          # training | rating
     position: Mapped[int] = mapped_column(Integer)          # 0.. over the whole session
     index: Mapped[int] = mapped_column(Integer)             # 1.. within the phase
-    served_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
     answered_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
     # An abandoned session's unanswered slots are released so other raters can take the clip.
     released: Mapped[bool] = mapped_column(Boolean, default=False)
@@ -133,7 +134,7 @@ def make_engine(url: str | None = None) -> Engine:
             # stale snapshot when several worker processes share the file.
             conn.exec_driver_sql("BEGIN IMMEDIATE")
         return engine
-    return create_engine(url, pool_size=10, max_overflow=20, pool_pre_ping=True, pool_recycle=1800)
+    return create_engine(url, pool_size=10, max_overflow=20, pool_recycle=1800)
 
 
 @contextlib.contextmanager
