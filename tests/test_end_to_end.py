@@ -1,0 +1,109 @@
+"""The whole study as real processes (issue 7): stimuli → rating app on PostgreSQL → simulated crowd →
+export → report. The stimulus folder is the one `make_stimuli --quick` run of the session (quick_stimuli)."""
+import csv
+import json
+import os
+import secrets
+import subprocess
+import sys
+from pathlib import Path
+
+import psycopg
+import pytest
+
+PG_ADMIN = os.environ.get("E2E_PG", "postgresql://postgres@127.0.0.1:5432/test")
+
+
+@pytest.fixture
+def pg_database():
+    """A fresh PostgreSQL database for one run, dropped afterwards."""
+    name = f"e2e_{secrets.token_hex(4)}"
+    with psycopg.connect(PG_ADMIN, autocommit=True) as conn:
+        conn.execute(f'CREATE DATABASE "{name}"')
+    try:
+        yield PG_ADMIN.rsplit("/", 1)[0] + f"/{name}"
+    finally:
+        with psycopg.connect(PG_ADMIN, autocommit=True) as conn:
+            conn.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
+
+
+def _processes_mentioning(text: str) -> list[str]:
+    found = []
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit() or int(pid) == os.getpid():
+            continue
+        try:
+            cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        if text in cmd:
+            found.append(f"{pid}: {cmd.strip()}")
+    return found
+
+
+def _run_demo(out: Path, stimuli: Path, db: str, raters: int, careless: float, seed: int):
+    cmd = [sys.executable, "-m", "analysis.demo", "--out", str(out), "--stimuli", str(stimuli), "--db", db,
+           "--raters", str(raters), "--careless", str(careless), "--seed", str(seed)]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+
+
+def test_study_end_to_end_on_postgres(quick_stimuli, pg_database, tmp_path):
+    out = tmp_path / "study"
+    r = _run_demo(out, quick_stimuli, pg_database, raters=120, careless=0.15, seed=7)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    report = out / "report"
+    assert str(report.resolve() / "report.html") in r.stdout  # it says where the report is
+    summary = json.loads((out / "crowd_summary.json").read_text())
+    stats = json.loads((report / "stats.json").read_text())
+
+    # The report counts exactly what the crowd submitted and the app acknowledged.
+    with open(out / "ratings.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == summary["n_ratings"] == stats["n_ratings_total"]
+    n_by_cond = {}
+    for row in rows:
+        n_by_cond[row["condition"]] = n_by_cond.get(row["condition"], 0) + 1
+    assert n_by_cond == summary["n_ratings_by_condition"]
+
+    # Every test clip reached its target of 20 ratings.
+    with open(quick_stimuli / "manifest.csv", newline="") as fh:
+        test_clips = {m["clip_id"] for m in csv.DictReader(fh) if m["role"] == "test"}
+    per_clip = {}
+    for row in rows:
+        if row["role"] == "test":
+            per_clip[row["clip_id"]] = per_clip.get(row["clip_id"], 0) + 1
+    assert set(per_clip) == test_clips and min(per_clip.values()) >= 20
+
+    # Exactly the raters who failed a catch trial are excluded, and they are careless ones.
+    failed = set(summary["failed_catch_raters"])
+    assert failed and failed <= set(summary["careless_raters"])
+    assert stats["n_raters_excluded"] == len(failed)
+    removed = sum(1 for row in rows if row["rater_id"] in failed)
+    assert stats["n_ratings_removed"] == removed
+    assert stats["n_ratings_kept"] == len(rows) - removed
+
+    # Real motion is rated above the catch trials, and the report holds the paper's figures.
+    means = stats["condition_means"]
+    assert means["NAT"] > means.get("BAD", 0.0) or "BAD" not in means
+    with_excl = {}
+    for row in rows:
+        if row["rater_id"] not in failed:
+            with_excl.setdefault(row["condition"], []).append(int(row["rating"]))
+    assert sum(with_excl["NAT"]) / len(with_excl["NAT"]) > sum(with_excl["BAD"]) / len(with_excl["BAD"])
+    for fig in ("ratings_histogram.png", "per_clip_means.png"):
+        assert (report / "figures" / fig).stat().st_size > 10_000
+
+    # Nothing the demo started is left running.
+    assert _processes_mentioning(str(out)) == []
+
+
+def test_demo_stops_everything_on_error(quick_stimuli, tmp_path):
+    """A crowd too small to fill the study is an error: one line, exit 2, and no process left behind."""
+    out = tmp_path / "small"
+    r = _run_demo(out, quick_stimuli, f"sqlite:///{tmp_path / 'r.sqlite'}", raters=2, careless=0.0, seed=1)
+    assert r.returncode == 2
+    err = r.stderr.strip().splitlines()
+    assert err[-1].startswith("error: ") and "raise --raters" in err[-1]
+    assert "Traceback" not in r.stderr
+    assert _processes_mentioning(str(out)) == []
+    assert "Traceback" not in (out / "logs" / "server.log").read_text()
