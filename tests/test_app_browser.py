@@ -53,6 +53,8 @@ def browser(tmp_path):
     driver.quit()
 
 
+# The page does not depend on the database (the API suite covers both); one browser run keeps CI short.
+@pytest.mark.parametrize("app_db_url", ["postgres"], indirect=True)
 def test_rater_flow_in_a_real_browser(live_server, browser):
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
