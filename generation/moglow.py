@@ -80,7 +80,7 @@ class MoGlow(MotionFlow):
     def inverse_naive(self, z, history, c):
         """The same as inverse, computed the plain way: for each frame, every coupling's nn.LSTM is called
         on that frame with its carried (h, c) state. The benchmark's baseline and the tests' reference."""
-        tau, b = self.tau, z.shape[0]
+        tau = self.tau
         steps = list(self.flow.layers)
         states = [None] * len(steps)
         hist, outs = history, []
@@ -101,7 +101,6 @@ class MoGlow(MotionFlow):
             x_t = y[:, :, 0]
             outs.append(x_t)
             hist = torch.cat([hist[:, 1:], x_t[:, None]], dim=1)
-        del b
         return torch.stack(outs, dim=1)
 
 
@@ -113,14 +112,13 @@ class MGStream:
 
     Fast because (1) the part of every coupling LSTM's gates that depends only on the history, the control
     and the previous frame's hidden state (the same inputs for all K steps of a frame) is computed for all
-    K steps at once in one matmul and two batched matmuls at the start of the frame; (2) weights are
-    fused/pre-transposed once (actnorm folded into the inverse linear map, the coupling's '+2' into the
-    output bias, shift/scale rows made contiguous); (3) no autograd. Starts with h = 0 (paper footnote 2).
+    K steps at once, in one matmul and one batched matmul per LSTM layer at the start of the frame; (2)
+    weights are fused and pre-transposed once (actnorm folded into the inverse linear map, the coupling's
+    '+2' into the output bias, shift/scale rows made contiguous); (3) no autograd. Starts with h = 0
+    (paper footnote 2).
     """
 
     def __init__(self, model, history, history_control, temperature=1.0, generator=None):
-        if model.config["lstm_layers"] != 2:
-            raise ValueError("MGStream supports 2-layer coupling LSTMs (the paper's MG)")
         self.model, self.tau = model, model.tau
         self.temperature, self.generator = temperature, generator
         p = next(model.parameters())
@@ -128,38 +126,40 @@ class MGStream:
         self.hist = history.to(self.device, self.dtype).clone()          # [B, tau, 63]
         self.hist_c = history_control.to(self.device, self.dtype).clone()  # [B, tau, 3]
         b = self.hist.shape[0]
-        w = fused_weights(model)
-        self.w = w
-        k, hid = w["K"], w["H"]
-        self.state = [torch.zeros(k, b, hid, dtype=self.dtype, device=self.device) for _ in range(4)]  # h1 c1 h2 c2
+        self.w = w = fused_weights(model)
+        # (h, c) of every LSTM layer, for all K steps at once: [K, B, H]
+        self.h = [torch.zeros(w["K"], b, w["H"], dtype=self.dtype, device=self.device) for _ in w["Whh"]]
+        self.c = [torch.zeros_like(h) for h in self.h]
 
     @torch.no_grad()
     def step(self, control, z=None):
         w, b = self.w, self.hist.shape[0]
-        k_steps, hid, c_a = w["K"], w["H"], w["c_a"]
+        k_steps, hid, c_a, layers = w["K"], w["H"], w["c_a"], len(w["Whh"])
         ctrl = torch.cat([self.hist_c, control.to(self.device, self.dtype)[:, None]], dim=1)
         cond = torch.cat([self.hist.flatten(1), ctrl.flatten(1)], dim=1)
-        h1, c1, h2, c2 = self.state
-        # Gate pre-activations from the frame's shared inputs, for all K steps at once.
-        g1 = torch.baddbmm(torch.addmm(w["b1"], cond, w["Wc"]).view(b, k_steps, 4 * hid).transpose(0, 1),
-                           h1, w["Whh1"])
-        g2 = torch.baddbmm(w["b2"], h2, w["Whh2"])
+        # Gate pre-activations from this frame's shared inputs and last frame's states, all K steps at once.
+        pre = [torch.baddbmm(torch.addmm(w["b"][0], cond, w["Wc"]).view(b, k_steps, 4 * hid).transpose(0, 1),
+                             self.h[0], w["Whh"][0])]
+        pre += [torch.baddbmm(w["b"][l], self.h[l], w["Whh"][l]) for l in range(1, layers)]
         if z is None:
             z = torch.randn(b, self.model.pose_dim, generator=self.generator, dtype=self.dtype,
                             device="cpu").to(self.device) * self.temperature
         y = z.to(self.device, self.dtype)
-        new = [torch.empty_like(s) for s in self.state]
+        new_h = [torch.empty_like(h) for h in self.h]
+        new_c = [torch.empty_like(c) for c in self.c]
         for k in reversed(range(k_steps)):
             y_a = y[:, :c_a]
-            ha, ca = lstm_cell(torch.addmm(g1[k], y_a, w["Wx"][k]), c1[k])
-            hb, cb = lstm_cell(torch.addmm(g2[k], ha, w["Wih2"][k]), c2[k])
-            new[0][k], new[1][k], new[2][k], new[3][k] = ha, ca, hb, cb
-            out = torch.addmm(w["bo"][k], hb, w["Wo"][k])
+            h, c = lstm_cell(torch.addmm(pre[0][k], y_a, w["Wx"][k]), self.c[0][k])
+            new_h[0][k], new_c[0][k] = h, c
+            for l in range(1, layers):
+                h, c = lstm_cell(torch.addmm(pre[l][k], h, w["Wih"][l][k]), self.c[l][k])
+                new_h[l][k], new_c[l][k] = h, c
+            out = torch.addmm(w["bo"][k], h, w["Wo"][k])
             n_b = out.shape[1] // 2
             y_b = y[:, c_a:] / torch.sigmoid(out[:, n_b:]) - out[:, :n_b]
             # Inverse LU linear map with the inverse actnorm folded in: x = y W^-T diag(e^-logs) - bias.
             y = torch.addmm(w["bn"][k], torch.cat([y_a, y_b], dim=1), w["Winv"][k])
-        self.state = new
+        self.h, self.c = new_h, new_c
         self.hist = torch.cat([self.hist[:, 1:], y[:, None]], dim=1)
         self.hist_c = ctrl[:, 1:]
         return y
@@ -173,24 +173,24 @@ def lstm_cell(gates, c):
 
 @torch.no_grad()
 def fused_weights(model):
-    """Pre-fused, pre-transposed inference weights of every step (cached on the model until it trains)."""
+    """Pre-fused, pre-transposed inference weights of all K steps (cached on the model until it changes)."""
     key = tuple((p.data_ptr(), p._version) for p in model.parameters())
     cached = getattr(model, "_fused", None)
     if cached is not None and cached[0] == key:
         return cached[1]
-    c_a = model.pose_dim // 2
-    acc = {n: [] for n in ("Wx", "Wc", "b1", "Whh1", "Wih2", "Whh2", "b2", "Wo", "bo", "Winv", "bn")}
+    c_a, layers = model.pose_dim // 2, model.config["lstm_layers"]
+    acc = {n: [] for n in ("Wx", "Wc", "Wo", "bo", "Winv", "bn")}
+    whh, wih, bias = [[] for _ in range(layers)], [[] for _ in range(layers)], [[] for _ in range(layers)]
     for step in model.flow.layers:
         actnorm, linear, coupling = step.layers
         lstm, out = coupling.net.lstm, coupling.net.out
         w_ih = lstm.weight_ih_l0
         acc["Wx"].append(w_ih[:, :c_a].T)
         acc["Wc"].append(w_ih[:, c_a:].T)
-        acc["b1"].append(lstm.bias_ih_l0 + lstm.bias_hh_l0)
-        acc["Whh1"].append(lstm.weight_hh_l0.T)
-        acc["Wih2"].append(lstm.weight_ih_l1.T)
-        acc["Whh2"].append(lstm.weight_hh_l1.T)
-        acc["b2"].append((lstm.bias_ih_l1 + lstm.bias_hh_l1)[None])
+        for l in range(layers):
+            whh[l].append(getattr(lstm, f"weight_hh_l{l}").T)
+            wih[l].append(getattr(lstm, f"weight_ih_l{l}").T)
+            bias[l].append(getattr(lstm, f"bias_ih_l{l}") + getattr(lstm, f"bias_hh_l{l}"))
         # Output rows: shifts first, then scale logits with the coupling's +2 folded into the bias.
         acc["Wo"].append(torch.cat([out.weight[0::2], out.weight[1::2]]).T)
         acc["bo"].append(torch.cat([out.bias[0::2], out.bias[1::2] + 2.0]))
@@ -198,11 +198,12 @@ def fused_weights(model):
         acc["Winv"].append(inv.T)
         acc["bn"].append(-actnorm.bias[0, :, 0])
     w = {n: torch.stack(v).contiguous() for n, v in acc.items()}
-    k, hid = w["Whh1"].shape[0], w["Whh1"].shape[1]
-    # All K steps' history/control projections side by side: one [cond_dim, K * 4H] matmul per frame;
-    # the layer-1 bias rides along in the batched hidden-state matmul.
+    k, hid = len(model.flow.layers), model.config["hidden"]
+    # All K steps' history/control projections side by side: one [cond_dim, K * 4H] matmul per frame.
     w["Wc"] = w["Wc"].permute(1, 0, 2).reshape(-1, k * 4 * hid).contiguous()
-    w["b1"] = w["b1"].reshape(-1)
+    w["Whh"] = [torch.stack(v).contiguous() for v in whh]
+    w["Wih"] = [None] + [torch.stack(v).contiguous() for v in wih[1:]]
+    w["b"] = [torch.stack(bias[0]).reshape(-1)] + [torch.stack(v)[:, None] for v in bias[1:]]
     w.update(K=k, H=hid, c_a=c_a)
     model._fused = (key, w)
     return w
