@@ -11,7 +11,7 @@ import re
 import secrets
 
 from flask import Blueprint, abort, current_app, jsonify, request, url_for
-from sqlalchemy import func, select, update
+from sqlalchemy import func, insert, select, update
 from sqlalchemy.dialects.postgresql import insert as pg_insert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.exc import IntegrityError
@@ -112,11 +112,12 @@ def create_session():
                               completion_code=cfg["COMPLETION_CODE"] or secrets.token_hex(4).upper())
                 s.add(rater)
                 s.flush()
-                counters = {"training": 0, "rating": 0}
+                counters, rows = {"training": 0, "rating": 0}, []
                 for pos, (clip_id, phase) in enumerate(plan):
                     counters[phase] += 1
-                    s.add(Trial(rater_pk=rater.id, clip_id=clip_id, phase=phase, position=pos,
-                                index=counters[phase], released=False))
+                    rows.append({"rater_pk": rater.id, "clip_id": clip_id, "phase": phase, "position": pos,
+                                 "index": counters[phase], "released": False})
+                s.execute(insert(Trial), rows)            # one multi-row INSERT, not one per trial
                 rater.n_training, rater.n_rating = counters["training"], counters["rating"]
                 s.flush()
                 return _session_reply(s, rater, 201)

@@ -134,7 +134,9 @@ def make_engine(url: str | None = None) -> Engine:
             # stale snapshot when several worker processes share the file.
             conn.exec_driver_sql("BEGIN IMMEDIATE")
         return engine
-    return create_engine(url, pool_size=10, max_overflow=20, pool_recycle=1800)
+    # Per process; keep workers x (pool_size + max_overflow) under the server's max_connections (100 by default).
+    pool = int(os.environ.get("DB_POOL_SIZE", "10"))
+    return create_engine(url, pool_size=pool, max_overflow=pool, pool_recycle=1800)
 
 
 @contextlib.contextmanager

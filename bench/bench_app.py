@@ -1,0 +1,183 @@
+"""Latency of the rating POST and the next-trial GET with 200 concurrent raters, gunicorn on this machine.
+
+    python bench/bench_app.py [--raters 200] [--duration 30] [--think 2.0] [--db sqlite|postgres|URL]
+        [--workers 4] [--threads 16] [--json out.json]
+
+A real gunicorn process (gthread workers) serves a paper-sized study (30 items x NAT/MG/FL + 4 catch + 4
+training clips, real MP4s) from a fresh PostgreSQL schema (or SQLite file). Each simulated rater keeps one
+keep-alive connection and loops: GET next -> pause (exponential, mean --think seconds, standing in for watching
+the clip and deciding) -> POST the rating. Latencies are client-side wall times (http.client, no retries);
+the first --warmup seconds are discarded. Target: p99 <= 100 ms, 0 errors.
+"""
+from __future__ import annotations
+
+import argparse
+import http.client
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from rating_app.testing import free_port, make_stimuli, pg_schema  # noqa: E402
+
+
+def start_server(port, env, workers, threads, log):
+    cmd = [sys.executable, "-m", "gunicorn", "-w", str(workers), "-k", "gthread", "--threads", str(threads),
+           "--backlog", "2048", "--keep-alive", "75", "-b", f"127.0.0.1:{port}", "rating_app.wsgi:app"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    for _ in range(300):
+        try:
+            c = http.client.HTTPConnection("127.0.0.1", port, timeout=1)
+            c.request("GET", "/healthz")
+            if c.getresponse().status == 200:
+                return proc
+        except OSError:
+            time.sleep(0.1)
+    os.killpg(proc.pid, signal.SIGKILL)
+    raise SystemExit("gunicorn did not start")
+
+
+class Rater(threading.Thread):
+    def __init__(self, port, i, stop_at, warm_at, think, rec, lock, errors):
+        super().__init__(daemon=True)
+        self.port, self.i, self.stop_at, self.warm_at, self.think = port, i, stop_at, warm_at, think
+        self.rec, self.lock, self.errors = rec, lock, errors
+        self.rng = random.Random(i)
+        self.conn = None
+
+    def call(self, method, path, body=None):
+        data = None if body is None else json.dumps(body).encode()
+        headers = {"Content-Type": "application/json"} if body is not None else {}
+        t0 = time.perf_counter()
+        try:
+            for attempt in (0, 1):
+                fresh = self.conn is None
+                if fresh:
+                    self.conn = http.client.HTTPConnection("127.0.0.1", self.port, timeout=30)
+                try:
+                    self.conn.request(method, path, body=data, headers=headers)
+                    resp = self.conn.getresponse()
+                    payload = resp.read()
+                    break
+                except (BrokenPipeError, ConnectionResetError, http.client.RemoteDisconnected):
+                    # A kept-alive connection the server had closed: reconnect once, as browsers do.
+                    self.conn.close()
+                    self.conn = None
+                    if fresh or attempt:
+                        raise
+        except OSError as e:
+            self.conn.close()
+            self.conn = None
+            with self.lock:
+                self.errors.append(f"{method} {path}: {e.__class__.__name__}")
+            return None, None, time.perf_counter() - t0
+        return resp.status, json.loads(payload), time.perf_counter() - t0
+
+    def record(self, kind, status, ok, dt):
+        if time.monotonic() < self.warm_at:
+            return
+        with self.lock:
+            self.rec[kind].append(dt)
+            if status not in ok:
+                self.errors.append(f"{kind}: HTTP {status}")
+
+    def run(self):
+        status, body, dt = self.call("POST", "/api/sessions", {"external_id": f"bench-{os.getpid()}-{self.i}"})
+        self.record("session", status, (201, 200), dt)
+        if status not in (200, 201):
+            return
+        token = body["session"]
+        while time.monotonic() < self.stop_at:
+            status, body, dt = self.call("GET", f"/api/sessions/{token}/next")
+            self.record("next", status, (200,), dt)
+            if status != 200 or body.get("done"):
+                return
+            t = body["trial"]
+            time.sleep(min(self.rng.expovariate(1.0 / self.think), 10 * self.think) if self.think else 0)
+            if time.monotonic() >= self.stop_at:
+                return
+            rating = None if t["phase"] == "training" else self.rng.randint(1, 5)
+            status, body, dt = self.call("POST", f"/api/sessions/{token}/ratings",
+                                         {"trial_id": t["trial_id"], "rating": rating, "watched_ms": 4000})
+            self.record("rating" if rating is not None else "training_ack", status, (201,), dt)
+
+
+def stats(xs):
+    a = np.array(xs) * 1000
+    if not len(a):
+        return {"n": 0}
+    return {"n": int(len(a)), "p50_ms": round(float(np.percentile(a, 50)), 2),
+            "p90_ms": round(float(np.percentile(a, 90)), 2), "p99_ms": round(float(np.percentile(a, 99)), 2),
+            "max_ms": round(float(a.max()), 2)}
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--raters", type=int, default=200)
+    p.add_argument("--duration", type=float, default=30.0, help="seconds of measurement after the warm-up")
+    p.add_argument("--warmup", type=float, default=10.0, help="seconds discarded (raters arrive over --ramp)")
+    p.add_argument("--ramp", type=float, default=5.0, help="seconds over which the raters arrive")
+    p.add_argument("--think", type=float, default=2.0, help="mean pause between GET next and POST, seconds")
+    p.add_argument("--db", default="postgres", help="postgres (fresh schema at 127.0.0.1), sqlite, or a URL")
+    p.add_argument("--workers", type=int, default=4)
+    p.add_argument("--threads", type=int, default=16)
+    p.add_argument("--json", default=None)
+    a = p.parse_args()
+
+    tmp = Path(tempfile.mkdtemp(prefix="bench_app_"))
+    manifest = make_stimuli(tmp / "stimuli", n_items=30, n_catch=4, n_training=4, n_frames=20)
+    ctx = pg_schema() if a.db == "postgres" else None
+    url = ctx.__enter__() if ctx else (f"sqlite:///{tmp}/ratings.sqlite" if a.db == "sqlite" else a.db)
+    port = free_port()
+    env = dict(os.environ, RATING_MANIFEST=str(manifest), DATABASE_URL=url, ADMIN_TOKEN="bench",
+               RATINGS_PER_CLIP="100000")
+    log = open(tmp / "gunicorn.log", "w")
+    proc = start_server(port, env, a.workers, a.threads, log)
+    rec = {"session": [], "next": [], "rating": [], "training_ack": []}
+    errors, lock = [], threading.Lock()
+    try:
+        t0 = time.monotonic()
+        warm_at, stop_at = t0 + a.warmup, t0 + a.warmup + a.duration
+        raters = [Rater(port, i, stop_at, warm_at, a.think, rec, lock, errors) for i in range(a.raters)]
+        for r in raters:                       # participants arrive over --ramp seconds
+            r.start()
+            time.sleep(a.ramp / a.raters)
+        for r in raters:
+            r.join(a.warmup + a.duration + 60)
+        wall = time.monotonic() - warm_at
+    finally:
+        os.killpg(proc.pid, signal.SIGTERM)
+        proc.wait(20)
+        log.close()
+        if ctx:
+            ctx.__exit__(None, None, None)
+    measured = len(rec["next"]) + len(rec["rating"]) + len(rec["training_ack"])
+    out = {"raters": a.raters, "think_s": a.think, "db": a.db if a.db in ("sqlite", "postgres") else "url",
+           "workers": a.workers, "threads": a.threads, "duration_s": a.duration,
+           "throughput_rps": round(measured / max(wall, 1e-9), 1), "errors": len(errors),
+           "error_examples": errors[:5], "load_avg_1min": round(os.getloadavg()[0], 2), "cpus": os.cpu_count(),
+           "next": stats(rec["next"]), "rating": stats(rec["rating"]), "training_ack": stats(rec["training_ack"]),
+           "session": stats(rec["session"])}
+    print(json.dumps(out, indent=1))
+    ok = out["errors"] == 0 and out["next"].get("p99_ms", 1e9) <= 100 and out["rating"].get("p99_ms", 1e9) <= 100
+    print(f"| {a.db} | {a.raters} | {a.think} | {a.workers}x{a.threads} | {out['throughput_rps']} | "
+          f"{out['rating']['p50_ms']} / {out['rating']['p99_ms']} | {out['next']['p50_ms']} / {out['next']['p99_ms']} | "
+          f"{out['errors']} | {out['load_avg_1min']} | {'PASS' if ok else 'FAIL'} |")
+    if a.json:
+        Path(a.json).write_text(json.dumps(out, indent=1))
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

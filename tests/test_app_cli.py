@@ -1,0 +1,160 @@
+"""`python -m rating_app serve | export | simulate`, the manifest reader and the simulated crowd's model."""
+import collections
+import csv
+import io
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+import requests
+
+from rating_app import create_app
+from rating_app.manifest import AppError, load_manifest
+from rating_app.simulate import ClipInfo, parse_quality, quality_from_metrics
+from rating_app.testing import free_port
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def cli(*args, timeout=120, **kw):
+    return subprocess.run([sys.executable, "-m", "rating_app", *map(str, args)], cwd=ROOT, capture_output=True,
+                          text=True, timeout=timeout, **kw)
+
+
+@pytest.fixture
+def live(app_stimuli, app_db_url):
+    from werkzeug.serving import make_server
+    app = create_app(manifest=app_stimuli, db_url=app_db_url, admin_token="cli-token", ratings_per_clip=6)
+    server = make_server("127.0.0.1", 0, app, threaded=True)
+    th = threading.Thread(target=server.serve_forever, daemon=True)
+    th.start()
+    yield f"http://127.0.0.1:{server.server_port}", app_db_url
+    server.shutdown()
+    th.join(5)
+    app.extensions["rating_app"]["engine"].dispose()
+
+
+def test_simulated_crowd_matches_export(live, app_stimuli, tmp_path):
+    url, db = live
+    out = tmp_path / "summary.json"
+    r = cli("simulate", "--url", url, "--raters", 8, "--seed", 1, "--careless", 0.5, "--manifest", app_stimuli,
+            "--summary", out, "--quiet", "--concurrency", 4)
+    assert r.returncode == 0, r.stderr
+    s = json.loads(out.read_text())
+    assert s["errors"] == [] and s["n_raters_completed"] == 6 and s["study_full"] is True   # target 6, all clips
+    assert len(s["careless_raters"]) >= 1
+    # export through the CLI, compare with what the crowd says it submitted
+    csv_path = tmp_path / "ratings.csv"
+    r = cli("export", "--db", db, "--out", csv_path)
+    assert r.returncode == 0, r.stderr
+    rows = list(csv.DictReader(csv_path.open()))
+    assert collections.Counter((x["rater_id"], x["clip_id"], int(x["rating"])) for x in rows) == \
+        collections.Counter((x["rater_id"], x["clip_id"], x["rating"]) for x in s["ratings"])
+    per_rater = collections.Counter(x["rater_id"] for x in rows)
+    assert per_rater == {x["rater_id"]: x["n_ratings"] for x in s["raters"] if x["started"]}
+    failed = {x["rater_id"] for x in rows if x["role"] == "catch" and int(x["rating"]) >= 3}
+    assert failed == set(s["failed_catch_raters"])
+    assert failed <= set(s["careless_raters"])                     # attentive raters never fail a catch trial
+    attentive = [x for x in rows if x["rater_id"] not in s["careless_raters"]]
+    mean = {c: sum(int(x["rating"]) for x in attentive if x["condition"] == c) /
+            max(1, sum(x["condition"] == c for x in attentive)) for c in ("NAT", "MG", "FL", "BAD")}
+    assert mean["NAT"] > mean["MG"] > mean["BAD"] and mean["NAT"] > mean["FL"] > mean["BAD"]
+    # the study is full now: another crowd is told so and submits nothing
+    r = cli("simulate", "--url", url, "--raters", 2, "--seed", 2, "--manifest", app_stimuli, "--quiet")
+    assert r.returncode == 0 and json.loads(r.stdout)["study_full"] is True
+    assert json.loads(r.stdout)["n_ratings"] == 0
+
+
+def test_simulate_reads_clips_from_admin(live):
+    url, _ = live
+    env = dict(os.environ, ADMIN_TOKEN="cli-token")
+    r = cli("simulate", "--url", url, "--raters", 1, "--careless", 0, "--quiet", env=env)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["n_ratings"] == 14
+
+
+def test_simulate_arg_errors():
+    url = "http://127.0.0.1:9"
+    env = {k: v for k, v in os.environ.items() if k != "ADMIN_TOKEN"}
+    for args, needle in ((("--raters", 0), "--raters"), (("--raters", 2, "--careless", 1.5), "--careless"),
+                         (("--raters", 2, "--quality", "NAT=9"), "--quality"), (("--raters", 2), "ADMIN_TOKEN")):
+        r = cli("simulate", "--url", url, *args, env=env)
+        assert r.returncode == 2 and r.stderr.startswith("error:") and needle in r.stderr, r.stderr
+        assert "Traceback" not in r.stderr
+
+
+def test_export_cli_errors(tmp_path):
+    r = cli("export", "--db", f"sqlite:///{tmp_path}/missing.sqlite", "--out", tmp_path / "x.csv")
+    assert r.returncode == 2 and r.stderr.startswith("error:") and "missing.sqlite" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    r = cli("export", "--db", "postgresql://postgres@127.0.0.1:5432/no_such_db_here", "--out", tmp_path / "x.csv")
+    assert r.returncode == 2 and r.stderr.startswith("error:") and "Traceback" not in r.stderr
+
+
+def test_serve_cli(app_stimuli, tmp_path):
+    r = cli("serve", "--manifest", tmp_path / "nope.csv")
+    assert r.returncode == 2 and "nope.csv" in r.stderr and "Traceback" not in r.stderr
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "rating_app", "serve", "--manifest", str(app_stimuli), "--db",
+                             f"sqlite:///{tmp_path}/r.sqlite", "--port", str(port)], cwd=ROOT,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        for _ in range(100):
+            try:
+                if requests.get(f"http://127.0.0.1:{port}/healthz", timeout=1).status_code == 200:
+                    break
+            except requests.RequestException:
+                time.sleep(0.1)
+        r = requests.post(f"http://127.0.0.1:{port}/api/sessions", json={}, timeout=5)
+        assert r.status_code == 201 and r.json()["n_trials"] == 17
+    finally:
+        proc.terminate()
+        proc.wait(10)
+    journal = (tmp_path / "r.sqlite-wal").exists() or (tmp_path / "r.sqlite").exists()
+    assert journal
+
+
+@pytest.mark.parametrize("edit,needle", [
+    (lambda rows: rows[1].__setitem__("clip_id", "NAT_clip_1"), ":3: clip_id"),
+    (lambda rows: rows[2].__setitem__("clip_id", rows[1]["clip_id"]), ":4: duplicate clip_id"),
+    (lambda rows: rows[1].__setitem__("role", "bonus"), ":3: role"),
+    (lambda rows: rows[1].__setitem__("video", "videos/none.mp4"), ":3: video"),
+    (lambda rows: rows[1].__setitem__("fps", "fast"), ":3: field 'fps'"),
+    (lambda rows: [r.pop("condition") for r in rows], ":1: missing column(s) condition"),
+])
+def test_manifest_errors_name_file_and_line(app_stimuli, tmp_path, edit, needle):
+    rows = list(csv.DictReader(open(app_stimuli, encoding="utf-8")))
+    edit(rows)
+    bad = app_stimuli.parent / f"bad_{tmp_path.name}.csv"
+    try:
+        with open(bad, "w", newline="", encoding="utf-8") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+        with pytest.raises(AppError) as e:
+            load_manifest(bad)
+        assert str(bad) in str(e.value) and needle in str(e.value)
+    finally:
+        bad.unlink()
+
+
+def test_quality_follows_the_metrics(app_stimuli):
+    from rating_app.simulate import load_clips
+    clips = load_clips("http://unused", manifest=app_stimuli)
+    q = quality_from_metrics(clips)
+    assert q["NAT"] > q["MG"] > q["FL"] > q["BAD"]
+    assert q["NAT"] == pytest.approx(4.3) and q["BAD"] == pytest.approx(1.3)
+    # metrics decide: if the 'NAT' clips had the worst metrics they would get the lowest quality
+    flipped = {k: ClipInfo(k, {"NAT": "BAD", "BAD": "NAT"}.get(c.condition, c.condition), c.role, metrics=c.metrics)
+               for k, c in clips.items()}
+    q2 = quality_from_metrics(flipped)
+    assert q2["BAD"] > q2["NAT"]
+    assert parse_quality("NAT=4.5, MG=3") == {"NAT": 4.5, "MG": 3.0}
+    for bad in ("NAT", "NAT=x", "=3", "NAT=0.5"):
+        with pytest.raises(AppError):
+            parse_quality(bad)
