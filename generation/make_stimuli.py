@@ -39,7 +39,8 @@ from .systems import SystemError_, canonical_placement, find_system_files, load_
 
 BUILTIN = ("NAT", "MG", "FL")
 CLIP_ID_LEN = 16
-MANIFEST_COLUMNS = ["clip_id", "condition", "role", "item", "video", "motion", "seed", "frames", "fps"]
+MANIFEST_COLUMNS = ["clip_id", "condition", "role", "item", "video", "motion", "seed", "frames", "fps", "width",
+                    "height"]
 METRICS_COLUMNS = ["clip_id", "condition", "role", "item", *METRIC_NAMES]
 ITEMS_COLUMNS = ["item", "role", "category", "take", "start_frame", "frames", "fps", "control"]
 
@@ -48,8 +49,11 @@ class StimuliError(ValueError):
     """Bad input to make_stimuli; one line naming the file or option."""
 
 
+_T0 = time.perf_counter()
+
+
 def log(msg):
-    print(msg, file=sys.stderr, flush=True)
+    print(f"[{time.perf_counter() - _T0:5.0f} s] {msg}", file=sys.stderr, flush=True)
 
 
 # ---------------------------------------------------------------- data
@@ -201,7 +205,7 @@ def ensure_model(kind, args, dataset):
     resume = (run / "resume.pt").is_file()
     log(f"models: {'resuming' if resume else 'training'} {kind} (config {args.config}) in {run}")
     train(kind, args.config, dataset, run, steps=args.train_steps, seed=args.seed, progress=True,
-          resume=resume, device=args.device)
+          resume=resume, device=args.device, threads=args.threads)
     ckpts = checkpoints_in(run)
     if not ckpts:
         raise StimuliError(f"{run}: training wrote no checkpoint")
@@ -242,12 +246,12 @@ def new_clip_id(taken, forbidden):
 def _render_job(job):
     from rendering.render import render_clip
 
-    motion, video, sheet, size = job
-    return render_clip(motion, video, size=size, sheet=sheet, threads=1)
+    motion, video, sheet, size, preset = job
+    return render_clip(motion, video, size=size, sheet=sheet, preset=preset, threads=1)
 
 
 def render_all(jobs, workers):
-    """Render (motion, video, sheet, size) jobs in a process pool, with a progress bar."""
+    """Render (motion, video, sheet, size, preset) jobs in a process pool, with a progress bar."""
     from rendering.render import RenderError
 
     bar = tqdm(total=len(jobs), desc="render", unit="clip", file=sys.stderr)
@@ -283,15 +287,19 @@ def prepare_out(out, force):
 
 
 def summary_text(metrics_rows):
-    """Per-condition means (sd) of every metric, test and catch clips, as a printable table."""
+    """Per-condition means (sd) of every metric over test and catch clips, as a printable table.
+
+    `no_contact`: clips in which no foot ever touches down (their foot_skating is NaN, left out of the mean).
+    """
     import pandas as pd
 
     df = pd.DataFrame(metrics_rows)
     df = df[df.role != "training"]
-    g = df.groupby(["role", "condition"])[list(METRIC_NAMES)]
-    mean, sd, n = g.mean(), g.std(), g.size()
-    table = mean.round(3).astype(str) + " (" + sd.round(3).astype(str) + ")"
-    table.insert(0, "n", n)
+    g = df.groupby(["role", "condition"])
+    mean, sd = g[list(METRIC_NAMES)].mean(), g[list(METRIC_NAMES)].std()
+    table = mean.map(lambda v: f"{v:.3g}") + " (" + sd.map(lambda v: f"{v:.2g}") + ")"
+    table.insert(0, "n", g.size())
+    table["no_contact"] = g["foot_skating"].apply(lambda v: int(v.isna().sum()))
     return table.to_string()
 
 
@@ -320,12 +328,17 @@ def parse_args(argv):
                                                               "condition but BAD")
     ap.add_argument("--temperature", type=float, default=1.0, help="sampling temperature of MG and FL")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--size", type=int, default=640, help="video width = height in pixels")
+    ap.add_argument("--size", type=int, help="video width = height in pixels (default 640; 320 with --quick)")
+    ap.add_argument("--preset", default="superfast", help="x264 preset: ultrafast (fastest, biggest files) ... veryslow")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="rendering processes")
     ap.add_argument("--device", help="torch device (default: cuda when present, else cpu)")
+    ap.add_argument("--threads", type=int, help="torch CPU threads for training and sampling (default: torch's "
+                                                "choice; 1 with --quick, where tiny models gain nothing from more)")
     ap.add_argument("--force", action="store_true", help="replace an existing stimulus set in --out")
     args = ap.parse_args(argv)
     args.config = args.config or ("tiny" if args.quick else "cpu")
+    args.size = args.size or (320 if args.quick else 640)
+    args.threads = args.threads or (1 if args.quick else None)
     args.dataset = args.dataset or str(Path(args.runs) / ("dataset_quick.npz" if args.quick else "dataset.npz"))
     for name in ("n_items", "n_catch", "n_training"):
         if getattr(args, name) < 0:
@@ -366,9 +379,14 @@ def run(args):
     imported = {}
     for name, folder in systems.items():
         files = find_system_files(folder, [items[k]["id"] for k in gen_items])
-        imported[name] = {k: load_system_motion(files[items[k]["id"]], fps, window)
-                          for k in tqdm(gen_items, desc=f"import {name}", unit="file", file=sys.stderr)}
+        imported[name] = {}
+        with tqdm(gen_items, desc=f"import {name}", unit="file", file=sys.stderr) as bar:
+            for k in bar:  # (the with-block closes the bar before an error message is printed)
+                imported[name][k] = load_system_motion(files[items[k]["id"]], fps, window)
 
+    if args.threads:
+        import torch
+        torch.set_num_threads(args.threads)
     mg_ckpt, mg_early = ensure_model("mg", args, dataset)
     fl_ckpt, _ = ensure_model("fl", args, dataset)
     bad_ckpt = Path(args.bad_checkpoint) if args.bad_checkpoint else mg_early
@@ -405,14 +423,16 @@ def run(args):
         control = arrays["c"][k]
         save_clip(out / "motion" / f"{cid}.npz", joints, skeleton.PARENTS, skeleton.JOINT_NAMES, fps, control=control)
         jobs.append((str(out / "motion" / f"{cid}.npz"), str(out / "videos" / f"{cid}.mp4"),
-                     str(out / "sheets" / f"{cid}.png"), args.size))
+                     str(out / "sheets" / f"{cid}.png"), args.size, args.preset))
         manifest.append(dict(clip_id=cid, condition=cond, role=it["role"], item=it["id"],
                              video=f"videos/{cid}.mp4", motion=f"motion/{cid}.npz", seed=seed,
-                             frames=len(joints), fps=f"{fps:g}"))
+                             frames=len(joints), fps=f"{fps:g}", width=args.size, height=args.size))
         m = clip_metrics(joints, fps, control)
         metrics_rows.append(dict(clip_id=cid, condition=cond, role=it["role"], item=it["id"], **m))
 
+    log(f"render: {len(jobs)} clips at {args.size}x{args.size} on {min(args.jobs, len(jobs))} processes")
     render_all(jobs, min(args.jobs, len(jobs)))
+    log("render: done")
 
     rng = np.random.default_rng(args.seed)
     order = rng.permutation(len(manifest))  # row order tells nothing about the condition either
@@ -455,12 +475,13 @@ def main(argv=None):
     from rendering.render import RenderError
     from .dataset import DatasetError
     from .prepare_data import PrepareError
+    from .sample import SampleError
     from .train import TrainError
 
     try:
         return run(parse_args(argv))
     except (StimuliError, SystemError_, PrepareError, BvhError, TrainError, DatasetError, ClipError,
-            RenderError) as e:
+            RenderError, SampleError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
 

@@ -29,7 +29,7 @@ class RenderError(ValueError):
 @dataclass(frozen=True)
 class Camera:
     elevation: float = 12.0     # degrees above the horizon
-    azimuth: float = 60.0       # degrees about +Y, from +Z towards +X (where the camera stands)
+    azimuth: float = 40.0       # degrees about +Y, from +Z towards +X (where the camera stands)
     distance: float = 4.5       # metres from the look-at point
     fov: float = 35.0           # vertical field of view, degrees
     height: float = 0.9         # look-at height above the floor, metres
@@ -49,7 +49,7 @@ class Style:
     grid_spacing: float = 1.0   # metres between grid lines
     grid_radius: float = 8.0    # metres of floor drawn around the look-at point (fading out)
     bone_width: float = 1 / 150  # line width as a fraction of the frame height
-    head_radius: float = 0.09   # metres
+    head_radius: float = 0.08   # metres
 
 
 DEFAULT_CAMERA = Camera()
@@ -176,7 +176,7 @@ class FrameDrawer:
         side_r = np.array([n.endswith("_R") or n.startswith("Right") for n in joint_names])
         self.bone_side = np.where(side[self.child], -1, np.where(side_r[self.child], 1, 0))
         names = [n.lower() for n in joint_names]
-        self.head = names.index("head") if "head" in names else int(np.argmax(self.parents == -1))
+        self.head = names.index("head") if "head" in names else None
         width = style.bone_width * size
         self.gcs = {}
         for key, colour in [("shadow", style.shadow), ("centre", style.centre), ("left", style.left), ("right", style.right)]:
@@ -224,10 +224,14 @@ class FrameDrawer:
                 m = self.bone_side == s
                 if m.any():
                     r.draw_path(self.gcs[key], _segments_path(seg[m]), t)
-            # Head: a filled disc of fixed size in metres.
-            hc = cam[self.head]
-            circle = Path.circle(self.proj.to_screen(hc), self.proj.focal * self.style.head_radius / hc[2])
-            r.draw_path(self.gcs["centre"], circle, t, rgbFace=self.style.centre)
+            if self.head is not None and self.parents[self.head] >= 0:
+                # Head: a disc of fixed size in metres, just beyond the head joint along the neck bone.
+                neck = joints[self.head] - joints[self.parents[self.head]]
+                centre = joints[self.head] + self.style.head_radius * neck / max(np.linalg.norm(neck), 1e-6)
+                hc = self.proj.to_camera(centre, eye)
+                if hc[2] > _NEAR:
+                    circle = Path.circle(self.proj.to_screen(hc), self.proj.focal * self.style.head_radius / hc[2])
+                    r.draw_path(self.gcs["centre"], circle, t, rgbFace=self.style.centre)
         return self.buffer
 
 
@@ -325,4 +329,4 @@ def contact_sheet(frames, fps, out_png, columns=4, thumb=240):
         x, y = (k % columns) * thumb, (k // columns) * (thumb + label)
         sheet.paste(im, (x, y))
         draw.text((x + 4, y + thumb + 3), f"{t / fps:.2f} s", fill=(60, 60, 60))
-    sheet.save(out_png)
+    sheet.save(out_png, compress_level=1)  # fast; the sheets are for reports, not archives

@@ -1,0 +1,110 @@
+"""Rendering speed: our renderer against a plain matplotlib FuncAnimation + ffmpeg writer, same run.
+
+    python bench/bench_render.py [--size 1000] [--repeats 3] [--core 0]
+
+Both render the same real 80-frame walk (4 s at 20 fps) at size x size to H.264 (libx264, one thread)
+with the process and its ffmpeg child pinned to one core. Reported per clip: wall time and CPU time
+(this process + ffmpeg), the best of `repeats`. The baseline is what one writes first: an mplot3d
+figure with a floor grid, one Line3D per bone updated in FuncAnimation, saved with FFMpegWriter.
+"""
+import argparse
+import os
+import resource
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import imageio_ffmpeg  # noqa: E402
+import matplotlib  # noqa: E402
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.animation import FFMpegWriter, FuncAnimation  # noqa: E402
+
+from generation import skeleton  # noqa: E402
+from generation.features import load_take  # noqa: E402
+from rendering.render import render_clip  # noqa: E402
+
+WALK = Path(__file__).resolve().parents[2] / "shared/data/bandai-namco-locomotion/dataset-1/data/dataset-1_walk_angry_002.bvh.gz"
+
+
+def cpu_seconds():
+    a, b = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
+
+
+def baseline(joints, out, size, preset):
+    """The plain way: mplot3d axes, floor grid, a line per bone, FuncAnimation, FFMpegWriter."""
+    matplotlib.rcParams["animation.ffmpeg_path"] = imageio_ffmpeg.get_ffmpeg_exe()
+    fig = plt.figure(figsize=(size / 100, size / 100), dpi=100)
+    ax = fig.add_subplot(projection="3d")
+    ax.view_init(elev=12, azim=40)
+    ax.set_axis_off()
+    child = np.nonzero(skeleton.PARENTS >= 0)[0]
+    lines = [ax.plot([], [], [], lw=4)[0] for _ in child]
+    grid = np.arange(-10, 11, 1.0)
+
+    def update(t):
+        x, z = joints[t, 0, 0], joints[t, 0, 2]
+        ax.set_xlim(x - 2, x + 2)
+        ax.set_ylim(z - 2, z + 2)
+        ax.set_zlim(0, 2)
+        for line, j in zip(lines, child):
+            p = joints[t, [j, skeleton.PARENTS[j]]]
+            line.set_data_3d(p[:, 0], p[:, 2], p[:, 1])
+        return lines
+
+    for g in grid:  # the floor grid, drawn once as artists (redrawn every frame by the animation)
+        ax.plot([g, g], [-10, 10], [0, 0], color="0.6", lw=1)
+        ax.plot([-10, 10], [g, g], [0, 0], color="0.6", lw=1)
+    anim = FuncAnimation(fig, update, frames=len(joints), blit=False)
+    writer = FFMpegWriter(fps=20, codec="libx264", extra_args=["-preset", preset, "-pix_fmt", "yuv420p",
+                                                               "-threads", "1", "-movflags", "+faststart"])
+    anim.save(out, writer=writer, dpi=100)
+    plt.close(fig)
+
+
+def measure(fn, repeats):
+    walls, cpus = [], []
+    for _ in range(repeats):
+        c0, w0 = cpu_seconds(), time.perf_counter()
+        fn()
+        walls.append(time.perf_counter() - w0)
+        cpus.append(cpu_seconds() - c0)
+    return min(walls), min(cpus)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--size", type=int, default=1000)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--core", type=int, default=0, help="CPU core to pin to (ffmpeg inherits it)")
+    args = ap.parse_args(argv)
+    os.sched_setaffinity(0, {args.core})
+    joints = load_take(WALK, 20.0)[:80].astype(np.float64)
+    clip = dict(joints=joints, parents=skeleton.PARENTS, joint_names=skeleton.JOINT_NAMES, fps=20.0)
+    tmp = Path(tempfile.mkdtemp())
+    rows = []
+    for preset in ("ultrafast", "superfast"):
+        ours = measure(lambda: render_clip(clip, tmp / "ours.mp4", size=args.size, preset=preset, threads=1),
+                       args.repeats)
+        base = measure(lambda: baseline(joints, str(tmp / "base.mp4"), args.size, preset), args.repeats)
+        rows.append((preset, ours, base))
+    ours640 = measure(lambda: render_clip(clip, tmp / "o640.mp4", size=640, preset="superfast", threads=1),
+                      args.repeats)
+    load = os.getloadavg()[0]
+    print(f"80-frame clip, {args.size}x{args.size}, one core (#{args.core}), best of {args.repeats}; "
+          f"load average {load:.1f} on {os.cpu_count()} cores")
+    print(f"{'x264 preset':<12}{'ours wall':>11}{'ours cpu':>10}{'baseline wall':>15}{'baseline cpu':>14}"
+          f"{'speed-up (wall)':>17}")
+    for preset, (ow, oc), (bw, bc) in rows:
+        print(f"{preset:<12}{ow:>10.3f}s{oc:>9.3f}s{bw:>14.3f}s{bc:>13.3f}s{bw / ow:>16.1f}x")
+    print(f"ours at 640x640 (make_stimuli default, superfast): wall {ours640[0]:.3f} s, cpu {ours640[1]:.3f} s")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,204 @@
+"""make_stimuli: the stimulus folder of one real --quick run (CONTRACTS.md §4), system import, bad input."""
+import csv
+import re
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import BANDAI, DATA, ROOT
+from generation import make_stimuli
+from generation.clip import load_clip
+from generation.features import root_trajectory
+
+CONDITION_NAMES = ("nat", "mg", "fl", "bad")
+
+
+def read_csv(path):
+    with open(path, newline="", encoding="utf-8") as f:
+        return list(csv.DictReader(f))
+
+
+def decode(path):
+    """(frames decoded, width, height, pix_fmt, codec, audio?) by decoding the whole video with ffmpeg."""
+    import imageio_ffmpeg
+    r = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-nostats", "-i", str(path), "-map", "0:v:0",
+                        "-f", "framemd5", "-"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    frames = sum(1 for line in r.stdout.splitlines() if line and not line.startswith("#"))
+    v = re.search(r"Video: (\w+).*?, (\w+)\(.*?\), (\d+)x(\d+)", r.stderr)
+    return frames, int(v.group(3)), int(v.group(4)), v.group(2), v.group(1), "Audio:" in r.stderr
+
+
+@pytest.fixture(scope="module")
+def manifest(quick_stimuli):
+    return read_csv(quick_stimuli / "manifest.csv")
+
+
+def test_stimuli_quick_run_counts_and_columns(manifest, quick_stimuli):
+    assert list(manifest[0]) >= ["clip_id", "condition", "role", "item", "video", "motion", "seed", "frames", "fps"]
+    count = {}
+    for m in manifest:
+        count[m["role"], m["condition"]] = count.get((m["role"], m["condition"]), 0) + 1
+    assert count["test", "NAT"] == count["test", "MG"] == count["test", "FL"] == 30
+    assert count["catch", "BAD"] == 4 and sum(v for (r, _), v in count.items() if r == "catch") == 4
+    training = {c for (r, c) in count if r == "training"}
+    assert training >= {"NAT", "MG", "FL"} and sum(v for (r, _), v in count.items() if r == "training") >= 3
+    ids = [m["clip_id"] for m in manifest]
+    assert len(set(ids)) == len(ids) and all(re.fullmatch(r"[a-z0-9]{12,}", i) for i in ids)
+    for m in manifest:
+        assert (quick_stimuli / m["video"]).is_file() and (quick_stimuli / m["motion"]).is_file()
+        assert (m["seed"] == "") == (m["condition"] == "NAT")
+        assert (quick_stimuli / "sheets" / f"{m['clip_id']}.png").is_file()
+
+
+def test_stimuli_every_video_decodes_as_stated(manifest, quick_stimuli):
+    from concurrent.futures import ThreadPoolExecutor
+    with ThreadPoolExecutor(2) as pool:   # ffmpeg processes; threads just wait on them
+        decoded = list(pool.map(lambda m: decode(quick_stimuli / m["video"]), manifest))
+    for m, (frames, w, h, pix_fmt, codec, audio) in zip(manifest, decoded):
+        assert (frames, w, h) == (int(m["frames"]), int(m["width"]), int(m["height"])), m["clip_id"]
+        assert (pix_fmt, codec, audio) == ("yuv420p", "h264", False)
+        data = (quick_stimuli / m["video"]).read_bytes()
+        assert data.find(b"moov") < data.find(b"mdat")       # +faststart
+    assert {int(m["frames"]) for m in manifest} == {80} and {m["fps"] for m in manifest} == {"20"}
+
+
+def test_stimuli_conditions_share_items(manifest):
+    items = {}
+    for m in manifest:
+        items.setdefault((m["role"], m["condition"]), set()).add(m["item"])
+    assert items["test", "NAT"] == items["test", "MG"] == items["test", "FL"]
+    assert len(items["test", "NAT"]) == 30
+    assert items["training", "NAT"] == items["training", "MG"] == items["training", "FL"]
+    assert not items["catch", "BAD"] & items["test", "NAT"]
+    assert not items["training", "NAT"] & items["test", "NAT"]
+
+
+def test_stimuli_no_name_reveals_the_condition(manifest, quick_stimuli):
+    names = [p.name for sub in ("videos", "motion", "sheets") for p in (quick_stimuli / sub).iterdir()]
+    assert len(names) == 3 * len(manifest)
+    for name in names + [m["clip_id"] for m in manifest]:
+        assert not any(c in name.lower() for c in CONDITION_NAMES), name
+    assert {p.stem for p in (quick_stimuli / "videos").iterdir()} == {m["clip_id"] for m in manifest}
+    # Clip files carry no condition either, and every clip starts at the origin facing +Z.
+    for m in manifest[:12]:
+        clip = load_clip(quick_stimuli / m["motion"])
+        assert clip["joints"].shape == (80, 21, 3) and clip["control"].shape == (80, 3)
+        assert not {"condition", "role"} & set(clip)
+        root, yaw = root_trajectory(clip["joints"], 20.0)
+        assert np.allclose(root[0], 0, atol=1e-4) and abs(yaw[0]) < 1e-4
+
+
+def test_stimuli_metrics_plausible_and_bad_clips_worse(manifest, quick_stimuli):
+    rows = read_csv(quick_stimuli / "metrics.csv")
+    assert list(rows[0]) == ["clip_id", "condition", "role", "item", "foot_skating", "bone_length_std", "jerk",
+                             "control_error"]
+    assert sorted(r["clip_id"] for r in rows) == sorted(m["clip_id"] for m in manifest)
+    val = lambda cond, key: np.array([float(r[key]) for r in rows if r["condition"] == cond])  # noqa: E731
+    nat_skate = val("NAT", "foot_skating")
+    assert np.isfinite(nat_skate).all() and np.median(nat_skate) < 0.1      # planted feet barely slide
+    assert val("NAT", "bone_length_std").max() < 1e-3
+    assert val("NAT", "control_error").max() < 0.01
+    assert np.median(val("BAD", "jerk")) > 5 * np.median(val("NAT", "jerk"))
+    assert val("BAD", "bone_length_std").min() > 10 * val("NAT", "bone_length_std").max()
+    items = read_csv(quick_stimuli / "items.csv")
+    assert {r["item"] for r in items} == {m["item"] for m in manifest if m["role"] != "catch"}
+
+
+def _walk_takes(n):
+    rows = [r for r in read_csv(DATA / "MANIFEST.csv") if r["locomotion"] == "walk" and float(r["seconds"]) > 5
+            and r["path"].startswith("bandai")]
+    return [DATA / r["path"] for r in rows[:n]]
+
+
+def test_stimuli_import_bvh_folder_adds_a_condition(quick_stimuli, tmp_path, capsys):
+    runs = quick_stimuli.parent / "runs"
+    common = ["--quick", "--runs", str(runs), "--n-items", "4", "--n-catch", "1", "--n-training", "1",
+              "--size", "96", "--jobs", "1"]
+    assert make_stimuli.main(common + ["--export-items", str(tmp_path / "ask")]) == 0
+    items = read_csv(tmp_path / "ask" / "items.csv")
+    assert [r["role"] for r in items] == ["test"] * 4 + ["training"]
+    ctrl = np.load(tmp_path / "ask" / items[0]["control"])
+    assert ctrl["control"].shape == (80, 3) and ctrl["history"].shape == (10, 63)
+    # "Another system": real walks, one BVH file per item, named by the item id.
+    sysdir = tmp_path / "mocap"
+    sysdir.mkdir()
+    for row, take in zip(items, _walk_takes(len(items))):
+        shutil.copy(take, sysdir / f"{row['item']}.bvh.gz")
+    (sysdir / "notes.txt").write_text("ignored")
+    mg = sorted((runs / "mg_tiny" / "checkpoints").glob("step_*.pt"))[-1]
+    fl = sorted((runs / "fl_tiny" / "checkpoints").glob("step_*.pt"))[-1]
+    out = tmp_path / "stimuli"
+    capsys.readouterr()
+    code = make_stimuli.main([*common, "--out", str(out), "--mg-checkpoint", str(mg), "--fl-checkpoint", str(fl),
+                              "--system", f"MOCAP={sysdir}"])
+    printed = capsys.readouterr()
+    assert code == 0, printed.err[-2000:]
+    man = read_csv(out / "manifest.csv")
+    by = {}
+    for m in man:
+        by.setdefault((m["role"], m["condition"]), set()).add(m["item"])
+    assert by["test", "MOCAP"] == by["test", "NAT"] == {i["item"] for i in items if i["role"] == "test"}
+    assert by["training", "MOCAP"] == {items[-1]["item"]}
+    assert not any("mocap" in m["clip_id"] or "mocap" in m["video"].lower() for m in man)
+    for m in man:
+        if m["condition"] == "MOCAP":
+            assert decode(out / m["video"])[:3] == (80, 96, 96)
+    metrics = [x for x in read_csv(out / "metrics.csv") if x["condition"] == "MOCAP"]
+    assert len(metrics) == 5 and all(float(x["foot_skating"]) < 0.15 for x in metrics)   # real walks
+    assert "MOCAP" in printed.out                                                        # in the summary
+
+
+def _error(argv, capsys):
+    code = make_stimuli.main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    return code, err[-1] if err else ""
+
+
+def test_stimuli_bad_input_one_line_errors(quick_stimuli, tmp_path, capsys):
+    runs = quick_stimuli.parent / "runs"
+    base = ["--quick", "--runs", str(runs), "--n-items", "4", "--n-catch", "1", "--out", str(tmp_path / "o")]
+    code, err = _error(base + ["--system", "NOEQUALS"], capsys)
+    assert code == 2 and err.startswith("error: ") and "NAME=DIR" in err
+    code, err = _error(base + ["--system", f"X={tmp_path / 'missing'}"], capsys)
+    assert code == 2 and "does not exist" in err
+    code, err = _error(base + ["--system", f"mg={tmp_path}"], capsys)
+    assert code == 2 and "built-in" in err
+    code, err = _error(base + ["--data", str(tmp_path / "nodata"), "--dataset", str(tmp_path / "none.npz")], capsys)
+    assert code == 2 and "nodata" in err
+    # A system folder that lacks items, then one whose BVH is broken.
+    sysdir = tmp_path / "sys"
+    sysdir.mkdir()
+    code, err = _error(base + ["--system", f"S={sysdir}"], capsys)
+    assert code == 2 and "no motion file for item" in err
+    make_stimuli.main(base[:-2] + ["--export-items", str(tmp_path / "ask")])
+    items = [r["item"] for r in read_csv(tmp_path / "ask" / "items.csv")]
+    good = BANDAI / "dataset-1" / "data" / "dataset-1_walk_angry_002.bvh.gz"
+    for it in items[1:]:
+        shutil.copy(good, sysdir / f"{it}.bvh.gz")
+    (sysdir / f"{items[0]}.bvh").write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 zero\n")
+    capsys.readouterr()
+    code, err = _error(base + ["--system", f"S={sysdir}"], capsys)
+    assert code == 2 and err.startswith("error: ") and f"{items[0]}.bvh" in err
+    # An existing stimulus set is not overwritten without --force.
+    code, err = _error(["--quick", "--runs", str(runs), "--out", str(quick_stimuli)], capsys)
+    assert code == 2 and "--force" in err
+
+
+@pytest.mark.slow
+def test_stimuli_full_default_run(tmp_path):
+    """The default job at full size: the whole data set, the cpu configs, 640x640 videos."""
+    out = tmp_path / "stimuli"
+    r = subprocess.run([sys.executable, "-m", "generation.make_stimuli", "--out", str(out), "--runs",
+                        str(tmp_path / "runs")], capture_output=True, text=True, cwd=ROOT, timeout=4 * 3600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    man = read_csv(out / "manifest.csv")
+    assert sum(m["role"] == "test" for m in man) == 90 and sum(m["role"] == "catch" for m in man) == 4
+    for m in man[:10]:
+        assert decode(out / m["video"])[:4] == (80, 640, 640, "yuv420p")
+    rows = read_csv(out / "metrics.csv")
+    nat = np.array([float(r["foot_skating"]) for r in rows if r["condition"] == "NAT"])
+    assert np.median(nat) < 0.1
