@@ -138,3 +138,10 @@ def test_frozen_comparison_catches_a_tiny_change():
     got["tukey"][2]["reject"] = not got["tukey"][2]["reject"]
     with pytest.raises(AssertionError, match=r"tukey\[2\].reject"):
         _compare(got, want)
+
+
+def test_mixed_model_skipped_beyond_max_levels(tmp_path):
+    doc = build_report(DATA / "exclusion.csv", tmp_path, n_boot=20, mixed_max_levels=2, progress=False, quiet=True)
+    assert doc["mixed_model"]["fixed_effects"] == {}
+    assert doc["mixed_model"]["skipped"] == "3 raters and 3 clips: both above --mixed-max-levels 2"
+    assert "Not fitted: 3 raters and 3 clips" in (tmp_path / "report.html").read_text()
