@@ -11,7 +11,7 @@ import re
 import secrets
 
 from flask import Blueprint, abort, current_app, jsonify, request, url_for
-from sqlalchemy import func, insert, select, update
+from sqlalchemy import func, insert, or_, select, update
 from sqlalchemy.dialects.postgresql import insert as pg_insert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.exc import IntegrityError
@@ -141,19 +141,24 @@ def _completion(rater: Rater) -> dict:
 
 
 TOUCH_EVERY_S = 30     # last_seen (for freeing abandoned slots) is refreshed at most this often
+RATER_COLS = (Rater.id, Rater.rater_id, Rater.n_training, Rater.n_rating, Rater.completed_at,
+              Rater.completion_code, Rater.last_seen)
 
 
-def _rater(conn, token: str, now):
-    """The rater's row; 404 for an unknown token. Refreshes last_seen when it is older than TOUCH_EVERY_S."""
+def _rater(conn, token: str, now=None):
+    """The rater's row; 404 for an unknown token. With `now`, refreshes last_seen when it is stale."""
     if not TOKEN.match(token):
         abort(404, "unknown session")
-    row = conn.execute(select(Rater.id, Rater.rater_id, Rater.n_training, Rater.n_rating, Rater.completed_at,
-                              Rater.completion_code, Rater.last_seen).where(Rater.token == token)).first()
+    row = conn.execute(select(*RATER_COLS).where(Rater.token == token)).first()
     if row is None:
         abort(404, "unknown session")
-    if (now - row.last_seen).total_seconds() > TOUCH_EVERY_S:
+    if now is not None and _stale(row, now):
         conn.execute(update(Rater).where(Rater.id == row.id).values(last_seen=now))
     return row
+
+
+def _stale(row, now) -> bool:
+    return (now - row.last_seen).total_seconds() > TOUCH_EVERY_S
 
 
 def _current(conn, rater_pk):
@@ -164,17 +169,25 @@ def _current(conn, rater_pk):
 
 
 # The two hot calls use Core statements on a plain connection (no ORM unit of work): they are what 200
-# concurrent raters hit. GET next usually only reads; every answer is committed before it is acknowledged.
+# concurrent raters hit. GET next only reads (a short write follows when last_seen is stale or the session
+# has just ended); every answer is committed before it is acknowledged.
 @bp.get("/sessions/<token>/next")
 def next_trial(token):
     now = utcnow()
-    with engine().begin() as conn:
-        rater = _rater(conn, token, now)
+    with engine().connect().execution_options(read_only=True) as conn, conn.begin():
+        rater = _rater(conn, token)
         trial = _current(conn, rater.id)
-        if trial is None:
-            if rater.completed_at is None:
-                conn.execute(update(Rater).where(Rater.id == rater.id).values(completed_at=now))
-            return jsonify(_completion(rater))
+    stmt = None
+    if trial is None and rater.completed_at is None:
+        stmt = update(Rater).where(Rater.id == rater.id, Rater.completed_at.is_(None)) \
+            .values(completed_at=now, last_seen=now)
+    elif _stale(rater, now):
+        stmt = update(Rater).where(Rater.id == rater.id).values(last_seen=now)
+    if stmt is not None:
+        with engine().begin() as conn:
+            conn.execute(stmt)
+    if trial is None:
+        return jsonify(_completion(rater))
     return jsonify(trial={
         "trial_id": trial.id, "clip_id": trial.clip_id,
         "video_url": url_for("pages.video", name=trial.clip_id + ".mp4"),
@@ -211,8 +224,9 @@ def post_rating(token):
             return jsonify(stored=False, duplicate=True, rating=stored), 200
         # Only the trial on screen can be answered: the first unanswered one in the rater's order (a trial
         # released after a long absence still counts, so a late answer is kept rather than lost).
+        # (This trial itself counts as unanswered here, in case a concurrent duplicate has just answered it.)
         first = conn.execute(select(func.min(Trial.position)).where(
-            Trial.rater_pk == rater.id, Trial.answered_at.is_(None))).scalar()
+            Trial.rater_pk == rater.id, or_(Trial.answered_at.is_(None), Trial.id == trial.id))).scalar()
         if trial.position != first:
             abort(409, "this trial has not been shown yet")
         if training:

@@ -131,8 +131,10 @@ def make_engine(url: str | None = None) -> Engine:
         @event.listens_for(engine, "begin")
         def _sqlite_begin(conn):
             # Take the write lock up front: a read-then-write transaction can then never fail on a
-            # stale snapshot when several worker processes share the file.
-            conn.exec_driver_sql("BEGIN IMMEDIATE")
+            # stale snapshot when several worker processes share the file. Pure reads (marked
+            # read_only) take no lock, so with WAL they never wait for a writer.
+            read_only = conn.get_execution_options().get("read_only", False)
+            conn.exec_driver_sql("BEGIN" if read_only else "BEGIN IMMEDIATE")
         return engine
     # Per process; keep workers x (pool_size + max_overflow) under the server's max_connections (100 by default).
     pool = int(os.environ.get("DB_POOL_SIZE", "10"))

@@ -136,7 +136,7 @@ def test_concurrent_duplicate_posts_counted_once(app):
         th.start()
     for th in threads:
         th.join()
-    assert sorted(statuses) == [200] * 7 + [201]
+    assert sorted(statuses) == [200] * 7 + [201], (statuses, export_rows(client))
     assert sum(r["clip_id"] == t["clip_id"] for r in export_rows(client)) == 1
 
 
