@@ -212,10 +212,6 @@ def ensure_model(kind, args, dataset):
     return ckpts[-1], ckpts[0]
 
 
-def _numpy(a):
-    return a.detach().cpu().numpy() if hasattr(a, "detach") else np.asarray(a)
-
-
 def sample_condition(kind, ckpt, arrays, idx, temperature, seed, device):
     """Features x [B, T, 63] sampled by the model in `ckpt` for the items at `idx`."""
     from .sample import load_model, sample_fl, sample_mg
@@ -226,7 +222,7 @@ def sample_condition(kind, ckpt, arrays, idx, temperature, seed, device):
         x = sample_mg(model, c, arrays["hist"][idx], arrays["hist_c"][idx], temperature=temperature, seed=seed)
     else:
         x = sample_fl(model, c, temperature=temperature, seed=seed)
-    x = _numpy(x).astype(np.float32)
+    x = np.asarray(x, dtype=np.float32)
     if x.shape != arrays["x"][idx].shape:
         raise StimuliError(f"{ckpt}: sampled {x.shape}, expected {arrays['x'][idx].shape}")
     return x
@@ -252,24 +248,20 @@ def _render_job(job):
 
 def render_all(jobs, workers):
     """Render (motion, video, sheet, size, preset) jobs in a process pool, with a progress bar."""
-    from rendering.render import RenderError
-
-    bar = tqdm(total=len(jobs), desc="render", unit="clip", file=sys.stderr)
-    if workers <= 1:
-        for job in jobs:
-            _render_job(job)
-            bar.update()
-    else:
-        # spawn: the parent holds torch (threads); forked children of it can hang.
-        with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
-            futures = [pool.submit(_render_job, job) for job in jobs]
-            for fut in as_completed(futures):
-                try:
-                    fut.result()
-                except RenderError:
-                    raise
+    with tqdm(total=len(jobs), desc="render", unit="clip", file=sys.stderr) as bar:
+        if workers <= 1:
+            for job in jobs:
+                _render_job(job)
                 bar.update()
-    bar.close()
+            return
+        # spawn: the parent holds torch (threads); forked children of it can hang.
+        pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"))
+        try:
+            for fut in as_completed([pool.submit(_render_job, job) for job in jobs]):
+                fut.result()  # a worker's RenderError is raised here
+                bar.update()
+        finally:
+            pool.shutdown(cancel_futures=True)
 
 
 def prepare_out(out, force):

@@ -40,8 +40,8 @@ class Camera:
 @dataclass(frozen=True)
 class Style:
     background: tuple = (0.97, 0.97, 0.97)
-    floor: tuple = (0.88, 0.88, 0.86)
-    grid: tuple = (0.55, 0.55, 0.53)
+    floor: tuple = (0.88, 0.88, 0.88)   # floor and grid are grey (see _wu_lines)
+    grid: float = 0.55
     shadow: tuple = (0.74, 0.74, 0.72)
     centre: tuple = (0.15, 0.15, 0.15)
     left: tuple = (0.15, 0.35, 0.75)
@@ -124,11 +124,13 @@ def _clip_rect(a, b, width, height):
     return a[keep] + t0[keep, None] * d[keep], a[keep] + t1[keep, None] * d[keep]
 
 
-def _wu_lines(buf, a, b, colour, alpha):
-    """Draw antialiased 1-px lines a->b [N, 2] (x=column, y=row, inside the image) into RGBA `buf`.
+def _wu_lines(buf, a, b, grey, alpha):
+    """Draw antialiased 1-px grey lines a->b [N, 2] (x=column, y=row, inside the image) into RGBA `buf`.
 
     Xiaolin Wu's method, vectorised over every pixel column (or row, for steep lines) of every line:
     each sample covers the two pixels straddling the line with weights 1-f and f, times alpha[row, col].
+    Lines and what lies under them (the floor) are grey, so one channel is read and the blended grey is
+    written as one 32-bit RGBA word per pixel.
     """
     steep = np.abs(b[:, 1] - a[:, 1]) > np.abs(b[:, 0] - a[:, 0])
     a, b = a.copy(), b.copy()
@@ -146,13 +148,16 @@ def _wu_lines(buf, a, b, colour, alpha):
     v0 = np.floor(v).astype(np.int64)
     f = (v - v0).astype(np.float32)
     st = steep[line]
-    lim = np.where(st, buf.shape[1], buf.shape[0]) - 1
-    col = np.asarray(colour, dtype=np.float32) * 255
-    for vv, w in ((v0, 1 - f), (np.minimum(v0 + 1, lim), f)):
-        rows, cols = np.where(st, u, vv), np.where(st, vv, u)
-        w = (w * alpha[rows, cols])[:, None]
-        px = buf[rows, cols, :3].astype(np.float32)
-        buf[rows, cols, :3] = (px + w * (col - px)).astype(np.uint8)
+    height, width = buf.shape[:2]
+    v1 = np.minimum(v0 + 1, np.where(st, width, height) - 1)
+    words, green = buf.view(np.uint32).reshape(-1), buf.reshape(-1)[1::4]
+    opaque = np.uint32(0xFF000000) if np.little_endian else np.uint32(0xFF)
+    for vv, w in ((v0, 1 - f), (v1, f)):
+        p = np.where(st, u * width + vv, vv * width + u)             # flat pixel index
+        w = w * alpha.reshape(-1)[p]
+        g = green[p].astype(np.float32)
+        g = (g + w * (np.float32(grey * 255) - g) + 0.5).astype(np.uint32)
+        words[p] = g * np.uint32(0x010101) | opaque
 
 
 class FrameDrawer:
