@@ -1,7 +1,6 @@
 """Regression tests of the statistics against certified and published reference values."""
 import re
 from decimal import Decimal
-from itertools import combinations
 from pathlib import Path
 
 import numpy as np
@@ -73,9 +72,10 @@ def test_naive_sum_of_squares_fails_where_we_do_not():
     assert sig_digits(stats.one_way_anova(data, "y", "group")["F"], cert["F"]) >= 9
 
 
-# R 4.x, TukeyHSD(aov(weight ~ group, data = PlantGrowth)), as printed in public knitted R reports, e.g. the
-# R Markdown course outputs indexed on GitHub ("FA8" ANOVA reports, R 4.3.3; identical in several others) and
-# the visStatistics vignette; data = R's datasets::PlantGrowth (also e.g. wonhyukc/data PlantGrowth.csv):
+# R 4.x, TukeyHSD(aov(weight ~ group, data = PlantGrowth)), as printed (identically) in several public knitted
+# R Markdown reports on GitHub (e.g. an "FA8" one-way ANOVA course report run under R 4.3.3) and in the
+# visStatistics package documentation (shhschilling.github.io/visStatistics, reference/visstat: its post-hoc
+# printout for PlantGrowth). Data = R's datasets::PlantGrowth (Dobson 1983; e.g. wonhyukc/data PlantGrowth.csv):
 #               diff        lwr       upr     p adj
 #   trt1-ctrl -0.371 -1.0622161 0.3202161 0.3908711
 #   trt2-ctrl  0.494 -0.1972161 1.1852161 0.1979960
