@@ -476,6 +476,9 @@ def main(argv=None):
             RenderError, SampleError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    except OSError as e:  # unwritable --out, full disk, ...: the message names the path
+        print(f"error: {e}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":
