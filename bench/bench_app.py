@@ -133,10 +133,14 @@ def main():
     p.add_argument("--workers", type=int, default=4)
     p.add_argument("--threads", type=int, default=16)
     p.add_argument("--json", default=None)
+    p.add_argument("--stimuli", default=None, help="reuse (or create) the benchmark's stimulus folder here")
     a = p.parse_args()
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_app_"))
-    manifest = make_stimuli(tmp / "stimuli", n_items=30, n_catch=4, n_training=4, n_frames=20)
+    stim = Path(a.stimuli) if a.stimuli else tmp / "stimuli"
+    manifest = stim / "manifest.csv"
+    if not manifest.is_file():
+        manifest = make_stimuli(stim, n_items=30, n_catch=4, n_training=4, n_frames=20)
     ctx = pg_schema() if a.db == "postgres" else None
     url = ctx.__enter__() if ctx else (f"sqlite:///{tmp}/ratings.sqlite" if a.db == "sqlite" else a.db)
     port = free_port()
