@@ -347,7 +347,8 @@ def parse_args(argv):
 
 
 def run(args):
-    t0 = time.perf_counter()
+    global _T0
+    _T0 = time.perf_counter()
     systems = dict(parse_system_spec(s) for s in args.system)
     if len(systems) != len(args.system):
         raise StimuliError("--system: the same NAME is given twice")
@@ -386,7 +387,7 @@ def run(args):
         raise StimuliError(f"--bad-checkpoint {bad_ckpt}: no such file")
     log(f"models: MG {mg_ckpt}, FL {fl_ckpt}, BAD {bad_ckpt}")
 
-    # Features per condition: {condition: (item positions, x [B, T, 63] or joints, seed)}
+    # (condition, model or None for the real motion, item positions): one batch per condition.
     catch = [k for k, it in enumerate(items) if it["role"] == "catch"]
     seeds = {"MG": args.seed + 1, "FL": args.seed + 2, "BAD": args.seed + 3}
     plan = [("NAT", None, gen_items), ("MG", ("mg", mg_ckpt), gen_items), ("FL", ("fl", fl_ckpt), gen_items)]
@@ -438,7 +439,7 @@ def run(args):
           f"control_error m\n{summary_text(metrics_rows)}")
     _warn_if_bad_not_bad(metrics_rows)
     print(f"\nwrote {out / 'manifest.csv'}: {len(manifest)} clips ({n['test']} test, {n['catch']} catch, "
-          f"{n['training']} training) in {time.perf_counter() - t0:.0f} s")
+          f"{n['training']} training) in {time.perf_counter() - _T0:.0f} s")
     return 0
 
 
