@@ -279,10 +279,7 @@ def prepare_out(out, force):
 
 
 def summary_text(metrics_rows):
-    """Per-condition means (sd) of every metric over test and catch clips, as a printable table.
-
-    `no_contact`: clips in which no foot ever touches down (their foot_skating is NaN, left out of the mean).
-    """
+    """Per-condition means (sd) of every metric over test and catch clips, as a printable table."""
     import pandas as pd
 
     df = pd.DataFrame(metrics_rows)
@@ -291,7 +288,6 @@ def summary_text(metrics_rows):
     mean, sd = g[list(METRIC_NAMES)].mean(), g[list(METRIC_NAMES)].std()
     table = mean.map(lambda v: f"{v:.3g}") + " (" + sd.map(lambda v: f"{v:.2g}") + ")"
     table.insert(0, "n", g.size())
-    table["no_contact"] = g["foot_skating"].apply(lambda v: int(v.isna().sum()))
     return table.to_string()
 
 

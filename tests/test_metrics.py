@@ -42,15 +42,21 @@ def test_metrics_foot_skating_sees_sliding_feet(walks):
     assert foot_skating(j, 20.0) < 0.15
 
 
-def test_metrics_foot_skating_contact_threshold_and_no_contact():
+def test_metrics_foot_skating_contact_threshold_and_fallback():
     assert CONTACT_HEIGHT == pytest.approx(0.01)
     t = np.arange(40)[:, None] / 20.0
     j = np.zeros((40, skeleton.N_JOINTS, 3))
-    j[:, :, 1] = 0.5 + 0.3 * np.sin(2 * np.pi * t)             # feet only pass their lowest point: in the
-    assert np.isnan(foot_skating(j, 20.0))                     # air except single frames -> no contact pair
     j[:, :, 1] = 0.0
     j[:, :, 0] = 2.0 * t                                       # on the floor, gliding at 2 m/s
     assert foot_skating(j, 20.0) == pytest.approx(2.0)
+    # Feet that never rest (bobbing 30 cm, so never two frames within 1 cm of the lowest point): the
+    # lowest 10% of frame pairs count as contact; gliding at 1 m/s then shows, standing still does not.
+    j[:, :, 1] = 0.5 + 0.3 * np.sin(2 * np.pi * 1.3 * t)
+    j[:, :, 0] = 1.0 * t
+    assert foot_skating(j, 20.0) == pytest.approx(1.0)
+    j[:, :, 0] = 0.0
+    assert foot_skating(j, 20.0) == pytest.approx(0.0)
+    assert np.isnan(foot_skating(j[:1], 20.0))
 
 
 def test_metrics_bone_length_and_jerk_see_noise(walks):

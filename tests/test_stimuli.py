@@ -97,6 +97,7 @@ def test_stimuli_metrics_plausible_and_bad_clips_worse(manifest, quick_stimuli):
     assert list(rows[0]) == ["clip_id", "condition", "role", "item", "foot_skating", "bone_length_std", "jerk",
                              "control_error"]
     assert sorted(r["clip_id"] for r in rows) == sorted(m["clip_id"] for m in manifest)
+    assert all(np.isfinite(float(r[k])) for r in rows for k in list(r)[4:])    # every metric defined
     val = lambda cond, key: np.array([float(r[key]) for r in rows if r["condition"] == cond])  # noqa: E731
     nat_skate = val("NAT", "foot_skating")
     assert np.isfinite(nat_skate).all() and np.median(nat_skate) < 0.1      # planted feet barely slide
