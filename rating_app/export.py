@@ -32,7 +32,7 @@ def export_csv(engine: Engine, out=None) -> str | int:
     w = csv.DictWriter(buf, fieldnames=COLUMNS, lineterminator="\n")
     w.writeheader()
     n = 0
-    with Session(engine) as s:
+    with Session(engine.execution_options(read_only=True)) as s:
         for row in iter_rows(s):
             w.writerow(row)
             n += 1
@@ -41,7 +41,7 @@ def export_csv(engine: Engine, out=None) -> str | int:
 
 def progress(engine: Engine, target: int) -> dict:
     """Counts for the dashboard: per clip, per condition, per rater (with catch failures)."""
-    with Session(engine) as s:
+    with Session(engine.execution_options(read_only=True)) as s:
         clips = s.execute(select(Clip.clip_id, Clip.condition, Clip.role, Clip.item)
                           .where(Clip.role != "training").order_by(Clip.role, Clip.condition, Clip.clip_id)).all()
         done = dict(s.execute(select(Rating.clip_id, func.count()).group_by(Rating.clip_id)).all())

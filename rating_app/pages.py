@@ -28,7 +28,7 @@ def index():
                 ids[key] = v
                 break
     ext = current_app.extensions["rating_app"]
-    with Session(ext["engine"]) as s:
+    with Session(ext["engine"].execution_options(read_only=True)) as s:     # no write lock on SQLite
         full = is_full(s, current_app.config["RATINGS_PER_CLIP"]) or not ext["clips"]
     return render_template("study.html", ids=ids, full=full)
 
