@@ -49,6 +49,8 @@ def create_app(manifest=None, db_url=None, ratings_per_clip=None, clips_per_rate
     completion_url = completion_url if completion_url is not None else _env("COMPLETION_URL")
     if ratings_per_clip < 1:
         raise AppError(f"ratings per clip must be >= 1, got {ratings_per_clip}")
+    if clips_per_rater == 0:
+        clips_per_rater = None                  # 0 means every clip still needing ratings
     if clips_per_rater is not None and clips_per_rater < 1:
         raise AppError(f"clips per rater must be >= 1, got {clips_per_rater}")
     if completion_url and not completion_url.startswith(("https://", "http://")):

@@ -81,7 +81,7 @@ def build_parser():
     s.add_argument("--host", default="127.0.0.1")
     s.add_argument("--port", type=int, default=5000)
     s.add_argument("--ratings-per-clip", type=int, default=None, help="target ratings per test clip (20)")
-    s.add_argument("--clips-per-rater", type=int, default=None, help="test clips per rater (default: all needed)")
+    s.add_argument("--clips-per-rater", type=int, default=None, help="test clips per rater (default or 0: all that still need ratings)")
     s.add_argument("--slot-timeout", type=float, default=None, help="seconds before an idle rater's slots are freed (3600)")
     s.add_argument("--completion-code", default=None, help="one code for everybody (e.g. Prolific's); default: random per rater")
     s.add_argument("--completion-url", default=None,
@@ -119,7 +119,8 @@ def main(argv=None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     except OSError as e:
-        print(f"error: {e.filename or ''}: {e.strerror or e}", file=sys.stderr)
+        where = f"{e.filename}: " if e.filename else ""
+        print(f"error: {where}{e.strerror or e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
