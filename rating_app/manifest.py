@@ -34,8 +34,8 @@ class ManifestClip:
         return None
 
 
-def _number(value: str, kind, where: str, field: str):
-    if value is None or value.strip() == "":
+def _number(value: str, kind, where: str, field: str, allow_nan=False):
+    if value is None or value.strip() == "" or (allow_nan and value.strip().lower() in ("nan", "na")):
         return None
     try:
         x = kind(value)
@@ -100,6 +100,6 @@ def load_metrics(path) -> dict[str, dict]:
             rec = {k: row.get(k, "") for k in ("condition", "role", "item")}
             for m in METRIC_COLUMNS:
                 if m in row:
-                    rec[m] = _number(row[m], float, f"{path}:{line}", m)
+                    rec[m] = _number(row[m], float, f"{path}:{line}", m, allow_nan=True)   # nan: not measured
             out[row["clip_id"].strip()] = rec
     return out

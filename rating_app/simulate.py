@@ -62,26 +62,25 @@ def parse_quality(text: str | None) -> dict[str, float]:
 def quality_from_metrics(clips: dict[str, ClipInfo]) -> dict[str, float]:
     """Per-condition quality from the clips' objective metrics; also sets a small per-clip offset.
 
-    Each metric is log-transformed and z-scored over all clips; a clip's badness is the mean z. Conditions are
-    placed linearly between QUALITY_HIGH (least bad) and QUALITY_LOW (most bad) by mean badness, so the order
-    of the conditions is the order the metrics give (NAT best and BAD worst whenever the metrics say so)."""
+    Each metric is turned into a percentile rank over all clips (0 = best, 1 = worst; ranks, so one extreme
+    condition such as NAT with zero bone-length error does not squash the others together); a clip's badness is
+    its mean rank. Conditions are placed linearly between QUALITY_HIGH (least bad) and QUALITY_LOW (most bad)
+    by mean badness, so the order of the conditions is the order the metrics give (NAT best and BAD worst
+    whenever the metrics say so)."""
+    from scipy.stats import rankdata
     have = [c for c in clips.values() if any(c.metrics.get(m) is not None for m in METRIC_COLUMNS)]
     if not have:
         return {}
-    z = np.zeros(len(have))
+    total = np.zeros(len(have))
     n = np.zeros(len(have))
     for m in METRIC_COLUMNS:
         vals = np.array([np.nan if c.metrics.get(m) is None else c.metrics[m] for c in have], float)
         ok = np.isfinite(vals)
-        if ok.sum() < 2:
+        if ok.sum() < 2 or np.ptp(vals[ok]) == 0:
             continue
-        v = np.log(np.maximum(vals[ok], 0) + 1e-6)
-        sd = v.std()
-        if sd < 1e-12:
-            continue
-        z[ok] += (v - v.mean()) / sd
+        total[ok] += (rankdata(vals[ok], method="average") - 1) / (ok.sum() - 1)
         n[ok] += 1
-    badness = np.where(n > 0, z / np.maximum(n, 1), 0.0)
+    badness = np.where(n > 0, total / np.maximum(n, 1), 0.5)
     by_cond: dict[str, list[float]] = {}
     for c, b in zip(have, badness):
         by_cond.setdefault(c.condition, []).append(float(b))
@@ -90,8 +89,8 @@ def quality_from_metrics(clips: dict[str, ClipInfo]) -> dict[str, float]:
     quality = {k: (QUALITY_HIGH + QUALITY_LOW) / 2 if hi - lo < 1e-9 else
                QUALITY_HIGH - (QUALITY_HIGH - QUALITY_LOW) * (b - lo) / (hi - lo) for k, b in mean.items()}
     for c, b in zip(have, badness):
-        # Within a condition, worse clips are rated a little lower (at most half a point).
-        c.quality = quality[c.condition] - float(np.clip(0.3 * (b - mean[c.condition]), -0.5, 0.5))
+        # Within a condition, worse clips are rated a little lower (at most 0.4 of a point).
+        c.quality = quality[c.condition] - float(np.clip(1.5 * (b - mean[c.condition]), -0.4, 0.4))
     return quality
 
 

@@ -156,6 +156,18 @@ def test_quality_follows_the_metrics(app_stimuli):
     q2 = quality_from_metrics(flipped)
     assert q2["BAD"] > q2["NAT"]
     assert parse_quality("NAT=4.5, MG=3") == {"NAT": 4.5, "MG": 3.0}
+    # a metric that could not be measured ('nan', e.g. foot skating without contacts) is skipped, not an error
+    from rating_app.manifest import load_metrics
+    text = app_stimuli.with_name("metrics.csv").read_text().splitlines()
+    head, first = text[0].split(","), text[1].split(",")
+    first[head.index("foot_skating")] = "nan"
+    nan_file = app_stimuli.parent / "metrics_nan_test.csv"
+    nan_file.write_text("\n".join([text[0], ",".join(first)] + text[2:]) + "\n")
+    try:
+        rec = load_metrics(nan_file)[first[0]]
+        assert rec["foot_skating"] is None and rec["jerk"] > 0
+    finally:
+        nan_file.unlink()
     for bad in ("NAT", "NAT=x", "=3", "NAT=0.5"):
         with pytest.raises(AppError):
             parse_quality(bad)
