@@ -110,7 +110,7 @@ def main(argv=None):
     for preset, (ow, oc), (bw, bc) in rows:
         print(f"{preset:<12}{ow:>10.3f}s{oc:>9.3f}s{bw:>14.3f}s{bc:>13.3f}s{bw / ow:>16.1f}x")
     print(f"of which drawing the 80 frames (no encoding): wall {draw[0]:.3f} s, cpu {draw[1]:.3f} s; the rest is "
-          "the pipe and ffmpeg (RGBA -> yuv420p, libx264)")
+          "the pipe and ffmpeg (libx264; the frames arrive as yuv420p)")
     print(f"ours at 640x640 (make_stimuli default, superfast): wall {ours640[0]:.3f} s, cpu {ours640[1]:.3f} s")
 
 

@@ -13,7 +13,7 @@ from generation import skeleton
 from generation.clip import save_clip
 from generation.features import load_take
 from rendering import Camera, RenderError, render_clip
-from rendering.render import FrameDrawer, camera_targets
+from rendering.render import FrameDrawer, camera_targets, yuv_to_rgb
 
 WALK = BANDAI / "dataset-1" / "data" / "dataset-1_walk_angry_002.bvh.gz"
 
@@ -48,9 +48,9 @@ def test_render_real_clip_to_h264_mp4_and_contact_sheet(walk_clip, tmp_path):
     assert sheet.size[0] == 4 * 240 and sheet.size[1] > 2 * 240     # 8 frames, 4 per row
 
 
-def _figure_pixels(rgba):
+def _figure_pixels(rgb):
     """Mask of pixels drawn in the figure's colours (dark trunk, blue left, red right limbs)."""
-    rgb = rgba[..., :3].astype(int)
+    rgb = rgb.astype(int)
     dark = rgb.max(-1) < 90
     coloured = (np.abs(rgb[..., 0] - rgb[..., 2]) > 80)
     return dark | coloured
@@ -63,7 +63,8 @@ def test_render_camera_follows_so_the_figure_never_leaves_the_frame(walk_clip):
     drawer = FrameDrawer(skeleton.PARENTS, skeleton.JOINT_NAMES, 200)
     targets = camera_targets(fast, 20.0)
     for t in range(0, 40, 3):
-        mask = _figure_pixels(drawer.draw(fast[t], targets[t]))
+        drawer.draw(fast[t], targets[t])
+        mask = _figure_pixels(drawer.rgb())
         rows, cols = np.nonzero(mask)
         assert mask.sum() > 100
         assert rows.min() > 2 and cols.min() > 2 and rows.max() < 197 and cols.max() < 197
@@ -79,11 +80,26 @@ def test_render_same_camera_set_up_wherever_the_clip_is(walk_clip):
     for t in (0, 17, 39):
         fa = a.draw(joints[t], ta[t]).copy()
         fb = a.draw(moved[t], tb[t]).copy()
+        assert fa.shape == (160 * 160 * 3 // 2,)                 # a yuv420p frame
+        fa, fb = (yuv_to_rgb(f, 160) for f in (fa, fb))
         diff = np.abs(fa.astype(int) - fb.astype(int))
         assert diff[1:-1, 1:-1].max() <= 2            # (lines clipped at the image border may differ by a pixel)
     # ...while another camera does change the picture.
     other = FrameDrawer(skeleton.PARENTS, skeleton.JOINT_NAMES, 160, camera=Camera(azimuth=150.0))
     assert np.abs(other.draw(joints[0], ta[0]).astype(int) - a.draw(joints[0], ta[0]).astype(int)).max() > 100
+
+
+def test_render_colours_survive_the_yuv_path():
+    """Frames are made as yuv420p directly; converted back, the background, floor and limbs have their colours."""
+    joints = load_take(WALK, 20.0)[:1].astype(np.float64)
+    drawer = FrameDrawer(skeleton.PARENTS, skeleton.JOINT_NAMES, 240)
+    drawer.draw(joints[0], camera_targets(joints, 20.0)[0])
+    rgb = drawer.rgb().astype(int)
+    assert np.abs(rgb[2, 2] - 0.97 * 255).max() <= 3                  # sky, top left
+    assert np.abs(rgb[-2, 120] - 0.88 * 255).max() <= 8               # floor near the camera (or a grid line)
+    red = (rgb[..., 0] > 150) & (rgb[..., 2] < 90)
+    blue = (rgb[..., 2] > 150) & (rgb[..., 0] < 90)
+    assert red.sum() > 30 and blue.sum() > 30                         # right and left limbs
 
 
 def test_render_rejects_bad_clips(tmp_path):
