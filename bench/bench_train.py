@@ -28,18 +28,19 @@ def time_steps(kind, ds, steps):
     opt = torch.optim.Adam(net.parameters(), lr=cfg["lr"])
     tr = ds.splits["train"]
     crop = cfg["train_window"] or tr.x.shape[1]
-    times = []
+    times, cpu = [], []
     for step in range(steps + 2):
         idx = batch_indices(len(tr), cfg["batch_size"], 0, step)
         x, c = tr.x[idx, :crop], tr.c[idx, :crop]
-        t = time.perf_counter()
+        t, t_cpu = time.perf_counter(), time.process_time()
         loss = net.nll(x, c).mean()
         opt.zero_grad()
         loss.backward()
         torch.nn.utils.clip_grad_norm_(net.parameters(), cfg["clip_grad"])
         opt.step()
         times.append(time.perf_counter() - t)
-    return 1 / statistics.median(times[2:]), cfg
+        cpu.append(time.process_time() - t_cpu)
+    return 1 / statistics.median(times[2:]), 1 / statistics.median(cpu[2:]), cfg
 
 
 def main():
@@ -53,11 +54,12 @@ def main():
         torch.set_num_threads(a.threads)
     ds = load_dataset(a.data)
     print(f"torch threads {torch.get_num_threads()}; load average {os.getloadavg()[0]:.1f}")
-    print("| config | steps/s (median of %d) | windows x frames per step |" % a.steps)
-    print("|---|---|---|")
+    print("| config | steps/s wall (median of %d) | steps per CPU-second | windows x frames per step |" % a.steps)
+    print("|---|---|---|---|")
     for kind in ("mg", "fl"):
-        sps, cfg = time_steps(kind, ds, a.steps)
-        print(f"| {kind}_cpu | {sps:.2f} | {cfg['batch_size']} x {cfg['train_window'] or ds.window} |", flush=True)
+        sps, sps_cpu, cfg = time_steps(kind, ds, a.steps)
+        print(f"| {kind}_cpu | {sps:.2f} | {sps_cpu:.2f} | {cfg['batch_size']} x {cfg['train_window'] or ds.window} |",
+              flush=True)
     if a.runs:
         print("\n| run | steps | wall min | steps/s | last valid NLL (nats/dim) |\n|---|---|---|---|---|")
         for run in a.runs:
