@@ -13,7 +13,7 @@ def main(argv=None):
     p.add_argument("out", help="output .mp4")
     p.add_argument("--size", type=int, default=640, help="frame width = height in pixels (even)")
     p.add_argument("--sheet", help="also write a PNG contact sheet here")
-    p.add_argument("--preset", default="veryfast", help="x264 preset (ultrafast ... veryslow)")
+    p.add_argument("--preset", default="superfast", help="x264 preset (ultrafast ... veryslow)")
     p.add_argument("--crf", type=int, default=20, help="x264 quality (lower is better)")
     args = p.parse_args(argv)
     try:

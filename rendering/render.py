@@ -343,7 +343,7 @@ def _check_joints(joints, name):
         raise RenderError(f"{name}: the clip has no frames")
 
 
-def ffmpeg_writer(out_mp4, size, fps, preset="veryfast", crf=20, threads=None):
+def ffmpeg_writer(out_mp4, size, fps, preset="superfast", crf=20, threads=None):
     """An ffmpeg process reading raw yuv420p frames on stdin and writing H.264 yuv420p +faststart MP4, no audio."""
     cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "yuv420p",
            "-s", f"{size}x{size}", "-r", f"{fps:g}", "-i", "-", "-an", "-c:v", "libx264", "-preset", preset,
@@ -354,7 +354,7 @@ def ffmpeg_writer(out_mp4, size, fps, preset="veryfast", crf=20, threads=None):
 
 
 def render_clip(clip_or_path, out_mp4, size=640, camera=DEFAULT_CAMERA, style=DEFAULT_STYLE, sheet=None,
-                sheet_frames=8, preset="veryfast", crf=20, threads=None):
+                sheet_frames=8, preset="superfast", crf=20, threads=None):
     """Render a clip (a path to a clip .npz, or a dict as from generation.clip.load_clip) to an MP4.
 
     sheet: optional PNG path for a contact sheet of `sheet_frames` evenly spaced frames.
