@@ -293,12 +293,11 @@ def summary_text(metrics_rows):
 
 # ---------------------------------------------------------------- main
 def parse_args(argv):
-    ap = argparse.ArgumentParser(prog="python -m generation.make_stimuli", description=__doc__.split("\n")[0],
-                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    ap.add_argument("--out", default="stimuli", help="stimulus folder to write")
+    ap = argparse.ArgumentParser(prog="python -m generation.make_stimuli", description=__doc__.split("\n")[0])
+    ap.add_argument("--out", default="stimuli", help="stimulus folder to write (default stimuli)")
     ap.add_argument("--quick", action="store_true", help="tiny models on a subset of takes: a few minutes in all")
     ap.add_argument("--data", help="folder of BVH takes (default ../shared/data/bandai-namco-locomotion)")
-    ap.add_argument("--runs", default="runs", help="folder for the cached dataset and training runs")
+    ap.add_argument("--runs", default="runs", help="folder for the cached dataset and training runs (default runs)")
     ap.add_argument("--dataset", help="prepared dataset .npz to use or create (default RUNS/dataset.npz, "
                                       "RUNS/dataset_quick.npz with --quick)")
     ap.add_argument("--config", help="training config for both models: tiny | cpu | paper (default cpu; tiny with --quick)")
@@ -310,15 +309,15 @@ def parse_args(argv):
                     help="import another system's output (one ITEM.bvh[.gz] or ITEM.npz per item) as condition NAME")
     ap.add_argument("--export-items", metavar="DIR", help="only write DIR/items.csv and DIR/items/ (what another "
                                                            "system must generate), then stop")
-    ap.add_argument("--n-items", type=int, default=30, help="test items (each in NAT, MG, FL and every system)")
-    ap.add_argument("--n-catch", type=int, default=4, help="BAD catch clips")
+    ap.add_argument("--n-items", type=int, default=30, help="test items (each in NAT, MG, FL and every system; default 30)")
+    ap.add_argument("--n-catch", type=int, default=4, help="BAD catch clips (default 4)")
     ap.add_argument("--n-training", type=int, default=1, help="familiarisation items, each shown in every "
-                                                              "condition but BAD")
-    ap.add_argument("--temperature", type=float, default=1.0, help="sampling temperature of MG and FL")
-    ap.add_argument("--seed", type=int, default=0)
+                                                              "condition but BAD (default 1)")
+    ap.add_argument("--temperature", type=float, default=1.0, help="sampling temperature of MG and FL (default 1.0)")
+    ap.add_argument("--seed", type=int, default=0, help="item selection, sampling and manifest order (default 0)")
     ap.add_argument("--size", type=int, help="video width = height in pixels (default 640; 320 with --quick)")
-    ap.add_argument("--preset", default="superfast", help="x264 preset: ultrafast (fastest, biggest files) ... veryslow")
-    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="rendering processes")
+    ap.add_argument("--preset", default="superfast", help="x264 preset (default superfast; ultrafast: fastest, biggest files)")
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="rendering processes (default: one per core)")
     ap.add_argument("--device", help="torch device (default: cuda when present, else cpu)")
     ap.add_argument("--threads", type=int, help="torch CPU threads for training and sampling (default: torch's "
                                                 "choice; 1 with --quick, where tiny models gain nothing from more)")
