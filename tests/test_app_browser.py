@@ -12,11 +12,15 @@ import pytest
 import requests
 
 from rating_app import create_app
+from rating_app.manifest import load_manifest
 
 ROOT = Path(__file__).resolve().parents[1]
 CHROMIUM, CHROMEDRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
 
 pytestmark = pytest.mark.browser
+
+
+live_server_manifest = []
 
 
 @pytest.fixture
@@ -28,6 +32,7 @@ def live_server(app_stimuli, app_db_url):
     server = make_server("127.0.0.1", 0, app, threaded=True)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
+    live_server_manifest[:] = [manifest]
     yield f"http://127.0.0.1:{server.server_port}"
     server.shutdown()
     thread.join(5)
@@ -72,45 +77,51 @@ def test_rater_flow_in_a_real_browser(live_server, browser):
 
     clicked, seen_before_end, n_training = {}, 0, 0
     screenshot = os.environ.get("SAVE_SCREENSHOTS") == "1"
+    state_js = (
+        "var vis=['trial','rating-intro','done'].filter(function(id){return !document.getElementById(id).hidden});"
+        "var v=document.getElementById('video');"
+        "return {section: vis.length ? vis[0] : null,"
+        " label: document.getElementById('phase-label').textContent,"
+        " count: document.getElementById('trial-count').textContent, ended: v.ended, src: v.currentSrc,"
+        " disabled: Array.prototype.every.call(document.querySelectorAll('button.rate'),"
+        "   function(b){return b.disabled}),"
+        " fits: document.documentElement.scrollWidth <= window.innerWidth + 1};")
+
+    def key(s):
+        return (s["section"], s["label"], s["count"])
+
     for _ in range(40):
-        wait.until(lambda d: d.execute_script(
-            "return ['trial','rating-intro','done'].some(function(id){return !document.getElementById(id).hidden})"))
-        if browser.find_element(By.ID, "done").is_displayed():
+        wait.until(lambda d: d.execute_script(state_js)["section"])
+        s = browser.execute_script(state_js)
+        if s["section"] == "done":
             break
-        if browser.find_element(By.ID, "rating-intro").is_displayed():
+        if s["section"] == "rating-intro":
             browser.find_element(By.ID, "rating-go").click()
-            continue
-        label = browser.find_element(By.ID, "phase-label").text
-        ended, disabled = browser.execute_script(
-            "var v=document.getElementById('video');"
-            "return [v.ended, Array.prototype.every.call(document.querySelectorAll('button.rate'),"
-            "function(b){return b.disabled})];")
-        if not ended:
-            assert disabled, "rating buttons must stay disabled until the clip has played to the end"
-            seen_before_end += 1
-        # no horizontal scrolling on a phone-sized screen
-        assert browser.execute_script("return document.documentElement.scrollWidth <= window.innerWidth + 1")
-        if label == "Example":
-            wait.until(EC.element_to_be_clickable((By.ID, "continue"))).click()
-            n_training += 1
         else:
-            count = browser.find_element(By.ID, "trial-count").text
-            index = int(count.split()[0])
-            rating = 1 + index % 5
-            btn = wait.until(EC.element_to_be_clickable((By.CSS_SELECTOR, f'button.rate[data-rating="{rating}"]')))
-            clip_id = browser.execute_script("return document.getElementById('video').currentSrc") \
-                .rsplit("/", 1)[1].split(".")[0]
-            if screenshot and index == 2:
-                (ROOT / "docs" / "img").mkdir(parents=True, exist_ok=True)
-                browser.save_screenshot(str(ROOT / "docs" / "img" / "rating_page.png"))
-            btn.click()
-            clicked[clip_id] = rating
-            wait.until(lambda d: d.find_element(By.ID, "trial-count").text != count
-                       or d.find_element(By.ID, "done").is_displayed())
+            if not s["ended"]:
+                assert s["disabled"], "rating buttons must stay disabled until the clip has played to the end"
+                seen_before_end += 1
+            assert s["fits"], "no horizontal scrolling on a phone-sized screen"
+            if s["label"] == "Example":
+                wait.until(EC.element_to_be_clickable((By.ID, "continue"))).click()
+                n_training += 1
+            else:
+                index = int(s["count"].split()[0])
+                rating = 1 + index % 5
+                btn = wait.until(EC.element_to_be_clickable((By.CSS_SELECTOR, f'button.rate[data-rating="{rating}"]')))
+                if screenshot and index == 2:
+                    (ROOT / "docs" / "img").mkdir(parents=True, exist_ok=True)
+                    browser.save_screenshot(str(ROOT / "docs" / "img" / "rating_page.png"))
+                btn.click()
+                clicked[s["src"].rsplit("/", 1)[1].split(".")[0]] = rating
+        # the page moves on only once the server has acknowledged the answer
+        wait.until(lambda d: d.execute_script(state_js)["section"] and key(d.execute_script(state_js)) != key(s))
     else:
         raise AssertionError("never reached the completion page")
     code = browser.find_element(By.ID, "completion-code").text
-    assert code and n_training == 3 and len(clicked) == 5       # 3 training, 3 test + 2 catch clips
+    roles = [c.role for c in load_manifest(live_server_manifest[0])]
+    assert code and n_training == roles.count("training")
+    assert len(clicked) == min(3, roles.count("test")) + roles.count("catch")    # 3 test clips + every catch clip
     assert seen_before_end >= 1
     errors = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
     assert not errors, errors
