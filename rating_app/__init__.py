@@ -4,7 +4,8 @@
 
 Arguments left as None are read from the environment (ADMIN_TOKEN, DATABASE_URL, RATING_MANIFEST,
 RATINGS_PER_CLIP, CLIPS_PER_RATER, SLOT_TIMEOUT, COMPLETION_CODE, COMPLETION_URL, SECRET_KEY), which is how
-`rating_app.wsgi:app` is configured under gunicorn.
+`rating_app.wsgi:app` is configured under gunicorn. Also read: COOKIE_SECURE=1 (admin cookie over HTTPS
+only) and DB_POOL_SIZE (connections per worker, default 10 + 10 overflow).
 """
 from __future__ import annotations
 
@@ -64,6 +65,7 @@ def create_app(manifest=None, db_url=None, ratings_per_clip=None, clips_per_rate
         SECRET_KEY=secret_key,
         SESSION_COOKIE_HTTPONLY=True,
         SESSION_COOKIE_SAMESITE="Strict",
+        SESSION_COOKIE_SECURE=os.environ.get("COOKIE_SECURE", "") == "1",     # set behind HTTPS
         MAX_CONTENT_LENGTH=16 * 1024,
         RATINGS_PER_CLIP=int(ratings_per_clip),
         CLIPS_PER_RATER=clips_per_rater,
