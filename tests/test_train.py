@@ -7,7 +7,7 @@ import sys
 import pytest
 import torch
 
-from generation.train import TrainError, load_config, train
+from generation.train import TrainError, load_config, main, train
 
 
 @pytest.fixture(autouse=True)
@@ -79,12 +79,11 @@ def test_config_names_and_errors(tmp_path):
         load_config("mg", {"model": "fl"})
 
 
-def test_cli_errors_are_one_line(tmp_path, small_dataset):
-    cases = [
-        ["--model", "mg", "--config", "tiny", "--data", str(tmp_path / "missing.npz"), "--out", str(tmp_path / "o")],
-        ["--model", "mg", "--config", "nosuch", "--data", str(small_dataset), "--out", str(tmp_path / "o")],
-    ]
-    for args in cases:
-        r = subprocess.run([sys.executable, "-m", "generation.train", *args], capture_output=True, text=True)
-        assert r.returncode == 2
-        assert r.stderr.startswith("error: ") and len(r.stderr.strip().splitlines()) == 1, r.stderr
+def test_cli_errors_are_one_line(tmp_path, small_dataset, capsys):
+    r = subprocess.run([sys.executable, "-m", "generation.train", "--model", "mg", "--config", "tiny", "--data",
+                        str(tmp_path / "missing.npz"), "--out", str(tmp_path / "o")], capture_output=True, text=True)
+    assert r.returncode == 2
+    assert r.stderr.startswith("error: ") and "missing.npz" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert main(["--model", "mg", "--config", "nosuch", "--data", str(small_dataset), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: config 'nosuch' not found") and len(err.strip().splitlines()) == 1
