@@ -89,6 +89,19 @@ def test_render_same_camera_set_up_wherever_the_clip_is(walk_clip):
     assert np.abs(other.draw(joints[0], ta[0]).astype(int) - a.draw(joints[0], ta[0]).astype(int)).max() > 100
 
 
+def test_render_frames_do_not_depend_on_the_frames_before():
+    """The drawer reuses its buffers (only the figure's blocks are cleared): a frame drawn after others equals
+    the same frame from a fresh drawer, and nothing is left in the figure buffer."""
+    joints = load_take(WALK, 20.0)[:30].astype(np.float64)
+    targets = camera_targets(joints, 20.0)
+    used = FrameDrawer(skeleton.PARENTS, skeleton.JOINT_NAMES, 200)
+    for t in range(0, 29, 4):
+        used.draw(joints[t], targets[t])
+    fresh = FrameDrawer(skeleton.PARENTS, skeleton.JOINT_NAMES, 200)
+    assert np.array_equal(used.draw(joints[29], targets[29]), fresh.draw(joints[29], targets[29]))
+    assert not used.rgba.any()
+
+
 def test_render_colours_survive_the_yuv_path():
     """Frames are made as yuv420p directly; converted back, the background, floor and limbs have their colours."""
     joints = load_take(WALK, 20.0)[:1].astype(np.float64)
@@ -118,6 +131,10 @@ def test_render_cli(walk_clip, tmp_path):
                          "--size", "128"], capture_output=True, text=True, cwd=ROOT)
     assert ok.returncode == 0, ok.stderr
     assert probe(tmp_path / "o.mp4")["frames"] == 40
+    crf = subprocess.run([sys.executable, "-m", "rendering", str(walk_clip[0]), str(tmp_path / "c.mp4"),
+                          "--size", "64", "--preset", "superfast", "--crf", "23"], capture_output=True, text=True, cwd=ROOT)
+    assert crf.returncode == 0, crf.stderr
+    assert probe(tmp_path / "c.mp4")["frames"] == 40
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     bad = subprocess.run([sys.executable, "-m", "rendering", str(tmp_path / "junk.npz"), str(tmp_path / "j.mp4")],
                          capture_output=True, text=True, cwd=ROOT)
