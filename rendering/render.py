@@ -116,28 +116,29 @@ def _wu_lines(flat, width, a, b, value, alpha):
     grid's fade). A sample's pixels are u*su + v*sv in the flat plane, with (su, sv) = (1, width) for
     shallow lines (stepping along columns) and (width, 1) for steep ones (stepping along rows).
     """
-    steep = np.abs(b[:, 1] - a[:, 1]) > np.abs(b[:, 0] - a[:, 0])
-    a = np.where(steep[:, None], a[:, ::-1], a)               # (u, v): u is the stepping coordinate
-    b = np.where(steep[:, None], b[:, ::-1], b)
-    a, b = np.where((a[:, 0] > b[:, 0])[:, None], b, a), np.where((a[:, 0] > b[:, 0])[:, None], a, b)
+    d = b - a
+    steep = np.abs(d[:, 1]) > np.abs(d[:, 0])
+    au, av = np.where(steep, a[:, 1], a[:, 0]), np.where(steep, a[:, 0], a[:, 1])  # u: the stepping coordinate
+    du, dv = np.where(steep, d[:, 1], d[:, 0]), np.where(steep, d[:, 0], d[:, 1])
     # (A rounding margin, so that an end clipped to the plane's edge always gets its edge sample.)
-    start, stop = np.ceil(a[:, 0] - 1e-6).astype(np.int64), np.floor(b[:, 0] + 1e-6).astype(np.int64)
-    n = np.maximum(stop - start + 1, 0)
+    start = np.ceil(np.minimum(au, au + du) - 1e-6)
+    n = np.maximum(np.floor(np.maximum(au, au + du) + 1e-6) - start + 1, 0).astype(np.int64)
     total = int(n.sum())
     if total == 0:
         return
-    slope = (b[:, 1] - a[:, 1]) / np.maximum(b[:, 0] - a[:, 0], 1e-9)
-    su = np.where(steep, width, 1)
-    sv = np.where(steep, 1, width)
-    line = np.repeat(np.arange(len(a)), n)
-    u = np.arange(total) + (start - (np.cumsum(n) - n))[line]   # the stepping coordinate of each sample
-    v = (a[:, 1] - a[:, 0] * slope)[line] + u * slope[line]
-    v0 = v.astype(np.int64)                          # v > -1e-6: truncation is floor (or 0)
-    p = u * su[line] + v0 * sv[line]                              # flat index of the sample's first pixel
-    q = p + sv[line]                                              # ... and of the second (v <= width-2)
-    w1 = (v - v0).astype(np.float32) * alpha[p]
-    idx = np.concatenate([p, q])
-    w = np.concatenate([alpha[p] - w1, w1])
+    slope = dv / np.where(du == 0, 1.0, du)
+    # Per line, then per sample: u = k + (start - first k of the line), v = icpt + u slope, strides su, sv.
+    per_line = np.stack([start - (np.cumsum(n) - n), av - au * slope, slope,
+                         np.where(steep, width, 1), np.where(steep, 1, width)])
+    ku, icpt, slope, su, sv = np.repeat(per_line, n, axis=1)
+    u = ku + np.arange(total)
+    v = icpt + u * slope
+    v0 = np.trunc(v)                                 # v > -1e-6: the floor (or 0 at the edge)
+    p = (u * su + v0 * sv).astype(np.int64)          # flat index of the sample's first pixel
+    idx = np.concatenate([p, p + sv.astype(np.int64)])  # ... and of its second (v <= width-2)
+    al = alpha[p]
+    w1 = (v - v0).astype(np.float32) * al
+    w = np.concatenate([al - w1, w1])
     y = flat[idx].astype(np.float32)
     flat[idx] = (y + w * (np.float32(value) - y) + np.float32(0.5)).astype(np.uint8)
 
