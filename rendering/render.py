@@ -198,14 +198,20 @@ class FrameDrawer:
         self.u_flat, self.v_flat = self.frame[n:n + n // 4], self.frame[n + n // 4:]
         self.quad = np.array([0, 1, size, size + 1])           # a 2x2 block's pixels from its top left
         self.parents = np.asarray(parents)
-        self.child = np.nonzero(self.parents >= 0)[0]
-        self.bone_ends = np.stack([self.child, self.parents[self.child]], 1)
+        child = np.nonzero(self.parents >= 0)[0]
         # A bone's side is its child joint's side (arms, legs); CMU-style names (LeftArm) count too.
         side = np.array([n.endswith("_L") or n.startswith("Left") for n in joint_names])
         side_r = np.array([n.endswith("_R") or n.startswith("Right") for n in joint_names])
-        self.bone_side = np.where(side[self.child], -1, np.where(side_r[self.child], 1, 0))
-        self.side_masks = {s: self.bone_side == s for s in (-1, 0, 1)}
-        self.codes = np.tile(np.array([Path.MOVETO, Path.LINETO], dtype=Path.code_type), len(self.child))
+        bone_side = np.where(side[child], -1, np.where(side_r[child], 1, 0))
+        # Bones ordered left, centre, right, so that each side's bones are one slice of the projected ends.
+        order = np.argsort(bone_side, kind="stable")
+        self.bone_ends = np.stack([child, self.parents[child]], 1)[order]
+        counts = [int((bone_side == s).sum()) for s in (-1, 0, 1)]
+        edges = np.cumsum([0] + counts)
+        self.codes = np.tile(np.array([Path.MOVETO, Path.LINETO], dtype=Path.code_type), len(child))
+        # side -> (its bones' slice, its path codes), for the sides that have bones
+        self.sides = {key: (slice(edges[k], edges[k + 1]), self.codes[:2 * counts[k]])
+                      for k, key in enumerate(("left", "centre", "right")) if counts[k]}
         names = [n.lower() for n in joint_names]
         self.head = names.index("head") if "head" in names else None
         self.circle = Path.unit_circle()
@@ -261,15 +267,13 @@ class FrameDrawer:
         if (cam[:, 2] > _NEAR).all():
             seg = self.proj.to_screen(cam[self.bone_ends])
             points.append(seg.reshape(-1, 2))
-            depth = cam[self.bone_ends, 2].sum(1)
+            depth = cam[self.bone_ends, 2]
+            d_left, d_right = (depth[self.sides[k][0]].mean() if k in self.sides else 0.0 for k in ("left", "right"))
             # Painter's order: the farther limb side first, then the trunk, then the nearer side.
-            left, right = self.side_masks[-1], self.side_masks[1]
-            d_left = depth[left].mean() if left.any() else 0
-            d_right = depth[right].mean() if right.any() else 0
-            far, near = ((left, "left"), (right, "right")) if d_left >= d_right else ((right, "right"), (left, "left"))
-            for m, key in (far, (self.side_masks[0], "centre"), near):
-                if m.any():
-                    r.draw_path(self.gcs[key], Path(seg[m].reshape(-1, 2), self.codes[:2 * m.sum()]), t)
+            for key in (("left", "centre", "right") if d_left >= d_right else ("right", "centre", "left")):
+                if key in self.sides:
+                    bones, codes = self.sides[key]
+                    r.draw_path(self.gcs[key], Path(seg[bones].reshape(-1, 2), codes), t)
             if self.head is not None and self.parents[self.head] >= 0:
                 # Head: a disc of fixed size in metres, just beyond the head joint along the neck bone.
                 neck = joints[self.head] - joints[self.parents[self.head]]
