@@ -57,21 +57,9 @@ def log(msg):
 
 
 # ---------------------------------------------------------------- data
-def quick_takes(data_dir, per_category=10):
-    """The `per_category` longest takes (by file size) of every locomotion category: enough held-out
-    windows for 30 items plus catch and training items, prepared in a few seconds."""
-    from .prepare_data import category_of, find_takes, take_name
-
-    by_cat = {}
-    for f in find_takes(data_dir):
-        by_cat.setdefault(category_of(f), []).append(f)
-    return sorted(take_name(f) for files in by_cat.values()
-                  for f in sorted(files, key=lambda p: (-p.stat().st_size, p.name))[:per_category])
-
-
 def ensure_dataset(args):
     """The prepared dataset path: --dataset if it exists, else prepared there from --data."""
-    from .prepare_data import default_data_dir, prepare, summary_table
+    from .prepare_data import default_data_dir, longest_takes, prepare, summary_table
 
     path = Path(args.dataset)
     if path.is_file():
@@ -82,7 +70,7 @@ def ensure_dataset(args):
         raise StimuliError(f"data folder {args.data or '../shared/data/bandai-namco-locomotion'} not found; "
                            "pass --data DIR (a folder of .bvh/.bvh.gz takes) or --dataset FILE.npz")
     log(f"data: preparing {data} -> {path}" + (" (quick subset)" if args.quick else ""))
-    takes = quick_takes(data) if args.quick else None
+    takes = longest_takes(data, per_category=10) if args.quick else None
     summary = prepare(data, path, takes=takes, seed=args.seed, progress=True)
     log(summary_table(summary))
     return path

@@ -65,6 +65,16 @@ def find_takes(data_dir):
     return files
 
 
+def longest_takes(data_dir, per_category):
+    """Names of the `per_category` longest takes (by file size) of every locomotion category: a small
+    real subset with held-out windows in every category, for quick runs and tests."""
+    by_cat = {}
+    for f in find_takes(data_dir):
+        by_cat.setdefault(category_of(f), []).append(f)
+    return sorted(take_name(f) for files in by_cat.values()
+                  for f in sorted(files, key=lambda p: (-p.stat().st_size, p.name))[:per_category])
+
+
 def default_data_dir():
     """../shared/data/bandai-namco-locomotion relative to the cwd, or beside the repository root."""
     for base in (Path.cwd(), Path(__file__).resolve().parents[1]):

@@ -33,13 +33,9 @@ def pytest_collection_modifyitems(config, items):
 
 # --- data (issue 2) ---
 def small_take_names(per_category=4):
-    """The `per_category` longest Bandai-Namco takes (by file size) of every locomotion category."""
-    from generation.prepare_data import category_of, find_takes, take_name
-    by_cat = {}
-    for f in find_takes(BANDAI):
-        by_cat.setdefault(category_of(f), []).append(f)
-    return sorted(take_name(f) for files in by_cat.values()
-                  for f in sorted(files, key=lambda p: (-p.stat().st_size, p.name))[:per_category])
+    """The `per_category` longest Bandai-Namco takes of every locomotion category."""
+    from generation.prepare_data import longest_takes
+    return longest_takes(BANDAI, per_category)
 
 
 @pytest.fixture(scope="session")
@@ -116,3 +112,13 @@ def quick_stimuli(tmp_path_factory):
         pytest.fail(f"make_stimuli --quick failed ({r.returncode}): {r.stderr[-3000:]}")
     (root / "make_stimuli.log").write_text(r.stdout + r.stderr)
     return root / "stimuli"
+
+
+@pytest.fixture
+def torch_one_thread():
+    """Tiny models: one thread is as fast and immune to other jobs on a shared 2-core machine."""
+    import torch
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)

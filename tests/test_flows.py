@@ -10,14 +10,7 @@ from generation.moglow import LSTMNet, MoGlow
 
 C, CC, T, TAU = 6, 2, 4, 3
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Tiny models: one thread is as fast and immune to other jobs on a shared 2-core machine."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
 
 def perturb(module, scale=0.1):

@@ -12,13 +12,7 @@ from generation.sample import SampleError, load_model, mg_stream, sample_fl, sam
 from generation.sample import main as sample_main
 from generation.train import load_config
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
 
 def last_ckpt(run):
