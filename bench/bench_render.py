@@ -5,8 +5,9 @@
 Both render the same real 80-frame walk (4 s at 20 fps) at size x size to H.264 (libx264, one thread)
 with the process and its ffmpeg child pinned to one core. Reported per clip: wall time and CPU time
 (this process + ffmpeg), the best of `repeats`; ours with its default x264 settings (ultrafast, qp 17)
-against the baseline at ultrafast, and with the old default (superfast, crf 20) against it at superfast. The baseline is what one writes first: an mplot3d
-figure with a floor grid, one Line3D per bone updated in FuncAnimation, saved with FFMpegWriter.
+against the baseline at ultrafast, and with the old default (superfast, crf 20) against it at superfast.
+The baseline is what one writes first: an mplot3d figure with a floor grid, one Line3D per bone updated
+in FuncAnimation, saved with FFMpegWriter.
 """
 import argparse
 import os

@@ -132,7 +132,8 @@ def test_render_cli(walk_clip, tmp_path):
     assert ok.returncode == 0, ok.stderr
     assert probe(tmp_path / "o.mp4")["frames"] == 40
     crf = subprocess.run([sys.executable, "-m", "rendering", str(walk_clip[0]), str(tmp_path / "c.mp4"),
-                          "--size", "64", "--preset", "superfast", "--crf", "23"], capture_output=True, text=True, cwd=ROOT)
+                          "--size", "64", "--preset", "superfast", "--crf", "23"],
+                         capture_output=True, text=True, cwd=ROOT)
     assert crf.returncode == 0, crf.stderr
     assert probe(tmp_path / "c.mp4")["frames"] == 40
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
