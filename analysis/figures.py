@@ -40,7 +40,7 @@ def ratings_histogram(hist, means, path, title=None):
     col = colours(conds)
     scale = [int(s) for s in hist.columns]
     with plt.rc_context(STYLE):
-        fig, ax = plt.subplots(figsize=(6.4, 3.4))
+        fig, ax = plt.subplots(figsize=(7.8, 3.4))
         width = 0.8 / len(conds)
         top = hist.to_numpy().max()
         for i, c in enumerate(conds):
@@ -58,7 +58,9 @@ def ratings_histogram(hist, means, path, title=None):
         ax.set_ylim(0, top * (1.1 + 0.07 * len(conds)))
         ax.set_xlim(scale[0] - 0.6, scale[-1] + 0.6)
         ax.grid(axis="y", color="0.9", lw=0.6, zorder=0)
-        ax.legend(frameon=False, loc="upper left", title="Condition (dashed: mean)", title_fontsize=8)
+        # Beside the axes: inside, it would cover the mean lines and their labels.
+        ax.legend(frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0), title="Condition (dashed: mean)",
+                  title_fontsize=8, alignment="left")
         if title:
             ax.set_title(title, loc="left")
         return _save(fig, path)
