@@ -73,6 +73,8 @@ def test_fast_sampler_matches_plain_lstm_and_inverts_forward(tiny_runs, test_spl
     fast = model.inverse(z, hist, c)
     plain = model.inverse_naive(z, hist, c)
     assert torch.allclose(fast, plain, atol=1e-5), (fast - plain).abs().max()
+    one = model.inverse(z[:1], hist[:1], c[:1])  # one stream: MGStream's row-form products
+    assert torch.allclose(one, plain[:1], atol=1e-5), (one - plain[:1]).abs().max()
     with torch.no_grad():
         z_back, _ = model(torch.cat([hist, fast], dim=1), c)
     assert torch.allclose(z_back, z, atol=1e-3), (z_back - z).abs().max()
