@@ -2,11 +2,12 @@
 
     python bench/bench_sampling.py [--frames 60] [--threads 2]
 
-Compares the streaming sampler (generation.moglow.MGStream: fused weights, feature-major activations, every
-product known at the start of a frame done for all K steps in batched matmuls, no autograd) with a plain baseline measured in
-the same run (MoGlow.inverse_naive: each coupling's nn.LSTM called per frame with its carried state, also
-without autograd), for 1 stream and a batch of 30 streams, and with a floor measured beside them (the
-fastest of three matmul layouts reading the same number of weights). Targets (issue 3): <= 12 ms (1) and <= 25 ms (30).
+Compares the streaming sampler (generation.moglow.MGStream: fused weights, feature-major activations,
+every product known at the start of a frame done for all K steps in batched matmuls, no autograd) with a
+plain baseline measured in the same run (MoGlow.inverse_naive: each coupling's nn.LSTM called per frame
+with its carried state, also without autograd), for 1 stream and a batch of 30 streams, and with a floor
+measured beside them (the fastest of three matmul layouts reading the same number of weights).
+Targets (issue 3): <= 12 ms (1) and <= 25 ms (30).
 """
 import argparse
 import json
@@ -107,8 +108,8 @@ def main():
         lm, lc, form = floor(n_all, batch, frames)
         rows[batch] = dict(fast_ms=fm, fast_cpu_ms=fc, naive_ms=nm, naive_cpu_ms=nc, floor_ms=lm, floor_cpu_ms=lc,
                            floor_form=form)
-        print(f"| {batch} | {fm:.1f}, {fc:.1f} | {nm:.1f}, {nc:.1f} | {nm / fm:.2f}x, {nc / fc:.2f}x | {lm:.1f}, {lc:.1f} "
-              f"({form}) | {fm / lm:.2f}, {fc / lc:.2f} |", flush=True)
+        print(f"| {batch} | {fm:.1f}, {fc:.1f} | {nm:.1f}, {nc:.1f} | {nm / fm:.2f}x, {nc / fc:.2f}x "
+              f"| {lm:.1f}, {lc:.1f} ({form}) | {fm / lm:.2f}, {fc / lc:.2f} |", flush=True)
     if a.json:
         Path(a.json).write_text(json.dumps(dict(rows=rows, threads=a.threads, load=os.getloadavg()), indent=2))
 
