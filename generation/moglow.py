@@ -112,8 +112,9 @@ class MGStream:
 
     Where the time goes (paper size: 73M LSTM weights, all read once per frame) and how it is cut:
     (1) everything in the coupling LSTMs' gates that is known at the start of a frame is computed for all K
-    steps at once: layer 1's history+control part (one matmul) and the recurrent h_{t-1} products of every
-    layer (one batched matmul per layer); (2) per step only what depends on the previous step's output is
+    steps at once: layer 1's history+control part (one batched matmul; the input padded to a multiple of 16
+    columns, layer 1's bias folded into the padding) and the recurrent h_{t-1} products of every layer (one
+    batched matmul per layer); (2) per step only what depends on the previous step's output is
     left: layer 1's lower-half product, layer 2's 2048x512 input product, the cells, the output layer and
     the 63x63 inverse, all accumulated in place into preallocated buffers; (3) activations are kept
     feature-major ([features, B]) and weights as nn.LSTM stores them ([out, in]), so every product is
