@@ -115,7 +115,7 @@ def resample_local(q, trans, fps_in, fps_out):
     i0 = np.minimum(np.floor(u).astype(np.int64), q.shape[0] - 1)
     i1 = np.minimum(i0 + 1, q.shape[0] - 1)
     w = (u - i0)[:, None]
-    q_out = slerp(q[i0], q[i1], np.broadcast_to(w, q[i0].shape[:-1]))
+    q_out = slerp(q[i0], q[i1], np.broadcast_to(w, (len(u),) + q.shape[1:-1]))
     t_out = trans[i0] * (1 - w[..., None]) + trans[i1] * w[..., None]
     return q_out, t_out
 
