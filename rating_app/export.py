@@ -44,25 +44,27 @@ def progress(engine: Engine, target: int) -> dict:
     with Session(engine.execution_options(read_only=True)) as s:
         clips = s.execute(select(Clip.clip_id, Clip.condition, Clip.role, Clip.item)
                           .where(Clip.role != "training").order_by(Clip.role, Clip.condition, Clip.clip_id)).all()
-        done = dict(s.execute(select(Rating.clip_id, func.count()).group_by(Rating.clip_id)).all())
-        mean = dict(s.execute(select(Rating.clip_id, func.avg(Rating.rating)).group_by(Rating.clip_id)).all())
+        # One pass over the ratings: count and sum per clip (condition means come from the exact sums).
+        stats = {c: (n, int(total)) for c, n, total in s.execute(
+            select(Rating.clip_id, func.count(), func.sum(Rating.rating)).group_by(Rating.clip_id))}
         pending = dict(s.execute(select(Trial.clip_id, func.count())
                                  .join(Rater, Rater.id == Trial.rater_pk)
                                  .where(Trial.phase == "rating", Trial.answered_at.is_(None),
                                         Trial.released.is_(False), Rater.completed_at.is_(None))
                                  .group_by(Trial.clip_id)).all())
-        per_clip = [{"clip_id": c, "condition": cond, "role": role, "item": item, "ratings": done.get(c, 0),
-                     "in_progress": pending.get(c, 0), "target": target if role == "test" else None,
-                     "mean": None if mean.get(c) is None else round(float(mean[c]), 2)}
-                    for c, cond, role, item in clips]
-        per_cond = {}
-        for r in per_clip:
-            d = per_cond.setdefault(r["condition"], {"condition": r["condition"], "role": r["role"], "clips": 0,
-                                                     "ratings": 0, "target": 0, "_sum": 0.0})
+        per_clip, per_cond = [], {}
+        for c, cond, role, item in clips:
+            n, total = stats.get(c, (0, 0))
+            r = {"clip_id": c, "condition": cond, "role": role, "item": item, "ratings": n,
+                 "in_progress": pending.get(c, 0), "target": target if role == "test" else None,
+                 "mean": round(total / n, 2) if n else None}
+            per_clip.append(r)
+            d = per_cond.setdefault(cond, {"condition": cond, "role": role, "clips": 0, "ratings": 0, "target": 0,
+                                           "_sum": 0})
             d["clips"] += 1
-            d["ratings"] += r["ratings"]
+            d["ratings"] += n
             d["target"] += r["target"] or 0
-            d["_sum"] += (r["mean"] or 0) * r["ratings"]
+            d["_sum"] += total
         for d in per_cond.values():
             d["mean"] = round(d.pop("_sum") / d["ratings"], 2) if d["ratings"] else None
         n_rated = dict(s.execute(select(Rating.rater_pk, func.count()).group_by(Rating.rater_pk)).all())
