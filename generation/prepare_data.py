@@ -86,9 +86,7 @@ def default_data_dir():
 
 def _load_features(args):
     path, fps = args
-    joints = load_take(path, fps)
-    x, c = to_features(joints, fps)
-    return x, c
+    return to_features(load_take(path, fps), fps)
 
 
 def window_starts(n_frames, window, stride, first=0):
@@ -191,21 +189,19 @@ def prepare(data_dir, out_path, fps=20.0, window=80, stride=20, seed=0, takes=No
                 d["hist"].append(xv[hidx])
                 d["hist_c"].append(cv[hidx])
 
+    # Shape and dtype of each stacked key when a split has no windows.
+    empty = dict(x=((0, window, skeleton.POSE_DIM), np.float32), c=((0, window, skeleton.CONTROL_DIM), np.float32),
+                 start=((0,), np.int64), aug=((0,), np.int64),
+                 hist=((0, tau, skeleton.POSE_DIM), np.float32), hist_c=((0, tau, skeleton.CONTROL_DIM), np.float32))
     arrays = {}
     for s in SPLITS:
         d = out[s]
-        n = len(d["labels"])
-        arrays[f"{s}_x"] = np.concatenate(d["x"]) if n else np.zeros((0, window, skeleton.POSE_DIM), np.float32)
-        arrays[f"{s}_c"] = np.concatenate(d["c"]) if n else np.zeros((0, window, skeleton.CONTROL_DIM), np.float32)
         arrays[f"{s}_labels"] = np.array(d["labels"], dtype=str)
         arrays[f"{s}_take"] = np.array(d["take"], dtype=str)
-        arrays[f"{s}_start"] = np.concatenate(d["start"]) if n else np.zeros(0, np.int64)
-        arrays[f"{s}_aug"] = np.concatenate(d["aug"]) if n else np.zeros(0, np.int64)
-        if s != "train":
-            arrays[f"{s}_hist"] = (np.concatenate(d["hist"]) if n
-                                   else np.zeros((0, tau, skeleton.POSE_DIM), np.float32))
-            arrays[f"{s}_hist_c"] = (np.concatenate(d["hist_c"]) if n
-                                     else np.zeros((0, tau, skeleton.CONTROL_DIM), np.float32))
+        for key, (shape, dtype) in empty.items():
+            if s == "train" and key.startswith("hist"):
+                continue
+            arrays[f"{s}_{key}"] = np.concatenate(d[key]) if d[key] else np.zeros(shape, dtype)
     if len(arrays["train_x"]) == 0:
         raise PrepareError(f"{data_dir}: no training windows (takes shorter than window={window} frames?)")
 
