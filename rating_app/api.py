@@ -18,7 +18,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from .assign import StudyFull, plan_trials
-from .db import Event, Rater, Rating, Trial, is_sqlite, utcnow
+from .db import Event, Rater, Rating, Trial, utcnow
 
 bp = Blueprint("api", __name__, url_prefix="/api")
 
@@ -72,16 +72,7 @@ def _ext(body, name):
     return v
 
 
-def load_rater(s: Session, token: str) -> Rater:
-    if not TOKEN.match(token):
-        abort(404, "unknown session")
-    rater = s.scalar(select(Rater).where(Rater.token == token))
-    if rater is None:
-        abort(404, "unknown session")
-    return rater
-
-
-def _session_reply(s: Session, rater: Rater, status: int):
+def _session_reply(rater: Rater, status: int):
     return jsonify(session=rater.token, rater_id=rater.rater_id, n_trials=rater.n_training + rater.n_rating,
                    n_training=rater.n_training, n_rating=rater.n_rating, resumed=status == 200), status
 
@@ -98,7 +89,7 @@ def create_session():
                     # The same participant again (reload, second tab, retried request): resume.
                     old = s.scalar(select(Rater).where(Rater.external_id == external_id))
                     if old is not None:
-                        return _session_reply(s, old, 200)
+                        return _session_reply(old, 200)
                 rng = random.Random(secrets.randbits(64))
                 try:
                     plan = plan_trials(s, rng, cfg["RATINGS_PER_CLIP"], cfg["CLIPS_PER_RATER"],
@@ -120,7 +111,7 @@ def create_session():
                 s.execute(insert(Trial), rows)            # one multi-row INSERT, not one per trial
                 rater.n_training, rater.n_rating = counters["training"], counters["rating"]
                 s.flush()
-                return _session_reply(s, rater, 201)
+                return _session_reply(rater, 201)
         except IntegrityError:
             # Two concurrent requests with the same external id: the other one won; resume it.
             if external_id is None:
@@ -129,7 +120,7 @@ def create_session():
                 old = s.scalar(select(Rater).where(Rater.external_id == external_id))
                 if old is None:
                     raise
-                return _session_reply(s, old, 200)
+                return _session_reply(old, 200)
 
 
 def _completion(rater: Rater) -> dict:
@@ -256,14 +247,14 @@ def post_event(token):
         abort(400, "field 'detail' must be a string")
     detail = detail[:500]
     trial_id = _int_field(body, "trial_id", 1, 2**31 - 1, nullable=True)
-    with Session(engine()) as s, s.begin():
-        rater = load_rater(s, token)
+    with engine().begin() as conn:
+        rater = _rater(conn, token)
         clip = None
         if trial_id is not None:
-            clip = s.scalar(select(Trial.clip_id).where(Trial.id == trial_id, Trial.rater_pk == rater.id))
+            clip = conn.execute(select(Trial.clip_id).where(Trial.id == trial_id, Trial.rater_pk == rater.id)).scalar()
             if clip is None:
                 abort(404, "unknown trial for this session")
-        s.add(Event(rater_pk=rater.id, trial_pk=trial_id, kind=kind, detail=detail, created_at=utcnow()))
-        rater_id = rater.rater_id
-    current_app.logger.warning("client %s: rater %s clip %s: %s", kind, rater_id, clip, detail)
+        conn.execute(insert(Event).values(rater_pk=rater.id, trial_pk=trial_id, kind=kind, detail=detail,
+                                          created_at=utcnow()))
+    current_app.logger.warning("client %s: rater %s clip %s: %s", kind, rater.rater_id, clip, detail)
     return jsonify(logged=True), 201
