@@ -20,8 +20,7 @@ from . import skeleton
 from .clip import save_clip
 from .fl import FL
 from .moglow import MGStream, MoGlow
-
-MODELS = {"fl": FL, "mg": MoGlow}
+from .train import MODELS, pick_device
 
 
 class SampleError(ValueError):
@@ -31,7 +30,6 @@ class SampleError(ValueError):
 def load_model(ckpt_path, device=None):
     """A checkpoint written by generation.train -> model in eval mode, with .kind, .config, .step, .fps,
     .window and its data statistics (buffers x_mean/x_std/c_mean/c_std)."""
-    from .train import pick_device
     device = pick_device(device)
     try:
         ck = torch.load(ckpt_path, map_location=device, weights_only=False)
@@ -54,12 +52,16 @@ def _generator(seed):
     return torch.Generator().manual_seed(int(seed))  # CPU generator: the same samples on any device
 
 
+def _mg_stream(model, history, history_control, temperature, seed):
+    """MGStream seeded with the last tau frames of un-standardised history."""
+    hist = model.standardize_x(_tensor(history, model)[:, -model.tau:])
+    hist_c = model.standardize_c(_tensor(history_control, model)[:, -model.tau:])
+    return MGStream(model, hist, hist_c, temperature, _generator(seed))
+
+
 def mg_stream(model, history, history_control, temperature=1.0, seed=0):
     """Real-time form of MG: returns f(control_t [B, 3]) -> pose [B, 63] (numpy, un-standardised)."""
-    tau = model.tau
-    hist = model.standardize_x(_tensor(history, model)[:, -tau:])
-    hist_c = model.standardize_c(_tensor(history_control, model)[:, -tau:])
-    stream = MGStream(model, hist, hist_c, temperature, _generator(seed))
+    stream = _mg_stream(model, history, history_control, temperature, seed)
 
     @torch.inference_mode()
     def step(control):
@@ -79,9 +81,7 @@ def sample_mg(model, control, history, history_control, temperature=1.0, seed=0)
     control = _tensor(control, model)
     if control.ndim != 3 or history.shape[1] < model.tau or np.shape(history_control)[1] < model.tau:
         raise SampleError(f"sample_mg: need control [B,T,3] and >= tau={model.tau} history frames")
-    hist = model.standardize_x(_tensor(history, model)[:, -model.tau:])
-    hist_c = model.standardize_c(_tensor(history_control, model)[:, -model.tau:])
-    stream = MGStream(model, hist, hist_c, temperature, _generator(seed))
+    stream = _mg_stream(model, history, history_control, temperature, seed)
     c = model.standardize_c(control)
     out = torch.stack([stream.step(c[:, t]) for t in range(c.shape[1])], dim=1)
     return model.unstandardize_x(out).cpu().numpy().astype(np.float32)
