@@ -78,19 +78,19 @@ def ensure_dataset(args):
 
 def load_splits(path):
     """The held-out splits of a prepared dataset as {split: dict of arrays}, plus fps and window."""
+    keys = ("x", "c", "labels", "take", "start", "hist", "hist_c")
     try:
+        # Only the held-out arrays: the training split is most of the file and is not needed here.
         with np.load(path, allow_pickle=False) as f:
-            d = {k: f[k] for k in f.files}
+            names = set(f.files)
+            splits = {s: {k: f[f"{s}_{k}"] for k in keys} for s in ("test", "valid")
+                      if all(f"{s}_{k}" in names for k in keys)}
+            fps, window = float(f["fps"]), int(f["window"])
     except (OSError, ValueError) as e:
         raise StimuliError(f"{path}: not a readable dataset .npz ({e})") from None
-    splits = {}
-    for s in ("test", "valid"):
-        keys = ("x", "c", "labels", "take", "start", "hist", "hist_c")
-        if all(f"{s}_{k}" in d for k in keys):
-            splits[s] = {k: d[f"{s}_{k}"] for k in keys}
     if "test" not in splits:
         raise StimuliError(f"{path}: no test split with history (test_x, test_hist, ...); re-run prepare_data")
-    return splits, float(d["fps"]), int(d["window"])
+    return splits, fps, window
 
 
 # ---------------------------------------------------------------- items
