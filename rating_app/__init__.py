@@ -88,7 +88,6 @@ def create_app(manifest=None, db_url=None, ratings_per_clip=None, clips_per_rate
             logging.getLogger(__name__).warning("metrics.csv ignored: %s", e)
     app.extensions["rating_app"] = {
         "engine": engine,
-        "videos": {c.clip_id: c.video for c in clips},
         "clips": {c.clip_id: c for c in clips},
         "metrics": metrics,
         "manifest": str(manifest) if manifest else None,

@@ -37,9 +37,10 @@ def index():
 def video(name):
     # Only files named by clip id in the manifest: no listing, no path from the client ever reaches the disk.
     m = VIDEO_NAME.match(name)
-    path = current_app.extensions["rating_app"]["videos"].get(m.group(1)) if m else None
-    if path is None:
+    clip = current_app.extensions["rating_app"]["clips"].get(m.group(1)) if m else None
+    if clip is None:
         abort(404, "unknown video")
+    path = clip.video
     if not path.is_file():
         current_app.logger.error("video file missing on the server: %s", path)
         abort(404, "unknown video")
