@@ -127,7 +127,7 @@ def select_items(splits, n_items, n_catch, n_training, seed):
         raise StimuliError(f"{need} items needed but the held-out splits have only {len(pool)} windows; "
                            "lower --n-items/--n-catch/--n-training")
     test = pool[:n_items]
-    rest = [p for p in pool if p not in set(test)]
+    rest = pool[n_items:]
     # Catch and training items: other windows, preferring other takes than the test items'.
     used_takes = {splits[s]["take"][i] for s, i in test}
     rest.sort(key=lambda p: splits[p[0]]["take"][p[1]] in used_takes)  # stable: keeps the balanced order
@@ -188,7 +188,8 @@ def ensure_model(kind, args, dataset):
         path = Path(given)
         if not path.is_file():
             raise StimuliError(f"--{kind}-checkpoint {path}: no such file")
-        return path, checkpoints_in(path.parent)[0] if checkpoints_in(path.parent) else path
+        siblings = checkpoints_in(path.parent)
+        return path, siblings[0] if siblings else path
     run = Path(args.runs) / f"{kind}_{args.config}"
     resume = (run / "resume.pt").is_file()
     log(f"models: {'resuming' if resume else 'training'} {kind} (config {args.config}) in {run}")
@@ -457,10 +458,8 @@ def main(argv=None):
     try:
         return run(parse_args(argv))
     except (StimuliError, SystemError_, PrepareError, BvhError, TrainError, DatasetError, ClipError,
-            RenderError, SampleError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    except OSError as e:  # unwritable --out, full disk, ...: the message names the path
+            RenderError, SampleError,
+            OSError) as e:  # OSError: an unwritable --out, a full disk, ...: the message names the path
         print(f"error: {e}", file=sys.stderr)
         return 2
 
