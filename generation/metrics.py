@@ -102,9 +102,3 @@ def clip_metrics(joints, fps, control=None):
         control_error=control_error(joints, control) if control is not None else float("nan"),
     )
 
-
-def summarise(df, by=("role", "condition")):
-    """Per-group mean and standard deviation of every metric of a metrics table (pandas DataFrame)."""
-    cols = [m for m in METRIC_NAMES if m in df.columns]
-    out = df.groupby(list(by))[cols].agg(["mean", "std"])
-    return out
