@@ -101,4 +101,3 @@ def clip_metrics(joints, fps, control=None):
         jerk=jerk(joints, fps),
         control_error=control_error(joints, control) if control is not None else float("nan"),
     )
-
