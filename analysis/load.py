@@ -23,7 +23,9 @@ def _read_csv(path):
     path = Path(path)
     if not path.is_file():
         raise AnalysisError(f"{path}: no such file")
-    if path.stat().st_size == 0 or not path.read_bytes()[:4096].strip():
+    with open(path, "rb") as f:
+        head = f.read(4096)  # not read_bytes(): the whole file is read once, by pandas, below
+    if not head.strip():
         raise AnalysisError(f"{path}: file is empty (expected a CSV header and rows)")
     try:
         # All text, no NA guessing: "NA" or "" stay visible so we can name the line that holds them.
