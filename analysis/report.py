@@ -84,7 +84,7 @@ def _clean(x):
 
 
 def _records(df):
-    return [{k: v for k, v in row.items()} for row in df.to_dict(orient="records")]
+    return df.to_dict(orient="records")
 
 
 def section_json(res):
@@ -114,9 +114,7 @@ def section_json(res):
 
 
 def to_json(counts, kept, everyone, meta):
-    doc = {**meta}
-    doc.update({k: v for k, v in counts.items()})
-    doc.update(section_json(kept))
+    doc = {**meta, **counts, **section_json(kept)}
     doc["without_exclusion"] = section_json(everyone)
     return _clean(doc)
 
