@@ -4,7 +4,6 @@ import csv
 import io
 import threading
 
-import pytest
 
 from rating_app import create_app
 from rating_app.manifest import load_manifest

@@ -1,7 +1,6 @@
 """`python -m rating_app serve | export | simulate`, the manifest reader and the simulated crowd's model."""
 import collections
 import csv
-import io
 import json
 import os
 import subprocess
