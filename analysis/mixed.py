@@ -76,16 +76,16 @@ def _solve_parts(s, tr, tc):
         x_big = (v_big - a * (A @ x_small)) / (d_big[:, None] if v_big.ndim == 2 else d_big)
         return x_big, x_small
 
-    return logdet, solve, s.rater_big
+    return logdet, solve
 
 
 def _gls(s, tr, tc):
     """For relative variances (tr, tc): REML deviance, b (centred y), X'V*^-1 X and r2."""
-    logdet, solve, rater_big = _solve_parts(s, tr, tc)
+    logdet, solve = _solve_parts(s, tr, tc)
     sr, sc = math.sqrt(tr), math.sqrt(tc)
     # Lambda Z'X and Lambda Z'y, split into the eliminated ("big") and Schur ("small") blocks
     LX_r, LX_c, Ly_r, Ly_c = sr * s.ZrX, sc * s.ZcX, sr * s.Zry, sc * s.Zcy
-    if rater_big:
+    if s.rater_big:
         bX, sX, by, sy = LX_r, LX_c, Ly_r, Ly_c
     else:
         bX, sX, by, sy = LX_c, LX_r, Ly_c, Ly_r
