@@ -31,6 +31,12 @@ class ActNorm(nn.Module):
         self.logs = nn.Parameter(torch.zeros(1, channels, 1))
         self.register_buffer("initialized", torch.tensor(False))
         self.min_std = min_std
+        # Python mirror of `initialized`: reading the buffer on every call would make a GPU wait each time.
+        self._ready = False
+
+    def _load_from_state_dict(self, *args, **kwargs):
+        super()._load_from_state_dict(*args, **kwargs)
+        self._ready = False  # read the loaded flag again on the next call
 
     @torch.no_grad()
     def initialize(self, x):
@@ -41,8 +47,10 @@ class ActNorm(nn.Module):
         self.initialized.fill_(True)
 
     def forward(self, x, cond=None):
-        if not self.initialized:
-            self.initialize(x)
+        if not self._ready:
+            if not self.initialized:
+                self.initialize(x)
+            self._ready = True
         y = (x + self.bias) * torch.exp(self.logs)
         return y, self.logs.sum().expand(x.shape[0]) * x.shape[2]
 

@@ -163,3 +163,14 @@ def test_mg_history_dropout_only_in_training():
     assert 0.9 < dropped < 0.99
     model.eval()
     assert (model.make_cond(x, c)[..., :TAU * 63] != 0).all()
+
+
+def test_actnorm_follows_a_loaded_init_flag():
+    """Loading an uninitialised state into a used ActNorm makes it initialise again on the next batch."""
+    norm = ActNorm(3)
+    norm(torch.randn(8, 3, 5) * 5 + 2)
+    norm.load_state_dict(ActNorm(3).state_dict())
+    y, _ = norm(torch.randn(16, 3, 7) * 3 + 1)
+    assert bool(norm.initialized)
+    assert torch.allclose(y.mean(dim=(0, 2)), torch.zeros(3), atol=1e-5)
+    assert torch.allclose(y.std(dim=(0, 2), unbiased=False), torch.ones(3), atol=1e-4)
