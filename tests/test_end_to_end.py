@@ -84,7 +84,9 @@ def test_study_end_to_end_on_postgres(quick_stimuli, pg_database, tmp_path):
 
     # Real motion is rated above the catch trials, and the report holds the paper's figures.
     means = stats["condition_means"]
-    assert means["NAT"] > means.get("BAD", 0.0) or "BAD" not in means
+    # Catch rows never enter the statistics, so BAD is compared from the rows below; the report itself must
+    # rank the real motion first among the test conditions.
+    assert "BAD" not in means and max(means, key=means.get) == "NAT"
     with_excl = {}
     for row in rows:
         if row["rater_id"] not in failed:
