@@ -2,11 +2,12 @@
 
     python bench/bench_sampling.py [--frames 60] [--threads 2]
 
-Compares the streaming sampler (generation.moglow.MGStream: fused weights, feature-major activations,
-every product known at the start of a frame done for all K steps in batched matmuls, no autograd) with a
-plain baseline measured in the same run (MoGlow.inverse_naive: each coupling's nn.LSTM called per frame
-with its carried state, also without autograd), for 1 stream and a batch of 30 streams, and with a floor
-measured beside them (the fastest of three matmul layouts reading the same number of weights).
+Compares the streaming sampler (generation.moglow.MGStream: fused weights, every product known at the start
+of a frame done for all K steps in batched matmuls, no autograd) in both of its memory layouts ("row" and
+"col", timed frame by frame in turn so that both see the same machine) and the one `pick_layout` chooses,
+with a plain baseline measured in the same run (MoGlow.inverse_naive: each coupling's nn.LSTM called per
+frame with its carried state, also without autograd), for 1 stream and a batch of 30 streams, and with a
+floor measured beside them (the fastest of four matmul forms reading the same number of weights).
 Targets (issue 3): <= 12 ms (1) and <= 25 ms (30).
 """
 import argparse
@@ -20,7 +21,7 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from generation.moglow import MGStream, MoGlow  # noqa: E402
+from generation.moglow import LAYOUTS, MGStream, MoGlow, pick_layout  # noqa: E402
 from generation.train import load_config, model_config  # noqa: E402
 
 
@@ -37,25 +38,33 @@ def paper_model():
 
 
 def time_frames(step_fn, frames, warmup=3):
+    return time_interleaved({"": step_fn}, frames, warmup)[""]
+
+
+def time_interleaved(step_fns, frames, warmup=3):
+    """{name: fn} -> {name: (wall ms, CPU ms)}, medians over `frames` calls, the functions called in turn so
+    that a burst of other tenants' memory traffic hits all of them alike."""
     for _ in range(warmup):
-        step_fn()
-    times, cpu = [], []
+        for fn in step_fns.values():
+            fn()
+    times = {name: ([], []) for name in step_fns}
     for _ in range(frames):
-        t, c = time.perf_counter(), time.process_time()
-        step_fn()
-        times.append(time.perf_counter() - t)
-        cpu.append(time.process_time() - c)
+        for name, fn in step_fns.items():
+            t, c = time.perf_counter(), time.process_time()
+            fn()
+            times[name][0].append(time.perf_counter() - t)
+            times[name][1].append(time.process_time() - c)
     # wall median, and CPU time median (all threads): with 1 thread on a shared machine the CPU time is the
     # steadier figure, as it leaves out the time the process waited for a core.
-    return 1000 * statistics.median(times), 1000 * statistics.median(cpu)
+    return {name: (1000 * statistics.median(w), 1000 * statistics.median(c)) for name, (w, c) in times.items()}
 
 
 def floor(n_params, batch, frames):
     """The memory/compute floor measured here and now: reading as many weights (and doing as many
     multiply-adds per stream) as one MG frame in the fastest of three layouts, so contention from other jobs
     hits it the same way: one wide matmul X @ W, and batched matmuls over 16 blocks [2048, n / 32768] in
-    the column form W @ X (what MGStream uses for a batch of streams) and the row form X @ W^T (one
-    stream). Returns (wall ms, CPU ms, layout) of the fastest."""
+    the column form W @ X (MGStream's "col" layout), the row form X @ W with the weights stored [in, out]
+    (its "row" layout), and X @ W^T. Returns (wall ms, CPU ms, form) of the fastest."""
     k, rows = 16, 2048
     cols = n_params // (k * rows)
     w = torch.randn(k, rows, cols)
@@ -64,6 +73,8 @@ def floor(n_params, batch, frames):
         "bmm W@X": (lambda x=torch.randn(k, cols, batch), o=torch.empty(k, rows, batch): torch.bmm(w, x, out=o)),
         "bmm X@W^T": (lambda x=torch.randn(k, batch, cols), o=torch.empty(k, batch, rows):
                       torch.bmm(x, w.mT, out=o)),
+        "bmm X@W": (lambda x=torch.randn(k, batch, cols), o=torch.empty(k, batch, rows), wt=w.view(k, cols, rows):
+                    torch.bmm(x, wt, out=o)),
     }
     with torch.inference_mode():
         timed = {name: time_frames(f, frames) for name, f in forms.items()}
@@ -77,12 +88,12 @@ def bench(model, batch, frames):
     ctrl = torch.randn(batch, 3)
     gen = torch.Generator().manual_seed(0)
     with torch.inference_mode():
-        stream = MGStream(model, hist, hist_c, 1.0, gen)
-        fast = time_frames(lambda: stream.step(ctrl), frames)
+        streams = {name: MGStream(model, hist, hist_c, 1.0, gen, layout=name) for name in LAYOUTS}
+        fast = time_interleaved({name: (lambda st=st: st.step(ctrl)) for name, st in streams.items()}, frames)
         c_all = torch.randn(batch, tau + 1, 3)
         z = torch.randn(batch, 1, 63)
         naive = time_frames(lambda: model.inverse_naive(z, hist, c_all), max(5, frames // 3))
-    return fast, naive
+    return fast, naive, pick_layout(model, batch)
 
 
 def main():
@@ -99,16 +110,19 @@ def main():
           f"{os.getloadavg()[0]:.1f} (other jobs on the machine inflate the figures)")
     rows = {}
     n_all = sum(p.numel() for p in model.parameters())
-    print("| streams | fast ms/frame (wall, CPU) | plain nn.LSTM ms/frame (wall, CPU) | speed-up vs plain (wall, CPU) "
-          "| floor ms/frame (wall, CPU; fastest matmul form reading the same weights) | fast / floor (wall, CPU) |")
-    print("|---|---|---|---|---|---|")
+    print("| streams | row ms/frame (wall, CPU) | col ms/frame (wall, CPU) | picked | plain nn.LSTM ms/frame (wall, CPU) "
+          "| picked vs plain (wall, CPU) | floor ms/frame (wall, CPU; fastest matmul form reading the same weights) "
+          "| picked / floor (wall, CPU) |")
+    print("|---|---|---|---|---|---|---|---|")
     for batch in (1, 30):
         frames = a.frames if batch == 1 else max(20, a.frames // 2)
-        (fm, fc), (nm, nc) = bench(model, batch, frames)
+        fast, (nm, nc), picked = bench(model, batch, frames)
+        fm, fc = fast[picked]
         lm, lc, form = floor(n_all, batch, frames)
-        rows[batch] = dict(fast_ms=fm, fast_cpu_ms=fc, naive_ms=nm, naive_cpu_ms=nc, floor_ms=lm, floor_cpu_ms=lc,
-                           floor_form=form)
-        print(f"| {batch} | {fm:.1f}, {fc:.1f} | {nm:.1f}, {nc:.1f} | {nm / fm:.2f}x, {nc / fc:.2f}x "
+        rows[batch] = dict(layouts={name: dict(ms=w, cpu_ms=c) for name, (w, c) in fast.items()}, picked=picked,
+                           naive_ms=nm, naive_cpu_ms=nc, floor_ms=lm, floor_cpu_ms=lc, floor_form=form)
+        print(f"| {batch} | {fast['row'][0]:.1f}, {fast['row'][1]:.1f} | {fast['col'][0]:.1f}, {fast['col'][1]:.1f} "
+              f"| {picked} | {nm:.1f}, {nc:.1f} | {nm / fm:.2f}x, {nc / fc:.2f}x "
               f"| {lm:.1f}, {lc:.1f} ({form}) | {fm / lm:.2f}, {fc / lc:.2f} |", flush=True)
     if a.json:
         Path(a.json).write_text(json.dumps(dict(rows=rows, threads=a.threads, load=os.getloadavg()), indent=2))

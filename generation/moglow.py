@@ -9,6 +9,8 @@ Training runs each coupling LSTM over a whole window at once (frames tau..T-1, h
 h = 0 at frame tau): that equals the frame-by-frame flow, because every other layer acts frame-wise.
 Sampling (MGStream) runs the same flow inverted, one frame at a time, with pre-fused weights.
 """
+import time
+
 import torch
 from torch import nn
 
@@ -70,10 +72,10 @@ class MoGlow(MotionFlow):
         return -(gaussian_logp(z) + logdet) / z[0].numel()
 
     @torch.no_grad()
-    def inverse(self, z, history, c):
+    def inverse(self, z, history, c, layout=None):
         """Frames from latents: z [B, n, 63], history [B, tau, 63], c [B, tau + n, 3] (all standardised)
         -> x [B, n, 63]. The exact inverse of forward (used by the tests); sampling = random z."""
-        stream = MGStream(self, history, c[:, :self.tau])
+        stream = MGStream(self, history, c[:, :self.tau], layout=layout)
         return torch.stack([stream.step(c[:, self.tau + t], z=z[:, t]) for t in range(z.shape[1])], dim=1)
 
     @torch.no_grad()
@@ -116,16 +118,20 @@ class MGStream:
     columns, layer 1's bias folded into the padding) and the recurrent h_{t-1} products of every layer (one
     batched matmul per layer); (2) per step only what depends on the previous step's output is
     left: layer 1's lower-half product, layer 2's 2048x512 input product, the cells, the output layer and
-    the 63x63 inverse, all accumulated in place into preallocated buffers; (3) activations are kept
-    feature-major ([features, B]) and weights as nn.LSTM stores them ([out, in]), so every product is
-    W @ X: for a batch of streams that runs ~1.5x faster on CPU than X @ W^T (the weights stream through
-    once, the few columns of X stay in registers); for one stream the batched products are called in the
-    row form on the same memory, the faster form there; (4) weights are fused once (actnorm folded into the
-    inverse linear map, the coupling's '+2' into the output bias, shift/scale rows contiguous, gates
-    reordered to i, f, o, g so one sigmoid covers three); (5) no autograd. Starts with h = 0 (footnote 2).
+    the 63x63 inverse, all accumulated in place into preallocated buffers; (3) weights are fused once
+    (actnorm folded into the inverse linear map, the coupling's '+2' into the output bias, shift/scale rows
+    contiguous, gates reordered to i, f, o, g so one sigmoid covers three); (4) no autograd.
+    Starts with h = 0 (paper footnote 2).
+
+    Two memory layouts compute the same thing (they differ only in float rounding):
+    "row": activations [B, features], weights stored [in, out], every product X @ W;
+    "col": activations [features, B], weights stored [out, in] as nn.LSTM keeps them, every product W @ X.
+    Which is faster depends on the CPU and its BLAS, by up to 1.5x either way (bench/RESULTS.md), so
+    layout=None times the frame's largest product both ways once per process and batch size and keeps the
+    faster (`pick_layout`); pass a layout to fix it.
     """
 
-    def __init__(self, model, history, history_control, temperature=1.0, generator=None):
+    def __init__(self, model, history, history_control, temperature=1.0, generator=None, layout=None):
         self.model, self.tau = model, model.tau
         self.temperature, self.generator = temperature, generator
         p = next(model.parameters())
@@ -133,86 +139,147 @@ class MGStream:
         self.hist = history.to(self.device, self.dtype).clone()          # [B, tau, 63]
         self.hist_c = history_control.to(self.device, self.dtype).clone()  # [B, tau, 3]
         b = self.hist.shape[0]
-        self.w = w = fused_weights(model)
+        self.layout = layout or pick_layout(model, b)
+        if self.layout not in LAYOUTS:
+            raise ValueError(f"MGStream: layout must be one of {LAYOUTS}, got {self.layout!r}")
+        self.w = w = fused_weights(model, self.layout)
         k_steps, hid, layers = w["K"], w["H"], len(w["Whh"])
+        rows = self.layout == "row"
+        shape = (lambda n: (b, n)) if rows else (lambda n: (n, b))
         # Buffers are updated in place; created under inference mode they may only be changed under it.
         self._inference = torch.is_inference_mode_enabled()
         new = dict(dtype=self.dtype, device=self.device)
-        # (h, c) of every LSTM layer for all K steps, feature-major [K, H, B]: step k overwrites its own
-        # slice after the frame's batched products have read last frame's values.
-        self.h = [torch.zeros(k_steps, hid, b, **new) for _ in range(layers)]
-        self.c = [torch.zeros(k_steps, hid, b, **new) for _ in range(layers)]
-        self.gates = [torch.empty(k_steps, 4 * hid, b, **new) for _ in range(layers)]
-        self.out = torch.empty(w["Wo"].shape[1], b, **new)
-        self.y_ab = torch.empty(model.pose_dim, b, **new)
-        self.cond = torch.zeros(b, w["Wc"].shape[2], **new)
+        # (h, c) of every LSTM layer for all K steps: step k overwrites its own slice after the frame's
+        # batched products have read last frame's values.
+        self.h = [torch.zeros(k_steps, *shape(hid), **new) for _ in range(layers)]
+        self.c = [torch.zeros(k_steps, *shape(hid), **new) for _ in range(layers)]
+        self.gates = [torch.empty(k_steps, *shape(4 * hid), **new) for _ in range(layers)]
+        self.out = torch.empty(*shape(w["n_out"]), **new)
+        self.y_ab = torch.empty(*shape(model.pose_dim), **new)
+        self.cond = torch.zeros(b, w["cond_cols"], **new)
         self.cond[:, w["cond_dim"]] = 1.0
+        # (weight, x) -> the operands of torch.mm/addmm for "W x": (x, W) in rows, (W, x) in columns.
+        self._mm = (lambda wt, x: (x, wt)) if rows else (lambda wt, x: (wt, x))
+        self._fdim = 1 if rows else 0  # the feature dimension of activations
+        # Per-step views made once: indexing [K, ...] tensors 16x per frame costs more than it looks.
+        self._steps = [
+            (w["Wx"][k], [w["Wih"][l][k] if l else None for l in range(layers)], w["Wo"][k], w["bo"][k],
+             w["Winv"][k], w["bn"][k], [g[k] for g in self.gates], [c[k] for c in self.c], [h[k] for h in self.h])
+            for k in range(k_steps)]
 
     @torch.no_grad()
     def step(self, control, z=None):
         with torch.inference_mode(self._inference):
             return self._step(control, z)
 
-    def _step(self, control, z):
-        w, b = self.w, self.hist.shape[0]
-        k_steps, hid, c_a, layers = w["K"], w["H"], w["c_a"], len(w["Whh"])
-        ctrl = torch.cat([self.hist_c, control.to(self.device, self.dtype)[:, None]], dim=1)
-        cond = self.cond  # [B, cond_dim + pad]: history, control, then 1 (layer 1's bias) and zeros
-        cond[:, :self.hist[0].numel()] = self.hist.flatten(1)
-        cond[:, self.hist[0].numel():w["cond_dim"]] = ctrl.flatten(1)
-        # Gate pre-activations from this frame's shared inputs and last frame's states, all K steps at once.
-        gates = self.gates
-        for l in range(layers):
-            if b == 1:  # the same memory as [K, 1, .] rows: X @ W^T is the faster bmm for one stream
-                torch.bmm(self.h[l].view(k_steps, 1, -1), w["Whh"][l].mT, out=gates[l].view(k_steps, 1, -1))
+    def _frame_start(self):
+        """Gate pre-activations from this frame's shared inputs and last frame's states, all K steps at once."""
+        w, gates, k_steps = self.w, self.gates, self.w["K"]
+        for l in range(len(gates)):
+            if self.layout == "row":
+                torch.bmm(self.h[l], w["Whh"][l], out=gates[l])
             else:
                 torch.bmm(w["Whh"][l], self.h[l], out=gates[l])
             if l > 0:
                 gates[l].add_(w["b"][l])
-        if b == 1:
-            gates[0].view(k_steps, 1, -1).baddbmm_(cond.expand(k_steps, 1, -1), w["Wc"].mT)
+        b = self.cond.shape[0]
+        if self.layout == "row":
+            gates[0].baddbmm_(self.cond.expand(k_steps, b, -1), w["Wc"])
         else:
-            gates[0].baddbmm_(w["Wc"], cond.T.expand(k_steps, -1, b))
+            gates[0].baddbmm_(w["Wc"], self.cond.T.expand(k_steps, -1, b))
+
+    def _step(self, control, z):
+        w, b, mm, fd = self.w, self.hist.shape[0], self._mm, self._fdim
+        c_a, n_b, hid = w["c_a"], w["n_out"] // 2, w["H"]
+        ctrl = torch.cat([self.hist_c, control.to(self.device, self.dtype)[:, None]], dim=1)
+        cond = self.cond  # [B, cond_dim + pad]: history, control, then 1 (layer 1's bias) and zeros
+        cond[:, :self.hist[0].numel()] = self.hist.flatten(1)
+        cond[:, self.hist[0].numel():w["cond_dim"]] = ctrl.flatten(1)
+        self._frame_start()
         if z is None:
             z = torch.randn(b, self.model.pose_dim, generator=self.generator, dtype=self.dtype,
                             device="cpu").to(self.device) * self.temperature
-        y = z.to(self.device, self.dtype).T  # [63, B]
-        out, y_ab, n_b = self.out, self.y_ab, self.out.shape[0] // 2
-        for k in reversed(range(k_steps)):
-            y_a = y[:c_a]
-            g = gates[0][k].addmm_(w["Wx"][k], y_a)
-            h = lstm_cell_(g, self.c[0][k], self.h[0][k])
-            for l in range(1, layers):
-                g = gates[l][k].addmm_(w["Wih"][l][k], h)
-                h = lstm_cell_(g, self.c[l][k], self.h[l][k])
-            torch.addmm(w["bo"][k], w["Wo"][k], h, out=out)
-            y_ab[:c_a] = y_a
-            torch.div(y[c_a:], out[n_b:].sigmoid_(), out=y_ab[c_a:]).sub_(out[:n_b])
+        y = z.to(self.device, self.dtype)
+        if fd == 0:
+            y = y.T  # [63, B]
+        out, y_ab = self.out, self.y_ab
+        out_shift, out_scale = out.narrow(fd, 0, n_b), out.narrow(fd, n_b, n_b)
+        ab_a, ab_b = y_ab.narrow(fd, 0, c_a), y_ab.narrow(fd, c_a, y_ab.shape[fd] - c_a)
+        for wx, wih, wo, bo, winv, bn, gates, cs, hs in reversed(self._steps):
+            y_a = y.narrow(fd, 0, c_a)
+            h = lstm_cell_(gates[0].addmm_(*mm(wx, y_a)), cs[0], hs[0], fd, hid)
+            for l in range(1, len(gates)):
+                h = lstm_cell_(gates[l].addmm_(*mm(wih[l], h)), cs[l], hs[l], fd, hid)
+            torch.addmm(bo, *mm(wo, h), out=out)
+            ab_a.copy_(y_a)
+            torch.div(y.narrow(fd, c_a, ab_b.shape[fd]), out_scale.sigmoid_(), out=ab_b).sub_(out_shift)
             # Inverse LU linear map with the inverse actnorm folded in: x = diag(e^-logs) W^-1 y - bias.
-            y = torch.addmm(w["bn"][k], w["Winv"][k], y_ab)
-        y = y.T.contiguous()
+            y = torch.addmm(bn, *mm(winv, y_ab))
+        y = y if fd else y.T.contiguous()
         self.hist = torch.cat([self.hist[:, 1:], y[:, None]], dim=1)
         self.hist_c = ctrl[:, 1:]
         return y
 
 
-def lstm_cell_(gates, c, h):
-    """LSTM cell in place, feature-major: gates [4H, B] in the order i, f, o, g (overwritten), c [H, B]
-    updated, h [H, B] written. Returns h."""
-    hid = c.shape[0]
-    s = gates[:3 * hid].sigmoid_()
-    g = gates[3 * hid:].tanh_()
-    c.mul_(s[hid:2 * hid]).addcmul_(s[:hid], g)
-    return torch.tanh(c, out=h).mul_(s[2 * hid:])
+LAYOUTS = ("row", "col")
+_picked = {}
+
+
+def pick_layout(model, batch):
+    """The faster layout for this model size, batch size, device and thread count, timed once per process:
+    the frame's largest product (layer 1's history/control weights of all K steps) both ways, interleaved,
+    best of 3. On CUDA "row" (cuBLAS takes either; not timed)."""
+    p = next(model.parameters())
+    if p.device.type != "cpu":
+        return "row"
+    key = (tuple(model.config.get(k) for k in ("K", "hidden", "lstm_layers", "tau")), batch, p.dtype,
+           torch.get_num_threads())
+    if key not in _picked:
+        times = {name: [] for name in LAYOUTS}
+        with torch.inference_mode():
+            w = {name: fused_weights(model, name)["Wc"] for name in LAYOUTS}
+            k, cols = w["row"].shape[0], w["row"].shape[1]
+            x = {"row": torch.zeros(k, batch, cols, dtype=p.dtype), "col": torch.zeros(k, cols, batch, dtype=p.dtype)}
+            for _ in range(4):
+                for name in LAYOUTS:
+                    operands = (x[name], w[name]) if name == "row" else (w[name], x[name])
+                    start = time.perf_counter()
+                    torch.bmm(*operands)
+                    times[name].append(time.perf_counter() - start)
+        _picked[key] = min(LAYOUTS, key=lambda name: min(times[name][1:]))  # the first round warms up
+        for name in LAYOUTS:  # keep one copy of the weights (293 MB at the paper's size), not both
+            if name != _picked[key]:
+                model._fused[1].pop(name, None)
+    return _picked[key]
+
+
+def lstm_cell_(gates, c, h, dim, hid):
+    """LSTM cell in place: gates in the order i, f, o, g along `dim` (overwritten), c updated, h written.
+    Returns h."""
+    s = gates.narrow(dim, 0, 3 * hid).sigmoid_()
+    g = gates.narrow(dim, 3 * hid, hid).tanh_()
+    c.mul_(s.narrow(dim, hid, hid)).addcmul_(s.narrow(dim, 0, hid), g)
+    return torch.tanh(c, out=h).mul_(s.narrow(dim, 2 * hid, hid))
 
 
 @torch.no_grad()
-def fused_weights(model):
-    """Pre-fused inference weights of all K steps, laid out [K, out, in] (cached on the model until it changes)."""
+def fused_weights(model, layout="col"):
+    """Pre-fused inference weights of all K steps: [K, out, in] for "col", [K, in, out] for "row" (each built
+    on first use and cached on the model until its parameters change)."""
     key = tuple((p.data_ptr(), p._version) for p in model.parameters())
     cached = getattr(model, "_fused", None)
-    if cached is not None and cached[0] == key:
-        return cached[1]
+    if cached is None or cached[0] != key:
+        cached = model._fused = (key, {})
+    forms = cached[1]
+    if layout not in forms:
+        col = forms.get("col") or _fuse_columns(model)
+        forms[layout] = col if layout == "col" else {
+            n: ([None if v is None else v.mT.contiguous() for v in x] if isinstance(x, list)
+                else x.mT.contiguous() if torch.is_tensor(x) else x) for n, x in col.items()}
+    return forms[layout]
+
+
+def _fuse_columns(model):
     c_a, layers, hid = model.pose_dim // 2, model.config["lstm_layers"], model.config["hidden"]
     # nn.LSTM's gate order is i, f, g, o; reorder to i, f, o, g (one sigmoid over the first three).
     order = torch.cat([torch.arange(2 * hid), torch.arange(3 * hid, 4 * hid), torch.arange(2 * hid, 3 * hid)])
@@ -243,6 +310,5 @@ def fused_weights(model):
     w["Whh"] = [torch.stack(v).contiguous() for v in whh]
     w["Wih"] = [None] + [torch.stack(v).contiguous() for v in wih[1:]]
     w["b"] = [torch.stack(v)[:, :, None].contiguous() for v in bias]  # [K, 4H, 1]
-    w.update(K=k, H=hid, c_a=c_a, cond_dim=cond_dim)
-    model._fused = (key, w)
+    w.update(K=k, H=hid, c_a=c_a, cond_dim=cond_dim, cond_cols=cond_dim + pad, n_out=w["Wo"].shape[1])
     return w

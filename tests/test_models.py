@@ -63,17 +63,18 @@ def test_streaming_matches_batch_sampling(tiny_runs, test_split):
     np.testing.assert_allclose(frames, batch[:, :12], rtol=0, atol=1e-6)
 
 
-def test_fast_sampler_matches_plain_lstm_and_inverts_forward(tiny_runs, test_split):
-    """MGStream (fused weights) == nn.LSTM called per step; and forward(inverse(z)) == z."""
+@pytest.mark.parametrize("layout", ["row", "col"])
+def test_fast_sampler_matches_plain_lstm_and_inverts_forward(tiny_runs, test_split, layout):
+    """MGStream (fused weights, either layout) == nn.LSTM called per step; and forward(inverse(z)) == z."""
     model = load_model(last_ckpt(tiny_runs["mg"]))
     s = test_split
     hist = model.standardize_x(torch.from_numpy(s["hist"]))
     c = model.standardize_c(torch.from_numpy(np.concatenate([s["hist_c"], s["c"][:, :15]], axis=1)))
     z = torch.randn(4, 15, 63, generator=torch.Generator().manual_seed(0))
-    fast = model.inverse(z, hist, c)
+    fast = model.inverse(z, hist, c, layout=layout)
     plain = model.inverse_naive(z, hist, c)
     assert torch.allclose(fast, plain, atol=1e-5), (fast - plain).abs().max()
-    one = model.inverse(z[:1], hist[:1], c[:1])  # one stream: MGStream's row-form products
+    one = model.inverse(z[:1], hist[:1], c[:1], layout=layout)  # one stream
     assert torch.allclose(one, plain[:1], atol=1e-5), (one - plain[:1]).abs().max()
     with torch.no_grad():
         z_back, _ = model(torch.cat([hist, fast], dim=1), c)
@@ -131,3 +132,14 @@ def test_paper_configs_build_models_of_the_papers_size():
     assert 280e6 < 4 * n_lstm < 300e6  # ~292 MB of LSTM weights read per generated frame
     fl_cfg = load_config("fl", "paper")
     assert (fl_cfg["L"], fl_cfg["K"]) == (4, 32)
+
+
+def test_layout_is_picked_once_and_checked(tiny_runs, test_split):
+    from generation.moglow import LAYOUTS, MGStream, pick_layout
+    model = load_model(last_ckpt(tiny_runs["mg"]))
+    hist = torch.zeros(3, model.tau, 63)
+    first = pick_layout(model, 3)
+    assert first in LAYOUTS and all(pick_layout(model, 3) == first for _ in range(3))  # cached, not re-timed
+    assert MGStream(model, hist, torch.zeros(3, model.tau, 3)).layout == first
+    with pytest.raises(ValueError, match="layout"):
+        MGStream(model, hist, torch.zeros(3, model.tau, 3), layout="diagonal")
