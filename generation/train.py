@@ -11,6 +11,7 @@ exactly as an uninterrupted one would.
 import argparse
 import csv
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -24,13 +25,24 @@ from . import fl, moglow
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 MODELS = {"fl": fl.FL, "mg": moglow.MoGlow}
 MODEL_DEFAULTS = {"fl": fl.DEFAULTS, "mg": moglow.DEFAULTS}
-TRAIN_DEFAULTS = dict(batch_size=32, lr=1e-3, warmup=200, clip_grad=5.0, steps=10000, valid_every=500,
+TRAIN_DEFAULTS = dict(batch_size=32, lr=1e-3, lr_min=None, warmup=200, clip_grad=5.0, steps=10000, valid_every=500,
                       valid_windows=256, ckpt_every=2000, early_ckpts=[50, 100, 200, 500], train_window=None,
                       noise=0.01)
 
 
 class TrainError(ValueError):
     """Bad training input (config, model name, diverged run); one-line message."""
+
+
+def learning_rate(cfg, step):
+    """Linear warm-up over `warmup` steps to `lr`; then constant, or, with `lr_min` set, a cosine decay that
+    reaches lr_min at the last step (a function of the step alone, so a resumed run follows the same curve)."""
+    if step < cfg["warmup"]:
+        return cfg["lr"] * (step + 1) / cfg["warmup"]
+    if cfg["lr_min"] is None:
+        return cfg["lr"]
+    progress = (step - cfg["warmup"]) / max(1, cfg["steps"] - 1 - cfg["warmup"])
+    return cfg["lr_min"] + (cfg["lr"] - cfg["lr_min"]) * 0.5 * (1 + math.cos(math.pi * min(1.0, progress)))
 
 
 def pick_device(device=None):
@@ -146,7 +158,7 @@ def train(model, config, data_path, out_dir, steps=None, seed=0, progress=True, 
     run_nll, run_n, bad, t0, valid_nll, t_row, s_row = 0.0, 0, 0, time.perf_counter(), float("nan"), \
         time.perf_counter(), start
     for step in bar:
-        lr = cfg["lr"] * min(1.0, (step + 1) / max(1, cfg["warmup"]))
+        lr = learning_rate(cfg, step)
         for group in opt.param_groups:
             group["lr"] = lr
         idx = batch_indices(n, cfg["batch_size"], seed, step).to(device)

@@ -7,7 +7,7 @@ import sys
 import pytest
 import torch
 
-from generation.train import TrainError, load_config, main, train
+from generation.train import TrainError, learning_rate, load_config, main, train
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
@@ -54,6 +54,19 @@ def test_seeded_run_is_reproducible_and_resume_is_exact(small_dataset, tmp_path)
     assert all(torch.equal(sa[k], sb[k]) for k in sa)
     assert not all(torch.equal(sa[k], sc[k]) for k in sa)
     assert [r["step"] for r in rows(b)] == ["1", "6", "12"]
+
+
+def test_learning_rate_warms_up_then_holds_or_decays_to_lr_min():
+    cfg = load_config("mg", {"lr": 1e-3, "warmup": 10, "steps": 110})
+    lrs = [learning_rate(cfg, s) for s in range(110)]
+    assert lrs[0] == pytest.approx(1e-4) and lrs[9] == pytest.approx(1e-3)
+    assert all(a < b for a, b in zip(lrs[:10], lrs[1:10]))
+    assert set(lrs[10:]) == {1e-3}  # no lr_min: constant after the warm-up
+    cfg["lr_min"] = 1e-5
+    lrs = [learning_rate(cfg, s) for s in range(110)]
+    assert lrs[10] == pytest.approx(1e-3) and lrs[-1] == pytest.approx(1e-5)
+    assert all(a >= b for a, b in zip(lrs[10:], lrs[11:]))  # cosine: never rises
+    assert lrs[60] == pytest.approx((1e-3 + 1e-5) / 2, rel=0.02)  # halfway down at mid-decay
 
 
 def test_config_names_and_errors(tmp_path):

@@ -1,0 +1,109 @@
+"""How trained generators move, against the held-out mocap driven by the same control.
+
+    python bench/sample_quality.py --data runs/dataset.npz --model MG=runs/mg_cpu/checkpoints/step_0003000.pt \
+        [--model FL=runs/fl_cpu/checkpoints/step_0003000.pt] [--temperature 1.0] [--figure out.png]
+
+Every window of the test split is sampled once per model (MG seeded with the tau real frames before the window).
+Per category it prints the median of three figures per clip:
+- late stepping (m): how far the feet swing about each other over the last 2 s: the standard deviation of
+  the horizontal vector from the right foot to the left (root frame; forward and sideways, so side-steps
+  count too). Stepping swings it by tens of centimetres; a gait that dies out into a standing pose gives ~0. Given beside NAT's, and as the median ratio to NAT on the same window.
+- jerk (m/s^3) and foot skating (m/s): generation.metrics, on the clip in world coordinates.
+The figure shows the feet of the first window of five categories (rows: NAT, then each model).
+"""
+import argparse
+import statistics
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from generation import skeleton  # noqa: E402
+from generation.features import to_world  # noqa: E402
+from generation.metrics import foot_skating, jerk  # noqa: E402
+from generation.sample import load_model, sample_split  # noqa: E402
+
+FOOT_L, FOOT_R = skeleton.INDEX["Foot_L"], skeleton.INDEX["Foot_R"]
+SHOWN = ("walk", "run", "walk_backward", "walk_turn_left", "sidestep_left")
+
+
+def late_stepping(x, fps):
+    """x [T, 63] root-frame features -> std (m) of the horizontal left-minus-right foot vector, last 2 s."""
+    joints = x.reshape(len(x), skeleton.N_JOINTS, 3)[-int(2 * fps):]
+    sep = joints[:, FOOT_L, ::2] - joints[:, FOOT_R, ::2]  # (x, z)
+    return float(np.sqrt(np.var(sep, axis=0).sum()))
+
+
+def clip_figures(x, c, fps):
+    world = to_world(x, c)
+    return dict(stepping=late_stepping(x, fps), jerk=float(jerk(world, fps)), skating=float(foot_skating(world, fps)))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", required=True, help="prepared dataset .npz")
+    ap.add_argument("--model", action="append", required=True, metavar="NAME=CHECKPOINT")
+    ap.add_argument("--temperature", type=float, default=1.0, help="(make_stimuli's default is 1.0)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--figure", default=None, help="write the feet figure to this PNG")
+    a = ap.parse_args()
+    torch.set_num_threads(a.threads)
+    with np.load(a.data) as d:
+        x_nat, c, labels, fps = d["test_x"], d["test_c"], d["test_labels"], float(d["fps"])
+    systems = {"NAT": x_nat}
+    for spec in a.model:
+        name, _, ckpt = spec.partition("=")
+        x, _ = sample_split(load_model(ckpt), a.data, "test", temperature=a.temperature, seed=a.seed)
+        systems[name] = x
+    figures = {name: [clip_figures(x[i], c[i], fps) for i in range(len(c))] for name, x in systems.items()}
+
+    cats = sorted(set(labels.tolist()))
+    names = list(systems)
+    head = ["category", "n"] + [f"{n} stepping" for n in names] + [f"{n}/NAT stepping" for n in names[1:]] \
+        + [f"{n} jerk" for n in names] + [f"{n} skating" for n in names]
+    print(f"test split, temperature {a.temperature}, medians per category")
+    print("| " + " | ".join(head) + " |")
+    print("|" + "---|" * len(head))
+    for cat in cats + ["all"]:
+        idx = [i for i in range(len(c)) if cat == "all" or labels[i] == cat]
+        med = lambda name, key: statistics.median(figures[name][i][key] for i in idx)  # noqa: E731
+        ratio = lambda name: statistics.median(  # noqa: E731
+            figures[name][i]["stepping"] / max(figures["NAT"][i]["stepping"], 1e-6) for i in idx)
+        row = [cat, str(len(idx))] + [f"{med(n, 'stepping'):.3f}" for n in names] \
+            + [f"{ratio(n):.2f}" for n in names[1:]] + [f"{med(n, 'jerk'):.0f}" for n in names] \
+            + [f"{med(n, 'skating'):.2f}" for n in names]
+        print("| " + " | ".join(row) + " |")
+
+    if a.figure:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        shown = [cat for cat in SHOWN if cat in cats]
+        fig, axes = plt.subplots(len(names), len(shown), figsize=(3.2 * len(shown), 2.1 * len(names)),
+                                 sharex=True, sharey=True, squeeze=False)
+        t = np.arange(x_nat.shape[1]) / fps
+        for col, cat in enumerate(shown):
+            i = int(np.flatnonzero(labels == cat)[0])
+            for row, name in enumerate(names):
+                j = systems[name][i].reshape(-1, skeleton.N_JOINTS, 3)
+                ax = axes[row, col]
+                for foot, colour in ((FOOT_L, "tab:blue"), (FOOT_R, "tab:red")):
+                    ax.plot(t, j[:, foot, 1], color=colour, lw=1)
+                    ax.plot(t, j[:, foot, 2], color=colour, lw=1, ls=":")
+                ax.set_title(f"{name}: {cat}", fontsize=8)
+                if col == 0:
+                    ax.set_ylabel("m (root frame)")
+                if row == len(names) - 1:
+                    ax.set_xlabel("s")
+        axes[0, 0].legend(["left foot height", "left foot forward", "right foot height", "right foot forward"],
+                          fontsize=6, loc="upper left")
+        fig.tight_layout()
+        fig.savefig(a.figure, dpi=90)
+        print(f"figure -> {a.figure}")
+
+
+if __name__ == "__main__":
+    main()
