@@ -61,7 +61,7 @@ def time_interleaved(step_fns, frames, warmup=3):
 
 def floor(n_params, batch, frames):
     """The memory/compute floor measured here and now: reading as many weights (and doing as many
-    multiply-adds per stream) as one MG frame in the fastest of three layouts, so contention from other jobs
+    multiply-adds per stream) as one MG frame in the fastest of four forms, so contention from other jobs
     hits it the same way: one wide matmul X @ W, and batched matmuls over 16 blocks [2048, n / 32768] in
     the column form W @ X (MGStream's "col" layout), the row form X @ W with the weights stored [in, out]
     (its "row" layout), and X @ W^T. Returns (wall ms, CPU ms, form) of the fastest."""

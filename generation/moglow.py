@@ -160,6 +160,8 @@ class MGStream:
         self.cond[:, w["cond_dim"]] = 1.0
         # (weight, x) -> the operands of torch.mm/addmm for "W x": (x, W) in rows, (W, x) in columns.
         self._mm = (lambda wt, x: (x, wt)) if rows else (lambda wt, x: (wt, x))
+        # The cond buffer as every step's input of the batched layer-1 product (a view: refilled in place).
+        self._cond_k = self.cond.expand(k_steps, b, -1) if rows else self.cond.T.expand(k_steps, -1, b)
         self._fdim = 1 if rows else 0  # the feature dimension of activations
         # Per-step views made once: indexing [K, ...] tensors 16x per frame costs more than it looks.
         self._steps = [
@@ -174,19 +176,12 @@ class MGStream:
 
     def _frame_start(self):
         """Gate pre-activations from this frame's shared inputs and last frame's states, all K steps at once."""
-        w, gates, k_steps = self.w, self.gates, self.w["K"]
+        w, gates, mm = self.w, self.gates, self._mm
         for l in range(len(gates)):
-            if self.layout == "row":
-                torch.bmm(self.h[l], w["Whh"][l], out=gates[l])
-            else:
-                torch.bmm(w["Whh"][l], self.h[l], out=gates[l])
+            torch.bmm(*mm(w["Whh"][l], self.h[l]), out=gates[l])
             if l > 0:
                 gates[l].add_(w["b"][l])
-        b = self.cond.shape[0]
-        if self.layout == "row":
-            gates[0].baddbmm_(self.cond.expand(k_steps, b, -1), w["Wc"])
-        else:
-            gates[0].baddbmm_(w["Wc"], self.cond.T.expand(k_steps, -1, b))
+        gates[0].baddbmm_(*mm(w["Wc"], self._cond_k))
 
     def _step(self, control, z):
         w, b, mm, fd = self.w, self.hist.shape[0], self._mm, self._fdim
@@ -227,29 +222,25 @@ _picked = {}
 
 def pick_layout(model, batch):
     """The faster layout for this model size, batch size, device and thread count, timed once per process:
-    the frame's largest product (layer 1's history/control weights of all K steps) both ways, interleaved,
-    best of 3. On CUDA "row" (cuBLAS takes either; not timed)."""
+    the frame's largest product (layer 1's history/control part for all K steps; its shape, not the model's
+    weights) both ways, interleaved, best of 3. On CUDA "row" (cuBLAS takes either; not timed)."""
     p = next(model.parameters())
     if p.device.type != "cpu":
         return "row"
-    key = (tuple(model.config.get(k) for k in ("K", "hidden", "lstm_layers", "tau")), batch, p.dtype,
-           torch.get_num_threads())
+    k, rows, cols = len(model.flow.layers), 4 * model.config["hidden"], _cond_columns(model.cond_dim)
+    key = (k, rows, cols, batch, p.dtype, torch.get_num_threads())
     if key not in _picked:
         times = {name: [] for name in LAYOUTS}
         with torch.inference_mode():
-            w = {name: fused_weights(model, name)["Wc"] for name in LAYOUTS}
-            k, cols = w["row"].shape[0], w["row"].shape[1]
-            x = {"row": torch.zeros(k, batch, cols, dtype=p.dtype), "col": torch.zeros(k, cols, batch, dtype=p.dtype)}
+            w_col = torch.full((k, rows, cols), 0.01, dtype=p.dtype)  # written, so the pages are real memory
+            operands = {"col": (w_col, torch.full((k, cols, batch), 0.01, dtype=p.dtype)),
+                        "row": (torch.full((k, batch, cols), 0.01, dtype=p.dtype), w_col.mT.contiguous())}
             for _ in range(4):
                 for name in LAYOUTS:
-                    operands = (x[name], w[name]) if name == "row" else (w[name], x[name])
                     start = time.perf_counter()
-                    torch.bmm(*operands)
+                    torch.bmm(*operands[name])
                     times[name].append(time.perf_counter() - start)
         _picked[key] = min(LAYOUTS, key=lambda name: min(times[name][1:]))  # the first round warms up
-        for name in LAYOUTS:  # keep one copy of the weights (293 MB at the paper's size), not both
-            if name != _picked[key]:
-                model._fused[1].pop(name, None)
     return _picked[key]
 
 
@@ -264,19 +255,23 @@ def lstm_cell_(gates, c, h, dim, hid):
 
 @torch.no_grad()
 def fused_weights(model, layout="col"):
-    """Pre-fused inference weights of all K steps: [K, out, in] for "col", [K, in, out] for "row" (each built
-    on first use and cached on the model until its parameters change)."""
-    key = tuple((p.data_ptr(), p._version) for p in model.parameters())
+    """Pre-fused inference weights of all K steps: [K, out, in] for "col", [K, in, out] for "row". Cached on
+    the model, one layout at a time (293 MB at the paper's size), until its parameters change."""
+    key = (layout, tuple((p.data_ptr(), p._version) for p in model.parameters()))
     cached = getattr(model, "_fused", None)
     if cached is None or cached[0] != key:
-        cached = model._fused = (key, {})
-    forms = cached[1]
-    if layout not in forms:
-        col = forms.get("col") or _fuse_columns(model)
-        forms[layout] = col if layout == "col" else {
-            n: ([None if v is None else v.mT.contiguous() for v in x] if isinstance(x, list)
-                else x.mT.contiguous() if torch.is_tensor(x) else x) for n, x in col.items()}
-    return forms[layout]
+        w = _fuse_columns(model)
+        if layout == "row":
+            w = {n: ([None if v is None else v.mT.contiguous() for v in x] if isinstance(x, list)
+                     else x.mT.contiguous() if torch.is_tensor(x) else x) for n, x in w.items()}
+        cached = model._fused = (key, w)
+    return cached[1]
+
+
+def _cond_columns(cond_dim):
+    """Columns of the fused history/control weights: cond_dim, then one for layer 1's bias, then zeros up to a
+    multiple of 16 (measured ~7% faster than 663 wide)."""
+    return cond_dim + 1 + -(cond_dim + 1) % 16
 
 
 def _fuse_columns(model):
@@ -302,10 +297,10 @@ def _fuse_columns(model):
         acc["bn"].append(-actnorm.bias[0])  # [63, 1]
     w = {n: torch.stack(v).contiguous() for n, v in acc.items()}
     k = len(model.flow.layers)
-    # History/control weights [K, 4H, cond_dim + pad]: layer 1's bias in the first padding column (the
-    # input there is 1), zeros up to a multiple of 16 columns (measured ~7% faster than 663 wide).
+    # History/control weights [K, 4H, _cond_columns]: layer 1's bias in the first padding column (the input
+    # there is 1), then zeros.
     cond_dim = w["Wc"].shape[2]
-    pad = -(cond_dim + 1) % 16 + 1
+    pad = _cond_columns(cond_dim) - cond_dim
     w["Wc"] = torch.cat([w["Wc"], torch.stack(bias[0])[:, :, None], w["Wc"].new_zeros(k, 4 * hid, pad - 1)], dim=2)
     w["Whh"] = [torch.stack(v).contiguous() for v in whh]
     w["Wih"] = [None] + [torch.stack(v).contiguous() for v in wih[1:]]
