@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from core.cli import UserError
 
 REQUIRED = ("rater_id", "clip_id", "condition", "rating")
 ROLES = ("test", "catch")
@@ -15,7 +16,7 @@ CATCH_CONDITION = "BAD"  # catch rows when the file has no role column
 METRIC_KEYS = ("clip_id", "condition", "role", "item")
 
 
-class AnalysisError(ValueError):
+class AnalysisError(UserError):
     """Bad input for the analysis; the message is one line naming the file and the line or column."""
 
 

@@ -16,12 +16,13 @@ import re
 from pathlib import Path
 
 import numpy as np
+from core.cli import UserError
 
 CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
 
 
-class BvhError(ValueError):
+class BvhError(UserError):
     """A malformed BVH file; the message reads `FILE:LINE: what is wrong`."""
 
 

@@ -2,9 +2,10 @@
 from pathlib import Path
 
 import numpy as np
+from core.cli import UserError
 
 
-class ClipError(ValueError):
+class ClipError(UserError):
     """A clip file that does not follow CONTRACTS.md §1; the message names the file and key."""
 
 

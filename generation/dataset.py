@@ -4,11 +4,12 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from core.cli import UserError
 
 REQUIRED = ("train_x", "train_c", "valid_x", "valid_c", "x_mean", "x_std", "c_mean", "c_std", "fps", "window")
 
 
-class DatasetError(ValueError):
+class DatasetError(UserError):
     """A prepared dataset that cannot be used; the message names the file and the key."""
 
 

@@ -36,6 +36,7 @@ from .clip import ClipError, save_clip
 from .features import to_world
 from .metrics import METRIC_NAMES, clip_metrics
 from .systems import SystemError_, canonical_placement, find_system_files, load_system_motion, parse_system_spec
+from core.cli import UserError
 
 BUILTIN = ("NAT", "MG", "FL")
 CLIP_ID_LEN = 16
@@ -45,7 +46,7 @@ METRICS_COLUMNS = ["clip_id", "condition", "role", "item", *METRIC_NAMES]
 ITEMS_COLUMNS = ["item", "role", "category", "take", "start_frame", "frames", "fps", "control"]
 
 
-class StimuliError(ValueError):
+class StimuliError(UserError):
     """Bad input to make_stimuli; one line naming the file or option."""
 
 

@@ -21,6 +21,7 @@ import numpy as np
 from . import skeleton
 from .bvh import BvhError
 from .features import load_take, mirror, reverse, to_features
+from core.cli import UserError
 
 DEFAULT_DATA = Path("..") / "shared" / "data" / "bandai-namco-locomotion"
 SPLITS = ("train", "valid", "test")
@@ -34,7 +35,7 @@ CATEGORY_OF_CONTENT = {
 }
 
 
-class PrepareError(ValueError):
+class PrepareError(UserError):
     """Bad input to prepare(); the message names the file or option."""
 
 

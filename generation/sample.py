@@ -21,9 +21,10 @@ from .clip import save_clip
 from .fl import FL
 from .moglow import MGStream, MoGlow
 from .train import MODELS, pick_device
+from core.cli import UserError
 
 
-class SampleError(ValueError):
+class SampleError(UserError):
     """Bad sampling input (checkpoint, data, arguments); one-line message."""
 
 

@@ -22,13 +22,14 @@ from .bvh import BvhError
 from .clip import ClipError, load_clip
 from .features import SKELETON_MAPS, load_take, map_joints, root_trajectory
 from .resample import resample_times
+from core.cli import UserError
 
 RESERVED = ("NAT", "MG", "FL", "BAD")
 NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,31}$")
 EXTENSIONS = (".bvh.gz", ".bvh", ".npz")
 
 
-class SystemError_(ValueError):
+class SystemError_(UserError):
     """Bad --system input; the message names the spec, folder or file."""
 
 

@@ -21,6 +21,7 @@ from tqdm import tqdm
 
 from .dataset import DatasetError, batch_indices, eval_batches, load_dataset
 from . import fl, moglow
+from core.cli import UserError
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 MODELS = {"fl": fl.FL, "mg": moglow.MoGlow}
@@ -30,7 +31,7 @@ TRAIN_DEFAULTS = dict(batch_size=32, lr=1e-3, lr_min=None, warmup=200, clip_grad
                       noise=0.01)
 
 
-class TrainError(ValueError):
+class TrainError(UserError):
     """Bad training input (config, model name, diverged run); one-line message."""
 
 

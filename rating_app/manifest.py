@@ -6,6 +6,7 @@ import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from core.cli import UserError
 
 CLIP_ID = re.compile(r"^[a-z0-9]{12,64}$")
 ROLES = ("test", "catch", "training")
@@ -13,7 +14,7 @@ REQUIRED = ("clip_id", "condition", "role", "item", "video")
 METRIC_COLUMNS = ("foot_skating", "bone_length_std", "jerk", "control_error")
 
 
-class AppError(Exception):
+class AppError(UserError):
     """A user-facing error: printed as one line by the CLI, never with a traceback."""
 
 

@@ -23,9 +23,10 @@ from matplotlib.transforms import IdentityTransform
 from scipy.ndimage import gaussian_filter1d
 
 from generation.clip import load_clip
+from core.cli import UserError
 
 
-class RenderError(ValueError):
+class RenderError(UserError):
     """A clip that cannot be rendered, or ffmpeg failing; the message names the file."""
 
 

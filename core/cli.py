@@ -1,0 +1,64 @@
+"""One convention for every command-line tool of the project.
+
+A problem with what the user gave (a file, a line in it, a flag) ends the run with one line on stderr,
+``error: WHERE: WHAT``, and exit code 2; never a traceback. Library code raises `UserError` (or a
+subclass, e.g. ``BvhError``) with a message that already names the file, line or field; flags are
+checked by the argparse types below; `run` turns both into that one line. Anything else is a bug and
+keeps its traceback.
+
+    def main(argv=None):
+        return cli.run(_main, argv)
+"""
+import argparse
+import math
+import sys
+
+EXIT_USAGE = 2
+
+
+class UserError(ValueError):
+    """Bad input from the user: the message is one line naming the file, line, field or flag."""
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse, but a bad flag gives one line (``error: argument --fps: ...``), not usage plus message."""
+
+    def error(self, message):
+        self.exit(EXIT_USAGE, f"error: {self.prog}: {message} (see --help)\n")
+
+
+def number(kind=float, lo=None, hi=None, lo_open=False):
+    """An argparse type: a finite `kind` (int or float) in [lo, hi] ((lo, hi] with lo_open).
+    Rejects nan, inf and absurd sizes before they reach an allocation."""
+    def parse(text):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {'an integer' if kind is int else 'a number'}, "
+                                             f"got {text!r}") from None
+        if isinstance(value, float) and not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+        too_low = lo is not None and (value <= lo if lo_open else value < lo)
+        if too_low or (hi is not None and value > hi):
+            low = "" if lo is None else f"{'>' if lo_open else '>='} {lo}"
+            high = "" if hi is None else f"<= {hi}"
+            raise argparse.ArgumentTypeError(f"must be {' and '.join(s for s in (low, high) if s)}, got {text!r}")
+        return value
+    return parse
+
+
+def run(main, argv=None):
+    """Call ``main(argv)`` and return its exit code; a `UserError` or an OS error becomes one line and 2."""
+    try:
+        return main(argv) or 0
+    except UserError as e:
+        print(f"error: {e}", file=sys.stderr)
+    except OSError as e:
+        where = e.filename if e.filename is not None else "system"
+        print(f"error: {where}: {e.strerror or e}", file=sys.stderr)
+    except MemoryError:
+        print("error: out of memory (an input asks for more than this machine has)", file=sys.stderr)
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
+    return EXIT_USAGE
