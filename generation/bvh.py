@@ -18,8 +18,12 @@ from pathlib import Path
 import numpy as np
 from core.cli import UserError
 
+from .clip import MAX_FPS, MIN_FPS
+
 CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
+# Beyond any real channel value (1e9 cm is 10,000 km); larger ones overflow forward kinematics.
+MAX_VALUE = 1e9
 
 
 class BvhError(UserError):
@@ -72,9 +76,12 @@ _MOTION = re.compile(rb"^[ \t]*MOTION(?![^\s])", re.M)
 
 def _number(tok, where):
     try:
-        return float(tok)
+        value = float(tok)
     except ValueError:
         raise BvhError(f"{where}: expected a number, got {tok!r}") from None
+    if not abs(value) <= MAX_VALUE:
+        raise BvhError(f"{where}: number out of range (non-finite or beyond ±{MAX_VALUE:g}), got {tok!r}")
+    return value
 
 
 def read_bvh(path):
@@ -197,8 +204,9 @@ def read_bvh(path):
             header["frames"] = (int(parts[1]), line_no)
         elif parts[:2] == ["Frame", "Time:"] and len(parts) == 3 and "frames" in header:
             dt = _number(parts[2], f"{name}:{line_no}")
-            if not dt > 0:
-                raise BvhError(f"{name}:{line_no}: Frame Time must be positive, got {parts[2]!r}")
+            if not 1 / MAX_FPS <= dt <= 1 / MIN_FPS:  # also false for nan and inf
+                raise BvhError(f"{name}:{line_no}: Frame Time must be between {1 / MAX_FPS:g} and "
+                               f"{1 / MIN_FPS:g} s ({MIN_FPS:g}-{MAX_FPS:g} fps), got {parts[2]!r}")
             header["dt"] = dt
         else:
             want = "'Frames: N'" if "frames" not in header else "'Frame Time: SECONDS'"
@@ -249,9 +257,10 @@ def _parse_motion(block, first, n_frames, n_channels, frames_line, name):
     if values is None or values.size != n_frames * n_channels:
         _find_bad_number(block.decode("utf-8", errors="replace").split("\n"), first, name)
         raise BvhError(f"{name}:{first}: MOTION block could not be parsed as numbers")
-    if not np.all(np.isfinite(values)):
-        k = int(np.flatnonzero(~np.isfinite(values))[0]) // n_channels
-        raise BvhError(f"{name}:{first + nonempty[k]}: non-finite value in frame {k}")
+    if not np.all(np.abs(values) <= MAX_VALUE):  # also catches nan and inf
+        k = int(np.flatnonzero(~(np.abs(values) <= MAX_VALUE))[0]) // n_channels
+        raise BvhError(f"{name}:{first + nonempty[k]}: value out of range (non-finite or beyond "
+                       f"±{MAX_VALUE:g}) in frame {k}")
     return values.reshape(n_frames, n_channels)
 
 

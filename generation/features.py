@@ -11,14 +11,14 @@ Conventions
   root frame of t-1 (sideways positive to the left), and yaw[t] - yaw[t-1] (positive = turning left).
   c[0] has no previous frame; `to_features` copies c[1] there, and `to_world` ignores c[0].
 """
-from pathlib import Path
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from . import skeleton
 from .bvh import BvhError, forward_kinematics, read_bvh
-from .resample import clean_fps, local_quaternions, quat_to_matrix, resample_local
+from .clip import check_frames
+from .resample import clean_fps, local_quaternions, quat_to_matrix, resample_local, resample_times
 
 FACING_SMOOTH_S = 0.25  # sigma of the Gaussian smoothing the facing direction (s)
 
@@ -49,13 +49,18 @@ SKELETON_MAPS = {
 _I = skeleton.INDEX
 
 
-def detect_skeleton(bvh):
-    """Name of the joint map that fits this file's joint names; BvhError when none does."""
-    names = set(bvh.names)
+def detect_skeleton(names, where):
+    """Name of the joint map that fits these joint names; BvhError naming `where` when none does, or
+    when the names look like a known skeleton that lacks a joint the map needs."""
+    names = set(names)
     for key, spec in SKELETON_MAPS.items():
         if spec["detect"] <= names:
+            needed = [n for src in spec["map"].values() for n in ((src,) if isinstance(src, str) else src[:2])]
+            missing = [n for n in dict.fromkeys(needed) if n not in names]
+            if missing:
+                raise BvhError(f"{where}: looks like a {key} skeleton but has no joint '{missing[0]}'")
             return key
-    raise BvhError(f"{bvh.path}:1: unknown skeleton (joints {', '.join(bvh.names[:6])}, ...); "
+    raise BvhError(f"{where}: unknown skeleton (joints {', '.join(sorted(names)[:6])}, ...); "
                    f"known: {', '.join(SKELETON_MAPS)}")
 
 
@@ -75,8 +80,10 @@ def map_joints(positions, names, key):
 
 def bvh_world_positions(bvh, fps=None):
     """FK positions [T, J, 3] of all joints of a Bvh in file units, resampled to `fps` (None: native)."""
-    q, trans = local_quaternions(bvh)
     fps_in = clean_fps(bvh.fps)
+    if fps is not None:
+        check_frames(len(resample_times(bvh.n_frames, fps_in, float(fps))), f"{bvh.path}: resampled to {fps:g} fps")
+    q, trans = local_quaternions(bvh)
     if fps is not None:
         q, trans = resample_local(q, trans, fps_in, float(fps))
     pos, _ = forward_kinematics(bvh.parents, quat_to_matrix(q), trans)
@@ -88,7 +95,7 @@ def load_take(path, fps=20.0):
     bvh = read_bvh(path)
     if bvh.n_frames < 2:
         raise BvhError(f"{path}:1: take has {bvh.n_frames} frame(s); need at least 2")
-    key = detect_skeleton(bvh)
+    key = detect_skeleton(bvh.names, f"{path}:1")
     pos = bvh_world_positions(bvh, fps)
     return (map_joints(pos, bvh.names, key) * SKELETON_MAPS[key]["scale"]).astype(np.float32)
 

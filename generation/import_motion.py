@@ -7,13 +7,14 @@ default 0.01 for centimetre files), resampled to `--fps` when given (rotations a
 keep their lengths). When the skeleton is one the project knows (Bandai-Namco, CMU/PFNN), the clip
 also gets the root `control` of its 21-joint body (features.to_features), in the clip's units.
 """
-import argparse
 import sys
 
 import numpy as np
 
+from core import cli
+
 from .bvh import BvhError, read_bvh
-from .clip import ClipError, save_clip
+from .clip import MAX_FPS, MIN_FPS, clip_path, save_clip
 from .features import bvh_world_positions, detect_skeleton, map_joints, to_features
 from .resample import clean_fps
 
@@ -28,8 +29,9 @@ def import_motion(in_path, out_path, scale=0.01, fps=None):
     joints = (pos * scale).astype(np.float32)
     extra = {}
     try:
-        key = detect_skeleton(bvh)
-    except BvhError:
+        key = detect_skeleton(bvh.names, f"{in_path}:1")
+    except BvhError as e:  # any skeleton imports; only the control needs a known one
+        print(f"note: no control written: {e}", file=sys.stderr)
         key = None
     if key is not None and len(joints) > 1:
         # control in the clip's own units (so it integrates back onto its joints whatever --scale is)
@@ -38,25 +40,21 @@ def import_motion(in_path, out_path, scale=0.01, fps=None):
     return joints
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m generation.import_motion", description=__doc__.split("\n")[0])
+def _main(argv):
+    ap = cli.ArgumentParser(prog="python -m generation.import_motion", description=__doc__.split("\n")[0])
     ap.add_argument("input", help="BVH file (.bvh or .bvh.gz)")
     ap.add_argument("output", help="clip .npz to write")
-    ap.add_argument("--scale", type=float, default=0.01, help="metres per file unit (default 0.01: centimetres)")
-    ap.add_argument("--fps", type=float, default=None, help="resample to this frame rate (default: keep the file's)")
+    ap.add_argument("--scale", type=cli.number(float, lo=0, hi=1e3, lo_open=True), default=0.01,
+                    help="metres per file unit (default 0.01: centimetres)")
+    ap.add_argument("--fps", type=cli.number(float, MIN_FPS, MAX_FPS), default=None,
+                    help="resample to this frame rate (default: keep the file's)")
     args = ap.parse_args(argv)
-    try:
-        if not args.scale > 0 or (args.fps is not None and not args.fps > 0):
-            raise BvhError(f"{args.input}:0: --scale and --fps must be positive")
-        joints = import_motion(args.input, args.output, args.scale, args.fps)
-    except (BvhError, ClipError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    except OSError as e:
-        print(f"error: {args.output}: cannot write ({e.strerror or e})", file=sys.stderr)
-        return 2
+    joints = import_motion(args.input, clip_path(args.output), args.scale, args.fps)
     print(f"{args.output}: {joints.shape[0]} frames, {joints.shape[1]} joints")
-    return 0
+
+
+def main(argv=None):
+    return cli.run(_main, argv)
 
 
 if __name__ == "__main__":

@@ -15,7 +15,6 @@
    condition except BAD. Every clip is placed to start at the origin facing +Z.
 5. Videos (in parallel, one process per core), contact sheets, metrics.csv, manifest.csv, items.csv.
 """
-import argparse
 import csv
 import os
 import re
@@ -30,13 +29,16 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from core import cli
+from core.cli import UserError
+from rendering.blinding import pad_to_common_size, same_mtime
+from rendering.render import MAX_SIZE, MIN_SIZE, render_clip
+
 from . import skeleton
-from .bvh import BvhError
-from .clip import ClipError, save_clip
+from .clip import save_clip
 from .features import to_world
 from .metrics import METRIC_NAMES, clip_metrics
-from .systems import SystemError_, canonical_placement, find_system_files, load_system_motion, parse_system_spec
-from core.cli import UserError
+from .systems import canonical_placement, find_system_files, load_system_motion, parse_system_spec
 
 BUILTIN = ("NAT", "MG", "FL")
 CLIP_ID_LEN = 16
@@ -230,8 +232,6 @@ def new_clip_id(taken, forbidden):
 
 
 def _render_job(job):
-    from rendering.render import render_clip
-
     motion, video, sheet, size, preset = job
     return render_clip(motion, video, size=size, sheet=sheet, preset=preset, threads=1)
 
@@ -283,7 +283,7 @@ def summary_text(metrics_rows):
 
 # ---------------------------------------------------------------- main
 def parse_args(argv):
-    ap = argparse.ArgumentParser(prog="python -m generation.make_stimuli", description=__doc__.split("\n")[0])
+    ap = cli.ArgumentParser(prog="python -m generation.make_stimuli", description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="stimuli", help="stimulus folder to write (default stimuli)")
     ap.add_argument("--quick", action="store_true", help="tiny models on a subset of takes: a few minutes in all")
     ap.add_argument("--data", help="folder of BVH takes (default ../shared/data/bandai-namco-locomotion)")
@@ -291,7 +291,7 @@ def parse_args(argv):
     ap.add_argument("--dataset", help="prepared dataset .npz to use or create (default RUNS/dataset.npz, "
                                       "RUNS/dataset_quick.npz with --quick)")
     ap.add_argument("--config", help="training config for both models: tiny | cpu | paper (default cpu; tiny with --quick)")
-    ap.add_argument("--train-steps", type=int, help="override the config's training steps")
+    ap.add_argument("--train-steps", type=cli.number(int, 1), help="override the config's training steps")
     ap.add_argument("--mg-checkpoint", help="MG checkpoint to sample from (skips MG training)")
     ap.add_argument("--fl-checkpoint", help="FL checkpoint to sample from (skips FL training)")
     ap.add_argument("--bad-checkpoint", help="checkpoint for the BAD catch clips (default: the earliest MG one)")
@@ -299,17 +299,17 @@ def parse_args(argv):
                     help="import another system's output (one ITEM.bvh[.gz] or ITEM.npz per item) as condition NAME")
     ap.add_argument("--export-items", metavar="DIR", help="only write DIR/items.csv and DIR/items/ (what another "
                                                            "system must generate), then stop")
-    ap.add_argument("--n-items", type=int, default=30, help="test items (each in NAT, MG, FL and every system; default 30)")
-    ap.add_argument("--n-catch", type=int, default=4, help="BAD catch clips (default 4)")
-    ap.add_argument("--n-training", type=int, default=1, help="familiarisation items, each shown in every "
+    ap.add_argument("--n-items", type=cli.number(int, 1, 10_000), default=30, help="test items (each in NAT, MG, FL and every system; default 30)")
+    ap.add_argument("--n-catch", type=cli.number(int, 0, 10_000), default=4, help="BAD catch clips (default 4)")
+    ap.add_argument("--n-training", type=cli.number(int, 0, 10_000), default=1, help="familiarisation items, each shown in every "
                                                               "condition but BAD (default 1)")
-    ap.add_argument("--temperature", type=float, default=1.0, help="sampling temperature of MG and FL (default 1.0)")
-    ap.add_argument("--seed", type=int, default=0, help="item selection, sampling and manifest order (default 0)")
-    ap.add_argument("--size", type=int, help="video width = height in pixels (default 640; 320 with --quick)")
+    ap.add_argument("--temperature", type=cli.number(float, 0, 10), default=1.0, help="sampling temperature of MG and FL (default 1.0)")
+    ap.add_argument("--seed", type=cli.number(int, 0), default=0, help="item selection, sampling and manifest order (default 0)")
+    ap.add_argument("--size", type=cli.number(int, MIN_SIZE, MAX_SIZE), help="video width = height in pixels (default 640; 320 with --quick)")
     ap.add_argument("--preset", default="ultrafast", help="x264 preset (default ultrafast at constant quantiser 17: fastest, no visible loss on stick figures)")
-    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="rendering processes (default: one per core)")
+    ap.add_argument("--jobs", type=cli.number(int, 1, 1024), default=os.cpu_count() or 1, help="rendering processes (default: one per core)")
     ap.add_argument("--device", help="torch device (default: cuda when present, else cpu)")
-    ap.add_argument("--threads", type=int, help="torch CPU threads for training and sampling (default: torch's "
+    ap.add_argument("--threads", type=cli.number(int, 1, 1024), help="torch CPU threads for training and sampling (default: torch's "
                                                 "choice; 1 with --quick, where tiny models gain nothing from more)")
     ap.add_argument("--force", action="store_true", help="replace an existing stimulus set in --out")
     args = ap.parse_args(argv)
@@ -317,15 +317,8 @@ def parse_args(argv):
     args.size = args.size or (320 if args.quick else 640)
     args.threads = args.threads or (1 if args.quick else None)
     args.dataset = args.dataset or str(Path(args.runs) / ("dataset_quick.npz" if args.quick else "dataset.npz"))
-    for name in ("n_items", "n_catch", "n_training"):
-        if getattr(args, name) < 0:
-            raise StimuliError(f"--{name.replace('_', '-')} must be >= 0")
-    if args.n_items < 1:
-        raise StimuliError("--n-items must be >= 1")
-    if args.size % 2 or args.size < 32:
-        raise StimuliError(f"--size must be even and >= 32, got {args.size}")
-    if args.jobs < 1:
-        raise StimuliError(f"--jobs must be >= 1, got {args.jobs}")
+    if args.size % 2 or not MIN_SIZE <= args.size <= MAX_SIZE:
+        raise StimuliError(f"--size must be even and {MIN_SIZE}-{MAX_SIZE}, got {args.size}")
     if args.data and not Path(args.data).is_dir():
         raise StimuliError(f"--data {args.data}: folder not found")
     return args
@@ -391,7 +384,10 @@ def run(args):
     for name, motions in imported.items():
         clips += [(name, k, motions[k], "") for k in gen_items]
 
-    # Write clip files and the render jobs; ids are random and never contain a condition name.
+    # Write clip files and the render jobs in a random order, so that nothing about the files (creation order,
+    # inode numbers) follows the condition; ids are random and never contain a condition name.
+    rng = np.random.default_rng(args.seed)
+    clips = [clips[i] for i in rng.permutation(len(clips))]
     forbidden = [c.lower() for c in (*BUILTIN, "BAD", *systems)]
     taken, manifest, metrics_rows, jobs = set(), [], [], []
     for cond, k, joints, seed in tqdm(clips, desc="clips", unit="clip", file=sys.stderr):
@@ -410,13 +406,14 @@ def run(args):
 
     log(f"render: {len(jobs)} clips at {args.size}x{args.size} on {min(args.jobs, len(jobs))} processes")
     render_all(jobs, min(args.jobs, len(jobs)))
-    log("render: done")
+    videos = [job[1] for job in jobs]
+    size = pad_to_common_size(videos)
+    same_mtime([p for job in jobs for p in job[:3]], time.time())
+    log(f"render: done; every video padded to {size} bytes and stamped with the same time")
 
-    rng = np.random.default_rng(args.seed)
-    order = rng.permutation(len(manifest))  # row order tells nothing about the condition either
-    _write_csv(out / "manifest.csv", MANIFEST_COLUMNS, [manifest[i] for i in order])
+    _write_csv(out / "manifest.csv", MANIFEST_COLUMNS, manifest)  # rows in the random order of the clips
     _write_csv(out / "metrics.csv", METRICS_COLUMNS,
-               [{k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in metrics_rows[i].items()} for i in order])
+               [{k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()} for row in metrics_rows])
     write_items(out, items, arrays, fps)
 
     n = {r: sum(m["role"] == r for m in manifest) for r in ("test", "catch", "training")}
@@ -450,19 +447,7 @@ def _write_csv(path, columns, rows):
 
 
 def main(argv=None):
-    from rendering.render import RenderError
-    from .dataset import DatasetError
-    from .prepare_data import PrepareError
-    from .sample import SampleError
-    from .train import TrainError
-
-    try:
-        return run(parse_args(argv))
-    except (StimuliError, SystemError_, PrepareError, BvhError, TrainError, DatasetError, ClipError,
-            RenderError, SampleError,
-            OSError) as e:  # OSError: an unwritable --out, a full disk, ...: the message names the path
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    return cli.run(lambda a: run(parse_args(a)), argv)
 
 
 if __name__ == "__main__":

@@ -10,7 +10,6 @@ take is cut into windows of `window` frames every `stride` frames, plus one wind
 frame so that short takes lose no tail. Valid/test windows start at frame >= tau and carry the tau
 frames before them (`{split}_hist`, `{split}_hist_c`) so that MG can be seeded with real history.
 """
-import argparse
 from concurrent.futures import ProcessPoolExecutor
 import os
 from pathlib import Path
@@ -19,8 +18,9 @@ import sys
 import numpy as np
 
 from . import skeleton
-from .bvh import BvhError
+from .clip import MAX_FPS, MIN_FPS
 from .features import load_take, mirror, reverse, to_features
+from core import cli
 from core.cli import UserError
 
 DEFAULT_DATA = Path("..") / "shared" / "data" / "bandai-namco-locomotion"
@@ -251,36 +251,32 @@ def summary_table(summary):
             f"train {n['train']}, valid {n['valid']}, test {n['test']} -> {summary['out']}")
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m generation.prepare_data", description=__doc__.split("\n")[0])
+def _main(argv):
+    ap = cli.ArgumentParser(prog="python -m generation.prepare_data", description=__doc__.split("\n")[0])
     ap.add_argument("--data", help="folder of BVH takes (default: ../shared/data/bandai-namco-locomotion)")
     ap.add_argument("--out", default="dataset.npz", help="output .npz (default: dataset.npz)")
-    ap.add_argument("--fps", type=float, default=20.0)
-    ap.add_argument("--window", type=int, default=80, help="frames per window (default 80 = 4 s)")
-    ap.add_argument("--stride", type=int, default=20, help="frames between window starts (default 20)")
-    ap.add_argument("--tau", type=int, default=10, help="history frames before valid/test windows")
-    ap.add_argument("--held-out", type=int, default=4, help="takes per category in valid and in test")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    ap.add_argument("--fps", type=cli.number(float, MIN_FPS, MAX_FPS), default=20.0)
+    ap.add_argument("--window", type=cli.number(int, 2, 100_000), default=80, help="frames per window (default 80 = 4 s)")
+    ap.add_argument("--stride", type=cli.number(int, 1, 100_000), default=20, help="frames between window starts (default 20)")
+    ap.add_argument("--tau", type=cli.number(int, 0, 1000), default=10, help="history frames before valid/test windows")
+    ap.add_argument("--held-out", type=cli.number(int, 0, 10_000), default=4, help="takes per category in valid and in test")
+    ap.add_argument("--seed", type=cli.number(int, 0), default=0)
+    ap.add_argument("--workers", type=cli.number(int, 1, 1024), default=None, help="processes (default: all cores)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     args = ap.parse_args(argv)
-    try:
-        data = args.data
+    data = args.data
+    if data is None:
+        data = default_data_dir()
         if data is None:
-            data = default_data_dir()
-            if data is None:
-                raise PrepareError(f"no --data given and {DEFAULT_DATA} not found here or beside the "
-                                   "repository; pass --data DIR (a folder of .bvh/.bvh.gz takes)")
-        summary = prepare(data, args.out, fps=args.fps, window=args.window, stride=args.stride, seed=args.seed,
-                          tau=args.tau, held_out=args.held_out, workers=args.workers, progress=not args.quiet)
-    except (BvhError, PrepareError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return 130
+            raise PrepareError(f"no --data given and {DEFAULT_DATA} not found here or beside the "
+                               "repository; pass --data DIR (a folder of .bvh/.bvh.gz takes)")
+    summary = prepare(data, args.out, fps=args.fps, window=args.window, stride=args.stride, seed=args.seed,
+                      tau=args.tau, held_out=args.held_out, workers=args.workers, progress=not args.quiet)
     print(summary_table(summary))
-    return 0
+
+
+def main(argv=None):
+    return cli.run(_main, argv)
 
 
 if __name__ == "__main__":

@@ -9,7 +9,6 @@ API (arrays in and out are un-standardised features, numpy or torch; outputs are
     stream = mg_stream(model, history [B,tau,63], history_control [B,tau,3], temperature, seed)
     pose = stream(control_t [B,3])                                    # one frame in, one pose out [B,63]
 """
-import argparse
 import sys
 from pathlib import Path
 
@@ -21,6 +20,7 @@ from .clip import save_clip
 from .fl import FL
 from .moglow import MGStream, MoGlow
 from .train import MODELS, pick_device
+from core import cli
 from core.cli import UserError
 
 
@@ -117,23 +117,19 @@ def sample_split(model, data_path, split="test", n=None, temperature=1.0, seed=0
     return x, c
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m generation.sample", description="Sample clips from a checkpoint.")
+def _main(argv):
+    ap = cli.ArgumentParser(prog="python -m generation.sample", description="Sample clips from a checkpoint.")
     ap.add_argument("--checkpoint", required=True)
     ap.add_argument("--data", required=True, help="prepared dataset .npz whose control (and history) to use")
     ap.add_argument("--split", default="test")
-    ap.add_argument("--n", type=int, default=None, help="number of windows (default: all)")
+    ap.add_argument("--n", type=cli.number(int, 1), default=None, help="number of windows (default: all)")
     ap.add_argument("--out", required=True)
-    ap.add_argument("--temperature", type=float, default=1.0)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--temperature", type=cli.number(float, 0, 10), default=1.0)
+    ap.add_argument("--seed", type=cli.number(int, 0), default=0)
     ap.add_argument("--device", default=None)
     a = ap.parse_args(argv)
-    try:
-        model = load_model(a.checkpoint, a.device)
-        x, c = sample_split(model, a.data, a.split, a.n, a.temperature, a.seed)
-    except SampleError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    model = load_model(a.checkpoint, a.device)
+    x, c = sample_split(model, a.data, a.split, a.n, a.temperature, a.seed)
     from .features import to_world
     out = Path(a.out)
     for i in range(len(x)):
@@ -141,7 +137,10 @@ def main(argv=None):
                   skeleton.JOINT_NAMES, model.fps, control=c[i], seed=np.int64(a.seed),
                   temperature=np.float64(a.temperature), checkpoint=np.str_(a.checkpoint))
     print(f"wrote {len(x)} {model.kind.upper()} clips to {out}")
-    return 0
+
+
+def main(argv=None):
+    return cli.run(_main, argv)
 
 
 if __name__ == "__main__":

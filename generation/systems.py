@@ -17,12 +17,13 @@ from pathlib import Path
 
 import numpy as np
 
+from core.cli import UserError
+
 from . import skeleton
 from .bvh import BvhError
 from .clip import ClipError, load_clip
-from .features import SKELETON_MAPS, load_take, map_joints, root_trajectory
+from .features import detect_skeleton, load_take, map_joints, root_trajectory
 from .resample import resample_times
-from core.cli import UserError
 
 RESERVED = ("NAT", "MG", "FL", "BAD")
 NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,31}$")
@@ -92,11 +93,7 @@ def _clip_joints21(path):
     pos = clip["joints"]
     if set(skeleton.JOINT_NAMES) <= set(names):
         return pos[:, [names.index(n) for n in skeleton.JOINT_NAMES]], clip["fps"]
-    for key, spec in SKELETON_MAPS.items():
-        if spec["detect"] <= set(names):
-            return map_joints(pos, names, key), clip["fps"]
-    raise SystemError_(f"{path}: joints {', '.join(names[:5])}, ... are neither the project's 21 joints "
-                       f"nor a known skeleton ({', '.join(SKELETON_MAPS)})")
+    return map_joints(pos, names, detect_skeleton(names, path)), clip["fps"]
 
 
 def load_system_motion(path, fps, n_frames):
@@ -105,7 +102,8 @@ def load_system_motion(path, fps, n_frames):
     try:
         if path.name.endswith(".npz"):
             joints, fps_in = _clip_joints21(path)
-            joints = resample_positions(np.asarray(joints, np.float64), fps_in, fps)
+            span = int(np.ceil((n_frames - 1) * fps_in / fps)) + 2  # only what the item needs is resampled
+            joints = resample_positions(np.asarray(joints[:span], np.float64), fps_in, fps)
         else:
             joints = load_take(path, fps)
     except (BvhError, ClipError) as e:

@@ -8,7 +8,6 @@ OUT/resume.pt (optimiser state for --resume). Adam with linear warm-up, gradient
 and dropout masks are functions of (seed, step), so a run is reproducible and a resumed run continues
 exactly as an uninterrupted one would.
 """
-import argparse
 import csv
 import json
 import math
@@ -19,8 +18,9 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
-from .dataset import DatasetError, batch_indices, eval_batches, load_dataset
+from .dataset import batch_indices, eval_batches, load_dataset
 from . import fl, moglow
+from core import cli
 from core.cli import UserError
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
@@ -204,27 +204,26 @@ def train(model, config, data_path, out_dir, steps=None, seed=0, progress=True, 
     return out
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m generation.train", description=__doc__.split("\n")[0])
+def _main(argv):
+    ap = cli.ArgumentParser(prog="python -m generation.train", description=__doc__.split("\n")[0])
     ap.add_argument("--model", required=True, choices=sorted(MODELS))
     ap.add_argument("--config", default="cpu", help="tiny | cpu | paper | path to a JSON config")
     ap.add_argument("--data", required=True, help="prepared dataset .npz (python -m generation.prepare_data)")
     ap.add_argument("--out", required=True)
-    ap.add_argument("--steps", type=int, default=None, help="override the config's number of steps")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--steps", type=cli.number(int, 1), default=None, help="override the config's number of steps")
+    ap.add_argument("--seed", type=cli.number(int, 0), default=0)
     ap.add_argument("--resume", action="store_true", help="continue from OUT/resume.pt")
     ap.add_argument("--device", default=None, help="default: cuda when present, else cpu")
-    ap.add_argument("--threads", type=int, default=None, help="CPU threads (default: all cores)")
+    ap.add_argument("--threads", type=cli.number(int, 1, 1024), default=None, help="CPU threads (default: all cores)")
     ap.add_argument("--no-progress", action="store_true")
     a = ap.parse_args(argv)
-    try:
-        out = train(a.model, a.config, a.data, a.out, steps=a.steps, seed=a.seed, progress=not a.no_progress,
-                    resume=a.resume, device=a.device, threads=a.threads)
-    except (TrainError, DatasetError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    out = train(a.model, a.config, a.data, a.out, steps=a.steps, seed=a.seed, progress=not a.no_progress,
+                resume=a.resume, device=a.device, threads=a.threads)
     print(f"trained {a.model}: {out}")
-    return 0
+
+
+def main(argv=None):
+    return cli.run(_main, argv)
 
 
 if __name__ == "__main__":

@@ -3,32 +3,43 @@ import argparse
 import sys
 from pathlib import Path
 
-from generation.clip import ClipError
-from rendering.render import RenderError, render_clip
+from core import cli
+from rendering.render import MAX_SIZE, MIN_SIZE, RenderError, render_clip
+
+PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower", "veryslow")
+
+
+def _even_size(text):
+    size = cli.number(int, MIN_SIZE, MAX_SIZE)(text)
+    if size % 2:
+        raise argparse.ArgumentTypeError(f"must be even (H.264 yuv420p), got {size}")
+    return size
+
+
+def _main(argv):
+    p = cli.ArgumentParser(prog="python -m rendering", description=__doc__)
+    p.add_argument("clip", help="motion clip .npz (CONTRACTS.md §1)")
+    p.add_argument("out", help="output .mp4")
+    p.add_argument("--size", type=_even_size, default=640,
+                   help=f"frame width = height in pixels, even, {MIN_SIZE}-{MAX_SIZE} (default 640)")
+    p.add_argument("--sheet", help="also write a PNG contact sheet here")
+    p.add_argument("--preset", default="ultrafast", choices=PRESETS, help="x264 preset (default ultrafast)")
+    p.add_argument("--qp", type=cli.number(int, 0, 51), default=17,
+                   help="x264 constant quantiser, 0-51, lower is better (default 17)")
+    p.add_argument("--crf", type=cli.number(int, 0, 51), help="x264 rate factor 0-51 instead of a constant quantiser")
+    args = p.parse_args(argv)
+    if not Path(args.clip).is_file():
+        raise RenderError(f"{args.clip}: no such file")
+    for flag, path in (("OUT", args.out), ("--sheet", args.sheet)):
+        if path is not None and not Path(path).parent.is_dir():
+            raise RenderError(f"{flag} {path}: folder {Path(path).parent} does not exist")
+    n = render_clip(args.clip, args.out, size=args.size, sheet=args.sheet, preset=args.preset, qp=args.qp,
+                    crf=args.crf)
+    print(f"wrote {args.out} ({n} frames, {args.size}x{args.size})")
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(prog="python -m rendering", description=__doc__)
-    p.add_argument("clip", help="motion clip .npz (CONTRACTS.md §1)")
-    p.add_argument("out", help="output .mp4")
-    p.add_argument("--size", type=int, default=640, help="frame width = height in pixels (even)")
-    p.add_argument("--sheet", help="also write a PNG contact sheet here")
-    p.add_argument("--preset", default="ultrafast", help="x264 preset (ultrafast ... veryslow; default ultrafast)")
-    p.add_argument("--qp", type=int, default=17, help="x264 constant quantiser, 0-51, lower is better (default 17)")
-    p.add_argument("--crf", type=int, help="x264 rate factor instead of a constant quantiser (lower is better)")
-    args = p.parse_args(argv)
-    try:
-        if not Path(args.clip).is_file():
-            raise RenderError(f"{args.clip}: no such file")
-        if not Path(args.out).parent.is_dir():
-            raise RenderError(f"{args.out}: folder {Path(args.out).parent} does not exist")
-        n = render_clip(args.clip, args.out, size=args.size, sheet=args.sheet, preset=args.preset,
-                        qp=args.qp, crf=args.crf)
-    except (ClipError, RenderError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    print(f"wrote {args.out} ({n} frames, {args.size}x{args.size})")
-    return 0
+    return cli.run(_main, argv)
 
 
 if __name__ == "__main__":

@@ -22,7 +22,7 @@ from matplotlib.path import Path
 from matplotlib.transforms import IdentityTransform
 from scipy.ndimage import gaussian_filter1d
 
-from generation.clip import load_clip
+from generation.clip import check_fps, check_joints, load_clip
 from core.cli import UserError
 
 
@@ -57,6 +57,7 @@ class Style:
     head_radius: float = 0.08   # metres
 
 
+MIN_SIZE, MAX_SIZE = 32, 4096  # pixels; beyond 4096 x264's level limits and memory get in the way
 DEFAULT_CAMERA = Camera()
 DEFAULT_STYLE = Style()
 _NEAR = 0.2  # metres; floor lines are clipped to this depth in front of the camera
@@ -375,13 +376,6 @@ def _as_clip(clip_or_path):
     return load_clip(clip_or_path)
 
 
-def _check_joints(joints, name):
-    if not np.isfinite(joints).all():
-        raise RenderError(f"{name}: joints contain NaN or infinite values")
-    if len(joints) < 1:
-        raise RenderError(f"{name}: the clip has no frames")
-
-
 def ffmpeg_writer(out_mp4, size, fps, preset="ultrafast", qp=17, crf=None, threads=None):
     """An ffmpeg process reading raw yuv420p frames on stdin and writing H.264 yuv420p +faststart MP4, no audio.
 
@@ -411,11 +405,13 @@ def render_clip(clip_or_path, out_mp4, size=640, camera=DEFAULT_CAMERA, style=DE
     """
     clip = _as_clip(clip_or_path)
     name = str(clip_or_path) if not isinstance(clip_or_path, dict) else str(out_mp4)
-    if size % 2 or size < 32:
-        raise RenderError(f"{out_mp4}: size must be even and >= 32 (H.264 yuv420p), got {size}")
+    if size % 2 or not MIN_SIZE <= size <= MAX_SIZE:
+        raise RenderError(f"{out_mp4}: size must be even and {MIN_SIZE}-{MAX_SIZE} (H.264 yuv420p), got {size}")
     joints = np.asarray(clip["joints"], dtype=np.float64)
-    _check_joints(joints, name)
-    fps = float(clip["fps"])
+    if joints.ndim != 3 or joints.shape[2] != 3 or len(joints) < 1:
+        raise RenderError(f"{name}: joints must be [T >= 1, J, 3], got {joints.shape}")
+    check_joints(joints, name)
+    fps = check_fps(clip["fps"], name)
     drawer = FrameDrawer(clip["parents"], list(clip["joint_names"]), size, camera, style)
     targets = camera_targets(joints, fps, camera)
     keep = set(np.linspace(0, len(joints) - 1, sheet_frames).round().astype(int)) if sheet else set()

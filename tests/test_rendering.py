@@ -10,7 +10,7 @@ from PIL import Image
 
 from conftest import BANDAI, ROOT
 from generation import skeleton
-from generation.clip import save_clip
+from generation.clip import ClipError, save_clip
 from generation.features import load_take
 from rendering import Camera, RenderError, render_clip
 from rendering.render import FrameDrawer, camera_targets, yuv_to_rgb
@@ -119,7 +119,7 @@ def test_render_rejects_bad_clips(tmp_path):
     bad = np.zeros((10, skeleton.N_JOINTS, 3), np.float32)
     bad[3, 4, 1] = np.nan
     clip = dict(joints=bad, parents=skeleton.PARENTS, joint_names=skeleton.JOINT_NAMES, fps=20.0)
-    with pytest.raises(RenderError, match="NaN"):
+    with pytest.raises(ClipError, match="NaN"):  # the clip contract is broken, whoever renders it
         render_clip(clip, tmp_path / "x.mp4")
     clip["joints"] = np.zeros((10, skeleton.N_JOINTS, 3), np.float32)
     with pytest.raises(RenderError, match="even"):

@@ -92,6 +92,25 @@ def test_stimuli_no_name_reveals_the_condition(manifest, quick_stimuli):
         assert np.allclose(root[0], 0, atol=1e-4) and abs(yaw[0]) < 1e-4
 
 
+def _condition_runs(conditions):
+    """How many runs of equal neighbours a sequence has: 4 when grouped by condition, ~2/3 of its length at random."""
+    return 1 + sum(a != b for a, b in zip(conditions, conditions[1:]))
+
+
+def test_stimuli_files_tell_nothing_outside_their_pixels(manifest, quick_stimuli):
+    """A bot that sorts clips by byte size, time stamp or creation order learns nothing (issue 11, finding 1)."""
+    videos = [quick_stimuli / m["video"] for m in manifest]
+    files = videos + [quick_stimuli / m["motion"] for m in manifest] + \
+        [quick_stimuli / "sheets" / f"{m['clip_id']}.png" for m in manifest]
+    assert len({v.stat().st_size for v in videos}) == 1  # padded to one size
+    assert len({f.stat().st_mtime_ns for f in files}) == 1  # one time stamp
+    conditions = [m["condition"] for m in manifest]
+    # Files were written in a random order: by creation (inode change) time the conditions are mixed.
+    by_creation = sorted(manifest, key=lambda m: (quick_stimuli / m["motion"]).stat().st_ctime_ns)
+    assert _condition_runs([m["condition"] for m in by_creation]) > len(manifest) / 3
+    assert _condition_runs(conditions) > len(manifest) / 3  # and so are the manifest's rows
+
+
 def test_stimuli_metrics_plausible_and_bad_clips_worse(manifest, quick_stimuli):
     rows = read_csv(quick_stimuli / "metrics.csv")
     assert list(rows[0]) == ["clip_id", "condition", "role", "item", "foot_skating", "bone_length_std", "jerk",
@@ -187,6 +206,50 @@ def test_stimuli_bad_input_one_line_errors(quick_stimuli, tmp_path, capsys):
     # An existing stimulus set is not overwritten without --force.
     code, err = _error(["--quick", "--runs", str(runs), "--out", str(quick_stimuli)], capsys)
     assert code == 2 and "--force" in err
+
+
+def _hostile_bvh(text, how):
+    """A real take, broken the way an attacker or a careless exporter would break it."""
+    lines = text.split("\n")
+    at = next(i for i, line in enumerate(lines) if line.startswith("Frame Time"))
+    if how.startswith("frame_time="):
+        lines[at] = f"Frame Time: {how.split('=')[1]}"
+    elif how == "huge_position":
+        lines[at + 1] = "1e308 " + lines[at + 1].split(" ", 1)[1]
+    elif how == "renamed_joint":
+        return text.replace("Hand_R", "HandR", 1).encode()
+    elif how == "non_utf8_name":
+        return text.encode().replace(b"Hand_R", b"Hand\xff_R", 1)
+    return "\n".join(lines).encode()
+
+
+@pytest.mark.parametrize("how, says", [
+    ("frame_time=1e-9", "Frame Time must be between"),   # once tried to allocate 15 GB
+    ("frame_time=1e308", "out of range"),                 # once a ZeroDivisionError
+    ("frame_time=inf", "out of range"),
+    ("huge_position", "out of range"),                    # once exit 0 with infinite joints
+    ("renamed_joint", "has no joint 'Hand_R'"),       # once a KeyError
+    ("non_utf8_name", "has no joint 'Hand_R'"),
+])
+def test_stimuli_hostile_system_file_one_line(quick_stimuli, tmp_path, capsys, how, says):
+    runs = quick_stimuli.parent / "runs"
+    base = ["--quick", "--runs", str(runs), "--n-items", "2", "--n-catch", "1", "--n-training", "0"]
+    assert make_stimuli.main(base + ["--export-items", str(tmp_path / "ask")]) == 0
+    items = [r["item"] for r in read_csv(tmp_path / "ask" / "items.csv")]
+    sysdir = tmp_path / "sys"
+    sysdir.mkdir()
+    take = BANDAI / "dataset-1" / "data" / "dataset-1_walk_angry_002.bvh.gz"
+    import gzip
+    text = gzip.decompress(take.read_bytes()).decode()
+    for it in items[1:]:
+        shutil.copy(take, sysdir / f"{it}.bvh.gz")
+    (sysdir / f"{items[0]}.bvh").write_bytes(_hostile_bvh(text, how))
+    capsys.readouterr()
+    code = make_stimuli.main(base + ["--out", str(tmp_path / "o"), "--system", f"S={sysdir}"])
+    err = capsys.readouterr().err
+    last = err.strip().splitlines()[-1]
+    assert code == 2 and "Traceback" not in err and last.startswith("error: ") and says in last, err[-500:]
+    assert f"{items[0]}.bvh" in last
 
 
 @pytest.mark.slow
