@@ -9,7 +9,7 @@ Training runs each coupling LSTM over a whole window at once (frames tau..T-1, h
 h = 0 at frame tau): that equals the frame-by-frame flow, because every other layer acts frame-wise.
 Sampling (MGStream) runs the same flow inverted, one frame at a time, with pre-fused weights.
 """
-import time
+import os
 
 import torch
 from torch import nn
@@ -126,9 +126,9 @@ class MGStream:
     Two memory layouts compute the same thing (they differ only in float rounding):
     "row": activations [B, features], weights stored [in, out], every product X @ W;
     "col": activations [features, B], weights stored [out, in] as nn.LSTM keeps them, every product W @ X.
-    Which is faster depends on the CPU and its BLAS, by up to 1.5x either way (bench/RESULTS.md), so
-    layout=None times the frame's largest product both ways once per process and batch size and keeps the
-    faster (`pick_layout`); pass a layout to fix it.
+    Which is faster depends on the CPU and its BLAS, by up to 2.8x either way (bench/RESULTS.md), so
+    layout=None takes `default_layout`, a fixed choice per device type and CPU vendor (never a timing, so the
+    same inputs give the same bits run after run); pass a layout to fix it.
     """
 
     def __init__(self, model, history, history_control, temperature=1.0, generator=None, layout=None):
@@ -139,7 +139,7 @@ class MGStream:
         self.hist = history.to(self.device, self.dtype).clone()          # [B, tau, 63]
         self.hist_c = history_control.to(self.device, self.dtype).clone()  # [B, tau, 3]
         b = self.hist.shape[0]
-        self.layout = layout or pick_layout(model, b)
+        self.layout = layout or default_layout(self.device)
         if self.layout not in LAYOUTS:
             raise ValueError(f"MGStream: layout must be one of {LAYOUTS}, got {self.layout!r}")
         self.w = w = fused_weights(model, self.layout)
@@ -217,31 +217,34 @@ class MGStream:
 
 
 LAYOUTS = ("row", "col")
-_picked = {}
 
 
-def pick_layout(model, batch):
-    """The faster layout for this model size, batch size, device and thread count, timed once per process:
-    the frame's largest product (layer 1's history/control part for all K steps; its shape, not the model's
-    weights) both ways, interleaved, best of 3. On CUDA "row" (cuBLAS takes either; not timed)."""
-    p = next(model.parameters())
-    if p.device.type != "cpu":
+def cpu_vendor():
+    """The CPU's vendor string from /proc/cpuinfo ("GenuineIntel", "AuthenticAMD", ...); "" where unknown."""
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
+            for line in f:
+                if line.startswith("vendor_id"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return ""
+
+
+def default_layout(device):
+    """The layout for a device, fixed per device type and CPU vendor so that sampling never depends on a
+    timing race (the two layouts round differently). MOGLOW_LAYOUT=row|col overrides it.
+
+    Measured (bench/RESULTS.md): on AMD Zen 3 with MKL, "row" is 2.8x faster for one stream and 1.2-1.4x for
+    30; on the Intel hosts measured "col" is as fast or faster. cuBLAS takes either: "row"."""
+    chosen = os.environ.get("MOGLOW_LAYOUT")
+    if chosen:
+        if chosen not in LAYOUTS:
+            raise ValueError(f"MOGLOW_LAYOUT must be one of {LAYOUTS}, got {chosen!r}")
+        return chosen
+    if torch.device(device).type != "cpu":
         return "row"
-    k, rows, cols = len(model.flow.layers), 4 * model.config["hidden"], _cond_columns(model.cond_dim)
-    key = (k, rows, cols, batch, p.dtype, torch.get_num_threads())
-    if key not in _picked:
-        times = {name: [] for name in LAYOUTS}
-        with torch.inference_mode():
-            w_col = torch.full((k, rows, cols), 0.01, dtype=p.dtype)  # written, so the pages are real memory
-            operands = {"col": (w_col, torch.full((k, cols, batch), 0.01, dtype=p.dtype)),
-                        "row": (torch.full((k, batch, cols), 0.01, dtype=p.dtype), w_col.mT.contiguous())}
-            for _ in range(4):
-                for name in LAYOUTS:
-                    start = time.perf_counter()
-                    torch.bmm(*operands[name])
-                    times[name].append(time.perf_counter() - start)
-        _picked[key] = min(LAYOUTS, key=lambda name: min(times[name][1:]))  # the first round warms up
-    return _picked[key]
+    return "row" if cpu_vendor() == "AuthenticAMD" else "col"
 
 
 def lstm_cell_(gates, c, h, dim, hid):

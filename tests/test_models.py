@@ -134,12 +134,35 @@ def test_paper_configs_build_models_of_the_papers_size():
     assert (fl_cfg["L"], fl_cfg["K"]) == (4, 32)
 
 
-def test_layout_is_picked_once_and_checked(tiny_runs, test_split):
-    from generation.moglow import LAYOUTS, MGStream, pick_layout
+def test_layout_is_a_fixed_choice_never_a_timing(tiny_runs, monkeypatch):
+    """The two layouts round differently, so the choice must not depend on a timing (issue 15, item 5)."""
+    from generation.moglow import LAYOUTS, MGStream, cpu_vendor, default_layout
     model = load_model(last_ckpt(tiny_runs["mg"]))
-    hist = torch.zeros(3, model.tau, 63)
-    first = pick_layout(model, 3)
-    assert first in LAYOUTS and all(pick_layout(model, 3) == first for _ in range(3))  # cached, not re-timed
-    assert MGStream(model, hist, torch.zeros(3, model.tau, 3)).layout == first
+    hist, hist_c = torch.zeros(3, model.tau, 63), torch.zeros(3, model.tau, 3)
+    monkeypatch.delenv("MOGLOW_LAYOUT", raising=False)
+    assert default_layout("cpu") == ("row" if cpu_vendor() == "AuthenticAMD" else "col")
+    assert default_layout("cuda") == "row" and default_layout(torch.device("cuda:0")) == "row"
+    assert MGStream(model, hist, hist_c).layout == default_layout("cpu")
+    other = next(name for name in LAYOUTS if name != default_layout("cpu"))
+    monkeypatch.setenv("MOGLOW_LAYOUT", other)
+    assert MGStream(model, hist, hist_c).layout == other
+    monkeypatch.setenv("MOGLOW_LAYOUT", "diagonal")
+    with pytest.raises(ValueError, match="MOGLOW_LAYOUT"):
+        MGStream(model, hist, hist_c)
+    monkeypatch.delenv("MOGLOW_LAYOUT")
     with pytest.raises(ValueError, match="layout"):
-        MGStream(model, hist, torch.zeros(3, model.tau, 3), layout="diagonal")
+        MGStream(model, hist, hist_c, layout="diagonal")
+
+
+def test_two_sampling_processes_give_identical_bits(tiny_runs, small_dataset, tmp_path):
+    """The same checkpoint, seed and inputs in two fresh processes: the same clip files, byte for byte."""
+    outs = []
+    for run in ("a", "b"):
+        r = subprocess.run([sys.executable, "-m", "generation.sample", "--checkpoint", str(last_ckpt(tiny_runs["mg"])),
+                            "--data", str(small_dataset), "--n", "3", "--seed", "4", "--out", str(tmp_path / run)],
+                           capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        outs.append(sorted((tmp_path / run).glob("*.npz")))
+    assert len(outs[0]) == 3
+    for a, b in zip(*outs):
+        assert np.array_equal(load_clip(a)["joints"], load_clip(b)["joints"])
