@@ -3,7 +3,9 @@
 ratings_histogram: the paper's Fig. 5 (responses per scale point and condition, vertical lines at the means);
 per_clip_means: Fig. 6 (mean rating of every clip, sorted worst to best within each condition);
 condition_means: means with t and cluster-bootstrap 95% intervals, with and without the rater exclusion;
-metric_scatter: each objective metric against the per-clip mean rating.
+metric_scatter: each objective metric against the per-clip mean rating;
+ordinal_fit: the ordinal mixed model's predicted rating distribution per condition beside the observed one;
+power_curve: the power planner's estimated power against the number of raters.
 """
 import matplotlib
 
@@ -19,6 +21,12 @@ STYLE = {
     "ytick.labelsize": 8, "axes.spines.top": False, "axes.spines.right": False, "axes.linewidth": 0.8,
     "savefig.dpi": 200, "savefig.bbox": "tight", "font.family": "DejaVu Sans",
 }
+
+
+def text(label):
+    """A name from the data as literal plot text: matplotlib would read "$...$" as mathematics (and stop on
+    a malformed formula), so dollar signs are escaped."""
+    return str(label).replace("$", r"\$")
 
 
 def colours(conditions):
@@ -46,7 +54,7 @@ def ratings_histogram(hist, means, path, title=None):
         for i, c in enumerate(conds):
             x = np.array(scale) + (i - (len(conds) - 1) / 2) * width
             ax.bar(x, hist.loc[c].to_numpy(), width=width * 0.95, color=col[c], alpha=0.85,
-                   label=f"{c} (n={int(hist.loc[c].sum()):,}, mean {means[c]:.2f})", zorder=2)
+                   label=f"{text(c)} (n={int(hist.loc[c].sum()):,}, mean {means[c]:.2f})", zorder=2)
             ax.axvline(means[c], color=col[c], lw=1.6, ls="--", zorder=3)
             ax.text(means[c], top * (1.04 + 0.07 * i), f" {means[c]:.2f}", color=col[c], fontsize=7.5,
                     ha="left", va="center")
@@ -80,7 +88,7 @@ def per_clip_means(clips, path, title=None):
             ax.fill_between(x, part["ci_low"].clip(1, 5), part["ci_high"].clip(1, 5), color=col[c], alpha=0.13,
                             lw=0, step=None)
             ax.plot(x, part["mean"], color=col[c], lw=1.3, marker="o" if ms else None, ms=ms,
-                    label=f"{c} ({len(part)} clips)")
+                    label=f"{text(c)} ({len(part)} clips)")
         ax.set_xlabel("Clip, sorted from worst to best within condition")
         ax.set_ylabel("Mean rating")
         ax.set_ylim(0.9, 5.1)
@@ -113,7 +121,7 @@ def condition_means(panels, path):
                             alpha=0.45, solid_capstyle="butt")
                 ax.plot(row["mean"], y, marker=markers[j % 4], color=col[c], mec="white", ms=6, zorder=3)
                 ticks.append(y)
-                labels.append(f"{c} — {label}")
+                labels.append(f"{text(c)} — {label}")
                 y -= 1
             y -= 0.4
         ax.set_yticks(ticks)
@@ -139,10 +147,10 @@ def metric_scatter(clips, metrics, corr, path):
         for ax, m in zip(axes.ravel(), names):
             for c in conds:
                 part = merged[merged["condition"] == c]
-                ax.scatter(part[m], part["mean"], s=9, color=col[c], alpha=0.8, lw=0, label=c)
+                ax.scatter(part[m], part["mean"], s=9, color=col[c], alpha=0.8, lw=0, label=text(c))
             row = corr[(corr["metric"] == m) & (corr["scope"] == "all")]
             rho = row["spearman_rho"].iloc[0] if len(row) else np.nan
-            ax.set_title(f"{m}\nSpearman ρ = {rho:.2f}" if np.isfinite(rho) else m, fontsize=8.5)
+            ax.set_title(f"{text(m)}\nSpearman ρ = {rho:.2f}" if np.isfinite(rho) else text(m), fontsize=8.5)
             ax.set_ylim(0.9, 5.1)
             ax.grid(color="0.92", lw=0.5)
             ax.tick_params(labelsize=7)
@@ -152,4 +160,49 @@ def metric_scatter(clips, metrics, corr, path):
             ax.set_ylabel("Clip mean rating")
         axes.ravel()[0].legend(frameon=False, fontsize=7, loc="lower left", handletextpad=0.1)
         fig.tight_layout()
+        return _save(fig, path)
+
+
+def ordinal_fit(model, path):
+    """model: stats.ordinal_model() dict. One panel per condition: observed share of each rating (bars) and the
+    fitted population-averaged distribution (dots), so a misfit of the cumulative-logit model shows at a glance."""
+    conds = list(model["observed_distribution"])
+    col = colours(conds)
+    levels = list(next(iter(model["observed_distribution"].values())))
+    x = np.arange(len(levels))
+    with plt.rc_context(STYLE):
+        fig, axes = plt.subplots(1, len(conds), figsize=(2.3 * len(conds) + 0.6, 2.6), sharey=True, squeeze=False)
+        for ax, c in zip(axes[0], conds):
+            obs = [model["observed_distribution"][c][k] for k in levels]
+            fit = [model["fitted_distribution"][c][k] for k in levels]
+            ax.bar(x, obs, width=0.7, color=col[c], alpha=0.75, label="observed", zorder=2)
+            ax.plot(x, fit, "o-", color="black", ms=4, lw=1, label="fitted", zorder=3)
+            ax.set_xticks(x)
+            ax.set_xticklabels(levels)
+            ax.set_title(text(c), loc="left")
+            ax.set_xlabel("Rating")
+            ax.grid(axis="y", color="0.9", lw=0.6, zorder=0)
+        axes[0, 0].set_ylabel("Share of responses")
+        axes[0, -1].legend(frameon=False, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+        return _save(fig, path)
+
+
+def power_curve(curve, target, path, title=None):
+    """curve: plan.power_curve() table (raters, raters_per_clip, power, low, high); target: the power asked."""
+    with plt.rc_context(STYLE):
+        fig, ax = plt.subplots(figsize=(6.0, 3.4))
+        ax.fill_between(curve["raters"], curve["low"], curve["high"], color="#0072B2", alpha=0.18, lw=0,
+                        label="95% Monte Carlo interval")
+        ax.plot(curve["raters"], curve["power"], "o-", color="#0072B2", ms=3.5, lw=1.4, label="estimated power")
+        ax.axhline(target, color="#D55E00", ls="--", lw=1, label=f"target {target:g}")
+        ax.set_xlabel("Raters in total")
+        ax.set_ylabel("Power")
+        ax.set_ylim(0, 1.02)
+        ax.grid(color="0.92", lw=0.5)
+        top = ax.secondary_xaxis("top", functions=(lambda r: r * curve.attrs["per_clip_per_rater"],
+                                                   lambda k: k / curve.attrs["per_clip_per_rater"]))
+        top.set_xlabel("Ratings per clip")
+        ax.legend(frameon=False, loc="lower right")
+        if title:
+            ax.set_title(text(title), loc="left", fontsize=9)
         return _save(fig, path)

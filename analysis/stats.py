@@ -15,6 +15,11 @@ from scipy import sparse
 from scipy import stats as sps
 
 PAPER_ORDER = ("NAT", "MG", "FL")  # the paper's order in tables and figures; other systems follow, BAD last
+NO_VARIANCE = "no variance (every rating is the same): test undefined"
+NO_WITHIN_VARIANCE = "no variance within conditions (every condition's ratings are all the same): test undefined"
+# scipy's studentized-range tail is a numerical integral: below ~1e-9 it loses its digits (R's ptukey too;
+# both reach 0 or a floor far out), so smaller Tukey p-values are reported as an upper bound instead.
+TUKEY_P_RESOLVED = 1e-9
 
 
 def condition_order(conditions):
@@ -87,15 +92,18 @@ def one_way_anova(df, dv="rating", between="condition"):
         ssb = float(np.dot(n, (means - grand) ** 2))
     df_b, df_w = k - 1, big_n - k
     if exact:
-        f_exact = (ssb / df_b) / (ssw / df_w) if ssw else None
-        F = float(f_exact) if f_exact is not None else math.inf
+        F = float((ssb / df_b) / (ssw / df_w)) if ssw else math.nan
         ssb, ssw = float(ssb), float(ssw)
     else:
-        F = (ssb / df_b) / (ssw / df_w) if ssw > 0 else math.inf
-    p = float(sps.f.sf(F, df_b, df_w)) if math.isfinite(F) else 0.0
-    return {"F": F, "df_between": df_b, "df_within": df_w, "p": p, "ss_between": ssb, "ss_within": ssw,
-            "ms_between": ssb / df_b, "ms_within": ssw / df_w, "eta_squared": ssb / (ssb + ssw) if ssb + ssw else
-            math.nan, "n": big_n, "k": k}
+        F = (ssb / df_b) / (ssw / df_w) if ssw > 0 else math.nan
+    out = {"F": F, "df_between": df_b, "df_within": df_w, "p": float(sps.f.sf(F, df_b, df_w)) if ssw else math.nan,
+           "ss_between": ssb, "ss_within": ssw, "ms_between": ssb / df_b, "ms_within": ssw / df_w,
+           "eta_squared": ssb / (ssb + ssw) if ssb + ssw else math.nan, "n": big_n, "k": k}
+    if not ssw:
+        # F = x / 0 is no evidence of anything: with no spread within conditions there is no error variance to
+        # compare against (every rating identical, or one per condition), so the test is undefined, not p = 0.
+        out["undefined"] = NO_VARIANCE if not ssb else NO_WITHIN_VARIANCE
+    return out
 
 
 # ---------------------------------------------------------------------------------------------- descriptives
@@ -160,12 +168,37 @@ def tukey_hsd(df, dv="rating", between="condition", alpha=0.05):
     for i, j in combinations(range(k), 2):
         diff = means[j] - means[i]
         se = math.sqrt(mse / 2 * (1 / n[i] + 1 / n[j]))
-        q = abs(diff) / se if se > 0 else math.inf
-        p = float(sps.studentized_range.sf(q, k, df_w)) if math.isfinite(q) else 0.0
+        if not se > 0:  # no error variance: no test (never "reject" on a 0 / 0 or x / 0)
+            rows.append({"group1": levels[i], "group2": levels[j], "meandiff": float(diff), "lower": math.nan,
+                         "upper": math.nan, "p_adj": math.nan, "p_adj_bound": False, "reject": False, "se": se,
+                         "q": math.nan})
+            continue
+        q = abs(diff) / se
+        p, bound = tukey_p(q, k, df_w)
         rows.append({"group1": levels[i], "group2": levels[j], "meandiff": float(diff),
                      "lower": float(diff - qcrit * se), "upper": float(diff + qcrit * se),
-                     "p_adj": min(max(p, 0.0), 1.0), "reject": bool(p < alpha), "se": se, "q": q})
-    return pd.DataFrame(rows)
+                     "p_adj": p, "p_adj_bound": bound, "reject": bool(p < alpha), "se": se, "q": q})
+    out = pd.DataFrame(rows)
+    out.attrs["undefined"] = (NO_VARIANCE if np.ptp(y) == 0 else NO_WITHIN_VARIANCE) if not mse > 0 else None
+    return out
+
+
+def tukey_p(q, k, df):
+    """Tail P(Q_k,df > q) -> (p, is_bound). Where the numerical tail falls below TUKEY_P_RESOLVED its digits
+    are noise, so it returns an upper bound instead: the union bound over the k(k-1)/2 pairs,
+    P(Q > q) <= C(k, 2) P(|T_df| > q / sqrt 2) (rigorous, and within 1% of the tail from 1e-7 down), capped
+    at TUKEY_P_RESOLVED and rounded up to one significant digit for printing."""
+    p = float(sps.studentized_range.sf(q, k, df))
+    if p >= TUKEY_P_RESOLVED:
+        return min(p, 1.0), False
+    union = k * (k - 1) * float(sps.t.sf(q / math.sqrt(2), df))
+    bound = min(TUKEY_P_RESOLVED, union)
+    if bound > 0:
+        exp = math.floor(math.log10(bound))
+        bound = math.ceil(bound / 10 ** exp) * 10.0 ** exp
+    else:
+        bound = 1e-300  # below the smallest double the t tail can give
+    return bound, True
 
 
 # ---------------------------------------------------------------------------------------------- rank tests
@@ -185,8 +218,11 @@ def holm(pvalues):
 def kruskal_wallis(df, dv="rating", between="condition"):
     """Kruskal-Wallis H test (tie-corrected) -> dict(H, df, p, epsilon_squared)."""
     groups = [g.to_numpy() for _, g in df.groupby(between, sort=True)[dv]]
-    h, p = sps.kruskal(*groups)
     n = sum(len(g) for g in groups)
+    if np.ptp(np.concatenate(groups)) == 0:  # every rank tied: H is 0 / 0
+        return {"H": math.nan, "df": len(groups) - 1, "p": math.nan, "epsilon_squared": math.nan,
+                "undefined": NO_VARIANCE}
+    h, p = sps.kruskal(*groups)
     return {"H": float(h), "df": len(groups) - 1, "p": float(p), "epsilon_squared": float(h / (n - 1))}
 
 
@@ -203,10 +239,15 @@ def pairwise_mannwhitney(df, dv="rating", between="condition", alpha=0.05):
     for a, b in combinations(names, 2):
         res = sps.mannwhitneyu(by[b], by[a], alternative="two-sided", method="asymptotic", use_continuity=True)
         cles = float(res.statistic) / (len(by[a]) * len(by[b]))
-        rows.append({"group1": a, "group2": b, "U": float(res.statistic), "p": float(res.pvalue),
+        # all ratings of the pair tied: the normal approximation has zero variance, no test
+        tied = np.ptp(np.concatenate([by[a], by[b]])) == 0
+        rows.append({"group1": a, "group2": b, "U": float(res.statistic), "p": math.nan if tied else float(res.pvalue),
                      "cles": cles, "rank_biserial": 2 * cles - 1})
     out = pd.DataFrame(rows)
-    out["p_holm"] = holm(out["p"].to_numpy())
+    p = out["p"].to_numpy()
+    ok = np.isfinite(p)
+    out["p_holm"] = np.nan
+    out.loc[ok, "p_holm"] = holm(p[ok])  # the family is the pairs that have a test
     out["reject"] = out["p_holm"] < alpha
     return out
 
@@ -300,6 +341,23 @@ def cluster_bootstrap(df, dv="rating", between="condition", rater="rater_id", cl
 
 
 # ---------------------------------------------------------------------------------------------- mixed model
+class ModelUndefined(ValueError):
+    """The data cannot identify the model (a statement for the report, not a failure)."""
+
+
+def random_effects_problem(df, dv="rating", between="condition", rater="rater_id", clip="clip_id"):
+    """Why  dv ~ between + (1|rater) + (1|clip)  cannot be fitted on these rows, or None. Each case would
+    otherwise give numbers that look like results: a 0/0 residual variance, a rater variance from one rater,
+    or a clip variance that is the condition effect itself (one clip per condition)."""
+    if df[dv].nunique() < 2:
+        return "no variance (every rating is the same): model undefined"
+    if df[rater].nunique() < 2:
+        return "a single rater: the rater variance cannot be estimated; model not fitted"
+    if df.groupby(between, observed=True)[clip].nunique().max() < 2:
+        return "one clip per condition: the clip variance is confounded with the condition; model not fitted"
+    return None
+
+
 def mixed_model(df, dv="rating", between="condition", rater="rater_id", clip="clip_id", reference=None):
     """Linear mixed model  dv ~ between + (1|rater) + (1|clip)  with crossed random intercepts, REML
     (analysis/mixed.py: lme4's profiled criterion from sufficient statistics; checked against statsmodels
@@ -312,6 +370,9 @@ def mixed_model(df, dv="rating", between="condition", rater="rater_id", clip="cl
     """
     from .mixed import fit_crossed
 
+    problem = random_effects_problem(df, dv, between, rater, clip)
+    if problem:
+        raise ModelUndefined(problem)
     levels = sorted(df[between].unique())
     if reference is None:
         reference = "NAT" if "NAT" in levels else levels[0]
@@ -325,11 +386,72 @@ def mixed_model(df, dv="rating", between="condition", rater="rater_id", clip="cl
     fe = fit["fixed_effects"]
     means = {reference: fe["Intercept"], **{c: fe["Intercept"] + fe[f"{between}[T.{c}]"] for c in others}}
     return {"formula": f"{dv} ~ {between} + (1|{rater}) + (1|{clip})",
-            "method": "REML, crossed random intercepts (profiled criterion, L-BFGS-B then Nelder-Mead polish)",
+            "method": "REML, crossed random intercepts (profiled criterion, L-BFGS-B then Nelder-Mead polish); "
+                      "t tests on Satterthwaite df",
             "reference": reference, **fit,
             "condition_means": {c: means[c] for c in condition_order(means)},
             "n": int(len(df)), "n_raters": int(rater_codes.max() + 1), "n_clips": int(clip_codes.max() + 1),
             "warnings": [] if fit["converged"] else ["optimiser did not report convergence"]}
+
+
+# ---------------------------------------------------------------------------------------------- ordinal model
+def ordinal_model(df, dv="rating", between="condition", rater="rater_id", clip="clip_id", reference=None,
+                  level=0.95):
+    """Cumulative-link (logit) mixed model  factor(dv) ~ between + (1|rater) + (1|clip), ML with the Laplace
+    approximation as R's ordinal::clmm (analysis/ordinal.py; matched to clmm in the tests).
+
+    Effects are log-odds of a higher rating against the reference (NAT when present), so exp(effect) is an
+    odds ratio: 0.5 means half the odds of a rating above any cut point. Thresholds are named by adjacent
+    observed levels ("1|2" ... "4|5" when every level occurs; an unused level has no cut point, as in clmm).
+
+    -> dict: formula, method, reference, fixed_effects, std_errors, z, p_values (Wald), odds_ratios,
+    or_ci_low, or_ci_high, thresholds, threshold_std_errors, sd_rater, sd_clip, log_likelihood, converged,
+    fitted_distribution and observed_distribution {COND: {level: proportion}}, n, n_raters, n_clips, warnings.
+    """
+    from .ordinal import fit_clmm, marginal_probabilities
+
+    problem = random_effects_problem(df, dv, between, rater, clip)
+    if problem:
+        raise ModelUndefined(problem)
+    levels = sorted(df[between].unique())
+    if reference is None:
+        reference = "NAT" if "NAT" in levels else levels[0]
+    others = [c for c in levels if c != reference]
+    cond = df[between].to_numpy()
+    X = np.column_stack([(cond == c).astype(float) for c in others])
+    names = [f"{between}[T.{c}]" for c in others]
+    y_codes, y_levels = pd.factorize(df[dv], sort=True)
+    y_levels = [int(v) if float(v).is_integer() else v for v in y_levels]
+    fit = fit_clmm(y_codes, X, pd.factorize(df[rater])[0], pd.factorize(df[clip])[0], names, len(y_levels),
+                   [str(v) for v in y_levels])
+    fit.pop("random_effects")
+    warnings = []
+    if not fit["converged"]:
+        warnings.append(f"optimiser did not converge (max |gradient| {fit['max_abs_gradient']:.2g})")
+    b = np.array(list(fit["fixed_effects"].values()))
+    se = np.array(list(fit["std_errors"].values()))
+    if np.any(np.abs(b) > 15) or not np.all(np.isfinite(se)):
+        # a condition whose ratings all sit in an end category: the likelihood keeps rising as the effect runs
+        # off to infinity (separation), so the estimate and its interval mean nothing
+        warnings.append("an effect is not identified (a condition's ratings sit in an end category: separation)")
+    zq = sps.norm.ppf(0.5 + level / 2)
+    th = np.array(list(fit["thresholds"].values()))
+    eta = np.array([0.0] + list(b))
+    probs = marginal_probabilities(th, eta, math.hypot(fit["sd_rater"], fit["sd_clip"]))
+    order = [reference] + others
+    observed = pd.crosstab(df[between], df[dv], normalize="index").reindex(columns=y_levels, fill_value=0.0)
+    return {"formula": f"{dv} ~ {between} + (1|{rater}) + (1|{clip})  (cumulative logit)",
+            "method": "ML, Laplace approximation, crossed random intercepts (as ordinal::clmm)",
+            "reference": reference, **fit,
+            "odds_ratios": {k: math.exp(v) for k, v in fit["fixed_effects"].items()},
+            "or_ci_low": {k: math.exp(v - zq * fit["std_errors"][k]) for k, v in fit["fixed_effects"].items()},
+            "or_ci_high": {k: math.exp(v + zq * fit["std_errors"][k]) for k, v in fit["fixed_effects"].items()},
+            "fitted_distribution": {c: dict(zip(map(str, y_levels), probs[order.index(c)].tolist()))
+                                    for c in condition_order(levels)},
+            "observed_distribution": {c: {str(k): float(v) for k, v in observed.loc[c].items()}
+                                      for c in condition_order(levels)},
+            "n": int(len(df)), "n_raters": int(df[rater].nunique()), "n_clips": int(df[clip].nunique()),
+            "warnings": warnings}
 
 
 # ---------------------------------------------------------------------------------------------- objective metrics
