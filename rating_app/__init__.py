@@ -3,61 +3,87 @@
     app = create_app(manifest="stimuli/manifest.csv", db_url="postgresql://...", ratings_per_clip=20)
 
 Arguments left as None are read from the environment (ADMIN_TOKEN, DATABASE_URL, RATING_MANIFEST,
-RATINGS_PER_CLIP, CLIPS_PER_RATER, SLOT_TIMEOUT, COMPLETION_CODE, COMPLETION_URL, SECRET_KEY), which is how
-`rating_app.wsgi:app` is configured under gunicorn. Also read: COOKIE_SECURE=1 (admin cookie over HTTPS
-only) and DB_POOL_SIZE (connections per worker, default 10 + 10 overflow).
+RATINGS_PER_CLIP, CLIPS_PER_RATER, SLOT_TIMEOUT, MIN_VIEW, SESSIONS_PER_CLIENT, COMPLETION_CODE, COMPLETION_URL,
+SECRET_KEY), which is how `rating_app.wsgi:app` is configured under gunicorn. Also read: COOKIE_SECURE=1 (admin
+cookie over HTTPS only), PROXY_COUNT (trusted reverse proxies in front, whose X-Forwarded-For names the client;
+default 0) and DB_POOL_SIZE (connections per worker, default 10 + 10 overflow). Every setting is checked here, so
+a bad one stops the start with one line instead of failing on each request.
 """
 from __future__ import annotations
 
+import argparse
 import hashlib
 import logging
 import os
 from pathlib import Path
 
 from flask import Flask, jsonify, request
-from sqlalchemy.exc import OperationalError
+from sqlalchemy.engine import make_url
+from sqlalchemy.exc import OperationalError, SQLAlchemyError
 from werkzeug.exceptions import HTTPException
+
+from core.cli import number
 
 from .manifest import AppError, load_manifest
 
-__all__ = ["create_app", "AppError"]
+__all__ = ["create_app", "AppError", "SETTINGS"]
+
+# name: (kind, default, lo, hi, lo_open); the CLI flags use the same bounds.
+SETTINGS = {
+    "RATINGS_PER_CLIP": (int, 20, 1, 1_000_000, False),
+    "CLIPS_PER_RATER": (int, 0, 0, 1_000_000, False),        # 0: every clip still needing ratings
+    "SLOT_TIMEOUT": (float, 3600.0, 0.0, 1e7, True),          # seconds without an answer before a session expires
+    "MIN_VIEW": (float, 1.0, 0.0, 1.0, False),               # share of each clip that must have played
+    "SESSIONS_PER_CLIENT": (int, 10, 0, 1_000_000, False),    # new sessions per client address per hour; 0: no limit
+    "PROXY_COUNT": (int, 0, 0, 10, False),
+}
 
 
-def _env(name, kind=str):
-    value = os.environ.get(name)
-    if value is None or value == "":
-        return None
+def setting(name: str, given=None):
+    """`given`, else the environment variable `name`, else the default; checked against SETTINGS."""
+    kind, default, lo, hi, lo_open = SETTINGS[name]
+    raw = given if given is not None else os.environ.get(name) or None
+    if raw is None:
+        return default
     try:
-        return kind(value)
-    except ValueError:
-        raise AppError(f"environment variable {name}={value!r} is not a valid {kind.__name__}") from None
+        return number(kind, lo, hi, lo_open)(str(raw))
+    except argparse.ArgumentTypeError as e:
+        where = name if given is None else name.lower()
+        raise AppError(f"{where}: {e}") from None
+
+
+def _env(name):
+    return os.environ.get(name) or None
 
 
 def create_app(manifest=None, db_url=None, ratings_per_clip=None, clips_per_rater=None, admin_token=None,
                slot_timeout_s=None, completion_code=None, completion_url=None, secret_key=None,
-               check_files=True) -> Flask:
+               check_files=True, min_view=None, sessions_per_client=None) -> Flask:
     from . import db as dbm
     from .admin import bp as admin_bp
     from .api import bp as api_bp
     from .pages import bp as pages_bp
+    from .videos import VideoStore
 
     manifest = manifest or _env("RATING_MANIFEST")
-    ratings_per_clip = ratings_per_clip if ratings_per_clip is not None else (_env("RATINGS_PER_CLIP", int) or 20)
-    clips_per_rater = clips_per_rater if clips_per_rater is not None else _env("CLIPS_PER_RATER", int)
-    slot_timeout_s = slot_timeout_s if slot_timeout_s is not None else (_env("SLOT_TIMEOUT", float) or 3600.0)
+    if not manifest:
+        raise AppError("no stimulus manifest: set RATING_MANIFEST (or --manifest) to stimuli/manifest.csv")
+    ratings_per_clip = setting("RATINGS_PER_CLIP", ratings_per_clip)
+    clips_per_rater = setting("CLIPS_PER_RATER", clips_per_rater) or None      # 0 / None: all clips still short
+    slot_timeout_s = setting("SLOT_TIMEOUT", slot_timeout_s)
+    min_view = setting("MIN_VIEW", min_view)
+    sessions_per_client = setting("SESSIONS_PER_CLIENT", sessions_per_client)
+    proxies = setting("PROXY_COUNT")
     admin_token = admin_token if admin_token is not None else _env("ADMIN_TOKEN")
     completion_code = completion_code if completion_code is not None else _env("COMPLETION_CODE")
     completion_url = completion_url if completion_url is not None else _env("COMPLETION_URL")
-    if ratings_per_clip < 1:
-        raise AppError(f"ratings per clip must be >= 1, got {ratings_per_clip}")
-    if clips_per_rater == 0:
-        clips_per_rater = None                  # 0 means every clip still needing ratings
-    if clips_per_rater is not None and clips_per_rater < 1:
-        raise AppError(f"clips per rater must be >= 1, got {clips_per_rater}")
     if completion_url and not completion_url.startswith(("https://", "http://")):
         raise AppError(f"completion URL must start with https:// or http://, got {completion_url!r}")
 
     app = Flask(__name__)
+    if proxies:
+        from werkzeug.middleware.proxy_fix import ProxyFix
+        app.wsgi_app = ProxyFix(app.wsgi_app, x_for=proxies, x_proto=proxies, x_host=proxies)
     # Workers must share the cookie key: derive it from the admin token unless one is given.
     secret_key = secret_key or _env("SECRET_KEY") or hashlib.sha256(
         b"rating-app:" + (admin_token or os.urandom(32).hex()).encode()).hexdigest()
@@ -67,20 +93,28 @@ def create_app(manifest=None, db_url=None, ratings_per_clip=None, clips_per_rate
         SESSION_COOKIE_SAMESITE="Strict",
         SESSION_COOKIE_SECURE=os.environ.get("COOKIE_SECURE", "") == "1",     # set behind HTTPS
         MAX_CONTENT_LENGTH=16 * 1024,
-        RATINGS_PER_CLIP=int(ratings_per_clip),
+        RATINGS_PER_CLIP=ratings_per_clip,
         CLIPS_PER_RATER=clips_per_rater,
         SLOT_TIMEOUT_S=float(slot_timeout_s),
+        MIN_VIEW=float(min_view),
+        SESSIONS_PER_CLIENT=sessions_per_client,
         ADMIN_TOKEN=admin_token,
         COMPLETION_CODE=completion_code,
         COMPLETION_URL=completion_url,
     )
-    clips = load_manifest(manifest, check_files=check_files) if manifest else []
+    clips = load_manifest(manifest, check_files=check_files)
     engine = dbm.make_engine(db_url)
-    dbm.init_db(engine, clips)
-    # Close connections opened during set-up so that forked workers (gunicorn --preload) start clean.
-    engine.dispose()
+    try:
+        dbm.init_db(engine, clips)
+    except SQLAlchemyError as e:
+        where = make_url(str(engine.url)).render_as_string(hide_password=True)
+        first = str(getattr(e, "orig", None) or e).strip().splitlines()
+        raise AppError(f"cannot open the database {where}: {first[0] if first else e.__class__.__name__}") from None
+    finally:
+        # Close connections opened during set-up so that forked workers (gunicorn --preload) start clean.
+        engine.dispose()
     metrics = {}
-    if manifest and (Path(manifest).resolve().parent / "metrics.csv").is_file():
+    if (Path(manifest).resolve().parent / "metrics.csv").is_file():
         from .manifest import load_metrics
         try:
             metrics = load_metrics(Path(manifest).resolve().parent / "metrics.csv")
@@ -89,8 +123,9 @@ def create_app(manifest=None, db_url=None, ratings_per_clip=None, clips_per_rate
     app.extensions["rating_app"] = {
         "engine": engine,
         "clips": {c.clip_id: c for c in clips},
+        "videos": VideoStore(clips, Path(manifest).resolve().parent, preload=check_files),
         "metrics": metrics,
-        "manifest": str(manifest) if manifest else None,
+        "manifest": str(manifest),
     }
     if not app.logger.handlers or app.logger.level == logging.NOTSET:
         app.logger.setLevel(logging.INFO)

@@ -1,24 +1,36 @@
 """python -m rating_app serve | export | simulate  (see --help of each)."""
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
 
+from core import cli
+
+from . import SETTINGS
 from .manifest import AppError
+
+
+def _flag(name):
+    """The argparse type for the setting `name`: the same bounds as the environment variable."""
+    kind, _, lo, hi, lo_open = SETTINGS[name]
+    return cli.number(kind, lo, hi, lo_open)
 
 
 def _serve(a):
     from . import create_app
     app = create_app(manifest=a.manifest, db_url=a.db, ratings_per_clip=a.ratings_per_clip,
                      clips_per_rater=a.clips_per_rater, slot_timeout_s=a.slot_timeout,
-                     completion_code=a.completion_code, completion_url=a.completion_url)
+                     completion_code=a.completion_code, completion_url=a.completion_url, min_view=a.min_view,
+                     sessions_per_client=a.sessions_per_client)
     from .db import normalise_url
     from sqlalchemy.engine import make_url
     db = make_url(normalise_url(a.db)).render_as_string(hide_password=True)
     print(f"rating app on http://{a.host}:{a.port}/  (database {db}; admin at /admin"
           f"{'' if app.config['ADMIN_TOKEN'] else ' disabled: set ADMIN_TOKEN'})", file=sys.stderr, flush=True)
+    if app.config["MIN_VIEW"] < 1:
+        print(f"warning: minimum viewing time lowered to {app.config['MIN_VIEW']:g} of each clip (tests and "
+              "simulations only)", file=sys.stderr, flush=True)
     app.run(host=a.host, port=a.port, threaded=True, debug=False, use_reloader=False)
     return 0
 
@@ -26,15 +38,12 @@ def _serve(a):
 def _export(a):
     from sqlalchemy import inspect
     from sqlalchemy.engine import make_url
-    from sqlalchemy.exc import OperationalError, ArgumentError
+    from sqlalchemy.exc import SQLAlchemyError
 
-    from .db import make_engine, normalise_url
+    from .db import check_url, make_engine
     from .export import export_csv
-    url = normalise_url(a.db)
-    try:
-        parsed = make_url(url)
-    except ArgumentError:
-        raise AppError(f"--db {a.db!r} is not a database URL") from None
+    url = check_url(a.db)
+    parsed = make_url(url)
     if parsed.drivername.startswith("sqlite") and not os.path.isfile(parsed.database or ""):
         raise AppError(f"{parsed.database}: no such database file")
     engine = make_engine(url)
@@ -46,8 +55,9 @@ def _export(a):
         else:
             with open(a.out, "w", newline="", encoding="utf-8") as fh:
                 n = export_csv(engine, fh)
-    except OperationalError as e:
-        raise AppError(f"cannot read the database: {str(e.orig).strip().splitlines()[0]}") from None
+    except SQLAlchemyError as e:
+        first = str(getattr(e, "orig", None) or e).strip().splitlines()
+        raise AppError(f"cannot read the database: {first[0] if first else e.__class__.__name__}") from None
     finally:
         engine.dispose()
     print(f"{n} ratings -> {a.out}", file=sys.stderr)
@@ -72,17 +82,26 @@ def _simulate(a):
 
 
 def build_parser():
-    p = argparse.ArgumentParser(prog="python -m rating_app", description=__doc__)
-    sub = p.add_subparsers(dest="cmd", required=True)
+    p = cli.ArgumentParser(prog="python -m rating_app", description=__doc__)
+    sub = p.add_subparsers(dest="cmd", required=True, parser_class=cli.ArgumentParser)
+    count = cli.number(int, 1, 1_000_000)
 
     s = sub.add_parser("serve", help="run the app (local use; production: gunicorn rating_app.wsgi:app)")
     s.add_argument("--manifest", required=True, help="stimuli/manifest.csv")
     s.add_argument("--db", default=None, help="database URL (default $DATABASE_URL or sqlite:///ratings.sqlite)")
     s.add_argument("--host", default="127.0.0.1")
-    s.add_argument("--port", type=int, default=5000)
-    s.add_argument("--ratings-per-clip", type=int, default=None, help="target ratings per test clip (20)")
-    s.add_argument("--clips-per-rater", type=int, default=None, help="test clips per rater (default or 0: all that still need ratings)")
-    s.add_argument("--slot-timeout", type=float, default=None, help="seconds before an idle rater's slots are freed (3600)")
+    s.add_argument("--port", type=cli.number(int, 1, 65535), default=5000)
+    s.add_argument("--ratings-per-clip", type=_flag("RATINGS_PER_CLIP"), default=None,
+                   help="target ratings per test clip (20)")
+    s.add_argument("--clips-per-rater", type=_flag("CLIPS_PER_RATER"), default=None,
+                   help="test clips per rater (default or 0: all that still need ratings)")
+    s.add_argument("--slot-timeout", type=_flag("SLOT_TIMEOUT"), default=None,
+                   help="seconds without an answer before a session expires and its slot is freed (3600)")
+    s.add_argument("--min-view", type=_flag("MIN_VIEW"), default=None,
+                   help="share of each clip that must have played before an answer is accepted (1 = the whole "
+                        "clip, the default; lower only for tests and simulated crowds)")
+    s.add_argument("--sessions-per-client", type=_flag("SESSIONS_PER_CLIENT"), default=None,
+                   help="new sessions per client address and hour (10; 0: no limit)")
     s.add_argument("--completion-code", default=None, help="one code for everybody (e.g. Prolific's); default: random per rater")
     s.add_argument("--completion-url", default=None,
                    help="redirect after the last trial; {code} is replaced, e.g. https://app.prolific.com/submissions/complete?cc={code}")
@@ -95,14 +114,17 @@ def build_parser():
 
     m = sub.add_parser("simulate", help="a simulated crowd rating through the public API")
     m.add_argument("--url", required=True, help="base URL of the running app")
-    m.add_argument("--raters", type=int, required=True, help="number of raters (stops early when the study is full)")
-    m.add_argument("--seed", type=int, default=0)
-    m.add_argument("--careless", type=float, default=0.1, help="share of careless raters answering at random")
+    m.add_argument("--raters", type=count, required=True, help="number of raters (stops early when the study is full)")
+    m.add_argument("--seed", type=cli.number(int, 0, 2**31 - 1), default=0)
+    m.add_argument("--careless", type=cli.number(float, 0, 1), default=0.1,
+                   help="share of careless raters answering at random")
     m.add_argument("--manifest", default=None, help="manifest.csv (+ metrics.csv beside it); else /admin/clips.json")
     m.add_argument("--quality", default=None, help="per-condition mean rating, e.g. NAT=4.3,MG=3.8,FL=2.5,BAD=1.3")
-    m.add_argument("--concurrency", type=int, default=8, help="raters at once")
-    m.add_argument("--timeout", type=float, default=600.0, help="overall time limit in seconds")
-    m.add_argument("--think", type=float, default=0.0, help="mean pause before each answer, seconds")
+    m.add_argument("--concurrency", type=cli.number(int, 1, 1000), default=8, help="raters at once")
+    m.add_argument("--timeout", type=cli.number(float, 0, 1e6, lo_open=True), default=600.0,
+                   help="overall time limit in seconds")
+    m.add_argument("--think", type=cli.number(float, 0, 3600), default=0.0,
+                   help="mean pause before each answer, seconds")
     m.add_argument("--prefix", default=None, help="external id prefix (default sim{seed})")
     m.add_argument("--admin-token", default=None, help="default $ADMIN_TOKEN")
     m.add_argument("--summary", default=None, help="write the full summary (raters, ratings) as JSON here")
@@ -111,20 +133,13 @@ def build_parser():
     return p
 
 
-def main(argv=None) -> int:
+def _main(argv):
     a = build_parser().parse_args(argv)
-    try:
-        return a.fn(a)
-    except AppError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    except OSError as e:
-        where = f"{e.filename}: " if e.filename else ""
-        print(f"error: {where}{e.strerror or e}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+    return a.fn(a)
+
+
+def main(argv=None) -> int:
+    return cli.run(_main, argv)
 
 
 if __name__ == "__main__":

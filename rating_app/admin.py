@@ -1,30 +1,72 @@
 """Admin: dashboard, ratings.csv export and the clip table, all behind ADMIN_TOKEN.
 
 A script sends `Authorization: Bearer TOKEN`; a browser logs in once through a form and then carries an
-HttpOnly, SameSite=Strict session cookie (the dashboard only reads, so there is nothing to forge).
+HttpOnly, SameSite=Strict session cookie naming a login row in the database (the dashboard only reads, so there
+is nothing to forge). Logout deletes the row, so a copied cookie stops working at once, in every worker. Wrong
+tokens are counted per client: after LOCKOUT_FAILURES within LOCKOUT_WINDOW the client is refused (429) until
+the window has passed, whatever token it sends.
 """
 from __future__ import annotations
 
+import datetime as dt
+import hashlib
 import hmac
+import secrets
 
 from flask import (Blueprint, Response, abort, current_app, jsonify, redirect, render_template, request,
                    session, url_for)
+from sqlalchemy import delete, func, insert, select
 
+from .db import AdminLogin, LoginFailure, utcnow
 from .export import export_csv, progress
+from .guard import client_key
 
 bp = Blueprint("admin", __name__, url_prefix="/admin")
 
+LOCKOUT_FAILURES = 10
+LOCKOUT_WINDOW = dt.timedelta(minutes=15)
+LOGIN_MAX_AGE = dt.timedelta(hours=12)
 
-def _token_ok(given: str | None) -> bool:
+
+def _engine():
+    return current_app.extensions["rating_app"]["engine"]
+
+
+def _locked_out(conn, client, now) -> bool:
+    n = conn.execute(select(func.count()).select_from(LoginFailure).where(
+        LoginFailure.client == client, LoginFailure.at >= now - LOCKOUT_WINDOW)).scalar()
+    return n >= LOCKOUT_FAILURES
+
+
+def _check_token(given: str | None) -> bool:
+    """Compare a token with ADMIN_TOKEN, counting a wrong one against the client; 429 while locked out."""
     want = current_app.config["ADMIN_TOKEN"]
-    return bool(want) and given is not None and hmac.compare_digest(given.encode(), want.encode())
+    if not want:
+        return False
+    client, now = client_key(), utcnow()
+    with _engine().begin() as conn:
+        if _locked_out(conn, client, now):
+            abort(429, "too many wrong admin tokens from this address; try again in 15 minutes")
+        ok = given is not None and hmac.compare_digest(given.encode(), want.encode())
+        if not ok:
+            conn.execute(insert(LoginFailure).values(client=client, at=now))
+    return ok
+
+
+def _login_hash(key: str) -> str:
+    return hashlib.sha256(key.encode()).hexdigest()
 
 
 def authorised() -> bool:
     auth = request.headers.get("Authorization", "")
     if auth.startswith("Bearer "):
-        return _token_ok(auth[len("Bearer "):].strip())
-    return bool(session.get("admin")) and bool(current_app.config["ADMIN_TOKEN"])
+        return _check_token(auth[len("Bearer "):].strip())
+    key = session.get("admin")
+    if not current_app.config["ADMIN_TOKEN"] or not isinstance(key, str):
+        return False
+    with _engine().connect() as conn:
+        created = conn.execute(select(AdminLogin.created_at).where(AdminLogin.key_hash == _login_hash(key))).scalar()
+    return created is not None and utcnow() - created < LOGIN_MAX_AGE
 
 
 def require_admin():
@@ -34,30 +76,33 @@ def require_admin():
         abort(401, "admin token required (Authorization: Bearer ADMIN_TOKEN)")
 
 
-def _engine():
-    return current_app.extensions["rating_app"]["engine"]
-
-
 @bp.get("")
 @bp.get("/")
 def dashboard():
     if not authorised():
         return render_template("admin_login.html", error=None), 401
     data = progress(_engine(), current_app.config["RATINGS_PER_CLIP"])
-    return render_template("admin.html", p=data)
+    return render_template("admin.html", p=data, min_view=current_app.config["MIN_VIEW"])
 
 
 @bp.post("/login")
 def login():
-    if _token_ok(request.form.get("token")):
+    if _check_token(request.form.get("token")):
+        key = secrets.token_urlsafe(24)
+        with _engine().begin() as conn:
+            conn.execute(insert(AdminLogin).values(key_hash=_login_hash(key), created_at=utcnow()))
         session.clear()
-        session["admin"] = True
+        session["admin"] = key
         return redirect(url_for("admin.dashboard"))
     return render_template("admin_login.html", error="wrong token"), 401
 
 
 @bp.post("/logout")
 def logout():
+    key = session.get("admin")
+    if isinstance(key, str):
+        with _engine().begin() as conn:
+            conn.execute(delete(AdminLogin).where(AdminLogin.key_hash == _login_hash(key)))
     session.clear()
     return redirect(url_for("admin.dashboard"))
 
@@ -74,6 +119,7 @@ def export():
 def progress_json():
     require_admin()
     data = progress(_engine(), current_app.config["RATINGS_PER_CLIP"])
+    data["min_view"] = current_app.config["MIN_VIEW"]
     for r in data["raters"]:
         r["started"], r["last_seen"] = r["started"].isoformat() + "Z", r["last_seen"].isoformat() + "Z"
     for e in data["events"]:

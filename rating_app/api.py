@@ -1,49 +1,57 @@
 """The rater JSON API (CONTRACTS §5). The page uses it; so do the simulated crowd and the load tests.
 
 Every answer is committed before it is sent, so an acknowledged rating survives a crash of the server.
-The session token in the URL is the only credential (no cookies), which makes the API immune to CSRF.
+The session token in the URL is the credential for a session's calls; creating a session needs a JSON body and
+refuses cross-site browsers, and resuming one by participant id needs proof (the platform's session id, or the
+resume cookie set at creation), so a participant id alone never hands out a token.
+
+The server, not the page, decides whether a clip was watched: it records when it first served each trial and
+when its video was fetched, and refuses an answer that comes before the clip could have played to the end.
 """
 from __future__ import annotations
 
+import datetime as dt
+import hashlib
+import hmac
 import math
 import random
 import re
 import secrets
 
 from flask import Blueprint, abort, current_app, jsonify, request, url_for
-from sqlalchemy import func, insert, or_, select, update
-from sqlalchemy.dialects.postgresql import insert as pg_insert
-from sqlalchemy.dialects.sqlite import insert as sqlite_insert
+from sqlalchemy import and_, func, insert, or_, select, update
 from sqlalchemy.exc import IntegrityError
-from sqlalchemy.orm import Session
 
-from .assign import StudyFull, plan_trials
+from .assign import StudyFull, assign_slot, expire_idle, lock_assign, plan_session
 from .db import Event, Rater, Rating, Trial, utcnow
+from .guard import check_depth, client_key, escape_text, same_site_only
 
 bp = Blueprint("api", __name__, url_prefix="/api")
 
-TOKEN = re.compile(r"^[A-Za-z0-9_-]{16,64}$")
-EXTERNAL = re.compile(r"^[A-Za-z0-9_.:@-]{1,128}$")
+TOKEN = re.compile(r"[A-Za-z0-9_-]{16,64}")           # always fullmatch: '$' would let a trailing newline in
+EXTERNAL = re.compile(r"[A-Za-z0-9_.:@-]{1,128}")
 EVENT_KINDS = ("video_error", "video_stalled", "page_error")
 MAX_WATCHED_MS = 24 * 3600 * 1000
+MAX_EVENTS = 30                  # per session: enough for every trial's playback problem, not a log flood
+TOLERANCE_MS = 250               # clock and decoding slack on the minimum viewing time
+RESUME_COOKIE = "rating_resume"
+CLIENT_WINDOW = dt.timedelta(hours=1)
 
 
 def engine():
     return current_app.extensions["rating_app"]["engine"]
 
 
-def json_body(allowed: tuple[str, ...], required: tuple[str, ...] = (), optional_body=False) -> dict:
-    if optional_body and not request.get_data(cache=True):
-        body = {}
-    else:
-        if not request.is_json:
-            abort(415, "expected a JSON body (Content-Type: application/json)")
-        body = request.get_json(silent=True)
-        if not isinstance(body, dict):
-            abort(400, "body must be a JSON object")
+def json_body(allowed: tuple[str, ...], required: tuple[str, ...] = ()) -> dict:
+    if not request.is_json:
+        abort(415, "expected a JSON body (Content-Type: application/json)")
+    check_depth(request.get_data(cache=True))
+    body = request.get_json(silent=True)
+    if not isinstance(body, dict):
+        abort(400, "body must be a JSON object")
     unknown = sorted(set(body) - set(allowed))
     if unknown:
-        abort(400, f"unknown field '{unknown[0]}'")
+        abort(400, f"unknown field '{escape_text(unknown[0])[:64]}'")
     for k in required:
         if k not in body:
             abort(400, f"missing field '{k}'")
@@ -67,63 +75,103 @@ def _ext(body, name):
     v = body.get(name)
     if v is None:
         return None
-    if not isinstance(v, str) or not EXTERNAL.match(v):
+    if not isinstance(v, str) or not EXTERNAL.fullmatch(v):
         abort(400, f"field '{name}' must be 1-128 characters of letters, digits and _.:@-")
     return v
 
 
-def _session_reply(rater: Rater, status: int):
-    return jsonify(session=rater.token, rater_id=rater.rater_id, n_trials=rater.n_training + rater.n_rating,
-                   n_training=rater.n_training, n_rating=rater.n_rating, resumed=status == 200), status
+def _hash(secret: str) -> str:
+    return hashlib.sha256(secret.encode()).hexdigest()
+
+
+def _session_reply(rater, status: int, resume_secret: str | None = None):
+    cfg = current_app.config
+    resp = jsonify(session=rater.token, rater_id=rater.rater_id, n_trials=rater.n_training + rater.n_rating,
+                   n_training=rater.n_training, n_rating=rater.n_rating, resumed=status == 200,
+                   min_view=cfg["MIN_VIEW"], view_tolerance_ms=TOLERANCE_MS)
+    resp.status_code = status
+    if resume_secret:
+        resp.set_cookie(RESUME_COOKIE, resume_secret, max_age=7 * 24 * 3600, path="/api/sessions", httponly=True,
+                        samesite="Strict", secure=cfg["SESSION_COOKIE_SECURE"])
+    return resp
+
+
+def _expired_reply():
+    return jsonify(error="this session has expired: nothing was answered for too long. It cannot be continued "
+                         "and gives no completion code", expired=True), 410
+
+
+def _resume(conn, external_id, ext_session, now):
+    """The session of a returning participant, but only with proof that it is the same person."""
+    old = conn.execute(select(Rater).where(Rater.external_id == external_id)).first()
+    if old is None:
+        return None
+    cookie = request.cookies.get(RESUME_COOKIE)
+    proof = (bool(old.external_session and ext_session) and hmac.compare_digest(old.external_session, ext_session)) \
+        or (bool(cookie and old.resume_hash) and hmac.compare_digest(_hash(cookie), old.resume_hash))
+    if not proof:
+        return jsonify(error="this participant id has already started a session; it can be resumed only from the "
+                             "same browser or through the recruiting platform's link", resume=False), 409
+    if old.expired_at is not None or expire_idle(conn, current_app.config["SLOT_TIMEOUT_S"], now, old.id):
+        return _expired_reply()
+    return _session_reply(old, 200)
 
 
 @bp.post("/sessions")
 def create_session():
-    body = json_body(("external_id", "study_id", "session_id"), optional_body=True)
+    same_site_only()
+    body = json_body(("external_id", "study_id", "session_id"))
     external_id, study_id, ext_session = _ext(body, "external_id"), _ext(body, "study_id"), _ext(body, "session_id")
     cfg = current_app.config
-    with Session(engine()) as s:
-        try:
-            with s.begin():
-                if external_id is not None:
-                    # The same participant again (reload, second tab, retried request): resume.
-                    old = s.scalar(select(Rater).where(Rater.external_id == external_id))
-                    if old is not None:
-                        return _session_reply(old, 200)
-                rng = random.Random(secrets.randbits(64))
-                try:
-                    plan = plan_trials(s, rng, cfg["RATINGS_PER_CLIP"], cfg["CLIPS_PER_RATER"],
-                                       cfg["SLOT_TIMEOUT_S"])
-                except StudyFull as e:
-                    return jsonify(error=str(e), full=True), 409
-                now = utcnow()
-                rater = Rater(token=secrets.token_urlsafe(24), rater_id="r" + secrets.token_hex(6),
-                              external_id=external_id, study_id=study_id, external_session=ext_session,
-                              created_at=now, last_seen=now,
-                              completion_code=cfg["COMPLETION_CODE"] or secrets.token_hex(4).upper())
-                s.add(rater)
-                s.flush()
-                counters, rows = {"training": 0, "rating": 0}, []
-                for pos, (clip_id, phase) in enumerate(plan):
-                    counters[phase] += 1
-                    rows.append({"rater_pk": rater.id, "clip_id": clip_id, "phase": phase, "position": pos,
-                                 "index": counters[phase], "released": False})
-                s.execute(insert(Trial), rows)            # one multi-row INSERT, not one per trial
-                rater.n_training, rater.n_rating = counters["training"], counters["rating"]
-                s.flush()
-                return _session_reply(rater, 201)
-        except IntegrityError:
-            # Two concurrent requests with the same external id: the other one won; resume it.
-            if external_id is None:
+    now = utcnow()
+    try:
+        with engine().begin() as conn:
+            if external_id is not None:
+                # The same participant again (a new tab, a retried request): resume, with proof.
+                resumed = _resume(conn, external_id, ext_session, now)
+                if resumed is not None:
+                    return resumed
+            lock_assign(conn)
+            client, limit = client_key(), cfg["SESSIONS_PER_CLIENT"]
+            if limit and conn.execute(select(func.count()).select_from(Rater).where(
+                    Rater.client == client, Rater.created_at >= now - CLIENT_WINDOW)).scalar() >= limit:
+                return jsonify(error="too many new sessions from this address; please try again later"), 429
+            expire_idle(conn, cfg["SLOT_TIMEOUT_S"], now)
+            try:
+                plan = plan_session(conn, random.Random(secrets.randbits(64)), cfg["RATINGS_PER_CLIP"],
+                                    cfg["CLIPS_PER_RATER"])
+            except StudyFull as e:
+                return jsonify(error=str(e), full=True), 409
+            resume_secret = secrets.token_urlsafe(24)
+            n_training = sum(kind == "training" for kind, _ in plan)
+            values = dict(token=secrets.token_urlsafe(24), rater_id="r" + secrets.token_hex(6),
+                          external_id=external_id, study_id=study_id, external_session=ext_session,
+                          created_at=now, last_seen=now, last_progress=now, client=client,
+                          resume_hash=_hash(resume_secret), n_early=0, n_training=n_training,
+                          n_rating=len(plan) - n_training,
+                          completion_code=cfg["COMPLETION_CODE"] or secrets.token_hex(4).upper())
+            rater_pk = conn.execute(insert(Rater).values(**values).returning(Rater.id)).scalar()
+            counters, rows = {"training": 0, "rating": 0}, []
+            for pos, (kind, clip_id) in enumerate(plan):
+                phase = "training" if kind == "training" else "rating"
+                counters[phase] += 1
+                rows.append({"rater_pk": rater_pk, "clip_id": clip_id, "kind": kind, "phase": phase,
+                             "position": pos, "index": counters[phase], "released": False})
+            conn.execute(insert(Trial), rows)            # one multi-row INSERT, not one per trial
+            rater = conn.execute(select(Rater).where(Rater.id == rater_pk)).one()
+            return _session_reply(rater, 201, resume_secret)
+    except IntegrityError:
+        # Two concurrent requests with the same external id: the other one won; resume it (with proof).
+        if external_id is None:
+            raise
+        with engine().begin() as conn:
+            resumed = _resume(conn, external_id, ext_session, now)
+            if resumed is None:
                 raise
-            with s.begin():
-                old = s.scalar(select(Rater).where(Rater.external_id == external_id))
-                if old is None:
-                    raise
-                return _session_reply(old, 200)
+            return resumed
 
 
-def _completion(rater: Rater) -> dict:
+def _completion(rater) -> dict:
     out = {"done": True, "completion_code": rater.completion_code}
     url = current_app.config["COMPLETION_URL"]
     if url:
@@ -131,14 +179,15 @@ def _completion(rater: Rater) -> dict:
     return out
 
 
-TOUCH_EVERY_S = 30     # last_seen (for freeing abandoned slots) is refreshed at most this often
-RATER_COLS = (Rater.id, Rater.rater_id, Rater.n_training, Rater.n_rating, Rater.completed_at,
-              Rater.completion_code, Rater.last_seen)
+TOUCH_EVERY_S = 30     # last_seen (shown on the dashboard) is refreshed at most this often
+RATER_COLS = (Rater.id, Rater.rater_id, Rater.n_training, Rater.n_rating, Rater.completed_at, Rater.expired_at,
+              Rater.completion_code, Rater.last_seen, Rater.last_progress)
+TRIAL_COLS = (Trial.id, Trial.clip_id, Trial.kind, Trial.phase, Trial.index, Trial.position, Trial.served_at)
 
 
 def _rater(conn, token: str, now=None):
     """The rater's row; 404 for an unknown token. With `now`, refreshes last_seen when it is stale."""
-    if not TOKEN.match(token):
+    if not TOKEN.fullmatch(token):
         abort(404, "unknown session")
     row = conn.execute(select(*RATER_COLS).where(Rater.token == token)).first()
     if row is None:
@@ -152,42 +201,105 @@ def _stale(row, now) -> bool:
     return (now - row.last_seen).total_seconds() > TOUCH_EVERY_S
 
 
+def _idle(row, now) -> bool:
+    """No answer for longer than the slot timeout (the session will be expired)."""
+    return row.completed_at is None and (
+        row.expired_at is not None or (now - row.last_progress).total_seconds() > current_app.config["SLOT_TIMEOUT_S"])
+
+
 def _current(conn, rater_pk):
     """The trial on the rater's screen: the first unanswered one in the rater's order."""
-    return conn.execute(select(Trial.id, Trial.clip_id, Trial.phase, Trial.index, Trial.position)
+    return conn.execute(select(*TRIAL_COLS)
                         .where(Trial.rater_pk == rater_pk, Trial.answered_at.is_(None), Trial.released.is_(False))
                         .order_by(Trial.position).limit(1)).first()
 
 
+def _serve(conn, rater_pk: int, now):
+    """The current trial, served: a test or catch slot gets its clip (or is dropped when none is left), and the
+    first serving time is recorded. In a write transaction."""
+    while True:
+        t = _current(conn, rater_pk)
+        if t is None or t.served_at is not None:
+            return t
+        if t.clip_id is not None:
+            conn.execute(update(Trial).where(Trial.id == t.id, Trial.served_at.is_(None)).values(served_at=now))
+            continue
+        lock_assign(conn)
+        t = _current(conn, rater_pk)                 # re-read under the lock (a concurrent GET next may have won)
+        if t is None or t.clip_id is not None:
+            continue
+        cfg = current_app.config
+        expire_idle(conn, cfg["SLOT_TIMEOUT_S"], now)
+        clip = assign_slot(conn, random.Random(secrets.randbits(64)), rater_pk, t.kind, cfg["RATINGS_PER_CLIP"])
+        if clip is not None:
+            conn.execute(update(Trial).where(Trial.id == t.id).values(clip_id=clip, served_at=now))
+            continue
+        # No clip left for this slot: drop it; the later rating trials move up one.
+        conn.execute(update(Trial).where(Trial.id == t.id).values(released=True))
+        conn.execute(update(Trial).where(Trial.rater_pk == rater_pk, Trial.phase == "rating",
+                                         Trial.position > t.position).values(index=Trial.index - 1))
+        conn.execute(update(Rater).where(Rater.id == rater_pk).values(n_rating=Rater.n_rating - 1))
+
+
+def _trial_reply(token, rater, trial):
+    return jsonify(trial={
+        "trial_id": trial.id, "clip_id": trial.clip_id,
+        "video_url": url_for("api.trial_video", token=token, trial_id=trial.id),
+        "phase": trial.phase, "index": trial.index,
+        "of": rater.n_training if trial.phase == "training" else rater.n_rating})
+
+
 # The two hot calls use Core statements on a plain connection (no ORM unit of work): they are what 200
-# concurrent raters hit. GET next only reads (a short write follows when last_seen is stale or the session
-# has just ended); every answer is committed before it is acknowledged.
+# concurrent raters hit. GET next only reads once its trial has been served (a write serves a new trial, ends a
+# session, or refreshes a stale last_seen); every answer is committed before it is acknowledged.
 @bp.get("/sessions/<token>/next")
 def next_trial(token):
     now = utcnow()
     with engine().connect().execution_options(read_only=True) as conn, conn.begin():
         rater = _rater(conn, token)
         trial = _current(conn, rater.id)
-    stmt = None
-    if trial is None and rater.completed_at is None:
-        stmt = update(Rater).where(Rater.id == rater.id, Rater.completed_at.is_(None)) \
-            .values(completed_at=now, last_seen=now)
-    elif _stale(rater, now):
-        stmt = update(Rater).where(Rater.id == rater.id).values(last_seen=now)
-    if stmt is not None:
+    if trial is not None and trial.served_at is not None and not _idle(rater, now) and not _stale(rater, now):
+        return _trial_reply(token, rater, trial)
+    with engine().begin() as conn:
+        rater = _rater(conn, token, now)
+        if rater.completed_at is None and _idle(rater, now):
+            expire_idle(conn, current_app.config["SLOT_TIMEOUT_S"], now, rater.id)
+            return _expired_reply()
+        trial = _serve(conn, rater.id, now) if rater.completed_at is None else None
+        if trial is not None:
+            return _trial_reply(token, _rater(conn, token), trial)
+        if rater.completed_at is None:
+            if _rater(conn, token).n_rating == 0:
+                # Every slot was dropped (the study filled meanwhile): nothing was rated, so no code.
+                conn.execute(update(Rater).where(Rater.id == rater.id).values(expired_at=now))
+                return jsonify(error="study full: every clip has all its ratings. Thank you for your interest",
+                               full=True), 409
+            conn.execute(update(Rater).where(Rater.id == rater.id, Rater.completed_at.is_(None))
+                         .values(completed_at=now, last_seen=now))
+    return jsonify(_completion(rater))
+
+
+@bp.get("/sessions/<token>/trials/<int(max=2147483647):trial_id>/video.mp4")
+def trial_video(token, trial_id):
+    """The video of a served trial; the first request is recorded (an answer without it is flagged)."""
+    with engine().connect().execution_options(read_only=True) as conn, conn.begin():
+        rater = _rater(conn, token)
+        t = conn.execute(select(Trial.clip_id, Trial.video_at, Trial.released, Trial.served_at)
+                         .where(Trial.id == trial_id, Trial.rater_pk == rater.id)).first()
+    if t is None or t.clip_id is None or t.served_at is None or t.released:
+        abort(404, "unknown video")
+    if t.video_at is None:
         with engine().begin() as conn:
-            conn.execute(stmt)
-    if trial is None:
-        return jsonify(_completion(rater))
-    return jsonify(trial={
-        "trial_id": trial.id, "clip_id": trial.clip_id,
-        "video_url": url_for("pages.video", name=trial.clip_id + ".mp4"),
-        "phase": trial.phase, "index": trial.index,
-        "of": rater.n_training if trial.phase == "training" else rater.n_rating})
+            conn.execute(update(Trial).where(Trial.id == trial_id, Trial.video_at.is_(None)).values(video_at=utcnow()))
+    return current_app.extensions["rating_app"]["videos"].response(t.clip_id)
 
 
-def _insert_ignore(conn):
-    return (sqlite_insert if conn.dialect.name == "sqlite" else pg_insert)(Rating)
+def required_ms(clip_id: str | None) -> int:
+    """The least time between serving a trial and its answer: the clip's duration (frames / fps from the
+    manifest) less a small tolerance, times MIN_VIEW (1 unless lowered for tests and simulations)."""
+    clip = current_app.extensions["rating_app"]["clips"].get(clip_id or "")
+    duration = clip.duration_ms if clip is not None and clip.duration_ms else 0
+    return int(current_app.config["MIN_VIEW"] * max(0, duration - TOLERANCE_MS))
 
 
 @bp.post("/sessions/<token>/ratings")
@@ -196,9 +308,11 @@ def post_rating(token):
     trial_id = _int_field(body, "trial_id", 1, 2**31 - 1)
     watched_ms = _int_field(body, "watched_ms", 0, MAX_WATCHED_MS, nullable=True)
     now = utcnow()
+    cfg = current_app.config
     with engine().begin() as conn:
         rater = _rater(conn, token, now)
-        trial = conn.execute(select(Trial.id, Trial.phase, Trial.clip_id, Trial.position, Trial.answered_at)
+        trial = conn.execute(select(Trial.id, Trial.phase, Trial.clip_id, Trial.position, Trial.answered_at,
+                                    Trial.released, Trial.served_at, Trial.video_at)
                              .where(Trial.id == trial_id, Trial.rater_pk == rater.id)).first()
         if trial is None:
             abort(404, "unknown trial for this session")
@@ -210,30 +324,44 @@ def post_rating(token):
                 abort(400, "missing field 'rating'")
             rating = _int_field(body, "rating", 1, 5)
         if trial.answered_at is not None:                       # a repeat: acknowledged, stored once
-            stored = None if training else conn.execute(
-                select(Rating.rating).where(Rating.trial_pk == trial.id)).scalar()
-            return jsonify(stored=False, duplicate=True, rating=stored), 200
-        # Only the trial on screen can be answered: the first unanswered one in the rater's order (a trial
-        # released after a long absence still counts, so a late answer is kept rather than lost).
-        # (This trial itself counts as unanswered here, in case a concurrent duplicate has just answered it.)
-        first = conn.execute(select(func.min(Trial.position)).where(
-            Trial.rater_pk == rater.id, or_(Trial.answered_at.is_(None), Trial.id == trial.id))).scalar()
-        if trial.position != first:
+            return _duplicate(conn, trial.id, training)
+        if _idle(rater, now):
+            expire_idle(conn, cfg["SLOT_TIMEOUT_S"], now, rater.id)
+            return _expired_reply()
+        # Only the trial on screen can be answered: the first unanswered, unreleased one, once served. (This
+        # trial itself counts as unanswered here, in case a concurrent duplicate has just answered it.)
+        first = conn.execute(select(func.min(Trial.position)).where(Trial.rater_pk == rater.id, or_(
+            and_(Trial.answered_at.is_(None), Trial.released.is_(False)), Trial.id == trial.id))).scalar()
+        if trial.released or trial.served_at is None or trial.position != first:
             abort(409, "this trial has not been shown yet")
-        if training:
-            res = conn.execute(update(Trial).where(Trial.id == trial.id, Trial.answered_at.is_(None))
-                               .values(answered_at=now))
-            return (jsonify(stored=True), 201) if res.rowcount == 1 else (jsonify(stored=False, duplicate=True), 200)
-        # INSERT .. ON CONFLICT DO NOTHING RETURNING: a concurrent duplicate waits on the unique index and
-        # then inserts nothing, so a rating is stored exactly once whatever the timing.
-        stmt = _insert_ignore(conn).values(trial_pk=trial.id, rater_pk=rater.id, clip_id=trial.clip_id,
-                                           rating=rating, watched_ms=watched_ms, submitted_at=now)
-        new_id = conn.execute(stmt.on_conflict_do_nothing(index_elements=["trial_pk"]).returning(Rating.id)).scalar()
-        if new_id is not None:
-            conn.execute(update(Trial).where(Trial.id == trial.id).values(answered_at=now))
-            return jsonify(stored=True), 201
-        stored = conn.execute(select(Rating.rating).where(Rating.trial_pk == trial.id)).scalar()
-        return jsonify(stored=False, duplicate=True, rating=stored), 200
+        need = required_ms(trial.clip_id)
+        elapsed = (now - trial.served_at).total_seconds() * 1000
+        if elapsed < need:
+            conn.execute(update(Rater).where(Rater.id == rater.id).values(n_early=Rater.n_early + 1))
+            return jsonify(error="answered before the video could have played to the end", too_early=True,
+                           retry_after_ms=int(math.ceil(need - elapsed))), 425
+        # Take the rater row first (as expire_idle does), then the trial: an answer and the expiry or a
+        # concurrent duplicate of it can never both succeed.
+        cutoff = now - dt.timedelta(seconds=cfg["SLOT_TIMEOUT_S"])
+        ok = conn.execute(update(Rater).where(Rater.id == rater.id, Rater.expired_at.is_(None),
+                                              Rater.last_progress >= cutoff)
+                          .values(last_progress=now, last_seen=now)).rowcount
+        if ok != 1:
+            return _expired_reply()
+        claimed = conn.execute(update(Trial).where(Trial.id == trial.id, Trial.answered_at.is_(None),
+                                                   Trial.released.is_(False)).values(answered_at=now)).rowcount
+        if claimed != 1:
+            return _duplicate(conn, trial.id, training)
+        if not training:
+            conn.execute(insert(Rating).values(trial_pk=trial.id, rater_pk=rater.id, clip_id=trial.clip_id,
+                                               rating=rating, watched_ms=watched_ms, submitted_at=now,
+                                               flags="" if trial.video_at else "no_video"))
+        return jsonify(stored=True), 201
+
+
+def _duplicate(conn, trial_pk, training):
+    stored = None if training else conn.execute(select(Rating.rating).where(Rating.trial_pk == trial_pk)).scalar()
+    return jsonify(stored=False, duplicate=True, rating=stored), 200
 
 
 @bp.post("/sessions/<token>/events")
@@ -245,15 +373,19 @@ def post_event(token):
     detail = body.get("detail") or ""
     if not isinstance(detail, str):
         abort(400, "field 'detail' must be a string")
-    detail = detail[:500]
+    detail = escape_text(detail)[:500]
     trial_id = _int_field(body, "trial_id", 1, 2**31 - 1, nullable=True)
     with engine().begin() as conn:
         rater = _rater(conn, token)
         clip = None
         if trial_id is not None:
-            clip = conn.execute(select(Trial.clip_id).where(Trial.id == trial_id, Trial.rater_pk == rater.id)).scalar()
+            clip = conn.execute(select(Trial.clip_id).where(Trial.id == trial_id, Trial.rater_pk == rater.id)).first()
             if clip is None:
                 abort(404, "unknown trial for this session")
+            clip = clip.clip_id
+        n = conn.execute(select(func.count()).select_from(Event).where(Event.rater_pk == rater.id)).scalar()
+        if n >= MAX_EVENTS:
+            return jsonify(error=f"at most {MAX_EVENTS} reports per session"), 429
         conn.execute(insert(Event).values(rater_pk=rater.id, trial_pk=trial_id, kind=kind, detail=detail,
                                           created_at=utcnow()))
     current_app.logger.warning("client %s: rater %s clip %s: %s", kind, rater.rater_id, clip, detail)

@@ -1,10 +1,15 @@
-"""Which clips a new rater gets.
+"""Which clips a rater gets, and when a slot is held.
 
-Every rater sees all training clips (familiarisation) and all catch clips. Test clips are handed out so each
-reaches its target count with as few raters as possible: a rater gets up to `clips_per_rater` of the clips
-still short of their target (all of them by default), least-covered first, ties broken at random. A clip's
-cover = stored ratings + slots held by raters still active; the slots of a session idle for longer than
-`slot_timeout_s` are released. When no test clip needs a slot the study is full.
+Every rater sees all training clips (familiarisation) and all catch clips. A new session plans only its slots:
+the training clips, one slot per catch clip and up to `clips_per_rater` test slots, in a random order. A test or
+catch slot gets its clip when it is first served (GET next): the least-covered test clip still short of its
+target that this rater has not had, ties broken at random (a catch slot: a catch clip the rater has not had).
+A clip's cover = stored ratings + slots held, i.e. served and unanswered in a live session. So a session holds at
+most one slot, only once it has come that far, and only until it answers or expires: creating sessions, or
+polling GET next, holds nothing. A slot for which no test clip is left is dropped (the session gets shorter).
+
+A session expires when it has not answered anything for `slot_timeout_s` (polling is not progress); its
+unanswered slots are released and can never be answered, so no clip ever exceeds its target.
 """
 from __future__ import annotations
 
@@ -12,63 +17,84 @@ import datetime as dt
 import random
 
 from sqlalchemy import func, select, update
-from sqlalchemy.orm import Session
 
-from .db import Clip, Lock, Rater, Rating, Trial, is_sqlite, utcnow
+from .db import Clip, Lock, Rater, Rating, Trial
 
 
 class StudyFull(Exception):
     pass
 
 
-def release_abandoned(s: Session, slot_timeout_s: float, now: dt.datetime) -> int:
+def lock_assign(conn) -> None:
+    """Serialise assignment between workers (SQLite already holds the write lock: BEGIN IMMEDIATE)."""
+    if conn.dialect.name != "sqlite":
+        conn.execute(select(Lock).where(Lock.name == "assign").with_for_update())
+
+
+def expire_idle(conn, slot_timeout_s: float, now: dt.datetime, rater_pk: int | None = None) -> list[int]:
+    """Mark sessions without an answer for `slot_timeout_s` as expired and release their unanswered slots.
+
+    The UPDATE on the rater row is what an answer takes first too, so an answer and the expiry of its session
+    never both succeed."""
     cutoff = now - dt.timedelta(seconds=slot_timeout_s)
-    idle = select(Rater.id).where(Rater.completed_at.is_(None), Rater.last_seen < cutoff)
-    res = s.execute(update(Trial).where(Trial.rater_pk.in_(idle), Trial.answered_at.is_(None),
-                                        Trial.released.is_(False)).values(released=True))
-    return res.rowcount or 0
+    stmt = update(Rater).where(Rater.completed_at.is_(None), Rater.expired_at.is_(None), Rater.last_progress < cutoff)
+    if rater_pk is not None:
+        stmt = stmt.where(Rater.id == rater_pk)
+    ids = list(conn.execute(stmt.values(expired_at=now).returning(Rater.id)).scalars())
+    if ids:
+        conn.execute(update(Trial).where(Trial.rater_pk.in_(ids), Trial.answered_at.is_(None),
+                                         Trial.released.is_(False)).values(released=True))
+    return ids
 
 
-def coverage(s: Session) -> dict[str, tuple[int, int]]:
-    """{clip_id: (stored ratings, open slots)} for every test clip."""
-    done = dict(s.execute(select(Rating.clip_id, func.count()).group_by(Rating.clip_id)).all())
-    pending = dict(s.execute(
+def coverage(conn) -> dict[str, tuple[int, int]]:
+    """{clip_id: (stored ratings, held slots)} for every test clip."""
+    done = dict(conn.execute(select(Rating.clip_id, func.count()).group_by(Rating.clip_id)).all())
+    held = dict(conn.execute(
         select(Trial.clip_id, func.count())
-        .where(Trial.phase == "rating", Trial.answered_at.is_(None), Trial.released.is_(False))
+        .where(Trial.kind == "test", Trial.clip_id.is_not(None), Trial.answered_at.is_(None),
+               Trial.released.is_(False))
         .group_by(Trial.clip_id)).all())
-    tests = s.scalars(select(Clip.clip_id).where(Clip.role == "test")).all()
-    return {c: (done.get(c, 0), pending.get(c, 0)) for c in tests}
+    tests = conn.execute(select(Clip.clip_id).where(Clip.role == "test")).scalars().all()
+    return {c: (done.get(c, 0), held.get(c, 0)) for c in tests}
 
 
-def is_full(s: Session, target: int) -> bool:
+def is_full(conn, target: int) -> bool:
     """True when every test clip has its target of stored ratings (the study is over)."""
-    cov = coverage(s)
+    cov = coverage(conn)
     return bool(cov) and all(d >= target for d, _ in cov.values())
 
 
-def plan_trials(s: Session, rng: random.Random, target: int, clips_per_rater: int | None,
-                slot_timeout_s: float) -> list[tuple[str, str]]:
-    """Return [(clip_id, phase)] in presentation order for a new rater; raise StudyFull."""
-    if not is_sqlite(s.get_bind()):
-        # PostgreSQL: serialise assignment between workers (SQLite already holds the write lock).
-        s.execute(select(Lock).where(Lock.name == "assign").with_for_update())
-    now = utcnow()
-    release_abandoned(s, slot_timeout_s, now)
-    cov = coverage(s)
+def plan_session(conn, rng: random.Random, target: int, clips_per_rater: int | None) -> list[tuple[str, str | None]]:
+    """[(kind, clip_id or None)] in presentation order for a new session; raise StudyFull."""
+    cov = coverage(conn)
     if not cov:
         raise StudyFull("the study has no test clips")
-    short = [(d + p, rng.random(), c) for c, (d, p) in cov.items() if d + p < target]
+    short = sum(d + h < target for d, h in cov.values())
     if not short:
         if all(d >= target for d, _ in cov.values()):
             raise StudyFull("study full: every clip has all its ratings. Thank you for your interest")
         raise StudyFull("study full for now: the remaining clips are being rated by others; "
                         "please try again later")
-    short.sort()
-    n = len(short) if not clips_per_rater else min(clips_per_rater, len(short))
-    tests = [c for _, _, c in short[:n]]
-    catch = list(s.scalars(select(Clip.clip_id).where(Clip.role == "catch").order_by(Clip.clip_id)))
-    training = list(s.scalars(select(Clip.clip_id).where(Clip.role == "training").order_by(Clip.clip_id)))
+    n_test = short if not clips_per_rater else min(clips_per_rater, short)
+    n_catch = conn.execute(select(func.count()).select_from(Clip).where(Clip.role == "catch")).scalar()
+    training = list(conn.execute(select(Clip.clip_id).where(Clip.role == "training").order_by(Clip.clip_id))
+                    .scalars())
     rng.shuffle(training)
-    rating = tests + catch
+    rating = [("test", None)] * n_test + [("catch", None)] * n_catch
     rng.shuffle(rating)
-    return [(c, "training") for c in training] + [(c, "rating") for c in rating]
+    return [("training", c) for c in training] + rating
+
+
+def assign_slot(conn, rng: random.Random, rater_pk: int, kind: str, target: int) -> str | None:
+    """The clip for a test or catch slot now being served, or None when none is left for this rater.
+    Call under `lock_assign`. Both kinds run the same queries, so their timing does not tell them apart."""
+    had = set(conn.execute(select(Trial.clip_id).where(Trial.rater_pk == rater_pk, Trial.clip_id.is_not(None)))
+              .scalars())
+    cov = coverage(conn)
+    if kind == "catch":
+        catch = conn.execute(select(Clip.clip_id).where(Clip.role == "catch").order_by(Clip.clip_id)).scalars()
+        left = [c for c in catch if c not in had]
+        return rng.choice(left) if left else None
+    short = sorted((d + h, rng.random(), c) for c, (d, h) in cov.items() if d + h < target and c not in had)
+    return short[0][2] if short else None

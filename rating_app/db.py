@@ -2,7 +2,8 @@
 
 One row per rater session (`Rater`), one per planned trial (`Trial`), one per stored rating (`Rating`,
 unique per trial so a repeated submission can never be counted twice), plus playback events and the
-clip table copied from the manifest (so an export needs only the database).
+clip table copied from the manifest (so an export needs only the database). The admin's logins and failed
+token guesses are rows too, so that every gunicorn worker sees a logout and a lockout at once.
 """
 from __future__ import annotations
 
@@ -15,7 +16,10 @@ from pathlib import Path
 from sqlalchemy import (Boolean, CheckConstraint, DateTime, Float, ForeignKey, Integer, String,
                         UniqueConstraint, create_engine, event, select, text)
 from sqlalchemy.engine import Engine, make_url
+from sqlalchemy.exc import ArgumentError
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+from .manifest import AppError
 
 DEFAULT_DB = "sqlite:///ratings.sqlite"
 
@@ -50,24 +54,36 @@ class Rater(Base):
     external_session: Mapped[str | None] = mapped_column(String(128), nullable=True)
     created_at: Mapped[dt.datetime] = mapped_column(DateTime)
     last_seen: Mapped[dt.datetime] = mapped_column(DateTime, index=True)
+    # Creation or the last accepted answer: polling GET next is no progress, so it cannot keep a session alive.
+    last_progress: Mapped[dt.datetime] = mapped_column(DateTime, index=True)
     completed_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
+    expired_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
     completion_code: Mapped[str] = mapped_column(String(64))
     n_training: Mapped[int] = mapped_column(Integer, default=0)
     n_rating: Mapped[int] = mapped_column(Integer, default=0)
+    client: Mapped[str] = mapped_column(String(32), index=True, default="")    # keyed hash of the address
+    resume_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)  # sha256 of the resume cookie
+    n_early: Mapped[int] = mapped_column(Integer, default=0)                    # answers refused as too early
 
 
 class Trial(Base):
-    """A clip planned for a rater, in the rater's own random order (`position`)."""
+    """A slot in a rater's own random order (`position`). Training slots get their clip at creation; a test or
+    catch slot gets it only when it is first served, so a session holds a clip's slot only while it is on the
+    rater's screen (a session that never progresses holds nothing), and test and catch slots take the same path."""
     __tablename__ = "trials"
     __table_args__ = (UniqueConstraint("rater_pk", "clip_id"), UniqueConstraint("rater_pk", "position"))
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     rater_pk: Mapped[int] = mapped_column(ForeignKey("raters.id"), index=True)
-    clip_id: Mapped[str] = mapped_column(ForeignKey("clips.clip_id"), index=True)
+    clip_id: Mapped[str | None] = mapped_column(ForeignKey("clips.clip_id"), index=True, nullable=True)
+    kind: Mapped[str] = mapped_column(String(16), default="test")   # training | test | catch (never sent)
     phase: Mapped[str] = mapped_column(String(16))          # training | rating
     position: Mapped[int] = mapped_column(Integer)          # 0.. over the whole session
     index: Mapped[int] = mapped_column(Integer)             # 1.. within the phase
+    served_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)    # first GET next
+    video_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)     # first video request
     answered_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
-    # An abandoned session's unanswered slots are released so other raters can take the clip.
+    # An expired session's unanswered slots, and a slot no clip was left for, are released: never served
+    # and never answerable again.
     released: Mapped[bool] = mapped_column(Boolean, default=False)
 
 
@@ -81,6 +97,7 @@ class Rating(Base):
     rating: Mapped[int] = mapped_column(Integer)
     watched_ms: Mapped[int | None] = mapped_column(Integer, nullable=True)
     submitted_at: Mapped[dt.datetime] = mapped_column(DateTime)
+    flags: Mapped[str] = mapped_column(String(64), default="")       # e.g. no_video (see export.FLAGS)
 
 
 class Event(Base):
@@ -92,6 +109,21 @@ class Event(Base):
     kind: Mapped[str] = mapped_column(String(32))
     detail: Mapped[str] = mapped_column(String(500), default="")
     created_at: Mapped[dt.datetime] = mapped_column(DateTime)
+
+
+class AdminLogin(Base):
+    """A browser login to the dashboard; logout deletes the row, so a copied cookie stops working."""
+    __tablename__ = "admin_logins"
+    key_hash: Mapped[str] = mapped_column(String(64), primary_key=True)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime)
+
+
+class LoginFailure(Base):
+    """A wrong admin token, per client: enough of them lock that client out for a while."""
+    __tablename__ = "login_failures"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    client: Mapped[str] = mapped_column(String(32), index=True)
+    at: Mapped[dt.datetime] = mapped_column(DateTime)
 
 
 class Lock(Base):
@@ -109,12 +141,35 @@ def normalise_url(url: str | None) -> str:
     return url
 
 
+def check_url(url: str | None) -> str:
+    """The normalised URL, or an AppError naming what is wrong with it: not a URL, a database other than
+    SQLite or PostgreSQL, or an SQLite path that is an existing file but no SQLite database."""
+    url = normalise_url(url)
+    try:
+        parsed = make_url(url)
+    except ArgumentError:
+        raise AppError(f"--db {url!r} is not a database URL (sqlite:///FILE or postgresql://HOST/DB)") from None
+    family = parsed.get_backend_name()
+    if family not in ("sqlite", "postgresql"):
+        raise AppError(f"--db {parsed.render_as_string(hide_password=True)}: unsupported database {family!r} "
+                       "(sqlite or postgresql)")
+    db = parsed.database or ""
+    if family == "sqlite" and db and db != ":memory:" and os.path.exists(db):
+        if not os.path.isfile(db):
+            raise AppError(f"{db}: not a file")
+        with open(db, "rb") as fh:
+            head = fh.read(16)
+        if head and head != b"SQLite format 3\0":
+            raise AppError(f"{db}: not an SQLite database")
+    return url
+
+
 def is_sqlite(engine: Engine) -> bool:
     return engine.dialect.name == "sqlite"
 
 
 def make_engine(url: str | None = None) -> Engine:
-    url = normalise_url(url)
+    url = check_url(url)
     if url.startswith("sqlite"):
         engine = create_engine(url, connect_args={"timeout": 30, "check_same_thread": False})
 

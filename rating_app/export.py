@@ -1,4 +1,9 @@
-"""ratings.csv (CONTRACTS §6) and progress figures, straight from the database."""
+"""ratings.csv (CONTRACTS §6) and progress figures, straight from the database.
+
+Every text cell that a spreadsheet would take for a formula (starting with = + - @, a tab or a carriage
+return) is written with a leading apostrophe, so opening the export can never run anything a rater typed.
+The `flags` column marks ratings to look at before trusting them (FLAGS).
+"""
 from __future__ import annotations
 
 import csv
@@ -11,19 +16,41 @@ from sqlalchemy.orm import Session
 from .db import Clip, Event, Rater, Rating, Trial
 
 COLUMNS = ("rater_id", "clip_id", "condition", "rating", "role", "item", "trial_index", "watched_ms",
-           "submitted_at", "external_id", "study_id", "rater_completed")
+           "submitted_at", "external_id", "study_id", "rater_completed", "flags")
+FLAGS = {
+    "no_video": "the server never sent this trial's video before the answer",
+    "too_fast": "the session had answers refused as arriving before the clip could have played to the end",
+}
+FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def cell(value):
+    """A CSV cell that no spreadsheet evaluates."""
+    if isinstance(value, str) and value.startswith(FORMULA_START):
+        return "'" + value
+    return value
+
+
+def row_flags(rating_flags: str, n_early: int) -> str:
+    flags = set(filter(None, (rating_flags or "").split(";")))
+    if n_early:
+        flags.add("too_fast")
+    return ";".join(sorted(flags))
 
 
 def iter_rows(s: Session):
     q = (select(Rater.rater_id, Rating.clip_id, Clip.condition, Rating.rating, Clip.role, Clip.item, Trial.index,
-                Rating.watched_ms, Rating.submitted_at, Rater.external_id, Rater.study_id, Rater.completed_at)
+                Rating.watched_ms, Rating.submitted_at, Rater.external_id, Rater.study_id, Rater.completed_at,
+                Rating.flags, Rater.n_early)
          .join(Trial, Trial.id == Rating.trial_pk).join(Rater, Rater.id == Rating.rater_pk)
          .join(Clip, Clip.clip_id == Rating.clip_id).order_by(Rater.id, Trial.index))
-    for (rater_id, clip_id, cond, rating, role, item, idx, watched, at, ext, study, completed) in s.execute(q):
+    for (rater_id, clip_id, cond, rating, role, item, idx, watched, at, ext, study, completed, flags,
+         n_early) in s.execute(q):
         yield {"rater_id": rater_id, "clip_id": clip_id, "condition": cond, "rating": rating, "role": role,
                "item": item, "trial_index": idx, "watched_ms": "" if watched is None else watched,
                "submitted_at": at.strftime("%Y-%m-%dT%H:%M:%S.%fZ"), "external_id": ext or "",
-               "study_id": study or "", "rater_completed": int(completed is not None)}
+               "study_id": study or "", "rater_completed": int(completed is not None),
+               "flags": row_flags(flags, n_early)}
 
 
 def export_csv(engine: Engine, out=None) -> str | int:
@@ -34,7 +61,7 @@ def export_csv(engine: Engine, out=None) -> str | int:
     n = 0
     with Session(engine.execution_options(read_only=True)) as s:
         for row in iter_rows(s):
-            w.writerow(row)
+            w.writerow({k: cell(v) for k, v in row.items()})
             n += 1
     return n if out is not None else buf.getvalue()
 
@@ -48,9 +75,8 @@ def progress(engine: Engine, target: int) -> dict:
         stats = {c: (n, int(total)) for c, n, total in s.execute(
             select(Rating.clip_id, func.count(), func.sum(Rating.rating)).group_by(Rating.clip_id))}
         pending = dict(s.execute(select(Trial.clip_id, func.count())
-                                 .join(Rater, Rater.id == Trial.rater_pk)
-                                 .where(Trial.phase == "rating", Trial.answered_at.is_(None),
-                                        Trial.released.is_(False), Rater.completed_at.is_(None))
+                                 .where(Trial.phase == "rating", Trial.clip_id.is_not(None),
+                                        Trial.answered_at.is_(None), Trial.released.is_(False))
                                  .group_by(Trial.clip_id)).all())
         per_clip, per_cond = [], {}
         for c, cond, role, item in clips:
@@ -68,14 +94,22 @@ def progress(engine: Engine, target: int) -> dict:
         for d in per_cond.values():
             d["mean"] = round(d.pop("_sum") / d["ratings"], 2) if d["ratings"] else None
         n_rated = dict(s.execute(select(Rating.rater_pk, func.count()).group_by(Rating.rater_pk)).all())
-        n_trials = dict(s.execute(select(Trial.rater_pk, func.count()).where(Trial.phase == "rating")
-                                  .group_by(Trial.rater_pk)).all())
         fails = dict(s.execute(select(Rating.rater_pk, func.count()).join(Clip, Clip.clip_id == Rating.clip_id)
                                .where(Clip.role == "catch", Rating.rating >= 3).group_by(Rating.rater_pk)).all())
-        raters = [{"rater_id": r.rater_id, "external_id": r.external_id or "", "started": r.created_at,
-                   "last_seen": r.last_seen, "completed": r.completed_at is not None,
-                   "rated": n_rated.get(r.id, 0), "of": n_trials.get(r.id, 0), "catch_failures": fails.get(r.id, 0)}
-                  for r in s.scalars(select(Rater).order_by(Rater.id))]
+        n_trials = dict(s.execute(select(Trial.rater_pk, func.count()).where(
+            Trial.phase == "rating", (Trial.released.is_(False)) | Trial.answered_at.is_not(None))
+            .group_by(Trial.rater_pk)).all())
+        no_video = dict(s.execute(select(Rating.rater_pk, func.count()).where(Rating.flags.contains("no_video"))
+                                  .group_by(Rating.rater_pk)).all())
+        raters = []
+        for r in s.scalars(select(Rater).order_by(Rater.id)):
+            flags = [f for f, bad in (("too_fast", r.n_early), ("no_video", no_video.get(r.id))) if bad]
+            raters.append({"rater_id": r.rater_id, "external_id": r.external_id or "", "started": r.created_at,
+                           "last_seen": r.last_seen, "completed": r.completed_at is not None,
+                           "expired": r.expired_at is not None, "rated": n_rated.get(r.id, 0),
+                           "of": n_trials.get(r.id, 0), "catch_failures": fails.get(r.id, 0),
+                           "early_answers": r.n_early, "ratings_without_video": no_video.get(r.id, 0),
+                           "flags": flags})
         events = s.execute(select(Event.created_at, Event.kind, Event.detail).order_by(Event.id.desc())
                            .limit(50)).all()
     tests = [r for r in per_clip if r["role"] == "test"]
@@ -91,5 +125,7 @@ def progress(engine: Engine, target: int) -> dict:
         "raters": raters,
         "raters_completed": sum(r["completed"] for r in raters),
         "raters_failed_catch": sum(r["catch_failures"] > 0 for r in raters),
+        "raters_suspicious": sum(bool(r["flags"]) for r in raters),
+        "raters_expired": sum(r["expired"] for r in raters),
         "events": [{"at": a, "kind": k, "detail": d} for a, k, d in events],
     }

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from core.cli import UserError
 
-CLIP_ID = re.compile(r"^[a-z0-9]{12,64}$")
+CLIP_ID = re.compile(r"[a-z0-9]{12,64}")         # always fullmatch
 ROLES = ("test", "catch", "training")
 REQUIRED = ("clip_id", "condition", "role", "item", "video")
 METRIC_COLUMNS = ("foot_skating", "bone_length_std", "jerk", "control_error")
@@ -62,7 +62,7 @@ def load_manifest(path, check_files: bool = True) -> list[ManifestClip]:
             for line, row in enumerate(reader, start=2):
                 where = f"{path}:{line}"
                 cid = (row["clip_id"] or "").strip()
-                if not CLIP_ID.match(cid):
+                if not CLIP_ID.fullmatch(cid):
                     raise AppError(f"{where}: clip_id {cid!r} is not an opaque token [a-z0-9]{{12,64}}")
                 if cid in seen:
                     raise AppError(f"{where}: duplicate clip_id {cid}")
@@ -74,6 +74,8 @@ def load_manifest(path, check_files: bool = True) -> list[ManifestClip]:
                 if not condition or len(condition) > 64:
                     raise AppError(f"{where}: condition must be 1-64 characters")
                 video = (base / (row["video"] or "").strip()).resolve()
+                if not video.is_relative_to(base):       # '..', an absolute path or a symlink leading out
+                    raise AppError(f"{where}: video {row['video']!r} leaves the stimulus folder {base}")
                 if check_files and not video.is_file():
                     raise AppError(f"{where}: video {row['video']!r} not found ({video})")
                 clips.append(ManifestClip(

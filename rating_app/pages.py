@@ -1,9 +1,10 @@
-"""The rater's page (one HTML page driven by static/study.js through the JSON API) and the videos."""
+"""The rater's page (one HTML page driven by static/study.js through the JSON API) and the videos by clip id
+(for the admin and old links; the page plays each trial's own URL, which records the fetch)."""
 from __future__ import annotations
 
 import re
 
-from flask import Blueprint, abort, current_app, jsonify, render_template, request, send_file
+from flask import Blueprint, abort, current_app, jsonify, render_template, request
 from sqlalchemy.orm import Session
 
 from .api import EXTERNAL
@@ -11,7 +12,7 @@ from .assign import is_full
 
 bp = Blueprint("pages", __name__)
 
-VIDEO_NAME = re.compile(r"^([a-z0-9]{12,64})\.mp4$")
+VIDEO_NAME = re.compile(r"([a-z0-9]{12,64})\.mp4")      # fullmatch
 # Query parameters Prolific appends to a study URL ({{%PROLIFIC_PID%}} etc.), plus generic fallbacks.
 ID_PARAMS = {"external_id": ("PROLIFIC_PID", "participant", "worker_id", "pid"),
              "study_id": ("STUDY_ID", "study"),
@@ -24,7 +25,7 @@ def index():
     for key, names in ID_PARAMS.items():
         for n in names:
             v = request.args.get(n)
-            if v and EXTERNAL.match(v):
+            if v and EXTERNAL.fullmatch(v):
                 ids[key] = v
                 break
     ext = current_app.extensions["rating_app"]
@@ -36,17 +37,11 @@ def index():
 @bp.get("/videos/<name>")
 def video(name):
     # Only files named by clip id in the manifest: no listing, no path from the client ever reaches the disk.
-    m = VIDEO_NAME.match(name)
+    m = VIDEO_NAME.fullmatch(name)
     clip = current_app.extensions["rating_app"]["clips"].get(m.group(1)) if m else None
     if clip is None:
         abort(404, "unknown video")
-    path = clip.video
-    if not path.is_file():
-        current_app.logger.error("video file missing on the server: %s", path)
-        abort(404, "unknown video")
-    resp = send_file(path, mimetype="video/mp4", conditional=True, max_age=3600, etag=True)
-    resp.headers["Cache-Control"] = "private, max-age=3600"
-    return resp
+    return current_app.extensions["rating_app"]["videos"].response(clip.clip_id)
 
 
 @bp.get("/healthz")

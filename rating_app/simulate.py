@@ -1,7 +1,9 @@
 """A simulated crowd: raters that use the public API exactly as the page does.
 
-Each rater creates a session, acknowledges the familiarisation clips (rating null), then rates every clip it is
-served. An attentive rater answers round(quality(clip) + bias + noise), clipped to 1..5, with a personal bias
+Each rater creates a session (with a platform session id, as Prolific's link gives one, which is also its proof
+for resuming after a lost reply), and for every trial fetches the video and waits until the server would accept
+an answer: the clip's duration times the server's `min_view` (from the session reply; 1 = the whole clip). It
+acknowledges the familiarisation clips (rating null), then rates every clip it is served. An attentive rater answers round(quality(clip) + bias + noise), clipped to 1..5, with a personal bias
 and noise level, and recognises the bad examples (catch clips) as such. A careless rater answers uniformly
 at random, and so fails catch trials. The per-clip quality comes by default from metrics.csv (worse objective
 metrics -> lower quality; the best condition by the metrics gets QUALITY_HIGH, the worst QUALITY_LOW), else
@@ -130,13 +132,14 @@ class _Client:
         self.http = requests.Session()
         self.retries = 0
 
-    def call(self, method: str, path: str, body=None):
+    def call(self, method: str, path: str, body=None, raw=False):
+        """(status, JSON body), or (status, bytes) with `raw` (a video)."""
         delay = 0.05
         while True:
             try:
                 r = self.http.request(method, self.base + path, json=body, timeout=self.request_timeout)
                 if r.status_code < 500:
-                    return r.status_code, r.json()
+                    return r.status_code, (r.content if raw and r.status_code == 200 else r.json())
                 err = f"HTTP {r.status_code}"
             except (requests.RequestException, ValueError) as e:     # dropped connection, restart, bad JSON
                 err = e.__class__.__name__
@@ -178,6 +181,7 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
     careless_set = set(rng.choice(n_raters, size=n_careless, replace=False).tolist()) if n_careless else set()
     prefix = prefix or f"sim{seed}"
     specs = [{"index": i, "external_id": f"{prefix}-{i:05d}", "careless": i in careless_set,
+              "session_id": f"{prefix}-{i:05d}-{int(rng.integers(2**62)):x}",
               "bias": float(rng.normal(0, BIAS_SD)), "noise_sd": float(rng.uniform(*NOISE_SD)),
               "seed": int(rng.integers(2**31))} for i in range(n_raters)]
     full = threading.Event()
@@ -215,7 +219,8 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
             local.client = _Client(url, deadline)
         cl = local.client
         r_rng = np.random.default_rng(spec["seed"])
-        status, body = cl.call("POST", "/api/sessions", {"external_id": spec["external_id"]})
+        status, body = cl.call("POST", "/api/sessions", {"external_id": spec["external_id"],
+                                                          "session_id": spec["session_id"]})
         if status == 409 and body.get("full"):
             full.set()
             res["skipped"] = "study full"
@@ -223,28 +228,46 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
         if status not in (200, 201):
             raise AppError(f"POST /api/sessions: HTTP {status}: {body.get('error')}")
         token, res["rater_id"], res["started"] = body["session"], body["rater_id"], True
+        min_view = float(body.get("min_view", 1.0))
+
+        def answer(t, clip, value, watched):
+            """Fetch the video, wait as the server requires, post; wait again if the server says too early."""
+            shown = time.monotonic()
+            status, data = cl.call("GET", t["video_url"], raw=True)
+            if status != 200:
+                raise AppError(f"video of trial {t['trial_id']}: HTTP {status}")
+            wait = min_view * (clip.duration_ms if clip else 2000) / 1000.0
+            if think_s:
+                wait += float(r_rng.exponential(think_s))
+            time.sleep(max(0.0, shown + wait - time.monotonic()))
+            for _ in range(5):
+                status, ans = cl.call("POST", f"/api/sessions/{token}/ratings",
+                                      {"trial_id": t["trial_id"], "rating": value, "watched_ms": watched})
+                if status != 425:
+                    return status, ans
+                time.sleep(ans.get("retry_after_ms", 100) / 1000.0)
+            return status, ans
+
         for _ in range(int(body["n_trials"]) + 3):
             status, body = cl.call("GET", f"/api/sessions/{token}/next")
+            if status == 409 and body.get("full"):
+                res["skipped"] = "study full"
+                return
             if status != 200:
                 raise AppError(f"GET next: HTTP {status}: {body.get('error')}")
             if body.get("done"):
                 res["completed"], res["completion_code"] = True, body["completion_code"]
                 return
             t = body["trial"]
-            if think_s:
-                time.sleep(float(r_rng.exponential(think_s)))
             clip = clips.get(t["clip_id"])
             if t["phase"] == "training":
-                status, ans = cl.call("POST", f"/api/sessions/{token}/ratings",
-                                      {"trial_id": t["trial_id"], "rating": None,
-                                       "watched_ms": clip.duration_ms if clip else 2000})
+                status, ans = answer(t, clip, None, clip.duration_ms if clip else 2000)
                 if status not in (200, 201):
                     raise AppError(f"training ack: HTTP {status}: {ans.get('error')}")
                 res["n_training"] += 1
                 continue
             value, watched = rate(spec, r_rng, clip)
-            status, ans = cl.call("POST", f"/api/sessions/{token}/ratings",
-                                  {"trial_id": t["trial_id"], "rating": value, "watched_ms": watched})
+            status, ans = answer(t, clip, value, watched)
             if status not in (200, 201):
                 raise AppError(f"rating: HTTP {status}: {ans.get('error')}")
             if status == 200 and ans.get("rating") is not None:

@@ -2,13 +2,19 @@
 
     RATING_MANIFEST=stimuli/manifest.csv DATABASE_URL=postgresql://USER@HOST/DB ADMIN_TOKEN=... \\
         gunicorn -w 4 -k gthread --threads 8 -b 0.0.0.0:8000 rating_app.wsgi:app
+
+A bad setting (no RATING_MANIFEST, a bad number, an unreachable database) prints one line and exits with
+gunicorn's "app failed to load" code (4): gunicorn then stops instead of respawning the worker forever, as it
+does for any other exit code.
 """
 import sys
+
+from gunicorn.arbiter import Arbiter
 
 from . import AppError, create_app
 
 try:
     app = create_app()
 except AppError as e:                      # a clear line in the server log instead of a traceback
-    print(f"error: {e}", file=sys.stderr)
-    raise SystemExit(2) from None
+    print(f"error: {e}", file=sys.stderr, flush=True)
+    raise SystemExit(Arbiter.APP_LOAD_ERROR) from None

@@ -85,8 +85,10 @@ def app_db_url(request, tmp_path):
 
 @pytest.fixture
 def app(app_stimuli, app_db_url):
+    """The app with target 3 and MIN_VIEW 0 (answers need no wait; tests of the viewing rule use `make_app`)."""
     from rating_app import create_app
-    app = create_app(manifest=app_stimuli, db_url=app_db_url, admin_token=APP_ADMIN_TOKEN, ratings_per_clip=3)
+    app = create_app(manifest=app_stimuli, db_url=app_db_url, admin_token=APP_ADMIN_TOKEN, ratings_per_clip=3,
+                     min_view=0)
     app.config["TESTING"] = True
     yield app
     app.extensions["rating_app"]["engine"].dispose()
@@ -95,6 +97,22 @@ def app(app_stimuli, app_db_url):
 @pytest.fixture
 def client(app):
     return app.test_client()
+
+
+@pytest.fixture
+def make_app(app_stimuli, app_db_url):
+    """make_app(**settings) -> an app on this test's database; every engine is disposed at the end."""
+    from rating_app import create_app
+    made = []
+
+    def make(**kw):
+        kw = {"manifest": app_stimuli, "db_url": app_db_url, "admin_token": APP_ADMIN_TOKEN, **kw}
+        made.append(create_app(**kw))
+        made[-1].config["TESTING"] = True
+        return made[-1]
+    yield make
+    for a in made:
+        a.extensions["rating_app"]["engine"].dispose()
 
 
 # --- stimuli (issue 4): one real `make_stimuli --quick` run per session ---

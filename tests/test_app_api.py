@@ -72,7 +72,7 @@ def test_whole_session_flow_and_export(client, app_stimuli):
     # never a hint of the condition: the trial carries only opaque ids, the video URL only the clip id
     for t in trials:
         assert set(t) == {"trial_id", "clip_id", "video_url", "phase", "index", "of"}
-        assert t["video_url"] == f"/videos/{t['clip_id']}.mp4"
+        assert t["video_url"] == f"/api/sessions/{token}/trials/{t['trial_id']}/video.mp4"
     assert done["done"] is True and done["completion_code"]
     assert nxt(client, token) == done           # stays done, same code
     rows = export_rows(client)
@@ -162,41 +162,50 @@ def test_assignment_fills_targets_with_fewest_raters_then_closes(client, app_sti
     assert per_clip == {c: 3 for c in roles["test"]}
 
 
-def test_balanced_share_and_abandoned_slots(app_stimuli, app_db_url):
+def test_balanced_share_and_abandoned_slots(app_stimuli, make_app):
     roles = clips_by_role(app_stimuli)
     n_test = len(roles["test"])
-    app = create_app(manifest=app_stimuli, db_url=app_db_url, admin_token="t", ratings_per_clip=1,
-                     clips_per_rater=n_test // 3, slot_timeout_s=3600)
-    try:
-        c = app.test_client()
-        got = []
-        for _ in range(3):
-            trials, _ = complete(c, start(c))
-            tests = {t["clip_id"] for t in trials if t["clip_id"] in roles["test"]}
-            assert len(tests) == n_test // 3
-            assert roles["catch"] <= {t["clip_id"] for t in trials}      # every rater gets every catch clip
-            got.append(tests)
-        assert set().union(*got) == roles["test"] and sum(map(len, got)) == n_test   # each clip exactly once
-        assert c.post("/api/sessions", json={}).status_code == 409
-    finally:
-        app.extensions["rating_app"]["engine"].dispose()
-
-    # A rater who takes every remaining slot and walks away blocks nobody once the timeout has passed.
-    app = create_app(manifest=app_stimuli, db_url=app_db_url, admin_token="t", ratings_per_clip=2,
-                     slot_timeout_s=3600)
-    try:
-        c = app.test_client()
-        ghost = start(c)                               # holds the 2nd slot of every clip
-        assert nxt(c, ghost)["trial"]
-        r = c.post("/api/sessions", json={})
-        assert r.status_code == 409 and "for now" in r.json["error"]
-        app.config["SLOT_TIMEOUT_S"] = 0.0             # now every idle session counts as abandoned
+    app = make_app(ratings_per_clip=1, clips_per_rater=n_test // 3, slot_timeout_s=3600, min_view=0)
+    c = app.test_client()
+    got = []
+    for _ in range(3):
         trials, _ = complete(c, start(c))
-        assert roles["test"] <= {t["clip_id"] for t in trials}
-        assert nxt(c, ghost)["done"] is True            # the ghost's released slots are not served any more
-        assert c.post("/api/sessions", json={}).status_code == 409
-    finally:
-        app.extensions["rating_app"]["engine"].dispose()
+        tests = {t["clip_id"] for t in trials if t["clip_id"] in roles["test"]}
+        assert len(tests) == n_test // 3
+        assert roles["catch"] <= {t["clip_id"] for t in trials}      # every rater gets every catch clip
+        got.append(tests)
+    assert set().union(*got) == roles["test"] and sum(map(len, got)) == n_test   # each clip exactly once
+    assert c.post("/api/sessions", json={}).status_code == 409
+
+    # A rater who walks away on a test trial holds that one slot, and only until the timeout has passed.
+    app = make_app(ratings_per_clip=2, slot_timeout_s=3600, min_view=0)     # each clip has 1 rating already
+    c = app.test_client()
+    ghost = start(c)
+    t = nxt(c, ghost)["trial"]
+    while t["phase"] == "training" or t["clip_id"] not in roles["test"]:
+        assert answer(c, ghost, t, 1).status_code == 201
+        t = nxt(c, ghost)["trial"]
+    held = t["clip_id"]
+    trials, _ = complete(c, start(c))
+    assert {x["clip_id"] for x in trials} >= roles["test"] - {held} and held not in {x["clip_id"] for x in trials}
+    r = c.post("/api/sessions", json={})
+    assert r.status_code == 409 and "for now" in r.json["error"]
+    idle(app, ghost)                                  # nothing answered for longer than the slot timeout
+    trials, _ = complete(c, start(c))
+    assert held in {x["clip_id"] for x in trials}
+    r = c.get(f"/api/sessions/{ghost}/next")          # the ghost is told it expired, and gets no code
+    assert r.status_code == 410 and r.json["expired"] is True and "completion_code" not in r.json
+    assert c.post("/api/sessions", json={}).status_code == 409
+
+
+def idle(app, token, hours=2):
+    """Move a session's last answer (and last poll) `hours` into the past, as if it had been idle that long."""
+    import datetime as dt
+    from sqlalchemy import update
+    from rating_app.db import Rater, utcnow
+    with app.extensions["rating_app"]["engine"].begin() as conn:
+        past = utcnow() - dt.timedelta(hours=hours)
+        conn.execute(update(Rater).where(Rater.token == token).values(last_progress=past, last_seen=past))
 
 
 # ---------------------------------------------------------------------------------------------- bad input
@@ -318,14 +327,10 @@ def test_admin_requires_token(client):
     assert page.status_code == 200 and b"Rating progress" in page.data
 
 
-def test_admin_disabled_without_token(app_stimuli, app_db_url):
-    app = create_app(manifest=app_stimuli, db_url=app_db_url, admin_token="", ratings_per_clip=3)
-    try:
-        c = app.test_client()
-        assert c.get("/admin/export.csv", headers={"Authorization": "Bearer "}).status_code == 401
-        assert c.post("/admin/login", data={"token": ""}).status_code == 401
-    finally:
-        app.extensions["rating_app"]["engine"].dispose()
+def test_admin_disabled_without_token(make_app):
+    c = make_app(admin_token="", ratings_per_clip=3).test_client()
+    assert c.get("/admin/export.csv", headers={"Authorization": "Bearer "}).status_code == 401
+    assert c.post("/admin/login", data={"token": ""}).status_code == 401
 
 
 def test_dashboard_progress_and_catch_failures(client, app_stimuli):
@@ -390,14 +395,10 @@ def test_pages_carry_ids_and_no_condition(client):
     assert "script-src 'self'" in r.headers["Content-Security-Policy"]
 
 
-def test_completion_code_and_redirect(app_stimuli, app_db_url):
-    app = create_app(manifest=app_stimuli, db_url=app_db_url, admin_token="t", ratings_per_clip=3,
-                     completion_code="C1ABCDEF",
-                     completion_url="https://app.prolific.com/submissions/complete?cc={code}")
-    try:
-        c = app.test_client()
-        _, done = complete(c, start(c))
-        assert done["completion_code"] == "C1ABCDEF"
-        assert done["redirect_url"] == "https://app.prolific.com/submissions/complete?cc=C1ABCDEF"
-    finally:
-        app.extensions["rating_app"]["engine"].dispose()
+def test_completion_code_and_redirect(make_app):
+    app = make_app(ratings_per_clip=3, min_view=0, completion_code="C1ABCDEF",
+                   completion_url="https://app.prolific.com/submissions/complete?cc={code}")
+    c = app.test_client()
+    _, done = complete(c, start(c))
+    assert done["completion_code"] == "C1ABCDEF"
+    assert done["redirect_url"] == "https://app.prolific.com/submissions/complete?cc=C1ABCDEF"

@@ -76,9 +76,15 @@
 
   function next() {
     api("GET", "/api/sessions/" + token + "/next").then(function (r) {
-      if (r.status === 404) {
+      if (r.status === 404 || r.status === 410) {
         try { sessionStorage.removeItem(KEY); } catch (e) {}
-        fail("This session is unknown. Please reload the page to start again.");
+        fail(r.status === 410 ? r.data.error : "This session is unknown. Please reload the page to start again.");
+        return;
+      }
+      if (r.status === 409 && r.data.full) {
+        try { sessionStorage.removeItem(KEY); } catch (e) {}
+        $("full-msg").textContent = r.data.error;
+        show("full");
         return;
       }
       if (r.status !== 200) { fail(r.data.error || "unexpected answer " + r.status); return; }
@@ -157,10 +163,18 @@
     rateButtons.forEach(function (b) { b.disabled = true; });
     $("continue").disabled = true;
     $("replay").disabled = true;
+    send(rating, 3);
+  }
+
+  // 425: the server counts the clip as not yet played to the end (a slow start); wait as it says, then resend.
+  function send(rating, early) {
     api("POST", "/api/sessions/" + token + "/ratings",
         { trial_id: trial.trial_id, rating: rating, watched_ms: Math.round(watchedMs) })
       .then(function (r) {
         if (r.status === 201 || r.status === 200) { next(); }
+        else if (r.status === 425 && early > 0) {
+          setTimeout(function () { send(rating, early - 1); }, Math.min(r.data.retry_after_ms || 500, 10000));
+        }
         else { fail(r.data.error || "the answer was not accepted (" + r.status + ")"); }
       }).catch(function () { answered = false; fail("The server cannot be reached. Please check your connection."); });
   }
