@@ -1,0 +1,292 @@
+"""`python -m analysis.plan PILOT.csv`: how many raters a rating study needs, from a pilot.
+
+Fits the report's linear mixed model (rating ~ condition + (1|rater) + (1|clip)) on the pilot's kept test rows
+and simulates whole studies from the fitted condition means and variance components (a parametric bootstrap):
+each simulated rater rates `clips_per_rater` clips drawn at random, as the app assigns them. Every simulated
+study is analysed with the report's own decision -- Tukey HSD at family-wise alpha over all conditions -- and
+power is the share of studies in which the chosen pair differs. Answers: how many raters give power 0.8
+(--power) to detect the pilot's difference (or --difference) between two conditions, and (--raters) what
+power a given design has. Covers the acr design only (pairwise and parallel designs have no planner yet).
+
+Why simulate rather than a formula: raters see a random subset of clips and both raters and clips vary, so the
+variance of a difference of condition means has no closed form that also covers Tukey's pooled error and
+critical value. The simulation is vectorised over studies (a chunk of studies is one set of array operations),
+and the same random numbers serve every design size, so the power curve is smooth and monotone up to noise.
+
+Caveat printed with every plan: Tukey HSD treats ratings as independent, while clips vary. The table also gives
+the false-positive rate of that decision at the planned size (difference 0); with many raters per clip it can
+exceed alpha, and then the mixed model's test in the report (Satterthwaite df) is the one to trust.
+"""
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from core import cli
+from scipy import stats as sps
+from tqdm import tqdm
+
+from . import figures, stats
+from .filtering import DEFAULT_THRESHOLD, exclude_raters, only_test_rows
+from .load import AnalysisError, load_ratings
+
+MAX_RATERS = 5000
+
+
+def pilot_design(test):
+    """Design and fitted model of the pilot's test rows -> dict(conditions, means, sd_rater, sd_clip,
+    sd_residual, clips_per_condition, clips_per_rater, n_raters)."""
+    m = stats.mixed_model(test)
+    vc = m["variance_components"]
+    conds = list(m["condition_means"])
+    return {"conditions": conds, "means": m["condition_means"], "sd_rater": math.sqrt(vc["rater"]),
+            "sd_clip": math.sqrt(vc["clip"]), "sd_residual": math.sqrt(vc["residual"]),
+            "clips_per_condition": int(round(test.groupby("condition")["clip_id"].nunique().mean())),
+            "clips_per_rater": int(round(test.groupby("rater_id").size().median())),
+            "n_raters": int(test["rater_id"].nunique())}
+
+
+def simulate_power(design, pair, n_raters, n_sim=1000, alpha=0.05, seed=0, chunk=100, progress=None):
+    """Share of simulated studies with n_raters raters in which Tukey HSD separates the two conditions of
+    `pair`, and its 95% Monte Carlo (Wilson) interval -> (power, low, high).
+
+    Tukey's decision for a pair (p_adj < alpha) is q > the studentized-range quantile at 1 - alpha, with
+    q = |mean difference| / sqrt(MSE / 2 (1/n_i + 1/n_j)) and MSE the pooled within-condition variance --
+    computed here from group sums for a whole chunk of studies at once."""
+    conds = design["conditions"]
+    K, C, m = len(conds), design["clips_per_condition"], design["clips_per_rater"]
+    n_clips = K * C
+    m = min(m, n_clips)
+    mu = np.array([design["means"][c] for c in conds])
+    a, b = conds.index(pair[0]), conds.index(pair[1])
+    clip_cond = np.repeat(np.arange(K), C)
+    N = n_raters * m
+    df_w = N - K
+    if df_w < 1:
+        return 0.0, 0.0, 1.0
+    qcrit = float(sps.studentized_range.ppf(1 - alpha, K, df_w))
+    rng = np.random.default_rng(seed)
+    rejected = 0
+    for start in range(0, n_sim, chunk):
+        S = min(chunk, n_sim - start)
+        # each rater's clips: the first m of a random permutation (all clips when m = n_clips)
+        keys = rng.random((S, n_raters, n_clips))
+        clips = np.argpartition(keys, m - 1, axis=2)[:, :, :m] if m < n_clips else np.broadcast_to(
+            np.arange(n_clips), (S, n_raters, n_clips))
+        u_r = rng.normal(0, design["sd_rater"], (S, n_raters, 1))
+        u_c = rng.normal(0, design["sd_clip"], (S, n_clips))
+        e = rng.normal(0, design["sd_residual"], (S, n_raters, m))
+        cond = clip_cond[clips]
+        y = mu[cond] + u_r + np.take_along_axis(u_c[:, None, :].repeat(n_raters, 1), clips, axis=2) + e
+        idx = (np.arange(S)[:, None, None] * K + cond).ravel()
+        yv = y.ravel()
+        n = np.bincount(idx, minlength=S * K).reshape(S, K)
+        s1 = np.bincount(idx, yv, minlength=S * K).reshape(S, K)
+        s2 = np.bincount(idx, yv * yv, minlength=S * K).reshape(S, K)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            means = s1 / n
+            ssw = np.nansum(s2 - s1 * means, axis=1)
+            mse = ssw / df_w
+            se = np.sqrt(mse / 2 * (1 / n[:, a] + 1 / n[:, b]))
+            q = np.abs(means[:, b] - means[:, a]) / se
+        rejected += int(np.sum(q > qcrit))
+        if progress is not None:
+            progress.update(S)
+    p = rejected / n_sim
+    z = 1.959963984540054
+    centre = (p + z * z / (2 * n_sim)) / (1 + z * z / n_sim)
+    half = z * math.sqrt(p * (1 - p) / n_sim + z * z / (4 * n_sim ** 2)) / (1 + z * z / n_sim)
+    return p, max(0.0, centre - half), min(1.0, centre + half)
+
+
+def with_difference(design, pair, difference):
+    """The design with the pair's means set `difference` apart (second minus first), others unchanged."""
+    means = dict(design["means"])
+    means[pair[1]] = means[pair[0]] + difference
+    return {**design, "means": means}
+
+
+def plan(design, pair, target=0.8, n_sim=1000, alpha=0.05, seed=0, raters=None, max_raters=MAX_RATERS,
+         progress=True):
+    """Power curve over the number of raters and the smallest number reaching `target`.
+
+    The search doubles the number of raters until the target is reached, then bisects between the last two
+    sizes; every size evaluated is a row of the curve. -> dict(curve DataFrame, planned_raters or None,
+    planned_power, false_positive_rate (difference 0 at the planned size), power_at (for `raters`))."""
+    per_clip_per_rater = design["clips_per_rater"] / (len(design["conditions"]) * design["clips_per_condition"])
+    rows = {}
+    bar = tqdm(desc="simulated studies", unit="study", disable=not progress, file=sys.stderr, leave=False)
+
+    def power(r):
+        if r not in rows:
+            rows[r] = simulate_power(design, pair, r, n_sim, alpha, seed, progress=bar)
+        return rows[r][0]
+
+    lo_r, hi_r = 1, 2
+    while power(hi_r) < target and hi_r < max_raters:
+        lo_r, hi_r = hi_r, min(2 * hi_r, max_raters)
+    planned = None
+    if power(hi_r) >= target:
+        while hi_r - lo_r > 1:
+            mid = (lo_r + hi_r) // 2
+            if power(mid) >= target:
+                hi_r = mid
+            else:
+                lo_r = mid
+        planned = hi_r
+        for r in np.unique(np.linspace(2, max(4, int(planned * 1.5)), 10).astype(int)):  # a readable curve
+            power(int(r))
+    if raters is not None:
+        power(int(raters))
+    out = {"planned_raters": planned, "planned_power": rows[planned][0] if planned else None,
+           "power_at": {int(raters): rows[int(raters)][0]} if raters is not None else {}}
+    null_design = with_difference(design, pair, 0.0)
+    check = planned or raters
+    if check:
+        out["false_positive_rate"] = simulate_power(null_design, pair, int(check), n_sim, alpha, seed + 1,
+                                                    progress=bar)[0]
+    bar.close()
+    curve = pd.DataFrame([(r, r * per_clip_per_rater, *v) for r, v in sorted(rows.items())],
+                         columns=["raters", "ratings_per_clip", "power", "low", "high"])
+    curve.attrs["per_clip_per_rater"] = per_clip_per_rater
+    out["curve"] = curve
+    return out
+
+
+def _pair(design, given):
+    conds = design["conditions"]
+    if given:
+        missing = [c for c in given if c not in conds]
+        if missing:
+            raise AnalysisError(f"--pair: condition {missing[0]!r} is not in the pilot ({', '.join(conds)})")
+        if given[0] == given[1]:
+            raise AnalysisError("--pair: two different conditions are needed")
+        return tuple(given)
+    # default: the pilot's closest pair, the hardest difference to detect
+    pairs = [(abs(design["means"][x] - design["means"][y]), x, y) for i, x in enumerate(conds) for y in conds[i + 1:]]
+    _, x, y = min(pairs)
+    return x, y
+
+
+def _main(argv):
+    ap = cli.ArgumentParser(prog="python -m analysis.plan", description=__doc__.splitlines()[0],
+                            epilog="Covers the acr design (one clip rated 1-5 per trial). Pairwise and parallel "
+                                   "(MUSHRA-like) designs do not exist in the analysis yet, so they have no planner.")
+    ap.add_argument("pilot", nargs="?", help="pilot ratings.csv (CONTRACTS.md §6); omit with --no-pilot")
+    ap.add_argument("--no-pilot", action="store_true",
+                    help="no pilot: take the variance components and design from the flags below")
+    ap.add_argument("--pair", nargs=2, metavar=("A", "B"),
+                    help="the two conditions to tell apart (default: the pilot's closest pair)")
+    ap.add_argument("--difference", type=cli.number(float, 0, 4, lo_open=True),
+                    help="mean rating difference to detect (default: the pilot's difference for the pair)")
+    ap.add_argument("--power", type=cli.number(float, 0.05, 0.999), default=0.8, help="target power (default 0.8)")
+    ap.add_argument("--alpha", type=cli.number(float, 0, 0.5, lo_open=True), default=0.05,
+                    help="family-wise error rate of Tukey HSD, as in the report (default 0.05)")
+    ap.add_argument("--raters", type=cli.number(int, 2, MAX_RATERS),
+                    help="also give the power of a study with this many raters")
+    ap.add_argument("--clips-per-condition", type=cli.number(int, 1, 10000),
+                    help="clips per condition (default: the pilot's; 30 with --no-pilot)")
+    ap.add_argument("--clips-per-rater", type=cli.number(int, 1, 100000),
+                    help="test clips each rater rates (default: the pilot's median; all clips with --no-pilot)")
+    ap.add_argument("--conditions", type=cli.number(int, 2, 20), default=3,
+                    help="number of conditions with --no-pilot (default 3)")
+    ap.add_argument("--sd-rater", type=cli.number(float, 0), help="rater SD (--no-pilot)")
+    ap.add_argument("--sd-clip", type=cli.number(float, 0), help="clip SD (--no-pilot)")
+    ap.add_argument("--sd-residual", type=cli.number(float, 0, lo_open=True), help="residual SD (--no-pilot)")
+    ap.add_argument("--threshold", type=cli.number(int, 1, 6), default=DEFAULT_THRESHOLD,
+                    help="the report's catch-trial exclusion threshold for the pilot (default 3)")
+    ap.add_argument("--n-sim", type=cli.number(int, 50, 1_000_000), default=1000,
+                    help="simulated studies per design size (default 1000)")
+    ap.add_argument("--seed", type=cli.number(int, 0, 2 ** 32 - 1), default=0, help="simulation seed (default 0)")
+    ap.add_argument("--out", default="plan", help="folder for power_curve.png and plan.json (default plan/)")
+    ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    args = ap.parse_args(argv)
+
+    if args.no_pilot:
+        need = [f for f in ("sd_rater", "sd_clip", "sd_residual", "difference") if getattr(args, f) is None]
+        if need:
+            raise AnalysisError(f"--no-pilot needs --{need[0].replace('_', '-')}")
+        if args.pilot:
+            raise AnalysisError(f"{args.pilot}: give a pilot file or --no-pilot, not both")
+        conds = [f"C{i + 1}" for i in range(args.conditions)]
+        C = args.clips_per_condition or 30
+        design = {"conditions": conds, "means": {c: 0.0 for c in conds}, "sd_rater": args.sd_rater,
+                  "sd_clip": args.sd_clip, "sd_residual": args.sd_residual, "clips_per_condition": C,
+                  "clips_per_rater": args.clips_per_rater or args.conditions * C, "n_raters": None}
+        source = "variance components from the command line"
+        pair = tuple(args.pair) if args.pair else (conds[0], conds[1])
+        if args.pair:
+            pair = _pair(design, args.pair)
+    else:
+        if not args.pilot:
+            raise AnalysisError("give a pilot ratings file (or --no-pilot with the variance components)")
+        df = load_ratings(args.pilot)
+        test = only_test_rows(exclude_raters(df, args.threshold)[0])
+        if test["condition"].nunique() < 2:
+            raise AnalysisError(f"{args.pilot}: the pilot's kept test rows hold fewer than 2 conditions")
+        problem = stats.random_effects_problem(test)
+        if problem:
+            raise AnalysisError(f"{args.pilot}: the pilot cannot be fitted: {problem}")
+        design = pilot_design(test)
+        if args.clips_per_condition:
+            design["clips_per_condition"] = args.clips_per_condition
+        if args.clips_per_rater:
+            design["clips_per_rater"] = args.clips_per_rater
+        source = f"pilot {args.pilot} ({design['n_raters']} raters after the exclusion)"
+        pair = _pair(design, args.pair)
+    pilot_diff = design["means"][pair[1]] - design["means"][pair[0]]
+    diff = args.difference if args.difference is not None else abs(pilot_diff)
+    if not diff > 0:
+        raise AnalysisError("the pilot shows no difference for the pair: give --difference")
+    design = with_difference(design, pair, diff)
+    design["clips_per_rater"] = min(design["clips_per_rater"], len(design["conditions"]) *
+                                    design["clips_per_condition"])
+    res = plan(design, pair, args.power, args.n_sim, args.alpha, args.seed, args.raters, progress=not args.quiet)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise AnalysisError(f"--out {out}: is a file, not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise AnalysisError(f"--out {out}: cannot create the folder ({exc.strerror or exc})") from None
+    curve = res["curve"]
+    title = f"{pair[1]} vs {pair[0]}, difference {diff:.2f}, Tukey HSD at alpha {args.alpha:g}"
+    figures.power_curve(curve, args.power, out / "power_curve.png", title)
+    doc = {"source": source, "pair": list(pair), "difference": diff, "alpha": args.alpha, "target_power": args.power,
+           "n_sim": args.n_sim, "seed": args.seed, "test": "Tukey HSD over all conditions (the report's)",
+           "design": {k: v for k, v in design.items()},
+           **{k: v for k, v in res.items() if k != "curve"}, "curve": curve.to_dict(orient="records")}
+    (out / "plan.json").write_text(json.dumps(doc, indent=1), encoding="utf-8")
+    d = design
+    print(f"Plan from {source}: {len(d['conditions'])} conditions x {d['clips_per_condition']} clips, each rater "
+          f"rates {d['clips_per_rater']} clips; SD rater {d['sd_rater']:.3f}, clip {d['sd_clip']:.3f}, "
+          f"residual {d['sd_residual']:.3f}.")
+    print(f"Detecting {pair[1]} - {pair[0]} = {diff:.3f} with Tukey HSD at family-wise alpha {args.alpha:g} "
+          f"({args.n_sim} simulated studies per size):\n")
+    print(f"{'raters':>7}{'ratings/clip':>14}{'power':>8}{'95% MC interval':>20}")
+    for r in curve.itertuples():
+        print(f"{r.raters:>7}{r.ratings_per_clip:>14.1f}{r.power:>8.3f}{f'[{r.low:.3f}, {r.high:.3f}]':>20}")
+    print()
+    if res["planned_raters"]:
+        r = res["planned_raters"]
+        print(f"Power {args.power:g} needs {r} raters in total ({r * curve.attrs['per_clip_per_rater']:.1f} ratings "
+              f"per clip); estimated power there {res['planned_power']:.3f}.")
+        print(f"False-positive rate of the same decision at that size when the difference is 0: "
+              f"{res['false_positive_rate']:.3f} (nominal {args.alpha:g}).")
+    else:
+        print(f"Power {args.power:g} is not reached with up to {MAX_RATERS} raters: more clips per condition are "
+              "needed (clip variation does not shrink with more raters).")
+    for r, p in res["power_at"].items():
+        print(f"A study with {r} raters has power {p:.3f}.")
+    print(f"\nPower curve: {out / 'power_curve.png'}; table: {out / 'plan.json'}")
+    return 0
+
+
+def main(argv=None):
+    return cli.run(_main, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
