@@ -355,6 +355,8 @@ def random_effects_problem(df, dv="rating", between="condition", rater="rater_id
         return "a single rater: the rater variance cannot be estimated; model not fitted"
     if df.groupby(between, observed=True)[clip].nunique().max() < 2:
         return "one clip per condition: the clip variance is confounded with the condition; model not fitted"
+    if df.groupby(between, observed=True)[dv].nunique().max() < 2:
+        return ("no variance within conditions (every condition's ratings are all the same): model undefined")
     return None
 
 
@@ -413,6 +415,12 @@ def ordinal_model(df, dv="rating", between="condition", rater="rater_id", clip="
     problem = random_effects_problem(df, dv, between, rater, clip)
     if problem:
         raise ModelUndefined(problem)
+    lo, hi = df[dv].min(), df[dv].max()
+    for c, g in df.groupby(between, observed=True)[dv]:
+        if g.nunique() == 1 and g.iloc[0] in (lo, hi):
+            # the likelihood rises forever as that condition's effect runs to +-infinity: no estimate exists
+            raise ModelUndefined(f"every rating of {c} is {g.iloc[0]}, the {'top' if g.iloc[0] == hi else 'bottom'} "
+                                 "category: its effect is infinite (separation); model not fitted")
     levels = sorted(df[between].unique())
     if reference is None:
         reference = "NAT" if "NAT" in levels else levels[0]
@@ -440,12 +448,13 @@ def ordinal_model(df, dv="rating", between="condition", rater="rater_id", clip="
     probs = marginal_probabilities(th, eta, math.hypot(fit["sd_rater"], fit["sd_clip"]))
     order = [reference] + others
     observed = pd.crosstab(df[between], df[dv], normalize="index").reindex(columns=y_levels, fill_value=0.0)
+    with np.errstate(over="ignore"):  # an unidentified effect's interval overflows to inf (JSON null), no warning
+        ors = [np.exp(b).tolist(), np.exp(b - zq * se).tolist(), np.exp(b + zq * se).tolist()]
     return {"formula": f"{dv} ~ {between} + (1|{rater}) + (1|{clip})  (cumulative logit)",
             "method": "ML, Laplace approximation, crossed random intercepts (as ordinal::clmm)",
             "reference": reference, **fit,
-            "odds_ratios": {k: math.exp(v) for k, v in fit["fixed_effects"].items()},
-            "or_ci_low": {k: math.exp(v - zq * fit["std_errors"][k]) for k, v in fit["fixed_effects"].items()},
-            "or_ci_high": {k: math.exp(v + zq * fit["std_errors"][k]) for k, v in fit["fixed_effects"].items()},
+            "odds_ratios": dict(zip(names, ors[0])), "or_ci_low": dict(zip(names, ors[1])),
+            "or_ci_high": dict(zip(names, ors[2])),
             "fitted_distribution": {c: dict(zip(map(str, y_levels), probs[order.index(c)].tolist()))
                                     for c in condition_order(levels)},
             "observed_distribution": {c: {str(k): float(v) for k, v in observed.loc[c].items()}

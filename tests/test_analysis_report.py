@@ -1,6 +1,9 @@
 """The report end to end: the paper's exclusion rule on a hand-made file, and a frozen ratings.csv -> stats.json."""
 import json
 import math
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -10,6 +13,7 @@ from analysis.load import load_ratings
 from analysis.report import build_report, main
 
 DATA = Path(__file__).parent / "data" / "analysis"
+ROOT = Path(__file__).resolve().parents[1]
 CONTRACT_KEYS = ["n_ratings_total", "n_ratings_removed", "n_ratings_kept", "n_raters_total", "n_raters_excluded",
                  "condition_means", "condition_counts", "anova", "tukey", "mixed_model"]
 
@@ -147,3 +151,147 @@ def test_mixed_model_skipped_beyond_max_levels(tmp_path):
     assert doc["mixed_model"]["fixed_effects"] == {}
     assert doc["mixed_model"]["skipped"] == "3 raters and 3 clips: both above --mixed-max-levels 2"
     assert "Not fitted: 3 raters and 3 clips" in (tmp_path / "report.html").read_text()
+
+
+# ---------------------------------------------------------------------------------------------- issue 11, 14
+H = "rater_id,clip_id,condition,rating,role\n"
+
+
+def _csv(tmp_path, name, rows):
+    path = tmp_path / f"{name}.csv"
+    path.write_text(H + "".join(f"{r},{c},{cond},{y},test\n" for r, c, cond, y in rows))
+    return path
+
+
+def test_identical_ratings_are_no_variance_not_significant(tmp_path):
+    """Every rating 3: the old report printed F = inf, p < 1e-16 and Tukey reject with meandiff 0."""
+    path = _csv(tmp_path, "same", [(f"r{r}", f"c{c}", ["NAT", "MG"][c % 2], 3) for r in range(15) for c in range(2)])
+    doc = build_report(path, tmp_path / "rep", n_boot=50, progress=False, quiet=True)
+    assert doc["anova"]["F"] is None and doc["anova"]["p"] is None
+    assert "no variance" in doc["anova"]["undefined"]
+    assert [t["reject"] for t in doc["tukey"]] == [False] and doc["tukey"][0]["p_adj"] is None
+    for test in ("anova", "tukey", "kruskal", "mannwhitney", "mixed_model", "ordinal_model"):
+        assert "no variance" in doc["undefined"][test] or "same" in doc["undefined"][test], test
+    page = (tmp_path / "rep" / "report.html").read_text()
+    assert "F(1, 28)" not in page and "no variance" in page and "differing at the 0.05 family-wise level" not in page
+
+
+def test_no_variance_within_conditions_is_undefined(tmp_path):
+    """Each condition constant (5 vs 2): F = x / 0 is not evidence; the models are not fitted either."""
+    path = _csv(tmp_path, "flat", [(f"r{r}", f"c{c}", ["NAT", "MG"][c % 2], [5, 2][c % 2]) for r in range(4)
+                                   for c in range(4)])
+    doc = build_report(path, tmp_path / "rep", n_boot=50, progress=False, quiet=True)
+    assert doc["anova"]["p"] is None and not any(t["reject"] for t in doc["tukey"])
+    assert {"anova", "tukey", "mixed_model", "ordinal_model"} <= set(doc["undefined"])
+    assert doc["mixed_model"]["fixed_effects"] == {} and doc["ordinal_model"]["fixed_effects"] == {}
+
+
+@pytest.mark.parametrize("name,rows,expect", [
+    ("single_rater", [("r1", f"c{c}", ["NAT", "MG", "FL"][c % 3], 1 + c % 5) for c in range(12)],
+     {"mixed_model": "single rater", "ordinal_model": "single rater", "bootstrap": "one rater"}),
+    ("one_clip_per_condition", [(f"r{r}", f"c{c}", ["NAT", "MG", "FL"][c], 1 + (r + c) % 5) for r in range(6)
+                                for c in range(3)],
+     {"mixed_model": "one clip per condition", "ordinal_model": "one clip per condition",
+      "bootstrap": "one clip per condition"}),
+    ("separation", [(f"r{r}", f"c{c}", ["NAT", "MG", "FL"][c % 3], 5 if c % 3 == 0 else 1 + (r * c) % 4)
+                    for r in range(8) for c in range(9)], {"ordinal_model": "separation"}),
+])
+def test_degenerate_designs_give_statements(tmp_path, name, rows, expect):
+    path = _csv(tmp_path, name, rows)
+    assert main([str(path), "--out", str(tmp_path / "rep"), "--n-boot", "50", "--quiet"]) == 0
+    doc = json.loads((tmp_path / "rep" / "stats.json").read_text())
+    for test, words in expect.items():
+        assert words in doc["undefined"][test], (test, doc["undefined"])
+    for model in ("mixed_model", "ordinal_model"):
+        if model in expect:
+            assert doc[model]["fixed_effects"] == {} and expect[model] in doc[model]["undefined"]
+    page = (tmp_path / "rep" / "report.html").read_text()
+    assert all(html_escape(w) in page for w in expect.values())
+
+
+def html_escape(text):
+    import html
+    return html.escape(text)
+
+
+def test_condition_names_are_escaped_in_the_html(tmp_path):
+    evil = "<script>alert(1)</script>"
+    rows = [(f"r{r}", f"c{c}", [evil, "MG&co", "<b>FL</b>"][c % 3], [5, 3, 1][c % 3] if r % 4 else 3)
+            for r in range(8) for c in range(9)]
+    path = _csv(tmp_path, "evil", rows)
+    doc = build_report(path, tmp_path / "rep", n_boot=50, progress=False, quiet=True)
+    assert any(t["reject"] for t in doc["tukey"])  # the names reach the summary's Tukey sentence
+    page = (tmp_path / "rep" / "report.html").read_text()
+    assert "<script" not in page and "<b>FL</b>" not in page and "MG&co" not in page
+    assert "&lt;script&gt;alert(1)&lt;/script&gt;" in page and "MG&amp;co" in page
+
+
+@pytest.mark.parametrize("args,pattern", [
+    (["--seed", "-1"], r"--seed: must be >= 0"),
+    (["--n-boot", "5"], r"--n-boot: must be >= 10"),
+    (["--alpha", "0"], r"--alpha: must be > 0"),
+])
+def test_bad_flags_one_line_exit_2(tmp_path, args, pattern):
+    proc = subprocess.run([sys.executable, "-m", "analysis.report", str(DATA / "exclusion.csv"), "--quiet",
+                           "--out", str(tmp_path / "rep"), *args], cwd=ROOT, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert re.search(pattern, proc.stderr) and "Traceback" not in proc.stderr
+
+
+def test_too_few_ratings_and_bad_out_are_one_line_errors(tmp_path):
+    two = _csv(tmp_path, "two", [("r1", "a", "NAT", 3), ("r2", "b", "MG", 4)])
+    a_file = tmp_path / "taken"
+    a_file.write_text("not a folder")
+    cases = [([str(two)], f"{two}: 2 test ratings in 2 conditions"),
+             ([str(DATA / "exclusion.csv"), "--out", str(a_file)], f"--out {a_file}: is a file"),
+             ([str(DATA / "exclusion.csv"), "--out", str(a_file / "sub")], f"--out {a_file / 'sub'}: cannot create")]
+    for args, start in cases:
+        proc = subprocess.run([sys.executable, "-m", "analysis.report", *args, "--quiet", "--n-boot", "20"]
+                              + ([] if "--out" in args else ["--out", str(tmp_path / "rep")]),
+                              cwd=ROOT, capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 2, (args, proc.stderr)
+        assert proc.stderr.startswith(f"error: {start}") and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert a_file.read_text() == "not a folder"
+
+
+def test_tiny_tukey_p_values_are_bounds(frozen_run):
+    """Beyond what the studentized-range integral resolves, p is an upper bound, printed as one: the three
+    pairs no longer share one meaningless floor value."""
+    doc = frozen_run[1]
+    bounds = [(t["p_adj"], t["p_adj_bound"]) for t in doc["tukey"]]
+    assert all(b for _, b in bounds) and len({p for p, _ in bounds}) == 3
+    assert all(p <= 1e-9 for p, _ in bounds)
+    page = (frozen_run[0] / "report.html").read_text()
+    assert f"&lt;{bounds[1][0]:.0e}" in page or f"<{bounds[1][0]:.0e}" in page
+
+
+def test_tukey_bound_is_a_true_upper_bound():
+    from scipy import stats as sps
+
+    from analysis.stats import tukey_p
+    for q in (6.0, 8.0, 9.5, 10.5):  # where the numerical tail is still accurate, the bound holds above it
+        exact = float(sps.studentized_range.sf(q, 3, 200))
+        p, bound = tukey_p(q, 3, 200)
+        assert p >= exact * (1 - 1e-9) and (bound or p == exact)
+    assert tukey_p(40.0, 3, 1437) == (pytest.approx(1e-139, rel=1), True)
+
+
+def test_no_ordinal_flag_and_report_sections(tmp_path, frozen_run):
+    assert main([str(DATA / "exclusion.csv"), "--out", str(tmp_path), "--no-ordinal", "--n-boot", "20",
+                 "--quiet"]) == 0
+    assert json.loads((tmp_path / "stats.json").read_text())["ordinal_model"]["skipped"] == "--no-ordinal"
+    out, doc = frozen_run
+    o = doc["ordinal_model"]
+    assert set(o["thresholds"]) == {"1|2", "2|3", "3|4", "4|5"} and o["reference"] == "NAT" and o["converged"]
+    assert set(o["fixed_effects"]) == {"condition[T.MG]", "condition[T.FL]"} == set(o["odds_ratios"])
+    assert doc["without_exclusion"]["ordinal_model"]["n"] == 1800
+    assert set(doc["mixed_model"]["df"]) == set(doc["mixed_model"]["fixed_effects"])
+    page = (out / "report.html").read_text()
+    assert "Ordinal mixed model" in page and "odds ratio" in page and "Satterthwaite" in page
+
+
+def test_console_shows_ordinal_and_df(tmp_path, capsys):
+    assert main([str(DATA / "ratings_small.csv"), "--out", str(tmp_path), "--n-boot", "50"]) == 0
+    out = capsys.readouterr().out
+    assert "Ordinal mixed model" in out and "odds ratio" in out and "df 87.0" in out and "<" in out
