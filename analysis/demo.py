@@ -113,7 +113,7 @@ def _export(url: str, token: str, out: Path) -> None:
 
 def run_demo(out: Path, db: str | None = None, raters: int = 200, seed: int = 0, careless: float = 0.1,
              ratings_per_clip: int = 20, clips_per_rater: int | None = 30, gunicorn: bool = False,
-             stimuli: Path | None = None, timeout_s: float = 1800.0) -> dict:
+             stimuli: Path | None = None, timeout_s: float = 1800.0, min_view: float = 0.01) -> dict:
     """Run the study; returns paths and the crowd's summary. `stimuli` reuses an existing folder."""
     out = Path(out)
     logs = out / "logs"
@@ -140,11 +140,15 @@ def run_demo(out: Path, db: str | None = None, raters: int = 200, seed: int = 0,
         env = dict(os.environ, ADMIN_TOKEN=token)
         serve_log = logs / "server.log"
         _stage(f"2/5 rating app at {url} (database {db.split('@')[-1]})")
-        serve_opts = ["--ratings-per-clip", str(ratings_per_clip)]
+        # The crowd runs on loopback (one address) and should not take 4 s per clip: lift the per-address session
+        # limit and lower the minimum viewing time (the dashboard says so); the crowd still waits as required.
+        serve_opts = ["--ratings-per-clip", str(ratings_per_clip), "--min-view", str(min_view),
+                      "--sessions-per-client", "0"]
         if clips_per_rater:
             serve_opts += ["--clips-per-rater", str(clips_per_rater)]
         if gunicorn:
-            env.update(RATING_MANIFEST=str(manifest), DATABASE_URL=db, RATINGS_PER_CLIP=str(ratings_per_clip))
+            env.update(RATING_MANIFEST=str(manifest), DATABASE_URL=db, RATINGS_PER_CLIP=str(ratings_per_clip),
+                       MIN_VIEW=str(min_view), SESSIONS_PER_CLIENT="0")
             if clips_per_rater:
                 env["CLIPS_PER_RATER"] = str(clips_per_rater)
             cmd = [py, "-m", "gunicorn", "-w", "2", "--threads", "4", "-b", f"127.0.0.1:{port}", "rating_app.wsgi:app"]
@@ -198,11 +202,13 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--stimuli", default=None, help="reuse this stimulus folder instead of making one")
     p.add_argument("--gunicorn", action="store_true", help="serve with gunicorn (2 workers) instead of Flask's server")
+    p.add_argument("--min-view", type=float, default=0.01,
+                   help="the app's MIN_VIEW: share of each clip the crowd must wait before answering (default 0.01)")
     a = p.parse_args(argv)
     try:
         run_demo(Path(a.out), db=a.db, raters=a.raters, seed=a.seed, careless=a.careless,
                  ratings_per_clip=a.ratings_per_clip, clips_per_rater=a.clips_per_rater or None,
-                 gunicorn=a.gunicorn, stimuli=Path(a.stimuli) if a.stimuli else None)
+                 gunicorn=a.gunicorn, stimuli=Path(a.stimuli) if a.stimuli else None, min_view=a.min_view)
     except DemoError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -145,7 +145,7 @@ def main():
     url = ctx.__enter__() if ctx else (f"sqlite:///{tmp}/ratings.sqlite" if a.db == "sqlite" else a.db)
     port = free_port()
     env = dict(os.environ, RATING_MANIFEST=str(manifest), DATABASE_URL=url, ADMIN_TOKEN="bench",
-               RATINGS_PER_CLIP="100000")
+               RATINGS_PER_CLIP="100000", MIN_VIEW="0", SESSIONS_PER_CLIENT="0")   # every rater is on loopback
     log = open(tmp / "gunicorn.log", "w")
     proc = start_server(port, env, a.workers, a.threads, log)
     rec = {"session": [], "next": [], "rating": [], "training_ack": []}

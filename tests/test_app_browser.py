@@ -32,7 +32,7 @@ def live_server(app_stimuli, app_db_url):
     server = make_server("127.0.0.1", 0, app, threaded=True)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
-    live_server_manifest[:] = [manifest]
+    live_server_manifest[:] = [manifest, app]
     yield f"http://127.0.0.1:{server.server_port}"
     server.shutdown()
     thread.join(5)
@@ -113,7 +113,7 @@ def test_rater_flow_in_a_real_browser(live_server, browser):
                     (ROOT / "docs" / "img").mkdir(parents=True, exist_ok=True)
                     browser.save_screenshot(str(ROOT / "docs" / "img" / "rating_page.png"))
                 btn.click()
-                clicked[s["src"].rsplit("/", 1)[1].split(".")[0]] = rating
+                clicked[int(s["src"].rsplit("/", 2)[1])] = rating     # .../trials/ID/video.mp4
         # the page moves on only once the server has acknowledged the answer
         wait.until(lambda d: d.execute_script(state_js)["section"] and key(d.execute_script(state_js)) != key(s))
     else:
@@ -128,7 +128,12 @@ def test_rater_flow_in_a_real_browser(live_server, browser):
 
     r = requests.get(live_server + "/admin/export.csv", headers={"Authorization": "Bearer browser-token"}, timeout=10)
     rows = [row for row in csv.DictReader(io.StringIO(r.text)) if row["external_id"] == "browserpid1"]
-    assert {row["clip_id"]: int(row["rating"]) for row in rows} == clicked
+    from sqlalchemy import select
+    from rating_app.db import Trial
+    with live_server_manifest[1].extensions["rating_app"]["engine"].connect() as conn:
+        clip_of = dict(conn.execute(select(Trial.id, Trial.clip_id)).all())
+    assert {row["clip_id"]: int(row["rating"]) for row in rows} == {clip_of[t]: v for t, v in clicked.items()}
+    assert all(row["flags"] == "" for row in rows)                 # watched in full, video fetched
     assert all(int(row["watched_ms"]) > 0 for row in rows)
     p = requests.get(live_server + "/admin/progress.json", headers={"Authorization": "Bearer browser-token"},
                      timeout=10).json()

@@ -172,3 +172,47 @@ def test_quality_follows_the_metrics(app_stimuli):
     for bad in ("NAT", "NAT=x", "=3", "NAT=0.5"):
         with pytest.raises(AppError):
             parse_quality(bad)
+
+
+def _one_line_error(r, needle):
+    assert r.returncode == 2, (r.returncode, r.stderr[-2000:])
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:") and needle in lines[0], r.stderr[-2000:]
+
+
+@pytest.mark.parametrize("db,needle", [
+    ("notaurl", "not a database URL"),
+    ("mysql://u@127.0.0.1/x", "unsupported database 'mysql'"),
+    ("TEXTFILE", "not an SQLite database"),
+    ("postgresql://postgres@127.0.0.1:1/test", "cannot"),
+])
+def test_bad_database_is_one_line(app_stimuli, tmp_path, db, needle):
+    if db == "TEXTFILE":
+        (tmp_path / "notes.txt").write_text("not a database\n")
+        db = f"sqlite:///{tmp_path / 'notes.txt'}"
+    _one_line_error(cli("serve", "--manifest", app_stimuli, "--db", db, "--port", free_port(), timeout=60), needle)
+    _one_line_error(cli("export", "--db", db, "--out", tmp_path / "x.csv", timeout=60), needle)
+
+
+@pytest.mark.parametrize("args,env,needle", [
+    (("--slot-timeout", "-5"), {}, "--slot-timeout"),
+    (("--port", "99999"), {}, "--port"),
+    (("--min-view", "2"), {}, "--min-view"),
+    ((), {"SLOT_TIMEOUT": "nan"}, "SLOT_TIMEOUT"),
+    ((), {"RATINGS_PER_CLIP": "0"}, "RATINGS_PER_CLIP"),
+])
+def test_bad_settings_stop_the_start(app_stimuli, tmp_path, args, env, needle):
+    r = cli("serve", "--manifest", app_stimuli, "--db", f"sqlite:///{tmp_path}/r.sqlite", *args,
+            timeout=60, env=dict(os.environ, **env))
+    _one_line_error(r, needle)
+
+
+@pytest.mark.parametrize("env,needle", [({"RATING_MANIFEST": ""}, "no stimulus manifest"),
+                                        ({"SLOT_TIMEOUT": "nan"}, "SLOT_TIMEOUT")])
+def test_gunicorn_with_a_bad_environment_stops(app_stimuli, tmp_path, env, needle):
+    base = dict(os.environ, RATING_MANIFEST=str(app_stimuli), DATABASE_URL=f"sqlite:///{tmp_path}/r.sqlite")
+    r = subprocess.run([sys.executable, "-m", "gunicorn", "-w", "2", "-b", f"127.0.0.1:{free_port()}",
+                        "rating_app.wsgi:app"], cwd=ROOT, env=dict(base, **env), capture_output=True, text=True,
+                       timeout=60)                    # respawning forever would run into the timeout
+    assert r.returncode != 0 and f"error: {needle}" in r.stderr and needle in r.stderr
+    assert "Traceback" not in r.stderr

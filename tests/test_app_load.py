@@ -45,7 +45,7 @@ def kill9(proc):
 def test_200_raters_with_a_server_crash(app_stimuli, app_db_url, tmp_path):
     port = free_port()
     env = dict(os.environ, RATING_MANIFEST=str(app_stimuli), DATABASE_URL=app_db_url, ADMIN_TOKEN="load-token",
-               RATINGS_PER_CLIP="1000", CLIPS_PER_RATER="2")
+               RATINGS_PER_CLIP="1000", CLIPS_PER_RATER="2", MIN_VIEW="0", SESSIONS_PER_CLIENT="0")   # all on loopback
     log = open(tmp_path / "gunicorn.log", "w")
     acks, killed = [0], threading.Event()
     kill_at = N_RATERS * 4 // 3          # a third of the way through the 4 ratings per rater
