@@ -3,7 +3,8 @@
 Each rater creates a session (with a platform session id, as Prolific's link gives one, which is also its proof
 for resuming after a lost reply), and for every trial fetches the video and waits until the server would accept
 an answer: the clip's duration times the server's `min_view` (from the session reply; 1 = the whole clip). It
-acknowledges the familiarisation clips (rating null), then rates every clip it is served. An attentive rater answers round(quality(clip) + bias + noise), clipped to 1..5, with a personal bias
+acknowledges the familiarisation clips (rating null), then rates every clip it is served. An attentive rater
+answers round(quality(clip) + bias + noise), clipped to 1..5, with a personal bias
 and noise level, and recognises the bad examples (catch clips) as such. A careless rater answers uniformly
 at random, and so fails catch trials. The per-clip quality comes by default from metrics.csv (worse objective
 metrics -> lower quality; the best condition by the metrics gets QUALITY_HIGH, the worst QUALITY_LOW), else

@@ -5,7 +5,6 @@ import io
 import threading
 
 
-from rating_app import create_app
 from rating_app.manifest import load_manifest
 
 TOKEN_HDR = {"Authorization": "Bearer test-admin-token"}

@@ -11,7 +11,7 @@ import threading
 import pytest
 from sqlalchemy import update
 
-from rating_app.db import Rater, Trial, utcnow
+from rating_app.db import Trial, utcnow
 from rating_app.manifest import AppError, load_manifest
 from rating_app.testing import make_stimuli
 
