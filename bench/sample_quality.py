@@ -8,7 +8,10 @@ Per category it prints the median of three figures per clip:
 - late stepping (m): how far the feet swing about each other over the last 2 s: the standard deviation of
   the horizontal vector from the right foot to the left (root frame; forward and sideways, so side-steps
   count too). Stepping swings it by tens of centimetres; a gait that dies out into a standing pose gives ~0. Given beside NAT's, and as the median ratio to NAT on the same window.
-- jerk (m/s^3) and foot skating (m/s): generation.metrics, on the clip in world coordinates.
+- jerk (m/s^3), foot skating (m/s) and control following (m): generation.metrics, on the clip in world
+  coordinates.
+Over all windows it also prints each system's Fréchet motion distance to training motion of the same categories
+(generation.motion_encoder; NAT's is the floor) and the medians as ratios to NAT's.
 The figure shows the feet of the first window of five categories (rows: NAT, then each model).
 """
 import argparse
@@ -22,7 +25,9 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from generation import skeleton  # noqa: E402
 from generation.features import to_world  # noqa: E402
-from generation.metrics import foot_skating, jerk  # noqa: E402
+from generation.make_stimuli import MOTION_ENCODER  # noqa: E402
+from generation.metrics import control_following, foot_skating, jerk  # noqa: E402
+from generation.motion_encoder import MotionEncoder  # noqa: E402
 from generation.sample import load_model, sample_split  # noqa: E402
 
 FOOT_L, FOOT_R = skeleton.INDEX["Foot_L"], skeleton.INDEX["Foot_R"]
@@ -38,7 +43,8 @@ def late_stepping(x, fps):
 
 def clip_figures(x, c, fps):
     world = to_world(x, c)
-    return dict(stepping=late_stepping(x, fps), jerk=float(jerk(world, fps)), skating=float(foot_skating(world, fps)))
+    return dict(stepping=late_stepping(x, fps), jerk=float(jerk(world, fps)), skating=float(foot_skating(world, fps)),
+                following=float(control_following(world, c)))
 
 
 def main():
@@ -49,6 +55,7 @@ def main():
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--figure", default=None, help="write the feet figure to this PNG")
+    ap.add_argument("--encoder", default=str(MOTION_ENCODER), help="motion encoder for the FMD")
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
     with np.load(a.data) as d:
@@ -63,7 +70,7 @@ def main():
     cats = sorted(set(labels.tolist()))
     names = list(systems)
     head = ["category", "n"] + [f"{n} stepping" for n in names] + [f"{n}/NAT stepping" for n in names[1:]] \
-        + [f"{n} jerk" for n in names] + [f"{n} skating" for n in names]
+        + [f"{n} jerk" for n in names] + [f"{n} skating" for n in names] + [f"{n} following" for n in names]
     print(f"test split, temperature {a.temperature}, medians per category")
     print("| " + " | ".join(head) + " |")
     print("|" + "---|" * len(head))
@@ -74,8 +81,21 @@ def main():
             figures[name][i]["stepping"] / max(figures["NAT"][i]["stepping"], 1e-6) for i in idx)
         row = [cat, str(len(idx))] + [f"{med(n, 'stepping'):.3f}" for n in names] \
             + [f"{ratio(n):.2f}" for n in names[1:]] + [f"{med(n, 'jerk'):.0f}" for n in names] \
-            + [f"{med(n, 'skating'):.2f}" for n in names]
+            + [f"{med(n, 'skating'):.2f}" for n in names] + [f"{med(n, 'following'):.3f}" for n in names]
         print("| " + " | ".join(row) + " |")
+
+    encoder = MotionEncoder.load(a.encoder)
+    fmd = {name: encoder.fmd(x, labels) for name, x in systems.items()}
+    overall = lambda name, key: statistics.median(f[key] for f in figures[name])  # noqa: E731
+    print("\nall windows: FMD to training motion of the same categories, and medians as ratios to NAT's")
+    print("| system | FMD | FMD / NAT | skating / NAT | jerk / NAT | following (m) | late stepping / NAT, worst category |")
+    print("|---|---|---|---|---|---|---|")
+    for name in names:
+        worst = min(statistics.median(figures[name][i]["stepping"] / max(figures["NAT"][i]["stepping"], 1e-6)
+                                      for i in range(len(c)) if labels[i] == cat) for cat in cats)
+        print(f"| {name} | {fmd[name]:.0f} | {fmd[name] / fmd['NAT']:.2f} | "
+              f"{overall(name, 'skating') / overall('NAT', 'skating'):.1f} | "
+              f"{overall(name, 'jerk') / overall('NAT', 'jerk'):.2f} | {overall(name, 'following'):.3f} | {worst:.2f} |")
 
     if a.figure:
         import matplotlib

@@ -89,8 +89,9 @@ class FL(MotionFlow):
                 h = unsqueeze_time(h)
         return h.transpose(1, 2), logdet
 
-    def nll(self, x, c):
-        """Negative log-likelihood in nats per dimension of the standardised data, per batch element."""
+    def nll(self, x, c, keep=None):
+        """Negative log-likelihood in nats per dimension of the standardised data, per batch element.
+        (`keep`: MG's history dropout mask; FL has no history.)"""
         z, logdet = self(x, c)
         return -(gaussian_logp(z) + logdet) / z.shape[1]
 

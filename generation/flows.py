@@ -17,6 +17,15 @@ import torch
 from torch import nn
 
 
+def _sum_over_ranks(total, count):
+    """total / count, both added over the ranks of torch.distributed when it is running."""
+    if torch.distributed.is_available() and torch.distributed.is_initialized():
+        both = torch.cat([total.flatten(), total.new_tensor([count])])
+        torch.distributed.all_reduce(both)
+        return (both[:-1] / both[-1]).view_as(total)
+    return total / count
+
+
 class ActNorm(nn.Module):
     """Per-channel affine map y = (x + bias) * exp(logs); initialised on the first batch it sees so
     that y has zero mean and unit variance per channel (data-dependent initialisation).
@@ -40,8 +49,12 @@ class ActNorm(nn.Module):
 
     @torch.no_grad()
     def initialize(self, x):
-        mean = x.mean(dim=(0, 2), keepdim=True)
-        std = x.std(dim=(0, 2), keepdim=True, unbiased=False)
+        """Per-channel mean and std of the first batch. Under torch.distributed every rank sees only its shard,
+        so the sums are added over ranks: every rank gets the statistics of the whole batch, the same as one
+        process would (unsynchronised ranks would start from different flows; StyleGestures issue #30)."""
+        count = x.shape[0] * x.shape[2]
+        mean = _sum_over_ranks(x.sum(dim=(0, 2), keepdim=True), count)
+        std = _sum_over_ranks((x - mean).pow(2).sum(dim=(0, 2), keepdim=True), count).sqrt()  # two passes: exact
         self.bias.copy_(-mean)
         self.logs.copy_(-torch.log(std.clamp_min(self.min_std)))
         self.initialized.fill_(True)

@@ -36,7 +36,7 @@ from rendering.render import MAX_SIZE, MIN_SIZE, render_clip
 
 from . import skeleton
 from .clip import save_clip
-from .features import to_world
+from .features import to_features, to_world
 from .metrics import METRIC_NAMES, clip_metrics
 from .systems import canonical_placement, find_system_files, load_system_motion, parse_system_spec
 
@@ -44,6 +44,7 @@ BUILTIN = ("NAT", "MG", "FL")
 CLIP_ID_LEN = 16
 MANIFEST_COLUMNS = ["clip_id", "condition", "role", "item", "video", "motion", "seed", "frames", "fps", "width",
                     "height"]
+MOTION_ENCODER = Path(__file__).resolve().parent / "pretrained" / "motion_encoder.pt"
 METRICS_COLUMNS = ["clip_id", "condition", "role", "item", *METRIC_NAMES]
 ITEMS_COLUMNS = ["item", "role", "category", "take", "start_frame", "frames", "fps", "control"]
 
@@ -232,6 +233,8 @@ def new_clip_id(taken, forbidden):
 
 
 def _render_job(job):
+    # Render workers are spawned and import this module: keep torch out of its module-level imports
+    # (sampling, training and the motion encoder import it inside the functions that need it).
     motion, video, sheet, size, preset = job
     return render_clip(motion, video, size=size, sheet=sheet, preset=preset, threads=1)
 
@@ -389,7 +392,7 @@ def run(args):
     rng = np.random.default_rng(args.seed)
     clips = [clips[i] for i in rng.permutation(len(clips))]
     forbidden = [c.lower() for c in (*BUILTIN, "BAD", *systems)]
-    taken, manifest, metrics_rows, jobs = set(), [], [], []
+    taken, manifest, metrics_rows, jobs, poses = set(), [], [], [], {}
     for cond, k, joints, seed in tqdm(clips, desc="clips", unit="clip", file=sys.stderr):
         it = items[k]
         cid = new_clip_id(taken, forbidden)
@@ -403,6 +406,8 @@ def run(args):
                              frames=len(joints), fps=f"{fps:g}", width=args.size, height=args.size))
         m = clip_metrics(joints, fps, control)
         metrics_rows.append(dict(clip_id=cid, condition=cond, role=it["role"], item=it["id"], **m))
+        if it["role"] == "test":
+            poses.setdefault(cond, []).append((to_features(joints, fps)[0], it["category"]))
 
     log(f"render: {len(jobs)} clips at {args.size}x{args.size} on {min(args.jobs, len(jobs))} processes")
     render_all(jobs, min(args.jobs, len(jobs)))
@@ -415,14 +420,33 @@ def run(args):
     _write_csv(out / "metrics.csv", METRICS_COLUMNS,
                [{k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()} for row in metrics_rows])
     write_items(out, items, arrays, fps)
+    fmd = condition_fmd(poses)
+    if fmd:
+        _write_csv(out / "fmd.csv", ["condition", "n_windows", "fmd"], fmd)
 
     n = {r: sum(m["role"] == r for m in manifest) for r in ("test", "catch", "training")}
     print(f"\nobjective metrics, mean (sd) per condition: foot_skating m/s, bone_length_std m, jerk m/s^3, "
-          f"control_error m\n{summary_text(metrics_rows)}")
+          f"control_error m, control_following m\n{summary_text(metrics_rows)}")
+    if fmd:
+        print("\nFréchet motion distance of the test clips to the training split (NAT's is the floor): "
+              + ", ".join(f"{r['condition']} {r['fmd']}" for r in fmd))
     _warn_if_bad_not_bad(metrics_rows)
     print(f"\nwrote {out / 'manifest.csv'}: {len(manifest)} clips ({n['test']} test, {n['catch']} catch, "
           f"{n['training']} training) in {time.perf_counter() - _T0:.0f} s")
     return 0
+
+
+def condition_fmd(poses, encoder=MOTION_ENCODER):
+    """[{condition, n_windows, fmd}] for root-frame test windows {condition: [(x [T, 63], category), ...]};
+    [] (with a note) when the shipped motion encoder is missing."""
+    if not Path(encoder).is_file():
+        log(f"note: no motion encoder at {encoder}; skipping the Fréchet motion distance")
+        return []
+    from .motion_encoder import MotionEncoder  # torch: imported here, not at module level (see _render_job)
+
+    enc = MotionEncoder.load(encoder)
+    return [dict(condition=cond, n_windows=len(w), fmd=f"{enc.fmd(np.stack([x for x, _ in w]), [k for _, k in w]):.4g}")
+            for cond, w in poses.items()]
 
 
 def _warn_if_bad_not_bad(rows):

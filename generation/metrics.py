@@ -16,6 +16,13 @@
   turned differently in the world (an imported system) is not penalised for that alone. NAT, MG and FL
   clips are built by integrating the requested control (features.to_world) with the hips as the root,
   so for them it is ~0 by construction; it measures imported systems, which move the body themselves.
+- control_following (m): how far the path that the body itself implies strays from the requested path.
+  The body implies its own travel through its feet: while a foot is in contact (as for foot_skating), the
+  body moves by the hips' displacement minus that foot's; in flight, by the hips' displacement. That path,
+  integrated over the clip and rigidly aligned as for control_error, is compared with the requested one
+  (mean distance). Real motion follows its control to a few centimetres. A generator that moves its feet
+  as if it walked elsewhere (ignoring a side-step, walking on the spot) drifts by metres, while zero-mean
+  jitter, which foot_skating and jerk measure, largely cancels along the path.
 """
 import numpy as np
 
@@ -23,7 +30,24 @@ from . import skeleton
 
 CONTACT_HEIGHT = 0.01  # m above each foot joint's lowest point in the clip
 CONTACT_FALLBACK = 0.1  # a foot is in contact in at least its lowest 10% of frame pairs
-METRIC_NAMES = ("foot_skating", "bone_length_std", "jerk", "control_error")
+METRIC_NAMES = ("foot_skating", "bone_length_std", "jerk", "control_error", "control_following")
+
+
+def foot_contacts(joints, feet=tuple(skeleton.FEET), contact_height=CONTACT_HEIGHT, fallback=CONTACT_FALLBACK):
+    """Per foot, whether it is in contact in each frame pair: bool [n_feet, T-1] (see foot_skating)."""
+    contacts = []
+    for pair in np.asarray(feet).reshape(-1, 2):
+        height = joints[:, pair, 1]                                       # [T, 2]
+        rel = (height - height.min(axis=0)).max(axis=1)                   # [T] the higher joint
+        score = np.maximum(rel[1:], rel[:-1])                             # [T-1] per frame pair
+        contacts.append(score <= max(contact_height, np.quantile(score, fallback)))
+    return np.array(contacts)
+
+
+def foot_steps(joints, feet=tuple(skeleton.FEET)):
+    """Horizontal displacement of each foot (mean of its two joints) per frame pair: [n_feet, T-1, 2] (m)."""
+    pairs = np.asarray(feet).reshape(-1, 2)
+    return np.stack([np.diff(joints[:, pair][..., [0, 2]], axis=0).mean(axis=1) for pair in pairs])
 
 
 def foot_skating(joints, fps, feet=tuple(skeleton.FEET), contact_height=CONTACT_HEIGHT, fallback=CONTACT_FALLBACK):
@@ -39,15 +63,11 @@ def foot_skating(joints, fps, feet=tuple(skeleton.FEET), contact_height=CONTACT_
     joints = np.asarray(joints, dtype=np.float64)
     if len(joints) < 2:
         return float("nan")
-    speeds = []
-    for pair in np.asarray(feet).reshape(-1, 2):
-        foot = joints[:, pair]                                            # [T, 2, 3]
-        rel = (foot[..., 1] - foot[..., 1].min(axis=0)).max(axis=1)       # [T] the higher joint
-        score = np.maximum(rel[1:], rel[:-1])                             # [T-1] per frame pair
-        contact = score <= max(contact_height, np.quantile(score, fallback))
-        speed = np.linalg.norm(np.diff(foot[..., [0, 2]], axis=0), axis=-1).mean(axis=1) * fps
-        speeds.append(speed[contact])
-    return float(np.concatenate(speeds).mean())
+    contact = foot_contacts(joints, feet, contact_height, fallback)
+    pairs = np.asarray(feet).reshape(-1, 2)
+    speed = np.stack([np.linalg.norm(np.diff(joints[:, pair][..., [0, 2]], axis=0), axis=-1).mean(axis=1)
+                      for pair in pairs]) * fps                          # [n_feet, T-1]
+    return float(speed[contact].mean())
 
 
 def bone_length_std(joints, parents=skeleton.PARENTS):
@@ -90,6 +110,17 @@ def control_error(joints, control):
     return _rigid_align_error(hips, control_path(control))
 
 
+def control_following(joints, control):
+    """Mean floor distance (m) between the path the body implies through its feet and the requested path."""
+    joints = np.asarray(joints, dtype=np.float64)
+    hips = joints[:, skeleton.INDEX["Hips"]][:, [0, 2]]
+    contact = foot_contacts(joints)                                       # [n_feet, T-1]
+    slide = (foot_steps(joints) * contact[..., None]).sum(0) / np.maximum(contact.sum(0), 1)[:, None]
+    step = np.diff(hips, axis=0) - slide                                  # the body's own travel per frame
+    implied = np.concatenate([hips[:1], hips[:1] + np.cumsum(step, axis=0)])
+    return _rigid_align_error(implied, control_path(control))
+
+
 def clip_metrics(joints, fps, control=None):
     """All metrics of one clip (joints [T, 21, 3] in metres, Y up) as a dict; control_error NaN without control."""
     joints = np.asarray(joints, dtype=np.float64)
@@ -100,4 +131,6 @@ def clip_metrics(joints, fps, control=None):
         bone_length_std=bone_length_std(joints),
         jerk=jerk(joints, fps),
         control_error=control_error(joints, control) if control is not None else float("nan"),
+        control_following=control_following(joints, control) if control is not None and len(joints) > 1
+        else float("nan"),
     )

@@ -47,28 +47,36 @@ class MoGlow(MotionFlow):
             FlowStep(pose_dim, LSTMNet(c_a, self.cond_dim, 2 * (pose_dim - c_a), cfg["hidden"], cfg["lstm_layers"]))
             for _ in range(cfg["K"])])
 
-    def make_cond(self, x, c):
+    def history_keep(self, batch, length, device=None):
+        """Which history frames training keeps: bool [batch, length - tau, tau, 1], each dropped with probability
+        `dropout`. Drawn for a whole batch so that ranks sharing it can each take their rows (train.py)."""
+        n = length - self.tau
+        return torch.rand(batch, n, self.tau, 1, device=device) >= self.config["dropout"]
+
+    def make_cond(self, x, c, keep=None):
         """Conditioning of frames tau..T-1 of a window: [poses t-tau..t-1, control t-tau..t] -> [B, n, cond_dim].
-        While training, each history pose frame is dropped (zeroed: the mean pose) with probability `dropout`."""
+        While training, each history pose frame is dropped (zeroed: the mean pose) with probability `dropout`,
+        as `keep` says (default: drawn here)."""
         tau, n = self.tau, x.shape[1] - self.tau
         hist = x.unfold(1, tau, 1)[:, :n].transpose(2, 3)  # [B, n, tau, 63], oldest first
         if self.training and self.config["dropout"] > 0:
-            keep = torch.rand(hist.shape[:3] + (1,), device=x.device) >= self.config["dropout"]
+            keep = self.history_keep(x.shape[0], x.shape[1], x.device) if keep is None else keep
             hist = hist * keep.to(hist.dtype)
         ctrl = c.unfold(1, tau + 1, 1).transpose(2, 3)  # [B, n, tau + 1, 3]
         return torch.cat([hist.flatten(2), ctrl.flatten(2)], dim=2)
 
-    def forward(self, x, c):
-        """Window x [B, T, 63], c [B, T, 3] (standardised) -> (z [B, T - tau, 63] for frames tau..T-1, logdet [B])."""
+    def forward(self, x, c, keep=None):
+        """Window x [B, T, 63], c [B, T, 3] (standardised) -> (z [B, T - tau, 63] for frames tau..T-1, logdet [B]).
+        `keep`: history dropout mask while training (see history_keep)."""
         if x.shape[1] <= self.tau:
             raise ValueError(f"MG needs windows longer than tau={self.tau} frames, got {x.shape[1]}")
-        cond = self.make_cond(x, c).transpose(1, 2)
+        cond = self.make_cond(x, c, keep).transpose(1, 2)
         z, logdet = self.flow(x[:, self.tau:].transpose(1, 2), cond)
         return z.transpose(1, 2), logdet
 
-    def nll(self, x, c):
+    def nll(self, x, c, keep=None):
         """Negative log-likelihood of frames tau..T-1 in nats per dimension (standardised data), per element."""
-        z, logdet = self(x, c)
+        z, logdet = self(x, c, keep)
         return -(gaussian_logp(z) + logdet) / z[0].numel()
 
     @torch.no_grad()

@@ -1,21 +1,29 @@
 """Train FL or MG by exact maximum likelihood (CONTRACTS.md §3).
 
     python -m generation.train --model mg --config cpu --data dataset.npz --out runs/mg [--steps N] [--resume]
+    torchrun --nproc_per_node 4 -m generation.train ...     # several GPUs (or CPU processes): DDP
 
 Writes OUT/config.json, OUT/checkpoints/step_XXXXXXX.pt (early ones kept: the bad examples come from them),
 OUT/metrics.csv (step, train_nll, valid_nll in nats per dimension of the standardised data) and
 OUT/resume.pt (optimiser state for --resume). Adam with linear warm-up, gradient-norm clipping; batches
 and dropout masks are functions of (seed, step), so a run is reproducible and a resumed run continues
 exactly as an uninterrupted one would.
+
+Under torchrun (WORLD_SIZE > 1) the same batch is split across the ranks: every rank draws the whole batch,
+its crop, noise and dropout masks from the shared seed and keeps its own rows, DistributedDataParallel
+averages the gradients, and ActNorm initialises from the statistics of the whole batch (flows.ActNorm), so
+N ranks train the same model as one process would (up to float rounding). Rank 0 validates and writes.
 """
 import csv
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
 
 import torch
+from torch import nn
 from tqdm import tqdm
 
 from .dataset import batch_indices, eval_batches, load_dataset
@@ -49,7 +57,30 @@ def learning_rate(cfg, step):
 def pick_device(device=None):
     if device:
         return torch.device(device)
-    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if torch.cuda.is_available():
+        return torch.device("cuda", int(os.environ.get("LOCAL_RANK", 0)))
+    return torch.device("cpu")
+
+
+def join_ranks():
+    """(rank, world size): (0, 1) alone; under torchrun, after joining the process group (nccl on CUDA)."""
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world == 1:
+        return 0, 1
+    if not torch.distributed.is_initialized():
+        torch.distributed.init_process_group("nccl" if torch.cuda.is_available() else "gloo")
+    return torch.distributed.get_rank(), world
+
+
+class _BatchNLL(nn.Module):
+    """The model's NLL as a module's forward, so that DistributedDataParallel can wrap it."""
+
+    def __init__(self, net):
+        super().__init__()
+        self.net = net
+
+    def forward(self, x, c, keep):
+        return self.net.nll(x, c, keep)
 
 
 def load_config(model, config):
@@ -124,8 +155,12 @@ def train(model, config, data_path, out_dir, steps=None, seed=0, progress=True, 
     ds = load_dataset(data_path)
     if "valid" not in ds.splits or "train" not in ds.splits:
         raise TrainError(f"{data_path}: needs 'train' and 'valid' splits")
+    rank, world = join_ranks()
+    if cfg["batch_size"] % world:
+        raise TrainError(f"batch_size {cfg['batch_size']} does not split evenly over {world} ranks")
     device = pick_device(device)
     out = Path(out_dir)
+    writes = rank == 0  # validation, metrics and checkpoints: rank 0 only
     (out / "checkpoints").mkdir(parents=True, exist_ok=True)
     train_split, valid_split = ds.splits["train"], ds.splits["valid"]
     torch.manual_seed(seed)
@@ -142,19 +177,25 @@ def train(model, config, data_path, out_dir, steps=None, seed=0, progress=True, 
         start, elapsed = state["step"], state.get("elapsed", 0.0)
     elif resume:
         raise TrainError(f"{resume_path}: nothing to resume")
-    (out / "config.json").write_text(json.dumps(
-        {**cfg, "data": str(data_path), "seed": seed, "device": str(device)}, indent=2))
     metrics_path = out / "metrics.csv"
-    if start == 0 or not metrics_path.exists():
-        with open(metrics_path, "w", newline="") as f:
-            csv.writer(f).writerow(["step", "train_nll", "valid_nll", "lr", "grad_norm", "elapsed_s", "steps_per_s"])
+    if writes:
+        (out / "config.json").write_text(json.dumps(
+            {**cfg, "data": str(data_path), "seed": seed, "device": str(device), "ranks": world}, indent=2))
+        if start == 0 or not metrics_path.exists():
+            with open(metrics_path, "w", newline="") as f:
+                csv.writer(f).writerow(["step", "train_nll", "valid_nll", "lr", "grad_norm", "elapsed_s",
+                                        "steps_per_s"])
 
     tx, tc = train_split.x.to(device), train_split.c.to(device)
-    n, window = len(train_split), tx.shape[1]
+    window = tx.shape[1]
     crop = cfg["train_window"] or window
     early = set(cfg["early_ckpts"])
+    rows = slice(rank * cfg["batch_size"] // world, (rank + 1) * cfg["batch_size"] // world)
+    step_nll = _BatchNLL(net)
+    if world > 1:
+        step_nll = nn.parallel.DistributedDataParallel(step_nll, device_ids=[device] if device.type == "cuda" else None)
     net.train()
-    bar = tqdm(range(start, cfg["steps"]), initial=start, total=cfg["steps"], disable=not progress,
+    bar = tqdm(range(start, cfg["steps"]), initial=start, total=cfg["steps"], disable=not (progress and writes),
                desc=f"train {model}", unit="step", dynamic_ncols=True)
     run_nll, run_n, bad, t0, valid_nll, t_row, s_row = 0.0, 0, 0, time.perf_counter(), float("nan"), \
         time.perf_counter(), start
@@ -162,19 +203,10 @@ def train(model, config, data_path, out_dir, steps=None, seed=0, progress=True, 
         lr = learning_rate(cfg, step)
         for group in opt.param_groups:
             group["lr"] = lr
-        idx = batch_indices(n, cfg["batch_size"], seed, step).to(device)
-        x, c = tx[idx], tc[idx]
-        torch.manual_seed(seed * 1_000_003 + step)  # dropout masks: a function of (seed, step)
-        if crop < window:
-            s = int(torch.randint(0, window - crop + 1, (1,)))
-            x, c = x[:, s:s + crop], c[:, s:s + crop]
-        if cfg["noise"] > 0:
-            # Small Gaussian noise (standardised units) bounds the density on (near-)deterministic dimensions,
-            # e.g. the root's own x/z in the root frame, which are exactly 0 (dequantisation, as in Glow).
-            x = x + cfg["noise"] * torch.randn_like(x)
-        loss = net.nll(x, c).mean()
+        x, c, keep = draw_batch(net, tx, tc, cfg, seed, step, crop)
+        loss = step_nll(x[rows], c[rows], None if keep is None else keep[rows]).mean()
         opt.zero_grad(set_to_none=True)
-        if not torch.isfinite(loss):
+        if not _finite_on_every_rank(loss, world):
             bad += 1
             if bad > 20:
                 raise TrainError(f"training diverged: NLL not finite at step {step + 1} (lower 'lr' in the config)")
@@ -186,6 +218,8 @@ def train(model, config, data_path, out_dir, steps=None, seed=0, progress=True, 
         run_n += 1
         done = step + 1
         last = done == cfg["steps"]
+        if not writes:
+            continue
         if done % cfg["valid_every"] == 0 or last or done == 1:
             valid_nll = evaluate(net, valid_split, cfg, device)
             now = time.perf_counter()
@@ -201,7 +235,36 @@ def train(model, config, data_path, out_dir, steps=None, seed=0, progress=True, 
             torch.save(dict(state=net.state_dict(), opt=opt.state_dict(), step=done,
                             elapsed=elapsed + time.perf_counter() - t0), resume_path)
     bar.close()
+    if world > 1:
+        torch.distributed.barrier()  # rank 0's last checkpoint is written before any rank returns
     return out
+
+
+def draw_batch(net, tx, tc, cfg, seed, step, crop):
+    """The whole training batch of `step` (every rank draws the same): windows, their random crop, the
+    dequantisation noise and MG's history dropout mask (None for FL), all functions of (seed, step)."""
+    idx = batch_indices(len(tx), cfg["batch_size"], seed, step).to(tx.device)
+    x, c = tx[idx], tc[idx]
+    torch.manual_seed(seed * 1_000_003 + step)
+    if crop < x.shape[1]:
+        s = int(torch.randint(0, x.shape[1] - crop + 1, (1,)))
+        x, c = x[:, s:s + crop], c[:, s:s + crop]
+    if cfg["noise"] > 0:
+        # Small Gaussian noise (standardised units) bounds the density on (near-)deterministic dimensions,
+        # e.g. the root's own x/z in the root frame, which are exactly 0 (dequantisation, as in Glow).
+        x = x + cfg["noise"] * torch.randn_like(x)
+    keep = None
+    if net.kind == "mg" and net.config["dropout"] > 0:
+        keep = net.history_keep(x.shape[0], x.shape[1], x.device)
+    return x, c, keep
+
+
+def _finite_on_every_rank(loss, world):
+    """Whether the loss is finite on every rank (a rank that skipped its step alone would hang the others)."""
+    finite = torch.isfinite(loss.detach()).to(torch.int32)
+    if world > 1:
+        torch.distributed.all_reduce(finite, op=torch.distributed.ReduceOp.MIN)
+    return bool(finite)
 
 
 def _main(argv):

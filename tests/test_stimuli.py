@@ -114,7 +114,7 @@ def test_stimuli_files_tell_nothing_outside_their_pixels(manifest, quick_stimuli
 def test_stimuli_metrics_plausible_and_bad_clips_worse(manifest, quick_stimuli):
     rows = read_csv(quick_stimuli / "metrics.csv")
     assert list(rows[0]) == ["clip_id", "condition", "role", "item", "foot_skating", "bone_length_std", "jerk",
-                             "control_error"]
+                             "control_error", "control_following"]
     assert sorted(r["clip_id"] for r in rows) == sorted(m["clip_id"] for m in manifest)
     assert all(np.isfinite(float(r[k])) for r in rows for k in list(r)[4:])    # every metric defined
     val = lambda cond, key: np.array([float(r[key]) for r in rows if r["condition"] == cond])  # noqa: E731
@@ -122,6 +122,10 @@ def test_stimuli_metrics_plausible_and_bad_clips_worse(manifest, quick_stimuli):
     assert np.isfinite(nat_skate).all() and np.median(nat_skate) < 0.1      # planted feet barely slide
     assert val("NAT", "bone_length_std").max() < 1e-3
     assert val("NAT", "control_error").max() < 0.01
+    assert np.median(val("NAT", "control_following")) < 0.05  # real feet carry the body along its control
+    assert np.median(val("BAD", "control_following")) > 2 * np.median(val("NAT", "control_following"))
+    fmd = {r["condition"]: float(r["fmd"]) for r in read_csv(quick_stimuli / "fmd.csv")}
+    assert set(fmd) == {"NAT", "MG", "FL"} and fmd["MG"] > fmd["NAT"] and fmd["FL"] > fmd["NAT"]  # NAT: the floor
     assert np.median(val("BAD", "jerk")) > 5 * np.median(val("NAT", "jerk"))
     assert val("BAD", "bone_length_std").min() > 10 * val("NAT", "bone_length_std").max()
     items = read_csv(quick_stimuli / "items.csv")
