@@ -25,7 +25,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from core import cli
-from scipy import stats as sps
 from tqdm import tqdm
 
 from . import figures, stats
@@ -66,7 +65,7 @@ def simulate_power(design, pair, n_raters, n_sim=1000, alpha=0.05, seed=0, chunk
     df_w = N - K
     if df_w < 1:
         return 0.0, 0.0, 1.0
-    qcrit = float(sps.studentized_range.ppf(1 - alpha, K, df_w))
+    qcrit = stats.tukey_qcrit(alpha, K, df_w)
     rng = np.random.default_rng(seed)
     rejected = 0
     for start in range(0, n_sim, chunk):

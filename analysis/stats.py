@@ -4,6 +4,7 @@ Every function takes the long table of ratings (one row per response) and the na
 same code serves ratings.csv, the NIST reference data and R's PlantGrowth in the tests. Plotting lives in
 figures.py; file handling in load.py and report.py.
 """
+import functools
 import math
 from decimal import Decimal
 from fractions import Fraction
@@ -163,7 +164,7 @@ def tukey_hsd(df, dv="rating", between="condition", alpha=0.05):
     if k < 2 or df_w < 1:
         raise ValueError("Tukey HSD needs at least 2 groups and more observations than groups")
     mse = ssw / df_w
-    qcrit = float(sps.studentized_range.ppf(1 - alpha, k, df_w))
+    qcrit = tukey_qcrit(alpha, k, df_w)
     rows = []
     for i, j in combinations(range(k), 2):
         diff = means[j] - means[i]
@@ -181,6 +182,13 @@ def tukey_hsd(df, dv="rating", between="condition", alpha=0.05):
     out = pd.DataFrame(rows)
     out.attrs["undefined"] = (NO_VARIANCE if np.ptp(y) == 0 else NO_WITHIN_VARIANCE) if not mse > 0 else None
     return out
+
+
+@functools.lru_cache(maxsize=256)
+def tukey_qcrit(alpha, k, df):
+    """Studentized-range quantile, cached: scipy inverts a numerical integral (~0.1 s), and simulations
+    (analysis.plan's validation, bootstrap-style checks) ask for the same (alpha, k, df) many times."""
+    return float(sps.studentized_range.ppf(1 - alpha, k, df))
 
 
 def tukey_p(q, k, df):

@@ -141,3 +141,77 @@ def test_metrics_empty_cell_is_missing_not_an_error(tmp_path):
     path.write_text(METRICS_HEADER + "a1,NAT,test,1,,2\nb1,MG,test,1,0.3,4\n")
     m = load_metrics(path)
     assert m.loc["b1", "foot_skating"] == 0.3 and m["foot_skating"].isna().sum() == 1
+
+
+# ---------------------------------------------------------------------------------------------- fuzzing (issue 11)
+REAL = (Path(__file__).parent / "data" / "analysis" / "ratings_small.csv").read_bytes()
+REAL_LINES = REAL.split(b"\n")[:60]  # the header and enough rows for every kind of line; keeps each example fast
+
+
+def _corrupt(draw):
+    """A real ratings file with a few random edits: bytes replaced, inserted or deleted, lines dropped,
+    duplicated or swapped, cells emptied, or the file cut short."""
+    from hypothesis import strategies as st
+
+    lines = list(REAL_LINES)
+    for _ in range(draw(st.integers(1, 4))):
+        kind = draw(st.sampled_from(["byte", "insert", "delete", "drop_line", "dup_line", "swap", "cell", "cut"]))
+        i = draw(st.integers(0, len(lines) - 1))
+        line = lines[i]
+        if kind == "byte" and line:
+            j = draw(st.integers(0, len(line) - 1))
+            lines[i] = line[:j] + bytes([draw(st.integers(0, 255))]) + line[j + 1:]
+        elif kind == "insert":
+            j = draw(st.integers(0, len(line)))
+            junk = draw(st.sampled_from([b",", b'"', b"\r", b"\x00", b"\xff\xfe", b"NaN", b"-", b"9" * 30, b"\n",
+                                         "é".encode(), b" ", b"1e3", b"inf"]))
+            lines[i] = line[:j] + junk + line[j:]
+        elif kind == "delete" and line:
+            j = draw(st.integers(0, len(line) - 1))
+            lines[i] = line[:j] + line[j + draw(st.integers(1, 5)):]
+        elif kind == "drop_line" and len(lines) > 1:
+            del lines[i]
+        elif kind == "dup_line":
+            lines.insert(i, line)
+        elif kind == "swap":
+            j = draw(st.integers(0, len(lines) - 1))
+            lines[i], lines[j] = lines[j], lines[i]
+        elif kind == "cell":
+            cells = line.split(b",")
+            cells[draw(st.integers(0, len(cells) - 1))] = draw(st.sampled_from([b"", b"x", b"0", b"7", b"3.0",
+                                                                                 b"catch", b"BAD", b"NAT"]))
+            lines[i] = b",".join(cells)
+        elif kind == "cut":
+            text = b"\n".join(lines)
+            return text[:draw(st.integers(0, len(text)))]
+    return b"\n".join(lines)
+
+
+def test_fuzzed_ratings_file_is_a_table_or_one_line_error(tmp_path_factory):
+    """Property: any corruption of a real ratings.csv gives a valid table or the one-line AnalysisError --
+    never another exception, never a table that breaks the contract."""
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+
+    folder = tmp_path_factory.mktemp("fuzz")
+
+    @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow], database=None,
+              derandomize=True)
+    @given(st.data())
+    def check(data):
+        path = folder / "ratings.csv"
+        path.write_bytes(_corrupt(data.draw))
+        try:
+            df = load_ratings(path)
+        except AnalysisError as exc:
+            msg = str(exc)
+            assert msg.startswith(str(path)) and "\n" not in msg and "\r" not in msg, msg
+            return
+        assert len(df) > 0 and (df["role"] == "test").any()
+        assert df["rating"].between(1, 5).all() and set(df["role"]) <= {"test", "catch"}
+        for col in ("rater_id", "clip_id", "condition"):
+            assert (df[col].astype(str).str.strip() != "").all()
+        assert not df.duplicated(["rater_id", "clip_id"]).any()
+        assert (df.groupby("clip_id", observed=True)["condition"].nunique() == 1).all()
+
+    check()
