@@ -25,10 +25,13 @@ from .load import AnalysisError, load_metrics, load_ratings
 # The REML fit costs ~150 Cholesky factorisations of a (smaller of raters, clips)-square matrix; beyond this
 # many levels it is skipped unless forced (1M ratings from 3,226 raters x 310 clips fit in ~10 s).
 MIXED_MAX_LEVELS = 2000
+# The ordinal fit works on every rating (no sufficient statistics exist for it): ~0.1 s per 1,000 ratings in
+# all, so beyond this many test ratings it is skipped unless asked for (--ordinal-max-ratings).
+ORDINAL_MAX_RATINGS = 100_000
 
 
 # ---------------------------------------------------------------------------------------------- analysis
-def _fit_model(fit, test, enabled, flag, n_raters, n_clips, max_levels):
+def _fit_model(fit, test, enabled, flag, n_raters, n_clips, max_levels, max_ratings=None):
     """One random-effects model, or why it is not there: skipped by a flag or by size, undefined for the data
     (stats.ModelUndefined), or a numerical failure -- always a dict with 'fixed_effects', never an exception."""
     if not enabled:
@@ -36,6 +39,8 @@ def _fit_model(fit, test, enabled, flag, n_raters, n_clips, max_levels):
     if min(n_raters, n_clips) > max_levels:
         return {"skipped": f"{n_raters} raters and {n_clips} clips: both above --mixed-max-levels {max_levels}",
                 "fixed_effects": {}}
+    if max_ratings is not None and len(test) > max_ratings:
+        return {"skipped": f"{len(test)} ratings: above --ordinal-max-ratings {max_ratings}", "fixed_effects": {}}
     try:
         return fit(test)
     except stats.ModelUndefined as exc:
@@ -74,7 +79,7 @@ def undefined_tests(res):
 
 
 def analyse(test, *, n_boot=2000, seed=0, alpha=0.05, mixed=True, ordinal=True, mixed_max_levels=MIXED_MAX_LEVELS,
-            metrics=None, progress=None):
+            ordinal_max_ratings=ORDINAL_MAX_RATINGS, metrics=None, progress=None):
     """All analyses of one set of test rows -> dict of tables and dicts (see to_json for the file layout)."""
     step = progress.update if progress is not None else (lambda n=1: None)
     conds = test["condition"].unique()
@@ -98,7 +103,7 @@ def analyse(test, *, n_boot=2000, seed=0, alpha=0.05, mixed=True, ordinal=True, 
     step()
     sizes = (out["n_raters"], out["n_clips"], mixed_max_levels)
     out["mixed"] = _fit_model(stats.mixed_model, test, mixed, "--no-mixed", *sizes)
-    out["ordinal"] = _fit_model(stats.ordinal_model, test, ordinal, "--no-ordinal", *sizes)
+    out["ordinal"] = _fit_model(stats.ordinal_model, test, ordinal, "--no-ordinal", *sizes, ordinal_max_ratings)
     step()
     if metrics is not None:
         out["metrics"] = stats.metric_correlations(out["clips"], metrics)
@@ -388,7 +393,7 @@ def _prepare_out(out):
 
 def build_report(ratings_path, out_dir="report", metrics_path=None, threshold=DEFAULT_THRESHOLD, mixed=True,
                  seed=0, n_boot=2000, alpha=0.05, mixed_max_levels=MIXED_MAX_LEVELS, progress=True, quiet=False,
-                 ordinal=True):
+                 ordinal=True, ordinal_max_ratings=ORDINAL_MAX_RATINGS):
     """Run the whole analysis; returns the stats.json document."""
     t0 = time.perf_counter()
     df = load_ratings(ratings_path)
@@ -403,7 +408,7 @@ def build_report(ratings_path, out_dir="report", metrics_path=None, threshold=DE
     _prepare_out(out)
     bar = tqdm(total=14, desc="analysis", unit="step", disable=not progress, leave=False, file=sys.stderr)
     opts = dict(n_boot=n_boot, seed=seed, alpha=alpha, mixed=mixed, ordinal=ordinal, mixed_max_levels=mixed_max_levels,
-                metrics=metrics, progress=bar)
+                ordinal_max_ratings=ordinal_max_ratings, metrics=metrics, progress=bar)
     try:
         kept = analyse(kept_test, **opts)
         everyone = analyse(all_test, **opts)
@@ -453,6 +458,9 @@ def _main(argv):
     ap.add_argument("--mixed-max-levels", type=cli.number(int, 1), default=MIXED_MAX_LEVELS,
                     help="skip the mixed models when raters and clips both exceed this (their cost grows with the "
                          f"cube of the smaller; default {MIXED_MAX_LEVELS})")
+    ap.add_argument("--ordinal-max-ratings", type=cli.number(int, 1), default=ORDINAL_MAX_RATINGS,
+                    help="skip the ordinal model above this many test ratings (its cost grows with every rating; "
+                         f"default {ORDINAL_MAX_RATINGS})")
     ap.add_argument("--seed", type=cli.number(int, 0, 2 ** 32 - 1), default=0, help="bootstrap seed (default 0)")
     ap.add_argument("--n-boot", type=cli.number(int, 10, 1_000_000), default=2000,
                     help="bootstrap resamples (10-1000000; default 2000)")
@@ -462,7 +470,7 @@ def _main(argv):
     args = ap.parse_args(argv)
     build_report(args.ratings, args.out, args.metrics, args.threshold, not args.no_mixed, args.seed,
                  args.n_boot, args.alpha, args.mixed_max_levels, progress=not args.quiet, quiet=args.quiet,
-                 ordinal=not args.no_ordinal)
+                 ordinal=not args.no_ordinal, ordinal_max_ratings=args.ordinal_max_ratings)
     return 0
 
 

@@ -281,6 +281,10 @@ def test_no_ordinal_flag_and_report_sections(tmp_path, frozen_run):
     assert main([str(DATA / "exclusion.csv"), "--out", str(tmp_path), "--no-ordinal", "--n-boot", "20",
                  "--quiet"]) == 0
     assert json.loads((tmp_path / "stats.json").read_text())["ordinal_model"]["skipped"] == "--no-ordinal"
+    assert main([str(DATA / "exclusion.csv"), "--out", str(tmp_path), "--ordinal-max-ratings", "5", "--n-boot", "20",
+                 "--quiet"]) == 0
+    skipped = json.loads((tmp_path / "stats.json").read_text())["ordinal_model"]["skipped"]
+    assert skipped == "9 ratings: above --ordinal-max-ratings 5"
     out, doc = frozen_run
     o = doc["ordinal_model"]
     assert set(o["thresholds"]) == {"1|2", "2|3", "3|4", "4|5"} and o["reference"] == "NAT" and o["converged"]
