@@ -1,8 +1,8 @@
 """Benchmark of `python -m analysis.report` (issue 6 targets).
 
-  1. 1,000,000 ratings, mixed models (linear and ordinal) off: < 20 s. Two designs: a panel (3,226 raters x all 310 clips: 100 per
-     NAT/MG/FL + 10 catch; the bootstrap uses BLAS on the dense rater x clip table) and a crowd (50,000 raters
-     x 20 of 3,004 clips; the sparse path).
+  1. 1,000,000 ratings, mixed models (linear and ordinal) off: < 20 s. Two designs: a panel (3,226 raters x all
+     310 clips: 100 per NAT/MG/FL + 10 catch; the bootstrap uses BLAS on the dense rater x clip table) and a crowd
+     (50,000 raters x 20 of 3,004 clips; the sparse path).
   2. 1,880 ratings (the paper's size: 20 raters x 94 clips), everything on (2,000-resample cluster bootstrap,
      the crossed linear and ordinal mixed models, each with and without the exclusion): < 5 s.
 The ordinal model alone against R's clmm: bench/bench_stats.py.
