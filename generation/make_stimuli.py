@@ -3,12 +3,15 @@
     python -m generation.make_stimuli [--out stimuli/] [--quick] [--mg-checkpoint CKPT --fl-checkpoint CKPT]
                                       [--system NAME=DIR ...] [--export-items DIR]
 
-1. Data: prepares ../shared/data/bandai-namco-locomotion into a cached dataset (runs/dataset.npz) if needed.
+1. Data: the held-out windows shipped in generation/pretrained/ (heldout.npz); with --retrain (or --quick,
+   --data, --dataset) ../shared/data/bandai-namco-locomotion prepared into a cached dataset (runs/dataset.npz).
 2. Items: held-out 4-s test windows, balanced over locomotion categories (round robin, distinct takes
    first), seeded: `--n-items` test items, `--n-catch` catch items and `--n-training` familiarisation
    items (from other windows).
-3. Models: MG and FL checkpoints as given, else trained (configs `cpu`, `tiny` with --quick) into
-   runs/ (an existing run there is resumed or reused). BAD clips come from the earliest MG checkpoint.
+3. Models: MG and FL checkpoints as given, else the shipped ones (generation/pretrained/: MG, FL and the early
+   MG checkpoint that makes the BAD clips), else (--retrain, --quick, --config) trained (configs `cpu`, `tiny`
+   with --quick) into runs/ (an existing run there is resumed or reused); BAD clips then come from the
+   earliest MG checkpoint.
 4. Clips: per test item NAT (the real window through features.to_world, the same inverse the models'
    output goes through), MG (seeded with the item's real preceding frames) and FL with the same control;
    every imported system's file for the item; BAD clips on the catch items; each training item in every
@@ -34,7 +37,7 @@ from core.cli import UserError
 from rendering.blinding import pad_to_common_size, same_mtime
 from rendering.render import MAX_SIZE, MIN_SIZE, render_clip
 
-from . import skeleton
+from . import pretrained, skeleton
 from .clip import save_clip
 from .features import to_features, to_world
 from .metrics import METRIC_NAMES, clip_metrics
@@ -194,6 +197,8 @@ def ensure_model(kind, args, dataset):
             raise StimuliError(f"--{kind}-checkpoint {path}: no such file")
         siblings = checkpoints_in(path.parent)
         return path, siblings[0] if siblings else path
+    if args.shipped:
+        return pretrained.CHECKPOINTS[kind], pretrained.CHECKPOINTS["bad"]
     run = Path(args.runs) / f"{kind}_{args.config}"
     resume = (run / "resume.pt").is_file()
     log(f"models: {'resuming' if resume else 'training'} {kind} (config {args.config}) in {run}")
@@ -289,6 +294,8 @@ def parse_args(argv):
     ap = cli.ArgumentParser(prog="python -m generation.make_stimuli", description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="stimuli", help="stimulus folder to write (default stimuli)")
     ap.add_argument("--quick", action="store_true", help="tiny models on a subset of takes: a few minutes in all")
+    ap.add_argument("--retrain", action="store_true", help="prepare the data and train MG and FL from the mocap "
+                                                           "instead of using the shipped models")
     ap.add_argument("--data", help="folder of BVH takes (default ../shared/data/bandai-namco-locomotion)")
     ap.add_argument("--runs", default="runs", help="folder for the cached dataset and training runs (default runs)")
     ap.add_argument("--dataset", help="prepared dataset .npz to use or create (default RUNS/dataset.npz, "
@@ -316,9 +323,13 @@ def parse_args(argv):
                                                 "choice; 1 with --quick, where tiny models gain nothing from more)")
     ap.add_argument("--force", action="store_true", help="replace an existing stimulus set in --out")
     args = ap.parse_args(argv)
+    args.shipped = not (args.retrain or args.quick or args.config or args.train_steps or args.data) \
+        and pretrained.available()
     args.config = args.config or ("tiny" if args.quick else "cpu")
     args.size = args.size or (320 if args.quick else 640)
     args.threads = args.threads or (1 if args.quick else None)
+    if args.shipped and not args.dataset:
+        args.dataset = str(pretrained.HELDOUT)
     args.dataset = args.dataset or str(Path(args.runs) / ("dataset_quick.npz" if args.quick else "dataset.npz"))
     if args.size % 2 or not MIN_SIZE <= args.size <= MAX_SIZE:
         raise StimuliError(f"--size must be even and {MIN_SIZE}-{MAX_SIZE}, got {args.size}")
@@ -471,6 +482,9 @@ def _write_csv(path, columns, rows):
 
 
 def main(argv=None):
+    # Training and sampling run in this process: let OpenMP's waiting threads sleep (see generation/train.py).
+    # torch is not loaded yet here; it is imported by the functions that sample or train.
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     return cli.run(lambda a: run(parse_args(a)), argv)
 
 

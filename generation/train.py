@@ -22,14 +22,20 @@ import sys
 import time
 from pathlib import Path
 
-import torch
-from torch import nn
-from tqdm import tqdm
+if __name__ == "__main__":
+    # Waiting OpenMP threads that sleep give their core up to whatever else runs; spinning ones (the default)
+    # make 2-thread training several times slower beside one busy process (bench/bench_train_load.py). The
+    # command sets it, library callers keep their environment; before torch loads OpenMP, which reads it once.
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from .dataset import batch_indices, eval_batches, load_dataset
-from . import fl, moglow
-from core import cli
-from core.cli import UserError
+import torch  # noqa: E402
+from torch import nn  # noqa: E402
+from tqdm import tqdm  # noqa: E402
+
+from . import fl, moglow  # noqa: E402
+from .dataset import batch_indices, eval_batches, load_dataset  # noqa: E402
+from core import cli  # noqa: E402
+from core.cli import UserError  # noqa: E402
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 MODELS = {"fl": fl.FL, "mg": moglow.MoGlow}

@@ -1,0 +1,96 @@
+"""The models and held-out data shipped in the repository, so that the default stimulus set needs no training.
+
+    python -m generation.pretrained --mg MG.pt --bad MG_EARLY.pt --fl FL.pt --data runs/dataset.npz
+
+writes generation/pretrained/{mg,bad,fl}.pt (checkpoints of generation.train with their weights in float16:
+half the size, and no visible change in the sampled motion, which sample.load_model runs in float32) and
+heldout.npz: the valid and test windows with their tau real history frames, the standardisation and the
+skeleton, which is all make_stimuli reads of a prepared dataset, and quality.json, the models' foot skating
+and jerk against NAT's on part of the test split (`quality`), which the tests hold them to. The motion is from the Bandai-Namco-Research-
+Motiondataset (Bandai Namco Research Inc.), licensed CC BY-NC 4.0: non-commercial use only, with attribution.
+"""
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from core import cli
+
+FOLDER = Path(__file__).resolve().parent / "pretrained"
+CHECKPOINTS = {"mg": FOLDER / "mg.pt", "fl": FOLDER / "fl.pt", "bad": FOLDER / "bad.pt"}
+HELDOUT = FOLDER / "heldout.npz"
+QUALITY = FOLDER / "quality.json"
+QUALITY_STRIDE = 4  # every 4th test window: about 25 windows spread over all categories
+ATTRIBUTION = ("Bandai-Namco-Research-Motiondataset, Bandai Namco Research Inc., CC BY-NC 4.0 "
+               "(https://creativecommons.org/licenses/by-nc/4.0/); windows of held-out takes, re-expressed as "
+               "21-joint root-frame features")
+HELDOUT_KEYS = ("x", "c", "labels", "take", "start", "hist", "hist_c")
+SHARED_KEYS = ("fps", "window", "joint_names", "parents", "x_mean", "x_std", "c_mean", "c_std", "tau")
+
+
+def available():
+    """Whether every shipped file is there (a checkout without them trains instead)."""
+    return HELDOUT.is_file() and all(p.is_file() for p in CHECKPOINTS.values())
+
+
+def export_checkpoint(src, dst):
+    """A training checkpoint with float16 weights (integer buffers and flags unchanged)."""
+    ck = torch.load(src, map_location="cpu", weights_only=False)
+    ck["state"] = {k: v.half() if v.is_floating_point() else v for k, v in ck["state"].items()}
+    ck["source"] = Path(src).as_posix()
+    torch.save(ck, dst)
+
+
+def export_heldout(dataset, dst):
+    """The held-out splits of a prepared dataset (no training windows), with the attribution."""
+    with np.load(dataset, allow_pickle=False) as d:
+        arrays = {f"{s}_{k}": d[f"{s}_{k}"] for s in ("valid", "test") for k in HELDOUT_KEYS}
+        arrays.update({k: d[k] for k in SHARED_KEYS if k in d.files})
+    np.savez_compressed(dst, **arrays, attribution=np.str_(ATTRIBUTION))
+
+
+def quality(stride=QUALITY_STRIDE, seed=0):
+    """Foot skating and jerk of the shipped MG and FL over NAT's, medians over every `stride`-th test window
+    of the shipped held-out set (temperature 1, as make_stimuli samples). Recorded in quality.json at export and
+    recomputed by the tests, which fail if the models fall back."""
+    from .features import to_world
+    from .metrics import foot_skating, jerk
+    from .sample import load_model, sample_fl, sample_mg
+
+    with np.load(HELDOUT) as d:
+        x, c, hist, hist_c = (d[f"test_{k}"][::stride] for k in ("x", "c", "hist", "hist_c"))
+        fps = float(d["fps"])
+    out = {}
+    samples = {"NAT": x,
+               "MG": sample_mg(load_model(CHECKPOINTS["mg"], "cpu"), c, hist, hist_c, seed=seed),
+               "FL": sample_fl(load_model(CHECKPOINTS["fl"], "cpu"), c, seed=seed)}
+    for name, xs in samples.items():
+        world = [to_world(xs[i], c[i]) for i in range(len(c))]
+        out[name] = {"foot_skating": float(np.median([foot_skating(w, fps) for w in world])),
+                     "jerk": float(np.median([jerk(w, fps) for w in world]))}
+    return {name: {k: v / out["NAT"][k] for k, v in m.items()} for name, m in out.items() if name != "NAT"}
+
+
+def _main(argv):
+    ap = cli.ArgumentParser(prog="python -m generation.pretrained", description=__doc__.split("\n")[0])
+    for kind in CHECKPOINTS:
+        ap.add_argument(f"--{kind}", required=True, help=f"checkpoint to ship as {CHECKPOINTS[kind].name}")
+    ap.add_argument("--data", required=True, help="the prepared dataset the models were trained on")
+    a = ap.parse_args(argv)
+    FOLDER.mkdir(exist_ok=True)
+    for kind, dst in CHECKPOINTS.items():
+        export_checkpoint(getattr(a, kind), dst)
+    export_heldout(a.data, HELDOUT)
+    QUALITY.write_text(json.dumps(quality(), indent=1) + "\n")
+    total = sum(p.stat().st_size for p in [*CHECKPOINTS.values(), HELDOUT])
+    print(f"wrote {FOLDER}: {', '.join(p.name for p in [*CHECKPOINTS.values(), HELDOUT])} ({total / 1e6:.1f} MB)")
+
+
+def main(argv=None):
+    return cli.run(_main, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
