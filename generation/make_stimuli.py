@@ -439,8 +439,8 @@ def run(args):
     print(f"\nobjective metrics, mean (sd) per condition: foot_skating m/s, bone_length_std m, jerk m/s^3, "
           f"control_error m, control_following m\n{summary_text(metrics_rows)}")
     if fmd:
-        print("\nFréchet motion distance of the test clips to the training split (NAT's is the floor): "
-              + ", ".join(f"{r['condition']} {r['fmd']}" for r in fmd))
+        print("\nFréchet motion distance of the test clips to training motion of their categories "
+              "(NAT's is the floor): " + ", ".join(f"{r['condition']} {r['fmd']}" for r in fmd))
     _warn_if_bad_not_bad(metrics_rows)
     print(f"\nwrote {out / 'manifest.csv'}: {len(manifest)} clips ({n['test']} test, {n['catch']} catch, "
           f"{n['training']} training) in {time.perf_counter() - _T0:.0f} s")
