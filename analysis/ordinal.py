@@ -78,7 +78,9 @@ class _Design:
 def _unpack(d, phi):
     th = phi[:d.K - 1]
     beta = phi[d.K - 1:d.K - 1 + d.p]
-    s_r, s_c = math.exp(phi[-2]), math.exp(phi[-1])
+    # capped: on data where an SD's likelihood keeps rising (separation by raters or clips) the search may run
+    # far out; the caller reports such a fit as not identified instead of overflowing
+    s_r, s_c = math.exp(min(phi[-2], 30.0)), math.exp(min(phi[-1], 30.0))
     return th, beta, s_r, s_c
 
 

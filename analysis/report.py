@@ -46,7 +46,8 @@ def _fit_model(fit, test, enabled, flag, n_raters, n_clips, max_levels, max_rati
     except stats.ModelUndefined as exc:
         return {"undefined": str(exc), "fixed_effects": {}}
     except (np.linalg.LinAlgError, ValueError) as exc:  # a degenerate design is reported, not fatal
-        return {"error": f"{type(exc).__name__}: {exc}".splitlines()[0], "fixed_effects": {}}
+        return {"error": f"the fit failed numerically, too little data for this model? ({type(exc).__name__}: "
+                         f"{str(exc).splitlines()[0] if str(exc) else ''})", "fixed_effects": {}}
 
 
 def undefined_tests(res):
@@ -73,7 +74,7 @@ def undefined_tests(res):
         notes.append("one clip per condition: the intervals do not include clip variation")
     if notes:
         out["bootstrap"] = "; ".join(notes)
-    if res["n_test_ratings"] <= res["anova"]["k"] + 1 or res["summary"]["n"].min() < 2:
+    if res["summary"]["n"].min() < 2:
         out["t_intervals"] = "a condition with a single rating has no t interval"
     return out
 
@@ -374,6 +375,9 @@ def write_html(path, counts, kept, everyone, fig_paths, meta):
 def _check_enough(path, test):
     """Too few ratings for any statistic is a problem with the input file, said in one line (exit 2)."""
     k = test["condition"].nunique()
+    if k < 2:
+        conds = ", ".join(map(str, test["condition"].unique()))
+        raise AnalysisError(f"{path}: the test rows hold {k} condition ({conds}); comparisons need at least 2")
     if len(test) <= k:
         raise AnalysisError(f"{path}: {len(test)} test rating{'s' if len(test) != 1 else ''} in {k} condition"
                             f"{'s' if k != 1 else ''}: the statistics need more ratings than conditions")
@@ -413,6 +417,7 @@ def build_report(ratings_path, out_dir="report", metrics_path=None, threshold=DE
         kept = analyse(kept_test, **opts)
         everyone = analyse(all_test, **opts)
     except AnalysisError as exc:
+        bar.close()  # leave=False: the bar disappears, the error line stands alone
         raise AnalysisError(f"{ratings_path}: {exc}") from None
     figs = {
         "ratings_histogram": figures.ratings_histogram(kept["histogram"], kept["summary"]["mean"].to_dict(),

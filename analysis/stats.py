@@ -441,17 +441,21 @@ def ordinal_model(df, dv="rating", between="condition", rater="rater_id", clip="
     fit = fit_clmm(y_codes, X, pd.factorize(df[rater])[0], pd.factorize(df[clip])[0], names, len(y_levels),
                    [str(v) for v in y_levels])
     fit.pop("random_effects")
+    b = np.array(list(fit["fixed_effects"].values()))
+    se = np.array(list(fit["std_errors"].values()))
+    th = np.array(list(fit["thresholds"].values()))
+    if (np.any(np.abs(b) > 15) or max(fit["sd_rater"], fit["sd_clip"]) > 20 or np.ptp(th) > 60
+            or not np.all(np.isfinite(b))):
+        # the likelihood keeps rising as an effect, an SD or the cut points run off to infinity (quasi-separation:
+        # some condition, rater or clip sits in an end category), so no estimate or interval means anything
+        raise ModelUndefined("estimates run off to infinity (quasi-separation: ratings of some condition, rater "
+                             "or clip sit in an end category); model not identified")
     warnings = []
     if not fit["converged"]:
         warnings.append(f"optimiser did not converge (max |gradient| {fit['max_abs_gradient']:.2g})")
-    b = np.array(list(fit["fixed_effects"].values()))
-    se = np.array(list(fit["std_errors"].values()))
-    if np.any(np.abs(b) > 15) or not np.all(np.isfinite(se)):
-        # a condition whose ratings all sit in an end category: the likelihood keeps rising as the effect runs
-        # off to infinity (separation), so the estimate and its interval mean nothing
-        warnings.append("an effect is not identified (a condition's ratings sit in an end category: separation)")
+    if not np.all(np.isfinite(se)):
+        warnings.append("the information matrix is singular: standard errors undefined")
     zq = sps.norm.ppf(0.5 + level / 2)
-    th = np.array(list(fit["thresholds"].values()))
     eta = np.array([0.0] + list(b))
     probs = marginal_probabilities(th, eta, math.hypot(fit["sd_rater"], fit["sd_clip"]))
     order = [reference] + others
