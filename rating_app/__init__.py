@@ -2,8 +2,8 @@
 
     app = create_app(manifest="stimuli/manifest.csv", db_url="postgresql://...", ratings_per_clip=20)
 
-Arguments left as None are read from the environment (ADMIN_TOKEN, DATABASE_URL, RATING_MANIFEST,
-RATINGS_PER_CLIP, CLIPS_PER_RATER, SLOT_TIMEOUT, MIN_VIEW, SESSIONS_PER_CLIENT, COMPLETION_CODE, COMPLETION_URL,
+Arguments left as None are read from the environment (ADMIN_TOKEN, DATABASE_URL, RATING_MANIFEST, STUDY_DESIGN,
+STUDY_QUESTION, RATINGS_PER_CLIP, CLIPS_PER_RATER, SLOT_TIMEOUT, MIN_VIEW, SESSIONS_PER_CLIENT, COMPLETION_CODE, COMPLETION_URL,
 SECRET_KEY), which is how `rating_app.wsgi:app` is configured under gunicorn. Also read: COOKIE_SECURE=1 (admin
 cookie over HTTPS only), PROXY_COUNT (trusted reverse proxies in front, whose X-Forwarded-For names the client;
 default 0) and DB_POOL_SIZE (connections per worker, default 10 + 10 overflow). Every setting is checked here, so
@@ -58,8 +58,12 @@ def _env(name):
 
 def create_app(manifest=None, db_url=None, ratings_per_clip=None, clips_per_rater=None, admin_token=None,
                slot_timeout_s=None, completion_code=None, completion_url=None, secret_key=None,
-               check_files=True, min_view=None, sessions_per_client=None) -> Flask:
+               check_files=True, min_view=None, sessions_per_client=None, design=None, question=None) -> Flask:
+    """`design`: acr (default), pairwise or parallel (designs.py); fixed for the life of the database.
+    `ratings_per_clip` and `clips_per_rater` count the design's units: clips (acr), pairs of conditions of an
+    item (pairwise) or pages (parallel)."""
     from . import db as dbm
+    from .designs import QUESTIONS, build_units, check_design
     from .admin import bp as admin_bp
     from .api import bp as api_bp
     from .pages import bp as pages_bp
@@ -74,6 +78,10 @@ def create_app(manifest=None, db_url=None, ratings_per_clip=None, clips_per_rate
     min_view = setting("MIN_VIEW", min_view)
     sessions_per_client = setting("SESSIONS_PER_CLIENT", sessions_per_client)
     proxies = setting("PROXY_COUNT")
+    design = check_design(design if design is not None else _env("STUDY_DESIGN"))
+    question = (question if question is not None else _env("STUDY_QUESTION")) or QUESTIONS[design]
+    if len(question) > 200 or not question.isprintable():
+        raise AppError("question: at most 200 printable characters on one line")
     admin_token = admin_token if admin_token is not None else _env("ADMIN_TOKEN")
     completion_code = completion_code if completion_code is not None else _env("COMPLETION_CODE")
     completion_url = completion_url if completion_url is not None else _env("COMPLETION_URL")
@@ -101,11 +109,14 @@ def create_app(manifest=None, db_url=None, ratings_per_clip=None, clips_per_rate
         ADMIN_TOKEN=admin_token,
         COMPLETION_CODE=completion_code,
         COMPLETION_URL=completion_url,
+        STUDY_DESIGN=design,
+        STUDY_QUESTION=question,
     )
     clips = load_manifest(manifest, check_files=check_files)
+    units = build_units(design, clips)
     engine = dbm.make_engine(db_url)
     try:
-        dbm.init_db(engine, clips)
+        dbm.init_db(engine, clips, design)
     except SQLAlchemyError as e:
         where = make_url(str(engine.url)).render_as_string(hide_password=True)
         first = str(getattr(e, "orig", None) or e).strip().splitlines()
@@ -126,6 +137,8 @@ def create_app(manifest=None, db_url=None, ratings_per_clip=None, clips_per_rate
         "videos": VideoStore(clips, Path(manifest).resolve().parent, preload=check_files),
         "metrics": metrics,
         "manifest": str(manifest),
+        "design": design,
+        "units": units,
     }
     if not app.logger.handlers or app.logger.level == logging.NOTSET:
         app.logger.setLevel(logging.INFO)

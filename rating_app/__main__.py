@@ -8,6 +8,7 @@ import sys
 from core import cli
 
 from . import SETTINGS
+from .designs import DESIGNS
 from .manifest import AppError
 
 
@@ -22,11 +23,11 @@ def _serve(a):
     app = create_app(manifest=a.manifest, db_url=a.db, ratings_per_clip=a.ratings_per_clip,
                      clips_per_rater=a.clips_per_rater, slot_timeout_s=a.slot_timeout,
                      completion_code=a.completion_code, completion_url=a.completion_url, min_view=a.min_view,
-                     sessions_per_client=a.sessions_per_client)
+                     sessions_per_client=a.sessions_per_client, design=a.design, question=a.question)
     from .db import normalise_url
     from sqlalchemy.engine import make_url
     db = make_url(normalise_url(a.db)).render_as_string(hide_password=True)
-    print(f"rating app on http://{a.host}:{a.port}/  (database {db}; admin at /admin"
+    print(f"rating app on http://{a.host}:{a.port}/  ({app.config['STUDY_DESIGN']} design; database {db}; admin at /admin"
           f"{'' if app.config['ADMIN_TOKEN'] else ' disabled: set ADMIN_TOKEN'})", file=sys.stderr, flush=True)
     if app.config["MIN_VIEW"] < 1:
         print(f"warning: minimum viewing time lowered to {app.config['MIN_VIEW']:g} of each clip (tests and "
@@ -91,10 +92,17 @@ def build_parser():
     s.add_argument("--db", default=None, help="database URL (default $DATABASE_URL or sqlite:///ratings.sqlite)")
     s.add_argument("--host", default="127.0.0.1")
     s.add_argument("--port", type=cli.number(int, 1, 65535), default=5000)
+    s.add_argument("--design", choices=DESIGNS, default=None,
+                   help="acr (one clip, 1-5; the default), pairwise (two clips, a preference) or parallel (every "
+                        "condition of an item on one page, 0-100); default $STUDY_DESIGN or acr. Stored with the "
+                        "study: a database holds one design")
+    s.add_argument("--question", default=None, help="the question on the rating page (default per design, e.g. "
+                                                    "'Which motion looks more natural?' for pairwise)")
     s.add_argument("--ratings-per-clip", type=_flag("RATINGS_PER_CLIP"), default=None,
-                   help="target ratings per test clip (20)")
+                   help="target answers per test unit: clip (acr), item and pair of conditions (pairwise), item "
+                        "page (parallel) (20)")
     s.add_argument("--clips-per-rater", type=_flag("CLIPS_PER_RATER"), default=None,
-                   help="test clips per rater (default or 0: all that still need ratings)")
+                   help="test units (clips, pairs or pages) per rater (default or 0: all that still need answers)")
     s.add_argument("--slot-timeout", type=_flag("SLOT_TIMEOUT"), default=None,
                    help="seconds without an answer before a session expires and its slot is freed (3600)")
     s.add_argument("--min-view", type=_flag("MIN_VIEW"), default=None,

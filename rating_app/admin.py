@@ -81,8 +81,14 @@ def require_admin():
 def dashboard():
     if not authorised():
         return render_template("admin_login.html", error=None), 401
-    data = progress(_engine(), current_app.config["RATINGS_PER_CLIP"])
-    return render_template("admin.html", p=data, min_view=current_app.config["MIN_VIEW"])
+    data = _progress()
+    return render_template("admin.html", p=data, min_view=current_app.config["MIN_VIEW"],
+                           design=current_app.config["STUDY_DESIGN"])
+
+
+def _progress():
+    cfg, ext = current_app.config, current_app.extensions["rating_app"]
+    return progress(_engine(), cfg["RATINGS_PER_CLIP"], cfg["STUDY_DESIGN"], ext["units"])
 
 
 @bp.post("/login")
@@ -110,16 +116,18 @@ def logout():
 @bp.get("/export.csv")
 def export():
     require_admin()
+    from .design_export import FILENAMES
     body = export_csv(_engine())
-    return Response(body, mimetype="text/csv",
-                    headers={"Content-Disposition": "attachment; filename=ratings.csv"})
+    name = FILENAMES[current_app.config["STUDY_DESIGN"]]
+    return Response(body, mimetype="text/csv", headers={"Content-Disposition": f"attachment; filename={name}"})
 
 
 @bp.get("/progress.json")
 def progress_json():
     require_admin()
-    data = progress(_engine(), current_app.config["RATINGS_PER_CLIP"])
+    data = _progress()
     data["min_view"] = current_app.config["MIN_VIEW"]
+    data["design"] = current_app.config["STUDY_DESIGN"]
     for r in data["raters"]:
         r["started"], r["last_seen"] = r["started"].isoformat() + "Z", r["last_seen"].isoformat() + "Z"
     for e in data["events"]:

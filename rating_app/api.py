@@ -7,9 +7,13 @@ resume cookie set at creation), so a participant id alone never hands out a toke
 
 The server, not the page, decides whether a clip was watched: it records when it first served each trial and
 when its video was fetched, and refuses an answer that comes before the clip could have played to the end.
+
+Every design (designs.py) takes the same path: a pairwise or parallel trial is a slot like an acr one, served
+with a unit of several clips instead of one clip, and answered with a preference or a page of ratings.
 """
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 import hashlib
 import hmac
@@ -22,8 +26,9 @@ from flask import Blueprint, abort, current_app, jsonify, request, url_for
 from sqlalchemy import and_, func, insert, or_, select, update
 from sqlalchemy.exc import IntegrityError
 
-from .assign import StudyFull, assign_slot, expire_idle, lock_assign, plan_session
-from .db import Event, Rater, Rating, Trial, utcnow
+from .assign import StudyFull, assign_slot, assign_unit, expire_idle, lock_assign, plan_session, plan_units
+from .db import Event, PageRating, Preference, Rater, Rating, Trial, TrialClip, utcnow
+from .designs import LABELS, required_ms as design_required_ms
 from .guard import check_depth, client_key, escape_text, same_site_only
 
 bp = Blueprint("api", __name__, url_prefix="/api")
@@ -88,7 +93,7 @@ def _session_reply(rater, status: int, resume_secret: str | None = None):
     cfg = current_app.config
     resp = jsonify(session=rater.token, rater_id=rater.rater_id, n_trials=rater.n_training + rater.n_rating,
                    n_training=rater.n_training, n_rating=rater.n_rating, resumed=status == 200,
-                   min_view=cfg["MIN_VIEW"], view_tolerance_ms=TOLERANCE_MS)
+                   min_view=cfg["MIN_VIEW"], view_tolerance_ms=TOLERANCE_MS, design=cfg["STUDY_DESIGN"])
     resp.status_code = status
     if resume_secret:
         resp.set_cookie(RESUME_COOKIE, resume_secret, max_age=7 * 24 * 3600, path="/api/sessions", httponly=True,
@@ -137,9 +142,14 @@ def create_session():
                     Rater.client == client, Rater.created_at >= now - CLIENT_WINDOW)).scalar() >= limit:
                 return jsonify(error="too many new sessions from this address; please try again later"), 429
             expire_idle(conn, cfg["SLOT_TIMEOUT_S"], now)
+            rng = random.Random(secrets.randbits(64))
             try:
-                plan = plan_session(conn, random.Random(secrets.randbits(64)), cfg["RATINGS_PER_CLIP"],
-                                    cfg["CLIPS_PER_RATER"])
+                if cfg["STUDY_DESIGN"] == "acr":
+                    plan = plan_session(conn, rng, cfg["RATINGS_PER_CLIP"], cfg["CLIPS_PER_RATER"])
+                else:
+                    ext = current_app.extensions["rating_app"]
+                    plan = plan_units(conn, rng, cfg["RATINGS_PER_CLIP"], cfg["CLIPS_PER_RATER"],
+                                      cfg["STUDY_DESIGN"], ext["clips"].values(), ext["units"])
             except StudyFull as e:
                 return jsonify(error=str(e), full=True), 409
             resume_secret = secrets.token_urlsafe(24)
@@ -151,13 +161,21 @@ def create_session():
                           n_rating=len(plan) - n_training,
                           completion_code=cfg["COMPLETION_CODE"] or secrets.token_hex(4).upper())
             rater_pk = conn.execute(insert(Rater).values(**values).returning(Rater.id)).scalar()
-            counters, rows = {"training": 0, "rating": 0}, []
+            counters, rows, groups = {"training": 0, "rating": 0}, [], {}
             for pos, (kind, clip_id) in enumerate(plan):
                 phase = "training" if kind == "training" else "rating"
                 counters[phase] += 1
+                if isinstance(clip_id, tuple):           # a familiarisation pair or page
+                    groups[pos], clip_id = clip_id, None
                 rows.append({"rater_pk": rater_pk, "clip_id": clip_id, "kind": kind, "phase": phase,
-                             "position": pos, "index": counters[phase], "released": False})
+                             "position": pos, "index": counters[phase], "released": False,
+                             "unit": "training" if pos in groups else None})
             conn.execute(insert(Trial), rows)            # one multi-row INSERT, not one per trial
+            if groups:
+                ids = dict(conn.execute(select(Trial.position, Trial.id).where(Trial.rater_pk == rater_pk)).all())
+                conn.execute(insert(TrialClip), [
+                    {"trial_pk": ids[pos], "position": i, "label": LABELS[i], "clip_id": c}
+                    for pos, group in groups.items() for i, c in enumerate(rng.sample(group, len(group)))])
             rater = conn.execute(select(Rater).where(Rater.id == rater_pk)).one()
             return _session_reply(rater, 201, resume_secret)
     except IntegrityError:
@@ -182,7 +200,8 @@ def _completion(rater) -> dict:
 TOUCH_EVERY_S = 30     # last_seen (shown on the dashboard) is refreshed at most this often
 RATER_COLS = (Rater.id, Rater.rater_id, Rater.n_training, Rater.n_rating, Rater.completed_at, Rater.expired_at,
               Rater.completion_code, Rater.last_seen, Rater.last_progress)
-TRIAL_COLS = (Trial.id, Trial.clip_id, Trial.kind, Trial.phase, Trial.index, Trial.position, Trial.served_at)
+TRIAL_COLS = (Trial.id, Trial.clip_id, Trial.kind, Trial.phase, Trial.index, Trial.position, Trial.served_at,
+              Trial.unit)
 
 
 def _rater(conn, token: str, now=None):
@@ -221,19 +240,31 @@ def _serve(conn, rater_pk: int, now):
         t = _current(conn, rater_pk)
         if t is None or t.served_at is not None:
             return t
-        if t.clip_id is not None:
+        if t.clip_id is not None or t.unit is not None:
             conn.execute(update(Trial).where(Trial.id == t.id, Trial.served_at.is_(None)).values(served_at=now))
             continue
         lock_assign(conn)
         t = _current(conn, rater_pk)                 # re-read under the lock (a concurrent GET next may have won)
-        if t is None or t.clip_id is not None:
+        if t is None or t.clip_id is not None or t.unit is not None:
             continue
         cfg = current_app.config
         expire_idle(conn, cfg["SLOT_TIMEOUT_S"], now)
-        clip = assign_slot(conn, random.Random(secrets.randbits(64)), rater_pk, t.kind, cfg["RATINGS_PER_CLIP"])
-        if clip is not None:
-            conn.execute(update(Trial).where(Trial.id == t.id).values(clip_id=clip, served_at=now))
-            continue
+        rng = random.Random(secrets.randbits(64))
+        if cfg["STUDY_DESIGN"] == "acr":
+            clip = assign_slot(conn, rng, rater_pk, t.kind, cfg["RATINGS_PER_CLIP"])
+            if clip is not None:
+                conn.execute(update(Trial).where(Trial.id == t.id).values(clip_id=clip, served_at=now))
+                continue
+        else:
+            unit = assign_unit(conn, rng, rater_pk, t.kind, cfg["RATINGS_PER_CLIP"],
+                               current_app.extensions["rating_app"]["units"])
+            if unit is not None:
+                # Sides (pairwise) and page order (parallel) are drawn per trial; labels follow the order shown.
+                order = rng.sample(unit.clips, len(unit.clips))
+                conn.execute(insert(TrialClip), [{"trial_pk": t.id, "position": i, "label": LABELS[i], "clip_id": c}
+                                                 for i, c in enumerate(order)])
+                conn.execute(update(Trial).where(Trial.id == t.id).values(unit=unit.key, served_at=now))
+                continue
         # No clip left for this slot: drop it; the later rating trials move up one.
         conn.execute(update(Trial).where(Trial.id == t.id).values(released=True))
         conn.execute(update(Trial).where(Trial.rater_pk == rater_pk, Trial.phase == "rating",
@@ -241,12 +272,29 @@ def _serve(conn, rater_pk: int, now):
         conn.execute(update(Rater).where(Rater.id == rater_pk).values(n_rating=Rater.n_rating - 1))
 
 
-def _trial_reply(token, rater, trial):
-    return jsonify(trial={
-        "trial_id": trial.id, "clip_id": trial.clip_id,
-        "video_url": url_for("api.trial_video", token=token, trial_id=trial.id),
-        "phase": trial.phase, "index": trial.index,
-        "of": rater.n_training if trial.phase == "training" else rater.n_rating})
+def _trial_clips(conn, trial_pk):
+    return conn.execute(select(TrialClip.label, TrialClip.clip_id, TrialClip.video_at)
+                        .where(TrialClip.trial_pk == trial_pk).order_by(TrialClip.position)).all()
+
+
+def _trial_reply(token, rater, trial, conn=None):
+    out = {"trial_id": trial.id, "phase": trial.phase, "index": trial.index,
+           "of": rater.n_training if trial.phase == "training" else rater.n_rating}
+    design = current_app.config["STUDY_DESIGN"]
+    if design == "acr":
+        out.update(clip_id=trial.clip_id, video_url=url_for("api.trial_video", token=token, trial_id=trial.id))
+        return jsonify(trial=out)
+    own = engine().connect().execution_options(read_only=True) if conn is None else contextlib.nullcontext(conn)
+    with own as c:
+        shown = [{"clip_id": r.clip_id, "label": r.label,
+                  "video_url": url_for("api.clip_video", token=token, trial_id=trial.id, label=r.label)}
+                 for r in _trial_clips(c, trial.id)]
+    out["design"] = design
+    if design == "pairwise" and len(shown) == 2:
+        out.update(a=shown[0], b=shown[1])
+    else:
+        out["clips"] = shown
+    return jsonify(trial=out)
 
 
 # The two hot calls use Core statements on a plain connection (no ORM unit of work): they are what 200
@@ -267,7 +315,7 @@ def next_trial(token):
             return _expired_reply()
         trial = _serve(conn, rater.id, now) if rater.completed_at is None else None
         if trial is not None:
-            return _trial_reply(token, _rater(conn, token), trial)
+            return _trial_reply(token, _rater(conn, token), trial, conn)
         if rater.completed_at is None:
             if _rater(conn, token).n_rating == 0:
                 # Every slot was dropped (the study filled meanwhile): nothing was rated, so no code.
@@ -294,21 +342,73 @@ def trial_video(token, trial_id):
     return current_app.extensions["rating_app"]["videos"].response(t.clip_id)
 
 
-def required_ms(clip_id: str | None) -> int:
+@bp.get("/sessions/<token>/trials/<int(max=2147483647):trial_id>/clips/<any(A,B,C,D,E,F,G,H):label>.mp4")
+def clip_video(token, trial_id, label):
+    """One clip of a served pairwise or parallel trial, by the label the rater sees; the first request is
+    recorded per clip (an answer before every clip's video was fetched is flagged)."""
+    with engine().connect().execution_options(read_only=True) as conn, conn.begin():
+        rater = _rater(conn, token)
+        t = conn.execute(select(TrialClip.id, TrialClip.clip_id, TrialClip.video_at, Trial.released, Trial.served_at)
+                         .join(Trial, Trial.id == TrialClip.trial_pk)
+                         .where(Trial.id == trial_id, Trial.rater_pk == rater.id, TrialClip.label == label)).first()
+    if t is None or t.served_at is None or t.released:
+        abort(404, "unknown video")
+    if t.video_at is None:
+        with engine().begin() as conn:
+            conn.execute(update(TrialClip).where(TrialClip.id == t.id, TrialClip.video_at.is_(None))
+                         .values(video_at=utcnow()))
+    return current_app.extensions["rating_app"]["videos"].response(t.clip_id)
+
+
+def required_ms(clip_id: str | None, clip_ids=None) -> int:
     """The least time between serving a trial and its answer: the clip's duration (frames / fps from the
-    manifest) less a small tolerance, times MIN_VIEW (1 unless lowered for tests and simulations)."""
-    clip = current_app.extensions["rating_app"]["clips"].get(clip_id or "")
-    duration = clip.duration_ms if clip is not None and clip.duration_ms else 0
-    return int(current_app.config["MIN_VIEW"] * max(0, duration - TOLERANCE_MS))
+    manifest) less a small tolerance, times MIN_VIEW (1 unless lowered for tests and simulations). With
+    `clip_ids` (pairwise, parallel), the time every clip of the trial needs (designs.required_ms)."""
+    clips = current_app.extensions["rating_app"]["clips"]
+
+    def duration(cid):
+        clip = clips.get(cid or "")
+        return clip.duration_ms if clip is not None and clip.duration_ms else 0
+    if clip_ids:
+        total = design_required_ms(current_app.config["STUDY_DESIGN"], [duration(c) for c in clip_ids])
+    else:
+        total = duration(clip_id)
+    return int(current_app.config["MIN_VIEW"] * max(0, total - TOLERANCE_MS))
+
+
+ANSWER_FIELD = {"acr": "rating", "pairwise": "preference", "parallel": "ratings"}
+
+
+def _parse_answer(body, design, training, shown):
+    """The answer's value for this design: None for a familiarisation trial (which must send null)."""
+    name = ANSWER_FIELD[design]
+    if training:
+        if body.get(name) is not None:
+            abort(400, f"field '{name}' must be null for a familiarisation trial")
+        return None
+    if name not in body:
+        abort(400, f"missing field '{name}'")
+    if design == "acr":
+        return _int_field(body, "rating", 1, 5)
+    if design == "pairwise":
+        return _int_field(body, "preference", -2, 2)
+    ratings = body.get("ratings")
+    if not isinstance(ratings, dict):
+        abort(400, "field 'ratings' must be an object {clip_id: rating 0-100} for every clip of the page")
+    want = {r.clip_id for r in shown}
+    if set(ratings) != want:
+        abort(400, "field 'ratings' must rate every clip of the page, and only those")
+    return {cid: _int_field(ratings, cid, 0, 100) for cid in sorted(want)}
 
 
 @bp.post("/sessions/<token>/ratings")
 def post_rating(token):
-    body = json_body(("trial_id", "rating", "watched_ms"), required=("trial_id",))
+    cfg = current_app.config
+    design = cfg["STUDY_DESIGN"]
+    body = json_body(("trial_id", ANSWER_FIELD[design], "watched_ms"), required=("trial_id",))
     trial_id = _int_field(body, "trial_id", 1, 2**31 - 1)
     watched_ms = _int_field(body, "watched_ms", 0, MAX_WATCHED_MS, nullable=True)
     now = utcnow()
-    cfg = current_app.config
     with engine().begin() as conn:
         rater = _rater(conn, token, now)
         trial = conn.execute(select(Trial.id, Trial.phase, Trial.clip_id, Trial.position, Trial.answered_at,
@@ -317,12 +417,8 @@ def post_rating(token):
         if trial is None:
             abort(404, "unknown trial for this session")
         training = trial.phase == "training"
-        if training and body.get("rating") is not None:
-            abort(400, "field 'rating' must be null for a familiarisation trial")
-        if not training:
-            if "rating" not in body:
-                abort(400, "missing field 'rating'")
-            rating = _int_field(body, "rating", 1, 5)
+        shown = _trial_clips(conn, trial.id) if design != "acr" else []
+        rating = _parse_answer(body, design, training, shown)
         if trial.answered_at is not None:                       # a repeat: acknowledged, stored once
             return _duplicate(conn, trial.id, training)
         if _idle(rater, now):
@@ -334,7 +430,7 @@ def post_rating(token):
             and_(Trial.answered_at.is_(None), Trial.released.is_(False)), Trial.id == trial.id))).scalar()
         if trial.released or trial.served_at is None or trial.position != first:
             abort(409, "this trial has not been shown yet")
-        need = required_ms(trial.clip_id)
+        need = required_ms(trial.clip_id, [r.clip_id for r in shown])
         elapsed = (now - trial.served_at).total_seconds() * 1000
         if elapsed < need:
             conn.execute(update(Rater).where(Rater.id == rater.id).values(n_early=Rater.n_early + 1))
@@ -353,15 +449,40 @@ def post_rating(token):
         if claimed != 1:
             return _duplicate(conn, trial.id, training)
         if not training:
-            conn.execute(insert(Rating).values(trial_pk=trial.id, rater_pk=rater.id, clip_id=trial.clip_id,
-                                               rating=rating, watched_ms=watched_ms, submitted_at=now,
-                                               flags="" if trial.video_at else "no_video"))
+            _store(conn, design, trial, rater.id, shown, rating, watched_ms, now)
         return jsonify(stored=True), 201
 
 
+def _store(conn, design, trial, rater_pk, shown, value, watched_ms, now):
+    """Insert the answer, in the transaction that claimed the trial."""
+    if design == "acr":
+        conn.execute(insert(Rating).values(trial_pk=trial.id, rater_pk=rater_pk, clip_id=trial.clip_id,
+                                           rating=value, watched_ms=watched_ms, submitted_at=now,
+                                           flags="" if trial.video_at else "no_video"))
+        return
+    flags = "" if all(r.video_at for r in shown) else "no_video"
+    if design == "pairwise":
+        conn.execute(insert(Preference).values(trial_pk=trial.id, rater_pk=rater_pk, clip_a=shown[0].clip_id,
+                                               clip_b=shown[1].clip_id, preference=value, watched_ms=watched_ms,
+                                               submitted_at=now, flags=flags))
+    else:
+        conn.execute(insert(PageRating), [{"trial_pk": trial.id, "rater_pk": rater_pk, "clip_id": cid, "rating": v,
+                                           "watched_ms": watched_ms, "submitted_at": now, "flags": flags}
+                                          for cid, v in value.items()])
+
+
 def _duplicate(conn, trial_pk, training):
-    stored = None if training else conn.execute(select(Rating.rating).where(Rating.trial_pk == trial_pk)).scalar()
-    return jsonify(stored=False, duplicate=True, rating=stored), 200
+    design = current_app.config["STUDY_DESIGN"]
+    name = ANSWER_FIELD[design]
+    stored = None
+    if not training and design == "acr":
+        stored = conn.execute(select(Rating.rating).where(Rating.trial_pk == trial_pk)).scalar()
+    elif not training and design == "pairwise":
+        stored = conn.execute(select(Preference.preference).where(Preference.trial_pk == trial_pk)).scalar()
+    elif not training:
+        stored = dict(conn.execute(select(PageRating.clip_id, PageRating.rating)
+                                   .where(PageRating.trial_pk == trial_pk)).all()) or None
+    return jsonify(stored=False, duplicate=True, **{name: stored}), 200
 
 
 @bp.post("/sessions/<token>/events")

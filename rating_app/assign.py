@@ -8,6 +8,10 @@ A clip's cover = stored ratings + slots held, i.e. served and unanswered in a li
 most one slot, only once it has come that far, and only until it answers or expires: creating sessions, or
 polling GET next, holds nothing. A slot for which no test clip is left is dropped (the session gets shorter).
 
+Pairwise and parallel studies balance units instead of clips (designs.Unit: a pair of conditions of an item, or
+an item's page) by the same rules: a slot gets the least-covered unit still short of its target that the rater
+has not had, a unit's cover being its answered trials plus its held slots.
+
 A session expires when it has not answered anything for `slot_timeout_s` (polling is not progress); its
 unanswered slots are released and can never be answered, so no clip ever exceeds its target.
 """
@@ -19,6 +23,7 @@ import random
 from sqlalchemy import func, select, update
 
 from .db import Clip, Lock, Rater, Rating, Trial
+from .designs import REFERENCE, training_groups
 
 
 class StudyFull(Exception):
@@ -77,7 +82,8 @@ def plan_session(conn, rng: random.Random, target: int, clips_per_rater: int | N
         raise StudyFull("study full for now: the remaining clips are being rated by others; "
                         "please try again later")
     n_test = short if not clips_per_rater else min(clips_per_rater, short)
-    n_catch = conn.execute(select(func.count()).select_from(Clip).where(Clip.role == "catch")).scalar()
+    n_catch = conn.execute(select(func.count()).select_from(Clip).where(Clip.role == "catch",
+                                                                         Clip.condition != REFERENCE)).scalar()
     training = list(conn.execute(select(Clip.clip_id).where(Clip.role == "training").order_by(Clip.clip_id))
                     .scalars())
     rng.shuffle(training)
@@ -93,8 +99,53 @@ def assign_slot(conn, rng: random.Random, rater_pk: int, kind: str, target: int)
               .scalars())
     cov = coverage(conn)
     if kind == "catch":
-        catch = conn.execute(select(Clip.clip_id).where(Clip.role == "catch").order_by(Clip.clip_id)).scalars()
+        catch = conn.execute(select(Clip.clip_id).where(Clip.role == "catch", Clip.condition != REFERENCE)
+                             .order_by(Clip.clip_id)).scalars()
         left = [c for c in catch if c not in had]
         return rng.choice(left) if left else None
     short = sorted((d + h, rng.random(), c) for c, (d, h) in cov.items() if d + h < target and c not in had)
     return short[0][2] if short else None
+
+
+# ---------------------------------------------------------------------------------------- pairwise / parallel
+def unit_coverage(conn, units) -> dict[str, tuple[int, int]]:
+    """{unit key: (answered trials, held slots)} for every test unit."""
+    base = select(Trial.unit, func.count()).where(Trial.kind == "test", Trial.unit.is_not(None))
+    done = dict(conn.execute(base.where(Trial.answered_at.is_not(None)).group_by(Trial.unit)).all())
+    held = dict(conn.execute(base.where(Trial.answered_at.is_(None), Trial.released.is_(False))
+                             .group_by(Trial.unit)).all())
+    return {k: (done.get(k, 0), held.get(k, 0)) for k, u in units.items() if u.role == "test"}
+
+
+def units_full(conn, units, target: int) -> bool:
+    cov = unit_coverage(conn, units)
+    return bool(cov) and all(d >= target for d, _ in cov.values())
+
+
+def plan_units(conn, rng: random.Random, target: int, per_rater: int | None, design: str, clips, units):
+    """[(kind, training clips or None)] in presentation order for a new pairwise or parallel session."""
+    cov = unit_coverage(conn, units)
+    short = sum(d + h < target for d, h in cov.values())
+    if not short:
+        if all(d >= target for d, _ in cov.values()):
+            raise StudyFull("study full: every comparison has all its answers. Thank you for your interest")
+        raise StudyFull("study full for now: the remaining comparisons are being answered by others; "
+                        "please try again later")
+    n_test = short if not per_rater else min(per_rater, short)
+    n_catch = sum(u.role == "catch" for u in units.values())
+    rating = [("test", None)] * n_test + [("catch", None)] * n_catch
+    rng.shuffle(rating)
+    return [("training", g) for g in training_groups(design, clips, rng)] + rating
+
+
+def assign_unit(conn, rng: random.Random, rater_pk: int, kind: str, target: int, units):
+    """The Unit for a test or catch slot now being served, or None when none is left for this rater. Call under
+    `lock_assign`; both kinds run the same queries."""
+    had = set(conn.execute(select(Trial.unit).where(Trial.rater_pk == rater_pk, Trial.unit.is_not(None)))
+              .scalars())
+    cov = unit_coverage(conn, units)
+    if kind == "catch":
+        left = [u for k, u in sorted(units.items()) if u.role == "catch" and k not in had]
+        return rng.choice(left) if left else None
+    short = sorted((d + h, rng.random(), k) for k, (d, h) in cov.items() if d + h < target and k not in had)
+    return units[short[0][2]] if short else None

@@ -2,7 +2,9 @@
 
 One row per rater session (`Rater`), one per planned trial (`Trial`), one per stored rating (`Rating`,
 unique per trial so a repeated submission can never be counted twice), plus playback events and the
-clip table copied from the manifest (so an export needs only the database). The admin's logins and failed
+clip table copied from the manifest (so an export needs only the database). Pairwise and parallel trials show
+several clips (`TrialClip`) and store a `Preference` or one `PageRating` per clip; the study's design is a
+`StudySetting` row, so a restart can never mix designs in one database. The admin's logins and failed
 token guesses are rows too, so that every gunicorn worker sees a logout and a lockout at once.
 """
 from __future__ import annotations
@@ -85,6 +87,20 @@ class Trial(Base):
     # An expired session's unanswered slots, and a slot no clip was left for, are released: never served
     # and never answerable again.
     released: Mapped[bool] = mapped_column(Boolean, default=False)
+    # pairwise / parallel: the unit (designs.Unit.key) the slot got when served; its clips are TrialClip rows.
+    unit: Mapped[str | None] = mapped_column(String(400), nullable=True, index=True)
+
+
+class TrialClip(Base):
+    """One clip of a pairwise or parallel trial, in the order and under the label the rater sees (A, B, ...)."""
+    __tablename__ = "trial_clips"
+    __table_args__ = (UniqueConstraint("trial_pk", "position"),)
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    trial_pk: Mapped[int] = mapped_column(ForeignKey("trials.id"), index=True)
+    position: Mapped[int] = mapped_column(Integer)
+    label: Mapped[str] = mapped_column(String(4))
+    clip_id: Mapped[str] = mapped_column(ForeignKey("clips.clip_id"))
+    video_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)     # first video request
 
 
 class Rating(Base):
@@ -98,6 +114,43 @@ class Rating(Base):
     watched_ms: Mapped[int | None] = mapped_column(Integer, nullable=True)
     submitted_at: Mapped[dt.datetime] = mapped_column(DateTime)
     flags: Mapped[str] = mapped_column(String(64), default="")       # e.g. no_video (see export.FLAGS)
+
+
+class Preference(Base):
+    """A pairwise answer: 2 = A clearly more natural .. -2 = B clearly (A = the clip shown as A)."""
+    __tablename__ = "preferences"
+    __table_args__ = (CheckConstraint("preference BETWEEN -2 AND 2", name="preference_range"),)
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    trial_pk: Mapped[int] = mapped_column(ForeignKey("trials.id"), unique=True)   # stored once per trial
+    rater_pk: Mapped[int] = mapped_column(ForeignKey("raters.id"), index=True)
+    clip_a: Mapped[str] = mapped_column(ForeignKey("clips.clip_id"))
+    clip_b: Mapped[str] = mapped_column(ForeignKey("clips.clip_id"))
+    preference: Mapped[int] = mapped_column(Integer)
+    watched_ms: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    submitted_at: Mapped[dt.datetime] = mapped_column(DateTime)
+    flags: Mapped[str] = mapped_column(String(64), default="")
+
+
+class PageRating(Base):
+    """One clip's 0..100 rating on a parallel page; a page's rows are written in one transaction."""
+    __tablename__ = "page_ratings"
+    __table_args__ = (UniqueConstraint("trial_pk", "clip_id"),
+                      CheckConstraint("rating BETWEEN 0 AND 100", name="page_rating_range"))
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    trial_pk: Mapped[int] = mapped_column(ForeignKey("trials.id"), index=True)
+    rater_pk: Mapped[int] = mapped_column(ForeignKey("raters.id"), index=True)
+    clip_id: Mapped[str] = mapped_column(ForeignKey("clips.clip_id"), index=True)
+    rating: Mapped[int] = mapped_column(Integer)
+    watched_ms: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    submitted_at: Mapped[dt.datetime] = mapped_column(DateTime)
+    flags: Mapped[str] = mapped_column(String(64), default="")
+
+
+class StudySetting(Base):
+    """Settings fixed for the life of a study's database; `design` is written by the first start."""
+    __tablename__ = "study_settings"
+    name: Mapped[str] = mapped_column(String(32), primary_key=True)
+    value: Mapped[str] = mapped_column(String(200))
 
 
 class Event(Base):
@@ -220,14 +273,39 @@ def _init_lock(engine: Engine):
                 conn.commit()
 
 
-def init_db(engine: Engine, clips=None) -> None:
-    """Create the schema (idempotent) and upsert the manifest's clips."""
+def _add_missing_columns(engine: Engine) -> None:
+    """A database made before the designs existed lacks trials.unit: add it (NULL, as for every acr trial)."""
+    from sqlalchemy import inspect
+    if "unit" not in {c["name"] for c in inspect(engine).get_columns("trials")}:
+        with engine.begin() as conn:
+            conn.execute(text("ALTER TABLE trials ADD COLUMN unit VARCHAR(400)"))
+
+
+def study_design(conn) -> str | None:
+    """The design stored with the study, or None for a database that has none yet."""
+    return conn.execute(select(StudySetting.value).where(StudySetting.name == "design")).scalar()
+
+
+def init_db(engine: Engine, clips=None, design: str | None = None) -> None:
+    """Create the schema (idempotent), upsert the manifest's clips and store the study's design; AppError when
+    the database already holds a study of another design (a database that predates designs holds an acr one)."""
     from sqlalchemy.orm import Session
     with _init_lock(engine):
         Base.metadata.create_all(engine)
+        _add_missing_columns(engine)
         with Session(engine) as s, s.begin():
             if s.get(Lock, "assign") is None:
                 s.add(Lock(name="assign"))
+            if design is not None:
+                have = study_design(s)
+                if have is None and s.scalar(select(Rater.id).limit(1)) is not None:
+                    have = "acr"                     # sessions from before designs were stored
+                if have is not None and have != design:
+                    where = make_url(str(engine.url)).render_as_string(hide_password=True)
+                    raise AppError(f"the database {where} holds a {have} study; it cannot be served as {design} "
+                                   "(use another database, or --design " + have + ")")
+                if s.get(StudySetting, "design") is None:
+                    s.add(StudySetting(name="design", value=design))
             if clips:
                 have = {c.clip_id: c for c in s.scalars(select(Clip))}
                 for c in clips:

@@ -2,7 +2,8 @@
 
 Every text cell that a spreadsheet would take for a formula (starting with = + - @, a tab or a carriage
 return) is written with a leading apostrophe, so opening the export can never run anything a rater typed.
-The `flags` column marks ratings to look at before trusting them (FLAGS).
+The `flags` column marks ratings to look at before trusting them (FLAGS). Pairwise and parallel studies export
+their own files (design_export.py); `export_csv` picks the one for the design stored in the database.
 """
 from __future__ import annotations
 
@@ -13,7 +14,8 @@ from sqlalchemy import func, select
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
-from .db import Clip, Event, Rater, Rating, Trial
+from .db import Clip, Event, Rater, Rating, Trial, study_design
+from .designs import REFERENCE
 
 COLUMNS = ("rater_id", "clip_id", "condition", "rating", "role", "item", "trial_index", "watched_ms",
            "submitted_at", "external_id", "study_id", "rater_completed", "flags")
@@ -54,23 +56,32 @@ def iter_rows(s: Session):
 
 
 def export_csv(engine: Engine, out=None) -> str | int:
-    """Write ratings.csv to the file object `out` (returns the row count) or return it as a string."""
+    """Write the study's export (ratings.csv, or pairs.csv for pairwise) to the file object `out` (returns the row
+    count) or return it as a string."""
+    from .design_export import PAGE_COLUMNS, PAIR_COLUMNS, iter_page_rows, iter_pair_rows
     buf = out if out is not None else io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=COLUMNS, lineterminator="\n")
-    w.writeheader()
     n = 0
     with Session(engine.execution_options(read_only=True)) as s:
-        for row in iter_rows(s):
+        design = study_design(s) or "acr"
+        columns, rows = {"acr": (COLUMNS, iter_rows), "pairwise": (PAIR_COLUMNS, iter_pair_rows),
+                         "parallel": (PAGE_COLUMNS, iter_page_rows)}[design]
+        w = csv.DictWriter(buf, fieldnames=columns, lineterminator="\n")
+        w.writeheader()
+        for row in rows(s):
             w.writerow({k: cell(v) for k, v in row.items()})
             n += 1
     return n if out is not None else buf.getvalue()
 
 
-def progress(engine: Engine, target: int) -> dict:
-    """Counts for the dashboard: per clip, per condition, per rater (with catch failures)."""
+def progress(engine: Engine, target: int, design: str = "acr", units=None) -> dict:
+    """Counts for the dashboard: per clip (per unit in pairwise and parallel studies), per condition, per rater
+    (with catch failures)."""
+    if design != "acr":
+        return _progress_units(engine, target, design, units)
     with Session(engine.execution_options(read_only=True)) as s:
         clips = s.execute(select(Clip.clip_id, Clip.condition, Clip.role, Clip.item)
-                          .where(Clip.role != "training").order_by(Clip.role, Clip.condition, Clip.clip_id)).all()
+                          .where(Clip.role != "training", (Clip.role != "catch") | (Clip.condition != REFERENCE))
+                          .order_by(Clip.role, Clip.condition, Clip.clip_id)).all()
         # One pass over the ratings: count and sum per clip (condition means come from the exact sums).
         stats = {c: (n, int(total)) for c, n, total in s.execute(
             select(Rating.clip_id, func.count(), func.sum(Rating.rating)).group_by(Rating.clip_id))}
@@ -112,6 +123,14 @@ def progress(engine: Engine, target: int) -> dict:
                            "flags": flags})
         events = s.execute(select(Event.created_at, Event.kind, Event.detail).order_by(Event.id.desc())
                            .limit(50)).all()
+    return _summary(target, per_clip, per_cond, raters, events)
+
+
+def _events(s):
+    return s.execute(select(Event.created_at, Event.kind, Event.detail).order_by(Event.id.desc()).limit(50)).all()
+
+
+def _summary(target, per_clip, per_cond, raters, events):
     tests = [r for r in per_clip if r["role"] == "test"]
     return {
         "target": target,
@@ -121,7 +140,7 @@ def progress(engine: Engine, target: int) -> dict:
         "ratings_needed": target * len(tests),
         "full": bool(tests) and all(r["ratings"] >= target for r in tests),
         "per_clip": per_clip,
-        "per_condition": list(per_cond.values()),
+        "per_condition": list(per_cond.values()) if isinstance(per_cond, dict) else per_cond,
         "raters": raters,
         "raters_completed": sum(r["completed"] for r in raters),
         "raters_failed_catch": sum(r["catch_failures"] > 0 for r in raters),
@@ -129,3 +148,23 @@ def progress(engine: Engine, target: int) -> dict:
         "raters_expired": sum(r["expired"] for r in raters),
         "events": [{"at": a, "kind": k, "detail": d} for a, k, d in events],
     }
+
+
+def _progress_units(engine: Engine, target: int, design: str, units) -> dict:
+    from .design_export import progress_units
+    with Session(engine.execution_options(read_only=True)) as s:
+        p = progress_units(s, design, units or {}, target)
+        n_trials = dict(s.execute(select(Trial.rater_pk, func.count()).where(
+            Trial.phase == "rating", (Trial.released.is_(False)) | Trial.answered_at.is_not(None))
+            .group_by(Trial.rater_pk)).all())
+        raters = []
+        for r in s.scalars(select(Rater).order_by(Rater.id)):
+            nv = p["no_video"].get(r.rater_id, 0)
+            flags = [f for f, bad in (("too_fast", r.n_early), ("no_video", nv)) if bad]
+            raters.append({"rater_id": r.rater_id, "external_id": r.external_id or "", "started": r.created_at,
+                           "last_seen": r.last_seen, "completed": r.completed_at is not None,
+                           "expired": r.expired_at is not None, "rated": p["answers"].get(r.rater_id, 0),
+                           "of": n_trials.get(r.id, 0), "catch_failures": p["fails"].get(r.rater_id, 0),
+                           "early_answers": r.n_early, "ratings_without_video": nv, "flags": flags})
+        events = _events(s)
+    return _summary(target, p["per_clip"], p["per_condition"], raters, events)

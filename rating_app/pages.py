@@ -8,7 +8,7 @@ from flask import Blueprint, abort, current_app, jsonify, render_template, reque
 from sqlalchemy.orm import Session
 
 from .api import EXTERNAL
-from .assign import is_full
+from .assign import is_full, units_full
 
 bp = Blueprint("pages", __name__)
 
@@ -29,9 +29,13 @@ def index():
                 ids[key] = v
                 break
     ext = current_app.extensions["rating_app"]
+    cfg = current_app.config
     with Session(ext["engine"].execution_options(read_only=True)) as s:     # no write lock on SQLite
-        full = is_full(s, current_app.config["RATINGS_PER_CLIP"]) or not ext["clips"]
-    return render_template("study.html", ids=ids, full=full)
+        target = cfg["RATINGS_PER_CLIP"]
+        full = (is_full(s, target) if cfg["STUDY_DESIGN"] == "acr" else units_full(s, ext["units"], target)) \
+            or not ext["clips"]
+    return render_template("study.html", ids=ids, full=full, design=cfg["STUDY_DESIGN"],
+                           question=cfg["STUDY_QUESTION"])
 
 
 @bp.get("/videos/<name>")

@@ -29,10 +29,11 @@ def write_mp4(path, n_frames=6, size=64, fps=20, shade=0):
 
 
 def make_stimuli(folder, n_items=4, conditions=("NAT", "MG", "FL"), n_catch=2, n_training=3, n_frames=16,
-                 fps=20, metrics=True, seed=0) -> Path:
+                 fps=20, metrics=True, seed=0, catch_nat=False) -> Path:
     """Write manifest.csv (+ metrics.csv) with one short MP4 per clip; return the manifest path.
 
-    NAT/MG/FL share items; BAD clips are catch trials; training clips cover every condition."""
+    NAT/MG/FL share items; BAD clips are catch trials; training clips cover every condition. `catch_nat`: also the
+    NAT clip of each catch item (role catch), as make_stimuli writes it for pairwise and parallel catch trials."""
     folder = Path(folder)
     (folder / "videos").mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
@@ -51,6 +52,8 @@ def make_stimuli(folder, n_items=4, conditions=("NAT", "MG", "FL"), n_catch=2, n
             add(cond, "test", f"item{i:02d}")
     for i in range(n_catch):
         add("BAD", "catch", f"bad{i:02d}")
+        if catch_nat:
+            add("NAT", "catch", f"bad{i:02d}")
     for i in range(n_training):
         add((list(conditions) + ["BAD"])[i % (len(conditions) + 1)], "training", f"train{i:02d}")
     manifest = folder / "manifest.csv"

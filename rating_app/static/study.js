@@ -1,9 +1,13 @@
 // The rater's page: consent -> familiarisation -> rating trials -> completion, all through the JSON API.
-// No build step; plain browser JavaScript.
+// No build step; plain browser JavaScript. One page for every design (data-design): acr shows one clip and
+// 5 rating buttons; pairwise two clips A and B and 5 preference buttons; parallel a page of clips with a 0-100
+// slider each. An answer can be given only once every clip of the trial has played to the end.
 (function () {
   "use strict";
   var $ = function (id) { return document.getElementById(id); };
   var app = $("app");
+  var design = app.dataset.design || "acr";
+  var question = app.dataset.question || "How natural does this motion look?";
   var KEY = "rating_app_session";
   var token = null;
   var trial = null;          // the trial on screen
@@ -13,7 +17,7 @@
   var rateButtons = Array.prototype.slice.call(document.querySelectorAll("button.rate"));
 
   function show(id) {
-    ["welcome", "intro", "trial", "rating-intro", "done", "full", "error"].forEach(function (s) {
+    ["welcome", "intro", "trial", "pair", "page", "rating-intro", "done", "full", "error"].forEach(function (s) {
       $(s).hidden = (s !== id);
     });
     window.scrollTo(0, 0);
@@ -105,6 +109,8 @@
   }
 
   function present() {
+    if (design === "pairwise") { presentPair(); return; }
+    if (design === "parallel") { presentPage(); return; }
     lastPhase = trial.phase;
     answered = false;
     watchedMs = 0;
@@ -112,7 +118,7 @@
     var training = trial.phase === "training";
     $("phase-label").textContent = training ? "Example" : "Video";
     $("trial-count").textContent = trial.index + " of " + trial.of;
-    $("question").textContent = training ? "Just watch this example." : "How natural does this motion look?";
+    $("question").textContent = training ? "Just watch this example." : question;
     $("buttons").classList.toggle("training", training);
     $("continue").hidden = !training;
     $("continue").disabled = true;
@@ -166,10 +172,183 @@
     send(rating, 3);
   }
 
+  // ---------------------------------------------------------------- pairwise and parallel: several clips
+  // Each clip's playing time is added up; `ended` says which clips have played to the end at least once.
+  var multi = { videos: [], ended: [], starts: [] };
+  var FIELD = { acr: "rating", pairwise: "preference", parallel: "ratings" };
+
+  function stopMultiClock(i) {
+    if (multi.starts[i] !== null && multi.starts[i] !== undefined) {
+      watchedMs += performance.now() - multi.starts[i];
+      multi.starts[i] = null;
+    }
+  }
+
+  function watchVideo(v, i, label, onEnded) {
+    v.onplaying = function () { multi.starts[i] = performance.now(); };
+    v.onpause = function () { stopMultiClock(i); };
+    v.onended = function () { stopMultiClock(i); multi.ended[i] = true; onEnded(i); };
+    v.onerror = function () {
+      var e = v.error;
+      logEvent("video_error", "trial " + (trial && trial.trial_id) + " clip " + label + ": code " +
+               (e ? e.code : "?") + " " + (e && e.message ? e.message : ""));
+    };
+  }
+
+  function allEnded() {
+    return multi.ended.length > 0 && multi.ended.every(function (x) { return x; });
+  }
+
+  function playOnly(i) {
+    multi.videos.forEach(function (v, j) { if (j !== i && !v.paused) { v.pause(); } });
+    var v = multi.videos[i];
+    if (v.ended) { v.currentTime = 0; }
+    var p = v.play();
+    if (p && p.catch) { p.catch(function () {}); }
+  }
+
+  var prefButtons = Array.prototype.slice.call(document.querySelectorAll("button.pref"));
+
+  function presentPair() {
+    lastPhase = trial.phase;
+    answered = false;
+    watchedMs = 0;
+    var training = trial.phase === "training";
+    var pair = [trial.a, trial.b];
+    document.querySelectorAll("#pair .phase-label")[0].textContent = training ? "Example" : "Pair";
+    document.querySelectorAll("#pair .trial-count")[0].textContent = trial.index + " of " + trial.of;
+    $("pair-question").textContent = training ? "Just watch these examples." : question;
+    $("pref-buttons").classList.toggle("training", training);
+    $("pair-continue").hidden = !training;
+    $("pair-continue").disabled = true;
+    $("pair-replay").disabled = true;
+    $("pair-msg").hidden = true;
+    prefButtons.forEach(function (b) { b.disabled = true; });
+    show("pair");
+    // Side by side both play at once; one above the other (a phone) A plays, then B.
+    var oneAfterOther = window.matchMedia("(max-width: 700px)").matches;
+    multi = { videos: [$("video-a"), $("video-b")], ended: [false, false], starts: [null, null] };
+    multi.videos.forEach(function (v, i) {
+      watchVideo(v, i, i ? "B" : "A", function (j) {
+        if (oneAfterOther && j === 0 && !multi.ended[1]) { playOnly(1); }
+        if (allEnded()) {
+          $("pair-replay").disabled = false;
+          if (training) { $("pair-continue").disabled = false; }
+          else { prefButtons.forEach(function (b) { b.disabled = answered; }); }
+        }
+      });
+      v.onclick = function () { if (v.paused) { if (oneAfterOther) { playOnly(i); } else { v.play(); } } };
+      v.src = pair[i].video_url;
+      v.load();
+    });
+    var started = oneAfterOther ? [multi.videos[0].play()] : multi.videos.map(function (v) { return v.play(); });
+    started.forEach(function (p) {
+      if (p && p.catch) {
+        p.catch(function () { $("pair-msg").textContent = "Tap a video to play it."; $("pair-msg").hidden = false; });
+      }
+    });
+  }
+
+  function presentPage() {
+    lastPhase = trial.phase;
+    answered = false;
+    watchedMs = 0;
+    var training = trial.phase === "training";
+    document.querySelectorAll("#page .phase-label")[0].textContent = training ? "Example page" : "Page";
+    document.querySelectorAll("#page .trial-count")[0].textContent = trial.index + " of " + trial.of;
+    $("page-question").textContent = training ? "Just watch these examples: click each video to play it." : question;
+    $("page-submit").textContent = training ? "Next example" : "Submit";
+    $("page-submit").disabled = true;
+    var box = $("page-clips");
+    while (box.firstChild) { box.removeChild(box.firstChild); }
+    multi = { videos: [], ended: [], starts: [], sliders: [] };
+    trial.clips.forEach(function (c, i) {
+      var card = document.createElement("div");
+      card.className = "page-clip" + (training ? " training" : "");
+      var label = document.createElement("div");
+      label.className = "clip-label";
+      label.textContent = c.label;
+      var player = document.createElement("div");
+      player.className = "player";
+      var v = document.createElement("video");
+      v.muted = true;
+      v.setAttribute("playsinline", "");
+      v.setAttribute("disablepictureinpicture", "");
+      v.preload = "auto";
+      v.src = c.video_url;
+      player.appendChild(v);
+      var slider = document.createElement("input");
+      slider.type = "range";
+      slider.min = "0";
+      slider.max = "100";
+      slider.step = "1";
+      slider.value = "50";
+      slider.disabled = true;
+      slider.setAttribute("aria-label", "Rating of " + c.label + ", 0 to 100");
+      slider.dataset.clipId = c.clip_id;
+      var value = document.createElement("div");
+      value.className = "value";
+      value.textContent = "50";
+      slider.addEventListener("input", function () { value.textContent = slider.value; });
+      card.appendChild(label);
+      card.appendChild(player);
+      card.appendChild(slider);
+      card.appendChild(value);
+      box.appendChild(card);
+      multi.videos.push(v);
+      multi.ended.push(false);
+      multi.starts.push(null);
+      multi.sliders.push(slider);
+      watchVideo(v, i, c.label, function (j) {
+        multi.sliders[j].disabled = answered;
+        updatePageState();
+      });
+      v.addEventListener("play", function () { card.classList.add("playing"); });
+      v.addEventListener("pause", function () { card.classList.remove("playing"); });
+      v.addEventListener("click", function () { playOnly(i); });
+    });
+    updatePageState();
+    show("page");
+  }
+
+  function updatePageState() {
+    var left = multi.ended.filter(function (x) { return !x; }).length;
+    $("page-left").textContent = left ? left + " video" + (left > 1 ? "s" : "") + " still to play to the end" : "";
+    $("page-submit").disabled = answered || left > 0;
+  }
+
+  function answerMulti(value) {
+    if (answered) { return; }
+    answered = true;
+    prefButtons.forEach(function (b) { b.disabled = true; });
+    $("pair-continue").disabled = true;
+    $("page-submit").disabled = true;
+    (multi.sliders || []).forEach(function (s) { s.disabled = true; });
+    multi.videos.forEach(function (v, i) { stopMultiClock(i); });
+    send(value, 3);
+  }
+
+  prefButtons.forEach(function (b) {
+    b.addEventListener("click", function () { answerMulti(parseInt(b.dataset.preference, 10)); });
+  });
+  $("pair-continue").addEventListener("click", function () { answerMulti(null); });
+  $("pair-replay").addEventListener("click", function () {
+    var oneAfterOther = window.matchMedia("(max-width: 700px)").matches;
+    multi.videos.forEach(function (v) { v.currentTime = 0; });
+    if (oneAfterOther) { playOnly(0); } else { multi.videos.forEach(function (v) { v.play(); }); }
+  });
+  $("page-submit").addEventListener("click", function () {
+    if (trial.phase === "training") { answerMulti(null); return; }
+    var ratings = {};
+    multi.sliders.forEach(function (s) { ratings[s.dataset.clipId] = parseInt(s.value, 10); });
+    answerMulti(ratings);
+  });
+
   // 425: the server counts the clip as not yet played to the end (a slow start); wait as it says, then resend.
   function send(rating, early) {
-    api("POST", "/api/sessions/" + token + "/ratings",
-        { trial_id: trial.trial_id, rating: rating, watched_ms: Math.round(watchedMs) })
+    var body = { trial_id: trial.trial_id, watched_ms: Math.round(watchedMs) };
+    body[FIELD[design]] = rating;
+    api("POST", "/api/sessions/" + token + "/ratings", body)
       .then(function (r) {
         if (r.status === 201 || r.status === 200) { next(); }
         else if (r.status === 425 && early > 0) {

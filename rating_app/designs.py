@@ -1,0 +1,145 @@
+"""The three test designs (CONTRACTS §8) and the units a study balances over.
+
+A study's design decides what one trial shows and what its answer is:
+- `acr`: one clip, a rating 1..5 (CONTRACTS §5-6; the unit is the clip);
+- `pairwise`: two clips of one item from two conditions, labelled A and B, a preference -2..2; the unit is
+  (item, condition pair), so every pair of conditions of every item reaches its target separately;
+- `parallel`: every condition's clip of one item on one page (MUSHRA-like), labelled A, B, C..., a rating 0..100
+  each; the unit is the item (its page).
+Units are derived from the manifest alone (the same on every worker and after every restart), and named by a key
+that is stored with each trial, so coverage is counted per unit in the database.
+
+Catch units: pairwise pairs each BAD clip of a catch item with the NAT clip of the same item; a parallel catch
+page holds every clip of a catch item (NAT and BAD). make_stimuli writes the NAT clip of each catch item with
+role `catch` for this; in `acr` that NAT clip is never served (only the bad examples are catch trials there).
+"""
+from __future__ import annotations
+
+import random
+from dataclasses import dataclass
+
+from .manifest import AppError
+
+DESIGNS = ("acr", "pairwise", "parallel")
+MAX_PAGE = 8                           # clips on a parallel page (labels A..H)
+LABELS = "ABCDEFGH"
+REFERENCE = "NAT"                      # the natural clip a catch trial compares the bad example with
+BAD = "BAD"
+QUESTIONS = {"acr": "How natural does this motion look?",
+             "pairwise": "Which motion looks more natural?",
+             "parallel": "How natural does each motion look?"}
+
+
+@dataclass(frozen=True)
+class Unit:
+    key: str                 # stored in trials.unit
+    role: str                # test | catch
+    item: str
+    clips: tuple[str, ...]   # clip ids (shuffled per trial when served)
+
+
+def check_design(design: str | None) -> str:
+    design = (design or "acr").strip()
+    if design not in DESIGNS:
+        raise AppError(f"design {design!r} must be one of {', '.join(DESIGNS)}")
+    return design
+
+
+def acr_catch(clip) -> bool:
+    """A catch trial of an acr study: a bad example, never the NAT reference a catch item also holds."""
+    return clip.role == "catch" and clip.condition != REFERENCE
+
+
+def _by_item(clips, role):
+    out: dict[str, dict[str, list]] = {}
+    for c in clips:
+        if c.role == role:
+            out.setdefault(c.item, {}).setdefault(c.condition, []).append(c.clip_id)
+    return out
+
+
+def build_units(design: str, clips) -> dict[str, Unit]:
+    """{key: Unit} of the test and catch units of a pairwise or parallel study; AppError when the manifest cannot
+    make that design (an item with one condition, a page over MAX_PAGE, a catch item without its NAT clip)."""
+    if design == "acr":
+        return {}
+    units: dict[str, Unit] = {}
+    tests, catches = _by_item(clips, "test"), _by_item(clips, "catch")
+    if not tests:
+        raise AppError("the manifest has no test clips")
+    for item, by_cond in sorted(tests.items()):
+        twice = [c for c, ids in by_cond.items() if len(ids) > 1]
+        if twice:
+            raise AppError(f"{design}: item {item!r} has {len(by_cond[twice[0]])} test clips of condition "
+                           f"{twice[0]}; a {design} study needs one clip per condition and item")
+        conds = sorted(by_cond)
+        if len(conds) < 2:
+            raise AppError(f"{design}: item {item!r} has test clips of one condition only ({conds[0]}); "
+                           "comparisons need at least two")
+        if design == "pairwise":
+            for i, a in enumerate(conds):
+                for b in conds[i + 1:]:
+                    units[f"pair:{item}:{a}:{b}"] = Unit(f"pair:{item}:{a}:{b}", "test", item,
+                                                         (by_cond[a][0], by_cond[b][0]))
+        else:
+            if len(conds) > MAX_PAGE:
+                raise AppError(f"parallel: item {item!r} has {len(conds)} conditions; a page shows at most "
+                               f"{MAX_PAGE}")
+            units[f"page:{item}"] = Unit(f"page:{item}", "test", item, tuple(by_cond[c][0] for c in conds))
+    for item, by_cond in sorted(catches.items()):
+        bads = [cid for cond, ids in sorted(by_cond.items()) if cond != REFERENCE for cid in ids]
+        if not bads:
+            continue
+        if REFERENCE not in by_cond:
+            raise AppError(f"{design}: catch item {item!r} has no {REFERENCE} clip to compare its bad example "
+                           "with; re-run generation.make_stimuli, which writes it (role catch)")
+        nat = by_cond[REFERENCE][0]
+        if design == "pairwise":
+            for k, bad in enumerate(bads):
+                units[f"catch:{item}:{k}"] = Unit(f"catch:{item}:{k}", "catch", item, (nat, bad))
+        else:
+            page = (nat, *bads)[:MAX_PAGE]
+            units[f"catchpage:{item}"] = Unit(f"catchpage:{item}", "catch", item, page)
+    return units
+
+
+def training_groups(design: str, clips, rng: random.Random) -> list[tuple[str, ...]]:
+    """Familiarisation trials of a session, in order: acr one clip each; pairwise two clips (of the same item
+    where an item has two, else two different clips); parallel one page per training item (items with a single
+    clip are pooled into pages of up to MAX_PAGE)."""
+    training = sorted((c for c in clips if c.role == "training"), key=lambda c: c.clip_id)
+    if design == "acr":
+        ids = [c.clip_id for c in training]
+        rng.shuffle(ids)
+        return [(c,) for c in ids]
+    by_item: dict[str, list[str]] = {}
+    for c in training:
+        by_item.setdefault(c.item, []).append(c.clip_id)
+    groups, single = [], []
+    for ids in by_item.values():
+        rng.shuffle(ids)
+        if design == "pairwise":
+            while len(ids) >= 2:
+                groups.append((ids.pop(), ids.pop()))
+            single += ids
+        elif len(ids) >= 2:
+            groups.append(tuple(ids[:MAX_PAGE]))
+        else:
+            single += ids
+    rng.shuffle(single)
+    size = 2 if design == "pairwise" else MAX_PAGE
+    for i in range(0, len(single), size):
+        chunk = tuple(single[i:i + size])
+        if len(chunk) == 1 and len(training) > 1:       # a lone clip is shown beside another training clip
+            chunk = (chunk[0], rng.choice([c.clip_id for c in training if c.clip_id != chunk[0]]))
+        groups.append(chunk)
+    rng.shuffle(groups)
+    return groups
+
+
+def required_ms(design: str, durations: list[int]) -> int:
+    """How long the clips of one trial take to play to the end: in pairwise the two clips can play at once
+    (side by side on a wide screen), so the longer one; a parallel page plays one clip at a time, so the sum."""
+    if not durations:
+        return 0
+    return sum(durations) if design == "parallel" else max(durations)
