@@ -30,29 +30,33 @@ class OrdinalError(ValueError):
     """The data cannot identify the ordinal model (one category, no variation to fit)."""
 
 
-def _link(theta_ext, y, eta):
+def _link(theta_ext, y, eta, third=True):
     """Log-probability of each rating and its derivatives in the two cut points a = theta_y - eta (upper) and
-    b = theta_{y-1} - eta (lower), up to third order. Infinite cut points (y = 1, y = K) give zero terms."""
+    b = theta_{y-1} - eta (lower), to second order (the Newton solve) or third (the gradient of log|H|).
+    Infinite cut points (y = 1, y = K) give zero terms. Products, not powers: numpy's float power is ~200x
+    slower than two multiplications, and this runs on every rating in every Newton step."""
     a = theta_ext[y + 1] - eta
     b = theta_ext[y] - eta
     Fa, Fb = expit(a), expit(b)
     Fna, Fnb = expit(-a), expit(-b)
     # P = F(a) - F(b) without cancellation: from the nearer tail
-    P = np.where(a + b > 0, Fnb - Fna, Fa - Fb)
-    P = np.maximum(P, 1e-300)
+    P = np.maximum(np.where(a + b > 0, Fnb - Fna, Fa - Fb), 1e-300)
     fa, fb = Fa * Fna, Fb * Fnb  # logistic density F(1 - F)
     la, lb = fa / P, -fb / P
     A2, B2 = fa * (Fna - Fa) / P, -fb * (Fnb - Fb) / P  # P_aa / P, P_bb / P (f' = f (1 - 2F))
-    A3, B3 = fa * (1 - 6 * fa) / P, -fb * (1 - 6 * fb) / P  # P_aaa / P, P_bbb / P (f'' = f (1 - 6f))
     laa, lbb, lab = A2 - la * la, B2 - lb * lb, -la * lb
-    laaa = A3 - 3 * A2 * la + 2 * la ** 3
-    lbbb = B3 - 3 * B2 * lb + 2 * lb ** 3
-    laab = -A2 * lb + 2 * la * la * lb
-    labb = -B2 * la + 2 * la * lb * lb
-    return {"logp": np.log(P), "la": la, "lb": lb, "laa": laa, "lbb": lbb, "lab": lab,
-            "l_eta": -(la + lb), "w": -(laa + 2 * lab + lbb),
-            "w_eta": laaa + 3 * laab + 3 * labb + lbbb,
-            "w_up": -(laaa + 2 * laab + labb), "w_low": -(laab + 2 * labb + lbbb)}
+    out = {"logp": np.log(P), "la": la, "lb": lb, "laa": laa, "lbb": lbb, "lab": lab, "l_eta": -(la + lb),
+           "w": -(laa + 2 * lab + lbb)}
+    if third:
+        A3, B3 = fa * (1 - 6 * fa) / P, -fb * (1 - 6 * fb) / P  # P_aaa / P, P_bbb / P (f'' = f (1 - 6f))
+        la2, lb2 = la * la, lb * lb
+        laaa = A3 - 3 * A2 * la + 2 * la2 * la
+        lbbb = B3 - 3 * B2 * lb + 2 * lb2 * lb
+        laab = (2 * la2 - A2) * lb
+        labb = (2 * lb2 - B2) * la
+        out.update(w_eta=laaa + 3 * laab + 3 * labb + lbbb, w_up=-(laaa + 2 * laab + labb),
+                   w_low=-(laab + 2 * labb + lbbb))
+    return out
 
 
 class _Design:
@@ -142,7 +146,7 @@ class _Laplace:
         th, beta, s_r, s_c = _unpack(d, phi)
         theta_ext = np.concatenate([[-np.inf], th, [np.inf]])
         u = self.u.copy()
-        q = _link(theta_ext, d.y, self._eta(beta, s_r, s_c, u))
+        q = _link(theta_ext, d.y, self._eta(beta, s_r, s_c, u), third=False)
         g = q["logp"].sum() - 0.5 * u @ u
         for _ in range(max_iter):
             grad = np.concatenate([s_r * np.bincount(d.rater, q["l_eta"], d.R),
@@ -153,7 +157,7 @@ class _Laplace:
             t = 1.0
             while True:
                 u_new = u + t * step
-                q_new = _link(theta_ext, d.y, self._eta(beta, s_r, s_c, u_new))
+                q_new = _link(theta_ext, d.y, self._eta(beta, s_r, s_c, u_new), third=False)
                 g_new = q_new["logp"].sum() - 0.5 * u_new @ u_new
                 if g_new >= g - 1e-12 * abs(g) or t < 1e-8:
                     break
@@ -161,6 +165,7 @@ class _Laplace:
             u, q, g = u_new, q_new, g_new
             if decrement < tol:
                 break
+        q = _link(theta_ext, d.y, self._eta(beta, s_r, s_c, u))  # third order, at the mode
         H = self._hessian(q, s_r, s_c)
         self.u = u
         return u, q, H, theta_ext
@@ -258,6 +263,8 @@ def _fit(y, X, rater, clip, names, K, level_names):
         gx[1:n_th] = np.exp(x[1:n_th]) * tail[1:]
         return val, gx
 
+    # BFGS from the identity: its first step is long (gradients ~ n) and the inner solve pays for it once, but
+    # starting from I / n (or scaling log L by 1 / n) took 60% more evaluations in all on 3k and 100k ratings
     res = optimize.minimize(objective, _to_free(d, start), jac=True, method="BFGS",
                             options={"gtol": 1e-7, "maxiter": 500})
     phi = _from_free(d, res.x)
