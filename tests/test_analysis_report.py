@@ -65,14 +65,17 @@ def frozen_run(tmp_path_factory):
     return out, doc
 
 
-VOLATILE = {"generated_at", "input"}
+VOLATILE = {"generated_at", "input", "max_abs_gradient", "n_evaluations"}  # the last two: optimiser diagnostics
 
 
 def _compare(got, want, path=""):
     """Every number within a tight tolerance; every string, bool, key and list length identical."""
-    # the REML and Laplace-ML optima are found to ~1e-9 in their parameters; allow for BLAS rounding there only
-    models = ("mixed_model", "ordinal_model")
-    rel = 1e-6 if path.startswith(models + tuple(f"without_exclusion.{m}" for m in models)) else 1e-9
+    # the REML optimum is found to ~1e-9 in the variance ratios, the Laplace-ML one to ~1e-8 (its standard errors
+    # from central differences of the gradient, its far-tail p-values amplify that): allow for rounding there only
+    rel = 1e-9
+    for model, tol in (("mixed_model", 1e-6), ("ordinal_model", 1e-5)):
+        if path.startswith((model, f"without_exclusion.{model}")):
+            rel = tol
     if isinstance(want, dict):
         assert set(got) == set(want), f"{path}: keys differ: {set(got) ^ set(want)}"
         for k in want:
