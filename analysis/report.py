@@ -398,7 +398,12 @@ def _prepare_out(out):
 def build_report(ratings_path, out_dir="report", metrics_path=None, threshold=DEFAULT_THRESHOLD, mixed=True,
                  seed=0, n_boot=2000, alpha=0.05, mixed_max_levels=MIXED_MAX_LEVELS, progress=True, quiet=False,
                  ordinal=True, ordinal_max_ratings=ORDINAL_MAX_RATINGS):
-    """Run the whole analysis; returns the stats.json document."""
+    """Run the whole analysis; returns the stats.json document. A pairwise or parallel file (CONTRACTS §8, told
+    by its columns) goes to analysis.design_report."""
+    from .design_report import build, detect_design
+    design = detect_design(ratings_path)
+    if design != "acr":
+        return build(ratings_path, out_dir, design, n_boot=n_boot, seed=seed, alpha=alpha, mixed=mixed, quiet=quiet)
     t0 = time.perf_counter()
     df = load_ratings(ratings_path)
     metrics = load_metrics(metrics_path) if metrics_path else None

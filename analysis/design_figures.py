@@ -1,0 +1,85 @@
+"""Figures of the pairwise and parallel reports, drawn from the tables of analysis.pairwise / analysis.parallel.
+
+preference_bars: one horizontal bar per pair of conditions, split into the five answer levels (as in the GENEA
+challenge reports): the left condition's clear and slight wins, no preference, the right condition's slight and
+clear wins; bradley_terry: log strengths with bootstrap intervals; parallel_boxplot: the 0-100 ratings per
+condition, with the means marked.
+"""
+from .figures import colours, plt, text, _save, STYLE
+
+LEVEL_COLOURS = ("#1b7837", "#7fbf7b", "#d9d9d9", "#af8dc3", "#762a83")
+LEVEL_NAMES = ("clearly", "slightly", "no preference", "slightly", "clearly")
+
+
+def preference_bars(pairs, path, title=None):
+    """Stacked shares of the five answer levels per pair; `pairs` from pairwise.pair_counts."""
+    keys = ("share_a_clearly", "share_a_slightly", "share_none", "share_b_slightly", "share_b_clearly")
+    with plt.rc_context(STYLE):
+        fig, ax = plt.subplots(figsize=(6.4, 0.55 * len(pairs) + 1.2))
+        for row_i, (_, r) in enumerate(pairs.iloc[::-1].iterrows()):
+            left = 0.0
+            for k, (key, colour) in enumerate(zip(keys, LEVEL_COLOURS)):
+                share = float(r[key])
+                ax.barh(row_i, share, left=left, color=colour, edgecolor="white", linewidth=0.5,
+                        label=None if row_i else (f"{'left' if k < 2 else 'right'} {LEVEL_NAMES[k]}"
+                                                  if k != 2 else LEVEL_NAMES[k]))
+                if share >= 0.07:
+                    ax.text(left + share / 2, row_i, f"{100 * share:.0f}", ha="center", va="center", fontsize=7)
+                left += share
+            ax.text(-0.01, row_i, text(r["condition_a"]), ha="right", va="center")
+            ax.text(1.01, row_i, f"{text(r['condition_b'])}  (n={int(r['n'])})", ha="left", va="center")
+        ax.set_yticks([])
+        ax.set_xlim(0, 1)
+        ax.set_xlabel("share of answers (%): preferred the left condition ... preferred the right condition")
+        ax.set_xticks([0, 0.25, 0.5, 0.75, 1])
+        ax.set_xticklabels(["0", "25", "50", "75", "100"])
+        ax.axvline(0.5, color="black", lw=0.6, ls=":")
+        ax.spines["left"].set_visible(False)
+        ax.legend(ncol=5, loc="lower center", bbox_to_anchor=(0.5, 1.0), frameon=False, fontsize=7)
+        if title:
+            ax.set_title(text(title), pad=24)
+        return _save(fig, path)
+
+
+def bradley_terry(bt, path, title=None):
+    """Log strengths (reference 0) with their bootstrap intervals, strongest on top."""
+    order = sorted(bt["strengths"], key=bt["strengths"].get)
+    col = colours(order)
+    with plt.rc_context(STYLE):
+        fig, ax = plt.subplots(figsize=(5.0, 0.45 * len(order) + 1.0))
+        for i, c in enumerate(order):
+            lo, hi = bt["ci"][c]
+            ax.plot([lo, hi], [i, i], color=col[c], lw=2)
+            ax.plot(bt["strengths"][c], i, "o", color=col[c])
+        ax.set_yticks(range(len(order)))
+        ax.set_yticklabels([text(c) for c in order])
+        ax.axvline(0, color="black", lw=0.6, ls=":")
+        ax.set_xlabel(f"log strength (Bradley-Terry-Davidson), {text(bt['reference'])} = 0; "
+                      f"{round(100 * bt['level'])}% bootstrap over raters")
+        if title:
+            ax.set_title(text(title))
+        return _save(fig, path)
+
+
+def parallel_boxplot(t, summary, path, title=None):
+    """Box plot of the 0-100 test ratings per condition (means as white diamonds)."""
+    conds = list(summary.index)
+    col = colours(conds)
+    with plt.rc_context(STYLE):
+        fig, ax = plt.subplots(figsize=(1.0 + 0.9 * len(conds), 3.6))
+        data = [t.loc[t["condition"] == c, "rating"].to_numpy() for c in conds]
+        box = ax.boxplot(data, patch_artist=True, widths=0.6, medianprops={"color": "black"},
+                         flierprops={"markersize": 2, "alpha": 0.4})
+        for patch, c in zip(box["boxes"], conds):
+            patch.set_facecolor(col[c])
+            patch.set_alpha(0.75)
+        ax.plot(range(1, len(conds) + 1), summary["mean"], "D", color="white", markeredgecolor="black",
+                markersize=5, label="mean")
+        ax.set_xticks(range(1, len(conds) + 1))
+        ax.set_xticklabels([text(c) for c in conds])
+        ax.set_ylim(-2, 102)
+        ax.set_ylabel("rating (0-100)")
+        ax.legend(frameon=False, loc="lower left")
+        if title:
+            ax.set_title(text(title))
+        return _save(fig, path)

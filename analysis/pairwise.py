@@ -1,0 +1,229 @@
+"""Statistics of a pairwise preference test (pairs.csv, CONTRACTS §8).
+
+Each answer compares two conditions of one item on a 5-level scale (2 = A clearly .. -2 = B clearly). Per pair of
+conditions: wins, ties and losses counted for the condition preferred whichever side it was shown on, the share of
+each answer level, and a two-sided sign test of wins against losses (ties dropped, as the sign test does), Holm-
+corrected over the pairs. Across pairs: a Bradley-Terry model with Davidson's (1970) extension for ties,
+
+    P(i over j) = pi_i / D,  P(tie) = nu sqrt(pi_i pi_j) / D,  D = pi_i + pi_j + nu sqrt(pi_i pi_j),
+
+fitted by maximum likelihood, with strengths log(pi) reported relative to NAT (or the first condition), so that a
+strength of -1 means e^-1 the odds of winning against NAT. Its 95% intervals come from a bootstrap over raters
+(raters resampled with replacement, all their answers kept together), because one rater's answers are not
+independent. Without ties in the data the tie parameter is left out (nu = 0: the plain Bradley-Terry model, which
+is a logistic regression on +-1 indicator columns).
+"""
+import math
+from itertools import combinations
+
+import numpy as np
+import pandas as pd
+from scipy import optimize
+from scipy import stats as sps
+
+from .load import AnalysisError, _read_csv
+
+REQUIRED = ("rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role")
+ROLES = ("test", "catch")
+LEVELS = (2, 1, 0, -1, -2)
+BAD, REFERENCE = "BAD", "NAT"
+MAX_STRENGTH = 30.0            # |log strength| bound: a condition that never wins goes to the bound, not to inf
+
+
+# ---------------------------------------------------------------------------------------------- file
+def load_pairs(path):
+    """pairs.csv -> DataFrame (index = file line). Each problem is one AnalysisError naming the file and line:
+    missing columns, empty fields, a preference that is not an integer -2..2, an unknown role, the same condition
+    on both sides, the same clip twice, a repeated comparison by one rater, no test rows."""
+    path, df = _read_csv(path)
+    missing = [c for c in REQUIRED if c not in df.columns]
+    if missing:
+        raise AnalysisError(f"{path}: missing required column{'s' if len(missing) > 1 else ''} "
+                            f"{', '.join(missing)} (header has: {', '.join(df.columns)})")
+    if len(df) == 0:
+        raise AnalysisError(f"{path}: no answers (header only)")
+    for col in REQUIRED:
+        df[col] = df[col].str.strip()
+        empty = df[col] == ""
+        if empty.any():
+            raise AnalysisError(f"{path}:{empty.idxmax()}: empty {col}")
+    ok = df["preference"].isin([str(v) for v in LEVELS] + ["+1", "+2"])
+    if not ok.all():
+        line = (~ok).idxmax()
+        raise AnalysisError(f"{path}:{line}: preference {df.at[line, 'preference']!r} is not an integer -2..2")
+    df["preference"] = df["preference"].astype(int)
+    df["role"] = df["role"].str.lower()
+    bad_role = ~df["role"].isin(ROLES)
+    if bad_role.any():
+        line = bad_role.idxmax()
+        raise AnalysisError(f"{path}:{line}: unknown role {df.at[line, 'role']!r} (expected test or catch)")
+    same = df["condition_a"] == df["condition_b"]
+    if same.any():
+        line = same.idxmax()
+        raise AnalysisError(f"{path}:{line}: condition {df.at[line, 'condition_a']} on both sides of a pair")
+    same = df["clip_a"] == df["clip_b"]
+    if same.any():
+        raise AnalysisError(f"{path}:{same.idxmax()}: clip {df.at[same.idxmax(), 'clip_a']} on both sides of a pair")
+    lo = np.where(df["clip_a"] < df["clip_b"], df["clip_a"], df["clip_b"])
+    hi = np.where(df["clip_a"] < df["clip_b"], df["clip_b"], df["clip_a"])
+    key = pd.Series(list(zip(df["rater_id"], lo, hi)), index=df.index)
+    dup = key.duplicated()
+    if dup.any():
+        line = dup.idxmax()
+        first = key[key == key[line]].index[0]
+        k = df.index.get_loc(line)
+        raise AnalysisError(f"{path}:{line}: rater {df.at[line, 'rater_id']} compared clips {lo[k]} and {hi[k]} "
+                            f"twice (first at line {first})")
+    if not (df["role"] == "test").any():
+        raise AnalysisError(f"{path}: no test answers (every row is a catch trial)")
+    return df
+
+
+# ---------------------------------------------------------------------------------------------- exclusion
+def failed_raters(df):
+    """Raters who preferred the BAD clip of any catch pair (either level)."""
+    c = df[df["role"] == "catch"]
+    fail = ((c["condition_a"] == BAD) & (c["preference"] > 0)) | ((c["condition_b"] == BAD) & (c["preference"] < 0))
+    return sorted(c.loc[fail, "rater_id"].unique().tolist())
+
+
+# ---------------------------------------------------------------------------------------------- counts
+def oriented(df):
+    """The test rows with each pair put in alphabetical order: columns rater_id, item, first, second, pref
+    (positive = `first` preferred)."""
+    t = df[df["role"] == "test"]
+    swap = (t["condition_a"] > t["condition_b"]).to_numpy()
+    return pd.DataFrame({"rater_id": t["rater_id"].to_numpy(), "item": t["item"].to_numpy(),
+                         "first": np.where(swap, t["condition_b"], t["condition_a"]),
+                         "second": np.where(swap, t["condition_a"], t["condition_b"]),
+                         "pref": np.where(swap, -t["preference"], t["preference"]).astype(int)}, index=t.index)
+
+
+def pair_counts(o, alpha=0.05):
+    """One row per pair of conditions (condition_a < condition_b): wins_a, wins_b, ties, n, the share of each
+    answer level (share_a_clearly .. share_b_clearly), and the two-sided sign test p with its Holm correction."""
+    rows = []
+    for (a, b), g in o.groupby(["first", "second"], sort=True):
+        p = g["pref"].to_numpy()
+        wins_a, wins_b, ties = int((p > 0).sum()), int((p < 0).sum()), int((p == 0).sum())
+        n_sign = wins_a + wins_b
+        sign_p = float(sps.binomtest(wins_a, n_sign, 0.5).pvalue) if n_sign else math.nan
+        rows.append({"condition_a": a, "condition_b": b, "wins_a": wins_a, "wins_b": wins_b, "ties": ties,
+                     "n": int(len(p)), "share_a": wins_a / len(p), "share_tie": ties / len(p),
+                     "share_b": wins_b / len(p),
+                     **{f"share_{name}": float((p == level).mean()) for name, level in
+                        zip(("a_clearly", "a_slightly", "none", "b_slightly", "b_clearly"), LEVELS)},
+                     "p": sign_p})
+    out = pd.DataFrame(rows)
+    from .stats import holm
+    ok = out["p"].notna().to_numpy() if len(out) else np.zeros(0, bool)
+    out["p_holm"] = np.nan
+    if ok.any():
+        out.loc[ok, "p_holm"] = holm(out.loc[ok, "p"].to_numpy())
+    out["reject"] = out["p_holm"] < alpha
+    return out
+
+
+# ---------------------------------------------------------------------------------------------- Bradley-Terry
+def _tables(o, conds):
+    """Per rater, per ordered pair (i < j): [wins of i, wins of j, ties] as an array [R, P, 3], plus the pairs."""
+    idx = {c: k for k, c in enumerate(conds)}
+    pairs = list(combinations(range(len(conds)), 2))
+    pos = {p: k for k, p in enumerate(pairs)}
+    raters, r_codes = np.unique(o["rater_id"].to_numpy(), return_inverse=True)
+    t = np.zeros((len(raters), len(pairs), 3))
+    i = o["first"].map(idx).to_numpy()
+    j = o["second"].map(idx).to_numpy()
+    p = o["pref"].to_numpy()
+    col = np.where(p > 0, 0, np.where(p < 0, 1, 2))
+    np.add.at(t, (r_codes, [pos[(a, b)] for a, b in zip(i, j)], col), 1)
+    return t, np.array(pairs, dtype=int)
+
+
+def _negloglik(params, counts, pairs, ref, k, ties):
+    """Davidson's tie model (nu = exp(params[-1])) or plain Bradley-Terry; returns (value, gradient)."""
+    theta = np.zeros(k)
+    free = [c for c in range(k) if c != ref]
+    theta[free] = params[:k - 1]
+    i, j = pairs[:, 0], pairs[:, 1]
+    w, lost, t = counts[:, 0], counts[:, 1], counts[:, 2]
+    ti, tj = theta[i], theta[j]
+    if ties:
+        lognu = params[-1]
+        terms = np.stack([ti, tj, lognu + 0.5 * (ti + tj)])
+    else:
+        terms = np.stack([ti, tj])
+    lse = np.logaddexp.reduce(terms, axis=0)
+    n = w + lost + t
+    ll = w * ti + lost * tj - n * lse
+    if ties:
+        ll = ll + t * (lognu + 0.5 * (ti + tj))
+    prob = np.exp(terms - lse)                     # P(i), P(j), P(tie)
+    d_ti = w - n * prob[0]
+    d_tj = lost - n * prob[1]
+    if ties:
+        d_ti = d_ti + 0.5 * (t - n * prob[2])
+        d_tj = d_tj + 0.5 * (t - n * prob[2])
+    g_theta = np.zeros(k)
+    np.add.at(g_theta, i, d_ti)
+    np.add.at(g_theta, j, d_tj)
+    grad = list(g_theta[free])
+    if ties:
+        grad.append(float(np.sum(t - n * prob[2])))
+    return -float(ll.sum()), -np.array(grad)
+
+
+def fit_bradley_terry(counts, pairs, conds, reference=None, ties=None):
+    """ML fit on pair counts [P, 3] (wins of the first, wins of the second, ties) ->
+    {"strengths": {cond: log strength, reference 0}, "nu": tie parameter or 0, "log_likelihood", "converged"}."""
+    k = len(conds)
+    ref = conds.index(reference) if reference in conds else 0
+    ties = bool(counts[:, 2].sum() > 0) if ties is None else ties
+    x0 = np.zeros(k - 1 + ties)
+    bounds = [(-MAX_STRENGTH, MAX_STRENGTH)] * (k - 1) + ([(-20.0, 5.0)] if ties else [])
+    res = optimize.minimize(_negloglik, x0, args=(counts, pairs, ref, k, ties), jac=True, method="L-BFGS-B",
+                            bounds=bounds, options={"maxiter": 2000, "ftol": 1e-13, "gtol": 1e-9})
+    theta = np.zeros(k)
+    theta[[c for c in range(k) if c != ref]] = res.x[:k - 1]
+    return {"strengths": {c: float(theta[n]) for n, c in enumerate(conds)},
+            "nu": float(math.exp(res.x[-1])) if ties else 0.0, "log_likelihood": -float(res.fun),
+            "converged": bool(res.success), "reference": conds[ref]}
+
+
+def bradley_terry(o, n_boot=1000, seed=0, level=0.95):
+    """The Davidson-Bradley-Terry fit on the oriented test rows, with percentile intervals from a bootstrap over
+    raters. -> dict strengths, ci {cond: [low, high]}, nu, reference, log_likelihood, converged, n_boot."""
+    conds = sorted(set(o["first"]) | set(o["second"]))
+    reference = REFERENCE if REFERENCE in conds else conds[0]
+    tables, pairs = _tables(o, conds)
+    total = tables.sum(axis=0)
+    ties = bool(total[:, 2].sum() > 0)
+    fit = fit_bradley_terry(total, pairs, conds, reference, ties)
+    rng = np.random.default_rng(seed)
+    n_r = tables.shape[0]
+    boot = np.full((n_boot, len(conds)), np.nan)
+    flat = tables.reshape(n_r, -1)
+    for b in range(n_boot):
+        w = np.bincount(rng.integers(0, n_r, n_r), minlength=n_r).astype(float)
+        c = (w @ flat).reshape(total.shape)
+        f = fit_bradley_terry(c, pairs, conds, reference, ties)
+        boot[b] = [f["strengths"][x] for x in conds]
+    lo, hi = 100 * (1 - level) / 2, 100 * (1 + level) / 2
+    ci = {c: [float(np.percentile(boot[:, n], lo)), float(np.percentile(boot[:, n], hi))]
+          for n, c in enumerate(conds)}
+    return {**fit, "ci": ci, "n_boot": n_boot, "seed": seed, "level": level,
+            "method": ("Bradley-Terry with Davidson's tie parameter, maximum likelihood" if ties else
+                       "Bradley-Terry (no ties in the data), maximum likelihood")
+            + "; percentile intervals from a bootstrap over raters"}
+
+
+def analyse(df, n_boot=1000, seed=0, alpha=0.05):
+    """All pairwise statistics of the test rows of `df` (catch rows never enter them)."""
+    o = oriented(df)
+    conds = sorted(set(o["first"]) | set(o["second"]))
+    if len(conds) < 2:
+        raise AnalysisError(f"the test rows compare {len(conds)} condition; comparisons need at least 2")
+    counts = pair_counts(o, alpha)
+    bt = bradley_terry(o, n_boot=n_boot, seed=seed)
+    return {"n_test_answers": int(len(o)), "n_raters": int(o["rater_id"].nunique()),
+            "n_items": int(o["item"].nunique()), "pairs": counts, "bradley_terry": bt}
