@@ -1,0 +1,85 @@
+"""Quality against training steps: every checkpoint of training runs, scored on the test split against NAT.
+
+    python bench/quality_curve.py --data runs/dataset.npz --run MG=runs/mg_cpu --run FL=runs/fl_cpu \
+        [--every 1000] [--figure bench/figures/quality_vs_steps.png]
+
+For each checkpoint whose step is a multiple of --every: the medians over the test split of foot skating and jerk
+as ratios to NAT's on the same windows, the median control following (m) and the worst category's late stepping
+(bench/sample_quality.py's figures), printed as a table and drawn against the step on log axes with the targets
+(skating 3x, jerk 2x) as lines. Temperature 1, seed 0, as make_stimuli samples.
+"""
+import argparse
+import statistics
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from sample_quality import clip_figures  # noqa: E402
+
+from generation.make_stimuli import checkpoints_in  # noqa: E402
+from generation.sample import load_model, sample_split  # noqa: E402
+
+TARGETS = {"skating": 3.0, "jerk": 2.0}
+
+
+def score(x, nat, c, labels, fps):
+    figs = [clip_figures(x[i], c[i], fps) for i in range(len(c))]
+    ref = [clip_figures(nat[i], c[i], fps) for i in range(len(c))]
+    med = lambda f, k: statistics.median(v[k] for v in f)  # noqa: E731
+    worst = min(statistics.median(figs[i]["stepping"] / max(ref[i]["stepping"], 1e-6)
+                                  for i in range(len(c)) if labels[i] == cat) for cat in set(labels.tolist()))
+    return dict(skating=med(figs, "skating") / med(ref, "skating"), jerk=med(figs, "jerk") / med(ref, "jerk"),
+                following=med(figs, "following"), stepping=worst)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", required=True)
+    ap.add_argument("--run", action="append", required=True, metavar="NAME=RUN_DIR")
+    ap.add_argument("--every", type=int, default=1000)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--figure", default=None)
+    a = ap.parse_args()
+    torch.set_num_threads(a.threads)
+    with np.load(a.data) as d:
+        nat, c, labels, fps = d["test_x"], d["test_c"], d["test_labels"], float(d["fps"])
+    curves = {}
+    print("| run | step | valid NLL | skating / NAT | jerk / NAT | following (m) | late stepping / NAT, worst category |")
+    print("|---|---|---|---|---|---|---|")
+    for spec in a.run:
+        name, _, folder = spec.partition("=")
+        for ckpt in checkpoints_in(folder):
+            model = load_model(ckpt, "cpu")
+            if model.step % a.every:
+                continue
+            x, _ = sample_split(model, a.data, "test", temperature=1.0, seed=0)
+            s = score(x, nat, c, labels, fps)
+            curves.setdefault(name, []).append((model.step, s))
+            valid = torch.load(ckpt, map_location="cpu", weights_only=False)["valid_nll"]
+            print(f"| {name} | {model.step} | {valid:.3f} | {s['skating']:.1f} | {s['jerk']:.2f} | "
+                  f"{s['following']:.3f} | {s['stepping']:.2f} |", flush=True)
+    if a.figure:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        fig, axes = plt.subplots(1, 2, figsize=(9, 3.4))
+        for ax, key in zip(axes, ("skating", "jerk")):
+            for name, points in curves.items():
+                ax.plot([p[0] for p in points], [p[1][key] for p in points], "o-", label=name)
+            ax.axhline(TARGETS[key], color="grey", ls="--", lw=1, label=f"target {TARGETS[key]:g}x")
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_xlabel("training steps (batches of 32)")
+            ax.set_ylabel(f"{'foot skating' if key == 'skating' else 'jerk'} / NAT's")
+            ax.legend(fontsize=7)
+        fig.tight_layout()
+        fig.savefig(a.figure, dpi=90)
+        print(f"figure -> {a.figure}")
+
+
+if __name__ == "__main__":
+    main()
