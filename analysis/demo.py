@@ -7,6 +7,10 @@ Every stage is a real process talking through the files and HTTP API of CONTRACT
 researcher would run them by hand. Everything started here is stopped at the end, also on Ctrl-C or error.
 
     python -m analysis.demo [--out demo/] [--db postgresql://127.0.0.1:5432/test] [--raters 60]
+                            [--design acr|pairwise|parallel]
+
+With --design pairwise or parallel the app runs that test design (CONTRACTS §8), the crowd answers it, the export is
+pairs.csv (pairwise) or the parallel ratings.csv, and the report is that design's.
 """
 from __future__ import annotations
 
@@ -113,7 +117,8 @@ def _export(url: str, token: str, out: Path) -> None:
 
 def run_demo(out: Path, db: str | None = None, raters: int = 200, seed: int = 0, careless: float = 0.1,
              ratings_per_clip: int = 20, clips_per_rater: int | None = 30, gunicorn: bool = False,
-             stimuli: Path | None = None, timeout_s: float = 1800.0, min_view: float = 0.01) -> dict:
+             stimuli: Path | None = None, timeout_s: float = 1800.0, min_view: float = 0.01,
+             design: str = "acr") -> dict:
     """Run the study; returns paths and the crowd's summary. `stimuli` reuses an existing folder."""
     out = Path(out)
     logs = out / "logs"
@@ -143,12 +148,12 @@ def run_demo(out: Path, db: str | None = None, raters: int = 200, seed: int = 0,
         # The crowd runs on loopback (one address) and should not take 4 s per clip: lift the per-address session
         # limit and lower the minimum viewing time (the dashboard says so); the crowd still waits as required.
         serve_opts = ["--ratings-per-clip", str(ratings_per_clip), "--min-view", str(min_view),
-                      "--sessions-per-client", "0"]
+                      "--sessions-per-client", "0", "--design", design]
         if clips_per_rater:
             serve_opts += ["--clips-per-rater", str(clips_per_rater)]
         if gunicorn:
             env.update(RATING_MANIFEST=str(manifest), DATABASE_URL=db, RATINGS_PER_CLIP=str(ratings_per_clip),
-                       MIN_VIEW=str(min_view), SESSIONS_PER_CLIENT="0")
+                       MIN_VIEW=str(min_view), SESSIONS_PER_CLIENT="0", STUDY_DESIGN=design)
             if clips_per_rater:
                 env["CLIPS_PER_RATER"] = str(clips_per_rater)
             cmd = [py, "-m", "gunicorn", "-w", "2", "--threads", "4", "-b", f"127.0.0.1:{port}", "rating_app.wsgi:app"]
@@ -164,6 +169,7 @@ def run_demo(out: Path, db: str | None = None, raters: int = 200, seed: int = 0,
         summary_path = out / "crowd_summary.json"
         procs.run([py, "-m", "rating_app", "simulate", "--url", url, "--raters", str(raters), "--seed", str(seed),
                    "--careless", str(careless), "--manifest", str(manifest), "--summary", str(summary_path),
+                   "--design", design,
                    "--timeout", str(max(60.0, timeout_s - (time.monotonic() - t0)))],
                   "the simulated crowd", env=env)
         summary = json.loads(summary_path.read_text())
@@ -171,15 +177,15 @@ def run_demo(out: Path, db: str | None = None, raters: int = 200, seed: int = 0,
             raise DemoError(f"the crowd of {raters} raters did not fill every clip's {ratings_per_clip} ratings; "
                             "raise --raters")
 
-        _stage("4/5 export ratings.csv")
-        ratings = out / "ratings.csv"
+        ratings = out / ("pairs.csv" if design == "pairwise" else "ratings.csv")
+        _stage(f"4/5 export {ratings.name}")
         _export(url, token, ratings)
         procs.stop_all()
 
         _stage(f"5/5 report → {out / 'report'}")
         metrics = Path(stimuli) / "metrics.csv"
         cmd = [py, "-m", "analysis.report", str(ratings), "--out", str(out / "report")]
-        if metrics.is_file():
+        if metrics.is_file() and design == "acr":
             cmd += ["--metrics", str(metrics)]
         procs.run(cmd, "analysis.report")
     finally:
@@ -190,8 +196,10 @@ def run_demo(out: Path, db: str | None = None, raters: int = 200, seed: int = 0,
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m analysis.demo", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    from core.cli import ArgumentParser
+    from rating_app.designs import DESIGNS
+    p = ArgumentParser(prog="python -m analysis.demo", description=__doc__,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="demo", help="folder for everything the demo makes (default demo/)")
     p.add_argument("--db", default=None, help="database URL (default an SQLite file in --out), e.g. "
                                                "postgresql://127.0.0.1:5432/test")
@@ -204,11 +212,15 @@ def main(argv=None) -> int:
     p.add_argument("--gunicorn", action="store_true", help="serve with gunicorn (2 workers) instead of Flask's server")
     p.add_argument("--min-view", type=float, default=0.01,
                    help="the app's MIN_VIEW: share of each clip the crowd must wait before answering (default 0.01)")
+    p.add_argument("--design", choices=DESIGNS, default="acr",
+                   help="test design: acr (one clip, 1-5; default), pairwise (two clips, a preference) or parallel "
+                        "(every condition of an item on one page, 0-100); targets count pairs or pages")
     a = p.parse_args(argv)
     try:
         run_demo(Path(a.out), db=a.db, raters=a.raters, seed=a.seed, careless=a.careless,
                  ratings_per_clip=a.ratings_per_clip, clips_per_rater=a.clips_per_rater or None,
-                 gunicorn=a.gunicorn, stimuli=Path(a.stimuli) if a.stimuli else None, min_view=a.min_view)
+                 gunicorn=a.gunicorn, stimuli=Path(a.stimuli) if a.stimuli else None, min_view=a.min_view,
+                 design=a.design)
     except DemoError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

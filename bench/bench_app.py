@@ -1,13 +1,17 @@
 """Latency of the rating POST and the next-trial GET with 200 concurrent raters, gunicorn on this machine.
 
     python bench/bench_app.py [--raters 200] [--duration 30] [--think 2.0] [--db sqlite|postgres|URL]
-        [--workers 4] [--threads 16] [--json out.json]
+        [--workers 4] [--threads 16] [--json out.json] [--design acr|pairwise|parallel]
 
 A real gunicorn process (gthread workers) serves a paper-sized study (30 items x NAT/MG/FL + 4 catch + 4
 training clips, real MP4s) from a fresh PostgreSQL schema (or SQLite file). Each simulated rater keeps one
 keep-alive connection and loops: GET next -> pause (exponential, mean --think seconds, standing in for watching
 the clip and deciding) -> POST the rating. Latencies are client-side wall times (http.client, no retries);
 the first --warmup seconds are discarded. Target: p99 <= 100 ms, 0 errors.
+
+--design pairwise / parallel runs that test design (CONTRACTS §8): each answer is a preference for the trial's two
+clips, or a 0-100 rating of every clip of its page (one POST per page); the stimuli then include the NAT clip of
+each catch item. The answer POST is reported as "rating" in every design.
 """
 from __future__ import annotations
 
@@ -29,6 +33,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from core import cli  # noqa: E402
+from rating_app.designs import DESIGNS  # noqa: E402
 from rating_app.testing import free_port, make_stimuli, pg_schema  # noqa: E402
 
 
@@ -49,8 +55,9 @@ def start_server(port, env, workers, threads, log):
 
 
 class Rater(threading.Thread):
-    def __init__(self, port, i, stop_at, warm_at, think, rec, lock, errors):
+    def __init__(self, port, i, stop_at, warm_at, think, rec, lock, errors, design="acr"):
         super().__init__(daemon=True)
+        self.design = design
         self.port, self.i, self.stop_at, self.warm_at, self.think = port, i, stop_at, warm_at, think
         self.rec, self.lock, self.errors = rec, lock, errors
         self.rng = random.Random(i)
@@ -107,10 +114,18 @@ class Rater(threading.Thread):
             time.sleep(min(self.rng.expovariate(1.0 / self.think), 10 * self.think) if self.think else 0)
             if time.monotonic() >= self.stop_at:
                 return
-            rating = None if t["phase"] == "training" else self.rng.randint(1, 5)
             status, body, dt = self.call("POST", f"/api/sessions/{token}/ratings",
-                                         {"trial_id": t["trial_id"], "rating": rating, "watched_ms": 4000})
-            self.record("rating" if rating is not None else "training_ack", status, (201,), dt)
+                                         {"trial_id": t["trial_id"], "watched_ms": 4000, **self.answer(t)})
+            self.record("training_ack" if t["phase"] == "training" else "rating", status, (201,), dt)
+
+    def answer(self, t):
+        """The answer field of the design, null for a familiarisation trial."""
+        training = t["phase"] == "training"
+        if self.design == "pairwise":
+            return {"preference": None if training else self.rng.randint(-2, 2)}
+        if self.design == "parallel":
+            return {"ratings": None if training else {c["clip_id"]: self.rng.randint(0, 100) for c in t["clips"]}}
+        return {"rating": None if training else self.rng.randint(1, 5)}
 
 
 def stats(xs):
@@ -123,7 +138,8 @@ def stats(xs):
 
 
 def main():
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = cli.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--design", choices=DESIGNS, default="acr", help="test design to serve and answer (acr)")
     p.add_argument("--raters", type=int, default=200)
     p.add_argument("--duration", type=float, default=30.0, help="seconds of measurement after the warm-up")
     p.add_argument("--warmup", type=float, default=10.0, help="seconds discarded (raters arrive over --ramp)")
@@ -140,12 +156,13 @@ def main():
     stim = Path(a.stimuli) if a.stimuli else tmp / "stimuli"
     manifest = stim / "manifest.csv"
     if not manifest.is_file():
-        manifest = make_stimuli(stim, n_items=30, n_catch=4, n_training=4, n_frames=20)
+        manifest = make_stimuli(stim, n_items=30, n_catch=4, n_training=4, n_frames=20, catch_nat=True)
     ctx = pg_schema() if a.db == "postgres" else None
     url = ctx.__enter__() if ctx else (f"sqlite:///{tmp}/ratings.sqlite" if a.db == "sqlite" else a.db)
     port = free_port()
     env = dict(os.environ, RATING_MANIFEST=str(manifest), DATABASE_URL=url, ADMIN_TOKEN="bench",
-               RATINGS_PER_CLIP="100000", MIN_VIEW="0", SESSIONS_PER_CLIENT="0")   # every rater is on loopback
+               RATINGS_PER_CLIP="100000", MIN_VIEW="0", SESSIONS_PER_CLIENT="0",   # every rater is on loopback
+               STUDY_DESIGN=a.design)
     log = open(tmp / "gunicorn.log", "w")
     proc = start_server(port, env, a.workers, a.threads, log)
     rec = {"session": [], "next": [], "rating": [], "training_ack": []}
@@ -153,7 +170,7 @@ def main():
     try:
         t0 = time.monotonic()
         warm_at, stop_at = t0 + a.warmup, t0 + a.warmup + a.duration
-        raters = [Rater(port, i, stop_at, warm_at, a.think, rec, lock, errors) for i in range(a.raters)]
+        raters = [Rater(port, i, stop_at, warm_at, a.think, rec, lock, errors, a.design) for i in range(a.raters)]
         for r in raters:                       # participants arrive over --ramp seconds
             r.start()
             time.sleep(a.ramp / a.raters)
@@ -167,7 +184,8 @@ def main():
         if ctx:
             ctx.__exit__(None, None, None)
     measured = len(rec["next"]) + len(rec["rating"]) + len(rec["training_ack"])
-    out = {"raters": a.raters, "think_s": a.think, "db": a.db if a.db in ("sqlite", "postgres") else "url",
+    out = {"design": a.design, "raters": a.raters, "think_s": a.think,
+           "db": a.db if a.db in ("sqlite", "postgres") else "url",
            "workers": a.workers, "threads": a.threads, "duration_s": a.duration,
            "throughput_rps": round(measured / max(wall, 1e-9), 1), "errors": len(errors),
            "error_examples": errors[:5], "load_avg_1min": round(os.getloadavg()[0], 2), "cpus": os.cpu_count(),
@@ -175,7 +193,8 @@ def main():
            "session": stats(rec["session"])}
     print(json.dumps(out, indent=1))
     ok = out["errors"] == 0 and out["next"].get("p99_ms", 1e9) <= 100 and out["rating"].get("p99_ms", 1e9) <= 100
-    print(f"| {a.db} | {a.raters} | {a.think} | {a.workers}x{a.threads} | {out['throughput_rps']} | "
+    db = a.db if a.design == "acr" else f"{a.db} {a.design}"
+    print(f"| {db} | {a.raters} | {a.think} | {a.workers}x{a.threads} | {out['throughput_rps']} | "
           f"{out['rating']['p50_ms']} / {out['rating']['p99_ms']} | {out['next']['p50_ms']} / {out['next']['p99_ms']} | "
           f"{out['errors']} | {out['load_avg_1min']} | {'PASS' if ok else 'FAIL'} |")
     if a.json:

@@ -3,11 +3,11 @@
     app = create_app(manifest="stimuli/manifest.csv", db_url="postgresql://...", ratings_per_clip=20)
 
 Arguments left as None are read from the environment (ADMIN_TOKEN, DATABASE_URL, RATING_MANIFEST, STUDY_DESIGN,
-STUDY_QUESTION, RATINGS_PER_CLIP, CLIPS_PER_RATER, SLOT_TIMEOUT, MIN_VIEW, SESSIONS_PER_CLIENT, COMPLETION_CODE, COMPLETION_URL,
-SECRET_KEY), which is how `rating_app.wsgi:app` is configured under gunicorn. Also read: COOKIE_SECURE=1 (admin
-cookie over HTTPS only), PROXY_COUNT (trusted reverse proxies in front, whose X-Forwarded-For names the client;
-default 0) and DB_POOL_SIZE (connections per worker, default 10 + 10 overflow). Every setting is checked here, so
-a bad one stops the start with one line instead of failing on each request.
+STUDY_QUESTION, RATINGS_PER_CLIP, CLIPS_PER_RATER, SLOT_TIMEOUT, MIN_VIEW, SESSIONS_PER_CLIENT, COMPLETION_CODE,
+COMPLETION_URL, SECRET_KEY), which is how `rating_app.wsgi:app` is configured under gunicorn. Also read:
+COOKIE_SECURE=1 (admin cookie over HTTPS only), PROXY_COUNT (trusted reverse proxies in front, whose X-Forwarded-For
+names the client; default 0) and DB_POOL_SIZE (connections per worker, default 10 + 10 overflow). Every setting is
+checked here, so a bad one stops the start with one line instead of failing on each request.
 """
 from __future__ import annotations
 

@@ -27,7 +27,8 @@ def _serve(a):
     from .db import normalise_url
     from sqlalchemy.engine import make_url
     db = make_url(normalise_url(a.db)).render_as_string(hide_password=True)
-    print(f"rating app on http://{a.host}:{a.port}/  ({app.config['STUDY_DESIGN']} design; database {db}; admin at /admin"
+    print(f"rating app on http://{a.host}:{a.port}/  ({app.config['STUDY_DESIGN']} design; database {db}; "
+          "admin at /admin"
           f"{'' if app.config['ADMIN_TOKEN'] else ' disabled: set ADMIN_TOKEN'})", file=sys.stderr, flush=True)
     if app.config["MIN_VIEW"] < 1:
         print(f"warning: minimum viewing time lowered to {app.config['MIN_VIEW']:g} of each clip (tests and "
@@ -70,7 +71,7 @@ def _simulate(a):
     summary = run_simulation(a.url, a.raters, seed=a.seed, careless=a.careless, manifest=a.manifest,
                              quality=parse_quality(a.quality), concurrency=a.concurrency, timeout_s=a.timeout,
                              admin_token=a.admin_token or os.environ.get("ADMIN_TOKEN"), think_s=a.think,
-                             prefix=a.prefix, progress=not a.quiet)
+                             prefix=a.prefix, progress=not a.quiet, design=a.design)
     if a.summary:
         write_summary(summary, a.summary)
     short = {k: summary[k] for k in ("n_raters_started", "n_raters_completed", "study_full", "n_ratings",
@@ -128,6 +129,8 @@ def build_parser():
                    help="share of careless raters answering at random")
     m.add_argument("--manifest", default=None, help="manifest.csv (+ metrics.csv beside it); else /admin/clips.json")
     m.add_argument("--quality", default=None, help="per-condition mean rating, e.g. NAT=4.3,MG=3.8,FL=2.5,BAD=1.3")
+    m.add_argument("--design", choices=DESIGNS, default=None,
+                   help="the design the server must run (checked first); default: answer whichever it runs")
     m.add_argument("--concurrency", type=cli.number(int, 1, 1000), default=8, help="raters at once")
     m.add_argument("--timeout", type=cli.number(float, 0, 1e6, lo_open=True), default=600.0,
                    help="overall time limit in seconds")

@@ -65,7 +65,8 @@ def iter_page_rows(s: Session):
 
 def pair_failed(row) -> bool:
     """A pairwise catch answer that prefers the bad example (either level)."""
-    return (row["condition_a"] == BAD and row["preference"] > 0) or (row["condition_b"] == BAD and row["preference"] < 0)
+    return ((row["condition_a"] == BAD and row["preference"] > 0)
+            or (row["condition_b"] == BAD and row["preference"] < 0))
 
 
 def page_failures(rows) -> set[str]:

@@ -50,4 +50,4 @@ def video(name):
 
 @bp.get("/healthz")
 def healthz():
-    return jsonify(ok=True)
+    return jsonify(ok=True, design=current_app.config["STUDY_DESIGN"])

@@ -12,6 +12,12 @@ from DEFAULT_QUALITY, and can be set per condition.
 
 Only the server's API is used; to know which condition a clip belongs to, the crowd reads the manifest (and
 metrics.csv beside it) or, without a manifest, the admin clip table (/admin/clips.json, needs ADMIN_TOKEN).
+
+The crowd answers whatever design the server runs (the session reply names it, CONTRACTS §8), fetching every clip
+of a trial and waiting as long as the server requires for all of them: in a pairwise study an attentive rater
+prefers the clip of higher quality (its own noise and a tie band; the margin picks "slightly" or "clearly") and
+never the bad example; in a parallel study it rates every clip of the page on 0..100 (the 1..5 quality scaled)
+and the bad example below the page's NAT clip. Careless raters answer at random in every design.
 """
 from __future__ import annotations
 
@@ -32,6 +38,7 @@ DEFAULT_QUALITY = {"NAT": 4.2, "MG": 3.6, "FL": 2.6, "BAD": 1.3}
 OTHER_QUALITY = 3.0
 QUALITY_HIGH, QUALITY_LOW = 4.3, 1.3
 BIAS_SD = 0.3
+PREFERENCE_TIE, PREFERENCE_CLEAR = 0.3, 1.0     # quality margins: below the first no preference, above the second clear
 NOISE_SD = (0.35, 0.7)       # each rater's own noise level is drawn from this range
 MAX_RATERS = 100_000
 
@@ -124,6 +131,17 @@ def load_clips(url: str, manifest=None, admin_token=None, timeout=30.0) -> dict[
     return clips
 
 
+def check_design(url: str, design: str, timeout=30.0) -> None:
+    """AppError unless the server at `url` runs `design` (its /healthz names it)."""
+    try:
+        r = requests.get(url.rstrip("/") + "/healthz", timeout=timeout)
+        running = r.json().get("design", "acr")
+    except (requests.RequestException, ValueError) as e:
+        raise AppError(f"{url}: server not reachable ({e.__class__.__name__})") from None
+    if running != design:
+        raise AppError(f"--design {design}: the server at {url} runs a {running} study")
+
+
 class _Client:
     """HTTP with retries: a server restart or a dropped connection is waited out until the deadline.
     Every call the crowd makes is idempotent (session by external id, GET next, rating per trial)."""
@@ -154,10 +172,11 @@ class _Client:
 def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1, manifest=None,
                    quality: dict[str, float] | None = None, concurrency: int = 8, timeout_s: float = 600.0,
                    admin_token: str | None = None, think_s: float = 0.0, prefix: str | None = None,
-                   progress: bool = True, on_ack=None) -> dict:
+                   progress: bool = True, on_ack=None, design: str | None = None) -> dict:
     """Run the crowd; return a summary of everything submitted and acknowledged (JSON-serialisable).
 
-    `on_ack(record)` is called after each acknowledged rating (used by the crash test)."""
+    `on_ack(record)` is called after each acknowledged rating (used by the crash test). `design`: the design the
+    server must run (checked at /healthz before any session); None answers whichever it runs."""
     if not 1 <= n_raters <= MAX_RATERS:
         raise AppError(f"--raters must be between 1 and {MAX_RATERS}, got {n_raters}")
     if not 0.0 <= careless <= 1.0:
@@ -168,6 +187,8 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
         raise AppError(f"--timeout must be positive, got {timeout_s}")
     started = time.monotonic()
     deadline = started + timeout_s
+    if design is not None:
+        check_design(url, design)
     clips = load_clips(url, manifest, admin_token)
     q_cond = dict(DEFAULT_QUALITY)
     q_cond.update(quality_from_metrics(clips))
@@ -207,6 +228,39 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
             x = min(x, 2)                 # an attentive rater recognises a bad example
         return x, int(dur + r_rng.uniform(0, 300))
 
+    def prefer(spec, r_rng, a: ClipInfo | None, b: ClipInfo | None) -> int:
+        """A pairwise answer: 2 = A clearly .. -2 = B clearly."""
+        if spec["careless"]:
+            return int(r_rng.integers(-2, 3))
+        qa = a.quality if a and a.quality is not None else OTHER_QUALITY
+        qb = b.quality if b and b.quality is not None else OTHER_QUALITY
+        d = qa - qb + r_rng.normal(0, spec["noise_sd"])
+        level = 0 if abs(d) < PREFERENCE_TIE else 1 if abs(d) < PREFERENCE_CLEAR else 2
+        pref = level if d > 0 else -level
+        if a is not None and b is not None and "BAD" in (a.condition, b.condition):
+            strength = abs(pref) or 1                         # never the bad example, never a tie with it
+            pref = strength if b.condition == "BAD" else -strength
+        return pref
+
+    def page(spec, r_rng, shown: list[ClipInfo | None]) -> list[int]:
+        """Parallel ratings 0..100 of the clips of one page, in order."""
+        if spec["careless"]:
+            return [int(r_rng.integers(0, 101)) for _ in shown]
+        out = []
+        for c in shown:
+            q = c.quality if c and c.quality is not None else OTHER_QUALITY
+            x = 25.0 * (q + spec["bias"] + r_rng.normal(0, spec["noise_sd"]) - 1.0)
+            out.append(int(np.clip(round(x), 0, 100)))
+        conds = [c.condition if c else None for c in shown]
+        if "BAD" in conds and "NAT" in conds:          # an attentive rater puts the bad example below natural
+            nat = out[conds.index("NAT")]
+            for i, cond in enumerate(conds):
+                if cond == "BAD" and out[i] >= nat:
+                    out[i] = max(0, nat - 10) if nat > 0 else 0
+                    if nat == 0:
+                        out[conds.index("NAT")] = 10
+        return out
+
     def one_rater(spec):
         res = {"external_id": spec["external_id"], "careless": spec["careless"], "rater_id": None,
                "started": False, "completed": False, "completion_code": None, "n_ratings": 0, "n_catch": 0,
@@ -230,20 +284,28 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
             raise AppError(f"POST /api/sessions: HTTP {status}: {body.get('error')}")
         token, res["rater_id"], res["started"] = body["session"], body["rater_id"], True
         min_view = float(body.get("min_view", 1.0))
+        design = body.get("design", "acr")
+        field_name = {"acr": "rating", "pairwise": "preference", "parallel": "ratings"}[design]
 
-        def answer(t, clip, value, watched):
-            """Fetch the video, wait as the server requires, post; wait again if the server says too early."""
+        def answer(t, trial_clips, value, watched):
+            """Fetch every video of the trial, wait as the server requires, post; wait again if the server says
+            too early."""
             shown = time.monotonic()
-            status, data = cl.call("GET", t["video_url"], raw=True)
-            if status != 200:
-                raise AppError(f"video of trial {t['trial_id']}: HTTP {status}")
-            wait = min_view * (clip.duration_ms if clip else 2000) / 1000.0
+            parts = [t] if design == "acr" else [t["a"], t["b"]] if "a" in t else t["clips"]
+            urls = [x["video_url"] for x in parts]
+            for u in urls:
+                status, data = cl.call("GET", u, raw=True)
+                if status != 200:
+                    raise AppError(f"video of trial {t['trial_id']}: HTTP {status}")
+            durations = [c.duration_ms if c else 2000 for c in trial_clips]
+            need = sum(durations) if design == "parallel" else max(durations)
+            wait = min_view * need / 1000.0
             if think_s:
                 wait += float(r_rng.exponential(think_s))
             time.sleep(max(0.0, shown + wait - time.monotonic()))
             for _ in range(5):
                 status, ans = cl.call("POST", f"/api/sessions/{token}/ratings",
-                                      {"trial_id": t["trial_id"], "rating": value, "watched_ms": watched})
+                                      {"trial_id": t["trial_id"], field_name: value, "watched_ms": watched})
                 if status != 425:
                     return status, ans
                 time.sleep(ans.get("retry_after_ms", 100) / 1000.0)
@@ -260,15 +322,31 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
                 res["completed"], res["completion_code"] = True, body["completion_code"]
                 return
             t = body["trial"]
+            if design != "acr":
+                ids = [t["a"]["clip_id"], t["b"]["clip_id"]] if "a" in t else [x["clip_id"] for x in t["clips"]]
+                shown = [clips.get(i) for i in ids]
+                if t["phase"] == "training":
+                    status, ans = answer(t, shown, None, sum(c.duration_ms if c else 2000 for c in shown))
+                    if status not in (200, 201):
+                        raise AppError(f"training ack: HTTP {status}: {ans.get('error')}")
+                    res["n_training"] += 1
+                    continue
+                recs = multi_answer(spec, r_rng, res, t, ids, shown, answer)
+                with lock:
+                    ratings.extend(recs)
+                if on_ack:
+                    for rec in recs:
+                        on_ack(rec)
+                continue
             clip = clips.get(t["clip_id"])
             if t["phase"] == "training":
-                status, ans = answer(t, clip, None, clip.duration_ms if clip else 2000)
+                status, ans = answer(t, [clip], None, clip.duration_ms if clip else 2000)
                 if status not in (200, 201):
                     raise AppError(f"training ack: HTTP {status}: {ans.get('error')}")
                 res["n_training"] += 1
                 continue
             value, watched = rate(spec, r_rng, clip)
-            status, ans = answer(t, clip, value, watched)
+            status, ans = answer(t, [clip], value, watched)
             if status not in (200, 201):
                 raise AppError(f"rating: HTTP {status}: {ans.get('error')}")
             if status == 200 and ans.get("rating") is not None:
@@ -285,6 +363,37 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
             if on_ack:
                 on_ack(rec)
         raise AppError(f"rater {spec['external_id']}: the server kept serving trials beyond n_trials")
+
+    def multi_answer(spec, r_rng, res, t, ids, shown, answer):
+        """Answer a pairwise or parallel trial; the acknowledged records (one per pair, one per clip of a page)."""
+        watched = int(sum(c.duration_ms if c else 2000 for c in shown) + r_rng.uniform(0, 300))
+        catch = any(c is not None and c.role == "catch" for c in shown)
+        base = {"rater_id": res["rater_id"], "external_id": spec["external_id"], "trial_id": t["trial_id"],
+                "role": "catch" if catch else "test", "careless": spec["careless"]}
+        cond = [c.condition if c else None for c in shown]
+        if "a" in t:
+            value = prefer(spec, r_rng, shown[0], shown[1])
+        else:
+            value = dict(zip(ids, page(spec, r_rng, shown)))
+        status, ans = answer(t, shown, value, watched)
+        if status not in (200, 201):
+            raise AppError(f"answer: HTTP {status}: {ans.get('error')}")
+        stored = ans.get("preference" if "a" in t else "ratings") if status == 200 else None
+        if stored is not None:
+            value = stored                        # a retry of an answer the server had already stored
+        res["n_ratings"] += 1
+        res["n_catch"] += catch
+        if "a" in t:
+            failed = catch and ((cond[0] == "BAD" and value > 0) or (cond[1] == "BAD" and value < 0))
+            recs = [{**base, "clip_a": ids[0], "clip_b": ids[1], "condition_a": cond[0], "condition_b": cond[1],
+                     "condition": " vs ".join(sorted(map(str, cond))), "preference": value}]
+        else:
+            by = {c: value[i] for i, c in zip(ids, cond)}
+            failed = catch and "BAD" in by and "NAT" in by and by["BAD"] >= by["NAT"]
+            recs = [{**base, "page_id": f"p{t['trial_id']}", "clip_id": i, "condition": c, "rating": value[i]}
+                    for i, c in zip(ids, cond)]
+        res["failed_catch"] = res["failed_catch"] or bool(failed)
+        return recs
 
     def job(spec):
         try:

@@ -43,12 +43,14 @@ var vis = ['pair', 'page', 'rating-intro', 'intro', 'done'].filter(function (id)
   return !document.getElementById(id).hidden; });
 var sec = vis.length ? vis[0] : null;
 var vids = sec ? Array.prototype.slice.call(document.querySelectorAll('#' + sec + ' video')) : [];
-var box = function (id) { var r = document.getElementById(id).getBoundingClientRect(); return [r.left, r.top, r.bottom]; };
+var box = function (id) {
+  var r = document.getElementById(id).getBoundingClientRect(); return [r.left, r.top, r.bottom]; };
 return {section: sec,
   label: sec ? (document.querySelector('#' + sec + ' .phase-label') || {}).textContent : null,
   count: sec ? (document.querySelector('#' + sec + ' .trial-count') || {}).textContent : null,
   ended: vids.map(function (v) { return v.ended; }), srcs: vids.map(function (v) { return v.currentSrc; }),
-  prefs_disabled: Array.prototype.every.call(document.querySelectorAll('button.pref'), function (b) { return b.disabled; }),
+  prefs_disabled: Array.prototype.every.call(document.querySelectorAll('button.pref'),
+                                             function (b) { return b.disabled; }),
   submit_disabled: document.getElementById('page-submit').disabled,
   a: box('video-a'), b: box('video-b'),
   fits: document.documentElement.scrollWidth <= window.innerWidth + 1};
@@ -59,7 +61,7 @@ def _trial_of(src):
     return int(src.rsplit("/", 3)[1])            # .../trials/ID/clips/A.mp4
 
 
-def _run_flow(browser, url, design, answer):
+def _run_flow(browser, url, design, answer):  # noqa: F811
     """Consent, familiarisation, every trial until the completion code; `answer(state)` answers a rating trial
     and returns (trial id, value). Returns ({trial id: value}, number of familiarisation trials, code)."""
     from selenium.webdriver.common.by import By
@@ -105,7 +107,7 @@ def _run_flow(browser, url, design, answer):
     return given, n_training, browser.find_element(By.ID, "completion-code").text
 
 
-def play_page(browser, wait):
+def play_page(browser, wait):  # noqa: F811
     """Click every clip of a parallel page in turn and wait until it has played to the end."""
     from selenium.webdriver.common.by import By
     videos = browser.find_elements(By.CSS_SELECTOR, "#page-clips video")
@@ -129,7 +131,7 @@ def _shown(app):
     return out
 
 
-def _screenshot(browser, name):
+def _screenshot(browser, name):  # noqa: F811
     if os.environ.get("SAVE_SCREENSHOTS") == "1":
         (ROOT / "docs" / "img").mkdir(parents=True, exist_ok=True)
         browser.save_screenshot(str(ROOT / "docs" / "img" / name))

@@ -1,5 +1,6 @@
 """Bounded load test on loopback: 200 concurrent simulated raters complete sessions against gunicorn; the server
-is killed with SIGKILL mid-run and restarted; no acknowledged rating is missing and none is counted twice."""
+is killed with SIGKILL mid-run and restarted; no acknowledged rating is missing and none is counted twice. In every
+design (acr, pairwise, parallel), on SQLite and PostgreSQL."""
 import collections
 import os
 import signal
@@ -9,12 +10,14 @@ import threading
 import time
 from pathlib import Path
 
+import pytest
 import requests
 
 from rating_app.db import make_engine
+from rating_app.design_export import iter_page_rows, iter_pair_rows
 from rating_app.export import iter_rows
 from rating_app.simulate import run_simulation
-from rating_app.testing import free_port
+from rating_app.testing import free_port, make_stimuli
 
 ROOT = Path(__file__).resolve().parents[1]
 N_RATERS = 200
@@ -42,13 +45,34 @@ def kill9(proc):
     proc.wait(10)
 
 
-def test_200_raters_with_a_server_crash(app_stimuli, app_db_url, tmp_path):
+# Per design: the acknowledged record's identity, the export's rows, acknowledged records per rater (2 test and 2
+# catch trials; a parallel page acknowledges each of its clips: 2 x 3 test + 2 x 2 catch) and the balanced unit of
+# a test row (None: the row is counted through another row of its unit).
+DESIGNS = {
+    "acr": (("rater_id", "clip_id", "rating"), iter_rows, 4, lambda r: r["clip_id"]),
+    "pairwise": (("rater_id", "clip_a", "clip_b", "preference"), iter_pair_rows, 4,
+                 lambda r: (r["item"], *sorted((r["condition_a"], r["condition_b"])))),
+    "parallel": (("rater_id", "page_id", "clip_id", "rating"), iter_page_rows, 10,
+                 lambda r: r["item"] if r["condition"] == "NAT" else None),
+}
+
+
+@pytest.fixture(scope="module")
+def design_stimuli(tmp_path_factory):
+    return make_stimuli(tmp_path_factory.mktemp("load_stimuli"), catch_nat=True)
+
+
+@pytest.mark.parametrize("design", list(DESIGNS))
+def test_200_raters_with_a_server_crash(app_stimuli, design_stimuli, app_db_url, tmp_path, design):
+    key, rows_of, per_rater, unit = DESIGNS[design]
+    stimuli = app_stimuli if design == "acr" else design_stimuli
     port = free_port()
-    env = dict(os.environ, RATING_MANIFEST=str(app_stimuli), DATABASE_URL=app_db_url, ADMIN_TOKEN="load-token",
-               RATINGS_PER_CLIP="1000", CLIPS_PER_RATER="2", MIN_VIEW="0", SESSIONS_PER_CLIENT="0")   # all on loopback
+    env = dict(os.environ, RATING_MANIFEST=str(stimuli), DATABASE_URL=app_db_url, ADMIN_TOKEN="load-token",
+               RATINGS_PER_CLIP="1000", CLIPS_PER_RATER="2", MIN_VIEW="0", SESSIONS_PER_CLIENT="0",   # all on loopback
+               STUDY_DESIGN=design)
     log = open(tmp_path / "gunicorn.log", "w")
     acks, killed = [0], threading.Event()
-    kill_at = N_RATERS * 4 // 3          # a third of the way through the 4 ratings per rater
+    kill_at = N_RATERS * per_rater // 3          # a third of the way through
     procs = [start_gunicorn(port, env, log)]
 
     def on_ack(rec):
@@ -56,7 +80,7 @@ def test_200_raters_with_a_server_crash(app_stimuli, app_db_url, tmp_path):
 
     summary = {}
     sim = threading.Thread(target=lambda: summary.update(run_simulation(
-        f"http://127.0.0.1:{port}", N_RATERS, seed=3, careless=0.1, manifest=app_stimuli, concurrency=N_RATERS,
+        f"http://127.0.0.1:{port}", N_RATERS, seed=3, careless=0.1, manifest=stimuli, concurrency=N_RATERS,
         timeout_s=150, progress=False, on_ack=on_ack)))
     try:
         sim.start()
@@ -79,19 +103,19 @@ def test_200_raters_with_a_server_crash(app_stimuli, app_db_url, tmp_path):
     assert killed.is_set() and 0 < acked_before < summary["n_ratings"]
     assert summary["errors"] == [], summary["errors"][:3]
     assert summary["n_raters_completed"] == N_RATERS
-    acked = collections.Counter((r["rater_id"], r["clip_id"], r["rating"]) for r in summary["ratings"])
-    assert max(acked.values()) == 1 and len(acked) == N_RATERS * 4     # 2 test + 2 catch each
+    acked = collections.Counter(tuple(r[k] for k in key) for r in summary["ratings"])
+    assert max(acked.values()) == 1 and len(acked) == N_RATERS * per_rater
 
     engine = make_engine(app_db_url)
     try:
         from sqlalchemy.orm import Session
         with Session(engine) as s:
-            rows = list(iter_rows(s))
+            rows = list(rows_of(s))
     finally:
         engine.dispose()
-    stored = collections.Counter((r["rater_id"], r["clip_id"], r["rating"]) for r in rows)
+    stored = collections.Counter(tuple(r[k] for k in key) for r in rows)
     assert max(stored.values()) == 1                 # never double-counted
     assert stored == acked                           # nothing acknowledged is missing, nothing extra
-    # the balanced assignment spread the 2 test slots per rater evenly over the 12 test clips
-    per_clip = collections.Counter(r["clip_id"] for r in rows if r["role"] == "test")
-    assert max(per_clip.values()) - min(per_clip.values()) <= 3
+    # the balanced assignment spread the 2 test slots per rater evenly over the test units
+    per_unit = collections.Counter(unit(r) for r in rows if r["role"] == "test" and unit(r) is not None)
+    assert max(per_unit.values()) - min(per_unit.values()) <= 3
