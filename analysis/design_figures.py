@@ -24,7 +24,8 @@ def preference_bars(pairs, path, title=None):
                         label=None if row_i else (f"{'left' if k < 2 else 'right'} {LEVEL_NAMES[k]}"
                                                   if k != 2 else LEVEL_NAMES[k]))
                 if share >= 0.07:
-                    ax.text(left + share / 2, row_i, f"{100 * share:.0f}", ha="center", va="center", fontsize=7)
+                    ax.text(left + share / 2, row_i, f"{100 * share:.0f}", ha="center", va="center", fontsize=7,
+                            color="white" if k in (0, 4) else "black")
                 left += share
             ax.text(-0.01, row_i, text(r["condition_a"]), ha="right", va="center")
             ax.text(1.01, row_i, f"{text(r['condition_b'])}  (n={int(r['n'])})", ha="left", va="center")

@@ -273,3 +273,12 @@ def test_cli_gives_one_line_for_a_bad_row_and_writes_the_report(tmp_path):
     assert doc["design"] == "pairwise" and set(doc["bradley_terry"]) == {"NAT", "MG"}
     assert doc["bradley_terry"]["NAT"] == 0 and set(doc["bradley_terry_ci"]) == {"NAT", "MG"}
     assert "MG vs NAT" in r.stdout
+
+
+def test_a_condition_that_never_wins_stays_finite():
+    rows = [[f"r{r}", f"i{i}", f"n{i}", f"f{i}", "NAT", "FL", 2, "test"] for r in range(5) for i in range(4)]
+    rows += [[f"r{r}", f"i{i}", f"m{i}", f"n{i}", "MG", "NAT", (-1) ** (r + i), "test"]
+             for r in range(5) for i in range(4)]
+    fit = pairwise.bradley_terry(pairwise.oriented(pd.DataFrame(rows, columns=PAIR_COLS)), n_boot=30)
+    assert fit["converged"] and -20 < fit["strengths"]["FL"] < -8 and abs(fit["strengths"]["MG"]) < 1e-6
+    assert all(np.isfinite(v).all() for v in fit["ci"].values())
