@@ -1,7 +1,8 @@
 """A real browser (Debian chromium, headless) takes a rater through a pairwise and a parallel study against the app
 served over HTTP, with the server's full viewing rule (MIN_VIEW 1): the answers it gave appear in the export.
 The pairwise page is checked on a phone (A above B, played one after the other) and on a wide screen (side by
-side). SAVE_SCREENSHOTS=1 writes docs/img/pairwise_page.png and docs/img/parallel_page.png."""
+side). SAVE_SCREENSHOTS=1 writes docs/img/pairwise_page.png and docs/img/parallel_page.png
+(SCREENSHOT_MANIFEST=path/manifest.csv to show real stimuli)."""
 import csv
 import io
 import os
@@ -25,7 +26,8 @@ pytestmark = pytest.mark.browser
 
 @pytest.fixture(scope="module")
 def design_stimuli(tmp_path_factory):
-    return make_stimuli(tmp_path_factory.mktemp("design_stimuli"), catch_nat=True)
+    return os.environ.get("SCREENSHOT_MANIFEST") or make_stimuli(tmp_path_factory.mktemp("design_stimuli"),
+                                                                 catch_nat=True)
 
 
 def serve(manifest, db_url, design):
@@ -170,8 +172,7 @@ def test_pairwise_flow_in_a_real_browser(design_stimuli, app_db_url, browser):  
         app.extensions["rating_app"]["engine"].dispose()
     assert code and n_training >= 1
     assert "pairs.csv" in resp.headers["Content-Disposition"]
-    roles = [c.role for c in load_manifest(design_stimuli)]
-    n_catch_pairs = roles.count("catch") // 2                     # one NAT + one BAD per catch item
+    n_catch_pairs = sum(c.role == "catch" and c.condition == "BAD" for c in load_manifest(design_stimuli))
     assert len(given) == 3 + n_catch_pairs
     assert {(row["clip_a"], row["clip_b"]): int(row["preference"]) for row in rows} == \
         {(shown[t]["A"], shown[t]["B"]): v for t, v in given.items()}
@@ -219,8 +220,7 @@ def test_parallel_flow_in_a_real_browser(design_stimuli, app_db_url, browser):  
         thread.join(5)
         app.extensions["rating_app"]["engine"].dispose()
     assert code and n_training >= 1
-    roles = [c.role for c in load_manifest(design_stimuli)]
-    n_catch_pages = roles.count("catch") // 2
+    n_catch_pages = len({c.item for c in load_manifest(design_stimuli) if c.role == "catch"})
     assert len(given) == 3 + n_catch_pages
     pages = {}
     for row in rows:
