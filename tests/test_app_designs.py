@@ -55,10 +55,12 @@ def clips_of(manifest):
 
 
 def shown(t):
-    return [t["a"], t["b"]] if "a" in t else t["clips"]
+    return [t] if "clip_id" in t else [t["a"], t["b"]] if "a" in t else t["clips"]
 
 
 def value_for(t, pref=1, rating=lambda i, c: 40 + i):
+    if "clip_id" in t:                                    # acr
+        return {"rating": None if t["phase"] == "training" else 3}
     if t["phase"] == "training":
         return {"preference": None} if "a" in t else {"ratings": None}
     if "a" in t:
@@ -281,7 +283,7 @@ def test_parallel_bad_input(make, stimuli):
 
 
 # ------------------------------------------------------------------------------------------------- balance
-@pytest.mark.parametrize("design,units,per_rater", [("pairwise", 90, 30), ("parallel", 30, 10)])
+@pytest.mark.parametrize("design,units,per_rater", [("acr", 90, 30), ("pairwise", 90, 30), ("parallel", 30, 10)])
 def test_targets_reached_exactly_with_fewest_raters(make, big_stimuli, design, units, per_rater):
     clips = clips_of(big_stimuli)
     target = 2
@@ -299,6 +301,8 @@ def test_targets_reached_exactly_with_fewest_raters(make, big_stimuli, design, u
 
 
 def unit_counts(rows, clips, design):
+    if design == "acr":
+        return collections.Counter(r["clip_id"] for r in rows if r["role"] == "test")
     if design == "pairwise":
         return collections.Counter((r["item"], *sorted((r["condition_a"], r["condition_b"])))
                                    for r in rows if r["role"] == "test")
@@ -315,7 +319,7 @@ def check_exact(c, clips, design, units, target):
     assert len(counts) == units and set(counts.values()) == {target}, collections.Counter(counts.values())
 
 
-@pytest.mark.parametrize("design,units", [("pairwise", 90), ("parallel", 30)])
+@pytest.mark.parametrize("design,units", [("acr", 90), ("pairwise", 90), ("parallel", 30)])
 def test_targets_exact_under_concurrent_sessions(make, big_stimuli, design, units):
     clips = clips_of(big_stimuli)
     target = 3
@@ -447,4 +451,13 @@ def test_simulated_crowd_answers_each_design_as_the_page_does(stimuli, app_db_ur
     assert acked == collections.Counter(tuple(r[k] for k in key) for r in rows) and max(acked.values()) == 1
     assert all(r["flags"] == "" for r in rows)                         # every video fetched, none too early
     failed = {r["rater_id"] for r in p["raters"] if r["catch_failures"]}
-    assert failed == set(summary["failed_catch_raters"]) and failed <= set(summary["careless_raters"])
+    assert failed and failed == set(summary["failed_catch_raters"]) and failed <= set(summary["careless_raters"])
+    # the report excludes exactly the raters the dashboard lists as failing a catch trial
+    from analysis import pairwise, parallel
+    f = tmp_path / "export.csv"
+    with open(f, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    loaded = pairwise.load_pairs(f) if design == "pairwise" else parallel.load_pages(f)
+    assert set((pairwise if design == "pairwise" else parallel).failed_raters(loaded)) == failed
