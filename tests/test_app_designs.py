@@ -425,8 +425,9 @@ def test_simulated_crowd_answers_each_design_as_the_page_does(stimuli, app_db_ur
     was acknowledged is what the export holds, careless raters fail catch trials and attentive ones never do."""
     from werkzeug.serving import make_server
     from rating_app.simulate import run_simulation
-    app = create_app(manifest=stimuli, db_url=app_db_url, admin_token="test-admin-token", ratings_per_clip=2,
-                     min_view=0.1, sessions_per_client=0, design=design)
+    # 2 test units per rater, so that many raters (half of them careless) take part before the study is full
+    app = create_app(manifest=stimuli, db_url=app_db_url, admin_token="test-admin-token", ratings_per_clip=6,
+                     clips_per_rater=2, min_view=0.1, sessions_per_client=0, design=design)
     server = make_server("127.0.0.1", 0, app, threaded=True)
     th = threading.Thread(target=server.serve_forever, daemon=True)
     th.start()
@@ -435,7 +436,7 @@ def test_simulated_crowd_answers_each_design_as_the_page_does(stimuli, app_db_ur
         other = "parallel" if design == "pairwise" else "pairwise"
         with pytest.raises(AppError, match=f"--design {other}: the server at .* runs a {design} study"):
             run_simulation(url, 2, design=other, manifest=stimuli, progress=False)
-        summary = run_simulation(url, 12, seed=5, careless=0.25, manifest=stimuli, concurrency=4, progress=False,
+        summary = run_simulation(url, 40, seed=5, careless=0.5, manifest=stimuli, concurrency=4, progress=False,
                                  design=design, timeout_s=300)
         c = app.test_client()
         rows, _ = export(c)
