@@ -462,3 +462,19 @@ def test_simulated_crowd_answers_each_design_as_the_page_does(stimuli, app_db_ur
         w.writerows(rows)
     loaded = pairwise.load_pairs(f) if design == "pairwise" else parallel.load_pages(f)
     assert set((pairwise if design == "pairwise" else parallel).failed_raters(loaded)) == failed
+
+
+@pytest.mark.parametrize("design", ["pairwise", "parallel"])
+def test_cli_export_writes_the_design_file(make, stimuli, app_db_url, tmp_path, design):
+    app = make(stimuli, design, ratings_per_clip=1)
+    c = app.test_client()
+    complete(c, start(c))
+    want, _ = export(c)
+    out = tmp_path / "export.csv"
+    r = subprocess.run([sys.executable, "-m", "rating_app", "export", "--db", app_db_url, "--out", str(out)],
+                       capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert r.returncode == 0, r.stderr
+    with open(out, newline="") as fh:
+        got = list(csv.DictReader(fh))
+    assert got == want and len(got) > 0
+    assert ("preference" in got[0]) == (design == "pairwise") and ("page_id" in got[0]) == (design == "parallel")
