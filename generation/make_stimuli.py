@@ -14,8 +14,9 @@
    earliest MG checkpoint.
 4. Clips: per test item NAT (the real window through features.to_world, the same inverse the models'
    output goes through), MG (seeded with the item's real preceding frames) and FL with the same control;
-   every imported system's file for the item; BAD and NAT clips on the catch items (NAT is the reference of the
-   pairwise and parallel catch trials; an acr study never shows it); each training item in every condition
+   every imported system's file for the item; BAD, NAT, MG and FL clips on the catch items (NAT is the
+   reference of the pairwise and parallel catch trials, MG and FL fill a parallel catch page to a test page's
+   size; an acr study shows only BAD); each training item in every condition
    except BAD. Every clip is placed to start at the origin facing +Z.
 5. Videos (in parallel, one process per core), contact sheets, metrics.csv, manifest.csv, items.csv.
 """
@@ -383,8 +384,10 @@ def run(args):
     # (condition, model or None for the real motion, item positions): one batch per condition.
     catch = [k for k, it in enumerate(items) if it["role"] == "catch"]
     seeds = {"MG": args.seed + 1, "FL": args.seed + 2, "BAD": args.seed + 3}
-    # NAT of the catch items too (role catch): the reference a pairwise or parallel catch trial shows beside BAD.
-    plan = [("NAT", None, gen_items + catch), ("MG", ("mg", mg_ckpt), gen_items), ("FL", ("fl", fl_ckpt), gen_items)]
+    # NAT, MG and FL of the catch items too (role catch): NAT is the reference a pairwise or parallel catch trial
+    # shows beside BAD, and a parallel catch page is filled up with MG and FL so that its size is a test page's.
+    plan = [("NAT", None, gen_items + catch), ("MG", ("mg", mg_ckpt), gen_items + catch),
+            ("FL", ("fl", fl_ckpt), gen_items + catch)]
     if catch:
         plan.append(("BAD", ("mg", bad_ckpt), catch))
     clips = []  # (condition, item position, joints, seed)

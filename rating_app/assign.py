@@ -23,7 +23,7 @@ import random
 from sqlalchemy import func, select, update
 
 from .db import Clip, Lock, Rater, Rating, Trial
-from .designs import REFERENCE, training_groups
+from .designs import BAD, training_groups
 
 
 class StudyFull(Exception):
@@ -83,7 +83,7 @@ def plan_session(conn, rng: random.Random, target: int, clips_per_rater: int | N
                         "please try again later")
     n_test = short if not clips_per_rater else min(clips_per_rater, short)
     n_catch = conn.execute(select(func.count()).select_from(Clip).where(Clip.role == "catch",
-                                                                         Clip.condition != REFERENCE)).scalar()
+                                                                         Clip.condition == BAD)).scalar()
     training = list(conn.execute(select(Clip.clip_id).where(Clip.role == "training").order_by(Clip.clip_id))
                     .scalars())
     rng.shuffle(training)
@@ -99,7 +99,7 @@ def assign_slot(conn, rng: random.Random, rater_pk: int, kind: str, target: int)
               .scalars())
     cov = coverage(conn)
     if kind == "catch":
-        catch = conn.execute(select(Clip.clip_id).where(Clip.role == "catch", Clip.condition != REFERENCE)
+        catch = conn.execute(select(Clip.clip_id).where(Clip.role == "catch", Clip.condition == BAD)
                              .order_by(Clip.clip_id)).scalars()
         left = [c for c in catch if c not in had]
         return rng.choice(left) if left else None

@@ -10,8 +10,9 @@ Units are derived from the manifest alone (the same on every worker and after ev
 that is stored with each trial, so coverage is counted per unit in the database.
 
 Catch units: pairwise pairs each BAD clip of a catch item with the NAT clip of the same item; a parallel catch
-page holds every clip of a catch item (NAT and BAD). make_stimuli writes the NAT clip of each catch item with
-role `catch` for this; in `acr` that NAT clip is never served (only the bad examples are catch trials there).
+page holds the catch item's NAT and BAD clips, filled up with its other conditions' clips to the size of a test
+page, so that a page's size never tells a catch page. make_stimuli writes NAT, MG and FL clips of each catch
+item with role `catch` for this; in `acr` only the bad examples (condition BAD) are catch trials.
 """
 from __future__ import annotations
 
@@ -46,8 +47,8 @@ def check_design(design: str | None) -> str:
 
 
 def acr_catch(clip) -> bool:
-    """A catch trial of an acr study: a bad example, never the NAT reference a catch item also holds."""
-    return clip.role == "catch" and clip.condition != REFERENCE
+    """A catch trial of an acr study: a bad example, never the other clips a catch item also holds."""
+    return clip.role == "catch" and clip.condition == BAD
 
 
 def _by_item(clips, role):
@@ -86,8 +87,9 @@ def build_units(design: str, clips) -> dict[str, Unit]:
                 raise AppError(f"parallel: item {item!r} has {len(conds)} conditions; a page shows at most "
                                f"{MAX_PAGE}")
             units[f"page:{item}"] = Unit(f"page:{item}", "test", item, tuple(by_cond[c][0] for c in conds))
+    page_size = max((len(u.clips) for u in units.values()), default=0)  # parallel: every test page's size
     for item, by_cond in sorted(catches.items()):
-        bads = [cid for cond, ids in sorted(by_cond.items()) if cond != REFERENCE for cid in ids]
+        bads = by_cond.get(BAD, [])
         if not bads:
             continue
         if REFERENCE not in by_cond:
@@ -98,7 +100,8 @@ def build_units(design: str, clips) -> dict[str, Unit]:
             for k, bad in enumerate(bads):
                 units[f"catch:{item}:{k}"] = Unit(f"catch:{item}:{k}", "catch", item, (nat, bad))
         else:
-            page = (nat, *bads)[:MAX_PAGE]
+            fillers = [ids[0] for cond, ids in sorted(by_cond.items()) if cond not in (REFERENCE, BAD)]
+            page = (nat, bads[0], *fillers)[:max(2, page_size)]
             units[f"catchpage:{item}"] = Unit(f"catchpage:{item}", "catch", item, page)
     return units
 

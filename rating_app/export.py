@@ -15,7 +15,7 @@ from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
 from .db import Clip, Event, Rater, Rating, Trial, study_design
-from .designs import REFERENCE
+from .designs import BAD
 
 COLUMNS = ("rater_id", "clip_id", "condition", "rating", "role", "item", "trial_index", "watched_ms",
            "submitted_at", "external_id", "study_id", "rater_completed", "flags")
@@ -80,7 +80,7 @@ def progress(engine: Engine, target: int, design: str = "acr", units=None) -> di
         return _progress_units(engine, target, design, units)
     with Session(engine.execution_options(read_only=True)) as s:
         clips = s.execute(select(Clip.clip_id, Clip.condition, Clip.role, Clip.item)
-                          .where(Clip.role != "training", (Clip.role != "catch") | (Clip.condition != REFERENCE))
+                          .where(Clip.role != "training", (Clip.role != "catch") | (Clip.condition == BAD))
                           .order_by(Clip.role, Clip.condition, Clip.clip_id)).all()
         # One pass over the ratings: count and sum per clip (condition means come from the exact sums).
         stats = {c: (n, int(total)) for c, n, total in s.execute(

@@ -32,8 +32,9 @@ def make_stimuli(folder, n_items=4, conditions=("NAT", "MG", "FL"), n_catch=2, n
                  fps=20, metrics=True, seed=0, catch_nat=False) -> Path:
     """Write manifest.csv (+ metrics.csv) with one short MP4 per clip; return the manifest path.
 
-    NAT/MG/FL share items; BAD clips are catch trials; training clips cover every condition. `catch_nat`: also the
-    NAT clip of each catch item (role catch), as make_stimuli writes it for pairwise and parallel catch trials."""
+    NAT/MG/FL share items; BAD clips are catch trials; training clips cover every condition. `catch_nat`: also a
+    clip of every condition of each catch item (role catch), as make_stimuli writes them for pairwise and parallel
+    catch trials (NAT is the reference, the others fill a parallel catch page to a test page's size)."""
     folder = Path(folder)
     (folder / "videos").mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
@@ -53,7 +54,8 @@ def make_stimuli(folder, n_items=4, conditions=("NAT", "MG", "FL"), n_catch=2, n
     for i in range(n_catch):
         add("BAD", "catch", f"bad{i:02d}")
         if catch_nat:
-            add("NAT", "catch", f"bad{i:02d}")
+            for cond in conditions:
+                add(cond, "catch", f"bad{i:02d}")
     for i in range(n_training):
         add((list(conditions) + ["BAD"])[i % (len(conditions) + 1)], "training", f"train{i:02d}")
     manifest = folder / "manifest.csv"

@@ -211,7 +211,9 @@ def test_bad_settings_stop_the_start(app_stimuli, tmp_path, args, env, needle):
                                         ({"SLOT_TIMEOUT": "nan"}, "SLOT_TIMEOUT")])
 def test_gunicorn_with_a_bad_environment_stops(app_stimuli, tmp_path, env, needle):
     base = dict(os.environ, RATING_MANIFEST=str(app_stimuli), DATABASE_URL=f"sqlite:///{tmp_path}/r.sqlite")
-    r = subprocess.run([sys.executable, "-m", "gunicorn", "-w", "2", "-b", f"127.0.0.1:{free_port()}",
+    # One worker: with two, gunicorn halting on the first one's load error may interrupt the second one's import,
+    # and that interrupted import's traceback is gunicorn's shutdown, not our error line.
+    r = subprocess.run([sys.executable, "-m", "gunicorn", "-w", "1", "-b", f"127.0.0.1:{free_port()}",
                         "rating_app.wsgi:app"], cwd=ROOT, env=dict(base, **env), capture_output=True, text=True,
                        timeout=60)                    # respawning forever would run into the timeout
     assert r.returncode != 0 and f"error: {needle}" in r.stderr and needle in r.stderr

@@ -44,7 +44,7 @@ def test_stimuli_quick_run_counts_and_columns(manifest, quick_stimuli):
         count[m["role"], m["condition"]] = count.get((m["role"], m["condition"]), 0) + 1
     assert count["test", "NAT"] == count["test", "MG"] == count["test", "FL"] == 30
     assert count["catch", "BAD"] == count["catch", "NAT"] == 4      # NAT: the reference of pairwise/parallel catches
-    assert sum(v for (r, _), v in count.items() if r == "catch") == 8
+    assert sum(v for (r, _), v in count.items() if r == "catch") == 16  # BAD, and NAT, MG, FL of each catch item
     training = {c for (r, c) in count if r == "training"}
     assert training >= {"NAT", "MG", "FL"} and sum(v for (r, _), v in count.items() if r == "training") >= 3
     ids = [m["clip_id"] for m in manifest]
@@ -265,7 +265,7 @@ def test_stimuli_full_default_run(tmp_path):
                         str(tmp_path / "runs")], capture_output=True, text=True, cwd=ROOT, timeout=4 * 3600)
     assert r.returncode == 0, r.stderr[-3000:]
     man = read_csv(out / "manifest.csv")
-    assert sum(m["role"] == "test" for m in man) == 90 and sum(m["role"] == "catch" for m in man) == 8
+    assert sum(m["role"] == "test" for m in man) == 90 and sum(m["role"] == "catch" for m in man) == 16
     for m in man[:10]:
         assert decode(out / m["video"])[:4] == (80, 640, 640, "yuv420p")
     rows = read_csv(out / "metrics.csv")
