@@ -27,8 +27,10 @@ import urllib.error
 import urllib.request
 from pathlib import Path
 
+from core import cli
 
-class DemoError(RuntimeError):
+
+class DemoError(cli.UserError):
     """A stage failed; the message says which and where its log is."""
 
 
@@ -195,22 +197,21 @@ def run_demo(out: Path, db: str | None = None, raters: int = 200, seed: int = 0,
     return {"stimuli": Path(stimuli), "ratings": ratings, "report": out / "report", "summary": summary}
 
 
-def main(argv=None) -> int:
-    from core.cli import ArgumentParser
+def _main(argv) -> int:
     from rating_app.designs import DESIGNS
-    p = ArgumentParser(prog="python -m analysis.demo", description=__doc__,
+    p = cli.ArgumentParser(prog="python -m analysis.demo", description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="demo", help="folder for everything the demo makes (default demo/)")
     p.add_argument("--db", default=None, help="database URL (default an SQLite file in --out), e.g. "
                                                "postgresql://127.0.0.1:5432/test")
-    p.add_argument("--raters", type=int, default=200, help="most simulated raters (stops when the study is full)")
-    p.add_argument("--careless", type=float, default=0.1, help="share of careless raters (default 0.1)")
-    p.add_argument("--ratings-per-clip", type=int, default=20)
-    p.add_argument("--clips-per-rater", type=int, default=30, help="test clips per rater (0: all)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--raters", type=cli.number(int, 1, 100_000), default=200, help="most simulated raters (stops when the study is full)")
+    p.add_argument("--careless", type=cli.number(float, 0, 1), default=0.1, help="share of careless raters (default 0.1)")
+    p.add_argument("--ratings-per-clip", type=cli.number(int, 1, 10_000), default=20)
+    p.add_argument("--clips-per-rater", type=cli.number(int, 0, 100_000), default=30, help="test clips per rater (0: all)")
+    p.add_argument("--seed", type=cli.number(int, 0), default=0)
     p.add_argument("--stimuli", default=None, help="reuse this stimulus folder instead of making one")
     p.add_argument("--gunicorn", action="store_true", help="serve with gunicorn (2 workers) instead of Flask's server")
-    p.add_argument("--min-view", type=float, default=0.01,
+    p.add_argument("--min-view", type=cli.number(float, 0, 1), default=0.01,
                    help="the app's MIN_VIEW: share of each clip the crowd must wait before answering (default 0.01)")
     p.add_argument("--design", choices=DESIGNS, default="acr",
                    help="test design: acr (one clip, 1-5; default), pairwise (two clips, a preference) or parallel "
@@ -221,13 +222,14 @@ def main(argv=None) -> int:
                  ratings_per_clip=a.ratings_per_clip, clips_per_rater=a.clips_per_rater or None,
                  gunicorn=a.gunicorn, stimuli=Path(a.stimuli) if a.stimuli else None, min_view=a.min_view,
                  design=a.design)
-    except DemoError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
         print("interrupted: everything the demo started has been stopped", file=sys.stderr)
         return 130
     return 0
+
+
+def main(argv=None) -> int:
+    return cli.run(_main, argv)
 
 
 if __name__ == "__main__":
