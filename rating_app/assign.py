@@ -20,9 +20,9 @@ from __future__ import annotations
 import datetime as dt
 import random
 
-from sqlalchemy import func, select, update
+from sqlalchemy import and_, case, func, select, update
 
-from .db import Clip, Lock, Rater, Rating, Trial
+from .db import Clip, Lock, Rater, Trial
 from .designs import BAD, training_groups
 
 
@@ -52,16 +52,22 @@ def expire_idle(conn, slot_timeout_s: float, now: dt.datetime, rater_pk: int | N
     return ids
 
 
+def _answered_and_held(conn, key, *where):
+    """{key: (answered trials, held slots)} over test trials, in ONE statement. Two statements would each see
+    the data as of their own start (PostgreSQL's read committed), and an answer committed between them would be
+    in neither count: its clip would look short and be handed out once too often. An answered test trial and
+    its stored answer are written in one transaction, so answered trials are the stored answers."""
+    held = case((and_(Trial.answered_at.is_(None), Trial.released.is_(False)), 1), else_=0)
+    rows = conn.execute(select(key, func.count(Trial.answered_at), func.sum(held))
+                        .where(Trial.kind == "test", key.is_not(None), *where).group_by(key)).all()
+    return {k: (int(done), int(h or 0)) for k, done, h in rows}
+
+
 def coverage(conn) -> dict[str, tuple[int, int]]:
     """{clip_id: (stored ratings, held slots)} for every test clip."""
-    done = dict(conn.execute(select(Rating.clip_id, func.count()).group_by(Rating.clip_id)).all())
-    held = dict(conn.execute(
-        select(Trial.clip_id, func.count())
-        .where(Trial.kind == "test", Trial.clip_id.is_not(None), Trial.answered_at.is_(None),
-               Trial.released.is_(False))
-        .group_by(Trial.clip_id)).all())
+    counts = _answered_and_held(conn, Trial.clip_id)
     tests = conn.execute(select(Clip.clip_id).where(Clip.role == "test")).scalars().all()
-    return {c: (done.get(c, 0), held.get(c, 0)) for c in tests}
+    return {c: counts.get(c, (0, 0)) for c in tests}
 
 
 def is_full(conn, target: int) -> bool:
@@ -110,11 +116,8 @@ def assign_slot(conn, rng: random.Random, rater_pk: int, kind: str, target: int)
 # ---------------------------------------------------------------------------------------- pairwise / parallel
 def unit_coverage(conn, units) -> dict[str, tuple[int, int]]:
     """{unit key: (answered trials, held slots)} for every test unit."""
-    base = select(Trial.unit, func.count()).where(Trial.kind == "test", Trial.unit.is_not(None))
-    done = dict(conn.execute(base.where(Trial.answered_at.is_not(None)).group_by(Trial.unit)).all())
-    held = dict(conn.execute(base.where(Trial.answered_at.is_(None), Trial.released.is_(False))
-                             .group_by(Trial.unit)).all())
-    return {k: (done.get(k, 0), held.get(k, 0)) for k, u in units.items() if u.role == "test"}
+    counts = _answered_and_held(conn, Trial.unit)
+    return {k: counts.get(k, (0, 0)) for k, u in units.items() if u.role == "test"}
 
 
 def units_full(conn, units, target: int) -> bool:
