@@ -23,7 +23,7 @@ import re
 import secrets
 
 from flask import Blueprint, abort, current_app, jsonify, request, url_for
-from sqlalchemy import and_, func, insert, or_, select, update
+from sqlalchemy import and_, func, insert, or_, select, text, update
 from sqlalchemy.exc import IntegrityError
 
 from .assign import StudyFull, assign_slot, assign_unit, expire_idle, lock_assign, plan_session, plan_units
@@ -243,6 +243,10 @@ def _serve(conn, rater_pk: int, now):
         if t.clip_id is not None or t.unit is not None:
             conn.execute(update(Trial).where(Trial.id == t.id, Trial.served_at.is_(None)).values(served_at=now))
             continue
+        if conn.dialect.name == "postgresql":
+            # Handing out a slot is not an answer: if a crash loses this commit, the trial is served again. Not
+            # waiting for the WAL flush shortens the time every worker queues on the assignment lock.
+            conn.execute(text("SET LOCAL synchronous_commit TO OFF"))
         lock_assign(conn)
         t = _current(conn, rater_pk)                 # re-read under the lock (a concurrent GET next may have won)
         if t is None or t.clip_id is not None or t.unit is not None:
