@@ -205,7 +205,7 @@ def ensure_model(kind, args, dataset):
     resume = (run / "resume.pt").is_file()
     log(f"models: {'resuming' if resume else 'training'} {kind} (config {args.config}) in {run}")
     train(kind, args.config, dataset, run, steps=args.train_steps, seed=args.seed, progress=True,
-          resume=resume, device=args.device, threads=args.threads)
+          resume=resume, device=args.device, threads=args.threads or "auto")
     ckpts = checkpoints_in(run)
     if not ckpts:
         raise StimuliError(f"{run}: training wrote no checkpoint")
@@ -321,8 +321,9 @@ def parse_args(argv):
     ap.add_argument("--preset", default="ultrafast", help="x264 preset (default ultrafast at constant quantiser 17: fastest, no visible loss on stick figures)")
     ap.add_argument("--jobs", type=cli.number(int, 1, 1024), default=os.cpu_count() or 1, help="rendering processes (default: one per core)")
     ap.add_argument("--device", help="torch device (default: cuda when present, else cpu)")
-    ap.add_argument("--threads", type=cli.number(int, 1, 1024), help="torch CPU threads for training and sampling (default: torch's "
-                                                "choice; 1 with --quick, where tiny models gain nothing from more)")
+    ap.add_argument("--threads", type=cli.number(int, 1, 1024), help="torch CPU threads for training and sampling (default: the "
+                                                "cores other processes leave free for training, torch's choice for "
+                                                "sampling; 1 with --quick, where tiny models gain nothing from more)")
     ap.add_argument("--force", action="store_true", help="replace an existing stimulus set in --out")
     args = ap.parse_args(argv)
     args.shipped = not (args.retrain or args.quick or args.config or args.train_steps or args.data) \
@@ -487,9 +488,6 @@ def _write_csv(path, columns, rows):
 
 
 def main(argv=None):
-    # Training and sampling run in this process: let OpenMP's waiting threads sleep (see generation/train.py).
-    # torch is not loaded yet here; it is imported by the functions that sample or train.
-    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     return cli.run(lambda a: run(parse_args(a)), argv)
 
 

@@ -22,20 +22,16 @@ import sys
 import time
 from pathlib import Path
 
-if __name__ == "__main__":
-    # Waiting OpenMP threads that sleep give their core up to whatever else runs; spinning ones (the default)
-    # make 2-thread training several times slower beside one busy process (bench/bench_train_load.py). The
-    # command sets it, library callers keep their environment; before torch loads OpenMP, which reads it once.
-    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+import torch
+from torch import nn
+from tqdm import tqdm
 
-import torch  # noqa: E402
-from torch import nn  # noqa: E402
-from tqdm import tqdm  # noqa: E402
+from core import cli
+from core.cli import UserError
 
-from . import fl, moglow  # noqa: E402
-from .dataset import batch_indices, eval_batches, load_dataset  # noqa: E402
-from core import cli  # noqa: E402
-from core.cli import UserError  # noqa: E402
+from . import fl, moglow
+from .core_share import CoreShare
+from .dataset import batch_indices, eval_batches, load_dataset
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 MODELS = {"fl": fl.FL, "mg": moglow.MoGlow}
@@ -152,8 +148,10 @@ def evaluate(net, split, cfg, device):
 def train(model, config, data_path, out_dir, steps=None, seed=0, progress=True, resume=False, device=None,
           threads=None):
     """Train `model` ('fl' or 'mg') with `config` on a prepared dataset; returns out_dir (see module doc).
-    `threads`: CPU threads for torch (default: torch's choice); 1 is faster on a machine shared with other jobs."""
-    if threads:
+    `threads`: CPU threads for torch: None keeps torch's choice, a number fixes it (and the bits of the result),
+    "auto" follows the cores other processes leave free (core_share.CoreShare; the command's default)."""
+    share = CoreShare() if threads == "auto" else None
+    if threads not in (None, "auto"):
         torch.set_num_threads(int(threads))
     cfg = load_config(model, config)
     if steps is not None:
@@ -209,6 +207,8 @@ def train(model, config, data_path, out_dir, steps=None, seed=0, progress=True, 
         lr = learning_rate(cfg, step)
         for group in opt.param_groups:
             group["lr"] = lr
+        if share is not None and device.type == "cpu":
+            share.step()
         x, c, keep = draw_batch(net, tx, tc, cfg, seed, step, crop)
         loss = step_nll(x[rows], c[rows], None if keep is None else keep[rows]).mean()
         opt.zero_grad(set_to_none=True)
@@ -273,6 +273,10 @@ def _finite_on_every_rank(loss, world):
     return bool(finite)
 
 
+def _threads(text):
+    return text if text == "auto" else cli.number(int, 1, 1024)(text)
+
+
 def _main(argv):
     ap = cli.ArgumentParser(prog="python -m generation.train", description=__doc__.split("\n")[0])
     ap.add_argument("--model", required=True, choices=sorted(MODELS))
@@ -283,7 +287,9 @@ def _main(argv):
     ap.add_argument("--seed", type=cli.number(int, 0), default=0)
     ap.add_argument("--resume", action="store_true", help="continue from OUT/resume.pt")
     ap.add_argument("--device", default=None, help="default: cuda when present, else cpu")
-    ap.add_argument("--threads", type=cli.number(int, 1, 1024), default=None, help="CPU threads (default: all cores)")
+    ap.add_argument("--threads", type=_threads, default="auto",
+                    help="CPU threads, fixed (and then the same bits run after run), or 'auto' (default): the cores "
+                         "other processes leave free, checked every 2 s")
     ap.add_argument("--no-progress", action="store_true")
     a = ap.parse_args(argv)
     out = train(a.model, a.config, a.data, a.out, steps=a.steps, seed=a.seed, progress=not a.no_progress,

@@ -124,3 +124,29 @@ def test_ddp_two_cpu_processes_match_one(small_dataset, tmp_path):
     # whole channels by a large fraction of a std; shards with their own random draws, every weight by ~lr.
     assert diff.median() < 1e-5 and diff.max() < 2e-3, (diff.median(), diff.max())
     assert json.loads((tmp_path / "two" / "config.json").read_text())["ranks"] == 2
+
+
+def test_core_share_leaves_a_busy_neighbour_its_core():
+    """With another process spinning on one of 2 cores, training drops to one thread, and takes both back when
+    the neighbour stops (issue 15, item 6)."""
+    import time
+
+    from generation.core_share import CoreShare
+    before = torch.get_num_threads()
+    busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        torch.set_num_threads(2)
+        share = CoreShare(interval=0.5, cores=2)
+        time.sleep(1.0)
+        assert share.others() > 0.6  # the neighbour's core, seen through /proc/stat
+        share.step()
+        assert torch.get_num_threads() == 1
+    finally:
+        busy.kill()
+        busy.wait()
+    try:
+        time.sleep(1.0)
+        share.step()
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)
