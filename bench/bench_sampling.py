@@ -93,7 +93,7 @@ def bench(model, batch, frames):
         c_all = torch.randn(batch, tau + 1, 3)
         z = torch.randn(batch, 1, 63)
         naive = time_frames(lambda: model.inverse_naive(z, hist, c_all), max(5, frames // 3))
-    return fast, naive, default_layout(next(model.parameters()).device)
+    return fast, naive, default_layout(next(model.parameters()).device, batch)
 
 
 def main():

@@ -135,7 +135,7 @@ class MGStream:
     "row": activations [B, features], weights stored [in, out], every product X @ W;
     "col": activations [features, B], weights stored [out, in] as nn.LSTM keeps them, every product W @ X.
     Which is faster depends on the CPU and its BLAS, by up to 2.8x either way (bench/RESULTS.md), so
-    layout=None takes `default_layout`, a fixed choice per device type and CPU vendor (never a timing, so the
+    layout=None takes `default_layout`, a fixed choice per device type, CPU vendor and batch size (never a timing, so the
     same inputs give the same bits run after run); pass a layout to fix it.
     """
 
@@ -147,7 +147,7 @@ class MGStream:
         self.hist = history.to(self.device, self.dtype).clone()          # [B, tau, 63]
         self.hist_c = history_control.to(self.device, self.dtype).clone()  # [B, tau, 3]
         b = self.hist.shape[0]
-        self.layout = layout or default_layout(self.device)
+        self.layout = layout or default_layout(self.device, b)
         if self.layout not in LAYOUTS:
             raise ValueError(f"MGStream: layout must be one of {LAYOUTS}, got {self.layout!r}")
         self.w = w = fused_weights(model, self.layout)
@@ -225,6 +225,7 @@ class MGStream:
 
 
 LAYOUTS = ("row", "col")
+BATCHED = 8  # streams from which a batch's products favour "col" on Intel CPUs (measured at 1 and 30)
 
 
 def cpu_vendor():
@@ -239,20 +240,21 @@ def cpu_vendor():
     return ""
 
 
-def default_layout(device):
-    """The layout for a device, fixed per device type and CPU vendor so that sampling never depends on a
-    timing race (the two layouts round differently). MOGLOW_LAYOUT=row|col overrides it.
+def default_layout(device, batch=1):
+    """The layout for a device and batch size, fixed per device type, CPU vendor and batch so that sampling never
+    depends on a timing race (the two layouts round differently). MOGLOW_LAYOUT=row|col overrides it.
 
-    Measured (bench/RESULTS.md): on AMD Zen 3 with MKL, "row" is 2.8x faster for one stream and 1.2-1.4x for
-    30; on the Intel hosts measured "col" is as fast or faster. cuBLAS takes either: "row"."""
+    Measured at the paper's size (bench/RESULTS.md): on AMD Zen 3 with MKL "row" is faster for 1 and 30 streams
+    (2.8x and 1.2-1.4x); on this project's Intel Xeon host "row" is 1.9x faster for one stream and "col" 1.2x
+    faster for 30. cuBLAS takes either: "row"."""
     chosen = os.environ.get("MOGLOW_LAYOUT")
     if chosen:
         if chosen not in LAYOUTS:
             raise ValueError(f"MOGLOW_LAYOUT must be one of {LAYOUTS}, got {chosen!r}")
         return chosen
-    if torch.device(device).type != "cpu":
+    if torch.device(device).type != "cpu" or cpu_vendor() == "AuthenticAMD" or batch < BATCHED:
         return "row"
-    return "row" if cpu_vendor() == "AuthenticAMD" else "col"
+    return "col"
 
 
 def lstm_cell_(gates, c, h, dim, hid):

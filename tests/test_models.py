@@ -140,10 +140,11 @@ def test_layout_is_a_fixed_choice_never_a_timing(tiny_runs, monkeypatch):
     model = load_model(last_ckpt(tiny_runs["mg"]))
     hist, hist_c = torch.zeros(3, model.tau, 63), torch.zeros(3, model.tau, 3)
     monkeypatch.delenv("MOGLOW_LAYOUT", raising=False)
-    assert default_layout("cpu") == ("row" if cpu_vendor() == "AuthenticAMD" else "col")
-    assert default_layout("cuda") == "row" and default_layout(torch.device("cuda:0")) == "row"
-    assert MGStream(model, hist, hist_c).layout == default_layout("cpu")
-    other = next(name for name in LAYOUTS if name != default_layout("cpu"))
+    assert default_layout("cpu", 1) == "row"
+    assert default_layout("cpu", 30) == ("row" if cpu_vendor() == "AuthenticAMD" else "col")
+    assert default_layout("cuda", 30) == "row" and default_layout(torch.device("cuda:0"), 1) == "row"
+    assert MGStream(model, hist, hist_c).layout == default_layout("cpu", 3)
+    other = next(name for name in LAYOUTS if name != default_layout("cpu", 3))
     monkeypatch.setenv("MOGLOW_LAYOUT", other)
     assert MGStream(model, hist, hist_c).layout == other
     monkeypatch.setenv("MOGLOW_LAYOUT", "diagonal")
