@@ -1,0 +1,62 @@
+"""The models and held-out data shipped in generation/pretrained/ (issue 15, item 4): they load, sample, keep
+the quality recorded when they were shipped, fit the size budget, and make the default stimulus set alone."""
+import csv
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from generation import make_stimuli, pretrained
+from generation.sample import load_model, sample_fl, sample_mg
+
+pytestmark = pytest.mark.usefixtures("torch_one_thread")
+
+
+def test_shipped_files_are_all_there_and_within_budget():
+    assert pretrained.available()
+    files = [*pretrained.CHECKPOINTS.values(), pretrained.HELDOUT, make_stimuli.MOTION_ENCODER]
+    assert sum(p.stat().st_size for p in files) <= 40e6
+    with np.load(pretrained.HELDOUT) as d:
+        assert "CC BY-NC 4.0" in str(d["attribution"])
+        assert not any(k.startswith("train_") for k in d.files)  # held-out windows only
+        assert d["test_x"].shape[1:] == (80, 63) and d["test_hist"].shape[1:] == (int(d["tau"]), 63)
+
+
+def test_shipped_checkpoints_load_and_sample():
+    with np.load(pretrained.HELDOUT) as d:
+        c, hist, hist_c = d["test_c"][:3], d["test_hist"][:3], d["test_hist_c"][:3]
+    for name, kind in (("mg", "mg"), ("bad", "mg"), ("fl", "fl")):
+        ck = torch.load(pretrained.CHECKPOINTS[name], weights_only=False)
+        assert {v.dtype for v in ck["state"].values() if v.is_floating_point()} == {torch.float16}  # half the size
+        model = load_model(pretrained.CHECKPOINTS[name], "cpu")
+        assert model.kind == kind and next(model.parameters()).dtype == torch.float32
+        x = sample_mg(model, c, hist, hist_c, seed=1) if kind == "mg" else sample_fl(model, c, seed=1)
+        assert x.shape == (3, 80, 63) and np.isfinite(x).all()
+    assert load_model(pretrained.CHECKPOINTS["bad"], "cpu").step < load_model(pretrained.CHECKPOINTS["mg"], "cpu").step
+
+
+def test_shipped_models_keep_their_recorded_quality():
+    """Foot skating and jerk over NAT's on a quarter of the test split: no worse than when shipped (10% slack
+    for another machine's float rounding)."""
+    recorded = json.loads(pretrained.QUALITY.read_text())
+    now = pretrained.quality()
+    for model in ("MG", "FL"):
+        for metric in ("foot_skating", "jerk"):
+            assert now[model][metric] <= 1.1 * recorded[model][metric], (model, metric, now, recorded)
+
+
+def test_default_job_uses_the_shipped_models_and_nothing_beside_the_checkout(tmp_path, capsys):
+    out, runs = tmp_path / "stimuli", tmp_path / "runs"
+    code = make_stimuli.main(["--out", str(out), "--runs", str(runs), "--n-items", "3", "--n-catch", "1",
+                              "--n-training", "1", "--size", "64", "--jobs", "1"])
+    err = capsys.readouterr().err
+    assert code == 0, err[-2000:]
+    assert not runs.exists()  # no dataset prepared, nothing trained
+    assert str(pretrained.HELDOUT) in err and str(pretrained.CHECKPOINTS["mg"]) in err
+    with open(out / "manifest.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    count = {}
+    for r in rows:
+        count[r["role"], r["condition"]] = count.get((r["role"], r["condition"]), 0) + 1
+    assert count["test", "NAT"] == count["test", "MG"] == count["test", "FL"] == 3 and count["catch", "BAD"] == 1
