@@ -46,13 +46,14 @@ def kill9(proc):
 
 
 # Per design: the acknowledged record's identity, the export's rows, acknowledged records per rater (2 test and 2
-# catch trials; a parallel page acknowledges each of its clips: 2 x 3 test + 2 x 2 catch) and the balanced unit of
+# catch trials; a parallel page acknowledges each of its clips: 2 x 3 test + 2 x 3 catch, a catch page being as large
+# as a test page) and the balanced unit of
 # a test row (None: the row is counted through another row of its unit).
 DESIGNS = {
     "acr": (("rater_id", "clip_id", "rating"), iter_rows, 4, lambda r: r["clip_id"]),
     "pairwise": (("rater_id", "clip_a", "clip_b", "preference"), iter_pair_rows, 4,
                  lambda r: (r["item"], *sorted((r["condition_a"], r["condition_b"])))),
-    "parallel": (("rater_id", "page_id", "clip_id", "rating"), iter_page_rows, 10,
+    "parallel": (("rater_id", "page_id", "clip_id", "rating"), iter_page_rows, 12,
                  lambda r: r["item"] if r["condition"] == "NAT" else None),
 }
 
@@ -62,8 +63,10 @@ def design_stimuli(tmp_path_factory):
     return make_stimuli(tmp_path_factory.mktemp("load_stimuli"), catch_nat=True)
 
 
+@pytest.mark.parametrize("raters", [pytest.param(N_RATERS, marks=pytest.mark.slow), 60])
 @pytest.mark.parametrize("design", list(DESIGNS))
-def test_200_raters_with_a_server_crash(app_stimuli, design_stimuli, app_db_url, tmp_path, design):
+def test_200_raters_with_a_server_crash(app_stimuli, design_stimuli, app_db_url, tmp_path, design, raters):
+    """200 raters (--run-slow), and a 60-rater short variant in CI: the same crash, the same checks."""
     key, rows_of, per_rater, unit = DESIGNS[design]
     stimuli = app_stimuli if design == "acr" else design_stimuli
     port = free_port()
@@ -72,7 +75,7 @@ def test_200_raters_with_a_server_crash(app_stimuli, design_stimuli, app_db_url,
                STUDY_DESIGN=design)
     log = open(tmp_path / "gunicorn.log", "w")
     acks, killed = [0], threading.Event()
-    kill_at = N_RATERS * per_rater // 3          # a third of the way through
+    kill_at = raters * per_rater // 3          # a third of the way through
     procs = [start_gunicorn(port, env, log)]
 
     def on_ack(rec):
@@ -80,7 +83,7 @@ def test_200_raters_with_a_server_crash(app_stimuli, design_stimuli, app_db_url,
 
     summary = {}
     sim = threading.Thread(target=lambda: summary.update(run_simulation(
-        f"http://127.0.0.1:{port}", N_RATERS, seed=3, careless=0.1, manifest=stimuli, concurrency=N_RATERS,
+        f"http://127.0.0.1:{port}", raters, seed=3, careless=0.1, manifest=stimuli, concurrency=raters,
         timeout_s=150, progress=False, on_ack=on_ack)))
     try:
         sim.start()
@@ -102,9 +105,9 @@ def test_200_raters_with_a_server_crash(app_stimuli, design_stimuli, app_db_url,
 
     assert killed.is_set() and 0 < acked_before < summary["n_ratings"]
     assert summary["errors"] == [], summary["errors"][:3]
-    assert summary["n_raters_completed"] == N_RATERS
+    assert summary["n_raters_completed"] == raters
     acked = collections.Counter(tuple(r[k] for k in key) for r in summary["ratings"])
-    assert max(acked.values()) == 1 and len(acked) == N_RATERS * per_rater
+    assert max(acked.values()) == 1 and len(acked) == raters * per_rater
 
     engine = make_engine(app_db_url)
     try:
