@@ -109,6 +109,24 @@ def _check_unique_attribute(path, df, clip_codes, attr):
                             f"{df.at[earlier, attr]!r} at line {earlier}")
 
 
+def read_export(path, required, noun, strip=False):
+    """(path, DataFrame of text, index = file line) of an exported CSV with the `required` columns and at least one
+    row; with `strip`, the required fields stripped of blanks and none empty. AnalysisError naming file and line."""
+    path, df = _read_csv(path)
+    missing = [c for c in required if c not in df.columns]
+    if missing:
+        raise AnalysisError(f"{path}: missing required column{'s' if len(missing) > 1 else ''} "
+                            f"{', '.join(missing)} (header has: {', '.join(df.columns)})")
+    if len(df) == 0:
+        raise AnalysisError(f"{path}: no {noun} (header only)")
+    for col in required if strip else ():
+        df[col] = df[col].str.strip()
+        empty = df[col] == ""
+        if empty.any():
+            raise AnalysisError(f"{path}:{empty.idxmax()}: empty {col}")
+    return path, df
+
+
 def load_ratings(path):
     """ratings.csv -> DataFrame (rater_id, clip_id categorical; condition; rating int8; role 'test'/'catch';
     extra columns as text).
@@ -117,13 +135,7 @@ def load_ratings(path):
     required columns, empty required fields, non-integer or out-of-range ratings, unknown roles, duplicate
     (rater, clip) pairs, a clip listed under two conditions or roles, no test rows.
     """
-    path, df = _read_csv(path)
-    missing = [c for c in REQUIRED if c not in df.columns]
-    if missing:
-        raise AnalysisError(f"{path}: missing required column{'s' if len(missing) > 1 else ''} "
-                            f"{', '.join(missing)} (header has: {', '.join(df.columns)})")
-    if len(df) == 0:
-        raise AnalysisError(f"{path}: no ratings (header only)")
+    path, df = read_export(path, REQUIRED, "ratings")
     rater_codes = _clean_column(path, df, "rater_id", categorical=True)
     clip_codes = _clean_column(path, df, "clip_id", categorical=True)
     _clean_column(path, df, "condition")

@@ -22,7 +22,7 @@ import pandas as pd
 from scipy import optimize
 from scipy import stats as sps
 
-from .load import AnalysisError, _read_csv
+from .load import AnalysisError, read_export
 
 REQUIRED = ("rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role")
 ROLES = ("test", "catch")
@@ -36,18 +36,7 @@ def load_pairs(path):
     """pairs.csv -> DataFrame (index = file line). Each problem is one AnalysisError naming the file and line:
     missing columns, empty fields, a preference that is not an integer -2..2, an unknown role, the same condition
     on both sides, the same clip twice, a repeated comparison by one rater, no test rows."""
-    path, df = _read_csv(path)
-    missing = [c for c in REQUIRED if c not in df.columns]
-    if missing:
-        raise AnalysisError(f"{path}: missing required column{'s' if len(missing) > 1 else ''} "
-                            f"{', '.join(missing)} (header has: {', '.join(df.columns)})")
-    if len(df) == 0:
-        raise AnalysisError(f"{path}: no answers (header only)")
-    for col in REQUIRED:
-        df[col] = df[col].str.strip()
-        empty = df[col] == ""
-        if empty.any():
-            raise AnalysisError(f"{path}:{empty.idxmax()}: empty {col}")
+    path, df = read_export(path, REQUIRED, "answers", strip=True)
     ok = df["preference"].isin([str(v) for v in LEVELS] + ["+1", "+2"])
     if not ok.all():
         line = (~ok).idxmax()

@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats as sps
 
-from .load import AnalysisError, _read_csv
+from .load import AnalysisError, read_export
 
 REQUIRED = ("rater_id", "page_id", "item", "clip_id", "condition", "rating", "role")
 ROLES = ("test", "catch")
@@ -25,18 +25,7 @@ def load_pages(path):
     file and line: missing columns, empty fields, a rating that is not an integer 0..100, an unknown role, a page
     shared by two raters or two items, a clip or a condition twice on one page, a clip rated twice by one rater,
     no test rows."""
-    path, df = _read_csv(path)
-    missing = [c for c in REQUIRED if c not in df.columns]
-    if missing:
-        raise AnalysisError(f"{path}: missing required column{'s' if len(missing) > 1 else ''} "
-                            f"{', '.join(missing)} (header has: {', '.join(df.columns)})")
-    if len(df) == 0:
-        raise AnalysisError(f"{path}: no ratings (header only)")
-    for col in REQUIRED:
-        df[col] = df[col].str.strip()
-        empty = df[col] == ""
-        if empty.any():
-            raise AnalysisError(f"{path}:{empty.idxmax()}: empty {col}")
+    path, df = read_export(path, REQUIRED, "ratings", strip=True)
     text = df["rating"]
     ok = text.str.fullmatch(r"\+?\d{1,3}") & text.str.isascii()
     values = pd.to_numeric(text.where(ok), errors="coerce")
