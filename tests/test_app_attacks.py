@@ -6,7 +6,6 @@ import datetime as dt
 import hashlib
 import io
 import os
-import threading
 
 import pytest
 from sqlalchemy import update
@@ -15,6 +14,7 @@ from rating_app.db import Trial, utcnow
 from rating_app.manifest import AppError, load_manifest
 from rating_app.testing import make_stimuli
 
+from concurrent_raters import run_raters
 from test_app_api import TOKEN_HDR, answer, clips_by_role, complete, export_rows, idle, nxt, start
 
 
@@ -222,30 +222,7 @@ def test_released_trial_cannot_push_a_clip_over_target(make_app, app_stimuli):
 def test_concurrent_raters_never_exceed_the_target(make_app, app_stimuli):
     roles = clips_by_role(app_stimuli)
     app = make_app(ratings_per_clip=2, min_view=0, sessions_per_client=0)
-    barrier, errors = threading.Barrier(8), []
-
-    def rater():
-        c = app.test_client()
-        barrier.wait()
-        try:
-            while True:
-                r = c.post("/api/sessions", json={})
-                if r.status_code == 409:
-                    return
-                token = r.json["session"]
-                while True:
-                    r = c.get(f"/api/sessions/{token}/next")
-                    if r.status_code != 200 or r.json.get("done"):
-                        break
-                    answer(c, token, r.json["trial"])
-        except Exception as e:                       # noqa: BLE001 - reported below
-            errors.append(repr(e))
-
-    threads = [threading.Thread(target=rater) for _ in range(8)]
-    for th in threads:
-        th.start()
-    for th in threads:
-        th.join(120)
+    errors = run_raters(app, answer, timeout=120)
     assert not errors
     per_clip = collections.Counter(r["clip_id"] for r in export_rows(app.test_client()) if r["role"] == "test")
     assert per_clip == {c: 2 for c in roles["test"]}

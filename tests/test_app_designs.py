@@ -19,6 +19,7 @@ from rating_app.db import Trial, utcnow
 from rating_app.manifest import AppError, load_manifest
 from rating_app.testing import make_stimuli
 
+from concurrent_raters import run_raters
 from test_app_api import TOKEN_HDR, idle
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -325,30 +326,7 @@ def test_targets_exact_under_concurrent_sessions(make, big_stimuli, design, unit
     clips = clips_of(big_stimuli)
     target = 3
     app = make(big_stimuli, design, ratings_per_clip=target, clips_per_rater=7)
-    barrier, errors = threading.Barrier(8), []
-
-    def rater():
-        c = app.test_client()
-        barrier.wait()
-        try:
-            while True:
-                r = c.post("/api/sessions", json={})
-                if r.status_code == 409:
-                    return
-                token = r.json["session"]
-                while True:
-                    r = c.get(f"/api/sessions/{token}/next")
-                    if r.status_code != 200 or r.json.get("done"):
-                        break
-                    post(c, token, r.json["trial"])
-        except Exception as e:                       # noqa: BLE001 - reported below
-            errors.append(repr(e))
-
-    threads = [threading.Thread(target=rater) for _ in range(8)]
-    for th in threads:
-        th.start()
-    for th in threads:
-        th.join(300)
+    errors = run_raters(app, post)
     assert not errors, errors[:3]
     check_exact(app.test_client(), clips, design, units, target)
 
