@@ -25,7 +25,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from generation import skeleton  # noqa: E402
 from generation.features import to_world  # noqa: E402
-from generation.make_stimuli import MOTION_ENCODER  # noqa: E402
+from generation.pretrained import MOTION_ENCODER  # noqa: E402
 from generation.metrics import control_following, foot_skating, jerk  # noqa: E402
 from generation.motion_encoder import MotionEncoder  # noqa: E402
 from generation.sample import load_model, sample_split  # noqa: E402

@@ -37,7 +37,7 @@ from tqdm import tqdm
 from core import cli
 from core.cli import UserError
 from rendering.blinding import pad_to_common_size, same_mtime
-from rendering.render import MAX_SIZE, MIN_SIZE, render_clip
+from rendering.render import render_clip, size_flag
 
 from . import pretrained, skeleton
 from .clip import save_clip
@@ -49,7 +49,6 @@ BUILTIN = ("NAT", "MG", "FL")
 CLIP_ID_LEN = 16
 MANIFEST_COLUMNS = ["clip_id", "condition", "role", "item", "video", "motion", "seed", "frames", "fps", "width",
                     "height"]
-MOTION_ENCODER = Path(__file__).resolve().parent / "pretrained" / "motion_encoder.pt"
 METRICS_COLUMNS = ["clip_id", "condition", "role", "item", *METRIC_NAMES]
 ITEMS_COLUMNS = ["item", "role", "category", "take", "start_frame", "frames", "fps", "control"]
 
@@ -317,7 +316,7 @@ def parse_args(argv):
                                                               "condition but BAD (default 1)")
     ap.add_argument("--temperature", type=cli.number(float, 0, 10), default=1.0, help="sampling temperature of MG and FL (default 1.0)")
     ap.add_argument("--seed", type=cli.number(int, 0), default=0, help="item selection, sampling and manifest order (default 0)")
-    ap.add_argument("--size", type=cli.number(int, MIN_SIZE, MAX_SIZE), help="video width = height in pixels (default 640; 320 with --quick)")
+    ap.add_argument("--size", type=size_flag, help="video width = height in pixels, even (default 640; 320 with --quick)")
     ap.add_argument("--preset", default="ultrafast", help="x264 preset (default ultrafast at constant quantiser 17: fastest, no visible loss on stick figures)")
     ap.add_argument("--jobs", type=cli.number(int, 1, 1024), default=os.cpu_count() or 1, help="rendering processes (default: one per core)")
     ap.add_argument("--device", help="torch device (default: cuda when present, else cpu)")
@@ -334,8 +333,6 @@ def parse_args(argv):
     if args.shipped and not args.dataset:
         args.dataset = str(pretrained.HELDOUT)
     args.dataset = args.dataset or str(Path(args.runs) / ("dataset_quick.npz" if args.quick else "dataset.npz"))
-    if args.size % 2 or not MIN_SIZE <= args.size <= MAX_SIZE:
-        raise StimuliError(f"--size must be even and {MIN_SIZE}-{MAX_SIZE}, got {args.size}")
     if args.data and not Path(args.data).is_dir():
         raise StimuliError(f"--data {args.data}: folder not found")
     return args
@@ -453,7 +450,7 @@ def run(args):
     return 0
 
 
-def condition_fmd(poses, encoder=MOTION_ENCODER):
+def condition_fmd(poses, encoder=pretrained.MOTION_ENCODER):
     """[{condition, n_windows, fmd}] for root-frame test windows {condition: [(x [T, 63], category), ...]};
     [] (with a note) when the shipped motion encoder is missing."""
     if not Path(encoder).is_file():

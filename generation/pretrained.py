@@ -14,13 +14,13 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from core import cli
 
 FOLDER = Path(__file__).resolve().parent / "pretrained"
 CHECKPOINTS = {"mg": FOLDER / "mg.pt", "fl": FOLDER / "fl.pt", "bad": FOLDER / "bad.pt"}
 HELDOUT = FOLDER / "heldout.npz"
+MOTION_ENCODER = FOLDER / "motion_encoder.pt"  # generation.motion_encoder, for the FMD
 QUALITY = FOLDER / "quality.json"
 QUALITY_STRIDE = 4  # every 4th test window: about 25 windows spread over all categories
 ATTRIBUTION = ("Bandai-Namco-Research-Motiondataset, Bandai Namco Research Inc., CC BY-NC 4.0 "
@@ -37,6 +37,8 @@ def available():
 
 def export_checkpoint(src, dst):
     """A training checkpoint with float16 weights (integer buffers and flags unchanged)."""
+    import torch  # here, not at module level: make_stimuli imports this module, and its render workers need no torch
+
     ck = torch.load(src, map_location="cpu", weights_only=False)
     ck["state"] = {k: v.half() if v.is_floating_point() else v for k, v in ck["state"].items()}
     ck["source"] = Path(src).as_posix()

@@ -1,26 +1,18 @@
 """`python -m rendering CLIP.npz OUT.mp4 [--size 640] [--sheet OUT.png]`: render one clip file."""
-import argparse
 import sys
 from pathlib import Path
 
 from core import cli
-from rendering.render import MAX_SIZE, MIN_SIZE, RenderError, render_clip
+from rendering.render import MAX_SIZE, MIN_SIZE, RenderError, render_clip, size_flag
 
 PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower", "veryslow")
-
-
-def _even_size(text):
-    size = cli.number(int, MIN_SIZE, MAX_SIZE)(text)
-    if size % 2:
-        raise argparse.ArgumentTypeError(f"must be even (H.264 yuv420p), got {size}")
-    return size
 
 
 def _main(argv):
     p = cli.ArgumentParser(prog="python -m rendering", description=__doc__)
     p.add_argument("clip", help="motion clip .npz (CONTRACTS.md §1)")
     p.add_argument("out", help="output .mp4")
-    p.add_argument("--size", type=_even_size, default=640,
+    p.add_argument("--size", type=size_flag, default=640,
                    help=f"frame width = height in pixels, even, {MIN_SIZE}-{MAX_SIZE} (default 640)")
     p.add_argument("--sheet", help="also write a PNG contact sheet here")
     p.add_argument("--preset", default="ultrafast", choices=PRESETS, help="x264 preset (default ultrafast)")

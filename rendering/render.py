@@ -11,6 +11,7 @@ just the 2x2 pixel blocks it touched into the Y/U/V planes, and hand ffmpeg (lib
 quantiser) ready yuv420p frames through a pipe. bench/bench_render.py compares this with a matplotlib
 FuncAnimation + ffmpeg writer; at 1000x1000 a third of our time is drawing, two thirds the pipe and x264.
 """
+import argparse
 import functools
 import subprocess
 from dataclasses import dataclass
@@ -22,8 +23,9 @@ from matplotlib.path import Path
 from matplotlib.transforms import IdentityTransform
 from scipy.ndimage import gaussian_filter1d
 
-from generation.clip import check_fps, check_joints, load_clip
+from core import cli
 from core.cli import UserError
+from generation.clip import check_fps, check_joints, load_clip
 
 
 class RenderError(UserError):
@@ -58,6 +60,15 @@ class Style:
 
 
 MIN_SIZE, MAX_SIZE = 32, 4096  # pixels; beyond 4096 x264's level limits and memory get in the way
+
+
+def size_flag(text):
+    """An argparse type for a video size: an even integer in [MIN_SIZE, MAX_SIZE] (yuv420p halves both sides)."""
+    size = cli.number(int, MIN_SIZE, MAX_SIZE)(text)
+    if size % 2:
+        raise argparse.ArgumentTypeError(f"must be even (H.264 yuv420p), got {size}")
+    return size
+
 DEFAULT_CAMERA = Camera()
 DEFAULT_STYLE = Style()
 _NEAR = 0.2  # metres; floor lines are clipped to this depth in front of the camera

@@ -121,7 +121,7 @@ def test_frechet_distance_matches_the_closed_form_for_diagonal_gaussians():
 def test_shipped_motion_encoder_ranks_real_held_out_motion_first(small_dataset):
     """The FMD floor (held-out real motion) lies well below the same motion spoiled: frames shuffled in time,
     held still (a standing pose), or shaken by 2 cm of noise per frame."""
-    from generation.make_stimuli import MOTION_ENCODER
+    from generation.pretrained import MOTION_ENCODER
     from generation.motion_encoder import MotionEncoder
     enc = MotionEncoder.load(MOTION_ENCODER)
     with np.load(small_dataset) as d:

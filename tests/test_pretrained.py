@@ -15,7 +15,7 @@ pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
 def test_shipped_files_are_all_there_and_within_budget():
     assert pretrained.available()
-    files = [*pretrained.CHECKPOINTS.values(), pretrained.HELDOUT, make_stimuli.MOTION_ENCODER]
+    files = [*pretrained.CHECKPOINTS.values(), pretrained.HELDOUT, pretrained.MOTION_ENCODER]
     assert sum(p.stat().st_size for p in files) <= 40e6
     with np.load(pretrained.HELDOUT) as d:
         assert "CC BY-NC 4.0" in str(d["attribution"])

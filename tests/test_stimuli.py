@@ -271,3 +271,11 @@ def test_stimuli_full_default_run(tmp_path):
     rows = read_csv(out / "metrics.csv")
     nat = np.array([float(r["foot_skating"]) for r in rows if r["condition"] == "NAT"])
     assert np.median(nat) < 0.1
+
+
+def test_render_workers_load_no_torch():
+    """make_stimuli's render workers are spawned and import generation.make_stimuli: that import must not load
+    torch (seconds and hundreds of MB per worker); sampling and training import it where they run."""
+    r = subprocess.run([sys.executable, "-c", "import sys, generation.make_stimuli; print('torch' in sys.modules)"],
+                       capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0 and r.stdout.strip() == "False", r.stderr[-500:]
