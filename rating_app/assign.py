@@ -76,17 +76,24 @@ def is_full(conn, target: int) -> bool:
     return bool(cov) and all(d >= target for d, _ in cov.values())
 
 
+def _short_or_full(cov, target, unit, answers, answered):
+    """How many units are still short of their target, counting held slots; StudyFull when none is: for good
+    when every unit has all its answers, for now when the rest are held by other sessions."""
+    short = sum(d + h < target for d, h in cov.values())
+    if not short:
+        if all(d >= target for d, _ in cov.values()):
+            raise StudyFull(f"study full: every {unit} has all its {answers}. Thank you for your interest")
+        raise StudyFull(f"study full for now: the remaining {unit}s are being {answered} by others; "
+                        "please try again later")
+    return short
+
+
 def plan_session(conn, rng: random.Random, target: int, clips_per_rater: int | None) -> list[tuple[str, str | None]]:
     """[(kind, clip_id or None)] in presentation order for a new session; raise StudyFull."""
     cov = coverage(conn)
     if not cov:
         raise StudyFull("the study has no test clips")
-    short = sum(d + h < target for d, h in cov.values())
-    if not short:
-        if all(d >= target for d, _ in cov.values()):
-            raise StudyFull("study full: every clip has all its ratings. Thank you for your interest")
-        raise StudyFull("study full for now: the remaining clips are being rated by others; "
-                        "please try again later")
+    short = _short_or_full(cov, target, "clip", "ratings", "rated")
     n_test = short if not clips_per_rater else min(clips_per_rater, short)
     n_catch = conn.execute(select(func.count()).select_from(Clip).where(Clip.role == "catch",
                                                                          Clip.condition == BAD)).scalar()
@@ -128,12 +135,7 @@ def units_full(conn, units, target: int) -> bool:
 def plan_units(conn, rng: random.Random, target: int, per_rater: int | None, design: str, clips, units):
     """[(kind, training clips or None)] in presentation order for a new pairwise or parallel session."""
     cov = unit_coverage(conn, units)
-    short = sum(d + h < target for d, h in cov.values())
-    if not short:
-        if all(d >= target for d, _ in cov.values()):
-            raise StudyFull("study full: every comparison has all its answers. Thank you for your interest")
-        raise StudyFull("study full for now: the remaining comparisons are being answered by others; "
-                        "please try again later")
+    short = _short_or_full(cov, target, "comparison", "answers", "answered")
     n_test = short if not per_rater else min(per_rater, short)
     n_catch = sum(u.role == "catch" for u in units.values())
     rating = [("test", None)] * n_test + [("catch", None)] * n_catch
