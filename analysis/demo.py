@@ -12,6 +12,7 @@ researcher would run them by hand. Everything started here is stopped at the end
 With --design pairwise or parallel the app runs that test design (CONTRACTS §8), the crowd answers it, the export is
 pairs.csv (pairwise) or the parallel ratings.csv, and the report is that design's.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -117,10 +118,20 @@ def _export(url: str, token: str, out: Path) -> None:
         raise DemoError(f"export from {url}/admin/export.csv failed: {e}") from None
 
 
-def run_demo(out: Path, db: str | None = None, raters: int = 200, seed: int = 0, careless: float = 0.1,
-             ratings_per_clip: int = 20, clips_per_rater: int | None = 30, gunicorn: bool = False,
-             stimuli: Path | None = None, timeout_s: float = 1800.0, min_view: float = 0.01,
-             design: str = "acr") -> dict:
+def run_demo(
+    out: Path,
+    db: str | None = None,
+    raters: int = 200,
+    seed: int = 0,
+    careless: float = 0.1,
+    ratings_per_clip: int = 20,
+    clips_per_rater: int | None = 30,
+    gunicorn: bool = False,
+    stimuli: Path | None = None,
+    timeout_s: float = 1800.0,
+    min_view: float = 0.01,
+    design: str = "acr",
+) -> dict:
     """Run the study; returns paths and the crowd's summary. `stimuli` reuses an existing folder."""
     out = Path(out)
     logs = out / "logs"
@@ -132,8 +143,21 @@ def run_demo(out: Path, db: str | None = None, raters: int = 200, seed: int = 0,
         if stimuli is None:
             stimuli = out / "stimuli"
             _stage(f"1/5 make stimuli (--quick) → {stimuli}")
-            procs.run([py, "-m", "generation.make_stimuli", "--quick", "--out", str(stimuli),
-                       "--runs", str(out / "runs"), "--seed", str(seed)], "make_stimuli")
+            procs.run(
+                [
+                    py,
+                    "-m",
+                    "generation.make_stimuli",
+                    "--quick",
+                    "--out",
+                    str(stimuli),
+                    "--runs",
+                    str(out / "runs"),
+                    "--seed",
+                    str(seed),
+                ],
+                "make_stimuli",
+            )
         else:
             _stage(f"1/5 stimuli: using {stimuli}")
         manifest = Path(stimuli) / "manifest.csv"
@@ -149,35 +173,84 @@ def run_demo(out: Path, db: str | None = None, raters: int = 200, seed: int = 0,
         _stage(f"2/5 rating app at {url} (database {db.split('@')[-1]})")
         # The crowd runs on loopback (one address) and should not take 4 s per clip: lift the per-address session
         # limit and lower the minimum viewing time (the dashboard says so); the crowd still waits as required.
-        serve_opts = ["--ratings-per-clip", str(ratings_per_clip), "--min-view", str(min_view),
-                      "--sessions-per-client", "0", "--design", design]
+        serve_opts = [
+            "--ratings-per-clip",
+            str(ratings_per_clip),
+            "--min-view",
+            str(min_view),
+            "--sessions-per-client",
+            "0",
+            "--design",
+            design,
+        ]
         if clips_per_rater:
             serve_opts += ["--clips-per-rater", str(clips_per_rater)]
         if gunicorn:
-            env.update(RATING_MANIFEST=str(manifest), DATABASE_URL=db, RATINGS_PER_CLIP=str(ratings_per_clip),
-                       MIN_VIEW=str(min_view), SESSIONS_PER_CLIENT="0", STUDY_DESIGN=design)
+            env.update(
+                RATING_MANIFEST=str(manifest),
+                DATABASE_URL=db,
+                RATINGS_PER_CLIP=str(ratings_per_clip),
+                MIN_VIEW=str(min_view),
+                SESSIONS_PER_CLIENT="0",
+                STUDY_DESIGN=design,
+            )
             if clips_per_rater:
                 env["CLIPS_PER_RATER"] = str(clips_per_rater)
             cmd = [py, "-m", "gunicorn", "-w", "2", "--threads", "4", "-b", f"127.0.0.1:{port}", "rating_app.wsgi:app"]
         else:
-            cmd = [py, "-m", "rating_app", "serve", "--manifest", str(manifest), "--db", db, "--port", str(port),
-                   *serve_opts]
+            cmd = [
+                py,
+                "-m",
+                "rating_app",
+                "serve",
+                "--manifest",
+                str(manifest),
+                "--db",
+                db,
+                "--port",
+                str(port),
+                *serve_opts,
+            ]
         with open(serve_log, "w") as fh:
             server = procs.start(cmd, stdout=fh, stderr=subprocess.STDOUT, env=env)
         _wait_until_up(f"{url}/", server, serve_log)
 
-        _stage(f"3/5 simulated crowd: up to {raters} raters, {careless:.0%} careless, until every test clip has "
-               f"{ratings_per_clip} ratings")
+        _stage(
+            f"3/5 simulated crowd: up to {raters} raters, {careless:.0%} careless, until every test clip has "
+            f"{ratings_per_clip} ratings"
+        )
         summary_path = out / "crowd_summary.json"
-        procs.run([py, "-m", "rating_app", "simulate", "--url", url, "--raters", str(raters), "--seed", str(seed),
-                   "--careless", str(careless), "--manifest", str(manifest), "--summary", str(summary_path),
-                   "--design", design,
-                   "--timeout", str(max(60.0, timeout_s - (time.monotonic() - t0)))],
-                  "the simulated crowd", env=env)
+        procs.run(
+            [
+                py,
+                "-m",
+                "rating_app",
+                "simulate",
+                "--url",
+                url,
+                "--raters",
+                str(raters),
+                "--seed",
+                str(seed),
+                "--careless",
+                str(careless),
+                "--manifest",
+                str(manifest),
+                "--summary",
+                str(summary_path),
+                "--design",
+                design,
+                "--timeout",
+                str(max(60.0, timeout_s - (time.monotonic() - t0))),
+            ],
+            "the simulated crowd",
+            env=env,
+        )
         summary = json.loads(summary_path.read_text())
         if not summary.get("study_full"):
-            raise DemoError(f"the crowd of {raters} raters did not fill every clip's {ratings_per_clip} ratings; "
-                            "raise --raters")
+            raise DemoError(
+                f"the crowd of {raters} raters did not fill every clip's {ratings_per_clip} ratings; raise --raters"
+            )
 
         ratings = out / ("pairs.csv" if design == "pairwise" else "ratings.csv")
         _stage(f"4/5 export {ratings.name}")
@@ -199,29 +272,60 @@ def run_demo(out: Path, db: str | None = None, raters: int = 200, seed: int = 0,
 
 def _main(argv) -> int:
     from rating_app.designs import DESIGNS
-    p = cli.ArgumentParser(prog="python -m analysis.demo", description=__doc__,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+
+    p = cli.ArgumentParser(
+        prog="python -m analysis.demo", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument("--out", default="demo", help="folder for everything the demo makes (default demo/)")
-    p.add_argument("--db", default=None, help="database URL (default an SQLite file in --out), e.g. "
-                                               "postgresql://127.0.0.1:5432/test")
-    p.add_argument("--raters", type=cli.number(int, 1, 100_000), default=200, help="most simulated raters (stops when the study is full)")
-    p.add_argument("--careless", type=cli.number(float, 0, 1), default=0.1, help="share of careless raters (default 0.1)")
+    p.add_argument(
+        "--db",
+        default=None,
+        help="database URL (default an SQLite file in --out), e.g. postgresql://127.0.0.1:5432/test",
+    )
+    p.add_argument(
+        "--raters",
+        type=cli.number(int, 1, 100_000),
+        default=200,
+        help="most simulated raters (stops when the study is full)",
+    )
+    p.add_argument(
+        "--careless", type=cli.number(float, 0, 1), default=0.1, help="share of careless raters (default 0.1)"
+    )
     p.add_argument("--ratings-per-clip", type=cli.number(int, 1, 10_000), default=20)
-    p.add_argument("--clips-per-rater", type=cli.number(int, 0, 100_000), default=30, help="test clips per rater (0: all)")
+    p.add_argument(
+        "--clips-per-rater", type=cli.number(int, 0, 100_000), default=30, help="test clips per rater (0: all)"
+    )
     p.add_argument("--seed", type=cli.number(int, 0), default=0)
     p.add_argument("--stimuli", default=None, help="reuse this stimulus folder instead of making one")
     p.add_argument("--gunicorn", action="store_true", help="serve with gunicorn (2 workers) instead of Flask's server")
-    p.add_argument("--min-view", type=cli.number(float, 0, 1), default=0.01,
-                   help="the app's MIN_VIEW: share of each clip the crowd must wait before answering (default 0.01)")
-    p.add_argument("--design", choices=DESIGNS, default="acr",
-                   help="test design: acr (one clip, 1-5; default), pairwise (two clips, a preference) or parallel "
-                        "(every condition of an item on one page, 0-100); targets count pairs or pages")
+    p.add_argument(
+        "--min-view",
+        type=cli.number(float, 0, 1),
+        default=0.01,
+        help="the app's MIN_VIEW: share of each clip the crowd must wait before answering (default 0.01)",
+    )
+    p.add_argument(
+        "--design",
+        choices=DESIGNS,
+        default="acr",
+        help="test design: acr (one clip, 1-5; default), pairwise (two clips, a preference) or parallel "
+        "(every condition of an item on one page, 0-100); targets count pairs or pages",
+    )
     a = p.parse_args(argv)
     try:
-        run_demo(Path(a.out), db=a.db, raters=a.raters, seed=a.seed, careless=a.careless,
-                 ratings_per_clip=a.ratings_per_clip, clips_per_rater=a.clips_per_rater or None,
-                 gunicorn=a.gunicorn, stimuli=Path(a.stimuli) if a.stimuli else None, min_view=a.min_view,
-                 design=a.design)
+        run_demo(
+            Path(a.out),
+            db=a.db,
+            raters=a.raters,
+            seed=a.seed,
+            careless=a.careless,
+            ratings_per_clip=a.ratings_per_clip,
+            clips_per_rater=a.clips_per_rater or None,
+            gunicorn=a.gunicorn,
+            stimuli=Path(a.stimuli) if a.stimuli else None,
+            min_view=a.min_view,
+            design=a.design,
+        )
     except KeyboardInterrupt:
         print("interrupted: everything the demo started has been stopped", file=sys.stderr)
         return 130

@@ -5,7 +5,8 @@ challenge reports): the left condition's clear and slight wins, no preference, t
 clear wins; bradley_terry: log strengths with bootstrap intervals; parallel_boxplot: the 0-100 ratings per
 condition, with the means marked.
 """
-from .figures import colours, plt, text, _save, STYLE
+
+from .figures import STYLE, _save, colours, plt, text
 
 LEVEL_COLOURS = ("#1b7837", "#7fbf7b", "#d9d9d9", "#af8dc3", "#762a83")
 LEVEL_NAMES = ("clearly", "slightly", "no preference", "slightly", "clearly")
@@ -20,12 +21,27 @@ def preference_bars(pairs, path, title=None):
             left = 0.0
             for k, (key, colour) in enumerate(zip(keys, LEVEL_COLOURS)):
                 share = float(r[key])
-                ax.barh(row_i, share, left=left, color=colour, edgecolor="white", linewidth=0.5,
-                        label=None if row_i else (f"{'left' if k < 2 else 'right'} {LEVEL_NAMES[k]}"
-                                                  if k != 2 else LEVEL_NAMES[k]))
+                ax.barh(
+                    row_i,
+                    share,
+                    left=left,
+                    color=colour,
+                    edgecolor="white",
+                    linewidth=0.5,
+                    label=None
+                    if row_i
+                    else (f"{'left' if k < 2 else 'right'} {LEVEL_NAMES[k]}" if k != 2 else LEVEL_NAMES[k]),
+                )
                 if share >= 0.07:
-                    ax.text(left + share / 2, row_i, f"{100 * share:.0f}", ha="center", va="center", fontsize=7,
-                            color="white" if k in (0, 4) else "black")
+                    ax.text(
+                        left + share / 2,
+                        row_i,
+                        f"{100 * share:.0f}",
+                        ha="center",
+                        va="center",
+                        fontsize=7,
+                        color="white" if k in (0, 4) else "black",
+                    )
                 left += share
             ax.text(-0.01, row_i, text(r["condition_a"]), ha="right", va="center")
             ax.text(1.01, row_i, f"{text(r['condition_b'])}  (n={int(r['n'])})", ha="left", va="center")
@@ -55,8 +71,10 @@ def bradley_terry(bt, path, title=None):
         ax.set_yticks(range(len(order)))
         ax.set_yticklabels([text(c) for c in order])
         ax.axvline(0, color="black", lw=0.6, ls=":")
-        ax.set_xlabel(f"log strength (Bradley-Terry-Davidson), {text(bt['reference'])} = 0; "
-                      f"{round(100 * bt['level'])}% bootstrap over raters")
+        ax.set_xlabel(
+            f"log strength (Bradley-Terry-Davidson), {text(bt['reference'])} = 0; "
+            f"{round(100 * bt['level'])}% bootstrap over raters"
+        )
         if title:
             ax.set_title(text(title))
         return _save(fig, path)
@@ -69,13 +87,25 @@ def parallel_boxplot(t, summary, path, title=None):
     with plt.rc_context(STYLE):
         fig, ax = plt.subplots(figsize=(1.0 + 0.9 * len(conds), 3.6))
         data = [t.loc[t["condition"] == c, "rating"].to_numpy() for c in conds]
-        box = ax.boxplot(data, patch_artist=True, widths=0.6, medianprops={"color": "black"},
-                         flierprops={"markersize": 2, "alpha": 0.4})
+        box = ax.boxplot(
+            data,
+            patch_artist=True,
+            widths=0.6,
+            medianprops={"color": "black"},
+            flierprops={"markersize": 2, "alpha": 0.4},
+        )
         for patch, c in zip(box["boxes"], conds):
             patch.set_facecolor(col[c])
             patch.set_alpha(0.75)
-        ax.plot(range(1, len(conds) + 1), summary["mean"], "D", color="white", markeredgecolor="black",
-                markersize=5, label="mean")
+        ax.plot(
+            range(1, len(conds) + 1),
+            summary["mean"],
+            "D",
+            color="white",
+            markeredgecolor="black",
+            markersize=5,
+            label="mean",
+        )
         ax.set_xticks(range(1, len(conds) + 1))
         ax.set_xticklabels([text(c) for c in conds])
         ax.set_ylim(-2, 102)

@@ -7,19 +7,31 @@ metric_scatter: each objective metric against the per-clip mean rating;
 ordinal_fit: the ordinal mixed model's predicted rating distribution per condition beside the observed one;
 power_curve: the power planner's estimated power against the number of raters.
 """
+
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from core import study
+
 # Okabe-Ito colour-blind-safe palette; the paper's three conditions keep fixed colours across figures.
-FIXED = {"NAT": "#009E73", "MG": "#0072B2", "FL": "#D55E00", "BAD": "#7F7F7F"}
+FIXED = dict(zip(study.RESERVED, ("#009E73", "#0072B2", "#D55E00", "#7F7F7F")))  # NAT, MG, FL, BAD
 EXTRA = ["#CC79A7", "#E69F00", "#56B4E9", "#F0E442", "#000000"]
 STYLE = {
-    "font.size": 9, "axes.titlesize": 10, "axes.labelsize": 9, "legend.fontsize": 8, "xtick.labelsize": 8,
-    "ytick.labelsize": 8, "axes.spines.top": False, "axes.spines.right": False, "axes.linewidth": 0.8,
-    "savefig.dpi": 200, "savefig.bbox": "tight", "font.family": "DejaVu Sans",
+    "font.size": 9,
+    "axes.titlesize": 10,
+    "axes.labelsize": 9,
+    "legend.fontsize": 8,
+    "xtick.labelsize": 8,
+    "ytick.labelsize": 8,
+    "axes.spines.top": False,
+    "axes.spines.right": False,
+    "axes.linewidth": 0.8,
+    "savefig.dpi": 200,
+    "savefig.bbox": "tight",
+    "font.family": "DejaVu Sans",
 }
 
 
@@ -53,22 +65,43 @@ def ratings_histogram(hist, means, path, title=None):
         top = hist.to_numpy().max()
         for i, c in enumerate(conds):
             x = np.array(scale) + (i - (len(conds) - 1) / 2) * width
-            ax.bar(x, hist.loc[c].to_numpy(), width=width * 0.95, color=col[c], alpha=0.85,
-                   label=f"{text(c)} (n={int(hist.loc[c].sum()):,}, mean {means[c]:.2f})", zorder=2)
+            ax.bar(
+                x,
+                hist.loc[c].to_numpy(),
+                width=width * 0.95,
+                color=col[c],
+                alpha=0.85,
+                label=f"{text(c)} (n={int(hist.loc[c].sum()):,}, mean {means[c]:.2f})",
+                zorder=2,
+            )
             ax.axvline(means[c], color=col[c], lw=1.6, ls="--", zorder=3)
-            ax.text(means[c], top * (1.04 + 0.07 * i), f" {means[c]:.2f}", color=col[c], fontsize=7.5,
-                    ha="left", va="center")
+            ax.text(
+                means[c],
+                top * (1.04 + 0.07 * i),
+                f" {means[c]:.2f}",
+                color=col[c],
+                fontsize=7.5,
+                ha="left",
+                va="center",
+            )
         ax.set_xticks(scale)
-        ax.set_xticklabels([f"{s}\n{lab}" for s, lab in zip(scale, ["very\nunnatural", "", "", "",
-                                                                     "very\nnatural"])], linespacing=0.9)
+        ax.set_xticklabels(
+            [f"{s}\n{lab}" for s, lab in zip(scale, ["very\nunnatural", "", "", "", "very\nnatural"])], linespacing=0.9
+        )
         ax.set_xlabel("Rating")
         ax.set_ylabel("Number of responses")
         ax.set_ylim(0, top * (1.1 + 0.07 * len(conds)))
         ax.set_xlim(scale[0] - 0.6, scale[-1] + 0.6)
         ax.grid(axis="y", color="0.9", lw=0.6, zorder=0)
         # Beside the axes: inside, it would cover the mean lines and their labels.
-        ax.legend(frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0), title="Condition (dashed: mean)",
-                  title_fontsize=8, alignment="left")
+        ax.legend(
+            frameon=False,
+            loc="upper left",
+            bbox_to_anchor=(1.01, 1.0),
+            title="Condition (dashed: mean)",
+            title_fontsize=8,
+            alignment="left",
+        )
         if title:
             ax.set_title(title, loc="left")
         return _save(fig, path)
@@ -85,10 +118,18 @@ def per_clip_means(clips, path, title=None):
         for c in conds:
             part = clips[clips["condition"] == c]
             x = part["rank"].to_numpy()
-            ax.fill_between(x, part["ci_low"].clip(1, 5), part["ci_high"].clip(1, 5), color=col[c], alpha=0.13,
-                            lw=0, step=None)
-            ax.plot(x, part["mean"], color=col[c], lw=1.3, marker="o" if ms else None, ms=ms,
-                    label=f"{text(c)} ({len(part)} clips)")
+            ax.fill_between(
+                x, part["ci_low"].clip(1, 5), part["ci_high"].clip(1, 5), color=col[c], alpha=0.13, lw=0, step=None
+            )
+            ax.plot(
+                x,
+                part["mean"],
+                color=col[c],
+                lw=1.3,
+                marker="o" if ms else None,
+                ms=ms,
+                label=f"{text(c)} ({len(part)} clips)",
+            )
         ax.set_xlabel("Clip, sorted from worst to best within condition")
         ax.set_ylabel("Mean rating")
         ax.set_ylim(0.9, 5.1)
@@ -114,11 +155,18 @@ def condition_means(panels, path):
                 if c not in t.index:
                     continue
                 row = t.loc[c]
-                ax.plot([row["t_low"], row["t_high"]], [y + 0.12, y + 0.12], color=col[c], lw=2.2,
-                        solid_capstyle="butt")
+                ax.plot(
+                    [row["t_low"], row["t_high"]], [y + 0.12, y + 0.12], color=col[c], lw=2.2, solid_capstyle="butt"
+                )
                 if "boot_low" in row and np.isfinite(row["boot_low"]):
-                    ax.plot([row["boot_low"], row["boot_high"]], [y - 0.12, y - 0.12], color=col[c], lw=2.2,
-                            alpha=0.45, solid_capstyle="butt")
+                    ax.plot(
+                        [row["boot_low"], row["boot_high"]],
+                        [y - 0.12, y - 0.12],
+                        color=col[c],
+                        lw=2.2,
+                        alpha=0.45,
+                        solid_capstyle="butt",
+                    )
                 ax.plot(row["mean"], y, marker=markers[j % 4], color=col[c], mec="white", ms=6, zorder=3)
                 ticks.append(y)
                 labels.append(f"{text(c)} — {label}")
@@ -142,8 +190,7 @@ def metric_scatter(clips, metrics, corr, path):
     ncol = min(4, len(names))
     nrow = int(np.ceil(len(names) / ncol))
     with plt.rc_context(STYLE):
-        fig, axes = plt.subplots(nrow, ncol, figsize=(1.75 * ncol + 0.6, 1.9 * nrow + 0.4), sharey=True,
-                                 squeeze=False)
+        fig, axes = plt.subplots(nrow, ncol, figsize=(1.75 * ncol + 0.6, 1.9 * nrow + 0.4), sharey=True, squeeze=False)
         for ax, m in zip(axes.ravel(), names):
             for c in conds:
                 part = merged[merged["condition"] == c]
@@ -154,7 +201,7 @@ def metric_scatter(clips, metrics, corr, path):
             ax.set_ylim(0.9, 5.1)
             ax.grid(color="0.92", lw=0.5)
             ax.tick_params(labelsize=7)
-        for ax in axes.ravel()[len(names):]:
+        for ax in axes.ravel()[len(names) :]:
             ax.set_visible(False)
         for ax in axes[:, 0]:
             ax.set_ylabel("Clip mean rating")
@@ -191,16 +238,28 @@ def power_curve(curve, target, path, title=None):
     """curve: plan.power_curve() table (raters, raters_per_clip, power, low, high); target: the power asked."""
     with plt.rc_context(STYLE):
         fig, ax = plt.subplots(figsize=(6.0, 3.4))
-        ax.fill_between(curve["raters"], curve["low"], curve["high"], color="#0072B2", alpha=0.18, lw=0,
-                        label="95% Monte Carlo interval")
+        ax.fill_between(
+            curve["raters"],
+            curve["low"],
+            curve["high"],
+            color="#0072B2",
+            alpha=0.18,
+            lw=0,
+            label="95% Monte Carlo interval",
+        )
         ax.plot(curve["raters"], curve["power"], "o-", color="#0072B2", ms=3.5, lw=1.4, label="estimated power")
         ax.axhline(target, color="#D55E00", ls="--", lw=1, label=f"target {target:g}")
         ax.set_xlabel("Raters in total")
         ax.set_ylabel("Power")
         ax.set_ylim(0, 1.02)
         ax.grid(color="0.92", lw=0.5)
-        top = ax.secondary_xaxis("top", functions=(lambda r: r * curve.attrs["per_clip_per_rater"],
-                                                   lambda k: k / curve.attrs["per_clip_per_rater"]))
+        top = ax.secondary_xaxis(
+            "top",
+            functions=(
+                lambda r: r * curve.attrs["per_clip_per_rater"],
+                lambda k: k / curve.attrs["per_clip_per_rater"],
+            ),
+        )
         top.set_xlabel("Ratings per clip")
         ax.legend(frameon=False, loc="lower right")
         if title:

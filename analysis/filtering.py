@@ -3,9 +3,12 @@
 MoGlow §5.4: raters who gave any of the BAD clips a rating of 3 or more were considered inattentive and all
 their responses were discarded (1880 responses, 152 removed, 1728 kept).
 """
+
 import pandas as pd
 
-DEFAULT_THRESHOLD = 3
+from core import study
+
+DEFAULT_THRESHOLD = study.CATCH_FAIL_AT
 
 
 def failed_raters(df, threshold=DEFAULT_THRESHOLD):

@@ -3,54 +3,20 @@
 Nothing is dropped silently: a bad row stops the analysis with the file line that holds it. The returned
 frame's index is the file line number of each row (header = line 1), so later messages can name lines too.
 """
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
+
+from core import study, tables
 from core.cli import UserError
 
 REQUIRED = ("rater_id", "clip_id", "condition", "rating")
-ROLES = ("test", "catch")
+ROLES = study.RATED_ROLES
 SCALE = (1, 2, 3, 4, 5)
-CATCH_CONDITION = "BAD"  # catch rows when the file has no role column
-METRIC_KEYS = ("clip_id", "condition", "role", "item")
 
 
 class AnalysisError(UserError):
     """Bad input for the analysis; the message is one line naming the file and the line or column."""
-
-
-def _read_csv(path):
-    path = Path(path)
-    if not path.is_file():
-        raise AnalysisError(f"{path}: no such file")
-    with open(path, "rb") as f:
-        head = f.read(4096)  # not read_bytes(): the whole file is read once, by pandas, below
-    if not head.strip():
-        raise AnalysisError(f"{path}: file is empty (expected a CSV header and rows)")
-    try:
-        # All text, no NA guessing: "NA" or "" stay visible so we can name the line that holds them.
-        df = pd.read_csv(path, dtype=str, keep_default_na=False, na_filter=False, skip_blank_lines=False,
-                         encoding="utf-8-sig")
-    except pd.errors.ParserError as exc:
-        raise AnalysisError(f"{path}: malformed CSV: {str(exc).strip().splitlines()[-1]}") from None
-    except UnicodeDecodeError as exc:
-        raise AnalysisError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    except pd.errors.EmptyDataError:
-        raise AnalysisError(f"{path}: file is empty (expected a CSV header and rows)") from None
-    df.columns = [str(c).strip() for c in df.columns]
-    df.index = np.arange(2, len(df) + 2)  # file line numbers (header is line 1)
-    # Wholly blank lines are layout, not data (a trailing newline or two); anything else is kept and checked.
-    if len(df.columns):
-        maybe = df[df.columns[0]] == ""
-        if maybe.any():
-            blank = maybe & (df == "").all(axis=1)
-            df = df[~blank]
-    return path, df
-
-
-def _first_line(mask):
-    return int(mask.index[np.flatnonzero(np.asarray(mask))[0]])
 
 
 def _codes(series):
@@ -66,7 +32,7 @@ def _clean_column(path, df, col, categorical=False):
     codes, uniques = _codes(df[col])
     empty = np.flatnonzero(uniques == "")
     if len(empty):
-        raise AnalysisError(f"{path}:{_first_line(pd.Series(codes == empty[0], index=df.index))}: empty {col}")
+        raise AnalysisError(f"{path}:{tables.first_line(pd.Series(codes == empty[0], index=df.index))}: empty {col}")
     if uniques.has_duplicates:  # 'r1' and 'r1 ' are the same rater once stripped
         remap, uniques = pd.factorize(uniques)
         codes = remap[codes]
@@ -84,13 +50,13 @@ def _parse_ratings(path, text):
     for i, u in enumerate(uniques):
         ok = u.lstrip("+-").isdigit() and u.isascii() and len(u) <= 18
         if not ok:
-            line = _first_line(pd.Series(codes == i, index=text.index))
+            line = tables.first_line(pd.Series(codes == i, index=text.index))
             raise AnalysisError(f"{path}:{line}: rating {text.loc[line]!r} is not an integer 1-5")
         values[i] = int(u)
     bad = np.flatnonzero((values < SCALE[0]) | (values > SCALE[-1]))
     if len(bad):
         first = np.isin(codes, bad)
-        line = _first_line(pd.Series(first, index=text.index))
+        line = tables.first_line(pd.Series(first, index=text.index))
         raise AnalysisError(f"{path}:{line}: rating {values[codes[text.index.get_loc(line)]]} is out of range 1-5")
     return pd.Series(values[codes].astype(np.int8), index=text.index)
 
@@ -105,18 +71,22 @@ def _check_unique_attribute(path, df, clip_codes, attr):
         line = int(df.index[i])
         clip = df.at[line, "clip_id"]
         earlier = int(df.index[np.flatnonzero(clip_codes == clip_codes[i])[0]])
-        raise AnalysisError(f"{path}:{line}: clip {clip} has {attr} {df.at[line, attr]!r} but "
-                            f"{df.at[earlier, attr]!r} at line {earlier}")
+        raise AnalysisError(
+            f"{path}:{line}: clip {clip} has {attr} {df.at[line, attr]!r} but "
+            f"{df.at[earlier, attr]!r} at line {earlier}"
+        )
 
 
 def read_export(path, required, noun, strip=False):
     """(path, DataFrame of text, index = file line) of an exported CSV with the `required` columns and at least one
     row; with `strip`, the required fields stripped of blanks and none empty. AnalysisError naming file and line."""
-    path, df = _read_csv(path)
+    path, df = tables.read_csv(path, AnalysisError)
     missing = [c for c in required if c not in df.columns]
     if missing:
-        raise AnalysisError(f"{path}: missing required column{'s' if len(missing) > 1 else ''} "
-                            f"{', '.join(missing)} (header has: {', '.join(df.columns)})")
+        raise AnalysisError(
+            f"{path}: missing required column{'s' if len(missing) > 1 else ''} "
+            f"{', '.join(missing)} (header has: {', '.join(df.columns)})"
+        )
     if len(df) == 0:
         raise AnalysisError(f"{path}: no {noun} (header only)")
     for col in required if strip else ():
@@ -145,18 +115,20 @@ def load_ratings(path):
         uniques = uniques.str.lower()
         unknown = np.flatnonzero(~uniques.isin(ROLES))
         if len(unknown):
-            line = _first_line(pd.Series(codes == unknown[0], index=df.index))
+            line = tables.first_line(pd.Series(codes == unknown[0], index=df.index))
             raise AnalysisError(f"{path}:{line}: unknown role {df.at[line, 'role']!r} (expected test or catch)")
         df["role"] = np.asarray(uniques, dtype=object)[codes]
     else:
-        df["role"] = np.where(df["condition"] == CATCH_CONDITION, "catch", "test")
+        df["role"] = np.where(df["condition"] == study.CATCH, "catch", "test")
     pair = pd.Series(rater_codes.astype(np.int64) * (clip_codes.max() + 1) + clip_codes, index=df.index)
     dup = pair.duplicated()
     if dup.any():
-        line = _first_line(dup)
-        first = _first_line(pair == pair.loc[line])
-        raise AnalysisError(f"{path}:{line}: duplicate rating of clip {df.at[line, 'clip_id']} by rater "
-                            f"{df.at[line, 'rater_id']} (first at line {first})")
+        line = tables.first_line(dup)
+        first = tables.first_line(pair == pair.loc[line])
+        raise AnalysisError(
+            f"{path}:{line}: duplicate rating of clip {df.at[line, 'clip_id']} by rater "
+            f"{df.at[line, 'rater_id']} (first at line {first})"
+        )
     _check_unique_attribute(path, df, clip_codes, "condition")
     _check_unique_attribute(path, df, clip_codes, "role")
     if not (df["role"] == "test").any():
@@ -165,32 +137,5 @@ def load_ratings(path):
 
 
 def load_metrics(path):
-    """metrics.csv (clip_id, condition, role, item, metric columns...) -> DataFrame indexed by clip_id.
-
-    Every column other than the four keys is an objective metric and must be numeric (empty = missing,
-    reported as such, never guessed).
-    """
-    path, df = _read_csv(path)
-    if "clip_id" not in df.columns:
-        raise AnalysisError(f"{path}: missing required column clip_id (header has: {', '.join(df.columns)})")
-    if len(df) == 0:
-        raise AnalysisError(f"{path}: no rows (header only)")
-    _clean_column(path, df, "clip_id")
-    dup = df["clip_id"].duplicated()
-    if dup.any():
-        line = _first_line(dup)
-        raise AnalysisError(f"{path}:{line}: duplicate clip_id {df.at[line, 'clip_id']}")
-    metric_cols = [c for c in df.columns if c not in METRIC_KEYS]
-    if not metric_cols:
-        raise AnalysisError(f"{path}: no metric columns besides {', '.join(METRIC_KEYS)}")
-    out = pd.DataFrame(index=df["clip_id"].to_numpy())
-    for col in metric_cols:
-        text = df[col].str.strip()
-        values = pd.to_numeric(text.replace("", np.nan).replace("nan", np.nan), errors="coerce")
-        bad = values.isna() & ~text.isin(["", "nan"])
-        if bad.any():
-            line = _first_line(bad)
-            raise AnalysisError(f"{path}:{line}: {col} {df.at[line, col]!r} is not a number")
-        out[col] = values.to_numpy(dtype=float)
-    out.index.name = "clip_id"
-    return out
+    """metrics.csv -> DataFrame indexed by clip_id (core.tables.read_metrics), errors as AnalysisError."""
+    return tables.read_metrics(path, AnalysisError)

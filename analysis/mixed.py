@@ -13,6 +13,7 @@ With V* = I + t_r Z_r Z_r' + t_c Z_c Z_c' and M = I + Lambda Z'Z Lambda (q x q, 
 where r2 = (y - X b)'V*^-1 (y - X b) at the GLS estimate b. M is solved by eliminating its diagonal
 rater block and a dense Cholesky of the clip-block Schur complement (or the other way round if raters are fewer).
 """
+
 import math
 
 import numpy as np
@@ -148,7 +149,8 @@ def satterthwaite_df(s, varpar):
                 ej = np.zeros(m)
                 ej[j] = h[j]
                 H[i, j] = H[j, i] = (f(x0 + ei + ej) - f(x0 + ei - ej) - f(x0 - ei + ej) + f(x0 - ei - ej)) / (
-                    4 * h[i] * h[j])
+                    4 * h[i] * h[j]
+                )
         return H
 
     def var_gradient(h):
@@ -191,12 +193,21 @@ def _fit(y, X, rater, clip, names):
         return _gls(s, rel_sd[0] ** 2, rel_sd[1] ** 2)[0]
 
     # Tolerances sit above the float noise of the criterion (~1e-16 x its size), so both stop cleanly.
-    best = optimize.minimize(objective, np.array([0.5, 0.5]), method="L-BFGS-B", bounds=[(0, None), (0, None)],
-                             options={"ftol": 1e-13, "gtol": 1e-8, "maxiter": 200})
+    best = optimize.minimize(
+        objective,
+        np.array([0.5, 0.5]),
+        method="L-BFGS-B",
+        bounds=[(0, None), (0, None)],
+        options={"ftol": 1e-13, "gtol": 1e-8, "maxiter": 200},
+    )
     # Polish: a derivative-free search from there (robust when an SD sits on the 0 bound, where the
     # finite-difference gradient of L-BFGS-B is one-sided).
-    polish = optimize.minimize(lambda v: objective(np.abs(v)), best.x, method="Nelder-Mead",
-                               options={"xatol": 1e-8, "fatol": 1e-9, "maxiter": 600})
+    polish = optimize.minimize(
+        lambda v: objective(np.abs(v)),
+        best.x,
+        method="Nelder-Mead",
+        options={"xatol": 1e-8, "fatol": 1e-9, "maxiter": 600},
+    )
     x = np.abs(polish.x) if polish.fun <= best.fun else best.x
     dev, b, XVX, r2 = _gls(s, x[0] ** 2, x[1] ** 2)
     sigma2 = r2 / (s.n - s.p)

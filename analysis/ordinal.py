@@ -17,6 +17,7 @@ of log|H|, which needs third derivatives of l and the implicit derivative du*/dp
 it reduces to per-rating quantities and the leverages h_i = z_i' H^-1 z_i, so a gradient costs about one more
 factorisation, not one log L per parameter.
 """
+
 import math
 
 import numpy as np
@@ -45,8 +46,16 @@ def _link(theta_ext, y, eta, third=True):
     la, lb = fa / P, -fb / P
     A2, B2 = fa * (Fna - Fa) / P, -fb * (Fnb - Fb) / P  # P_aa / P, P_bb / P (f' = f (1 - 2F))
     laa, lbb, lab = A2 - la * la, B2 - lb * lb, -la * lb
-    out = {"logp": np.log(P), "la": la, "lb": lb, "laa": laa, "lbb": lbb, "lab": lab, "l_eta": -(la + lb),
-           "w": -(laa + 2 * lab + lbb)}
+    out = {
+        "logp": np.log(P),
+        "la": la,
+        "lb": lb,
+        "laa": laa,
+        "lbb": lbb,
+        "lab": lab,
+        "l_eta": -(la + lb),
+        "w": -(laa + 2 * lab + lbb),
+    }
     if third:
         A3, B3 = fa * (1 - 6 * fa) / P, -fb * (1 - 6 * fb) / P  # P_aaa / P, P_bbb / P (f'' = f (1 - 6f))
         la2, lb2 = la * la, lb * lb
@@ -54,8 +63,9 @@ def _link(theta_ext, y, eta, third=True):
         lbbb = B3 - 3 * B2 * lb + 2 * lb2 * lb
         laab = (2 * la2 - A2) * lb
         labb = (2 * lb2 - B2) * la
-        out.update(w_eta=laaa + 3 * laab + 3 * labb + lbbb, w_up=-(laaa + 2 * laab + labb),
-                   w_low=-(laab + 2 * labb + lbbb))
+        out.update(
+            w_eta=laaa + 3 * laab + 3 * labb + lbbb, w_up=-(laaa + 2 * laab + labb), w_low=-(laab + 2 * labb + lbbb)
+        )
     return out
 
 
@@ -80,8 +90,8 @@ class _Design:
 
 
 def _unpack(d, phi):
-    th = phi[:d.K - 1]
-    beta = phi[d.K - 1:d.K - 1 + d.p]
+    th = phi[: d.K - 1]
+    beta = phi[d.K - 1 : d.K - 1 + d.p]
     # capped: on data where an SD's likelihood keeps rising (separation by raters or clips) the search may run
     # far out; the caller reports such a fit as not identified instead of overflowing
     s_r, s_c = math.exp(min(phi[-2], 30.0)), math.exp(min(phi[-1], 30.0))
@@ -123,7 +133,7 @@ class _Laplace:
 
     def _eta(self, beta, s_r, s_c, u):
         d = self.d
-        return d.X @ beta + s_r * u[:d.R][d.rater] + s_c * u[d.R:][d.clip]
+        return d.X @ beta + s_r * u[: d.R][d.rater] + s_c * u[d.R :][d.clip]
 
     def _hessian(self, q, s_r, s_c):
         d = self.d
@@ -135,7 +145,7 @@ class _Laplace:
 
     def _split(self, v):
         d = self.d
-        return (v[:d.R], v[d.R:]) if d.rater_big else (v[d.R:], v[:d.R])
+        return (v[: d.R], v[d.R :]) if d.rater_big else (v[d.R :], v[: d.R])
 
     def _join(self, vb, vs):
         return np.concatenate([vb, vs]) if self.d.rater_big else np.concatenate([vs, vb])
@@ -149,8 +159,12 @@ class _Laplace:
         q = _link(theta_ext, d.y, self._eta(beta, s_r, s_c, u), third=False)
         g = q["logp"].sum() - 0.5 * u @ u
         for _ in range(max_iter):
-            grad = np.concatenate([s_r * np.bincount(d.rater, q["l_eta"], d.R),
-                                   s_c * np.bincount(d.clip, q["l_eta"], d.C)]) - u
+            grad = (
+                np.concatenate(
+                    [s_r * np.bincount(d.rater, q["l_eta"], d.R), s_c * np.bincount(d.clip, q["l_eta"], d.C)]
+                )
+                - u
+            )
             H = self._hessian(q, s_r, s_c)
             step = self._join(*H.solve(*self._split(grad)))
             decrement = float(grad @ step)
@@ -176,14 +190,14 @@ class _Laplace:
         d = self.d
         th, beta, s_r, s_c = _unpack(d, phi)
         u, q, H, _ = self.mode(phi)
-        ur, uc = u[:d.R][d.rater], u[d.R:][d.clip]
+        ur, uc = u[: d.R][d.rater], u[d.R :][d.clip]
         loglik = q["logp"].sum() - 0.5 * u @ u - 0.5 * H.logdet
         # leverages h_i = z_i' H^-1 z_i, z_i = s_r e_rater + s_c e_clip
         gbb, gss, gbs = H.blocks()
         big, small = d.big, d.small
         g_big, g_small, g_cross = gbb[big], gss[small, small], gbs[big, small]
         s_big, s_small = (s_r, s_c) if d.rater_big else (s_c, s_r)
-        h = s_big ** 2 * g_big + s_small ** 2 * g_small + 2 * s_big * s_small * g_cross
+        h = s_big**2 * g_big + s_small**2 * g_small + 2 * s_big * s_small * g_cross
         g_rr, g_cc = (g_big, g_small) if d.rater_big else (g_small, g_big)
         w, l_eta, w_eta = q["w"], q["l_eta"], q["w_eta"]
         K1 = d.K - 1
@@ -212,8 +226,8 @@ class _Laplace:
         cr = K1 + d.p
         dlog[cr] += (w * (2 * s_r * s_r * g_rr + 2 * s_r * s_c * g_cross)).sum()
         dlog[cr + 1] += (w * (2 * s_c * s_c * g_cc + 2 * s_r * s_c * g_cross)).sum()
-        cross[:d.R, cr] += s_r * np.bincount(d.rater, l_eta, d.R)
-        cross[d.R:, cr + 1] += s_c * np.bincount(d.clip, l_eta, d.C)
+        cross[: d.R, cr] += s_r * np.bincount(d.rater, l_eta, d.R)
+        cross[d.R :, cr + 1] += s_c * np.bincount(d.clip, l_eta, d.C)
         v = to_u(w_eta * h, w_eta * h)  # d log|H| / du
         Gv = self._join(*H.solve(*self._split(v)))
         grad = dg - 0.5 * (dlog + Gv @ cross)
@@ -222,13 +236,13 @@ class _Laplace:
 
 def _to_free(d, phi):
     """(theta_1, log increments of the thresholds, rest): keeps the cut points ordered during the search."""
-    th = phi[:d.K - 1]
-    return np.concatenate([[th[0]], np.log(np.diff(th)), phi[d.K - 1:]])
+    th = phi[: d.K - 1]
+    return np.concatenate([[th[0]], np.log(np.diff(th)), phi[d.K - 1 :]])
 
 
 def _from_free(d, x):
-    th = x[0] + np.concatenate([[0.0], np.cumsum(np.exp(x[1:d.K - 1]))])
-    return np.concatenate([th, x[d.K - 1:]])
+    th = x[0] + np.concatenate([[0.0], np.cumsum(np.exp(x[1 : d.K - 1]))])
+    return np.concatenate([th, x[d.K - 1 :]])
 
 
 def fit_clmm(y, X, rater, clip, names, n_levels, level_names=None):
@@ -239,8 +253,15 @@ def fit_clmm(y, X, rater, clip, names, n_levels, level_names=None):
     log_likelihood, converged, max_abs_gradient, n_evaluations.
     """
     with threadpool_limits(limits=1, user_api="blas"):  # small factorisations: threads cost more than they save
-        return _fit(np.asarray(y, np.int64), np.asarray(X, float), np.asarray(rater, np.int64),
-                    np.asarray(clip, np.int64), list(names), int(n_levels), level_names)
+        return _fit(
+            np.asarray(y, np.int64),
+            np.asarray(X, float),
+            np.asarray(rater, np.int64),
+            np.asarray(clip, np.int64),
+            list(names),
+            int(n_levels),
+            level_names,
+        )
 
 
 def _fit(y, X, rater, clip, names, K, level_names):
@@ -265,8 +286,9 @@ def _fit(y, X, rater, clip, names, K, level_names):
 
     # BFGS from the identity: its first step is long (gradients ~ n) and the inner solve pays for it once, but
     # starting from I / n (or scaling log L by 1 / n) took 60% more evaluations in all on 3k and 100k ratings
-    res = optimize.minimize(objective, _to_free(d, start), jac=True, method="BFGS",
-                            options={"gtol": 1e-7, "maxiter": 500})
+    res = optimize.minimize(
+        objective, _to_free(d, start), jac=True, method="BFGS", options={"gtol": 1e-7, "maxiter": 500}
+    )
     phi = _from_free(d, res.x)
     nll, grad = lap.value_and_grad(phi)
     # observed information by central differences of the exact gradient (clmm: numerical Hessian of log L)
@@ -287,7 +309,7 @@ def _fit(y, X, rater, clip, names, K, level_names):
     th, beta, s_r, s_c = _unpack(d, phi)
     levels = list(level_names) if level_names is not None else [str(k + 1) for k in range(K)]
     th_names = [f"{levels[j]}|{levels[j + 1]}" for j in range(K - 1)]
-    b_se = se[n_th:n_th + d.p]
+    b_se = se[n_th : n_th + d.p]
     z = beta / b_se
     max_grad = float(np.max(np.abs(grad)))
     return {
@@ -297,12 +319,13 @@ def _fit(y, X, rater, clip, names, K, level_names):
         "std_errors": dict(zip(names, b_se.tolist())),
         "z": dict(zip(names, z.tolist())),
         "p_values": dict(zip(names, (2 * sps.norm.sf(np.abs(z))).tolist())),
-        "sd_rater": s_r, "sd_clip": s_c,
+        "sd_rater": s_r,
+        "sd_clip": s_c,
         "log_likelihood": -float(nll),
         "converged": bool(max_grad < 1e-3 and ok_hess),
         "max_abs_gradient": max_grad,
         "n_evaluations": lap.evals,
-        "random_effects": {"rater": (s_r * lap.u[:d.R]).tolist(), "clip": (s_c * lap.u[d.R:]).tolist()},
+        "random_effects": {"rater": (s_r * lap.u[: d.R]).tolist(), "clip": (s_c * lap.u[d.R :]).tolist()},
     }
 
 

@@ -14,6 +14,7 @@ never wins finite instead of running off to minus infinity). Its 95% intervals c
 independent. Without ties in the data the tie parameter is left out (nu = 0: the plain Bradley-Terry model, which
 is a logistic regression on +-1 indicator columns).
 """
+
 import math
 from itertools import combinations
 
@@ -22,13 +23,15 @@ import pandas as pd
 from scipy import optimize
 from scipy import stats as sps
 
+from core import study
+
 from .load import AnalysisError, read_export
 
 REQUIRED = ("rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role")
 ROLES = ("test", "catch")
 LEVELS = (2, 1, 0, -1, -2)
-BAD, REFERENCE = "BAD", "NAT"
-RIDGE = 1e-6                   # on the log strengths: a condition that never wins stays finite (about -15)
+BAD, REFERENCE = study.CATCH, study.NATURAL
+RIDGE = 1e-6  # on the log strengths: a condition that never wins stays finite (about -15)
 
 
 # ---------------------------------------------------------------------------------------------- file
@@ -62,8 +65,10 @@ def load_pairs(path):
         line = dup.idxmax()
         first = key[key == key[line]].index[0]
         k = df.index.get_loc(line)
-        raise AnalysisError(f"{path}:{line}: rater {df.at[line, 'rater_id']} compared clips {lo[k]} and {hi[k]} "
-                            f"twice (first at line {first})")
+        raise AnalysisError(
+            f"{path}:{line}: rater {df.at[line, 'rater_id']} compared clips {lo[k]} and {hi[k]} "
+            f"twice (first at line {first})"
+        )
     if not (df["role"] == "test").any():
         raise AnalysisError(f"{path}: no test answers (every row is a catch trial)")
     return df
@@ -73,7 +78,7 @@ def load_pairs(path):
 def failed_raters(df):
     """Raters who preferred the BAD clip of any catch pair (either level)."""
     c = df[df["role"] == "catch"]
-    fail = ((c["condition_a"] == BAD) & (c["preference"] > 0)) | ((c["condition_b"] == BAD) & (c["preference"] < 0))
+    fail = study.pair_catch_failed(c["condition_a"], c["condition_b"], c["preference"])
     return sorted(c.loc[fail, "rater_id"].unique().tolist())
 
 
@@ -83,10 +88,16 @@ def oriented(df):
     (positive = `first` preferred)."""
     t = df[df["role"] == "test"]
     swap = (t["condition_a"] > t["condition_b"]).to_numpy()
-    return pd.DataFrame({"rater_id": t["rater_id"].to_numpy(), "item": t["item"].to_numpy(),
-                         "first": np.where(swap, t["condition_b"], t["condition_a"]),
-                         "second": np.where(swap, t["condition_a"], t["condition_b"]),
-                         "pref": np.where(swap, -t["preference"], t["preference"]).astype(int)}, index=t.index)
+    return pd.DataFrame(
+        {
+            "rater_id": t["rater_id"].to_numpy(),
+            "item": t["item"].to_numpy(),
+            "first": np.where(swap, t["condition_b"], t["condition_a"]),
+            "second": np.where(swap, t["condition_a"], t["condition_b"]),
+            "pref": np.where(swap, -t["preference"], t["preference"]).astype(int),
+        },
+        index=t.index,
+    )
 
 
 def pair_counts(o, alpha=0.05):
@@ -98,14 +109,27 @@ def pair_counts(o, alpha=0.05):
         wins_a, wins_b, ties = int((p > 0).sum()), int((p < 0).sum()), int((p == 0).sum())
         n_sign = wins_a + wins_b
         sign_p = float(sps.binomtest(wins_a, n_sign, 0.5).pvalue) if n_sign else math.nan
-        rows.append({"condition_a": a, "condition_b": b, "wins_a": wins_a, "wins_b": wins_b, "ties": ties,
-                     "n": int(len(p)), "share_a": wins_a / len(p), "share_tie": ties / len(p),
-                     "share_b": wins_b / len(p),
-                     **{f"share_{name}": float((p == level).mean()) for name, level in
-                        zip(("a_clearly", "a_slightly", "none", "b_slightly", "b_clearly"), LEVELS)},
-                     "p": sign_p})
+        rows.append(
+            {
+                "condition_a": a,
+                "condition_b": b,
+                "wins_a": wins_a,
+                "wins_b": wins_b,
+                "ties": ties,
+                "n": int(len(p)),
+                "share_a": wins_a / len(p),
+                "share_tie": ties / len(p),
+                "share_b": wins_b / len(p),
+                **{
+                    f"share_{name}": float((p == level).mean())
+                    for name, level in zip(("a_clearly", "a_slightly", "none", "b_slightly", "b_clearly"), LEVELS)
+                },
+                "p": sign_p,
+            }
+        )
     out = pd.DataFrame(rows)
     from .stats import holm
+
     ok = out["p"].notna().to_numpy() if len(out) else np.zeros(0, bool)
     out["p_holm"] = np.nan
     if ok.any():
@@ -134,7 +158,7 @@ def _negloglik(params, counts, pairs, ref, k, ties):
     """Davidson's tie model (nu = exp(params[-1])) or plain Bradley-Terry; returns (value, gradient)."""
     theta = np.zeros(k)
     free = [c for c in range(k) if c != ref]
-    theta[free] = params[:k - 1]
+    theta[free] = params[: k - 1]
     i, j = pairs[:, 0], pairs[:, 1]
     w, lost, t = counts[:, 0], counts[:, 1], counts[:, 2]
     ti, tj = theta[i], theta[j]
@@ -148,7 +172,7 @@ def _negloglik(params, counts, pairs, ref, k, ties):
     ll = w * ti + lost * tj - n * lse
     if ties:
         ll = ll + t * (lognu + 0.5 * (ti + tj))
-    prob = np.exp(terms - lse)                     # P(i), P(j), P(tie)
+    prob = np.exp(terms - lse)  # P(i), P(j), P(tie)
     d_ti = w - n * prob[0]
     d_tj = lost - n * prob[1]
     if ties:
@@ -173,17 +197,21 @@ def fit_bradley_terry(counts, pairs, conds, reference=None, ties=None, x0=None):
 
     def objective(x):
         value, grad = _negloglik(x, counts, pairs, ref, k, ties)
-        return value + float(ridge @ x ** 2), grad + 2 * ridge * x
+        return value + float(ridge @ x**2), grad + 2 * ridge * x
 
     # BFGS: a few dozen iterations on at most 8 parameters (L-BFGS-B costs ten times as much per call here).
     res = optimize.minimize(objective, x0, jac=True, method="BFGS", options={"maxiter": 2000, "gtol": 1e-9})
     converged = bool(np.max(np.abs(objective(res.x)[1]), initial=0.0) < 1e-4)
     theta = np.zeros(k)
-    theta[[c for c in range(k) if c != ref]] = res.x[:k - 1]
-    return {"strengths": {c: float(theta[n]) for n, c in enumerate(conds)},
-            "nu": float(math.exp(res.x[-1])) if ties else 0.0,
-            "log_likelihood": -_negloglik(res.x, counts, pairs, ref, k, ties)[0],
-            "converged": converged, "reference": conds[ref], "params": res.x}
+    theta[[c for c in range(k) if c != ref]] = res.x[: k - 1]
+    return {
+        "strengths": {c: float(theta[n]) for n, c in enumerate(conds)},
+        "nu": float(math.exp(res.x[-1])) if ties else 0.0,
+        "log_likelihood": -_negloglik(res.x, counts, pairs, ref, k, ties)[0],
+        "converged": converged,
+        "reference": conds[ref],
+        "params": res.x,
+    }
 
 
 def bradley_terry(o, n_boot=1000, seed=0, level=0.95):
@@ -205,13 +233,21 @@ def bradley_terry(o, n_boot=1000, seed=0, level=0.95):
         f = fit_bradley_terry(c, pairs, conds, reference, ties, x0=fit["params"])
         boot[b] = [f["strengths"][x] for x in conds]
     lo, hi = 100 * (1 - level) / 2, 100 * (1 + level) / 2
-    ci = {c: [float(np.percentile(boot[:, n], lo)), float(np.percentile(boot[:, n], hi))]
-          for n, c in enumerate(conds)}
+    ci = {c: [float(np.percentile(boot[:, n], lo)), float(np.percentile(boot[:, n], hi))] for n, c in enumerate(conds)}
     fit.pop("params")
-    return {**fit, "ci": ci, "n_boot": n_boot, "seed": seed, "level": level,
-            "method": ("Bradley-Terry with Davidson's tie parameter, maximum likelihood" if ties else
-                       "Bradley-Terry (no ties in the data), maximum likelihood")
-            + "; percentile intervals from a bootstrap over raters"}
+    return {
+        **fit,
+        "ci": ci,
+        "n_boot": n_boot,
+        "seed": seed,
+        "level": level,
+        "method": (
+            "Bradley-Terry with Davidson's tie parameter, maximum likelihood"
+            if ties
+            else "Bradley-Terry (no ties in the data), maximum likelihood"
+        )
+        + "; percentile intervals from a bootstrap over raters",
+    }
 
 
 def analyse(df, n_boot=1000, seed=0, alpha=0.05):
@@ -222,5 +258,10 @@ def analyse(df, n_boot=1000, seed=0, alpha=0.05):
         raise AnalysisError(f"the test rows compare {len(conds)} condition; comparisons need at least 2")
     counts = pair_counts(o, alpha)
     bt = bradley_terry(o, n_boot=n_boot, seed=seed)
-    return {"n_test_answers": int(len(o)), "n_raters": int(o["rater_id"].nunique()),
-            "n_items": int(o["item"].nunique()), "pairs": counts, "bradley_terry": bt}
+    return {
+        "n_test_answers": int(len(o)),
+        "n_raters": int(o["rater_id"].nunique()),
+        "n_items": int(o["item"].nunique()),
+        "pairs": counts,
+        "bradley_terry": bt,
+    }

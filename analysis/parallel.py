@@ -6,12 +6,15 @@ the pairs. Per condition: mean and median with 95% percentile intervals from a b
 pages resampled together), and the linear mixed model rating ~ condition + (1|rater) + (1|item) of analysis.stats
 (REML, Satterthwaite t tests). A catch page is failed by rating a BAD clip at or above the page's NAT clip.
 """
+
 import math
 from itertools import combinations
 
 import numpy as np
 import pandas as pd
 from scipy import stats as sps
+
+from core import study
 
 from .load import AnalysisError, read_export
 
@@ -45,17 +48,22 @@ def load_pages(path):
         if clash.any():
             line = clash.idxmax()
             earlier = df.index[(df["page_id"] == df.at[line, "page_id"])][0]
-            raise AnalysisError(f"{path}:{line}: page {df.at[line, 'page_id']} has {col} {df.at[line, col]!r} but "
-                                f"{first[line]!r} at line {earlier}")
-    for cols, what in ((["page_id", "clip_id"], "clip {clip_id} twice on page {page_id}"),
-                       (["page_id", "condition"], "condition {condition} twice on page {page_id}"),
-                       (["rater_id", "clip_id"], "clip {clip_id} rated twice by rater {rater_id}")):
+            raise AnalysisError(
+                f"{path}:{line}: page {df.at[line, 'page_id']} has {col} {df.at[line, col]!r} but "
+                f"{first[line]!r} at line {earlier}"
+            )
+    for cols, what in (
+        (["page_id", "clip_id"], "clip {clip_id} twice on page {page_id}"),
+        (["page_id", "condition"], "condition {condition} twice on page {page_id}"),
+        (["rater_id", "clip_id"], "clip {clip_id} rated twice by rater {rater_id}"),
+    ):
         dup = df.duplicated(cols)
         if dup.any():
             line = dup.idxmax()
             first = df.index[(df[cols] == df.loc[line, cols]).all(axis=1)][0]
-            raise AnalysisError(f"{path}:{line}: " + what.format(**df.loc[line, cols].to_dict())
-                                + f" (first at line {first})")
+            raise AnalysisError(
+                f"{path}:{line}: " + what.format(**df.loc[line, cols].to_dict()) + f" (first at line {first})"
+            )
     if not (df["role"] == "test").any():
         raise AnalysisError(f"{path}: no test ratings (every row is a catch page)")
     return df
@@ -64,11 +72,12 @@ def load_pages(path):
 def failed_raters(df):
     """Raters who rated a BAD clip at or above the NAT clip of the same catch page."""
     c = df[df["role"] == "catch"]
-    wide = c.pivot_table(index=["rater_id", "page_id"], columns="condition", values="rating", aggfunc="max",
-                         observed=True)
+    wide = c.pivot_table(
+        index=["rater_id", "page_id"], columns="condition", values="rating", aggfunc="max", observed=True
+    )
     if BAD not in wide.columns or REFERENCE not in wide.columns:
         return []
-    fail = wide[BAD] >= wide[REFERENCE]
+    fail = study.page_catch_failed(wide[BAD], wide[REFERENCE])
     return sorted(wide.index[fail.fillna(False).to_numpy()].get_level_values("rater_id").unique().tolist())
 
 
@@ -92,12 +101,19 @@ def condition_summary(t, n_boot=1000, seed=0, level=0.95):
     rows = []
     for k, c in enumerate(conds):
         v = y[cond == c]
-        rows.append({"condition": c, "n": int(len(v)), "mean": float(v.mean()), "median": float(np.median(v)),
-                     "sd": float(v.std(ddof=1)) if len(v) > 1 else math.nan,
-                     "mean_low": float(np.nanpercentile(boot_mean[:, k], lo)),
-                     "mean_high": float(np.nanpercentile(boot_mean[:, k], hi)),
-                     "median_low": float(np.nanpercentile(boot_med[:, k], lo)),
-                     "median_high": float(np.nanpercentile(boot_med[:, k], hi))})
+        rows.append(
+            {
+                "condition": c,
+                "n": int(len(v)),
+                "mean": float(v.mean()),
+                "median": float(np.median(v)),
+                "sd": float(v.std(ddof=1)) if len(v) > 1 else math.nan,
+                "mean_low": float(np.nanpercentile(boot_mean[:, k], lo)),
+                "mean_high": float(np.nanpercentile(boot_mean[:, k], hi)),
+                "median_low": float(np.nanpercentile(boot_med[:, k], lo)),
+                "median_high": float(np.nanpercentile(boot_med[:, k], hi)),
+            }
+        )
     return pd.DataFrame(rows).set_index("condition")
 
 
@@ -113,6 +129,7 @@ def wilcoxon_pairs(t, alpha=0.05):
     conditions on page-paired ratings; Holm-corrected. group1 < group2 alphabetically; median_diff = median of
     group2 - group1 over the pages."""
     from .stats import holm
+
     rows = []
     for a, b in combinations(sorted(t["condition"].unique()), 2):
         x, y = paired(t, a, b)
@@ -122,8 +139,16 @@ def wilcoxon_pairs(t, alpha=0.05):
             stat, p = float(res.statistic), float(res.pvalue)
         else:
             stat, p = math.nan, math.nan
-        rows.append({"group1": a, "group2": b, "n_pages": int(len(d)),
-                     "median_diff": float(np.median(d)) if len(d) else math.nan, "statistic": stat, "p": p})
+        rows.append(
+            {
+                "group1": a,
+                "group2": b,
+                "n_pages": int(len(d)),
+                "median_diff": float(np.median(d)) if len(d) else math.nan,
+                "statistic": stat,
+                "p": p,
+            }
+        )
     out = pd.DataFrame(rows)
     out["p_holm"] = np.nan
     ok = out["p"].notna().to_numpy()
@@ -136,12 +161,18 @@ def wilcoxon_pairs(t, alpha=0.05):
 def analyse(df, n_boot=1000, seed=0, alpha=0.05, mixed=True):
     """All parallel statistics of the test rows of `df` (catch pages never enter them)."""
     from . import stats
+
     t = df[df["role"] == "test"]
     if t["condition"].nunique() < 2:
         raise AnalysisError(f"the test rows hold {t['condition'].nunique()} condition; comparisons need at least 2")
-    out = {"n_test_ratings": int(len(t)), "n_raters": int(t["rater_id"].nunique()),
-           "n_pages": int(t["page_id"].nunique()), "n_items": int(t["item"].nunique()),
-           "summary": condition_summary(t, n_boot=n_boot, seed=seed), "wilcoxon": wilcoxon_pairs(t, alpha)}
+    out = {
+        "n_test_ratings": int(len(t)),
+        "n_raters": int(t["rater_id"].nunique()),
+        "n_pages": int(t["page_id"].nunique()),
+        "n_items": int(t["item"].nunique()),
+        "summary": condition_summary(t, n_boot=n_boot, seed=seed),
+        "wilcoxon": wilcoxon_pairs(t, alpha),
+    }
     if not mixed:
         out["mixed"] = {"skipped": "--no-mixed", "fixed_effects": {}}
         return out

@@ -17,6 +17,7 @@ Caveat printed with every plan: Tukey HSD treats ratings as independent, while c
 the false-positive rate of that decision at the planned size (difference 0); with many raters per clip it can
 exceed alpha, and then the mixed model's test in the report (Satterthwaite df) is the one to trust.
 """
+
 import json
 import math
 import sys
@@ -24,8 +25,9 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from core import cli
 from tqdm import tqdm
+
+from core import cli
 
 from . import figures, stats
 from .filtering import DEFAULT_THRESHOLD, exclude_raters, only_test_rows
@@ -40,11 +42,16 @@ def pilot_design(test):
     m = stats.mixed_model(test)
     vc = m["variance_components"]
     conds = list(m["condition_means"])
-    return {"conditions": conds, "means": m["condition_means"], "sd_rater": math.sqrt(vc["rater"]),
-            "sd_clip": math.sqrt(vc["clip"]), "sd_residual": math.sqrt(vc["residual"]),
-            "clips_per_condition": int(round(test.groupby("condition")["clip_id"].nunique().mean())),
-            "clips_per_rater": int(round(test.groupby("rater_id").size().median())),
-            "n_raters": int(test["rater_id"].nunique())}
+    return {
+        "conditions": conds,
+        "means": m["condition_means"],
+        "sd_rater": math.sqrt(vc["rater"]),
+        "sd_clip": math.sqrt(vc["clip"]),
+        "sd_residual": math.sqrt(vc["residual"]),
+        "clips_per_condition": int(round(test.groupby("condition")["clip_id"].nunique().mean())),
+        "clips_per_rater": int(round(test.groupby("rater_id").size().median())),
+        "n_raters": int(test["rater_id"].nunique()),
+    }
 
 
 def simulate_power(design, pair, n_raters, n_sim=1000, alpha=0.05, seed=0, chunk=100, progress=None):
@@ -72,8 +79,11 @@ def simulate_power(design, pair, n_raters, n_sim=1000, alpha=0.05, seed=0, chunk
         S = min(chunk, n_sim - start)
         # each rater's clips: the first m of a random permutation (all clips when m = n_clips)
         keys = rng.random((S, n_raters, n_clips))
-        clips = np.argpartition(keys, m - 1, axis=2)[:, :, :m] if m < n_clips else np.broadcast_to(
-            np.arange(n_clips), (S, n_raters, n_clips))
+        clips = (
+            np.argpartition(keys, m - 1, axis=2)[:, :, :m]
+            if m < n_clips
+            else np.broadcast_to(np.arange(n_clips), (S, n_raters, n_clips))
+        )
         u_r = rng.normal(0, design["sd_rater"], (S, n_raters, 1))
         u_c = rng.normal(0, design["sd_clip"], (S, n_clips))
         e = rng.normal(0, design["sd_residual"], (S, n_raters, m))
@@ -96,7 +106,7 @@ def simulate_power(design, pair, n_raters, n_sim=1000, alpha=0.05, seed=0, chunk
     p = rejected / n_sim
     z = 1.959963984540054
     centre = (p + z * z / (2 * n_sim)) / (1 + z * z / n_sim)
-    half = z * math.sqrt(p * (1 - p) / n_sim + z * z / (4 * n_sim ** 2)) / (1 + z * z / n_sim)
+    half = z * math.sqrt(p * (1 - p) / n_sim + z * z / (4 * n_sim**2)) / (1 + z * z / n_sim)
     return p, max(0.0, centre - half), min(1.0, centre + half)
 
 
@@ -107,8 +117,7 @@ def with_difference(design, pair, difference):
     return {**design, "means": means}
 
 
-def plan(design, pair, target=0.8, n_sim=1000, alpha=0.05, seed=0, raters=None, max_raters=MAX_RATERS,
-         progress=True):
+def plan(design, pair, target=0.8, n_sim=1000, alpha=0.05, seed=0, raters=None, max_raters=MAX_RATERS, progress=True):
     """Power curve over the number of raters and the smallest number reaching `target`.
 
     The search doubles the number of raters until the target is reached, then bisects between the last two
@@ -139,16 +148,22 @@ def plan(design, pair, target=0.8, n_sim=1000, alpha=0.05, seed=0, raters=None, 
             power(int(r))
     if raters is not None:
         power(int(raters))
-    out = {"planned_raters": planned, "planned_power": rows[planned][0] if planned else None,
-           "power_at": {int(raters): rows[int(raters)][0]} if raters is not None else {}}
+    out = {
+        "planned_raters": planned,
+        "planned_power": rows[planned][0] if planned else None,
+        "power_at": {int(raters): rows[int(raters)][0]} if raters is not None else {},
+    }
     null_design = with_difference(design, pair, 0.0)
     check = planned or raters
     if check:
-        out["false_positive_rate"] = simulate_power(null_design, pair, int(check), n_sim, alpha, seed + 1,
-                                                    progress=bar)[0]
+        out["false_positive_rate"] = simulate_power(
+            null_design, pair, int(check), n_sim, alpha, seed + 1, progress=bar
+        )[0]
     bar.close()
-    curve = pd.DataFrame([(r, r * per_clip_per_rater, *v) for r, v in sorted(rows.items())],
-                         columns=["raters", "ratings_per_clip", "power", "low", "high"])
+    curve = pd.DataFrame(
+        [(r, r * per_clip_per_rater, *v) for r, v in sorted(rows.items())],
+        columns=["raters", "ratings_per_clip", "power", "low", "high"],
+    )
     curve.attrs["per_clip_per_rater"] = per_clip_per_rater
     out["curve"] = curve
     return out
@@ -164,41 +179,72 @@ def _pair(design, given):
             raise AnalysisError("--pair: two different conditions are needed")
         return tuple(given)
     # default: the pilot's closest pair, the hardest difference to detect
-    pairs = [(abs(design["means"][x] - design["means"][y]), x, y) for i, x in enumerate(conds) for y in conds[i + 1:]]
+    pairs = [(abs(design["means"][x] - design["means"][y]), x, y) for i, x in enumerate(conds) for y in conds[i + 1 :]]
     _, x, y = min(pairs)
     return x, y
 
 
 def _main(argv):
-    ap = cli.ArgumentParser(prog="python -m analysis.plan", description=__doc__.splitlines()[0],
-                            epilog="Covers the acr design (one clip rated 1-5 per trial). Pairwise and parallel "
-                                   "(MUSHRA-like) designs do not exist in the analysis yet, so they have no planner.")
+    ap = cli.ArgumentParser(
+        prog="python -m analysis.plan",
+        description=__doc__.splitlines()[0],
+        epilog="Covers the acr design (one clip rated 1-5 per trial). Pairwise and parallel "
+        "(MUSHRA-like) designs do not exist in the analysis yet, so they have no planner.",
+    )
     ap.add_argument("pilot", nargs="?", help="pilot ratings.csv (CONTRACTS.md §6); omit with --no-pilot")
-    ap.add_argument("--no-pilot", action="store_true",
-                    help="no pilot: take the variance components and design from the flags below")
-    ap.add_argument("--pair", nargs=2, metavar=("A", "B"),
-                    help="the two conditions to tell apart (default: the pilot's closest pair)")
-    ap.add_argument("--difference", type=cli.number(float, 0, 4, lo_open=True),
-                    help="mean rating difference to detect (default: the pilot's difference for the pair)")
+    ap.add_argument(
+        "--no-pilot", action="store_true", help="no pilot: take the variance components and design from the flags below"
+    )
+    ap.add_argument(
+        "--pair",
+        nargs=2,
+        metavar=("A", "B"),
+        help="the two conditions to tell apart (default: the pilot's closest pair)",
+    )
+    ap.add_argument(
+        "--difference",
+        type=cli.number(float, 0, 4, lo_open=True),
+        help="mean rating difference to detect (default: the pilot's difference for the pair)",
+    )
     ap.add_argument("--power", type=cli.number(float, 0.05, 0.999), default=0.8, help="target power (default 0.8)")
-    ap.add_argument("--alpha", type=cli.number(float, 0, 0.5, lo_open=True), default=0.05,
-                    help="family-wise error rate of Tukey HSD, as in the report (default 0.05)")
-    ap.add_argument("--raters", type=cli.number(int, 2, MAX_RATERS),
-                    help="also give the power of a study with this many raters")
-    ap.add_argument("--clips-per-condition", type=cli.number(int, 1, 10000),
-                    help="clips per condition (default: the pilot's; 30 with --no-pilot)")
-    ap.add_argument("--clips-per-rater", type=cli.number(int, 1, 100000),
-                    help="test clips each rater rates (default: the pilot's median; all clips with --no-pilot)")
-    ap.add_argument("--conditions", type=cli.number(int, 2, 20), default=3,
-                    help="number of conditions with --no-pilot (default 3)")
+    ap.add_argument(
+        "--alpha",
+        type=cli.number(float, 0, 0.5, lo_open=True),
+        default=0.05,
+        help="family-wise error rate of Tukey HSD, as in the report (default 0.05)",
+    )
+    ap.add_argument(
+        "--raters", type=cli.number(int, 2, MAX_RATERS), help="also give the power of a study with this many raters"
+    )
+    ap.add_argument(
+        "--clips-per-condition",
+        type=cli.number(int, 1, 10000),
+        help="clips per condition (default: the pilot's; 30 with --no-pilot)",
+    )
+    ap.add_argument(
+        "--clips-per-rater",
+        type=cli.number(int, 1, 100000),
+        help="test clips each rater rates (default: the pilot's median; all clips with --no-pilot)",
+    )
+    ap.add_argument(
+        "--conditions", type=cli.number(int, 2, 20), default=3, help="number of conditions with --no-pilot (default 3)"
+    )
     ap.add_argument("--sd-rater", type=cli.number(float, 0), help="rater SD (--no-pilot)")
     ap.add_argument("--sd-clip", type=cli.number(float, 0), help="clip SD (--no-pilot)")
     ap.add_argument("--sd-residual", type=cli.number(float, 0, lo_open=True), help="residual SD (--no-pilot)")
-    ap.add_argument("--threshold", type=cli.number(int, 1, 6), default=DEFAULT_THRESHOLD,
-                    help="the report's catch-trial exclusion threshold for the pilot (default 3)")
-    ap.add_argument("--n-sim", type=cli.number(int, 50, 1_000_000), default=1000,
-                    help="simulated studies per design size (default 1000)")
-    ap.add_argument("--seed", type=cli.number(int, 0, 2 ** 32 - 1), default=0, help="simulation seed (default 0)")
+    ap.add_argument(
+        "--threshold",
+        type=cli.number(int, 1, 6),
+        default=DEFAULT_THRESHOLD,
+        help="the report's catch-trial exclusion threshold for the pilot (default 3)",
+    )
+    ap.add_argument(
+        "--n-sim",
+        type=cli.number(int, 50, 1_000_000),
+        default=1000,
+        help="simulated studies per design size (default 1000)",
+    )
+    ap.add_argument("--seed", type=cli.number(int, 0, 2**32 - 1), default=0, help="simulation seed (default 0)")
     ap.add_argument("--out", default="plan", help="folder for power_curve.png and plan.json (default plan/)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     args = ap.parse_args(argv)
@@ -211,9 +257,16 @@ def _main(argv):
             raise AnalysisError(f"{args.pilot}: give a pilot file or --no-pilot, not both")
         conds = [f"C{i + 1}" for i in range(args.conditions)]
         C = args.clips_per_condition or 30
-        design = {"conditions": conds, "means": {c: 0.0 for c in conds}, "sd_rater": args.sd_rater,
-                  "sd_clip": args.sd_clip, "sd_residual": args.sd_residual, "clips_per_condition": C,
-                  "clips_per_rater": args.clips_per_rater or args.conditions * C, "n_raters": None}
+        design = {
+            "conditions": conds,
+            "means": {c: 0.0 for c in conds},
+            "sd_rater": args.sd_rater,
+            "sd_clip": args.sd_clip,
+            "sd_residual": args.sd_residual,
+            "clips_per_condition": C,
+            "clips_per_rater": args.clips_per_rater or args.conditions * C,
+            "n_raters": None,
+        }
         source = "variance components from the command line"
         pair = tuple(args.pair) if args.pair else (conds[0], conds[1])
         if args.pair:
@@ -240,8 +293,9 @@ def _main(argv):
     if not diff > 0:
         raise AnalysisError("the pilot shows no difference for the pair: give --difference")
     design = with_difference(design, pair, diff)
-    design["clips_per_rater"] = min(design["clips_per_rater"], len(design["conditions"]) *
-                                    design["clips_per_condition"])
+    design["clips_per_rater"] = min(
+        design["clips_per_rater"], len(design["conditions"]) * design["clips_per_condition"]
+    )
     res = plan(design, pair, args.power, args.n_sim, args.alpha, args.seed, args.raters, progress=not args.quiet)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
@@ -253,30 +307,49 @@ def _main(argv):
     curve = res["curve"]
     title = f"{pair[1]} vs {pair[0]}, difference {diff:.2f}, Tukey HSD at alpha {args.alpha:g}"
     figures.power_curve(curve, args.power, out / "power_curve.png", title)
-    doc = {"source": source, "pair": list(pair), "difference": diff, "alpha": args.alpha, "target_power": args.power,
-           "n_sim": args.n_sim, "seed": args.seed, "test": "Tukey HSD over all conditions (the report's)",
-           "design": {k: v for k, v in design.items()},
-           **{k: v for k, v in res.items() if k != "curve"}, "curve": curve.to_dict(orient="records")}
+    doc = {
+        "source": source,
+        "pair": list(pair),
+        "difference": diff,
+        "alpha": args.alpha,
+        "target_power": args.power,
+        "n_sim": args.n_sim,
+        "seed": args.seed,
+        "test": "Tukey HSD over all conditions (the report's)",
+        "design": {k: v for k, v in design.items()},
+        **{k: v for k, v in res.items() if k != "curve"},
+        "curve": curve.to_dict(orient="records"),
+    }
     (out / "plan.json").write_text(json.dumps(doc, indent=1), encoding="utf-8")
     d = design
-    print(f"Plan from {source}: {len(d['conditions'])} conditions x {d['clips_per_condition']} clips, each rater "
-          f"rates {d['clips_per_rater']} clips; SD rater {d['sd_rater']:.3f}, clip {d['sd_clip']:.3f}, "
-          f"residual {d['sd_residual']:.3f}.")
-    print(f"Detecting {pair[1]} - {pair[0]} = {diff:.3f} with Tukey HSD at family-wise alpha {args.alpha:g} "
-          f"({args.n_sim} simulated studies per size):\n")
+    print(
+        f"Plan from {source}: {len(d['conditions'])} conditions x {d['clips_per_condition']} clips, each rater "
+        f"rates {d['clips_per_rater']} clips; SD rater {d['sd_rater']:.3f}, clip {d['sd_clip']:.3f}, "
+        f"residual {d['sd_residual']:.3f}."
+    )
+    print(
+        f"Detecting {pair[1]} - {pair[0]} = {diff:.3f} with Tukey HSD at family-wise alpha {args.alpha:g} "
+        f"({args.n_sim} simulated studies per size):\n"
+    )
     print(f"{'raters':>7}{'ratings/clip':>14}{'power':>8}{'95% MC interval':>20}")
     for r in curve.itertuples():
         print(f"{r.raters:>7}{r.ratings_per_clip:>14.1f}{r.power:>8.3f}{f'[{r.low:.3f}, {r.high:.3f}]':>20}")
     print()
     if res["planned_raters"]:
         r = res["planned_raters"]
-        print(f"Power {args.power:g} needs {r} raters in total ({r * curve.attrs['per_clip_per_rater']:.1f} ratings "
-              f"per clip); estimated power there {res['planned_power']:.3f}.")
-        print(f"False-positive rate of the same decision at that size when the difference is 0: "
-              f"{res['false_positive_rate']:.3f} (nominal {args.alpha:g}).")
+        print(
+            f"Power {args.power:g} needs {r} raters in total ({r * curve.attrs['per_clip_per_rater']:.1f} ratings "
+            f"per clip); estimated power there {res['planned_power']:.3f}."
+        )
+        print(
+            f"False-positive rate of the same decision at that size when the difference is 0: "
+            f"{res['false_positive_rate']:.3f} (nominal {args.alpha:g})."
+        )
     else:
-        print(f"Power {args.power:g} is not reached with up to {MAX_RATERS} raters: more clips per condition are "
-              "needed (clip variation does not shrink with more raters).")
+        print(
+            f"Power {args.power:g} is not reached with up to {MAX_RATERS} raters: more clips per condition are "
+            "needed (clip variation does not shrink with more raters)."
+        )
     for r, p in res["power_at"].items():
         print(f"A study with {r} raters has power {p:.3f}.")
     print(f"\nPower curve: {out / 'power_curve.png'}; table: {out / 'plan.json'}")

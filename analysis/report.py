@@ -4,6 +4,7 @@ Writes OUT/stats.json (CONTRACTS.md §7), OUT/figures/*.png and OUT/report.html 
 offline), and prints a summary table. Every statistic is computed on the kept test rows (after the catch-trial
 rater exclusion) and again on all test rows ("without_exclusion").
 """
+
 import base64
 import html
 import json
@@ -15,8 +16,9 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from core import cli
 from tqdm import tqdm
+
+from core import cli
 
 from . import figures, stats
 from .filtering import DEFAULT_THRESHOLD, exclude_raters, only_test_rows
@@ -37,8 +39,10 @@ def _fit_model(fit, test, enabled, flag, n_raters, n_clips, max_levels, max_rati
     if not enabled:
         return {"skipped": flag, "fixed_effects": {}}
     if min(n_raters, n_clips) > max_levels:
-        return {"skipped": f"{n_raters} raters and {n_clips} clips: both above --mixed-max-levels {max_levels}",
-                "fixed_effects": {}}
+        return {
+            "skipped": f"{n_raters} raters and {n_clips} clips: both above --mixed-max-levels {max_levels}",
+            "fixed_effects": {},
+        }
     if max_ratings is not None and len(test) > max_ratings:
         return {"skipped": f"{len(test)} ratings: above --ordinal-max-ratings {max_ratings}", "fixed_effects": {}}
     try:
@@ -46,8 +50,11 @@ def _fit_model(fit, test, enabled, flag, n_raters, n_clips, max_levels, max_rati
     except stats.ModelUndefined as exc:
         return {"undefined": str(exc), "fixed_effects": {}}
     except (np.linalg.LinAlgError, ValueError) as exc:  # a degenerate design is reported, not fatal
-        return {"error": f"the fit failed numerically, too little data for this model? ({type(exc).__name__}: "
-                         f"{str(exc).splitlines()[0] if str(exc) else ''})", "fixed_effects": {}}
+        return {
+            "error": f"the fit failed numerically, too little data for this model? ({type(exc).__name__}: "
+            f"{str(exc).splitlines()[0] if str(exc) else ''})",
+            "fixed_effects": {},
+        }
 
 
 def undefined_tests(res):
@@ -79,16 +86,31 @@ def undefined_tests(res):
     return out
 
 
-def analyse(test, *, n_boot=2000, seed=0, alpha=0.05, mixed=True, ordinal=True, mixed_max_levels=MIXED_MAX_LEVELS,
-            ordinal_max_ratings=ORDINAL_MAX_RATINGS, metrics=None, progress=None):
+def analyse(
+    test,
+    *,
+    n_boot=2000,
+    seed=0,
+    alpha=0.05,
+    mixed=True,
+    ordinal=True,
+    mixed_max_levels=MIXED_MAX_LEVELS,
+    ordinal_max_ratings=ORDINAL_MAX_RATINGS,
+    metrics=None,
+    progress=None,
+):
     """All analyses of one set of test rows -> dict of tables and dicts (see to_json for the file layout)."""
     step = progress.update if progress is not None else (lambda n=1: None)
     conds = test["condition"].unique()
     if len(conds) < 2:
-        raise AnalysisError(f"the test rows hold {len(conds)} condition ({', '.join(map(str, conds))}); "
-                            "comparisons need at least 2")
-    out = {"n_test_ratings": int(len(test)), "n_raters": int(test["rater_id"].nunique()),
-           "n_clips": int(test["clip_id"].nunique())}
+        raise AnalysisError(
+            f"the test rows hold {len(conds)} condition ({', '.join(map(str, conds))}); comparisons need at least 2"
+        )
+    out = {
+        "n_test_ratings": int(len(test)),
+        "n_raters": int(test["rater_id"].nunique()),
+        "n_clips": int(test["clip_id"].nunique()),
+    }
     summary = stats.group_summary(test)
     out["histogram"] = stats.rating_histogram(test)
     out["clips"] = stats.per_clip_means(test)
@@ -137,24 +159,35 @@ def section_json(res):
     s = res["summary"]
     boot = res["bootstrap"]
     out = {
-        "n_test_ratings": res["n_test_ratings"], "n_raters": res["n_raters"], "n_clips": res["n_clips"],
+        "n_test_ratings": res["n_test_ratings"],
+        "n_raters": res["n_raters"],
+        "n_clips": res["n_clips"],
         "condition_means": {c: s.at[c, "mean"] for c in s.index},
         "condition_counts": {c: int(s.at[c, "n"]) for c in s.index},
         "condition_summary": {c: {k: s.at[c, k] for k in s.columns if k != "n"} for c in s.index},
         "rating_histogram": {c: {str(k): int(v) for k, v in row.items()} for c, row in res["histogram"].iterrows()},
         "anova": res["anova"],
-        "tukey": _records(res["tukey"][["group1", "group2", "meandiff", "lower", "upper", "p_adj", "p_adj_bound",
-                                        "reject", "se", "q"]]),
-        "bootstrap": {"method": boot["method"], "n_boot": boot["n_boot"], "seed": boot["seed"],
-                      "level": boot["level"], "n_degenerate": boot["n_degenerate"],
-                      "differences": _records(boot["differences"])},
+        "tukey": _records(
+            res["tukey"][
+                ["group1", "group2", "meandiff", "lower", "upper", "p_adj", "p_adj_bound", "reject", "se", "q"]
+            ]
+        ),
+        "bootstrap": {
+            "method": boot["method"],
+            "n_boot": boot["n_boot"],
+            "seed": boot["seed"],
+            "level": boot["level"],
+            "n_degenerate": boot["n_degenerate"],
+            "differences": _records(boot["differences"]),
+        },
         "kruskal": res["kruskal"],
         "mannwhitney": _records(res["mannwhitney"]),
         "mixed_model": res["mixed"],
         "ordinal_model": res["ordinal"],
         "undefined": res["undefined"],
-        "per_clip_means": _records(res["clips"][["clip_id", "condition", "rank", "n", "mean", "sd", "ci_low",
-                                                 "ci_high"]]),
+        "per_clip_means": _records(
+            res["clips"][["clip_id", "condition", "rank", "n", "mean", "sd", "ci_low", "ci_high"]]
+        ),
     }
     if "metrics" in res:
         out["metric_correlations"] = _records(res["metrics"])
@@ -185,37 +218,52 @@ def _peq(p):
 
 
 def console_summary(counts, kept, everyone):
-    lines = [f"Ratings: {counts['n_ratings_total']} total, {counts['n_ratings_removed']} removed, "
-             f"{counts['n_ratings_kept']} kept  (raters: {counts['n_raters_total']} total, "
-             f"{counts['n_raters_excluded']} excluded for a catch rating >= {counts['threshold']})", ""]
+    lines = [
+        f"Ratings: {counts['n_ratings_total']} total, {counts['n_ratings_removed']} removed, "
+        f"{counts['n_ratings_kept']} kept  (raters: {counts['n_raters_total']} total, "
+        f"{counts['n_raters_excluded']} excluded for a catch rating >= {counts['threshold']})",
+        "",
+    ]
     s, s_all = kept["summary"], everyone["summary"]
     head = f"{'condition':<10}{'n':>7}{'mean':>8}{'95% CI (t)':>18}{'95% CI (bootstrap)':>22}{'mean, all raters':>18}"
     lines += [head, "-" * len(head)]
     for c in s.index:
         r = s.loc[c]
         all_mean = f"{s_all.at[c, 'mean']:.3f}" if c in s_all.index else "-"
-        lines.append(f"{c:<10}{int(r['n']):>7}{r['mean']:>8.3f}{f'[{r.t_low:.3f}, {r.t_high:.3f}]':>18}"
-                     f"{f'[{r.boot_low:.3f}, {r.boot_high:.3f}]':>22}{all_mean:>18}")
+        lines.append(
+            f"{c:<10}{int(r['n']):>7}{r['mean']:>8.3f}{f'[{r.t_low:.3f}, {r.t_high:.3f}]':>18}"
+            f"{f'[{r.boot_low:.3f}, {r.boot_high:.3f}]':>22}{all_mean:>18}"
+        )
     a, kw, undef = kept["anova"], kept["kruskal"], kept["undefined"]
-    lines += ["", f"One-way ANOVA: {undef['anova']}" if "anova" in undef else
-              f"One-way ANOVA: F({a['df_between']}, {a['df_within']}) = {a['F']:.3f}, {_peq(a['p'])}",
-              f"Kruskal-Wallis: {undef['kruskal']}" if "kruskal" in undef else
-              f"Kruskal-Wallis: H({kw['df']}) = {kw['H']:.3f}, {_peq(kw['p'])}", "",
-              f"{'Tukey HSD':<14}{'diff':>8}{'95% CI':>20}{'p adj':>11}{'MWU p (Holm)':>14}"]
+    lines += [
+        "",
+        f"One-way ANOVA: {undef['anova']}"
+        if "anova" in undef
+        else f"One-way ANOVA: F({a['df_between']}, {a['df_within']}) = {a['F']:.3f}, {_peq(a['p'])}",
+        f"Kruskal-Wallis: {undef['kruskal']}"
+        if "kruskal" in undef
+        else f"Kruskal-Wallis: H({kw['df']}) = {kw['H']:.3f}, {_peq(kw['p'])}",
+        "",
+        f"{'Tukey HSD':<14}{'diff':>8}{'95% CI':>20}{'p adj':>11}{'MWU p (Holm)':>14}",
+    ]
     mwu = kept["mannwhitney"].set_index(["group1", "group2"])
     for _, t in kept["tukey"].iterrows():
         pair = f"{t.group2}-{t.group1}"
-        lines.append(f"{pair:<14}{t.meandiff:>8.3f}{f'[{t.lower:.3f}, {t.upper:.3f}]':>20}"
-                     f"{_p(t.p_adj, t.p_adj_bound):>11}{_p(mwu.at[(t.group1, t.group2), 'p_holm']):>14}"
-                     f"{'  *' if t.reject else ''}")
+        lines.append(
+            f"{pair:<14}{t.meandiff:>8.3f}{f'[{t.lower:.3f}, {t.upper:.3f}]':>20}"
+            f"{_p(t.p_adj, t.p_adj_bound):>11}{_p(mwu.at[(t.group1, t.group2), 'p_holm']):>14}"
+            f"{'  *' if t.reject else ''}"
+        )
     if "tukey" in undef:
         lines.append(f"Tukey HSD: {undef['tukey']}")
     m = kept["mixed"]
     if m.get("fixed_effects"):
         lines += ["", f"Mixed model {m['formula']} (reference {m['reference']}; t tests, Satterthwaite df):"]
         for k, v in m["fixed_effects"].items():
-            lines.append(f"  {k:<22}{v:>8.3f}  [{m['ci_low'][k]:.3f}, {m['ci_high'][k]:.3f}]  "
-                         f"df {m['df'][k]:.1f}  {_peq(m['p_values'][k])}")
+            lines.append(
+                f"  {k:<22}{v:>8.3f}  [{m['ci_low'][k]:.3f}, {m['ci_high'][k]:.3f}]  "
+                f"df {m['df'][k]:.1f}  {_peq(m['p_values'][k])}"
+            )
         vc = m["variance_components"]
         lines.append(f"  variance: rater {vc['rater']:.3f}, clip {vc['clip']:.3f}, residual {vc['residual']:.3f}")
     else:
@@ -224,10 +272,15 @@ def console_summary(counts, kept, everyone):
     if o.get("fixed_effects"):
         lines += ["", f"Ordinal mixed model {o['formula']} (reference {o['reference']}):"]
         for k, v in o["fixed_effects"].items():
-            lines.append(f"  {k:<22}{v:>8.3f} log-odds  odds ratio {o['odds_ratios'][k]:.3f} "
-                         f"[{o['or_ci_low'][k]:.3f}, {o['or_ci_high'][k]:.3f}]  {_peq(o['p_values'][k])}")
-        lines.append("  thresholds: " + ", ".join(f"{k} {v:.3f}" for k, v in o["thresholds"].items()) +
-                     f"; SD rater {o['sd_rater']:.3f}, clip {o['sd_clip']:.3f}; converged: {o['converged']}")
+            lines.append(
+                f"  {k:<22}{v:>8.3f} log-odds  odds ratio {o['odds_ratios'][k]:.3f} "
+                f"[{o['or_ci_low'][k]:.3f}, {o['or_ci_high'][k]:.3f}]  {_peq(o['p_values'][k])}"
+            )
+        lines.append(
+            "  thresholds: "
+            + ", ".join(f"{k} {v:.3f}" for k, v in o["thresholds"].items())
+            + f"; SD rater {o['sd_rater']:.3f}, clip {o['sd_clip']:.3f}; converged: {o['converged']}"
+        )
         lines += [f"  warning: {w}" for w in o["warnings"]]
     else:
         lines += ["", f"Ordinal mixed model: {_why_not(o)}"]
@@ -265,30 +318,54 @@ def _img(path):
 def _mixed_html(m):
     if not m.get("fixed_effects"):
         return f"<p>Not fitted: {html.escape(str(_why_not(m)))}</p>"
-    fe = pd.DataFrame({"estimate": m["fixed_effects"], "std. error": m["std_errors"], "df": m["df"],
-                       "95% low": m["ci_low"], "95% high": m["ci_high"], "p": m["p_values"]})
+    fe = pd.DataFrame(
+        {
+            "estimate": m["fixed_effects"],
+            "std. error": m["std_errors"],
+            "df": m["df"],
+            "95% low": m["ci_low"],
+            "95% high": m["ci_high"],
+            "p": m["p_values"],
+        }
+    )
     vc = pd.DataFrame({"variance": m["variance_components"]})
     warn = f"<p class=note>Fit warnings: {html.escape('; '.join(m['warnings']))}</p>" if m["warnings"] else ""
-    return (f"<p>{html.escape(m['formula'])}, {html.escape(m['method'])}; reference level "
-            f"<b>{html.escape(m['reference'])}</b>; converged: {m['converged']}.</p>"
-            f"<div class=cols>{_fmt_table(fe, ('p',))}{_fmt_table(vc)}</div>{warn}"
-            "<p class=note>t tests and intervals on Satterthwaite degrees of freedom (as lmerTest).</p>")
+    return (
+        f"<p>{html.escape(m['formula'])}, {html.escape(m['method'])}; reference level "
+        f"<b>{html.escape(m['reference'])}</b>; converged: {m['converged']}.</p>"
+        f"<div class=cols>{_fmt_table(fe, ('p',))}{_fmt_table(vc)}</div>{warn}"
+        "<p class=note>t tests and intervals on Satterthwaite degrees of freedom (as lmerTest).</p>"
+    )
 
 
 def _ordinal_html(o, fig=None):
     if not o.get("fixed_effects"):
         return f"<p>Not fitted: {html.escape(str(_why_not(o)))}</p>"
-    fe = pd.DataFrame({"log-odds": o["fixed_effects"], "std. error": o["std_errors"], "p": o["p_values"],
-                       "odds ratio": o["odds_ratios"], "OR 95% low": o["or_ci_low"], "OR 95% high": o["or_ci_high"]})
+    fe = pd.DataFrame(
+        {
+            "log-odds": o["fixed_effects"],
+            "std. error": o["std_errors"],
+            "p": o["p_values"],
+            "odds ratio": o["odds_ratios"],
+            "OR 95% low": o["or_ci_low"],
+            "OR 95% high": o["or_ci_high"],
+        }
+    )
     th = pd.DataFrame({"threshold": o["thresholds"], "std. error": o["threshold_std_errors"]})
     sd = pd.DataFrame({"SD": {"rater": o["sd_rater"], "clip": o["sd_clip"]}})
     warn = f"<p class=note>Fit warnings: {html.escape('; '.join(o['warnings']))}</p>" if o["warnings"] else ""
-    return (f"<p>{html.escape(o['formula'])}, {html.escape(o['method'])}; reference level "
-            f"<b>{html.escape(o['reference'])}</b>; log-likelihood {o['log_likelihood']:.3f}; converged: "
-            f"{o['converged']}. An odds ratio below 1: lower odds of a higher rating than the reference.</p>"
-            f"<div class=cols>{_fmt_table(fe, ('p',))}{_fmt_table(th)}{_fmt_table(sd)}</div>{warn}"
-            + (f"<p>{_img(fig)}</p><p class=note>Bars: observed share of each rating; dots: the model's "
-               "predicted distribution for a new rater on a new clip.</p>" if fig else ""))
+    return (
+        f"<p>{html.escape(o['formula'])}, {html.escape(o['method'])}; reference level "
+        f"<b>{html.escape(o['reference'])}</b>; log-likelihood {o['log_likelihood']:.3f}; converged: "
+        f"{o['converged']}. An odds ratio below 1: lower odds of a higher rating than the reference.</p>"
+        f"<div class=cols>{_fmt_table(fe, ('p',))}{_fmt_table(th)}{_fmt_table(sd)}</div>{warn}"
+        + (
+            f"<p>{_img(fig)}</p><p class=note>Bars: observed share of each rating; dots: the model's "
+            "predicted distribution for a new rater on a new clip.</p>"
+            if fig
+            else ""
+        )
+    )
 
 
 def _undefined_html(res):
@@ -301,11 +378,17 @@ def _undefined_html(res):
 def _anova_text(res, digits=4):
     """(ANOVA sentence, Kruskal-Wallis sentence), or the reason each is undefined."""
     a, k, undef = res["anova"], res["kruskal"], res["undefined"]
-    anova = (f"One-way ANOVA: {html.escape(undef['anova'])}." if "anova" in undef else
-             f"One-way ANOVA: <b>F({a['df_between']}, {a['df_within']}) = {a['F']:.{digits}f}</b>, {_peq(a['p'])}, "
-             f"η² = {a['eta_squared']:.3f}.")
-    kruskal = (f"Kruskal–Wallis: {html.escape(undef['kruskal'])}." if "kruskal" in undef else
-               f"Kruskal–Wallis: H({k['df']}) = {k['H']:.3f}, {_peq(k['p'])}.")
+    anova = (
+        f"One-way ANOVA: {html.escape(undef['anova'])}."
+        if "anova" in undef
+        else f"One-way ANOVA: <b>F({a['df_between']}, {a['df_within']}) = {a['F']:.{digits}f}</b>, {_peq(a['p'])}, "
+        f"η² = {a['eta_squared']:.3f}."
+    )
+    kruskal = (
+        f"Kruskal–Wallis: {html.escape(undef['kruskal'])}."
+        if "kruskal" in undef
+        else f"Kruskal–Wallis: H({k['df']}) = {k['H']:.3f}, {_peq(k['p'])}."
+    )
     return anova, kruskal
 
 
@@ -316,26 +399,40 @@ def _tukey_table(res):
 
 
 def _section_html(res, title, figs=None, ordinal_fig=None):
-    parts = [f"<h2>{html.escape(title)}</h2>",
-             f"<p>{res['n_test_ratings']} test ratings from {res['n_raters']} raters on {res['n_clips']} clips.</p>",
-             _undefined_html(res),
-             "<h3>Condition means</h3>",
-             _fmt_table(res["summary"].rename(columns={"t_low": "t 95% low", "t_high": "t 95% high",
-                                                        "boot_low": "boot 95% low", "boot_high": "boot 95% high"})),
-             f"<p>{' '.join(_anova_text(res))}</p>",
-             "<h3>Tukey HSD (95% family-wise)</h3>",
-             _tukey_table(res),
-             "<h3>Pairwise Mann–Whitney U (Holm-adjusted)</h3>",
-             _fmt_table(res["mannwhitney"], ("p", "p_holm")),
-             f"<h3>Cluster bootstrap of differences ({res['bootstrap']['n_boot']} resamples of raters and clips)</h3>",
-             _fmt_table(res["bootstrap"]["differences"], ("boot_p",)),
-             "<h3>Linear mixed model</h3>", _mixed_html(res["mixed"]),
-             "<h3>Ordinal mixed model (cumulative logit)</h3>", _ordinal_html(res["ordinal"], ordinal_fig)]
+    parts = [
+        f"<h2>{html.escape(title)}</h2>",
+        f"<p>{res['n_test_ratings']} test ratings from {res['n_raters']} raters on {res['n_clips']} clips.</p>",
+        _undefined_html(res),
+        "<h3>Condition means</h3>",
+        _fmt_table(
+            res["summary"].rename(
+                columns={
+                    "t_low": "t 95% low",
+                    "t_high": "t 95% high",
+                    "boot_low": "boot 95% low",
+                    "boot_high": "boot 95% high",
+                }
+            )
+        ),
+        f"<p>{' '.join(_anova_text(res))}</p>",
+        "<h3>Tukey HSD (95% family-wise)</h3>",
+        _tukey_table(res),
+        "<h3>Pairwise Mann–Whitney U (Holm-adjusted)</h3>",
+        _fmt_table(res["mannwhitney"], ("p", "p_holm")),
+        f"<h3>Cluster bootstrap of differences ({res['bootstrap']['n_boot']} resamples of raters and clips)</h3>",
+        _fmt_table(res["bootstrap"]["differences"], ("boot_p",)),
+        "<h3>Linear mixed model</h3>",
+        _mixed_html(res["mixed"]),
+        "<h3>Ordinal mixed model (cumulative logit)</h3>",
+        _ordinal_html(res["ordinal"], ordinal_fig),
+    ]
     if figs:
         parts += [f"<p>{_img(f)}</p>" for f in figs]
     if "metrics" in res:
-        parts += ["<h3>Objective metrics vs per-clip mean rating</h3>",
-                  _fmt_table(res["metrics"], ("pearson_p", "spearman_p"))]
+        parts += [
+            "<h3>Objective metrics vs per-clip mean rating</h3>",
+            _fmt_table(res["metrics"], ("pearson_p", "spearman_p")),
+        ]
     return "\n".join(parts)
 
 
@@ -344,8 +441,11 @@ def write_html(path, counts, kept, everyone, fig_paths, meta):
     # every name below comes from the ratings file: escaped, so a condition called "<b>" stays text
     means = ", ".join(f"{html.escape(str(c))} {s.at[c, 'mean']:.2f}" for c in s.index)
     sig = [html.escape(f"{t.group2}–{t.group1}") for _, t in kept["tukey"].iterrows() if t.reject]
-    tukey = (f"Tukey HSD: {html.escape(kept['undefined']['tukey'])}." if "tukey" in kept["undefined"] else
-             f"Tukey HSD pairs differing at the 0.05 family-wise level: {', '.join(sig) if sig else 'none'}.")
+    tukey = (
+        f"Tukey HSD: {html.escape(kept['undefined']['tukey'])}."
+        if "tukey" in kept["undefined"]
+        else f"Tukey HSD pairs differing at the 0.05 family-wise level: {', '.join(sig) if sig else 'none'}."
+    )
     body = [
         f"<h1>Perceptual test report</h1><p class=note>{html.escape(meta['input'])} · generated "
         f"{html.escape(meta['generated_at'])} · bootstrap seed {meta['seed']}</p>",
@@ -360,14 +460,19 @@ def write_html(path, counts, kept, everyone, fig_paths, meta):
         f"<p>{_img(fig_paths['per_clip_means'])}</p>",
         "<p class=note>Fig. 6 of the paper: mean rating of each clip, sorted worst to best within each condition.</p>",
         f"<p>{_img(fig_paths['condition_means'])}</p>",
-        _section_html(kept, "With the rater exclusion (primary analysis)",
-                      [fig_paths["metric_scatter"]] if "metric_scatter" in fig_paths else None,
-                      fig_paths.get("ordinal_fit")),
+        _section_html(
+            kept,
+            "With the rater exclusion (primary analysis)",
+            [fig_paths["metric_scatter"]] if "metric_scatter" in fig_paths else None,
+            fig_paths.get("ordinal_fit"),
+        ),
         _section_html(everyone, "Without the exclusion (all raters)", ordinal_fig=fig_paths.get("ordinal_fit_all")),
         "<h2>Excluded raters</h2><p>" + (html.escape(", ".join(counts["excluded_raters"])) or "none") + "</p>",
     ]
-    page = ("<!doctype html><html lang=en><head><meta charset=utf-8><title>Perceptual test report</title>"
-            f"<style>{CSS}</style></head><body>{''.join(body)}</body></html>")
+    page = (
+        "<!doctype html><html lang=en><head><meta charset=utf-8><title>Perceptual test report</title>"
+        f"<style>{CSS}</style></head><body>{''.join(body)}</body></html>"
+    )
     Path(path).write_text(page, encoding="utf-8")
 
 
@@ -379,8 +484,10 @@ def _check_enough(path, test):
         conds = ", ".join(map(str, test["condition"].unique()))
         raise AnalysisError(f"{path}: the test rows hold {k} condition ({conds}); comparisons need at least 2")
     if len(test) <= k:
-        raise AnalysisError(f"{path}: {len(test)} test rating{'s' if len(test) != 1 else ''} in {k} condition"
-                            f"{'s' if k != 1 else ''}: the statistics need more ratings than conditions")
+        raise AnalysisError(
+            f"{path}: {len(test)} test rating{'s' if len(test) != 1 else ''} in {k} condition"
+            f"{'s' if k != 1 else ''}: the statistics need more ratings than conditions"
+        )
 
 
 def _prepare_out(out):
@@ -395,12 +502,25 @@ def _prepare_out(out):
         raise AnalysisError(f"--out {out}: folder is not writable")
 
 
-def build_report(ratings_path, out_dir="report", metrics_path=None, threshold=DEFAULT_THRESHOLD, mixed=True,
-                 seed=0, n_boot=2000, alpha=0.05, mixed_max_levels=MIXED_MAX_LEVELS, progress=True, quiet=False,
-                 ordinal=True, ordinal_max_ratings=ORDINAL_MAX_RATINGS):
+def build_report(
+    ratings_path,
+    out_dir="report",
+    metrics_path=None,
+    threshold=DEFAULT_THRESHOLD,
+    mixed=True,
+    seed=0,
+    n_boot=2000,
+    alpha=0.05,
+    mixed_max_levels=MIXED_MAX_LEVELS,
+    progress=True,
+    quiet=False,
+    ordinal=True,
+    ordinal_max_ratings=ORDINAL_MAX_RATINGS,
+):
     """Run the whole analysis; returns the stats.json document. A pairwise or parallel file (CONTRACTS §8, told
     by its columns) goes to analysis.design_report."""
     from .design_report import build, detect_design
+
     design = detect_design(ratings_path)
     if design != "acr":
         return build(ratings_path, out_dir, design, n_boot=n_boot, seed=seed, alpha=alpha, mixed=mixed, quiet=quiet)
@@ -410,14 +530,24 @@ def build_report(ratings_path, out_dir="report", metrics_path=None, threshold=DE
     kept_rows, counts = exclude_raters(df, threshold)
     kept_test, all_test = only_test_rows(kept_rows), only_test_rows(df)
     if len(kept_test) == 0:
-        raise AnalysisError(f"{ratings_path}: every rater failed the catch trials (threshold {threshold}); "
-                            "no test ratings are left")
+        raise AnalysisError(
+            f"{ratings_path}: every rater failed the catch trials (threshold {threshold}); no test ratings are left"
+        )
     _check_enough(ratings_path, kept_test)
     out = Path(out_dir)
     _prepare_out(out)
     bar = tqdm(total=14, desc="analysis", unit="step", disable=not progress, leave=False, file=sys.stderr)
-    opts = dict(n_boot=n_boot, seed=seed, alpha=alpha, mixed=mixed, ordinal=ordinal, mixed_max_levels=mixed_max_levels,
-                ordinal_max_ratings=ordinal_max_ratings, metrics=metrics, progress=bar)
+    opts = dict(
+        n_boot=n_boot,
+        seed=seed,
+        alpha=alpha,
+        mixed=mixed,
+        ordinal=ordinal,
+        mixed_max_levels=mixed_max_levels,
+        ordinal_max_ratings=ordinal_max_ratings,
+        metrics=metrics,
+        progress=bar,
+    )
     try:
         kept = analyse(kept_test, **opts)
         everyone = analyse(all_test, **opts)
@@ -425,25 +555,33 @@ def build_report(ratings_path, out_dir="report", metrics_path=None, threshold=DE
         bar.close()  # leave=False: the bar disappears, the error line stands alone
         raise AnalysisError(f"{ratings_path}: {exc}") from None
     figs = {
-        "ratings_histogram": figures.ratings_histogram(kept["histogram"], kept["summary"]["mean"].to_dict(),
-                                                       out / "figures" / "ratings_histogram.png"),
+        "ratings_histogram": figures.ratings_histogram(
+            kept["histogram"], kept["summary"]["mean"].to_dict(), out / "figures" / "ratings_histogram.png"
+        ),
         "per_clip_means": figures.per_clip_means(kept["clips"], out / "figures" / "per_clip_means.png"),
-        "condition_means": figures.condition_means([("kept raters", kept["summary"]),
-                                                    ("all raters", everyone["summary"])],
-                                                   out / "figures" / "condition_means.png"),
+        "condition_means": figures.condition_means(
+            [("kept raters", kept["summary"]), ("all raters", everyone["summary"])],
+            out / "figures" / "condition_means.png",
+        ),
     }
     for key, res in (("ordinal_fit", kept), ("ordinal_fit_all", everyone)):
         if res["ordinal"].get("fixed_effects"):
             figs[key] = figures.ordinal_fit(res["ordinal"], out / "figures" / f"{key}.png")
     bar.update(3)
     if metrics is not None:
-        figs["metric_scatter"] = figures.metric_scatter(kept["clips"], metrics, kept["metrics"],
-                                                        out / "figures" / "metric_scatter.png")
+        figs["metric_scatter"] = figures.metric_scatter(
+            kept["clips"], metrics, kept["metrics"], out / "figures" / "metric_scatter.png"
+        )
         matched = kept["clips"]["clip_id"].isin(metrics.index)
         counts["n_clips_with_metrics"] = int(matched.sum())
         counts["n_clips_without_metrics"] = int((~matched).sum())
-    meta = {"input": str(ratings_path), "generated_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-            "seed": seed, "alpha": alpha, "figures": {k: str(Path(v).relative_to(out)) for k, v in figs.items()}}
+    meta = {
+        "input": str(ratings_path),
+        "generated_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "seed": seed,
+        "alpha": alpha,
+        "figures": {k: str(Path(v).relative_to(out)) for k, v in figs.items()},
+    }
     write_html(out / "report.html", counts, kept, everyone, figs, meta)
     doc = to_json(counts, kept, everyone, meta)
     (out / "stats.json").write_text(json.dumps(doc, indent=1, allow_nan=False), encoding="utf-8")
@@ -460,27 +598,59 @@ def _main(argv):
     ap.add_argument("ratings", help="ratings.csv exported by the rating app (CONTRACTS.md §6)")
     ap.add_argument("--out", default="report", help="report folder (default: report/)")
     ap.add_argument("--metrics", help="metrics.csv of the stimuli: correlate each metric with the clip mean rating")
-    ap.add_argument("--threshold", type=cli.number(int, 1, 6), default=DEFAULT_THRESHOLD,
-                    help="exclude raters who rated any catch clip at or above this (1-6; default 3, as in the "
-                         "paper; 6 keeps every rater)")
+    ap.add_argument(
+        "--threshold",
+        type=cli.number(int, 1, 6),
+        default=DEFAULT_THRESHOLD,
+        help="exclude raters who rated any catch clip at or above this (1-6; default 3, as in the "
+        "paper; 6 keeps every rater)",
+    )
     ap.add_argument("--no-mixed", action="store_true", help="skip the linear mixed model")
     ap.add_argument("--no-ordinal", action="store_true", help="skip the ordinal (cumulative-logit) mixed model")
-    ap.add_argument("--mixed-max-levels", type=cli.number(int, 1), default=MIXED_MAX_LEVELS,
-                    help="skip the mixed models when raters and clips both exceed this (their cost grows with the "
-                         f"cube of the smaller; default {MIXED_MAX_LEVELS})")
-    ap.add_argument("--ordinal-max-ratings", type=cli.number(int, 1), default=ORDINAL_MAX_RATINGS,
-                    help="skip the ordinal model above this many test ratings (its cost grows with every rating; "
-                         f"default {ORDINAL_MAX_RATINGS})")
-    ap.add_argument("--seed", type=cli.number(int, 0, 2 ** 32 - 1), default=0, help="bootstrap seed (default 0)")
-    ap.add_argument("--n-boot", type=cli.number(int, 10, 1_000_000), default=2000,
-                    help="bootstrap resamples (10-1000000; default 2000)")
-    ap.add_argument("--alpha", type=cli.number(float, 0, 0.5, lo_open=True), default=0.05,
-                    help="family-wise error rate (0 < alpha <= 0.5; default 0.05)")
+    ap.add_argument(
+        "--mixed-max-levels",
+        type=cli.number(int, 1),
+        default=MIXED_MAX_LEVELS,
+        help="skip the mixed models when raters and clips both exceed this (their cost grows with the "
+        f"cube of the smaller; default {MIXED_MAX_LEVELS})",
+    )
+    ap.add_argument(
+        "--ordinal-max-ratings",
+        type=cli.number(int, 1),
+        default=ORDINAL_MAX_RATINGS,
+        help="skip the ordinal model above this many test ratings (its cost grows with every rating; "
+        f"default {ORDINAL_MAX_RATINGS})",
+    )
+    ap.add_argument("--seed", type=cli.number(int, 0, 2**32 - 1), default=0, help="bootstrap seed (default 0)")
+    ap.add_argument(
+        "--n-boot",
+        type=cli.number(int, 10, 1_000_000),
+        default=2000,
+        help="bootstrap resamples (10-1000000; default 2000)",
+    )
+    ap.add_argument(
+        "--alpha",
+        type=cli.number(float, 0, 0.5, lo_open=True),
+        default=0.05,
+        help="family-wise error rate (0 < alpha <= 0.5; default 0.05)",
+    )
     ap.add_argument("--quiet", action="store_true", help="no console summary or progress bar")
     args = ap.parse_args(argv)
-    build_report(args.ratings, args.out, args.metrics, args.threshold, not args.no_mixed, args.seed,
-                 args.n_boot, args.alpha, args.mixed_max_levels, progress=not args.quiet, quiet=args.quiet,
-                 ordinal=not args.no_ordinal, ordinal_max_ratings=args.ordinal_max_ratings)
+    build_report(
+        args.ratings,
+        args.out,
+        args.metrics,
+        args.threshold,
+        not args.no_mixed,
+        args.seed,
+        args.n_boot,
+        args.alpha,
+        args.mixed_max_levels,
+        progress=not args.quiet,
+        quiet=args.quiet,
+        ordinal=not args.no_ordinal,
+        ordinal_max_ratings=args.ordinal_max_ratings,
+    )
     return 0
 
 

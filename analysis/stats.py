@@ -4,6 +4,7 @@ Every function takes the long table of ratings (one row per response) and the na
 same code serves ratings.csv, the NIST reference data and R's PlantGrowth in the tests. Plotting lives in
 figures.py; file handling in load.py and report.py.
 """
+
 import functools
 import math
 from decimal import Decimal
@@ -15,20 +16,13 @@ import pandas as pd
 from scipy import sparse
 from scipy import stats as sps
 
-PAPER_ORDER = ("NAT", "MG", "FL")  # the paper's order in tables and figures; other systems follow, BAD last
+from core.study import condition_order
+
 NO_VARIANCE = "no variance (every rating is the same): test undefined"
 NO_WITHIN_VARIANCE = "no variance within conditions (every condition's ratings are all the same): test undefined"
 # scipy's studentized-range tail is a numerical integral: below ~1e-9 it loses its digits (R's ptukey too;
 # both reach 0 or a floor far out), so smaller Tukey p-values are reported as an upper bound instead.
 TUKEY_P_RESOLVED = 1e-9
-
-
-def condition_order(conditions):
-    """NAT, MG, FL first (as in the paper), then other systems alphabetically, BAD last."""
-    conds = sorted(set(conditions))
-    head = [c for c in PAPER_ORDER if c in conds]
-    tail = [c for c in conds if c not in PAPER_ORDER and c != "BAD"]
-    return head + tail + (["BAD"] if "BAD" in conds else [])
 
 
 # ---------------------------------------------------------------------------------------------- one-way ANOVA
@@ -97,9 +91,19 @@ def one_way_anova(df, dv="rating", between="condition"):
         ssb, ssw = float(ssb), float(ssw)
     else:
         F = (ssb / df_b) / (ssw / df_w) if ssw > 0 else math.nan
-    out = {"F": F, "df_between": df_b, "df_within": df_w, "p": float(sps.f.sf(F, df_b, df_w)) if ssw else math.nan,
-           "ss_between": ssb, "ss_within": ssw, "ms_between": ssb / df_b, "ms_within": ssw / df_w,
-           "eta_squared": ssb / (ssb + ssw) if ssb + ssw else math.nan, "n": big_n, "k": k}
+    out = {
+        "F": F,
+        "df_between": df_b,
+        "df_within": df_w,
+        "p": float(sps.f.sf(F, df_b, df_w)) if ssw else math.nan,
+        "ss_between": ssb,
+        "ss_within": ssw,
+        "ms_between": ssb / df_b,
+        "ms_within": ssw / df_w,
+        "eta_squared": ssb / (ssb + ssw) if ssb + ssw else math.nan,
+        "n": big_n,
+        "k": k,
+    }
     if not ssw:
         # F = x / 0 is no evidence of anything: with no spread within conditions there is no error variance to
         # compare against (every rating identical, or one per condition), so the test is undefined, not p = 0.
@@ -170,15 +174,37 @@ def tukey_hsd(df, dv="rating", between="condition", alpha=0.05):
         diff = means[j] - means[i]
         se = math.sqrt(mse / 2 * (1 / n[i] + 1 / n[j]))
         if not se > 0:  # no error variance: no test (never "reject" on a 0 / 0 or x / 0)
-            rows.append({"group1": levels[i], "group2": levels[j], "meandiff": float(diff), "lower": math.nan,
-                         "upper": math.nan, "p_adj": math.nan, "p_adj_bound": False, "reject": False, "se": se,
-                         "q": math.nan})
+            rows.append(
+                {
+                    "group1": levels[i],
+                    "group2": levels[j],
+                    "meandiff": float(diff),
+                    "lower": math.nan,
+                    "upper": math.nan,
+                    "p_adj": math.nan,
+                    "p_adj_bound": False,
+                    "reject": False,
+                    "se": se,
+                    "q": math.nan,
+                }
+            )
             continue
         q = abs(diff) / se
         p, bound = tukey_p(q, k, df_w)
-        rows.append({"group1": levels[i], "group2": levels[j], "meandiff": float(diff),
-                     "lower": float(diff - qcrit * se), "upper": float(diff + qcrit * se),
-                     "p_adj": p, "p_adj_bound": bound, "reject": bool(p < alpha), "se": se, "q": q})
+        rows.append(
+            {
+                "group1": levels[i],
+                "group2": levels[j],
+                "meandiff": float(diff),
+                "lower": float(diff - qcrit * se),
+                "upper": float(diff + qcrit * se),
+                "p_adj": p,
+                "p_adj_bound": bound,
+                "reject": bool(p < alpha),
+                "se": se,
+                "q": q,
+            }
+        )
     out = pd.DataFrame(rows)
     out.attrs["undefined"] = (NO_VARIANCE if np.ptp(y) == 0 else NO_WITHIN_VARIANCE) if not mse > 0 else None
     return out
@@ -203,7 +229,7 @@ def tukey_p(q, k, df):
     bound = min(TUKEY_P_RESOLVED, union)
     if bound > 0:
         exp = math.floor(math.log10(bound))
-        bound = math.ceil(bound / 10 ** exp) * 10.0 ** exp
+        bound = math.ceil(bound / 10**exp) * 10.0**exp
     else:
         bound = 1e-300  # below the smallest double the t tail can give
     return bound, True
@@ -228,8 +254,13 @@ def kruskal_wallis(df, dv="rating", between="condition"):
     groups = [g.to_numpy() for _, g in df.groupby(between, sort=True)[dv]]
     n = sum(len(g) for g in groups)
     if np.ptp(np.concatenate(groups)) == 0:  # every rank tied: H is 0 / 0
-        return {"H": math.nan, "df": len(groups) - 1, "p": math.nan, "epsilon_squared": math.nan,
-                "undefined": NO_VARIANCE}
+        return {
+            "H": math.nan,
+            "df": len(groups) - 1,
+            "p": math.nan,
+            "epsilon_squared": math.nan,
+            "undefined": NO_VARIANCE,
+        }
     h, p = sps.kruskal(*groups)
     return {"H": float(h), "df": len(groups) - 1, "p": float(p), "epsilon_squared": float(h / (n - 1))}
 
@@ -249,8 +280,16 @@ def pairwise_mannwhitney(df, dv="rating", between="condition", alpha=0.05):
         cles = float(res.statistic) / (len(by[a]) * len(by[b]))
         # all ratings of the pair tied: the normal approximation has zero variance, no test
         tied = np.ptp(np.concatenate([by[a], by[b]])) == 0
-        rows.append({"group1": a, "group2": b, "U": float(res.statistic), "p": math.nan if tied else float(res.pvalue),
-                     "cles": cles, "rank_biserial": 2 * cles - 1})
+        rows.append(
+            {
+                "group1": a,
+                "group2": b,
+                "U": float(res.statistic),
+                "p": math.nan if tied else float(res.pvalue),
+                "cles": cles,
+                "rank_biserial": 2 * cles - 1,
+            }
+        )
     out = pd.DataFrame(rows)
     p = out["p"].to_numpy()
     ok = np.isfinite(p)
@@ -263,15 +302,24 @@ def pairwise_mannwhitney(df, dv="rating", between="condition", alpha=0.05):
 # ---------------------------------------------------------------------------------------------- bootstrap
 def _resample_counts(rng, n_boot, size, dtype=np.float64):
     """n_boot rows of multiplicities of drawing `size` items with replacement from `size` items."""
-    idx = rng.integers(0, size, size=(n_boot, size), dtype=np.int32 if size < 2 ** 31 else np.int64)
+    idx = rng.integers(0, size, size=(n_boot, size), dtype=np.int32 if size < 2**31 else np.int64)
     out = np.empty((n_boot, size), dtype=dtype)
     for b in range(n_boot):  # row-wise bincount: cache-friendly and no offset array (2x faster than one flat pass)
         out[b] = np.bincount(idx[b], minlength=size)
     return out
 
 
-def cluster_bootstrap(df, dv="rating", between="condition", rater="rater_id", clip="clip_id", n_boot=2000,
-                      seed=0, level=0.95, dense_limit=30_000_000):
+def cluster_bootstrap(
+    df,
+    dv="rating",
+    between="condition",
+    rater="rater_id",
+    clip="clip_id",
+    n_boot=2000,
+    seed=0,
+    level=0.95,
+    dense_limit=30_000_000,
+):
     """Two-way cluster bootstrap of the group means: raters resampled with replacement, and clips resampled
     with replacement within their condition (clips are nested in conditions, raters are crossed with them).
 
@@ -298,7 +346,7 @@ def cluster_bootstrap(df, dv="rating", between="condition", rater="rater_id", cl
     members = [np.flatnonzero(clip_cond == k) for k in range(K)]
     # float32 products are exact while every per-clip sum of (rater weight x rating) stays below 2**24
     # (weights of one replicate sum to R); twice as fast as float64 in both the BLAS and the sparse kernels.
-    exact32 = bool(np.all(y == np.rint(y))) and R * max(1.0, float(np.abs(y).max())) < 2 ** 24
+    exact32 = bool(np.all(y == np.rint(y))) and R * max(1.0, float(np.abs(y).max())) < 2**24
     dtype = np.float32 if exact32 else np.float64
     nnz = len(y)
     use_dense = R * C <= min(dense_limit, 20 * nnz)  # BLAS on the full table beats the sparse kernel up to ~20x
@@ -307,8 +355,16 @@ def cluster_bootstrap(df, dv="rating", between="condition", rater="rater_id", cl
         SN[rc, cc] = y
         SN[rc, C + cc] = 1.0
     else:
-        SN = sparse.vstack([sparse.csr_matrix((y, (cc, rc)), shape=(C, R)),
-                            sparse.csr_matrix((np.ones_like(y), (cc, rc)), shape=(C, R))]).tocsr().astype(dtype)
+        SN = (
+            sparse.vstack(
+                [
+                    sparse.csr_matrix((y, (cc, rc)), shape=(C, R)),
+                    sparse.csr_matrix((np.ones_like(y), (cc, rc)), shape=(C, R)),
+                ]
+            )
+            .tocsr()
+            .astype(dtype)
+        )
     rng = np.random.default_rng(seed)
     num = np.empty((n_boot, K))
     den = np.empty((n_boot, K))
@@ -321,16 +377,22 @@ def cluster_bootstrap(df, dv="rating", between="condition", rater="rater_id", cl
             wc[:, m] = _resample_counts(rng, nb, len(m))
         ab = (wr @ SN) if use_dense else (SN @ np.ascontiguousarray(wr.T)).T
         ab = ab.astype(np.float64)
-        num[s:s + nb] = (ab[:, :C] * wc) @ onehot
-        den[s:s + nb] = (ab[:, C:] * wc) @ onehot
+        num[s : s + nb] = (ab[:, :C] * wc) @ onehot
+        den[s : s + nb] = (ab[:, C:] * wc) @ onehot
     with np.errstate(invalid="ignore", divide="ignore"):
         boot = num / den
     degenerate = int(np.isnan(boot).any(axis=1).sum())
     lo, hi = 50 * (1 - level), 50 * (1 + level)
     full = pd.Series(y).groupby(cond_codes).mean().to_numpy()
-    means = pd.DataFrame({"mean": full, "boot_low": np.nanpercentile(boot, lo, axis=0),
-                          "boot_high": np.nanpercentile(boot, hi, axis=0),
-                          "boot_se": np.nanstd(boot, axis=0, ddof=1)}, index=pd.Index(conds, name=between))
+    means = pd.DataFrame(
+        {
+            "mean": full,
+            "boot_low": np.nanpercentile(boot, lo, axis=0),
+            "boot_high": np.nanpercentile(boot, hi, axis=0),
+            "boot_se": np.nanstd(boot, axis=0, ddof=1),
+        },
+        index=pd.Index(conds, name=between),
+    )
     rows = []
     for i, j in combinations(range(K), 2):
         d = boot[:, j] - boot[:, i]
@@ -338,14 +400,27 @@ def cluster_bootstrap(df, dv="rating", between="condition", rater="rater_id", cl
         # add-one Monte Carlo p-value (Davison & Hinkley 1997, ch. 4): never 0 with finitely many resamples
         tail = min((d <= 0).sum(), (d >= 0).sum())
         p_boot = min(1.0, 2 * (tail + 1) / (len(d) + 1)) if len(d) else math.nan
-        rows.append({"group1": conds[i], "group2": conds[j], "meandiff": float(full[j] - full[i]),
-                     "boot_low": float(np.percentile(d, lo)), "boot_high": float(np.percentile(d, hi)),
-                     "boot_p": float(p_boot)})
+        rows.append(
+            {
+                "group1": conds[i],
+                "group2": conds[j],
+                "meandiff": float(full[j] - full[i]),
+                "boot_low": float(np.percentile(d, lo)),
+                "boot_high": float(np.percentile(d, hi)),
+                "boot_p": float(p_boot),
+            }
+        )
     if between == "condition":
         means = means.loc[condition_order(means.index)]
-    return {"means": means, "differences": pd.DataFrame(rows), "n_boot": n_boot, "seed": seed, "level": level,
-            "n_degenerate": degenerate, "method": "two-way cluster bootstrap (raters; clips within condition), "
-                                                  "percentile intervals"}
+    return {
+        "means": means,
+        "differences": pd.DataFrame(rows),
+        "n_boot": n_boot,
+        "seed": seed,
+        "level": level,
+        "n_degenerate": degenerate,
+        "method": "two-way cluster bootstrap (raters; clips within condition), percentile intervals",
+    }
 
 
 # ---------------------------------------------------------------------------------------------- mixed model
@@ -364,7 +439,7 @@ def random_effects_problem(df, dv="rating", between="condition", rater="rater_id
     if df.groupby(between, observed=True)[clip].nunique().max() < 2:
         return "one clip per condition: the clip variance is confounded with the condition; model not fitted"
     if df.groupby(between, observed=True)[dv].nunique().max() < 2:
-        return ("no variance within conditions (every condition's ratings are all the same): model undefined")
+        return "no variance within conditions (every condition's ratings are all the same): model undefined"
     return None
 
 
@@ -395,18 +470,22 @@ def mixed_model(df, dv="rating", between="condition", rater="rater_id", clip="cl
     fit = fit_crossed(df[dv].to_numpy(dtype=float), X, rater_codes, clip_codes, names)
     fe = fit["fixed_effects"]
     means = {reference: fe["Intercept"], **{c: fe["Intercept"] + fe[f"{between}[T.{c}]"] for c in others}}
-    return {"formula": f"{dv} ~ {between} + (1|{rater}) + (1|{clip})",
-            "method": "REML, crossed random intercepts (profiled criterion, L-BFGS-B then Nelder-Mead polish); "
-                      "t tests on Satterthwaite df",
-            "reference": reference, **fit,
-            "condition_means": {c: means[c] for c in condition_order(means)},
-            "n": int(len(df)), "n_raters": int(rater_codes.max() + 1), "n_clips": int(clip_codes.max() + 1),
-            "warnings": [] if fit["converged"] else ["optimiser did not report convergence"]}
+    return {
+        "formula": f"{dv} ~ {between} + (1|{rater}) + (1|{clip})",
+        "method": "REML, crossed random intercepts (profiled criterion, L-BFGS-B then Nelder-Mead polish); "
+        "t tests on Satterthwaite df",
+        "reference": reference,
+        **fit,
+        "condition_means": {c: means[c] for c in condition_order(means)},
+        "n": int(len(df)),
+        "n_raters": int(rater_codes.max() + 1),
+        "n_clips": int(clip_codes.max() + 1),
+        "warnings": [] if fit["converged"] else ["optimiser did not report convergence"],
+    }
 
 
 # ---------------------------------------------------------------------------------------------- ordinal model
-def ordinal_model(df, dv="rating", between="condition", rater="rater_id", clip="clip_id", reference=None,
-                  level=0.95):
+def ordinal_model(df, dv="rating", between="condition", rater="rater_id", clip="clip_id", reference=None, level=0.95):
     """Cumulative-link (logit) mixed model  factor(dv) ~ between + (1|rater) + (1|clip), ML with the Laplace
     approximation as R's ordinal::clmm (analysis/ordinal.py; matched to clmm in the tests).
 
@@ -427,8 +506,10 @@ def ordinal_model(df, dv="rating", between="condition", rater="rater_id", clip="
     for c, g in df.groupby(between, observed=True)[dv]:
         if g.nunique() == 1 and g.iloc[0] in (lo, hi):
             # the likelihood rises forever as that condition's effect runs to +-infinity: no estimate exists
-            raise ModelUndefined(f"every rating of {c} is {g.iloc[0]}, the {'top' if g.iloc[0] == hi else 'bottom'} "
-                                 "category: its effect is infinite (separation); model not fitted")
+            raise ModelUndefined(
+                f"every rating of {c} is {g.iloc[0]}, the {'top' if g.iloc[0] == hi else 'bottom'} "
+                "category: its effect is infinite (separation); model not fitted"
+            )
     levels = sorted(df[between].unique())
     if reference is None:
         reference = "NAT" if "NAT" in levels else levels[0]
@@ -438,18 +519,31 @@ def ordinal_model(df, dv="rating", between="condition", rater="rater_id", clip="
     names = [f"{between}[T.{c}]" for c in others]
     y_codes, y_levels = pd.factorize(df[dv], sort=True)
     y_levels = [int(v) if float(v).is_integer() else v for v in y_levels]
-    fit = fit_clmm(y_codes, X, pd.factorize(df[rater])[0], pd.factorize(df[clip])[0], names, len(y_levels),
-                   [str(v) for v in y_levels])
+    fit = fit_clmm(
+        y_codes,
+        X,
+        pd.factorize(df[rater])[0],
+        pd.factorize(df[clip])[0],
+        names,
+        len(y_levels),
+        [str(v) for v in y_levels],
+    )
     fit.pop("random_effects")
     b = np.array(list(fit["fixed_effects"].values()))
     se = np.array(list(fit["std_errors"].values()))
     th = np.array(list(fit["thresholds"].values()))
-    if (np.any(np.abs(b) > 15) or max(fit["sd_rater"], fit["sd_clip"]) > 20 or np.ptp(th) > 60
-            or not np.all(np.isfinite(b))):
+    if (
+        np.any(np.abs(b) > 15)
+        or max(fit["sd_rater"], fit["sd_clip"]) > 20
+        or np.ptp(th) > 60
+        or not np.all(np.isfinite(b))
+    ):
         # the likelihood keeps rising as an effect, an SD or the cut points run off to infinity (quasi-separation:
         # some condition, rater or clip sits in an end category), so no estimate or interval means anything
-        raise ModelUndefined("estimates run off to infinity (quasi-separation: ratings of some condition, rater "
-                             "or clip sit in an end category); model not identified")
+        raise ModelUndefined(
+            "estimates run off to infinity (quasi-separation: ratings of some condition, rater "
+            "or clip sit in an end category); model not identified"
+        )
     warnings = []
     if not fit["converged"]:
         warnings.append(f"optimiser did not converge (max |gradient| {fit['max_abs_gradient']:.2g})")
@@ -462,17 +556,25 @@ def ordinal_model(df, dv="rating", between="condition", rater="rater_id", clip="
     observed = pd.crosstab(df[between], df[dv], normalize="index").reindex(columns=y_levels, fill_value=0.0)
     with np.errstate(over="ignore"):  # an unidentified effect's interval overflows to inf (JSON null), no warning
         ors = [np.exp(b).tolist(), np.exp(b - zq * se).tolist(), np.exp(b + zq * se).tolist()]
-    return {"formula": f"{dv} ~ {between} + (1|{rater}) + (1|{clip})  (cumulative logit)",
-            "method": "ML, Laplace approximation, crossed random intercepts (as ordinal::clmm)",
-            "reference": reference, **fit,
-            "odds_ratios": dict(zip(names, ors[0])), "or_ci_low": dict(zip(names, ors[1])),
-            "or_ci_high": dict(zip(names, ors[2])),
-            "fitted_distribution": {c: dict(zip(map(str, y_levels), probs[order.index(c)].tolist()))
-                                    for c in condition_order(levels)},
-            "observed_distribution": {c: {str(k): float(v) for k, v in observed.loc[c].items()}
-                                      for c in condition_order(levels)},
-            "n": int(len(df)), "n_raters": int(df[rater].nunique()), "n_clips": int(df[clip].nunique()),
-            "warnings": warnings}
+    return {
+        "formula": f"{dv} ~ {between} + (1|{rater}) + (1|{clip})  (cumulative logit)",
+        "method": "ML, Laplace approximation, crossed random intercepts (as ordinal::clmm)",
+        "reference": reference,
+        **fit,
+        "odds_ratios": dict(zip(names, ors[0])),
+        "or_ci_low": dict(zip(names, ors[1])),
+        "or_ci_high": dict(zip(names, ors[2])),
+        "fitted_distribution": {
+            c: dict(zip(map(str, y_levels), probs[order.index(c)].tolist())) for c in condition_order(levels)
+        },
+        "observed_distribution": {
+            c: {str(k): float(v) for k, v in observed.loc[c].items()} for c in condition_order(levels)
+        },
+        "n": int(len(df)),
+        "n_raters": int(df[rater].nunique()),
+        "n_clips": int(df[clip].nunique()),
+        "warnings": warnings,
+    }
 
 
 # ---------------------------------------------------------------------------------------------- objective metrics
@@ -486,16 +588,28 @@ def metric_correlations(clip_means, metrics, between="condition"):
     merged = clip_means.set_index(clip_means.columns[0]).join(metrics, how="inner")
     rows = []
     for metric in metrics.columns:
-        scopes = [("all", merged)] + [(c, merged[merged[between] == c])
-                                      for c in condition_order(merged[between].unique())]
+        scopes = [("all", merged)] + [
+            (c, merged[merged[between] == c]) for c in condition_order(merged[between].unique())
+        ]
         for scope, part in scopes:
             part = part[np.isfinite(part[metric])]
-            row = {"metric": metric, "scope": scope, "n": int(len(part)), "pearson_r": math.nan,
-                   "pearson_p": math.nan, "spearman_rho": math.nan, "spearman_p": math.nan}
+            row = {
+                "metric": metric,
+                "scope": scope,
+                "n": int(len(part)),
+                "pearson_r": math.nan,
+                "pearson_p": math.nan,
+                "spearman_rho": math.nan,
+                "spearman_p": math.nan,
+            }
             if len(part) >= 3 and part[metric].std() > 0 and part["mean"].std() > 0:
                 r = sps.pearsonr(part[metric], part["mean"])
                 s = sps.spearmanr(part[metric], part["mean"])
-                row.update(pearson_r=float(r.statistic), pearson_p=float(r.pvalue),
-                           spearman_rho=float(s.statistic), spearman_p=float(s.pvalue))
+                row.update(
+                    pearson_r=float(r.statistic),
+                    pearson_p=float(r.pvalue),
+                    spearman_rho=float(s.statistic),
+                    spearman_p=float(s.pvalue),
+                )
             rows.append(row)
     return pd.DataFrame(rows)

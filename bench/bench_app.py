@@ -13,6 +13,7 @@ the first --warmup seconds are discarded. Target: p99 <= 100 ms, 0 errors.
 clips, or a 0-100 rating of every clip of its page (one POST per page); the stimuli then include the NAT clip of
 each catch item. The answer POST is reported as "rating" in every design.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -39,8 +40,24 @@ from rating_app.testing import free_port, make_stimuli, pg_schema  # noqa: E402
 
 
 def start_server(port, env, workers, threads, log):
-    cmd = [sys.executable, "-m", "gunicorn", "-w", str(workers), "-k", "gthread", "--threads", str(threads),
-           "--backlog", "2048", "--keep-alive", "75", "-b", f"127.0.0.1:{port}", "rating_app.wsgi:app"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "gunicorn",
+        "-w",
+        str(workers),
+        "-k",
+        "gthread",
+        "--threads",
+        str(threads),
+        "--backlog",
+        "2048",
+        "--keep-alive",
+        "75",
+        "-b",
+        f"127.0.0.1:{port}",
+        "rating_app.wsgi:app",
+    ]
     proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
     for _ in range(300):
         try:
@@ -114,8 +131,11 @@ class Rater(threading.Thread):
             time.sleep(min(self.rng.expovariate(1.0 / self.think), 10 * self.think) if self.think else 0)
             if time.monotonic() >= self.stop_at:
                 return
-            status, body, dt = self.call("POST", f"/api/sessions/{token}/ratings",
-                                         {"trial_id": t["trial_id"], "watched_ms": 4000, **self.answer(t)})
+            status, body, dt = self.call(
+                "POST",
+                f"/api/sessions/{token}/ratings",
+                {"trial_id": t["trial_id"], "watched_ms": 4000, **self.answer(t)},
+            )
             self.record("training_ack" if t["phase"] == "training" else "rating", status, (201,), dt)
 
     def answer(self, t):
@@ -132,9 +152,13 @@ def stats(xs):
     a = np.array(xs) * 1000
     if not len(a):
         return {"n": 0}
-    return {"n": int(len(a)), "p50_ms": round(float(np.percentile(a, 50)), 2),
-            "p90_ms": round(float(np.percentile(a, 90)), 2), "p99_ms": round(float(np.percentile(a, 99)), 2),
-            "max_ms": round(float(a.max()), 2)}
+    return {
+        "n": int(len(a)),
+        "p50_ms": round(float(np.percentile(a, 50)), 2),
+        "p90_ms": round(float(np.percentile(a, 90)), 2),
+        "p99_ms": round(float(np.percentile(a, 99)), 2),
+        "max_ms": round(float(a.max()), 2),
+    }
 
 
 def main():
@@ -160,9 +184,16 @@ def main():
     ctx = pg_schema() if a.db == "postgres" else None
     url = ctx.__enter__() if ctx else (f"sqlite:///{tmp}/ratings.sqlite" if a.db == "sqlite" else a.db)
     port = free_port()
-    env = dict(os.environ, RATING_MANIFEST=str(manifest), DATABASE_URL=url, ADMIN_TOKEN="bench",
-               RATINGS_PER_CLIP="100000", MIN_VIEW="0", SESSIONS_PER_CLIENT="0",   # every rater is on loopback
-               STUDY_DESIGN=a.design)
+    env = dict(
+        os.environ,
+        RATING_MANIFEST=str(manifest),
+        DATABASE_URL=url,
+        ADMIN_TOKEN="bench",
+        RATINGS_PER_CLIP="100000",
+        MIN_VIEW="0",
+        SESSIONS_PER_CLIENT="0",  # every rater is on loopback
+        STUDY_DESIGN=a.design,
+    )
     log = open(tmp / "gunicorn.log", "w")
     proc = start_server(port, env, a.workers, a.threads, log)
     rec = {"session": [], "next": [], "rating": [], "training_ack": []}
@@ -171,7 +202,7 @@ def main():
         t0 = time.monotonic()
         warm_at, stop_at = t0 + a.warmup, t0 + a.warmup + a.duration
         raters = [Rater(port, i, stop_at, warm_at, a.think, rec, lock, errors, a.design) for i in range(a.raters)]
-        for r in raters:                       # participants arrive over --ramp seconds
+        for r in raters:  # participants arrive over --ramp seconds
             r.start()
             time.sleep(a.ramp / a.raters)
         for r in raters:
@@ -184,19 +215,32 @@ def main():
         if ctx:
             ctx.__exit__(None, None, None)
     measured = len(rec["next"]) + len(rec["rating"]) + len(rec["training_ack"])
-    out = {"design": a.design, "raters": a.raters, "think_s": a.think,
-           "db": a.db if a.db in ("sqlite", "postgres") else "url",
-           "workers": a.workers, "threads": a.threads, "duration_s": a.duration,
-           "throughput_rps": round(measured / max(wall, 1e-9), 1), "errors": len(errors),
-           "error_examples": errors[:5], "load_avg_1min": round(os.getloadavg()[0], 2), "cpus": os.cpu_count(),
-           "next": stats(rec["next"]), "rating": stats(rec["rating"]), "training_ack": stats(rec["training_ack"]),
-           "session": stats(rec["session"])}
+    out = {
+        "design": a.design,
+        "raters": a.raters,
+        "think_s": a.think,
+        "db": a.db if a.db in ("sqlite", "postgres") else "url",
+        "workers": a.workers,
+        "threads": a.threads,
+        "duration_s": a.duration,
+        "throughput_rps": round(measured / max(wall, 1e-9), 1),
+        "errors": len(errors),
+        "error_examples": errors[:5],
+        "load_avg_1min": round(os.getloadavg()[0], 2),
+        "cpus": os.cpu_count(),
+        "next": stats(rec["next"]),
+        "rating": stats(rec["rating"]),
+        "training_ack": stats(rec["training_ack"]),
+        "session": stats(rec["session"]),
+    }
     print(json.dumps(out, indent=1))
     ok = out["errors"] == 0 and out["next"].get("p99_ms", 1e9) <= 100 and out["rating"].get("p99_ms", 1e9) <= 100
     db = a.db if a.design == "acr" else f"{a.db} {a.design}"
-    print(f"| {db} | {a.raters} | {a.think} | {a.workers}x{a.threads} | {out['throughput_rps']} | "
-          f"{out['rating']['p50_ms']} / {out['rating']['p99_ms']} | {out['next']['p50_ms']} / {out['next']['p99_ms']} | "
-          f"{out['errors']} | {out['load_avg_1min']} | {'PASS' if ok else 'FAIL'} |")
+    print(
+        f"| {db} | {a.raters} | {a.think} | {a.workers}x{a.threads} | {out['throughput_rps']} | "
+        f"{out['rating']['p50_ms']} / {out['rating']['p99_ms']} | {out['next']['p50_ms']} / {out['next']['p99_ms']} | "
+        f"{out['errors']} | {out['load_avg_1min']} | {'PASS' if ok else 'FAIL'} |"
+    )
     if a.json:
         Path(a.json).write_text(json.dumps(out, indent=1))
     return 0 if ok else 1

@@ -7,14 +7,15 @@
 2. Parsing a ~10 MB BVH file (real frames repeated) with generation.bvh.read_bvh, against a plain
    line-by-line Python parser of the same MOTION block (baseline). Target: < 1 s.
 """
+
 import argparse
 import gzip
 import os
 import resource
-from pathlib import Path
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -25,7 +26,7 @@ from generation.prepare_data import default_data_dir, find_takes, prepare  # noq
 
 def bench_prepare(data, workers, out_dir, baseline=True):
     rows = []
-    for w in ([workers, 1] if baseline and workers != 1 else [workers]):
+    for w in [workers, 1] if baseline and workers != 1 else [workers]:
         t, c = time.perf_counter(), cpu_all()
         summary = prepare(data, Path(out_dir) / f"ds_{w}.npz", workers=w, progress=False)
         rows.append((w, time.perf_counter() - t, cpu_all() - c, summary))
@@ -48,7 +49,7 @@ def naive_parse(path):
     """Baseline: the usual loop, one float() per token, list of lists -> array."""
     lines = Path(path).read_text().split("\n")
     k = next(i for i, l in enumerate(lines) if l.startswith("Frame Time"))
-    return np.array([[float(v) for v in l.split()] for l in lines[k + 1:] if l.strip()])
+    return np.array([[float(v) for v in l.split()] for l in lines[k + 1 :] if l.strip()])
 
 
 def best_of(fn, n=3):
@@ -85,20 +86,26 @@ def main():
         t_fast, c_fast, b = best_of(lambda: read_bvh(big), 5)
         t_naive, c_naive, m = best_of(lambda: naive_parse(big), 3)
         assert np.array_equal(b.motion, m)
-        print(f"parse {size / 1e6:.1f} MB BVH ({frames} frames x {b.motion.shape[1]} channels), best of 5/3: "
-              f"read_bvh {t_fast:.3f} s wall, {c_fast:.3f} s CPU; line-by-line Python (no checks) "
-              f"{t_naive:.3f} s wall, {c_naive:.3f} s CPU; CPU ratio x{c_naive / c_fast:.1f}  [target < 1 s]")
+        print(
+            f"parse {size / 1e6:.1f} MB BVH ({frames} frames x {b.motion.shape[1]} channels), best of 5/3: "
+            f"read_bvh {t_fast:.3f} s wall, {c_fast:.3f} s CPU; line-by-line Python (no checks) "
+            f"{t_naive:.3f} s wall, {c_naive:.3f} s CPU; CPU ratio x{c_naive / c_fast:.1f}  [target < 1 s]"
+        )
 
         t, c = time.perf_counter(), time.process_time()
         for f in files:
             read_bvh(f)
-        print(f"read_bvh of all {len(files)} takes, one process: {time.perf_counter() - t:.2f} s wall, "
-              f"{time.process_time() - c:.2f} s CPU")
+        print(
+            f"read_bvh of all {len(files)} takes, one process: {time.perf_counter() - t:.2f} s wall, "
+            f"{time.process_time() - c:.2f} s CPU"
+        )
 
         for w, secs, cpu, s in bench_prepare(data, args.workers, tmp, baseline=not args.skip_baseline):
             n = s["n_windows"]
-            print(f"prepare_data, {len(files)} takes, {w} worker(s): {secs:.1f} s wall, {cpu:.1f} s CPU "
-                  f"(windows train {n['train']}, valid {n['valid']}, test {n['test']})  [target < 60 s]")
+            print(
+                f"prepare_data, {len(files)} takes, {w} worker(s): {secs:.1f} s wall, {cpu:.1f} s CPU "
+                f"(windows train {n['train']}, valid {n['valid']}, test {n['test']})  [target < 60 s]"
+            )
     print(f"load average after: {os.getloadavg()[0]:.2f}")
 
 

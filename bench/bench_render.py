@@ -9,6 +9,7 @@ against the baseline at ultrafast, and with the old default (superfast, crf 20) 
 The baseline is what one writes first: an mplot3d figure with a floor grid, one Line3D per bone updated
 in FuncAnimation, saved with FFMpegWriter.
 """
+
 import argparse
 import os
 import resource
@@ -31,7 +32,10 @@ from generation import skeleton  # noqa: E402
 from generation.features import load_take  # noqa: E402
 from rendering.render import FrameDrawer, _background, camera_targets, render_clip  # noqa: E402
 
-WALK = Path(__file__).resolve().parents[2] / "shared/data/bandai-namco-locomotion/dataset-1/data/dataset-1_walk_angry_002.bvh.gz"
+WALK = (
+    Path(__file__).resolve().parents[2]
+    / "shared/data/bandai-namco-locomotion/dataset-1/data/dataset-1_walk_angry_002.bvh.gz"
+)
 
 
 def cpu_seconds():
@@ -64,8 +68,11 @@ def baseline(joints, out, size, preset):
         ax.plot([g, g], [-10, 10], [0, 0], color="0.6", lw=1)
         ax.plot([-10, 10], [g, g], [0, 0], color="0.6", lw=1)
     anim = FuncAnimation(fig, update, frames=len(joints), blit=False)
-    writer = FFMpegWriter(fps=20, codec="libx264", extra_args=["-preset", preset, "-pix_fmt", "yuv420p",
-                                                               "-threads", "1", "-movflags", "+faststart"])
+    writer = FFMpegWriter(
+        fps=20,
+        codec="libx264",
+        extra_args=["-preset", preset, "-pix_fmt", "yuv420p", "-threads", "1", "-movflags", "+faststart"],
+    )
     anim.save(out, writer=writer, dpi=100)
     plt.close(fig)
 
@@ -91,8 +98,10 @@ def main(argv=None):
     clip = dict(joints=joints, parents=skeleton.PARENTS, joint_names=skeleton.JOINT_NAMES, fps=20.0)
     tmp = Path(tempfile.mkdtemp())
     # (label, our render_clip options, the baseline's x264 preset)
-    configs = [("default: ultrafast qp 17", dict(preset="ultrafast"), "ultrafast"),
-               ("superfast crf 20 (old default)", dict(preset="superfast", crf=20), "superfast")]
+    configs = [
+        ("default: ultrafast qp 17", dict(preset="ultrafast"), "ultrafast"),
+        ("superfast crf 20 (old default)", dict(preset="superfast", crf=20), "superfast"),
+    ]
     rows = []
     for label, kw, preset in configs:
         ours = measure(lambda: render_clip(clip, tmp / "ours.mp4", size=args.size, threads=1, **kw), args.repeats)
@@ -113,18 +122,26 @@ def main(argv=None):
     draw = measure(draw_only, args.repeats)
     ours640 = measure(lambda: render_clip(clip, tmp / "o640.mp4", size=640, threads=1), args.repeats)
     load = os.getloadavg()[0]
-    print(f"80-frame clip, {args.size}x{args.size}, one core (#{args.core}), best of {args.repeats}; "
-          f"load average {load:.1f} on {os.cpu_count()} cores")
-    print(f"{'ours (x264)':<32}{'ours wall':>10}{'ours cpu':>10}{'baseline wall':>15}{'baseline cpu':>14}"
-          f"{'speed-up wall':>15}{'speed-up cpu':>14}")
+    print(
+        f"80-frame clip, {args.size}x{args.size}, one core (#{args.core}), best of {args.repeats}; "
+        f"load average {load:.1f} on {os.cpu_count()} cores"
+    )
+    print(
+        f"{'ours (x264)':<32}{'ours wall':>10}{'ours cpu':>10}{'baseline wall':>15}{'baseline cpu':>14}"
+        f"{'speed-up wall':>15}{'speed-up cpu':>14}"
+    )
     for label, (ow, oc), (bw, bc) in rows:
         print(f"{label:<32}{ow:>9.3f}s{oc:>9.3f}s{bw:>14.3f}s{bc:>13.3f}s{bw / ow:>14.1f}x{bc / oc:>13.1f}x")
     print(f"target: <= 0.3 s where the baseline takes ~2.1 s (a quiet machine), i.e. a speed-up >= {2.1 / 0.3:.1f}x")
     print(f"first clip of a process (computes the floor maps): wall {first[0]:.3f} s, cpu {first[1]:.3f} s")
-    print(f"of which drawing the 80 frames (no encoding): wall {draw[0]:.3f} s, cpu {draw[1]:.3f} s; the rest is "
-          "the pipe and ffmpeg (libx264; the frames arrive as yuv420p)")
-    print(f"ours at 640x640 (the stimulus size, default x264 settings): wall {ours640[0]:.3f} s, "
-          f"cpu {ours640[1]:.3f} s")
+    print(
+        f"of which drawing the 80 frames (no encoding): wall {draw[0]:.3f} s, cpu {draw[1]:.3f} s; the rest is "
+        "the pipe and ffmpeg (libx264; the frames arrive as yuv420p)"
+    )
+    print(
+        f"ours at 640x640 (the stimulus size, default x264 settings): wall {ours640[0]:.3f} s, cpu {ours640[1]:.3f} s"
+    )
+
 
 if __name__ == "__main__":
     main()

@@ -11,6 +11,7 @@ Also times the cluster bootstrap against a per-replicate loop baseline on the pa
 
     python bench/bench_report.py [--quick]
 """
+
 import argparse
 import importlib.util
 import os
@@ -72,8 +73,10 @@ def main():
     small = tmp / "small.csv"
     gen.make_ratings(n_raters=20, seed=6).to_csv(small, index=False)
     runs = [timed_report(small, tmp / "rs", mixed=True) for _ in range(3)]
-    print(f"1,880 ratings, everything on (bootstrap 2000 x2, linear and ordinal mixed models x2): "
-          f"best {min(runs):.2f} s, median {sorted(runs)[1]:.2f} s wall, {min(CPU[-3:]):.2f} s CPU  (target < 5 s)")
+    print(
+        f"1,880 ratings, everything on (bootstrap 2000 x2, linear and ordinal mixed models x2): "
+        f"best {min(runs):.2f} s, median {sorted(runs)[1]:.2f} s wall, {min(CPU[-3:]):.2f} s CPU  (target < 5 s)"
+    )
     print(f"load average at start: {os.getloadavg()[0]:.1f} (2 cores shared with other work)")
 
     t = only_test_rows(exclude_raters(load_ratings(small))[0])
@@ -83,8 +86,10 @@ def main():
     t0 = time.perf_counter()
     loop_bootstrap(t, 200)
     loop = (time.perf_counter() - t0) * 10
-    print(f"cluster bootstrap, 2000 resamples of 1,440 ratings: vectorised {vec:.3f} s, "
-          f"per-replicate loop {loop:.1f} s (extrapolated from 200) -> {loop / vec:.0f}x")
+    print(
+        f"cluster bootstrap, 2000 resamples of 1,440 ratings: vectorised {vec:.3f} s, "
+        f"per-replicate loop {loop:.1f} s (extrapolated from 200) -> {loop / vec:.0f}x"
+    )
     t0 = time.perf_counter()
     stats.mixed_model(t)
     print(f"mixed model (REML, 16 raters x 90 clips): {time.perf_counter() - t0:.2f} s")
@@ -92,8 +97,10 @@ def main():
     scale = 10 if args.quick else 1
     designs = [  # (label, generator arguments): a panel where every rater sees every clip, and a crowd
         ("panel: 3,226 raters x all 310 clips", dict(n_raters=3226 // scale, clips_per_condition=100, n_catch=10)),
-        ("crowd: 50,000 raters x 20 of 3,004 clips",
-         dict(n_raters=50000 // scale, clips_per_condition=1000, n_catch=4, clips_per_rater=20)),
+        (
+            "crowd: 50,000 raters x 20 of 3,004 clips",
+            dict(n_raters=50000 // scale, clips_per_condition=1000, n_catch=4, clips_per_rater=20),
+        ),
     ]
     for label, kw in designs:
         big = tmp / "big.csv"
@@ -106,13 +113,15 @@ def main():
         n = len(df)
         del df
         total = timed_report(big, tmp / "rb", mixed=False, ordinal=False)
-        print(f"{n:,} ratings ({label}), mixed models off: {total:.2f} s wall, {CPU[-1]:.2f} s CPU "
-              f"(read+validate {load_s:.2f} s) (target < 20 s; CSV generated in {gen_s:.0f} s, not timed)")
+        print(
+            f"{n:,} ratings ({label}), mixed models off: {total:.2f} s wall, {CPU[-1]:.2f} s CPU "
+            f"(read+validate {load_s:.2f} s) (target < 20 s; CSV generated in {gen_s:.0f} s, not timed)"
+        )
         if label.startswith("panel"):
             total = timed_report(big, tmp / "rb", mixed=True)
-            print(f"{n:,} ratings ({label}), mixed model ON (x2): {total:.2f} s wall, {CPU[-1]:.2f} s CPU "
-                  "(no target)")
+            print(f"{n:,} ratings ({label}), mixed model ON (x2): {total:.2f} s wall, {CPU[-1]:.2f} s CPU (no target)")
     shutil.rmtree(tmp, ignore_errors=True)
+
 
 if __name__ == "__main__":
     main()

@@ -10,6 +10,7 @@ frame with its carried state, also without autograd), for 1 stream and a batch o
 floor measured beside them (the fastest of four matmul forms reading the same number of weights).
 Targets (issue 3): <= 12 ms (1) and <= 25 ms (30).
 """
+
 import argparse
 import json
 import os
@@ -71,10 +72,12 @@ def floor(n_params, batch, frames):
     forms = {
         "matmul": (lambda x=torch.randn(batch, k * cols), w2=w.view(k * cols, rows): x @ w2),
         "bmm W@X": (lambda x=torch.randn(k, cols, batch), o=torch.empty(k, rows, batch): torch.bmm(w, x, out=o)),
-        "bmm X@W^T": (lambda x=torch.randn(k, batch, cols), o=torch.empty(k, batch, rows):
-                      torch.bmm(x, w.mT, out=o)),
-        "bmm X@W": (lambda x=torch.randn(k, batch, cols), o=torch.empty(k, batch, rows), wt=w.view(k, cols, rows):
-                    torch.bmm(x, wt, out=o)),
+        "bmm X@W^T": (lambda x=torch.randn(k, batch, cols), o=torch.empty(k, batch, rows): torch.bmm(x, w.mT, out=o)),
+        "bmm X@W": (
+            lambda x=torch.randn(k, batch, cols), o=torch.empty(k, batch, rows), wt=w.view(k, cols, rows): torch.bmm(
+                x, wt, out=o
+            )
+        ),
     }
     with torch.inference_mode():
         timed = {name: time_frames(f, frames) for name, f in forms.items()}
@@ -105,25 +108,39 @@ def main():
     torch.set_num_threads(a.threads)
     model = paper_model()
     n_lstm = sum(p.numel() for s in model.flow.layers for p in s.layers[2].net.lstm.parameters())
-    print(f"MG paper size: K={len(model.flow.layers)}, LSTM 2x{model.config['hidden']}, tau={model.tau}; "
-          f"LSTM weights {4 * n_lstm / 1e6:.0f} MB; torch threads {a.threads}; load average "
-          f"{os.getloadavg()[0]:.1f} (other jobs on the machine inflate the figures)")
+    print(
+        f"MG paper size: K={len(model.flow.layers)}, LSTM 2x{model.config['hidden']}, tau={model.tau}; "
+        f"LSTM weights {4 * n_lstm / 1e6:.0f} MB; torch threads {a.threads}; load average "
+        f"{os.getloadavg()[0]:.1f} (other jobs on the machine inflate the figures)"
+    )
     rows = {}
     n_all = sum(p.numel() for p in model.parameters())
-    print("| streams | row ms/frame (wall, CPU) | col ms/frame (wall, CPU) | picked | plain nn.LSTM ms/frame (wall, CPU) "
-          "| picked vs plain (wall, CPU) | floor ms/frame (wall, CPU; fastest matmul form reading the same weights) "
-          "| picked / floor (wall, CPU) |")
+    print(
+        "| streams | row ms/frame (wall, CPU) | col ms/frame (wall, CPU) | picked | plain nn.LSTM ms/frame (wall, CPU) "
+        "| picked vs plain (wall, CPU) | floor ms/frame (wall, CPU; fastest matmul form reading the same weights) "
+        "| picked / floor (wall, CPU) |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for batch in (1, 30):
         frames = a.frames if batch == 1 else max(20, a.frames // 2)
         fast, (nm, nc), picked = bench(model, batch, frames)
         fm, fc = fast[picked]
         lm, lc, form = floor(n_all, batch, frames)
-        rows[batch] = dict(layouts={name: dict(ms=w, cpu_ms=c) for name, (w, c) in fast.items()}, picked=picked,
-                           naive_ms=nm, naive_cpu_ms=nc, floor_ms=lm, floor_cpu_ms=lc, floor_form=form)
-        print(f"| {batch} | {fast['row'][0]:.1f}, {fast['row'][1]:.1f} | {fast['col'][0]:.1f}, {fast['col'][1]:.1f} "
-              f"| {picked} | {nm:.1f}, {nc:.1f} | {nm / fm:.2f}x, {nc / fc:.2f}x "
-              f"| {lm:.1f}, {lc:.1f} ({form}) | {fm / lm:.2f}, {fc / lc:.2f} |", flush=True)
+        rows[batch] = dict(
+            layouts={name: dict(ms=w, cpu_ms=c) for name, (w, c) in fast.items()},
+            picked=picked,
+            naive_ms=nm,
+            naive_cpu_ms=nc,
+            floor_ms=lm,
+            floor_cpu_ms=lc,
+            floor_form=form,
+        )
+        print(
+            f"| {batch} | {fast['row'][0]:.1f}, {fast['row'][1]:.1f} | {fast['col'][0]:.1f}, {fast['col'][1]:.1f} "
+            f"| {picked} | {nm:.1f}, {nc:.1f} | {nm / fm:.2f}x, {nc / fc:.2f}x "
+            f"| {lm:.1f}, {lc:.1f} ({form}) | {fm / lm:.2f}, {fc / lc:.2f} |",
+            flush=True,
+        )
     if a.json:
         Path(a.json).write_text(json.dumps(dict(rows=rows, threads=a.threads, load=os.getloadavg()), indent=2))
 

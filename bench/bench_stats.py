@@ -11,6 +11,7 @@ Wall time is printed with the process CPU time: on a shared machine wall time in
 
     python bench/bench_stats.py [--repeat 5] [--no-r]
 """
+
 import argparse
 import json
 import os
@@ -67,8 +68,9 @@ def time_clmm(repeat):
     with tempfile.NamedTemporaryFile("w", suffix=".R", delete=False) as f:
         f.write(R_SCRIPT)
     try:
-        proc = subprocess.run(["Rscript", f.name, str(REF_CSV), str(repeat)], capture_output=True, text=True,
-                              timeout=1800)
+        proc = subprocess.run(
+            ["Rscript", f.name, str(REF_CSV), str(repeat)], capture_output=True, text=True, timeout=1800
+        )
     finally:
         os.unlink(f.name)
     if proc.returncode != 0:
@@ -87,15 +89,19 @@ def main():
     rows = only_test_rows(exclude_raters(load_ratings(REF_CSV))[0])
     stats.ordinal_model(rows)  # warm-up: imports and first-call costs are not the fit's
     ours, cpu, fit = best_of(lambda: stats.ordinal_model(rows), args.repeat)
-    print(f"ordinal fit, {len(rows):,} ratings ({rows['rater_id'].nunique()} raters x {rows['clip_id'].nunique()} "
-          f"clips): best {ours:.3f} s wall, {cpu:.3f} s CPU, {fit['n_evaluations']} Laplace evaluations "
-          f"(target <= 1 s)")
+    print(
+        f"ordinal fit, {len(rows):,} ratings ({rows['rater_id'].nunique()} raters x {rows['clip_id'].nunique()} "
+        f"clips): best {ours:.3f} s wall, {cpu:.3f} s CPU, {fit['n_evaluations']} Laplace evaluations "
+        f"(target <= 1 s)"
+    )
     r = None if args.no_r else time_clmm(args.repeat)
     if r is not None:
         r_s, r_ll, r_beta = r
-        print(f"R ordinal::clmm, same rows: best {r_s:.3f} s  -> ours is {r_s / ours:.1f}x faster; "
-              f"log-likelihood ours {fit['log_likelihood']:.4f}, R {r_ll:.4f}; "
-              f"max |beta difference| {max(abs(a - b) for a, b in zip(fit['fixed_effects'].values(), r_beta)):.1e}")
+        print(
+            f"R ordinal::clmm, same rows: best {r_s:.3f} s  -> ours is {r_s / ours:.1f}x faster; "
+            f"log-likelihood ours {fit['log_likelihood']:.4f}, R {r_ll:.4f}; "
+            f"max |beta difference| {max(abs(a - b) for a, b in zip(fit['fixed_effects'].values(), r_beta)):.1e}"
+        )
     elif not args.no_r:
         print("R ordinal::clmm: Rscript not found; no ratio")
     lmm, cpu, m = best_of(lambda: stats.mixed_model(rows), args.repeat)
@@ -104,8 +110,10 @@ def main():
     try:
         small = DATA / "ratings_small.csv"
         rep, cpu, _ = best_of(lambda: build_report(small, tmp / "r", progress=False, quiet=True), args.repeat)
-        print(f"whole report, 1,880 ratings, everything on (bootstrap 2000, mixed and ordinal models, each x2): "
-              f"best {rep:.2f} s wall, {cpu:.2f} s CPU (target <= 5 s)")
+        print(
+            f"whole report, 1,880 ratings, everything on (bootstrap 2000, mixed and ordinal models, each x2): "
+            f"best {rep:.2f} s wall, {cpu:.2f} s CPU (target <= 5 s)"
+        )
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 

@@ -6,6 +6,7 @@ Times `--steps` optimiser steps of mg_cpu and fl_cpu on the real training set (a
 for every run folder given with --runs (written by generation.train) it also reports the steps, wall
 time, overall steps/s and the last valid NLL from its metrics.csv.
 """
+
 import argparse
 import csv
 import os
@@ -58,15 +59,19 @@ def main():
     print("|---|---|---|---|")
     for kind in ("mg", "fl"):
         sps, sps_cpu, cfg = time_steps(kind, ds, a.steps)
-        print(f"| {kind}_cpu | {sps:.2f} | {sps_cpu:.2f} | {cfg['batch_size']} x {cfg['train_window'] or ds.window} |",
-              flush=True)
+        print(
+            f"| {kind}_cpu | {sps:.2f} | {sps_cpu:.2f} | {cfg['batch_size']} x {cfg['train_window'] or ds.window} |",
+            flush=True,
+        )
     if a.runs:
         print("\n| run | steps | wall min | steps/s | last valid NLL (nats/dim) |\n|---|---|---|---|---|")
         for run in a.runs:
             rows = list(csv.DictReader(open(Path(run) / "metrics.csv")))
             last = rows[-1]
-            print(f"| {run} | {last['step']} | {float(last['elapsed_s']) / 60:.1f} | "
-                  f"{int(last['step']) / float(last['elapsed_s']):.2f} | {float(last['valid_nll']):.3f} |")
+            print(
+                f"| {run} | {last['step']} | {float(last['elapsed_s']) / 60:.1f} | "
+                f"{int(last['step']) / float(last['elapsed_s']):.2f} | {float(last['valid_nll']):.3f} |"
+            )
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ with OpenMP's waiting threads sleeping at once (OMP_WAIT_POLICY=PASSIVE) or afte
 libgomp's), one thread, and the CLI's default, the cores other processes leave free (generation/core_share.py). Prints steps/s and each setting's slowdown beside the busy core; run it with nothing
 else on the machine.
 """
+
 import argparse
 import os
 import subprocess
@@ -67,8 +68,9 @@ print((step - 3) / (time.perf_counter() - start))
 def steps_per_second(setting, args):
     env = {k: v for k, v in os.environ.items() if k not in OMP_ENV}
     env.update({k: setting[k] for k in OMP_ENV if k in setting})
-    code = WORKER.format(root=str(ROOT), threads=setting["threads"], data=args.data, kind=args.kind,
-                         seconds=args.seconds)
+    code = WORKER.format(
+        root=str(ROOT), threads=setting["threads"], data=args.data, kind=args.kind, seconds=args.seconds
+    )
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     return float(out.stdout.strip().splitlines()[-1])
 

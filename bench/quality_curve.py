@@ -8,6 +8,7 @@ as ratios to NAT's on the same windows, the median control following (m) and the
 (bench/sample_quality.py's figures), printed as a table and drawn against the step on log axes with the targets
 (skating 3x, jerk 2x) as lines. Temperature 1, seed 0, as make_stimuli samples.
 """
+
 import argparse
 import statistics
 import sys
@@ -30,10 +31,18 @@ def score(x, nat, c, labels, fps):
     figs = [clip_figures(x[i], c[i], fps) for i in range(len(c))]
     ref = [clip_figures(nat[i], c[i], fps) for i in range(len(c))]
     med = lambda f, k: statistics.median(v[k] for v in f)  # noqa: E731
-    worst = min(statistics.median(figs[i]["stepping"] / max(ref[i]["stepping"], 1e-6)
-                                  for i in range(len(c)) if labels[i] == cat) for cat in set(labels.tolist()))
-    return dict(skating=med(figs, "skating") / med(ref, "skating"), jerk=med(figs, "jerk") / med(ref, "jerk"),
-                following=med(figs, "following"), stepping=worst)
+    worst = min(
+        statistics.median(
+            figs[i]["stepping"] / max(ref[i]["stepping"], 1e-6) for i in range(len(c)) if labels[i] == cat
+        )
+        for cat in set(labels.tolist())
+    )
+    return dict(
+        skating=med(figs, "skating") / med(ref, "skating"),
+        jerk=med(figs, "jerk") / med(ref, "jerk"),
+        following=med(figs, "following"),
+        stepping=worst,
+    )
 
 
 def main():
@@ -48,7 +57,9 @@ def main():
     with np.load(a.data) as d:
         nat, c, labels, fps = d["test_x"], d["test_c"], d["test_labels"], float(d["fps"])
     curves = {}
-    print("| run | step | valid NLL | skating / NAT | jerk / NAT | following (m) | late stepping / NAT, worst category |")
+    print(
+        "| run | step | valid NLL | skating / NAT | jerk / NAT | following (m) | late stepping / NAT, worst category |"
+    )
     print("|---|---|---|---|---|---|---|")
     for spec in a.run:
         name, _, folder = spec.partition("=")
@@ -60,12 +71,17 @@ def main():
             s = score(x, nat, c, labels, fps)
             curves.setdefault(name, []).append((model.step, s))
             valid = torch.load(ckpt, map_location="cpu", weights_only=False)["valid_nll"]
-            print(f"| {name} | {model.step} | {valid:.3f} | {s['skating']:.1f} | {s['jerk']:.2f} | "
-                  f"{s['following']:.3f} | {s['stepping']:.2f} |", flush=True)
+            print(
+                f"| {name} | {model.step} | {valid:.3f} | {s['skating']:.1f} | {s['jerk']:.2f} | "
+                f"{s['following']:.3f} | {s['stepping']:.2f} |",
+                flush=True,
+            )
     if a.figure:
         import matplotlib
+
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
+
         fig, axes = plt.subplots(1, 2, figsize=(9, 3.4))
         for ax, key in zip(axes, ("skating", "jerk")):
             for name, points in curves.items():

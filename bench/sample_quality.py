@@ -14,6 +14,7 @@ Over all windows it also prints each system's Fréchet motion distance to traini
 (generation.motion_encoder; NAT's is the floor) and the medians as ratios to NAT's.
 The figure shows the feet of the first window of five categories (rows: NAT, then each model).
 """
+
 import argparse
 import statistics
 import sys
@@ -25,9 +26,9 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from generation import skeleton  # noqa: E402
 from generation.features import to_world  # noqa: E402
-from generation.pretrained import MOTION_ENCODER  # noqa: E402
 from generation.metrics import control_following, foot_skating, jerk  # noqa: E402
 from generation.motion_encoder import MotionEncoder  # noqa: E402
+from generation.pretrained import MOTION_ENCODER  # noqa: E402
 from generation.sample import load_model, sample_split  # noqa: E402
 
 FOOT_L, FOOT_R = skeleton.INDEX["Foot_L"], skeleton.INDEX["Foot_R"]
@@ -36,15 +37,19 @@ SHOWN = ("walk", "run", "walk_backward", "walk_turn_left", "sidestep_left")
 
 def late_stepping(x, fps):
     """x [T, 63] root-frame features -> std (m) of the horizontal left-minus-right foot vector, last 2 s."""
-    joints = x.reshape(len(x), skeleton.N_JOINTS, 3)[-int(2 * fps):]
+    joints = x.reshape(len(x), skeleton.N_JOINTS, 3)[-int(2 * fps) :]
     sep = joints[:, FOOT_L, ::2] - joints[:, FOOT_R, ::2]  # (x, z)
     return float(np.sqrt(np.var(sep, axis=0).sum()))
 
 
 def clip_figures(x, c, fps):
     world = to_world(x, c)
-    return dict(stepping=late_stepping(x, fps), jerk=float(jerk(world, fps)), skating=float(foot_skating(world, fps)),
-                following=float(control_following(world, c)))
+    return dict(
+        stepping=late_stepping(x, fps),
+        jerk=float(jerk(world, fps)),
+        skating=float(foot_skating(world, fps)),
+        following=float(control_following(world, c)),
+    )
 
 
 def main():
@@ -69,8 +74,14 @@ def main():
 
     cats = sorted(set(labels.tolist()))
     names = list(systems)
-    head = ["category", "n"] + [f"{n} stepping" for n in names] + [f"{n}/NAT stepping" for n in names[1:]] \
-        + [f"{n} jerk" for n in names] + [f"{n} skating" for n in names] + [f"{n} following" for n in names]
+    head = (
+        ["category", "n"]
+        + [f"{n} stepping" for n in names]
+        + [f"{n}/NAT stepping" for n in names[1:]]
+        + [f"{n} jerk" for n in names]
+        + [f"{n} skating" for n in names]
+        + [f"{n} following" for n in names]
+    )
     print(f"test split, temperature {a.temperature}, medians per category")
     print("| " + " | ".join(head) + " |")
     print("|" + "---|" * len(head))
@@ -78,32 +89,56 @@ def main():
         idx = [i for i in range(len(c)) if cat == "all" or labels[i] == cat]
         med = lambda name, key: statistics.median(figures[name][i][key] for i in idx)  # noqa: E731
         ratio = lambda name: statistics.median(  # noqa: E731
-            figures[name][i]["stepping"] / max(figures["NAT"][i]["stepping"], 1e-6) for i in idx)
-        row = [cat, str(len(idx))] + [f"{med(n, 'stepping'):.3f}" for n in names] \
-            + [f"{ratio(n):.2f}" for n in names[1:]] + [f"{med(n, 'jerk'):.0f}" for n in names] \
-            + [f"{med(n, 'skating'):.2f}" for n in names] + [f"{med(n, 'following'):.3f}" for n in names]
+            figures[name][i]["stepping"] / max(figures["NAT"][i]["stepping"], 1e-6) for i in idx
+        )
+        row = (
+            [cat, str(len(idx))]
+            + [f"{med(n, 'stepping'):.3f}" for n in names]
+            + [f"{ratio(n):.2f}" for n in names[1:]]
+            + [f"{med(n, 'jerk'):.0f}" for n in names]
+            + [f"{med(n, 'skating'):.2f}" for n in names]
+            + [f"{med(n, 'following'):.3f}" for n in names]
+        )
         print("| " + " | ".join(row) + " |")
 
     encoder = MotionEncoder.load(a.encoder)
     fmd = {name: encoder.fmd(x, labels) for name, x in systems.items()}
     overall = lambda name, key: statistics.median(f[key] for f in figures[name])  # noqa: E731
     print("\nall windows: FMD to training motion of the same categories, and medians as ratios to NAT's")
-    print("| system | FMD | FMD / NAT | skating / NAT | jerk / NAT | following (m) | late stepping / NAT, worst category |")
+    print(
+        "| system | FMD | FMD / NAT | skating / NAT | jerk / NAT | following (m) | late stepping / NAT, worst category |"
+    )
     print("|---|---|---|---|---|---|---|")
     for name in names:
-        worst = min(statistics.median(figures[name][i]["stepping"] / max(figures["NAT"][i]["stepping"], 1e-6)
-                                      for i in range(len(c)) if labels[i] == cat) for cat in cats)
-        print(f"| {name} | {fmd[name]:.0f} | {fmd[name] / fmd['NAT']:.2f} | "
-              f"{overall(name, 'skating') / overall('NAT', 'skating'):.1f} | "
-              f"{overall(name, 'jerk') / overall('NAT', 'jerk'):.2f} | {overall(name, 'following'):.3f} | {worst:.2f} |")
+        worst = min(
+            statistics.median(
+                figures[name][i]["stepping"] / max(figures["NAT"][i]["stepping"], 1e-6)
+                for i in range(len(c))
+                if labels[i] == cat
+            )
+            for cat in cats
+        )
+        print(
+            f"| {name} | {fmd[name]:.0f} | {fmd[name] / fmd['NAT']:.2f} | "
+            f"{overall(name, 'skating') / overall('NAT', 'skating'):.1f} | "
+            f"{overall(name, 'jerk') / overall('NAT', 'jerk'):.2f} | {overall(name, 'following'):.3f} | {worst:.2f} |"
+        )
 
     if a.figure:
         import matplotlib
+
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
+
         shown = [cat for cat in SHOWN if cat in cats]
-        fig, axes = plt.subplots(len(names), len(shown), figsize=(3.2 * len(shown), 2.1 * len(names)),
-                                 sharex=True, sharey=True, squeeze=False)
+        fig, axes = plt.subplots(
+            len(names),
+            len(shown),
+            figsize=(3.2 * len(shown), 2.1 * len(names)),
+            sharex=True,
+            sharey=True,
+            squeeze=False,
+        )
         t = np.arange(x_nat.shape[1]) / fps
         for col, cat in enumerate(shown):
             i = int(np.flatnonzero(labels == cat)[0])
@@ -118,8 +153,11 @@ def main():
                     ax.set_ylabel("m (root frame)")
                 if row == len(names) - 1:
                     ax.set_xlabel("s")
-        axes[0, 0].legend(["left foot height", "left foot forward", "right foot height", "right foot forward"],
-                          fontsize=6, loc="upper left")
+        axes[0, 0].legend(
+            ["left foot height", "left foot forward", "right foot height", "right foot forward"],
+            fontsize=6,
+            loc="upper left",
+        )
         fig.tight_layout()
         fig.savefig(a.figure, dpi=90)
         print(f"figure -> {a.figure}")

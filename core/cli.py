@@ -9,6 +9,7 @@ keeps its traceback.
     def main(argv=None):
         return cli.run(_main, argv)
 """
+
 import argparse
 import math
 import sys
@@ -30,12 +31,14 @@ class ArgumentParser(argparse.ArgumentParser):
 def number(kind=float, lo=None, hi=None, lo_open=False):
     """An argparse type: a finite `kind` (int or float) in [lo, hi] ((lo, hi] with lo_open).
     Rejects nan, inf and absurd sizes before they reach an allocation."""
+
     def parse(text):
         try:
             value = kind(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {'an integer' if kind is int else 'a number'}, "
-                                             f"got {text!r}") from None
+            raise argparse.ArgumentTypeError(
+                f"expected {'an integer' if kind is int else 'a number'}, got {text!r}"
+            ) from None
         if isinstance(value, float) and not math.isfinite(value):
             raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
         too_low = lo is not None and (value <= lo if lo_open else value < lo)
@@ -44,6 +47,7 @@ def number(kind=float, lo=None, hi=None, lo_open=False):
             high = "" if hi is None else f"<= {hi}"
             raise argparse.ArgumentTypeError(f"must be {' and '.join(s for s in (low, high) if s)}, got {text!r}")
         return value
+
     return parse
 
 

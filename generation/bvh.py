@@ -9,16 +9,17 @@ Conventions (the usual BVH ones): rotation channels are intrinsic rotations appl
 order, so `Zrotation Xrotation Yrotation` gives R = Rz @ Rx @ Ry, angles in degrees; a joint's
 position channels give its local translation and replace its OFFSET (CONTRACTS.md §1).
 """
-from dataclasses import dataclass, field
+
 import gzip
 import io
 import re
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from core.cli import UserError
 
-from .clip import MAX_FPS, MIN_FPS
+from core.cli import UserError
+from core.clip import MAX_FPS, MIN_FPS
 
 CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
@@ -32,12 +33,12 @@ class BvhError(UserError):
 
 @dataclass
 class Bvh:
-    names: list            # joint names [J] (End Sites are not joints)
-    parents: np.ndarray    # int [J], -1 for the root; parents come before their children
-    offsets: np.ndarray    # float [J, 3] OFFSET of each joint, file units
-    channels: list         # per joint, its channel names in file order
-    motion: np.ndarray     # float [T, C] the MOTION block, C = total channel count
-    frame_time: float      # seconds per frame
+    names: list  # joint names [J] (End Sites are not joints)
+    parents: np.ndarray  # int [J], -1 for the root; parents come before their children
+    offsets: np.ndarray  # float [J, 3] OFFSET of each joint, file units
+    channels: list  # per joint, its channel names in file order
+    motion: np.ndarray  # float [T, C] the MOTION block, C = total channel count
+    frame_time: float  # seconds per frame
     end_sites: list = field(default_factory=list)  # (parent joint index, offset [3]) per End Site
     path: str = ""
 
@@ -98,7 +99,7 @@ def read_bvh(path):
         if lines[0].split()[:1] != ["HIERARCHY"]:
             raise BvhError(f"{name}:1: expected 'HIERARCHY' at the start of the file")
         raise BvhError(f"{name}:{last}: no MOTION section (file truncated?)")
-    lines = raw[:m.start()].decode("utf-8", errors="replace").split("\n")
+    lines = raw[: m.start()].decode("utf-8", errors="replace").split("\n")
     motion_line = len(lines) - 1  # 0-based index of the MOTION line
 
     # Header: a token stream with line numbers, so layout (braces on their own line or not) is free.
@@ -165,7 +166,9 @@ def read_bvh(path):
             for _ in range(int(n_str)):
                 ch, cl = take("a channel name")
                 if ch not in CHANNEL_NAMES:
-                    raise BvhError(f"{name}:{cl}: unknown channel name {ch!r} (expected one of {', '.join(CHANNEL_NAMES)})")
+                    raise BvhError(
+                        f"{name}:{cl}: unknown channel name {ch!r} (expected one of {', '.join(CHANNEL_NAMES)})"
+                    )
                 chans.append(ch)
             channels[stack[-1]] = chans
         elif tok == "}":
@@ -190,10 +193,12 @@ def read_bvh(path):
     header = {}
     while len(header) < 2:
         if cursor < 0:
-            raise BvhError(f"{name}:{line_no}: MOTION block truncated before "
-                           f"{'Frames' if 'frames' not in header else 'Frame Time'}")
+            raise BvhError(
+                f"{name}:{line_no}: MOTION block truncated before "
+                f"{'Frames' if 'frames' not in header else 'Frame Time'}"
+            )
         end = raw.find(b"\n", cursor + 1)
-        text = raw[cursor + 1:end if end >= 0 else len(raw)].decode("utf-8", errors="replace")
+        text = raw[cursor + 1 : end if end >= 0 else len(raw)].decode("utf-8", errors="replace")
         cursor, line_no = end, line_no + 1
         parts = text.split()
         if not parts:
@@ -205,17 +210,27 @@ def read_bvh(path):
         elif parts[:2] == ["Frame", "Time:"] and len(parts) == 3 and "frames" in header:
             dt = _number(parts[2], f"{name}:{line_no}")
             if not 1 / MAX_FPS <= dt <= 1 / MIN_FPS:  # also false for nan and inf
-                raise BvhError(f"{name}:{line_no}: Frame Time must be between {1 / MAX_FPS:g} and "
-                               f"{1 / MIN_FPS:g} s ({MIN_FPS:g}-{MAX_FPS:g} fps), got {parts[2]!r}")
+                raise BvhError(
+                    f"{name}:{line_no}: Frame Time must be between {1 / MAX_FPS:g} and "
+                    f"{1 / MIN_FPS:g} s ({MIN_FPS:g}-{MAX_FPS:g} fps), got {parts[2]!r}"
+                )
             header["dt"] = dt
         else:
             want = "'Frames: N'" if "frames" not in header else "'Frame Time: SECONDS'"
             raise BvhError(f"{name}:{line_no}: expected {want}, got {text.strip()[:60]!r}")
     n_frames, frames_line = header["frames"]
-    block = raw[cursor + 1:] if cursor >= 0 else b""
+    block = raw[cursor + 1 :] if cursor >= 0 else b""
     motion = _parse_motion(block, line_no + 1, n_frames, n_channels, frames_line, name)
-    return Bvh(names=names, parents=np.array(parents, dtype=np.int64), offsets=np.array(offsets),
-               channels=channels, motion=motion, frame_time=header["dt"], end_sites=end_sites, path=name)
+    return Bvh(
+        names=names,
+        parents=np.array(parents, dtype=np.int64),
+        offsets=np.array(offsets),
+        channels=channels,
+        motion=motion,
+        frame_time=header["dt"],
+        end_sites=end_sites,
+        path=name,
+    )
 
 
 def _parse_motion(block, first, n_frames, n_channels, frames_line, name):
@@ -243,10 +258,14 @@ def _parse_motion(block, first, n_frames, n_channels, frames_line, name):
         raise BvhError(f"{name}:{first + k}: {what}: expected {n_channels} values, got {got}")
     if len(nonempty) != n_frames:
         if len(nonempty) < n_frames:
-            raise BvhError(f"{name}:{frames_line}: MOTION block truncated: Frames says {n_frames}, "
-                           f"the file has {len(nonempty)} frame lines")
-        raise BvhError(f"{name}:{first + nonempty[n_frames]}: more frame lines than Frames: {n_frames} says "
-                       f"({len(nonempty)} lines)")
+            raise BvhError(
+                f"{name}:{frames_line}: MOTION block truncated: Frames says {n_frames}, "
+                f"the file has {len(nonempty)} frame lines"
+            )
+        raise BvhError(
+            f"{name}:{first + nonempty[n_frames]}: more frame lines than Frames: {n_frames} says "
+            f"({len(nonempty)} lines)"
+        )
     if n_frames == 0 or n_channels == 0:
         return np.zeros((n_frames, n_channels))
     try:
@@ -259,8 +278,9 @@ def _parse_motion(block, first, n_frames, n_channels, frames_line, name):
         raise BvhError(f"{name}:{first}: MOTION block could not be parsed as numbers")
     if not np.all(np.abs(values) <= MAX_VALUE):  # also catches nan and inf
         k = int(np.flatnonzero(~(np.abs(values) <= MAX_VALUE))[0]) // n_channels
-        raise BvhError(f"{name}:{first + nonempty[k]}: value out of range (non-finite or beyond "
-                       f"±{MAX_VALUE:g}) in frame {k}")
+        raise BvhError(
+            f"{name}:{first + nonempty[k]}: value out of range (non-finite or beyond ±{MAX_VALUE:g}) in frame {k}"
+        )
     return values.reshape(n_frames, n_channels)
 
 

@@ -9,6 +9,7 @@ minus this process's own CPU time) and runs on the cores left, at least one.
 A thread count changes the float rounding of the products, so an adaptive run is reproducible only as long as
 the machine's load is; `--threads N` fixes it (the shipped models were trained with --threads 1).
 """
+
 import os
 import time
 

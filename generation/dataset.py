@@ -1,9 +1,11 @@
 """The prepared dataset (CONTRACTS.md §2) as standardised tensors, and random training batches."""
+
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import torch
+
 from core.cli import UserError
 
 REQUIRED = ("train_x", "train_c", "valid_x", "valid_c", "x_mean", "x_std", "c_mean", "c_std", "fps", "window")
@@ -17,7 +19,7 @@ class DatasetError(UserError):
 class Split:
     x: torch.Tensor  # [N, T, 63] standardised
     c: torch.Tensor  # [N, T, 3] standardised
-    hist: torch.Tensor | None = None    # [N, tau, 63] standardised frames before each window, if stored
+    hist: torch.Tensor | None = None  # [N, tau, 63] standardised frames before each window, if stored
     hist_c: torch.Tensor | None = None  # [N, tau, 3]
 
     def __len__(self):
@@ -53,8 +55,14 @@ def load_dataset(path):
         if f"{split}_x" not in d:
             continue
         x, c = d[f"{split}_x"], d[f"{split}_c"]
-        if x.ndim != 3 or x.shape[2] != stats["x_mean"].shape[0] or c.shape != x.shape[:2] + (stats["c_mean"].shape[0],):
-            raise DatasetError(f"{path}: '{split}_x' {x.shape} and '{split}_c' {c.shape} do not match [N, T, 63] / [N, T, 3]")
+        if (
+            x.ndim != 3
+            or x.shape[2] != stats["x_mean"].shape[0]
+            or c.shape != x.shape[:2] + (stats["c_mean"].shape[0],)
+        ):
+            raise DatasetError(
+                f"{path}: '{split}_x' {x.shape} and '{split}_c' {c.shape} do not match [N, T, 63] / [N, T, 3]"
+            )
         if len(x) == 0:
             raise DatasetError(f"{path}: split '{split}' is empty")
         if not (np.isfinite(x).all() and np.isfinite(c).all()):
@@ -82,4 +90,4 @@ def eval_batches(split, batch_size, max_windows=None):
     """Deterministic batches over (the first max_windows of) a split, for validation NLL."""
     n = len(split) if max_windows is None else min(len(split), max_windows)
     for i in range(0, n, batch_size):
-        yield split.x[i:min(n, i + batch_size)], split.c[i:min(n, i + batch_size)]
+        yield split.x[i : min(n, i + batch_size)], split.c[i : min(n, i + batch_size)]

@@ -15,9 +15,10 @@ Conventions
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
+from core.clip import check_frames
+
 from . import skeleton
 from .bvh import BvhError, forward_kinematics, read_bvh
-from .clip import check_frames
 from .resample import clean_fps, local_quaternions, quat_to_matrix, resample_local, resample_times
 
 FACING_SMOOTH_S = 0.25  # sigma of the Gaussian smoothing the facing direction (s)
@@ -35,13 +36,27 @@ SKELETON_MAPS = {
         "detect": {"Hips", "LeftUpLeg", "RightUpLeg", "LeftArm", "RightArm", "Spine1"},
         "scale": 2.54 / 0.45 / 100,  # CMU units: inches / 0.45 (as in the ASF files), i.e. 5.64 cm
         "map": {
-            "Hips": "Hips", "Spine": "Spine", "Chest": "Spine1", "Neck": "Neck1", "Head": "Head",
-            "Shoulder_L": ("LeftShoulder", "LeftArm", 1 / 3), "UpperArm_L": "LeftArm",
-            "LowerArm_L": "LeftForeArm", "Hand_L": "LeftHand",
-            "Shoulder_R": ("RightShoulder", "RightArm", 1 / 3), "UpperArm_R": "RightArm",
-            "LowerArm_R": "RightForeArm", "Hand_R": "RightHand",
-            "UpperLeg_L": "LeftUpLeg", "LowerLeg_L": "LeftLeg", "Foot_L": "LeftFoot", "Toes_L": "LeftToeBase",
-            "UpperLeg_R": "RightUpLeg", "LowerLeg_R": "RightLeg", "Foot_R": "RightFoot", "Toes_R": "RightToeBase",
+            "Hips": "Hips",
+            "Spine": "Spine",
+            "Chest": "Spine1",
+            "Neck": "Neck1",
+            "Head": "Head",
+            "Shoulder_L": ("LeftShoulder", "LeftArm", 1 / 3),
+            "UpperArm_L": "LeftArm",
+            "LowerArm_L": "LeftForeArm",
+            "Hand_L": "LeftHand",
+            "Shoulder_R": ("RightShoulder", "RightArm", 1 / 3),
+            "UpperArm_R": "RightArm",
+            "LowerArm_R": "RightForeArm",
+            "Hand_R": "RightHand",
+            "UpperLeg_L": "LeftUpLeg",
+            "LowerLeg_L": "LeftLeg",
+            "Foot_L": "LeftFoot",
+            "Toes_L": "LeftToeBase",
+            "UpperLeg_R": "RightUpLeg",
+            "LowerLeg_R": "RightLeg",
+            "Foot_R": "RightFoot",
+            "Toes_R": "RightToeBase",
         },
     },
 }
@@ -60,8 +75,9 @@ def detect_skeleton(names, where):
             if missing:
                 raise BvhError(f"{where}: looks like a {key} skeleton but has no joint '{missing[0]}'")
             return key
-    raise BvhError(f"{where}: unknown skeleton (joints {', '.join(sorted(names)[:6])}, ...); "
-                   f"known: {', '.join(SKELETON_MAPS)}")
+    raise BvhError(
+        f"{where}: unknown skeleton (joints {', '.join(sorted(names)[:6])}, ...); known: {', '.join(SKELETON_MAPS)}"
+    )
 
 
 def map_joints(positions, names, key):
@@ -103,8 +119,12 @@ def load_take(path, fps=20.0):
 def root_trajectory(joints, fps=20.0):
     """Root position on the floor [T, 2] (x, z) and unwrapped heading yaw [T] (rad) of joints [T, 21, 3]."""
     joints = _np(joints, np.float64)
-    across = (joints[:, _I["UpperLeg_L"]] - joints[:, _I["UpperLeg_R"]]
-              + joints[:, _I["UpperArm_L"]] - joints[:, _I["UpperArm_R"]])
+    across = (
+        joints[:, _I["UpperLeg_L"]]
+        - joints[:, _I["UpperLeg_R"]]
+        + joints[:, _I["UpperArm_L"]]
+        - joints[:, _I["UpperArm_R"]]
+    )
     # forward = across x up, horizontal
     fwd = np.stack([-across[:, 2], across[:, 0]], axis=-1)  # (x, z)
     fwd /= np.maximum(np.linalg.norm(fwd, axis=-1, keepdims=True), 1e-9)
@@ -160,11 +180,11 @@ def to_world(x, c, start_xz=(0.0, 0.0), start_yaw=0.0):
     if x.shape[-1] != skeleton.POSE_DIM or c.shape[-1] != skeleton.CONTROL_DIM or x.shape[:-1] != c.shape[:-1]:
         raise ValueError(f"to_world: need x [..., T, 63] and c [..., T, 3], got {x.shape} and {c.shape}")
     yaw = _np(start_yaw, np.float64)[..., None] + np.concatenate(
-        [np.zeros(c.shape[:-1][:-1] + (1,)), np.cumsum(c[..., 1:, 2], axis=-1)], axis=-1)
+        [np.zeros(c.shape[:-1][:-1] + (1,)), np.cumsum(c[..., 1:, 2], axis=-1)], axis=-1
+    )
     step = _rotate_y(np.stack([c[..., 1:, 1], c[..., 1:, 0]], -1), yaw[..., :-1])  # world (x, z)
     start = _np(start_xz, np.float64)
-    root = np.concatenate([np.zeros(step.shape[:-2] + (1, 2)), np.cumsum(step, axis=-2)], axis=-2) \
-        + start[..., None, :]
+    root = np.concatenate([np.zeros(step.shape[:-2] + (1, 2)), np.cumsum(step, axis=-2)], axis=-2) + start[..., None, :]
     local = x.reshape(x.shape[:-1] + (skeleton.N_JOINTS, 3))
     world = _rotate_y(local, yaw[..., None])
     world[..., 0] += root[..., None, 0]
@@ -180,8 +200,7 @@ def mirror(x, c):
     """Left/right mirror image: swap _L/_R joints, reflect x; sideways and yaw control change sign."""
     x = _np(x)
     c = _np(c)
-    return ((x[..., _MIRROR_IDX] * _MIRROR_SIGN).astype(x.dtype),
-            (c * np.array([1.0, -1.0, -1.0])).astype(c.dtype))
+    return ((x[..., _MIRROR_IDX] * _MIRROR_SIGN).astype(x.dtype), (c * np.array([1.0, -1.0, -1.0])).astype(c.dtype))
 
 
 def _reverse_step(c):

@@ -5,11 +5,11 @@ every coupling. L levels of K steps; between levels the sequence is squeezed alo
 one with twice the channels), the control squeezed with it but never split; after each level but the last,
 half the channels leave for the latent. Exact log-likelihood.
 """
+
 import torch
 from torch import nn
 
-from .flows import (Chain, ConvNet, FlowStep, MotionFlow, Split, gaussian_logp, squeeze_time,
-                    unsqueeze_time)
+from .flows import Chain, ConvNet, FlowStep, MotionFlow, Split, gaussian_logp, squeeze_time, unsqueeze_time
 
 DEFAULTS = dict(L=4, K=32, hidden=512, kernel=3)  # the paper's names: L levels of K steps
 
@@ -28,9 +28,14 @@ class FL(MotionFlow):
             if level > 0:
                 ch, cc = 2 * ch, 2 * cc
             c_a = ch // 2
-            self.levels.append(Chain(*[
-                FlowStep(ch, ConvNet(c_a, cc, 2 * (ch - c_a), cfg["hidden"], cfg["kernel"]))
-                for _ in range(cfg["K"])]))
+            self.levels.append(
+                Chain(
+                    *[
+                        FlowStep(ch, ConvNet(c_a, cc, 2 * (ch - c_a), cfg["hidden"], cfg["kernel"]))
+                        for _ in range(cfg["K"])
+                    ]
+                )
+            )
             self.level_channels.append(ch)
             if level < cfg["L"] - 1:
                 keep = ch // 2
@@ -57,8 +62,8 @@ class FL(MotionFlow):
                 split = self.splits[level]
                 h, ld = split(h, cond)
                 logdet = logdet + ld
-                zs.append(h[:, split.c_keep:].flatten(1))
-                h = h[:, :split.c_keep]
+                zs.append(h[:, split.c_keep :].flatten(1))
+                h = h[:, : split.c_keep]
         zs.append(h.flatten(1))
         return torch.cat(zs, dim=1), logdet
 
@@ -98,6 +103,10 @@ class FL(MotionFlow):
     @torch.no_grad()
     def sample(self, c, temperature=1.0, generator=None):
         """Standardised control [B, T, 3] -> standardised poses [B, T, 63]."""
-        z = torch.randn(c.shape[0], c.shape[1] * self.pose_dim, generator=generator,
-                        dtype=c.dtype, device="cpu").to(c.device) * temperature
+        z = (
+            torch.randn(c.shape[0], c.shape[1] * self.pose_dim, generator=generator, dtype=c.dtype, device="cpu").to(
+                c.device
+            )
+            * temperature
+        )
         return self.inverse(z, c)[0]

@@ -9,6 +9,7 @@ Every layer maps a sequence x [B, C, T] (channels = pose features, T = frames) t
 `cond` is the conditioning sequence [B, Cc, T] (control, and for MoGlow the pose history); layers
 that do not need it ignore it.
 """
+
 import math
 
 import numpy as np
@@ -127,13 +128,13 @@ class AffineCoupling(nn.Module):
         return shift, torch.sigmoid(raw + 2.0)
 
     def forward(self, x, cond=None):
-        x_a, x_b = x[:, :self.c_a], x[:, self.c_a:]
+        x_a, x_b = x[:, : self.c_a], x[:, self.c_a :]
         shift, scale = self._shift_scale(x_a, cond)
         y_b = (x_b + shift) * scale
         return torch.cat([x_a, y_b], dim=1), torch.log(scale).sum(dim=(1, 2))
 
     def inverse(self, y, cond=None):
-        y_a, y_b = y[:, :self.c_a], y[:, self.c_a:]
+        y_a, y_b = y[:, : self.c_a], y[:, self.c_a :]
         shift, scale = self._shift_scale(y_a, cond)
         x_b = y_b / scale - shift
         return torch.cat([y_a, x_b], dim=1), -torch.log(scale).sum(dim=(1, 2))
@@ -180,13 +181,13 @@ class Split(nn.Module):
         return h[:, 0::2], h[:, 1::2]
 
     def forward(self, x, cond=None):
-        x_a, x_b = x[:, :self.c_keep], x[:, self.c_keep:]
+        x_a, x_b = x[:, : self.c_keep], x[:, self.c_keep :]
         mu, log_sigma = self._mu_logsigma(x_a, cond)
         z_b = (x_b - mu) * torch.exp(-log_sigma)
         return torch.cat([x_a, z_b], dim=1), -log_sigma.sum(dim=(1, 2))
 
     def inverse(self, y, cond=None):
-        y_a, z_b = y[:, :self.c_keep], y[:, self.c_keep:]
+        y_a, z_b = y[:, : self.c_keep], y[:, self.c_keep :]
         mu, log_sigma = self._mu_logsigma(y_a, cond)
         x_b = z_b * torch.exp(log_sigma) + mu
         return torch.cat([y_a, x_b], dim=1), log_sigma.sum(dim=(1, 2))
@@ -226,9 +227,12 @@ class ConvNet(nn.Module):
     def __init__(self, in_channels, cond_channels, out_channels, hidden, kernel=3):
         super().__init__()
         self.layers = nn.Sequential(
-            nn.Conv1d(in_channels + cond_channels, hidden, kernel, padding=kernel // 2), nn.ReLU(),
-            nn.Conv1d(hidden, hidden, 1), nn.ReLU(),
-            ZeroConv1d(hidden, out_channels))
+            nn.Conv1d(in_channels + cond_channels, hidden, kernel, padding=kernel // 2),
+            nn.ReLU(),
+            nn.Conv1d(hidden, hidden, 1),
+            nn.ReLU(),
+            ZeroConv1d(hidden, out_channels),
+        )
 
     def forward(self, x_a, cond):
         return self.layers(x_a if cond is None else torch.cat([x_a, cond], dim=1))

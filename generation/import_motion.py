@@ -7,14 +7,15 @@ default 0.01 for centimetre files), resampled to `--fps` when given (rotations a
 keep their lengths). When the skeleton is one the project knows (Bandai-Namco, CMU/PFNN), the clip
 also gets the root `control` of its 21-joint body (features.to_features), in the clip's units.
 """
+
 import sys
 
 import numpy as np
 
 from core import cli
+from core.clip import MAX_FPS, MIN_FPS, clip_path, save_clip
 
 from .bvh import BvhError, read_bvh
-from .clip import MAX_FPS, MIN_FPS, clip_path, save_clip
 from .features import bvh_world_positions, detect_skeleton, map_joints, to_features
 from .resample import clean_fps
 
@@ -44,10 +45,18 @@ def _main(argv):
     ap = cli.ArgumentParser(prog="python -m generation.import_motion", description=__doc__.split("\n")[0])
     ap.add_argument("input", help="BVH file (.bvh or .bvh.gz)")
     ap.add_argument("output", help="clip .npz to write")
-    ap.add_argument("--scale", type=cli.number(float, lo=0, hi=1e3, lo_open=True), default=0.01,
-                    help="metres per file unit (default 0.01: centimetres)")
-    ap.add_argument("--fps", type=cli.number(float, MIN_FPS, MAX_FPS), default=None,
-                    help="resample to this frame rate (default: keep the file's)")
+    ap.add_argument(
+        "--scale",
+        type=cli.number(float, lo=0, hi=1e3, lo_open=True),
+        default=0.01,
+        help="metres per file unit (default 0.01: centimetres)",
+    )
+    ap.add_argument(
+        "--fps",
+        type=cli.number(float, MIN_FPS, MAX_FPS),
+        default=None,
+        help="resample to this frame rate (default: keep the file's)",
+    )
     args = ap.parse_args(argv)
     joints = import_motion(args.input, clip_path(args.output), args.scale, args.fps)
     print(f"{args.output}: {joints.shape[0]} frames, {joints.shape[1]} joints")

@@ -20,10 +20,10 @@
    except BAD. Every clip is placed to start at the origin facing +Z.
 5. Videos (in parallel, one process per core), contact sheets, metrics.csv, manifest.csv, items.csv.
 """
+
 import csv
 import os
 import re
-import secrets
 import shutil
 import sys
 import time
@@ -34,22 +34,31 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from core import cli
+from core import cli, study
 from core.cli import UserError
+from core.clip import save_clip
 from rendering.blinding import pad_to_common_size, same_mtime
 from rendering.render import render_clip, size_flag
 
 from . import pretrained, skeleton
-from .clip import save_clip
 from .features import to_features, to_world
-from .metrics import METRIC_NAMES, clip_metrics
+from .metrics import clip_metrics
 from .systems import canonical_placement, find_system_files, load_system_motion, parse_system_spec
 
-BUILTIN = ("NAT", "MG", "FL")
-CLIP_ID_LEN = 16
-MANIFEST_COLUMNS = ["clip_id", "condition", "role", "item", "video", "motion", "seed", "frames", "fps", "width",
-                    "height"]
-METRICS_COLUMNS = ["clip_id", "condition", "role", "item", *METRIC_NAMES]
+MANIFEST_COLUMNS = [
+    "clip_id",
+    "condition",
+    "role",
+    "item",
+    "video",
+    "motion",
+    "seed",
+    "frames",
+    "fps",
+    "width",
+    "height",
+]
+METRICS_COLUMNS = [*study.METRIC_KEYS, *study.METRIC_NAMES]
 ITEMS_COLUMNS = ["item", "role", "category", "take", "start_frame", "frames", "fps", "control"]
 
 
@@ -75,8 +84,10 @@ def ensure_dataset(args):
         return path
     data = Path(args.data) if args.data else default_data_dir()
     if data is None or not data.is_dir():
-        raise StimuliError(f"data folder {args.data or '../shared/data/bandai-namco-locomotion'} not found; "
-                           "pass --data DIR (a folder of .bvh/.bvh.gz takes) or --dataset FILE.npz")
+        raise StimuliError(
+            f"data folder {args.data or '../shared/data/bandai-namco-locomotion'} not found; "
+            "pass --data DIR (a folder of .bvh/.bvh.gz takes) or --dataset FILE.npz"
+        )
     log(f"data: preparing {data} -> {path}" + (" (quick subset)" if args.quick else ""))
     takes = longest_takes(data, per_category=10) if args.quick else None
     summary = prepare(data, path, takes=takes, seed=args.seed, progress=True)
@@ -91,8 +102,9 @@ def load_splits(path):
         # Only the held-out arrays: the training split is most of the file and is not needed here.
         with np.load(path, allow_pickle=False) as f:
             names = set(f.files)
-            splits = {s: {k: f[f"{s}_{k}"] for k in keys} for s in ("test", "valid")
-                      if all(f"{s}_{k}" in names for k in keys)}
+            splits = {
+                s: {k: f[f"{s}_{k}"] for k in keys} for s in ("test", "valid") if all(f"{s}_{k}" in names for k in keys)
+            }
             fps, window = float(f["fps"]), int(f["window"])
     except (OSError, ValueError) as e:
         raise StimuliError(f"{path}: not a readable dataset .npz ({e})") from None
@@ -132,8 +144,10 @@ def select_items(splits, n_items, n_catch, n_training, seed):
         raise StimuliError(f"--n-items {n_items}: the dataset's test split has only {n_test_windows} windows")
     need = n_items + n_catch + n_training
     if need > len(pool):
-        raise StimuliError(f"{need} items needed but the held-out splits have only {len(pool)} windows; "
-                           "lower --n-items/--n-catch/--n-training")
+        raise StimuliError(
+            f"{need} items needed but the held-out splits have only {len(pool)} windows; "
+            "lower --n-items/--n-catch/--n-training"
+        )
     test = pool[:n_items]
     rest = pool[n_items:]
     # Catch and training items: other windows, preferring other takes than the test items'.
@@ -142,8 +156,17 @@ def select_items(splits, n_items, n_catch, n_training, seed):
     roles = ["test"] * n_items + ["catch"] * n_catch + ["training"] * n_training
     items = []
     for role, (s, i) in zip(roles, test + rest[: n_catch + n_training]):
-        items.append(dict(id=f"{s}{i:04d}", role=role, split=s, index=i, category=str(splits[s]["labels"][i]),
-                          take=str(splits[s]["take"][i]), start=int(splits[s]["start"][i])))
+        items.append(
+            dict(
+                id=f"{s}{i:04d}",
+                role=role,
+                split=s,
+                index=i,
+                category=str(splits[s]["labels"][i]),
+                take=str(splits[s]["take"][i]),
+                start=int(splits[s]["start"][i]),
+            )
+        )
     return items
 
 
@@ -169,12 +192,29 @@ def write_items(folder, items, arrays, fps):
             hist_x = np.concatenate([arrays["hist"][k], arrays["x"][k][:1]])
             hist_c = np.concatenate([arrays["hist_c"][k], arrays["c"][k][:1]])
             hist = canonical_placement(to_world(hist_x, hist_c), fps, frame=-1)[:-1]
-            np.savez_compressed(folder / rel, control=arrays["c"][k], history=arrays["hist"][k],
-                                history_control=arrays["hist_c"][k], history_joints=hist, fps=np.float64(fps),
-                                frames=np.int64(arrays["c"][k].shape[0]), joint_names=np.array(skeleton.JOINT_NAMES),
-                                parents=skeleton.PARENTS)
-            w.writerow([it["id"], it["role"], it["category"], it["take"], it["start"], arrays["c"][k].shape[0],
-                        f"{fps:g}", rel])
+            np.savez_compressed(
+                folder / rel,
+                control=arrays["c"][k],
+                history=arrays["hist"][k],
+                history_control=arrays["hist_c"][k],
+                history_joints=hist,
+                fps=np.float64(fps),
+                frames=np.int64(arrays["c"][k].shape[0]),
+                joint_names=np.array(skeleton.JOINT_NAMES),
+                parents=skeleton.PARENTS,
+            )
+            w.writerow(
+                [
+                    it["id"],
+                    it["role"],
+                    it["category"],
+                    it["take"],
+                    it["start"],
+                    arrays["c"][k].shape[0],
+                    f"{fps:g}",
+                    rel,
+                ]
+            )
 
 
 # ---------------------------------------------------------------- models
@@ -203,8 +243,18 @@ def ensure_model(kind, args, dataset):
     run = Path(args.runs) / f"{kind}_{args.config}"
     resume = (run / "resume.pt").is_file()
     log(f"models: {'resuming' if resume else 'training'} {kind} (config {args.config}) in {run}")
-    train(kind, args.config, dataset, run, steps=args.train_steps, seed=args.seed, progress=True,
-          resume=resume, device=args.device, threads=args.threads or "auto")
+    train(
+        kind,
+        args.config,
+        dataset,
+        run,
+        steps=args.train_steps,
+        seed=args.seed,
+        progress=True,
+        resume=resume,
+        device=args.device,
+        threads=args.threads or "auto",
+    )
     ckpts = checkpoints_in(run)
     if not ckpts:
         raise StimuliError(f"{run}: training wrote no checkpoint")
@@ -228,16 +278,6 @@ def sample_condition(kind, ckpt, arrays, idx, temperature, seed, device):
 
 
 # ---------------------------------------------------------------- clips, videos, manifest
-def new_clip_id(taken, forbidden):
-    """A random token [a-z0-9]{16}, unique, containing no condition name (case-insensitively)."""
-    alphabet = "abcdefghijklmnopqrstuvwxyz0123456789"
-    while True:
-        cid = "".join(secrets.choice(alphabet) for _ in range(CLIP_ID_LEN))
-        if cid not in taken and not any(f in cid for f in forbidden):
-            taken.add(cid)
-            return cid
-
-
 def _render_job(job):
     # Render workers are spawned and import this module: keep torch out of its module-level imports
     # (sampling, training and the motion encoder import it inside the functions that need it).
@@ -284,7 +324,7 @@ def summary_text(metrics_rows):
     df = pd.DataFrame(metrics_rows)
     df = df[df.role != "training"]
     g = df.groupby(["role", "condition"])
-    mean, sd = g[list(METRIC_NAMES)].mean(), g[list(METRIC_NAMES)].std()
+    mean, sd = g[list(study.METRIC_NAMES)].mean(), g[list(study.METRIC_NAMES)].std()
     table = mean.map(lambda v: f"{v:.3g}") + " (" + sd.map(lambda v: f"{v:.2g}") + ")"
     table.insert(0, "n", g.size())
     return table.to_string()
@@ -295,38 +335,85 @@ def parse_args(argv):
     ap = cli.ArgumentParser(prog="python -m generation.make_stimuli", description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="stimuli", help="stimulus folder to write (default stimuli)")
     ap.add_argument("--quick", action="store_true", help="tiny models on a subset of takes: a few minutes in all")
-    ap.add_argument("--retrain", action="store_true", help="prepare the data and train MG and FL from the mocap "
-                                                           "instead of using the shipped models")
+    ap.add_argument(
+        "--retrain",
+        action="store_true",
+        help="prepare the data and train MG and FL from the mocap instead of using the shipped models",
+    )
     ap.add_argument("--data", help="folder of BVH takes (default ../shared/data/bandai-namco-locomotion)")
     ap.add_argument("--runs", default="runs", help="folder for the cached dataset and training runs (default runs)")
-    ap.add_argument("--dataset", help="prepared dataset .npz to use or create (default RUNS/dataset.npz, "
-                                      "RUNS/dataset_quick.npz with --quick)")
-    ap.add_argument("--config", help="training config for both models: tiny | cpu | paper (default cpu; tiny with --quick)")
+    ap.add_argument(
+        "--dataset",
+        help="prepared dataset .npz to use or create (default RUNS/dataset.npz, RUNS/dataset_quick.npz with --quick)",
+    )
+    ap.add_argument(
+        "--config", help="training config for both models: tiny | cpu | paper (default cpu; tiny with --quick)"
+    )
     ap.add_argument("--train-steps", type=cli.number(int, 1), help="override the config's training steps")
     ap.add_argument("--mg-checkpoint", help="MG checkpoint to sample from (skips MG training)")
     ap.add_argument("--fl-checkpoint", help="FL checkpoint to sample from (skips FL training)")
     ap.add_argument("--bad-checkpoint", help="checkpoint for the BAD catch clips (default: the earliest MG one)")
-    ap.add_argument("--system", action="append", default=[], metavar="NAME=DIR",
-                    help="import another system's output (one ITEM.bvh[.gz] or ITEM.npz per item) as condition NAME")
-    ap.add_argument("--export-items", metavar="DIR", help="only write DIR/items.csv and DIR/items/ (what another "
-                                                           "system must generate), then stop")
-    ap.add_argument("--n-items", type=cli.number(int, 1, 10_000), default=30, help="test items (each in NAT, MG, FL and every system; default 30)")
+    ap.add_argument(
+        "--system",
+        action="append",
+        default=[],
+        metavar="NAME=DIR",
+        help="import another system's output (one ITEM.bvh[.gz] or ITEM.npz per item) as condition NAME",
+    )
+    ap.add_argument(
+        "--export-items",
+        metavar="DIR",
+        help="only write DIR/items.csv and DIR/items/ (what another system must generate), then stop",
+    )
+    ap.add_argument(
+        "--n-items",
+        type=cli.number(int, 1, 10_000),
+        default=30,
+        help="test items (each in NAT, MG, FL and every system; default 30)",
+    )
     ap.add_argument("--n-catch", type=cli.number(int, 0, 10_000), default=4, help="BAD catch clips (default 4)")
-    ap.add_argument("--n-training", type=cli.number(int, 0, 10_000), default=1, help="familiarisation items, each shown in every "
-                                                              "condition but BAD (default 1)")
-    ap.add_argument("--temperature", type=cli.number(float, 0, 10), default=1.0, help="sampling temperature of MG and FL (default 1.0)")
-    ap.add_argument("--seed", type=cli.number(int, 0), default=0, help="item selection, sampling and manifest order (default 0)")
-    ap.add_argument("--size", type=size_flag, help="video width = height in pixels, even (default 640; 320 with --quick)")
-    ap.add_argument("--preset", default="ultrafast", help="x264 preset (default ultrafast at constant quantiser 17: fastest, no visible loss on stick figures)")
-    ap.add_argument("--jobs", type=cli.number(int, 1, 1024), default=os.cpu_count() or 1, help="rendering processes (default: one per core)")
+    ap.add_argument(
+        "--n-training",
+        type=cli.number(int, 0, 10_000),
+        default=1,
+        help="familiarisation items, each shown in every condition but BAD (default 1)",
+    )
+    ap.add_argument(
+        "--temperature",
+        type=cli.number(float, 0, 10),
+        default=1.0,
+        help="sampling temperature of MG and FL (default 1.0)",
+    )
+    ap.add_argument(
+        "--seed", type=cli.number(int, 0), default=0, help="item selection, sampling and manifest order (default 0)"
+    )
+    ap.add_argument(
+        "--size", type=size_flag, help="video width = height in pixels, even (default 640; 320 with --quick)"
+    )
+    ap.add_argument(
+        "--preset",
+        default="ultrafast",
+        help="x264 preset (default ultrafast at constant quantiser 17: fastest, no visible loss on stick figures)",
+    )
+    ap.add_argument(
+        "--jobs",
+        type=cli.number(int, 1, 1024),
+        default=os.cpu_count() or 1,
+        help="rendering processes (default: one per core)",
+    )
     ap.add_argument("--device", help="torch device (default: cuda when present, else cpu)")
-    ap.add_argument("--threads", type=cli.number(int, 1, 1024), help="torch CPU threads for training and sampling (default: the "
-                                                "cores other processes leave free for training, torch's choice for "
-                                                "sampling; 1 with --quick, where tiny models gain nothing from more)")
+    ap.add_argument(
+        "--threads",
+        type=cli.number(int, 1, 1024),
+        help="torch CPU threads for training and sampling (default: the "
+        "cores other processes leave free for training, torch's choice for "
+        "sampling; 1 with --quick, where tiny models gain nothing from more)",
+    )
     ap.add_argument("--force", action="store_true", help="replace an existing stimulus set in --out")
     args = ap.parse_args(argv)
-    args.shipped = not (args.retrain or args.quick or args.config or args.train_steps or args.data) \
-        and pretrained.available()
+    args.shipped = (
+        not (args.retrain or args.quick or args.config or args.train_steps or args.data) and pretrained.available()
+    )
     args.config = args.config or ("tiny" if args.quick else "cpu")
     args.size = args.size or (320 if args.quick else 640)
     args.threads = args.threads or (1 if args.quick else None)
@@ -350,13 +437,19 @@ def run(args):
     splits, fps, window = load_splits(dataset)
     items = select_items(splits, args.n_items, args.n_catch, args.n_training, args.seed)
     arrays = item_arrays(splits, items)
-    log(f"items: {args.n_items} test, {args.n_catch} catch, {args.n_training} training; categories "
-        + ", ".join(f"{c} {n}" for c, n in zip(*np.unique([it['category'] for it in items
-                                                              if it['role'] == 'test'], return_counts=True))))
+    log(
+        f"items: {args.n_items} test, {args.n_catch} catch, {args.n_training} training; categories "
+        + ", ".join(
+            f"{c} {n}"
+            for c, n in zip(*np.unique([it["category"] for it in items if it["role"] == "test"], return_counts=True))
+        )
+    )
     if args.export_items:
         write_items(args.export_items, items, arrays, fps)
-        log(f"wrote {Path(args.export_items) / 'items.csv'} and items/ ({sum(it['role'] != 'catch' for it in items)} "
-            "items); generate one ITEM.bvh or ITEM.npz per item, then pass --system NAME=DIR")
+        log(
+            f"wrote {Path(args.export_items) / 'items.csv'} and items/ ({sum(it['role'] != 'catch' for it in items)} "
+            "items); generate one ITEM.bvh or ITEM.npz per item, then pass --system NAME=DIR"
+        )
         return 0
 
     # Imported systems first: their errors should come before any training.
@@ -371,6 +464,7 @@ def run(args):
 
     if args.threads:
         import torch
+
         torch.set_num_threads(args.threads)
     mg_ckpt, mg_early = ensure_model("mg", args, dataset)
     fl_ckpt, _ = ensure_model("fl", args, dataset)
@@ -384,8 +478,11 @@ def run(args):
     seeds = {"MG": args.seed + 1, "FL": args.seed + 2, "BAD": args.seed + 3}
     # NAT, MG and FL of the catch items too (role catch): NAT is the reference a pairwise or parallel catch trial
     # shows beside BAD, and a parallel catch page is filled up with MG and FL so that its size is a test page's.
-    plan = [("NAT", None, gen_items + catch), ("MG", ("mg", mg_ckpt), gen_items + catch),
-            ("FL", ("fl", fl_ckpt), gen_items + catch)]
+    plan = [
+        ("NAT", None, gen_items + catch),
+        ("MG", ("mg", mg_ckpt), gen_items + catch),
+        ("FL", ("fl", fl_ckpt), gen_items + catch),
+    ]
     if catch:
         plan.append(("BAD", ("mg", bad_ckpt), catch))
     clips = []  # (condition, item position, joints, seed)
@@ -405,19 +502,38 @@ def run(args):
     # inode numbers) follows the condition; ids are random and never contain a condition name.
     rng = np.random.default_rng(args.seed)
     clips = [clips[i] for i in rng.permutation(len(clips))]
-    forbidden = [c.lower() for c in (*BUILTIN, "BAD", *systems)]
+    forbidden = [*study.RESERVED, *systems]
     taken, manifest, metrics_rows, jobs, poses = set(), [], [], [], {}
     for cond, k, joints, seed in tqdm(clips, desc="clips", unit="clip", file=sys.stderr):
         it = items[k]
-        cid = new_clip_id(taken, forbidden)
+        cid = study.new_clip_id(taken, forbidden)
         joints = canonical_placement(joints, fps)
         control = arrays["c"][k]
         save_clip(out / "motion" / f"{cid}.npz", joints, skeleton.PARENTS, skeleton.JOINT_NAMES, fps, control=control)
-        jobs.append((str(out / "motion" / f"{cid}.npz"), str(out / "videos" / f"{cid}.mp4"),
-                     str(out / "sheets" / f"{cid}.png"), args.size, args.preset))
-        manifest.append(dict(clip_id=cid, condition=cond, role=it["role"], item=it["id"],
-                             video=f"videos/{cid}.mp4", motion=f"motion/{cid}.npz", seed=seed,
-                             frames=len(joints), fps=f"{fps:g}", width=args.size, height=args.size))
+        jobs.append(
+            (
+                str(out / "motion" / f"{cid}.npz"),
+                str(out / "videos" / f"{cid}.mp4"),
+                str(out / "sheets" / f"{cid}.png"),
+                args.size,
+                args.preset,
+            )
+        )
+        manifest.append(
+            dict(
+                clip_id=cid,
+                condition=cond,
+                role=it["role"],
+                item=it["id"],
+                video=f"videos/{cid}.mp4",
+                motion=f"motion/{cid}.npz",
+                seed=seed,
+                frames=len(joints),
+                fps=f"{fps:g}",
+                width=args.size,
+                height=args.size,
+            )
+        )
         m = clip_metrics(joints, fps, control)
         metrics_rows.append(dict(clip_id=cid, condition=cond, role=it["role"], item=it["id"], **m))
         if it["role"] == "test":
@@ -431,22 +547,31 @@ def run(args):
     log(f"render: done; every video padded to {size} bytes and stamped with the same time")
 
     _write_csv(out / "manifest.csv", MANIFEST_COLUMNS, manifest)  # rows in the random order of the clips
-    _write_csv(out / "metrics.csv", METRICS_COLUMNS,
-               [{k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()} for row in metrics_rows])
+    _write_csv(
+        out / "metrics.csv",
+        METRICS_COLUMNS,
+        [{k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()} for row in metrics_rows],
+    )
     write_items(out, items, arrays, fps)
     fmd = condition_fmd(poses)
     if fmd:
         _write_csv(out / "fmd.csv", ["condition", "n_windows", "fmd"], fmd)
 
     n = {r: sum(m["role"] == r for m in manifest) for r in ("test", "catch", "training")}
-    print(f"\nobjective metrics, mean (sd) per condition: foot_skating m/s, bone_length_std m, jerk m/s^3, "
-          f"control_error m, control_following m\n{summary_text(metrics_rows)}")
+    print(
+        f"\nobjective metrics, mean (sd) per condition: foot_skating m/s, bone_length_std m, jerk m/s^3, "
+        f"control_error m, control_following m\n{summary_text(metrics_rows)}"
+    )
     if fmd:
-        print("\nFréchet motion distance of the test clips to training motion of their categories "
-              "(NAT's is the floor): " + ", ".join(f"{r['condition']} {r['fmd']}" for r in fmd))
+        print(
+            "\nFréchet motion distance of the test clips to training motion of their categories "
+            "(NAT's is the floor): " + ", ".join(f"{r['condition']} {r['fmd']}" for r in fmd)
+        )
     _warn_if_bad_not_bad(metrics_rows)
-    print(f"\nwrote {out / 'manifest.csv'}: {len(manifest)} clips ({n['test']} test, {n['catch']} catch, "
-          f"{n['training']} training) in {time.perf_counter() - _T0:.0f} s")
+    print(
+        f"\nwrote {out / 'manifest.csv'}: {len(manifest)} clips ({n['test']} test, {n['catch']} catch, "
+        f"{n['training']} training) in {time.perf_counter() - _T0:.0f} s"
+    )
     return 0
 
 
@@ -459,12 +584,15 @@ def condition_fmd(poses, encoder=pretrained.MOTION_ENCODER):
     from .motion_encoder import MotionEncoder  # torch: imported here, not at module level (see _render_job)
 
     enc = MotionEncoder.load(encoder)
-    return [dict(condition=cond, n_windows=len(w), fmd=f"{enc.fmd(np.stack([x for x, _ in w]), [k for _, k in w]):.4g}")
-            for cond, w in poses.items()]
+    return [
+        dict(condition=cond, n_windows=len(w), fmd=f"{enc.fmd(np.stack([x for x, _ in w]), [k for _, k in w]):.4g}")
+        for cond, w in poses.items()
+    ]
 
 
 def _warn_if_bad_not_bad(rows):
     """BAD clips should be plainly worse than NAT; say so when no metric shows it."""
+
     def mean(cond, key):
         v = [r[key] for r in rows if r["condition"] == cond and np.isfinite(r[key])]
         return np.mean(v) if v else np.nan
@@ -473,8 +601,10 @@ def _warn_if_bad_not_bad(rows):
         return
     worse = [k for k in ("jerk", "bone_length_std", "foot_skating") if mean("BAD", k) > 2 * mean("NAT", k)]
     if not worse:
-        log("warning: the BAD clips are not clearly worse than NAT on jerk, bone length or foot skating; "
-            "pass an earlier --bad-checkpoint")
+        log(
+            "warning: the BAD clips are not clearly worse than NAT on jerk, bone length or foot skating; "
+            "pass an earlier --bad-checkpoint"
+        )
 
 
 def _write_csv(path, columns, rows):

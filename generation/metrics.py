@@ -24,22 +24,24 @@
   as if it walked elsewhere (ignoring a side-step, walking on the spot) drifts by metres, while zero-mean
   jitter, which foot_skating and jerk measure, largely cancels along the path.
 """
+
 import numpy as np
+
+from core.study import METRIC_NAMES
 
 from . import skeleton
 
 CONTACT_HEIGHT = 0.01  # m above each foot joint's lowest point in the clip
 CONTACT_FALLBACK = 0.1  # a foot is in contact in at least its lowest 10% of frame pairs
-METRIC_NAMES = ("foot_skating", "bone_length_std", "jerk", "control_error", "control_following")
 
 
 def foot_contacts(joints, feet=tuple(skeleton.FEET), contact_height=CONTACT_HEIGHT, fallback=CONTACT_FALLBACK):
     """Per foot, whether it is in contact in each frame pair: bool [n_feet, T-1] (see foot_skating)."""
     contacts = []
     for pair in np.asarray(feet).reshape(-1, 2):
-        height = joints[:, pair, 1]                                       # [T, 2]
-        rel = (height - height.min(axis=0)).max(axis=1)                   # [T] the higher joint
-        score = np.maximum(rel[1:], rel[:-1])                             # [T-1] per frame pair
+        height = joints[:, pair, 1]  # [T, 2]
+        rel = (height - height.min(axis=0)).max(axis=1)  # [T] the higher joint
+        score = np.maximum(rel[1:], rel[:-1])  # [T-1] per frame pair
         contacts.append(score <= max(contact_height, np.quantile(score, fallback)))
     return np.array(contacts)
 
@@ -65,8 +67,12 @@ def foot_skating(joints, fps, feet=tuple(skeleton.FEET), contact_height=CONTACT_
         return float("nan")
     contact = foot_contacts(joints, feet, contact_height, fallback)
     pairs = np.asarray(feet).reshape(-1, 2)
-    speed = np.stack([np.linalg.norm(np.diff(joints[:, pair][..., [0, 2]], axis=0), axis=-1).mean(axis=1)
-                      for pair in pairs]) * fps                          # [n_feet, T-1]
+    speed = (
+        np.stack(
+            [np.linalg.norm(np.diff(joints[:, pair][..., [0, 2]], axis=0), axis=-1).mean(axis=1) for pair in pairs]
+        )
+        * fps
+    )  # [n_feet, T-1]
     return float(speed[contact].mean())
 
 
@@ -83,7 +89,7 @@ def jerk(joints, fps):
     joints = np.asarray(joints, dtype=np.float64)
     if len(joints) < 4:
         return float("nan")
-    return float(np.linalg.norm(np.diff(joints, n=3, axis=0), axis=-1).mean() * fps ** 3)
+    return float(np.linalg.norm(np.diff(joints, n=3, axis=0), axis=-1).mean() * fps**3)
 
 
 def _rigid_align_error(a, b):
@@ -91,7 +97,7 @@ def _rigid_align_error(a, b):
     ca, cb = a - a.mean(0), b - b.mean(0)
     u, _, vt = np.linalg.svd(cb.T @ ca)
     d = np.sign(np.linalg.det(u @ vt))
-    rot = u @ np.diag([1.0, d]) @ vt                                      # proper rotation, no reflection
+    rot = u @ np.diag([1.0, d]) @ vt  # proper rotation, no reflection
     return float(np.linalg.norm(cb @ rot - ca, axis=1).mean())
 
 
@@ -114,9 +120,9 @@ def control_following(joints, control):
     """Mean floor distance (m) between the path the body implies through its feet and the requested path."""
     joints = np.asarray(joints, dtype=np.float64)
     hips = joints[:, skeleton.INDEX["Hips"]][:, [0, 2]]
-    contact = foot_contacts(joints)                                       # [n_feet, T-1]
+    contact = foot_contacts(joints)  # [n_feet, T-1]
     slide = (foot_steps(joints) * contact[..., None]).sum(0) / np.maximum(contact.sum(0), 1)[:, None]
-    step = np.diff(hips, axis=0) - slide                                  # the body's own travel per frame
+    step = np.diff(hips, axis=0) - slide  # the body's own travel per frame
     implied = np.concatenate([hips[:1], hips[:1] + np.cumsum(step, axis=0)])
     return _rigid_align_error(implied, control_path(control))
 
@@ -126,11 +132,12 @@ def clip_metrics(joints, fps, control=None):
     joints = np.asarray(joints, dtype=np.float64)
     if joints.ndim != 3 or joints.shape[1:] != (skeleton.N_JOINTS, 3):
         raise ValueError(f"clip_metrics: joints must be [T, {skeleton.N_JOINTS}, 3], got {joints.shape}")
-    return dict(
+    no_control = float("nan")
+    values = dict(
         foot_skating=foot_skating(joints, fps),
         bone_length_std=bone_length_std(joints),
         jerk=jerk(joints, fps),
-        control_error=control_error(joints, control) if control is not None else float("nan"),
-        control_following=control_following(joints, control) if control is not None and len(joints) > 1
-        else float("nan"),
+        control_error=control_error(joints, control) if control is not None else no_control,
+        control_following=control_following(joints, control) if control is not None and len(joints) > 1 else no_control,
     )
+    return {name: values[name] for name in METRIC_NAMES}  # metrics.csv's column order; a missing one is a KeyError

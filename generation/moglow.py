@@ -9,6 +9,7 @@ Training runs each coupling LSTM over a whole window at once (frames tau..T-1, h
 h = 0 at frame tau): that equals the frame-by-frame flow, because every other layer acts frame-wise.
 Sampling (MGStream) runs the same flow inverted, one frame at a time, with pre-fused weights.
 """
+
 import os
 
 import torch
@@ -43,9 +44,12 @@ class MoGlow(MotionFlow):
         self.tau = cfg["tau"]
         self.cond_dim = self.tau * pose_dim + (self.tau + 1) * control_dim
         c_a = pose_dim // 2
-        self.flow = Chain(*[
-            FlowStep(pose_dim, LSTMNet(c_a, self.cond_dim, 2 * (pose_dim - c_a), cfg["hidden"], cfg["lstm_layers"]))
-            for _ in range(cfg["K"])])
+        self.flow = Chain(
+            *[
+                FlowStep(pose_dim, LSTMNet(c_a, self.cond_dim, 2 * (pose_dim - c_a), cfg["hidden"], cfg["lstm_layers"]))
+                for _ in range(cfg["K"])
+            ]
+        )
 
     def history_keep(self, batch, length, device=None):
         """Which history frames training keeps: bool [batch, length - tau, tau, 1], each dropped with probability
@@ -71,7 +75,7 @@ class MoGlow(MotionFlow):
         if x.shape[1] <= self.tau:
             raise ValueError(f"MG needs windows longer than tau={self.tau} frames, got {x.shape[1]}")
         cond = self.make_cond(x, c, keep).transpose(1, 2)
-        z, logdet = self.flow(x[:, self.tau:].transpose(1, 2), cond)
+        z, logdet = self.flow(x[:, self.tau :].transpose(1, 2), cond)
         return z.transpose(1, 2), logdet
 
     def nll(self, x, c, keep=None):
@@ -83,7 +87,7 @@ class MoGlow(MotionFlow):
     def inverse(self, z, history, c, layout=None):
         """Frames from latents: z [B, n, 63], history [B, tau, 63], c [B, tau + n, 3] (all standardised)
         -> x [B, n, 63]. The exact inverse of forward (used by the tests); sampling = random z."""
-        stream = MGStream(self, history, c[:, :self.tau], layout=layout)
+        stream = MGStream(self, history, c[:, : self.tau], layout=layout)
         return torch.stack([stream.step(c[:, self.tau + t], z=z[:, t]) for t in range(z.shape[1])], dim=1)
 
     @torch.no_grad()
@@ -95,17 +99,17 @@ class MoGlow(MotionFlow):
         states = [None] * len(steps)
         hist, outs = history, []
         for t in range(z.shape[1]):
-            ctrl = c[:, t:t + tau + 1]
+            ctrl = c[:, t : t + tau + 1]
             cond = torch.cat([hist.flatten(1), ctrl.flatten(1)], dim=1)[:, :, None]  # [B, cond_dim, 1]
             y = z[:, t][:, :, None]
             for k in reversed(range(len(steps))):
                 actnorm, linear, coupling = steps[k].layers
-                y_a = y[:, :coupling.c_a]
+                y_a = y[:, : coupling.c_a]
                 inp = torch.cat([y_a, cond], dim=1).transpose(1, 2)
                 h, states[k] = coupling.net.lstm(inp, states[k])
                 out = coupling.net.out(h).transpose(1, 2)
                 shift, scale = out[:, 0::2], torch.sigmoid(out[:, 1::2] + 2.0)
-                y = torch.cat([y_a, y[:, coupling.c_a:] / scale - shift], dim=1)
+                y = torch.cat([y_a, y[:, coupling.c_a :] / scale - shift], dim=1)
                 y = linear.inverse(y)[0]
                 y = actnorm.inverse(y)[0]
             x_t = y[:, :, 0]
@@ -144,7 +148,7 @@ class MGStream:
         self.temperature, self.generator = temperature, generator
         p = next(model.parameters())
         self.dtype, self.device = p.dtype, p.device
-        self.hist = history.to(self.device, self.dtype).clone()          # [B, tau, 63]
+        self.hist = history.to(self.device, self.dtype).clone()  # [B, tau, 63]
         self.hist_c = history_control.to(self.device, self.dtype).clone()  # [B, tau, 3]
         b = self.hist.shape[0]
         self.layout = layout or default_layout(self.device, b)
@@ -173,9 +177,19 @@ class MGStream:
         self._fdim = 1 if rows else 0  # the feature dimension of activations
         # Per-step views made once: indexing [K, ...] tensors 16x per frame costs more than it looks.
         self._steps = [
-            (w["Wx"][k], [w["Wih"][l][k] if l else None for l in range(layers)], w["Wo"][k], w["bo"][k],
-             w["Winv"][k], w["bn"][k], [g[k] for g in self.gates], [c[k] for c in self.c], [h[k] for h in self.h])
-            for k in range(k_steps)]
+            (
+                w["Wx"][k],
+                [w["Wih"][l][k] if l else None for l in range(layers)],
+                w["Wo"][k],
+                w["bo"][k],
+                w["Winv"][k],
+                w["bn"][k],
+                [g[k] for g in self.gates],
+                [c[k] for c in self.c],
+                [h[k] for h in self.h],
+            )
+            for k in range(k_steps)
+        ]
 
     @torch.no_grad()
     def step(self, control, z=None):
@@ -196,12 +210,16 @@ class MGStream:
         c_a, n_b, hid = w["c_a"], w["n_out"] // 2, w["H"]
         ctrl = torch.cat([self.hist_c, control.to(self.device, self.dtype)[:, None]], dim=1)
         cond = self.cond  # [B, cond_dim + pad]: history, control, then 1 (layer 1's bias) and zeros
-        cond[:, :self.hist[0].numel()] = self.hist.flatten(1)
-        cond[:, self.hist[0].numel():w["cond_dim"]] = ctrl.flatten(1)
+        cond[:, : self.hist[0].numel()] = self.hist.flatten(1)
+        cond[:, self.hist[0].numel() : w["cond_dim"]] = ctrl.flatten(1)
         self._frame_start()
         if z is None:
-            z = torch.randn(b, self.model.pose_dim, generator=self.generator, dtype=self.dtype,
-                            device="cpu").to(self.device) * self.temperature
+            z = (
+                torch.randn(b, self.model.pose_dim, generator=self.generator, dtype=self.dtype, device="cpu").to(
+                    self.device
+                )
+                * self.temperature
+            )
         y = z.to(self.device, self.dtype)
         if fd == 0:
             y = y.T  # [63, B]
@@ -275,8 +293,16 @@ def fused_weights(model, layout="col"):
     if cached is None or cached[0] != key:
         w = _fuse_columns(model)
         if layout == "row":
-            w = {n: ([None if v is None else v.mT.contiguous() for v in x] if isinstance(x, list)
-                     else x.mT.contiguous() if torch.is_tensor(x) else x) for n, x in w.items()}
+            w = {
+                n: (
+                    [None if v is None else v.mT.contiguous() for v in x]
+                    if isinstance(x, list)
+                    else x.mT.contiguous()
+                    if torch.is_tensor(x)
+                    else x
+                )
+                for n, x in w.items()
+            }
         cached = model._fused = (key, w)
     return cached[1]
 

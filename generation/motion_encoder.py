@@ -17,6 +17,7 @@ upwards for small sets: compare a model's FMD with the floor, real held-out moti
 
     python -m generation.motion_encoder --data runs/dataset.npz --out generation/pretrained/motion_encoder.pt
 """
+
 import sys
 from pathlib import Path
 
@@ -42,15 +43,25 @@ class MotionAutoencoder(nn.Module):
         super().__init__()
         act = nn.LeakyReLU(0.2)
         self.encoder = nn.Sequential(
-            nn.Conv1d(pose_dim, hidden, 3, padding=1), act,
-            nn.Conv1d(hidden, hidden, 4, stride=2, padding=1), act,    # 34 -> 17
-            nn.Conv1d(hidden, hidden, 4, stride=2, padding=1), act,    # 17 -> 8
-            nn.Flatten(), nn.Linear(hidden * 8, features))
+            nn.Conv1d(pose_dim, hidden, 3, padding=1),
+            act,
+            nn.Conv1d(hidden, hidden, 4, stride=2, padding=1),
+            act,  # 34 -> 17
+            nn.Conv1d(hidden, hidden, 4, stride=2, padding=1),
+            act,  # 17 -> 8
+            nn.Flatten(),
+            nn.Linear(hidden * 8, features),
+        )
         self.decoder = nn.Sequential(
-            nn.Linear(features, hidden * 8), act, nn.Unflatten(1, (hidden, 8)),
-            nn.ConvTranspose1d(hidden, hidden, 4, stride=2, padding=1, output_padding=1), act,  # 8 -> 17
-            nn.ConvTranspose1d(hidden, hidden, 4, stride=2, padding=1), act,                    # 17 -> 34
-            nn.Conv1d(hidden, pose_dim, 3, padding=1))
+            nn.Linear(features, hidden * 8),
+            act,
+            nn.Unflatten(1, (hidden, 8)),
+            nn.ConvTranspose1d(hidden, hidden, 4, stride=2, padding=1, output_padding=1),
+            act,  # 8 -> 17
+            nn.ConvTranspose1d(hidden, hidden, 4, stride=2, padding=1),
+            act,  # 17 -> 34
+            nn.Conv1d(hidden, pose_dim, 3, padding=1),
+        )
 
     def encode(self, x):
         return self.encoder(x.transpose(1, 2))
@@ -63,7 +74,7 @@ def chunks(windows):
     """Windows [N, T, D] -> every CHUNK-frame piece starting at 0, STRIDE, ..., window by window [N * n, CHUNK, D]."""
     windows = np.asarray(windows, dtype=np.float32)
     starts = range(0, windows.shape[1] - CHUNK + 1, STRIDE)
-    return np.stack([windows[:, s:s + CHUNK] for s in starts], axis=1).reshape(-1, CHUNK, windows.shape[2])
+    return np.stack([windows[:, s : s + CHUNK] for s in starts], axis=1).reshape(-1, CHUNK, windows.shape[2])
 
 
 def frechet_distance(mu_a, cov_a, mu_b, cov_b):
@@ -80,8 +91,9 @@ class MotionEncoder:
         self.net.load_state_dict(state["state"])
         self.net.eval()
         self.x_mean, self.x_std = (np.asarray(state[k], np.float32) for k in ("x_mean", "x_std"))
-        self.moments = {k: (np.asarray(m1, np.float64), np.asarray(m2, np.float64))
-                        for k, (m1, m2) in state["moments"].items()}
+        self.moments = {
+            k: (np.asarray(m1, np.float64), np.asarray(m2, np.float64)) for k, (m1, m2) in state["moments"].items()
+        }
 
     @classmethod
     def load(cls, path):
@@ -115,7 +127,7 @@ class MotionEncoder:
 @torch.no_grad()
 def encode_windows(net, windows, block=256):
     """Features of every chunk of standardised windows [N, T, 63], a block of windows at a time (float64)."""
-    out = [net.encode(torch.from_numpy(chunks(windows[i:i + block]))) for i in range(0, len(windows), block)]
+    out = [net.encode(torch.from_numpy(chunks(windows[i : i + block]))) for i in range(0, len(windows), block)]
     return torch.cat(out).double().numpy()
 
 
@@ -140,8 +152,15 @@ def train_encoder(data_path, steps=3000, batch_size=128, lr=1e-3, seed=0, progre
     feats = encode_windows(net, windows.numpy())
     with np.load(data_path) as d:
         labels = np.repeat(d["train_labels"].astype(str), len(feats) // n)  # chunks come window by window
-    return dict(state=net.state_dict(), x_mean=ds.stats["x_mean"], x_std=ds.stats["x_std"],
-                moments=_moments(feats, labels), steps=steps, seed=seed, recon_mse=loss.item())
+    return dict(
+        state=net.state_dict(),
+        x_mean=ds.stats["x_mean"],
+        x_std=ds.stats["x_std"],
+        moments=_moments(feats, labels),
+        steps=steps,
+        seed=seed,
+        recon_mse=loss.item(),
+    )
 
 
 def _moments(feats, labels):

@@ -10,18 +10,20 @@ take is cut into windows of `window` frames every `stride` frames, plus one wind
 frame so that short takes lose no tail. Valid/test windows start at frame >= tau and carry the tau
 frames before them (`{split}_hist`, `{split}_hist_c`) so that MG can be seeded with real history.
 """
-from concurrent.futures import ProcessPoolExecutor
+
 import os
-from pathlib import Path
 import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 
 import numpy as np
 
-from . import skeleton
-from .clip import MAX_FPS, MIN_FPS
-from .features import load_take, mirror, reverse, to_features
 from core import cli
 from core.cli import UserError
+from core.clip import MAX_FPS, MIN_FPS
+
+from . import skeleton
+from .features import load_take, mirror, reverse, to_features
 
 DEFAULT_DATA = Path("..") / "shared" / "data" / "bandai-namco-locomotion"
 SPLITS = ("train", "valid", "test")
@@ -29,9 +31,14 @@ AUG_NAMES = ("none", "mirror", "reverse", "mirror+reverse")
 
 # Bandai-Namco content name (from the file name) -> locomotion category (as in shared/data/MANIFEST.csv)
 CATEGORY_OF_CONTENT = {
-    "walk": "walk", "run": "run", "dash": "run_fast", "walk-back": "walk_backward",
-    "walk-left": "sidestep_left", "walk-right": "sidestep_right",
-    "walk-turn-left": "walk_turn_left", "walk-turn-right": "walk_turn_right",
+    "walk": "walk",
+    "run": "run",
+    "dash": "run_fast",
+    "walk-back": "walk_backward",
+    "walk-left": "sidestep_left",
+    "walk-right": "sidestep_right",
+    "walk-turn-left": "walk_turn_left",
+    "walk-turn-right": "walk_turn_right",
 }
 
 
@@ -59,8 +66,9 @@ def find_takes(data_dir):
     data_dir = Path(data_dir)
     if not data_dir.is_dir():
         raise PrepareError(f"{data_dir}: data directory not found")
-    files = sorted(p for p in data_dir.rglob("*") if p.name.endswith((".bvh", ".bvh.gz"))
-                   and not p.name.startswith("rest."))
+    files = sorted(
+        p for p in data_dir.rglob("*") if p.name.endswith((".bvh", ".bvh.gz")) and not p.name.startswith("rest.")
+    )
     if not files:
         raise PrepareError(f"{data_dir}: no .bvh or .bvh.gz files found")
     return files
@@ -72,8 +80,11 @@ def longest_takes(data_dir, per_category):
     by_cat = {}
     for f in find_takes(data_dir):
         by_cat.setdefault(category_of(f), []).append(f)
-    return sorted(take_name(f) for files in by_cat.values()
-                  for f in sorted(files, key=lambda p: (-p.stat().st_size, p.name))[:per_category])
+    return sorted(
+        take_name(f)
+        for files in by_cat.values()
+        for f in sorted(files, key=lambda p: (-p.stat().st_size, p.name))[:per_category]
+    )
 
 
 def default_data_dir():
@@ -122,13 +133,24 @@ def _mean_std(a, chunk=512):
     flat = a.reshape(-1, a.shape[-1])
     n = len(flat)
     step = chunk * a.shape[1]
-    mean = sum(flat[i:i + step].sum(0, dtype=np.float64) for i in range(0, n, step)) / n
-    var = sum(np.square(flat[i:i + step] - mean).sum(0) for i in range(0, n, step)) / n
+    mean = sum(flat[i : i + step].sum(0, dtype=np.float64) for i in range(0, n, step)) / n
+    var = sum(np.square(flat[i : i + step] - mean).sum(0) for i in range(0, n, step)) / n
     return mean.astype(np.float32), np.sqrt(var).astype(np.float32)
 
 
-def prepare(data_dir, out_path, fps=20.0, window=80, stride=20, seed=0, takes=None, tau=10, held_out=4,
-            workers=None, progress=True):
+def prepare(
+    data_dir,
+    out_path,
+    fps=20.0,
+    window=80,
+    stride=20,
+    seed=0,
+    takes=None,
+    tau=10,
+    held_out=4,
+    workers=None,
+    progress=True,
+):
     """Build the dataset .npz at `out_path`; returns a summary dict (see `summary_table`).
 
     `takes`: optional subset, as paths or take names (with or without extension) under `data_dir`.
@@ -191,9 +213,14 @@ def prepare(data_dir, out_path, fps=20.0, window=80, stride=20, seed=0, takes=No
                 d["hist_c"].append(cv[hidx])
 
     # Shape and dtype of each stacked key when a split has no windows.
-    empty = dict(x=((0, window, skeleton.POSE_DIM), np.float32), c=((0, window, skeleton.CONTROL_DIM), np.float32),
-                 start=((0,), np.int64), aug=((0,), np.int64),
-                 hist=((0, tau, skeleton.POSE_DIM), np.float32), hist_c=((0, tau, skeleton.CONTROL_DIM), np.float32))
+    empty = dict(
+        x=((0, window, skeleton.POSE_DIM), np.float32),
+        c=((0, window, skeleton.CONTROL_DIM), np.float32),
+        start=((0,), np.int64),
+        aug=((0,), np.int64),
+        hist=((0, tau, skeleton.POSE_DIM), np.float32),
+        hist_c=((0, tau, skeleton.CONTROL_DIM), np.float32),
+    )
     arrays = {}
     for s in SPLITS:
         d = out[s]
@@ -211,10 +238,17 @@ def prepare(data_dir, out_path, fps=20.0, window=80, stride=20, seed=0, takes=No
     x_mean, x_std = _mean_std(arrays["train_x"])
     c_mean, c_std = _mean_std(arrays["train_c"])
     arrays.update(
-        x_mean=x_mean, x_std=np.maximum(x_std, 1e-3).astype(np.float32),
-        c_mean=c_mean, c_std=np.maximum(c_std, 1e-3).astype(np.float32),
-        fps=np.float64(fps), window=np.int64(window), tau=np.int64(tau), stride=np.int64(stride),
-        seed=np.int64(seed), joint_names=np.array(skeleton.JOINT_NAMES, dtype=str), parents=skeleton.PARENTS,
+        x_mean=x_mean,
+        x_std=np.maximum(x_std, 1e-3).astype(np.float32),
+        c_mean=c_mean,
+        c_std=np.maximum(c_std, 1e-3).astype(np.float32),
+        fps=np.float64(fps),
+        window=np.int64(window),
+        tau=np.int64(tau),
+        stride=np.int64(stride),
+        seed=np.int64(seed),
+        joint_names=np.array(skeleton.JOINT_NAMES, dtype=str),
+        parents=skeleton.PARENTS,
         aug_names=np.array(AUG_NAMES, dtype=str),
     )
     out_path = Path(out_path)
@@ -228,11 +262,19 @@ def prepare(data_dir, out_path, fps=20.0, window=80, stride=20, seed=0, takes=No
         for si, s in enumerate(SPLITS):
             members = [i for i in range(len(files)) if cats[i] == cat and split[i] == si]
             n_win = int(np.sum((arrays[f"{s}_labels"] == cat) & (arrays[f"{s}_aug"] == 0)))
-            rows.append(dict(category=cat, split=s, takes=len(members),
-                             minutes=sum(lengths[i] for i in members) / fps / 60, windows=n_win,
-                             windows_augmented=int(np.sum(arrays[f"{s}_labels"] == cat))))
-    return dict(out=str(out_path), n_takes=len(files), rows=rows,
-                n_windows={s: int(len(arrays[f"{s}_x"])) for s in SPLITS})
+            rows.append(
+                dict(
+                    category=cat,
+                    split=s,
+                    takes=len(members),
+                    minutes=sum(lengths[i] for i in members) / fps / 60,
+                    windows=n_win,
+                    windows_augmented=int(np.sum(arrays[f"{s}_labels"] == cat)),
+                )
+            )
+    return dict(
+        out=str(out_path), n_takes=len(files), rows=rows, n_windows={s: int(len(arrays[f"{s}_x"])) for s in SPLITS}
+    )
 
 
 def summary_table(summary):
@@ -247,8 +289,10 @@ def summary_table(summary):
     for col in wide.columns:
         wide[col] = wide[col].round(1) if col.startswith("minutes") else wide[col].astype(int)
     n = summary["n_windows"]
-    return (wide.to_string() + f"\nwindows in file (train incl. mirror/reverse augmentation x4): "
-            f"train {n['train']}, valid {n['valid']}, test {n['test']} -> {summary['out']}")
+    return (
+        wide.to_string() + f"\nwindows in file (train incl. mirror/reverse augmentation x4): "
+        f"train {n['train']}, valid {n['valid']}, test {n['test']} -> {summary['out']}"
+    )
 
 
 def _main(argv):
@@ -256,10 +300,16 @@ def _main(argv):
     ap.add_argument("--data", help="folder of BVH takes (default: ../shared/data/bandai-namco-locomotion)")
     ap.add_argument("--out", default="dataset.npz", help="output .npz (default: dataset.npz)")
     ap.add_argument("--fps", type=cli.number(float, MIN_FPS, MAX_FPS), default=20.0)
-    ap.add_argument("--window", type=cli.number(int, 2, 100_000), default=80, help="frames per window (default 80 = 4 s)")
-    ap.add_argument("--stride", type=cli.number(int, 1, 100_000), default=20, help="frames between window starts (default 20)")
+    ap.add_argument(
+        "--window", type=cli.number(int, 2, 100_000), default=80, help="frames per window (default 80 = 4 s)"
+    )
+    ap.add_argument(
+        "--stride", type=cli.number(int, 1, 100_000), default=20, help="frames between window starts (default 20)"
+    )
     ap.add_argument("--tau", type=cli.number(int, 0, 1000), default=10, help="history frames before valid/test windows")
-    ap.add_argument("--held-out", type=cli.number(int, 0, 10_000), default=4, help="takes per category in valid and in test")
+    ap.add_argument(
+        "--held-out", type=cli.number(int, 0, 10_000), default=4, help="takes per category in valid and in test"
+    )
     ap.add_argument("--seed", type=cli.number(int, 0), default=0)
     ap.add_argument("--workers", type=cli.number(int, 1, 1024), default=None, help="processes (default: all cores)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -268,10 +318,22 @@ def _main(argv):
     if data is None:
         data = default_data_dir()
         if data is None:
-            raise PrepareError(f"no --data given and {DEFAULT_DATA} not found here or beside the "
-                               "repository; pass --data DIR (a folder of .bvh/.bvh.gz takes)")
-    summary = prepare(data, args.out, fps=args.fps, window=args.window, stride=args.stride, seed=args.seed,
-                      tau=args.tau, held_out=args.held_out, workers=args.workers, progress=not args.quiet)
+            raise PrepareError(
+                f"no --data given and {DEFAULT_DATA} not found here or beside the "
+                "repository; pass --data DIR (a folder of .bvh/.bvh.gz takes)"
+            )
+    summary = prepare(
+        data,
+        args.out,
+        fps=args.fps,
+        window=args.window,
+        stride=args.stride,
+        seed=args.seed,
+        tau=args.tau,
+        held_out=args.held_out,
+        workers=args.workers,
+        progress=not args.quiet,
+    )
     print(summary_table(summary))
 
 

@@ -9,6 +9,7 @@ skeleton, which is all make_stimuli reads of a prepared dataset, and quality.jso
 and jerk against NAT's on part of the test split (`quality`), which the tests hold them to. The motion is from the Bandai-Namco-Research-
 Motiondataset (Bandai Namco Research Inc.), licensed CC BY-NC 4.0: non-commercial use only, with attribution.
 """
+
 import json
 import sys
 from pathlib import Path
@@ -23,9 +24,11 @@ HELDOUT = FOLDER / "heldout.npz"
 MOTION_ENCODER = FOLDER / "motion_encoder.pt"  # generation.motion_encoder, for the FMD
 QUALITY = FOLDER / "quality.json"
 QUALITY_STRIDE = 4  # every 4th test window: about 25 windows spread over all categories
-ATTRIBUTION = ("Bandai-Namco-Research-Motiondataset, Bandai Namco Research Inc., CC BY-NC 4.0 "
-               "(https://creativecommons.org/licenses/by-nc/4.0/); windows of held-out takes, re-expressed as "
-               "21-joint root-frame features")
+ATTRIBUTION = (
+    "Bandai-Namco-Research-Motiondataset, Bandai Namco Research Inc., CC BY-NC 4.0 "
+    "(https://creativecommons.org/licenses/by-nc/4.0/); windows of held-out takes, re-expressed as "
+    "21-joint root-frame features"
+)
 HELDOUT_KEYS = ("x", "c", "labels", "take", "start", "hist", "hist_c")
 SHARED_KEYS = ("fps", "window", "joint_names", "parents", "x_mean", "x_std", "c_mean", "c_std", "tau")
 
@@ -65,13 +68,17 @@ def quality(stride=QUALITY_STRIDE, seed=0):
         x, c, hist, hist_c = (d[f"test_{k}"][::stride] for k in ("x", "c", "hist", "hist_c"))
         fps = float(d["fps"])
     out = {}
-    samples = {"NAT": x,
-               "MG": sample_mg(load_model(CHECKPOINTS["mg"], "cpu"), c, hist, hist_c, seed=seed),
-               "FL": sample_fl(load_model(CHECKPOINTS["fl"], "cpu"), c, seed=seed)}
+    samples = {
+        "NAT": x,
+        "MG": sample_mg(load_model(CHECKPOINTS["mg"], "cpu"), c, hist, hist_c, seed=seed),
+        "FL": sample_fl(load_model(CHECKPOINTS["fl"], "cpu"), c, seed=seed),
+    }
     for name, xs in samples.items():
         world = [to_world(xs[i], c[i]) for i in range(len(c))]
-        out[name] = {"foot_skating": float(np.median([foot_skating(w, fps) for w in world])),
-                     "jerk": float(np.median([jerk(w, fps) for w in world]))}
+        out[name] = {
+            "foot_skating": float(np.median([foot_skating(w, fps) for w in world])),
+            "jerk": float(np.median([jerk(w, fps) for w in world])),
+        }
     return {name: {k: v / out["NAT"][k] for k, v in m.items()} for name, m in out.items() if name != "NAT"}
 
 

@@ -9,19 +9,21 @@ API (arrays in and out are un-standardised features, numpy or torch; outputs are
     stream = mg_stream(model, history [B,tau,63], history_control [B,tau,3], temperature, seed)
     pose = stream(control_t [B,3])                                    # one frame in, one pose out [B,63]
 """
+
 import sys
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from core import cli
+from core.cli import UserError
+from core.clip import save_clip
+
 from . import skeleton
-from .clip import save_clip
 from .fl import FL
 from .moglow import MGStream, MoGlow
 from .train import MODELS, pick_device
-from core import cli
-from core.cli import UserError
 
 
 class SampleError(UserError):
@@ -55,8 +57,8 @@ def _generator(seed):
 
 def _mg_stream(model, history, history_control, temperature, seed):
     """MGStream seeded with the last tau frames of un-standardised history."""
-    hist = model.standardize_x(_tensor(history, model)[:, -model.tau:])
-    hist_c = model.standardize_c(_tensor(history_control, model)[:, -model.tau:])
+    hist = model.standardize_x(_tensor(history, model)[:, -model.tau :])
+    hist_c = model.standardize_c(_tensor(history_control, model)[:, -model.tau :])
     return MGStream(model, hist, hist_c, temperature, _generator(seed))
 
 
@@ -131,11 +133,20 @@ def _main(argv):
     model = load_model(a.checkpoint, a.device)
     x, c = sample_split(model, a.data, a.split, a.n, a.temperature, a.seed)
     from .features import to_world
+
     out = Path(a.out)
     for i in range(len(x)):
-        save_clip(out / f"{model.kind}_{a.split}_{i:03d}.npz", to_world(x[i], c[i]), skeleton.PARENTS,
-                  skeleton.JOINT_NAMES, model.fps, control=c[i], seed=np.int64(a.seed),
-                  temperature=np.float64(a.temperature), checkpoint=np.str_(a.checkpoint))
+        save_clip(
+            out / f"{model.kind}_{a.split}_{i:03d}.npz",
+            to_world(x[i], c[i]),
+            skeleton.PARENTS,
+            skeleton.JOINT_NAMES,
+            model.fps,
+            control=c[i],
+            seed=np.int64(a.seed),
+            temperature=np.float64(a.temperature),
+            checkpoint=np.str_(a.checkpoint),
+        )
     print(f"wrote {len(x)} {model.kind.upper()} clips to {out}")
 
 

@@ -12,20 +12,21 @@ BVH files go through the same reader, skeleton detection and 21-joint mapping as
 of generation.skeleton or a skeleton that features knows (e.g. the output of
 `python -m generation.import_motion`); their positions are taken as metres and linearly resampled.
 """
+
 import re
 from pathlib import Path
 
 import numpy as np
 
 from core.cli import UserError
+from core.clip import ClipError, load_clip
+from core.study import RESERVED
 
 from . import skeleton
 from .bvh import BvhError
-from .clip import ClipError, load_clip
 from .features import detect_skeleton, load_take, map_joints, root_trajectory
 from .resample import resample_times
 
-RESERVED = ("NAT", "MG", "FL", "BAD")
 NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,31}$")
 EXTENSIONS = (".bvh.gz", ".bvh", ".npz")
 
@@ -70,8 +71,10 @@ def find_system_files(folder, items):
     missing = [i for i in items if i not in found]
     if missing:
         more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
-        raise SystemError_(f"{folder}: no motion file for item(s) {', '.join(missing[:5])}{more} "
-                           f"(expected ITEM.bvh, ITEM.bvh.gz or ITEM.npz; see items.csv)")
+        raise SystemError_(
+            f"{folder}: no motion file for item(s) {', '.join(missing[:5])}{more} "
+            f"(expected ITEM.bvh, ITEM.bvh.gz or ITEM.npz; see items.csv)"
+        )
     return found
 
 

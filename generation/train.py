@@ -14,6 +14,7 @@ its crop, noise and dropout masks from the shared seed and keeps its own rows, D
 averages the gradients, and ActNorm initialises from the statistics of the whole batch (flows.ActNorm), so
 N ranks train the same model as one process would (up to float rounding). Rank 0 validates and writes.
 """
+
 import csv
 import json
 import math
@@ -36,9 +37,20 @@ from .dataset import batch_indices, eval_batches, load_dataset
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 MODELS = {"fl": fl.FL, "mg": moglow.MoGlow}
 MODEL_DEFAULTS = {"fl": fl.DEFAULTS, "mg": moglow.DEFAULTS}
-TRAIN_DEFAULTS = dict(batch_size=32, lr=1e-3, lr_min=None, warmup=200, clip_grad=5.0, steps=10000, valid_every=500,
-                      valid_windows=256, ckpt_every=2000, early_ckpts=[50, 100, 200, 500], train_window=None,
-                      noise=0.01)
+TRAIN_DEFAULTS = dict(
+    batch_size=32,
+    lr=1e-3,
+    lr_min=None,
+    warmup=200,
+    clip_grad=5.0,
+    steps=10000,
+    valid_every=500,
+    valid_windows=256,
+    ckpt_every=2000,
+    early_ckpts=[50, 100, 200, 500],
+    train_window=None,
+    noise=0.01,
+)
 
 
 class TrainError(UserError):
@@ -126,9 +138,21 @@ def build_model(kind, cfg, stats=None):
 
 def save_checkpoint(path, net, cfg, ds, step, valid_nll):
     """Everything needed to sample without the dataset."""
-    torch.save(dict(kind=net.kind, config=cfg, model_config=net.config, state=net.state_dict(), step=step,
-                    valid_nll=valid_nll, stats={k: v.tolist() for k, v in ds.stats.items()},
-                    tau=getattr(net, "tau", ds.tau), fps=ds.fps, window=ds.window), path)
+    torch.save(
+        dict(
+            kind=net.kind,
+            config=cfg,
+            model_config=net.config,
+            state=net.state_dict(),
+            step=step,
+            valid_nll=valid_nll,
+            stats={k: v.tolist() for k, v in ds.stats.items()},
+            tau=getattr(net, "tau", ds.tau),
+            fps=ds.fps,
+            window=ds.window,
+        ),
+        path,
+    )
 
 
 @torch.no_grad()
@@ -145,8 +169,9 @@ def evaluate(net, split, cfg, device):
     return total / n
 
 
-def train(model, config, data_path, out_dir, steps=None, seed=0, progress=True, resume=False, device=None,
-          threads=None):
+def train(
+    model, config, data_path, out_dir, steps=None, seed=0, progress=True, resume=False, device=None, threads=None
+):
     """Train `model` ('fl' or 'mg') with `config` on a prepared dataset; returns out_dir (see module doc).
     `threads`: CPU threads for torch: None keeps torch's choice, a number fixes it (and the bits of the result),
     "auto" follows the cores other processes leave free (core_share.CoreShare; the command's default)."""
@@ -183,12 +208,14 @@ def train(model, config, data_path, out_dir, steps=None, seed=0, progress=True, 
         raise TrainError(f"{resume_path}: nothing to resume")
     metrics_path = out / "metrics.csv"
     if writes:
-        (out / "config.json").write_text(json.dumps(
-            {**cfg, "data": str(data_path), "seed": seed, "device": str(device), "ranks": world}, indent=2))
+        (out / "config.json").write_text(
+            json.dumps({**cfg, "data": str(data_path), "seed": seed, "device": str(device), "ranks": world}, indent=2)
+        )
         if start == 0 or not metrics_path.exists():
             with open(metrics_path, "w", newline="") as f:
-                csv.writer(f).writerow(["step", "train_nll", "valid_nll", "lr", "grad_norm", "elapsed_s",
-                                        "steps_per_s"])
+                csv.writer(f).writerow(
+                    ["step", "train_nll", "valid_nll", "lr", "grad_norm", "elapsed_s", "steps_per_s"]
+                )
 
     tx, tc = train_split.x.to(device), train_split.c.to(device)
     window = tx.shape[1]
@@ -199,10 +226,24 @@ def train(model, config, data_path, out_dir, steps=None, seed=0, progress=True, 
     if world > 1:
         step_nll = nn.parallel.DistributedDataParallel(step_nll, device_ids=[device] if device.type == "cuda" else None)
     net.train()
-    bar = tqdm(range(start, cfg["steps"]), initial=start, total=cfg["steps"], disable=not (progress and writes),
-               desc=f"train {model}", unit="step", dynamic_ncols=True)
-    run_nll, run_n, bad, t0, valid_nll, t_row, s_row = 0.0, 0, 0, time.perf_counter(), float("nan"), \
-        time.perf_counter(), start
+    bar = tqdm(
+        range(start, cfg["steps"]),
+        initial=start,
+        total=cfg["steps"],
+        disable=not (progress and writes),
+        desc=f"train {model}",
+        unit="step",
+        dynamic_ncols=True,
+    )
+    run_nll, run_n, bad, t0, valid_nll, t_row, s_row = (
+        0.0,
+        0,
+        0,
+        time.perf_counter(),
+        float("nan"),
+        time.perf_counter(),
+        start,
+    )
     for step in bar:
         lr = learning_rate(cfg, step)
         for group in opt.param_groups:
@@ -232,14 +273,27 @@ def train(model, config, data_path, out_dir, steps=None, seed=0, progress=True, 
             sps = (done - s_row) / max(1e-9, now - t_row)
             t_row, s_row = now, done
             with open(metrics_path, "a", newline="") as f:
-                csv.writer(f).writerow([done, f"{run_nll / max(1, run_n):.5f}", f"{valid_nll:.5f}", f"{lr:.3g}",
-                                        f"{grad_norm:.3f}", f"{elapsed + now - t0:.1f}", f"{sps:.3f}"])
+                csv.writer(f).writerow(
+                    [
+                        done,
+                        f"{run_nll / max(1, run_n):.5f}",
+                        f"{valid_nll:.5f}",
+                        f"{lr:.3g}",
+                        f"{grad_norm:.3f}",
+                        f"{elapsed + now - t0:.1f}",
+                        f"{sps:.3f}",
+                    ]
+                )
             run_nll, run_n = 0.0, 0
         bar.set_postfix(nll=f"{loss.item():.3f}", valid=f"{valid_nll:.3f}")
         if done in early or done % cfg["ckpt_every"] == 0 or last:
             save_checkpoint(out / "checkpoints" / f"step_{done:07d}.pt", net, cfg, ds, done, valid_nll)
-            torch.save(dict(state=net.state_dict(), opt=opt.state_dict(), step=done,
-                            elapsed=elapsed + time.perf_counter() - t0), resume_path)
+            torch.save(
+                dict(
+                    state=net.state_dict(), opt=opt.state_dict(), step=done, elapsed=elapsed + time.perf_counter() - t0
+                ),
+                resume_path,
+            )
     bar.close()
     if world > 1:
         torch.distributed.barrier()  # rank 0's last checkpoint is written before any rank returns
@@ -254,7 +308,7 @@ def draw_batch(net, tx, tc, cfg, seed, step, crop):
     torch.manual_seed(seed * 1_000_003 + step)
     if crop < x.shape[1]:
         s = int(torch.randint(0, x.shape[1] - crop + 1, (1,)))
-        x, c = x[:, s:s + crop], c[:, s:s + crop]
+        x, c = x[:, s : s + crop], c[:, s : s + crop]
     if cfg["noise"] > 0:
         # Small Gaussian noise (standardised units) bounds the density on (near-)deterministic dimensions,
         # e.g. the root's own x/z in the root frame, which are exactly 0 (dequantisation, as in Glow).
@@ -287,13 +341,27 @@ def _main(argv):
     ap.add_argument("--seed", type=cli.number(int, 0), default=0)
     ap.add_argument("--resume", action="store_true", help="continue from OUT/resume.pt")
     ap.add_argument("--device", default=None, help="default: cuda when present, else cpu")
-    ap.add_argument("--threads", type=_threads, default="auto",
-                    help="CPU threads, fixed (and then the same bits run after run), or 'auto' (default): the cores "
-                         "other processes leave free, checked every 2 s")
+    ap.add_argument(
+        "--threads",
+        type=_threads,
+        default="auto",
+        help="CPU threads, fixed (and then the same bits run after run), or 'auto' (default): the cores "
+        "other processes leave free, checked every 2 s",
+    )
     ap.add_argument("--no-progress", action="store_true")
     a = ap.parse_args(argv)
-    out = train(a.model, a.config, a.data, a.out, steps=a.steps, seed=a.seed, progress=not a.no_progress,
-                resume=a.resume, device=a.device, threads=a.threads)
+    out = train(
+        a.model,
+        a.config,
+        a.data,
+        a.out,
+        steps=a.steps,
+        seed=a.seed,
+        progress=not a.no_progress,
+        resume=a.resume,
+        device=a.device,
+        threads=a.threads,
+    )
     print(f"trained {a.model}: {out}")
 
 

@@ -9,6 +9,7 @@ COOKIE_SECURE=1 (admin cookie over HTTPS only), PROXY_COUNT (trusted reverse pro
 names the client; default 0) and DB_POOL_SIZE (connections per worker, default 10 + 10 overflow). Every setting is
 checked here, so a bad one stops the start with one line instead of failing on each request.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -31,10 +32,10 @@ __all__ = ["create_app", "AppError", "SETTINGS"]
 # name: (kind, default, lo, hi, lo_open); the CLI flags use the same bounds.
 SETTINGS = {
     "RATINGS_PER_CLIP": (int, 20, 1, 1_000_000, False),
-    "CLIPS_PER_RATER": (int, 0, 0, 1_000_000, False),        # 0: every clip still needing ratings
-    "SLOT_TIMEOUT": (float, 3600.0, 0.0, 1e7, True),          # seconds without an answer before a session expires
-    "MIN_VIEW": (float, 1.0, 0.0, 1.0, False),               # share of each clip that must have played
-    "SESSIONS_PER_CLIENT": (int, 10, 0, 1_000_000, False),    # new sessions per client address per hour; 0: no limit
+    "CLIPS_PER_RATER": (int, 0, 0, 1_000_000, False),  # 0: every clip still needing ratings
+    "SLOT_TIMEOUT": (float, 3600.0, 0.0, 1e7, True),  # seconds without an answer before a session expires
+    "MIN_VIEW": (float, 1.0, 0.0, 1.0, False),  # share of each clip that must have played
+    "SESSIONS_PER_CLIENT": (int, 10, 0, 1_000_000, False),  # new sessions per client address per hour; 0: no limit
     "PROXY_COUNT": (int, 0, 0, 10, False),
 }
 
@@ -56,16 +57,29 @@ def _env(name):
     return os.environ.get(name) or None
 
 
-def create_app(manifest=None, db_url=None, ratings_per_clip=None, clips_per_rater=None, admin_token=None,
-               slot_timeout_s=None, completion_code=None, completion_url=None, secret_key=None,
-               check_files=True, min_view=None, sessions_per_client=None, design=None, question=None) -> Flask:
+def create_app(
+    manifest=None,
+    db_url=None,
+    ratings_per_clip=None,
+    clips_per_rater=None,
+    admin_token=None,
+    slot_timeout_s=None,
+    completion_code=None,
+    completion_url=None,
+    secret_key=None,
+    check_files=True,
+    min_view=None,
+    sessions_per_client=None,
+    design=None,
+    question=None,
+) -> Flask:
     """`design`: acr (default), pairwise or parallel (designs.py); fixed for the life of the database.
     `ratings_per_clip` and `clips_per_rater` count the design's units: clips (acr), pairs of conditions of an
     item (pairwise) or pages (parallel)."""
     from . import db as dbm
-    from .designs import QUESTIONS, build_units, check_design
     from .admin import bp as admin_bp
     from .api import bp as api_bp
+    from .designs import QUESTIONS, build_units, check_design
     from .pages import bp as pages_bp
     from .videos import VideoStore
 
@@ -73,7 +87,7 @@ def create_app(manifest=None, db_url=None, ratings_per_clip=None, clips_per_rate
     if not manifest:
         raise AppError("no stimulus manifest: set RATING_MANIFEST (or --manifest) to stimuli/manifest.csv")
     ratings_per_clip = setting("RATINGS_PER_CLIP", ratings_per_clip)
-    clips_per_rater = setting("CLIPS_PER_RATER", clips_per_rater) or None      # 0 / None: all clips still short
+    clips_per_rater = setting("CLIPS_PER_RATER", clips_per_rater) or None  # 0 / None: all clips still short
     slot_timeout_s = setting("SLOT_TIMEOUT", slot_timeout_s)
     min_view = setting("MIN_VIEW", min_view)
     sessions_per_client = setting("SESSIONS_PER_CLIENT", sessions_per_client)
@@ -91,15 +105,19 @@ def create_app(manifest=None, db_url=None, ratings_per_clip=None, clips_per_rate
     app = Flask(__name__)
     if proxies:
         from werkzeug.middleware.proxy_fix import ProxyFix
+
         app.wsgi_app = ProxyFix(app.wsgi_app, x_for=proxies, x_proto=proxies, x_host=proxies)
     # Workers must share the cookie key: derive it from the admin token unless one is given.
-    secret_key = secret_key or _env("SECRET_KEY") or hashlib.sha256(
-        b"rating-app:" + (admin_token or os.urandom(32).hex()).encode()).hexdigest()
+    secret_key = (
+        secret_key
+        or _env("SECRET_KEY")
+        or hashlib.sha256(b"rating-app:" + (admin_token or os.urandom(32).hex()).encode()).hexdigest()
+    )
     app.config.update(
         SECRET_KEY=secret_key,
         SESSION_COOKIE_HTTPONLY=True,
         SESSION_COOKIE_SAMESITE="Strict",
-        SESSION_COOKIE_SECURE=os.environ.get("COOKIE_SECURE", "") == "1",     # set behind HTTPS
+        SESSION_COOKIE_SECURE=os.environ.get("COOKIE_SECURE", "") == "1",  # set behind HTTPS
         MAX_CONTENT_LENGTH=16 * 1024,
         RATINGS_PER_CLIP=ratings_per_clip,
         CLIPS_PER_RATER=clips_per_rater,
@@ -127,6 +145,7 @@ def create_app(manifest=None, db_url=None, ratings_per_clip=None, clips_per_rate
     metrics = {}
     if (Path(manifest).resolve().parent / "metrics.csv").is_file():
         from .manifest import load_metrics
+
         try:
             metrics = load_metrics(Path(manifest).resolve().parent / "metrics.csv")
         except (AppError, OSError, ValueError) as e:
@@ -174,7 +193,8 @@ def create_app(manifest=None, db_url=None, ratings_per_clip=None, clips_per_rate
         resp.headers.setdefault(
             "Content-Security-Policy",
             "default-src 'self'; media-src 'self'; img-src 'self' data:; style-src 'self'; "
-            "script-src 'self'; frame-ancestors 'none'; form-action 'self'")
+            "script-src 'self'; frame-ancestors 'none'; form-action 'self'",
+        )
         if request.path.startswith(("/api/", "/admin")):
             resp.headers.setdefault("Cache-Control", "no-store")
         return resp

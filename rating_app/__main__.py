@@ -1,4 +1,5 @@
 """python -m rating_app serve | export | simulate  (see --help of each)."""
+
 from __future__ import annotations
 
 import json
@@ -20,19 +21,39 @@ def _flag(name):
 
 def _serve(a):
     from . import create_app
-    app = create_app(manifest=a.manifest, db_url=a.db, ratings_per_clip=a.ratings_per_clip,
-                     clips_per_rater=a.clips_per_rater, slot_timeout_s=a.slot_timeout,
-                     completion_code=a.completion_code, completion_url=a.completion_url, min_view=a.min_view,
-                     sessions_per_client=a.sessions_per_client, design=a.design, question=a.question)
-    from .db import normalise_url
+
+    app = create_app(
+        manifest=a.manifest,
+        db_url=a.db,
+        ratings_per_clip=a.ratings_per_clip,
+        clips_per_rater=a.clips_per_rater,
+        slot_timeout_s=a.slot_timeout,
+        completion_code=a.completion_code,
+        completion_url=a.completion_url,
+        min_view=a.min_view,
+        sessions_per_client=a.sessions_per_client,
+        design=a.design,
+        question=a.question,
+    )
     from sqlalchemy.engine import make_url
+
+    from .db import normalise_url
+
     db = make_url(normalise_url(a.db)).render_as_string(hide_password=True)
-    print(f"rating app on http://{a.host}:{a.port}/  ({app.config['STUDY_DESIGN']} design; database {db}; "
-          "admin at /admin"
-          f"{'' if app.config['ADMIN_TOKEN'] else ' disabled: set ADMIN_TOKEN'})", file=sys.stderr, flush=True)
+    print(
+        f"rating app on http://{a.host}:{a.port}/  ({app.config['STUDY_DESIGN']} design; database {db}; "
+        "admin at /admin"
+        f"{'' if app.config['ADMIN_TOKEN'] else ' disabled: set ADMIN_TOKEN'})",
+        file=sys.stderr,
+        flush=True,
+    )
     if app.config["MIN_VIEW"] < 1:
-        print(f"warning: minimum viewing time lowered to {app.config['MIN_VIEW']:g} of each clip (tests and "
-              "simulations only)", file=sys.stderr, flush=True)
+        print(
+            f"warning: minimum viewing time lowered to {app.config['MIN_VIEW']:g} of each clip (tests and "
+            "simulations only)",
+            file=sys.stderr,
+            flush=True,
+        )
     app.run(host=a.host, port=a.port, threaded=True, debug=False, use_reloader=False)
     return 0
 
@@ -44,6 +65,7 @@ def _export(a):
 
     from .db import check_url, make_engine
     from .export import export_csv
+
     url = check_url(a.db)
     parsed = make_url(url)
     if parsed.drivername.startswith("sqlite") and not os.path.isfile(parsed.database or ""):
@@ -51,7 +73,9 @@ def _export(a):
     engine = make_engine(url)
     try:
         if "ratings" not in inspect(engine).get_table_names():
-            raise AppError(f"{parsed.render_as_string(hide_password=True)}: no ratings table (not a rating app database)")
+            raise AppError(
+                f"{parsed.render_as_string(hide_password=True)}: no ratings table (not a rating app database)"
+            )
         if a.out == "-":
             n = export_csv(engine, sys.stdout)
         else:
@@ -68,14 +92,36 @@ def _export(a):
 
 def _simulate(a):
     from .simulate import parse_quality, run_simulation, write_summary
-    summary = run_simulation(a.url, a.raters, seed=a.seed, careless=a.careless, manifest=a.manifest,
-                             quality=parse_quality(a.quality), concurrency=a.concurrency, timeout_s=a.timeout,
-                             admin_token=a.admin_token or os.environ.get("ADMIN_TOKEN"), think_s=a.think,
-                             prefix=a.prefix, progress=not a.quiet, design=a.design)
+
+    summary = run_simulation(
+        a.url,
+        a.raters,
+        seed=a.seed,
+        careless=a.careless,
+        manifest=a.manifest,
+        quality=parse_quality(a.quality),
+        concurrency=a.concurrency,
+        timeout_s=a.timeout,
+        admin_token=a.admin_token or os.environ.get("ADMIN_TOKEN"),
+        think_s=a.think,
+        prefix=a.prefix,
+        progress=not a.quiet,
+        design=a.design,
+    )
     if a.summary:
         write_summary(summary, a.summary)
-    short = {k: summary[k] for k in ("n_raters_started", "n_raters_completed", "study_full", "n_ratings",
-                                     "n_ratings_by_condition", "quality", "elapsed_s")}
+    short = {
+        k: summary[k]
+        for k in (
+            "n_raters_started",
+            "n_raters_completed",
+            "study_full",
+            "n_ratings",
+            "n_ratings_by_condition",
+            "quality",
+            "elapsed_s",
+        )
+    }
     short["careless_raters"] = len(summary["careless_raters"])
     short["failed_catch_raters"] = len(summary["failed_catch_raters"])
     short["errors"] = summary["errors"][:5]
@@ -93,27 +139,60 @@ def build_parser():
     s.add_argument("--db", default=None, help="database URL (default $DATABASE_URL or sqlite:///ratings.sqlite)")
     s.add_argument("--host", default="127.0.0.1")
     s.add_argument("--port", type=cli.number(int, 1, 65535), default=5000)
-    s.add_argument("--design", choices=DESIGNS, default=None,
-                   help="acr (one clip, 1-5; the default), pairwise (two clips, a preference) or parallel (every "
-                        "condition of an item on one page, 0-100); default $STUDY_DESIGN or acr. Stored with the "
-                        "study: a database holds one design")
-    s.add_argument("--question", default=None, help="the question on the rating page (default per design, e.g. "
-                                                    "'Which motion looks more natural?' for pairwise)")
-    s.add_argument("--ratings-per-clip", type=_flag("RATINGS_PER_CLIP"), default=None,
-                   help="target answers per test unit: clip (acr), item and pair of conditions (pairwise), item "
-                        "page (parallel) (20)")
-    s.add_argument("--clips-per-rater", type=_flag("CLIPS_PER_RATER"), default=None,
-                   help="test units (clips, pairs or pages) per rater (default or 0: all that still need answers)")
-    s.add_argument("--slot-timeout", type=_flag("SLOT_TIMEOUT"), default=None,
-                   help="seconds without an answer before a session expires and its slot is freed (3600)")
-    s.add_argument("--min-view", type=_flag("MIN_VIEW"), default=None,
-                   help="share of each clip that must have played before an answer is accepted (1 = the whole "
-                        "clip, the default; lower only for tests and simulated crowds)")
-    s.add_argument("--sessions-per-client", type=_flag("SESSIONS_PER_CLIENT"), default=None,
-                   help="new sessions per client address and hour (10; 0: no limit)")
-    s.add_argument("--completion-code", default=None, help="one code for everybody (e.g. Prolific's); default: random per rater")
-    s.add_argument("--completion-url", default=None,
-                   help="redirect after the last trial; {code} is replaced, e.g. https://app.prolific.com/submissions/complete?cc={code}")
+    s.add_argument(
+        "--design",
+        choices=DESIGNS,
+        default=None,
+        help="acr (one clip, 1-5; the default), pairwise (two clips, a preference) or parallel (every "
+        "condition of an item on one page, 0-100); default $STUDY_DESIGN or acr. Stored with the "
+        "study: a database holds one design",
+    )
+    s.add_argument(
+        "--question",
+        default=None,
+        help="the question on the rating page (default per design, e.g. "
+        "'Which motion looks more natural?' for pairwise)",
+    )
+    s.add_argument(
+        "--ratings-per-clip",
+        type=_flag("RATINGS_PER_CLIP"),
+        default=None,
+        help="target answers per test unit: clip (acr), item and pair of conditions (pairwise), item "
+        "page (parallel) (20)",
+    )
+    s.add_argument(
+        "--clips-per-rater",
+        type=_flag("CLIPS_PER_RATER"),
+        default=None,
+        help="test units (clips, pairs or pages) per rater (default or 0: all that still need answers)",
+    )
+    s.add_argument(
+        "--slot-timeout",
+        type=_flag("SLOT_TIMEOUT"),
+        default=None,
+        help="seconds without an answer before a session expires and its slot is freed (3600)",
+    )
+    s.add_argument(
+        "--min-view",
+        type=_flag("MIN_VIEW"),
+        default=None,
+        help="share of each clip that must have played before an answer is accepted (1 = the whole "
+        "clip, the default; lower only for tests and simulated crowds)",
+    )
+    s.add_argument(
+        "--sessions-per-client",
+        type=_flag("SESSIONS_PER_CLIENT"),
+        default=None,
+        help="new sessions per client address and hour (10; 0: no limit)",
+    )
+    s.add_argument(
+        "--completion-code", default=None, help="one code for everybody (e.g. Prolific's); default: random per rater"
+    )
+    s.add_argument(
+        "--completion-url",
+        default=None,
+        help="redirect after the last trial; {code} is replaced, e.g. https://app.prolific.com/submissions/complete?cc={code}",
+    )
     s.set_defaults(fn=_serve)
 
     e = sub.add_parser("export", help="write ratings.csv from the database")
@@ -125,17 +204,24 @@ def build_parser():
     m.add_argument("--url", required=True, help="base URL of the running app")
     m.add_argument("--raters", type=count, required=True, help="number of raters (stops early when the study is full)")
     m.add_argument("--seed", type=cli.number(int, 0, 2**31 - 1), default=0)
-    m.add_argument("--careless", type=cli.number(float, 0, 1), default=0.1,
-                   help="share of careless raters answering at random")
+    m.add_argument(
+        "--careless", type=cli.number(float, 0, 1), default=0.1, help="share of careless raters answering at random"
+    )
     m.add_argument("--manifest", default=None, help="manifest.csv (+ metrics.csv beside it); else /admin/clips.json")
     m.add_argument("--quality", default=None, help="per-condition mean rating, e.g. NAT=4.3,MG=3.8,FL=2.5,BAD=1.3")
-    m.add_argument("--design", choices=DESIGNS, default=None,
-                   help="the design the server must run (checked first); default: answer whichever it runs")
+    m.add_argument(
+        "--design",
+        choices=DESIGNS,
+        default=None,
+        help="the design the server must run (checked first); default: answer whichever it runs",
+    )
     m.add_argument("--concurrency", type=cli.number(int, 1, 1000), default=8, help="raters at once")
-    m.add_argument("--timeout", type=cli.number(float, 0, 1e6, lo_open=True), default=600.0,
-                   help="overall time limit in seconds")
-    m.add_argument("--think", type=cli.number(float, 0, 3600), default=0.0,
-                   help="mean pause before each answer, seconds")
+    m.add_argument(
+        "--timeout", type=cli.number(float, 0, 1e6, lo_open=True), default=600.0, help="overall time limit in seconds"
+    )
+    m.add_argument(
+        "--think", type=cli.number(float, 0, 3600), default=0.0, help="mean pause before each answer, seconds"
+    )
     m.add_argument("--prefix", default=None, help="external id prefix (default sim{seed})")
     m.add_argument("--admin-token", default=None, help="default $ADMIN_TOKEN")
     m.add_argument("--summary", default=None, help="write the full summary (raters, ratings) as JSON here")

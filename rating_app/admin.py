@@ -6,6 +6,7 @@ is nothing to forge). Logout deletes the row, so a copied cookie stops working a
 tokens are counted per client: after LOCKOUT_FAILURES within LOCKOUT_WINDOW the client is refused (429) until
 the window has passed, whatever token it sends.
 """
+
 from __future__ import annotations
 
 import datetime as dt
@@ -13,8 +14,7 @@ import hashlib
 import hmac
 import secrets
 
-from flask import (Blueprint, Response, abort, current_app, jsonify, redirect, render_template, request,
-                   session, url_for)
+from flask import Blueprint, Response, abort, current_app, jsonify, redirect, render_template, request, session, url_for
 from sqlalchemy import delete, func, insert, select
 
 from .db import AdminLogin, LoginFailure, utcnow
@@ -33,8 +33,11 @@ def _engine():
 
 
 def _locked_out(conn, client, now) -> bool:
-    n = conn.execute(select(func.count()).select_from(LoginFailure).where(
-        LoginFailure.client == client, LoginFailure.at >= now - LOCKOUT_WINDOW)).scalar()
+    n = conn.execute(
+        select(func.count())
+        .select_from(LoginFailure)
+        .where(LoginFailure.client == client, LoginFailure.at >= now - LOCKOUT_WINDOW)
+    ).scalar()
     return n >= LOCKOUT_FAILURES
 
 
@@ -60,7 +63,7 @@ def _login_hash(key: str) -> str:
 def authorised() -> bool:
     auth = request.headers.get("Authorization", "")
     if auth.startswith("Bearer "):
-        return _check_token(auth[len("Bearer "):].strip())
+        return _check_token(auth[len("Bearer ") :].strip())
     key = session.get("admin")
     if not current_app.config["ADMIN_TOKEN"] or not isinstance(key, str):
         return False
@@ -82,8 +85,9 @@ def dashboard():
     if not authorised():
         return render_template("admin_login.html", error=None), 401
     data = _progress()
-    return render_template("admin.html", p=data, min_view=current_app.config["MIN_VIEW"],
-                           design=current_app.config["STUDY_DESIGN"])
+    return render_template(
+        "admin.html", p=data, min_view=current_app.config["MIN_VIEW"], design=current_app.config["STUDY_DESIGN"]
+    )
 
 
 def _progress():
@@ -117,6 +121,7 @@ def logout():
 def export():
     require_admin()
     from .design_export import FILENAMES
+
     body = export_csv(_engine())
     name = FILENAMES[current_app.config["STUDY_DESIGN"]]
     return Response(body, mimetype="text/csv", headers={"Content-Disposition": f"attachment; filename={name}"})
@@ -142,9 +147,16 @@ def clips_json():
     ext = current_app.extensions["rating_app"]
     out = []
     for c in ext["clips"].values():
-        rec = {"clip_id": c.clip_id, "condition": c.condition, "role": c.role, "item": c.item,
-               "frames": c.frames, "fps": c.fps}
-        rec.update({k: v for k, v in ext["metrics"].get(c.clip_id, {}).items()
-                    if k not in ("condition", "role", "item")})
+        rec = {
+            "clip_id": c.clip_id,
+            "condition": c.condition,
+            "role": c.role,
+            "item": c.item,
+            "frames": c.frames,
+            "fps": c.fps,
+        }
+        rec.update(
+            {k: v for k, v in ext["metrics"].get(c.clip_id, {}).items() if k not in ("condition", "role", "item")}
+        )
         out.append(rec)
     return jsonify(clips=out)

@@ -11,6 +11,7 @@ when its video was fetched, and refuses an answer that comes before the clip cou
 Every design (designs.py) takes the same path: a pairwise or parallel trial is a slot like an acr one, served
 with a unit of several clips instead of one clip, and answered with a preference or a page of ratings.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -28,17 +29,18 @@ from sqlalchemy.exc import IntegrityError
 
 from .assign import StudyFull, assign_slot, assign_unit, expire_idle, lock_assign, plan_session, plan_units
 from .db import Event, PageRating, Preference, Rater, Rating, Trial, TrialClip, utcnow
-from .designs import LABELS, required_ms as design_required_ms
+from .designs import LABELS
+from .designs import required_ms as design_required_ms
 from .guard import check_depth, client_key, escape_text, same_site_only
 
 bp = Blueprint("api", __name__, url_prefix="/api")
 
-TOKEN = re.compile(r"[A-Za-z0-9_-]{16,64}")           # always fullmatch: '$' would let a trailing newline in
+TOKEN = re.compile(r"[A-Za-z0-9_-]{16,64}")  # always fullmatch: '$' would let a trailing newline in
 EXTERNAL = re.compile(r"[A-Za-z0-9_.:@-]{1,128}")
 EVENT_KINDS = ("video_error", "video_stalled", "page_error")
 MAX_WATCHED_MS = 24 * 3600 * 1000
-MAX_EVENTS = 30                  # per session: enough for every trial's playback problem, not a log flood
-TOLERANCE_MS = 250               # clock and decoding slack on the minimum viewing time
+MAX_EVENTS = 30  # per session: enough for every trial's playback problem, not a log flood
+TOLERANCE_MS = 250  # clock and decoding slack on the minimum viewing time
 RESUME_COOKIE = "rating_resume"
 CLIENT_WINDOW = dt.timedelta(hours=1)
 
@@ -67,8 +69,11 @@ def _int_field(body, name, lo, hi, nullable=False):
     v = body.get(name)
     if v is None and nullable:
         return None
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or (isinstance(v, float) and not (
-            math.isfinite(v) and v.is_integer())):
+    if (
+        isinstance(v, bool)
+        or not isinstance(v, (int, float))
+        or (isinstance(v, float) and not (math.isfinite(v) and v.is_integer()))
+    ):
         abort(400, f"field '{name}' must be an integer")
     v = int(v)
     if not lo <= v <= hi:
@@ -91,19 +96,37 @@ def _hash(secret: str) -> str:
 
 def _session_reply(rater, status: int, resume_secret: str | None = None):
     cfg = current_app.config
-    resp = jsonify(session=rater.token, rater_id=rater.rater_id, n_trials=rater.n_training + rater.n_rating,
-                   n_training=rater.n_training, n_rating=rater.n_rating, resumed=status == 200,
-                   min_view=cfg["MIN_VIEW"], view_tolerance_ms=TOLERANCE_MS, design=cfg["STUDY_DESIGN"])
+    resp = jsonify(
+        session=rater.token,
+        rater_id=rater.rater_id,
+        n_trials=rater.n_training + rater.n_rating,
+        n_training=rater.n_training,
+        n_rating=rater.n_rating,
+        resumed=status == 200,
+        min_view=cfg["MIN_VIEW"],
+        view_tolerance_ms=TOLERANCE_MS,
+        design=cfg["STUDY_DESIGN"],
+    )
     resp.status_code = status
     if resume_secret:
-        resp.set_cookie(RESUME_COOKIE, resume_secret, max_age=7 * 24 * 3600, path="/api/sessions", httponly=True,
-                        samesite="Strict", secure=cfg["SESSION_COOKIE_SECURE"])
+        resp.set_cookie(
+            RESUME_COOKIE,
+            resume_secret,
+            max_age=7 * 24 * 3600,
+            path="/api/sessions",
+            httponly=True,
+            samesite="Strict",
+            secure=cfg["SESSION_COOKIE_SECURE"],
+        )
     return resp
 
 
 def _expired_reply():
-    return jsonify(error="this session has expired: nothing was answered for too long. It cannot be continued "
-                         "and gives no completion code", expired=True), 410
+    return jsonify(
+        error="this session has expired: nothing was answered for too long. It cannot be continued "
+        "and gives no completion code",
+        expired=True,
+    ), 410
 
 
 def _resume(conn, external_id, ext_session, now):
@@ -112,11 +135,15 @@ def _resume(conn, external_id, ext_session, now):
     if old is None:
         return None
     cookie = request.cookies.get(RESUME_COOKIE)
-    proof = (bool(old.external_session and ext_session) and hmac.compare_digest(old.external_session, ext_session)) \
-        or (bool(cookie and old.resume_hash) and hmac.compare_digest(_hash(cookie), old.resume_hash))
+    proof = (bool(old.external_session and ext_session) and hmac.compare_digest(old.external_session, ext_session)) or (
+        bool(cookie and old.resume_hash) and hmac.compare_digest(_hash(cookie), old.resume_hash)
+    )
     if not proof:
-        return jsonify(error="this participant id has already started a session; it can be resumed only from the "
-                             "same browser or through the recruiting platform's link", resume=False), 409
+        return jsonify(
+            error="this participant id has already started a session; it can be resumed only from the "
+            "same browser or through the recruiting platform's link",
+            resume=False,
+        ), 409
     if old.expired_at is not None or expire_idle(conn, current_app.config["SLOT_TIMEOUT_S"], now, old.id):
         return _expired_reply()
     return _session_reply(old, 200)
@@ -138,8 +165,15 @@ def create_session():
                     return resumed
             lock_assign(conn)
             client, limit = client_key(), cfg["SESSIONS_PER_CLIENT"]
-            if limit and conn.execute(select(func.count()).select_from(Rater).where(
-                    Rater.client == client, Rater.created_at >= now - CLIENT_WINDOW)).scalar() >= limit:
+            if (
+                limit
+                and conn.execute(
+                    select(func.count())
+                    .select_from(Rater)
+                    .where(Rater.client == client, Rater.created_at >= now - CLIENT_WINDOW)
+                ).scalar()
+                >= limit
+            ):
                 return jsonify(error="too many new sessions from this address; please try again later"), 429
             expire_idle(conn, cfg["SLOT_TIMEOUT_S"], now)
             rng = random.Random(secrets.randbits(64))
@@ -148,34 +182,65 @@ def create_session():
                     plan = plan_session(conn, rng, cfg["RATINGS_PER_CLIP"], cfg["CLIPS_PER_RATER"])
                 else:
                     ext = current_app.extensions["rating_app"]
-                    plan = plan_units(conn, rng, cfg["RATINGS_PER_CLIP"], cfg["CLIPS_PER_RATER"],
-                                      cfg["STUDY_DESIGN"], ext["clips"].values(), ext["units"])
+                    plan = plan_units(
+                        conn,
+                        rng,
+                        cfg["RATINGS_PER_CLIP"],
+                        cfg["CLIPS_PER_RATER"],
+                        cfg["STUDY_DESIGN"],
+                        ext["clips"].values(),
+                        ext["units"],
+                    )
             except StudyFull as e:
                 return jsonify(error=str(e), full=True), 409
             resume_secret = secrets.token_urlsafe(24)
             n_training = sum(kind == "training" for kind, _ in plan)
-            values = dict(token=secrets.token_urlsafe(24), rater_id="r" + secrets.token_hex(6),
-                          external_id=external_id, study_id=study_id, external_session=ext_session,
-                          created_at=now, last_seen=now, last_progress=now, client=client,
-                          resume_hash=_hash(resume_secret), n_early=0, n_training=n_training,
-                          n_rating=len(plan) - n_training,
-                          completion_code=cfg["COMPLETION_CODE"] or secrets.token_hex(4).upper())
+            values = dict(
+                token=secrets.token_urlsafe(24),
+                rater_id="r" + secrets.token_hex(6),
+                external_id=external_id,
+                study_id=study_id,
+                external_session=ext_session,
+                created_at=now,
+                last_seen=now,
+                last_progress=now,
+                client=client,
+                resume_hash=_hash(resume_secret),
+                n_early=0,
+                n_training=n_training,
+                n_rating=len(plan) - n_training,
+                completion_code=cfg["COMPLETION_CODE"] or secrets.token_hex(4).upper(),
+            )
             rater_pk = conn.execute(insert(Rater).values(**values).returning(Rater.id)).scalar()
             counters, rows, groups = {"training": 0, "rating": 0}, [], {}
             for pos, (kind, clip_id) in enumerate(plan):
                 phase = "training" if kind == "training" else "rating"
                 counters[phase] += 1
-                if isinstance(clip_id, tuple):           # a familiarisation pair or page
+                if isinstance(clip_id, tuple):  # a familiarisation pair or page
                     groups[pos], clip_id = clip_id, None
-                rows.append({"rater_pk": rater_pk, "clip_id": clip_id, "kind": kind, "phase": phase,
-                             "position": pos, "index": counters[phase], "released": False,
-                             "unit": "training" if pos in groups else None})
-            conn.execute(insert(Trial), rows)            # one multi-row INSERT, not one per trial
+                rows.append(
+                    {
+                        "rater_pk": rater_pk,
+                        "clip_id": clip_id,
+                        "kind": kind,
+                        "phase": phase,
+                        "position": pos,
+                        "index": counters[phase],
+                        "released": False,
+                        "unit": "training" if pos in groups else None,
+                    }
+                )
+            conn.execute(insert(Trial), rows)  # one multi-row INSERT, not one per trial
             if groups:
                 ids = dict(conn.execute(select(Trial.position, Trial.id).where(Trial.rater_pk == rater_pk)).all())
-                conn.execute(insert(TrialClip), [
-                    {"trial_pk": ids[pos], "position": i, "label": LABELS[i], "clip_id": c}
-                    for pos, group in groups.items() for i, c in enumerate(rng.sample(group, len(group)))])
+                conn.execute(
+                    insert(TrialClip),
+                    [
+                        {"trial_pk": ids[pos], "position": i, "label": LABELS[i], "clip_id": c}
+                        for pos, group in groups.items()
+                        for i, c in enumerate(rng.sample(group, len(group)))
+                    ],
+                )
             rater = conn.execute(select(Rater).where(Rater.id == rater_pk)).one()
             return _session_reply(rater, 201, resume_secret)
     except IntegrityError:
@@ -197,11 +262,28 @@ def _completion(rater) -> dict:
     return out
 
 
-TOUCH_EVERY_S = 30     # last_seen (shown on the dashboard) is refreshed at most this often
-RATER_COLS = (Rater.id, Rater.rater_id, Rater.n_training, Rater.n_rating, Rater.completed_at, Rater.expired_at,
-              Rater.completion_code, Rater.last_seen, Rater.last_progress)
-TRIAL_COLS = (Trial.id, Trial.clip_id, Trial.kind, Trial.phase, Trial.index, Trial.position, Trial.served_at,
-              Trial.unit)
+TOUCH_EVERY_S = 30  # last_seen (shown on the dashboard) is refreshed at most this often
+RATER_COLS = (
+    Rater.id,
+    Rater.rater_id,
+    Rater.n_training,
+    Rater.n_rating,
+    Rater.completed_at,
+    Rater.expired_at,
+    Rater.completion_code,
+    Rater.last_seen,
+    Rater.last_progress,
+)
+TRIAL_COLS = (
+    Trial.id,
+    Trial.clip_id,
+    Trial.kind,
+    Trial.phase,
+    Trial.index,
+    Trial.position,
+    Trial.served_at,
+    Trial.unit,
+)
 
 
 def _rater(conn, token: str, now=None):
@@ -223,14 +305,18 @@ def _stale(row, now) -> bool:
 def _idle(row, now) -> bool:
     """No answer for longer than the slot timeout (the session will be expired)."""
     return row.completed_at is None and (
-        row.expired_at is not None or (now - row.last_progress).total_seconds() > current_app.config["SLOT_TIMEOUT_S"])
+        row.expired_at is not None or (now - row.last_progress).total_seconds() > current_app.config["SLOT_TIMEOUT_S"]
+    )
 
 
 def _current(conn, rater_pk):
     """The trial on the rater's screen: the first unanswered one in the rater's order."""
-    return conn.execute(select(*TRIAL_COLS)
-                        .where(Trial.rater_pk == rater_pk, Trial.answered_at.is_(None), Trial.released.is_(False))
-                        .order_by(Trial.position).limit(1)).first()
+    return conn.execute(
+        select(*TRIAL_COLS)
+        .where(Trial.rater_pk == rater_pk, Trial.answered_at.is_(None), Trial.released.is_(False))
+        .order_by(Trial.position)
+        .limit(1)
+    ).first()
 
 
 def _serve(conn, rater_pk: int, now):
@@ -248,7 +334,7 @@ def _serve(conn, rater_pk: int, now):
             # waiting for the WAL flush shortens the time every worker queues on the assignment lock.
             conn.execute(text("SET LOCAL synchronous_commit TO OFF"))
         lock_assign(conn)
-        t = _current(conn, rater_pk)                 # re-read under the lock (a concurrent GET next may have won)
+        t = _current(conn, rater_pk)  # re-read under the lock (a concurrent GET next may have won)
         if t is None or t.clip_id is not None or t.unit is not None:
             continue
         cfg = current_app.config
@@ -260,39 +346,57 @@ def _serve(conn, rater_pk: int, now):
                 conn.execute(update(Trial).where(Trial.id == t.id).values(clip_id=clip, served_at=now))
                 continue
         else:
-            unit = assign_unit(conn, rng, rater_pk, t.kind, cfg["RATINGS_PER_CLIP"],
-                               current_app.extensions["rating_app"]["units"])
+            unit = assign_unit(
+                conn, rng, rater_pk, t.kind, cfg["RATINGS_PER_CLIP"], current_app.extensions["rating_app"]["units"]
+            )
             if unit is not None:
                 # Sides (pairwise) and page order (parallel) are drawn per trial; labels follow the order shown.
                 order = rng.sample(unit.clips, len(unit.clips))
-                conn.execute(insert(TrialClip), [{"trial_pk": t.id, "position": i, "label": LABELS[i], "clip_id": c}
-                                                 for i, c in enumerate(order)])
+                conn.execute(
+                    insert(TrialClip),
+                    [{"trial_pk": t.id, "position": i, "label": LABELS[i], "clip_id": c} for i, c in enumerate(order)],
+                )
                 conn.execute(update(Trial).where(Trial.id == t.id).values(unit=unit.key, served_at=now))
                 continue
         # No clip left for this slot: drop it; the later rating trials move up one.
         conn.execute(update(Trial).where(Trial.id == t.id).values(released=True))
-        conn.execute(update(Trial).where(Trial.rater_pk == rater_pk, Trial.phase == "rating",
-                                         Trial.position > t.position).values(index=Trial.index - 1))
+        conn.execute(
+            update(Trial)
+            .where(Trial.rater_pk == rater_pk, Trial.phase == "rating", Trial.position > t.position)
+            .values(index=Trial.index - 1)
+        )
         conn.execute(update(Rater).where(Rater.id == rater_pk).values(n_rating=Rater.n_rating - 1))
 
 
 def _trial_clips(conn, trial_pk):
-    return conn.execute(select(TrialClip.label, TrialClip.clip_id, TrialClip.video_at)
-                        .where(TrialClip.trial_pk == trial_pk).order_by(TrialClip.position)).all()
+    return conn.execute(
+        select(TrialClip.label, TrialClip.clip_id, TrialClip.video_at)
+        .where(TrialClip.trial_pk == trial_pk)
+        .order_by(TrialClip.position)
+    ).all()
 
 
 def _trial_reply(token, rater, trial, conn=None):
-    out = {"trial_id": trial.id, "phase": trial.phase, "index": trial.index,
-           "of": rater.n_training if trial.phase == "training" else rater.n_rating}
+    out = {
+        "trial_id": trial.id,
+        "phase": trial.phase,
+        "index": trial.index,
+        "of": rater.n_training if trial.phase == "training" else rater.n_rating,
+    }
     design = current_app.config["STUDY_DESIGN"]
     if design == "acr":
         out.update(clip_id=trial.clip_id, video_url=url_for("api.trial_video", token=token, trial_id=trial.id))
         return jsonify(trial=out)
     own = engine().connect().execution_options(read_only=True) if conn is None else contextlib.nullcontext(conn)
     with own as c:
-        shown = [{"clip_id": r.clip_id, "label": r.label,
-                  "video_url": url_for("api.clip_video", token=token, trial_id=trial.id, label=r.label)}
-                 for r in _trial_clips(c, trial.id)]
+        shown = [
+            {
+                "clip_id": r.clip_id,
+                "label": r.label,
+                "video_url": url_for("api.clip_video", token=token, trial_id=trial.id, label=r.label),
+            }
+            for r in _trial_clips(c, trial.id)
+        ]
     out["design"] = design
     if design == "pairwise" and len(shown) == 2:
         out.update(a=shown[0], b=shown[1])
@@ -324,10 +428,14 @@ def next_trial(token):
             if _rater(conn, token).n_rating == 0:
                 # Every slot was dropped (the study filled meanwhile): nothing was rated, so no code.
                 conn.execute(update(Rater).where(Rater.id == rater.id).values(expired_at=now))
-                return jsonify(error="study full: every clip has all its ratings. Thank you for your interest",
-                               full=True), 409
-            conn.execute(update(Rater).where(Rater.id == rater.id, Rater.completed_at.is_(None))
-                         .values(completed_at=now, last_seen=now))
+                return jsonify(
+                    error="study full: every clip has all its ratings. Thank you for your interest", full=True
+                ), 409
+            conn.execute(
+                update(Rater)
+                .where(Rater.id == rater.id, Rater.completed_at.is_(None))
+                .values(completed_at=now, last_seen=now)
+            )
     return jsonify(_completion(rater))
 
 
@@ -336,8 +444,11 @@ def trial_video(token, trial_id):
     """The video of a served trial; the first request is recorded (an answer without it is flagged)."""
     with engine().connect().execution_options(read_only=True) as conn, conn.begin():
         rater = _rater(conn, token)
-        t = conn.execute(select(Trial.clip_id, Trial.video_at, Trial.released, Trial.served_at)
-                         .where(Trial.id == trial_id, Trial.rater_pk == rater.id)).first()
+        t = conn.execute(
+            select(Trial.clip_id, Trial.video_at, Trial.released, Trial.served_at).where(
+                Trial.id == trial_id, Trial.rater_pk == rater.id
+            )
+        ).first()
     if t is None or t.clip_id is None or t.served_at is None or t.released:
         abort(404, "unknown video")
     if t.video_at is None:
@@ -352,15 +463,18 @@ def clip_video(token, trial_id, label):
     recorded per clip (an answer before every clip's video was fetched is flagged)."""
     with engine().connect().execution_options(read_only=True) as conn, conn.begin():
         rater = _rater(conn, token)
-        t = conn.execute(select(TrialClip.id, TrialClip.clip_id, TrialClip.video_at, Trial.released, Trial.served_at)
-                         .join(Trial, Trial.id == TrialClip.trial_pk)
-                         .where(Trial.id == trial_id, Trial.rater_pk == rater.id, TrialClip.label == label)).first()
+        t = conn.execute(
+            select(TrialClip.id, TrialClip.clip_id, TrialClip.video_at, Trial.released, Trial.served_at)
+            .join(Trial, Trial.id == TrialClip.trial_pk)
+            .where(Trial.id == trial_id, Trial.rater_pk == rater.id, TrialClip.label == label)
+        ).first()
     if t is None or t.served_at is None or t.released:
         abort(404, "unknown video")
     if t.video_at is None:
         with engine().begin() as conn:
-            conn.execute(update(TrialClip).where(TrialClip.id == t.id, TrialClip.video_at.is_(None))
-                         .values(video_at=utcnow()))
+            conn.execute(
+                update(TrialClip).where(TrialClip.id == t.id, TrialClip.video_at.is_(None)).values(video_at=utcnow())
+            )
     return current_app.extensions["rating_app"]["videos"].response(t.clip_id)
 
 
@@ -373,6 +487,7 @@ def required_ms(clip_id: str | None, clip_ids=None) -> int:
     def duration(cid):
         clip = clips.get(cid or "")
         return clip.duration_ms if clip is not None and clip.duration_ms else 0
+
     if clip_ids:
         total = design_required_ms(current_app.config["STUDY_DESIGN"], [duration(c) for c in clip_ids])
     else:
@@ -415,41 +530,62 @@ def post_rating(token):
     now = utcnow()
     with engine().begin() as conn:
         rater = _rater(conn, token, now)
-        trial = conn.execute(select(Trial.id, Trial.phase, Trial.clip_id, Trial.position, Trial.answered_at,
-                                    Trial.released, Trial.served_at, Trial.video_at)
-                             .where(Trial.id == trial_id, Trial.rater_pk == rater.id)).first()
+        trial = conn.execute(
+            select(
+                Trial.id,
+                Trial.phase,
+                Trial.clip_id,
+                Trial.position,
+                Trial.answered_at,
+                Trial.released,
+                Trial.served_at,
+                Trial.video_at,
+            ).where(Trial.id == trial_id, Trial.rater_pk == rater.id)
+        ).first()
         if trial is None:
             abort(404, "unknown trial for this session")
         training = trial.phase == "training"
         shown = _trial_clips(conn, trial.id) if design != "acr" else []
         rating = _parse_answer(body, design, training, shown)
-        if trial.answered_at is not None:                       # a repeat: acknowledged, stored once
+        if trial.answered_at is not None:  # a repeat: acknowledged, stored once
             return _duplicate(conn, trial.id, training)
         if _idle(rater, now):
             expire_idle(conn, cfg["SLOT_TIMEOUT_S"], now, rater.id)
             return _expired_reply()
         # Only the trial on screen can be answered: the first unanswered, unreleased one, once served. (This
         # trial itself counts as unanswered here, in case a concurrent duplicate has just answered it.)
-        first = conn.execute(select(func.min(Trial.position)).where(Trial.rater_pk == rater.id, or_(
-            and_(Trial.answered_at.is_(None), Trial.released.is_(False)), Trial.id == trial.id))).scalar()
+        first = conn.execute(
+            select(func.min(Trial.position)).where(
+                Trial.rater_pk == rater.id,
+                or_(and_(Trial.answered_at.is_(None), Trial.released.is_(False)), Trial.id == trial.id),
+            )
+        ).scalar()
         if trial.released or trial.served_at is None or trial.position != first:
             abort(409, "this trial has not been shown yet")
         need = required_ms(trial.clip_id, [r.clip_id for r in shown])
         elapsed = (now - trial.served_at).total_seconds() * 1000
         if elapsed < need:
             conn.execute(update(Rater).where(Rater.id == rater.id).values(n_early=Rater.n_early + 1))
-            return jsonify(error="answered before the video could have played to the end", too_early=True,
-                           retry_after_ms=int(math.ceil(need - elapsed))), 425
+            return jsonify(
+                error="answered before the video could have played to the end",
+                too_early=True,
+                retry_after_ms=int(math.ceil(need - elapsed)),
+            ), 425
         # Take the rater row first (as expire_idle does), then the trial: an answer and the expiry or a
         # concurrent duplicate of it can never both succeed.
         cutoff = now - dt.timedelta(seconds=cfg["SLOT_TIMEOUT_S"])
-        ok = conn.execute(update(Rater).where(Rater.id == rater.id, Rater.expired_at.is_(None),
-                                              Rater.last_progress >= cutoff)
-                          .values(last_progress=now, last_seen=now)).rowcount
+        ok = conn.execute(
+            update(Rater)
+            .where(Rater.id == rater.id, Rater.expired_at.is_(None), Rater.last_progress >= cutoff)
+            .values(last_progress=now, last_seen=now)
+        ).rowcount
         if ok != 1:
             return _expired_reply()
-        claimed = conn.execute(update(Trial).where(Trial.id == trial.id, Trial.answered_at.is_(None),
-                                                   Trial.released.is_(False)).values(answered_at=now)).rowcount
+        claimed = conn.execute(
+            update(Trial)
+            .where(Trial.id == trial.id, Trial.answered_at.is_(None), Trial.released.is_(False))
+            .values(answered_at=now)
+        ).rowcount
         if claimed != 1:
             return _duplicate(conn, trial.id, training)
         if not training:
@@ -460,19 +596,48 @@ def post_rating(token):
 def _store(conn, design, trial, rater_pk, shown, value, watched_ms, now):
     """Insert the answer, in the transaction that claimed the trial."""
     if design == "acr":
-        conn.execute(insert(Rating).values(trial_pk=trial.id, rater_pk=rater_pk, clip_id=trial.clip_id,
-                                           rating=value, watched_ms=watched_ms, submitted_at=now,
-                                           flags="" if trial.video_at else "no_video"))
+        conn.execute(
+            insert(Rating).values(
+                trial_pk=trial.id,
+                rater_pk=rater_pk,
+                clip_id=trial.clip_id,
+                rating=value,
+                watched_ms=watched_ms,
+                submitted_at=now,
+                flags="" if trial.video_at else "no_video",
+            )
+        )
         return
     flags = "" if all(r.video_at for r in shown) else "no_video"
     if design == "pairwise":
-        conn.execute(insert(Preference).values(trial_pk=trial.id, rater_pk=rater_pk, clip_a=shown[0].clip_id,
-                                               clip_b=shown[1].clip_id, preference=value, watched_ms=watched_ms,
-                                               submitted_at=now, flags=flags))
+        conn.execute(
+            insert(Preference).values(
+                trial_pk=trial.id,
+                rater_pk=rater_pk,
+                clip_a=shown[0].clip_id,
+                clip_b=shown[1].clip_id,
+                preference=value,
+                watched_ms=watched_ms,
+                submitted_at=now,
+                flags=flags,
+            )
+        )
     else:
-        conn.execute(insert(PageRating), [{"trial_pk": trial.id, "rater_pk": rater_pk, "clip_id": cid, "rating": v,
-                                           "watched_ms": watched_ms, "submitted_at": now, "flags": flags}
-                                          for cid, v in value.items()])
+        conn.execute(
+            insert(PageRating),
+            [
+                {
+                    "trial_pk": trial.id,
+                    "rater_pk": rater_pk,
+                    "clip_id": cid,
+                    "rating": v,
+                    "watched_ms": watched_ms,
+                    "submitted_at": now,
+                    "flags": flags,
+                }
+                for cid, v in value.items()
+            ],
+        )
 
 
 def _duplicate(conn, trial_pk, training):
@@ -484,8 +649,12 @@ def _duplicate(conn, trial_pk, training):
     elif not training and design == "pairwise":
         stored = conn.execute(select(Preference.preference).where(Preference.trial_pk == trial_pk)).scalar()
     elif not training:
-        stored = dict(conn.execute(select(PageRating.clip_id, PageRating.rating)
-                                   .where(PageRating.trial_pk == trial_pk)).all()) or None
+        stored = (
+            dict(
+                conn.execute(select(PageRating.clip_id, PageRating.rating).where(PageRating.trial_pk == trial_pk)).all()
+            )
+            or None
+        )
     return jsonify(stored=False, duplicate=True, **{name: stored}), 200
 
 
@@ -511,7 +680,8 @@ def post_event(token):
         n = conn.execute(select(func.count()).select_from(Event).where(Event.rater_pk == rater.id)).scalar()
         if n >= MAX_EVENTS:
             return jsonify(error=f"at most {MAX_EVENTS} reports per session"), 429
-        conn.execute(insert(Event).values(rater_pk=rater.id, trial_pk=trial_id, kind=kind, detail=detail,
-                                          created_at=utcnow()))
+        conn.execute(
+            insert(Event).values(rater_pk=rater.id, trial_pk=trial_id, kind=kind, detail=detail, created_at=utcnow())
+        )
     current_app.logger.warning("client %s: rater %s clip %s: %s", kind, rater.rater_id, clip, detail)
     return jsonify(logged=True), 201

@@ -15,6 +15,7 @@ has not had, a unit's cover being its answered trials plus its held slots.
 A session expires when it has not answered anything for `slot_timeout_s` (polling is not progress); its
 unanswered slots are released and can never be answered, so no clip ever exceeds its target.
 """
+
 from __future__ import annotations
 
 import datetime as dt
@@ -47,8 +48,11 @@ def expire_idle(conn, slot_timeout_s: float, now: dt.datetime, rater_pk: int | N
         stmt = stmt.where(Rater.id == rater_pk)
     ids = list(conn.execute(stmt.values(expired_at=now).returning(Rater.id)).scalars())
     if ids:
-        conn.execute(update(Trial).where(Trial.rater_pk.in_(ids), Trial.answered_at.is_(None),
-                                         Trial.released.is_(False)).values(released=True))
+        conn.execute(
+            update(Trial)
+            .where(Trial.rater_pk.in_(ids), Trial.answered_at.is_(None), Trial.released.is_(False))
+            .values(released=True)
+        )
     return ids
 
 
@@ -58,8 +62,11 @@ def _answered_and_held(conn, key, *where):
     in neither count: its clip would look short and be handed out once too often. An answered test trial and
     its stored answer are written in one transaction, so answered trials are the stored answers."""
     held = case((and_(Trial.answered_at.is_(None), Trial.released.is_(False)), 1), else_=0)
-    rows = conn.execute(select(key, func.count(Trial.answered_at), func.sum(held))
-                        .where(Trial.kind == "test", key.is_not(None), *where).group_by(key)).all()
+    rows = conn.execute(
+        select(key, func.count(Trial.answered_at), func.sum(held))
+        .where(Trial.kind == "test", key.is_not(None), *where)
+        .group_by(key)
+    ).all()
     return {k: (int(done), int(h or 0)) for k, done, h in rows}
 
 
@@ -83,8 +90,9 @@ def _short_or_full(cov, target, unit, answers, answered):
     if not short:
         if all(d >= target for d, _ in cov.values()):
             raise StudyFull(f"study full: every {unit} has all its {answers}. Thank you for your interest")
-        raise StudyFull(f"study full for now: the remaining {unit}s are being {answered} by others; "
-                        "please try again later")
+        raise StudyFull(
+            f"study full for now: the remaining {unit}s are being {answered} by others; please try again later"
+        )
     return short
 
 
@@ -95,10 +103,10 @@ def plan_session(conn, rng: random.Random, target: int, clips_per_rater: int | N
         raise StudyFull("the study has no test clips")
     short = _short_or_full(cov, target, "clip", "ratings", "rated")
     n_test = short if not clips_per_rater else min(clips_per_rater, short)
-    n_catch = conn.execute(select(func.count()).select_from(Clip).where(Clip.role == "catch",
-                                                                         Clip.condition == BAD)).scalar()
-    training = list(conn.execute(select(Clip.clip_id).where(Clip.role == "training").order_by(Clip.clip_id))
-                    .scalars())
+    n_catch = conn.execute(
+        select(func.count()).select_from(Clip).where(Clip.role == "catch", Clip.condition == BAD)
+    ).scalar()
+    training = list(conn.execute(select(Clip.clip_id).where(Clip.role == "training").order_by(Clip.clip_id)).scalars())
     rng.shuffle(training)
     rating = [("test", None)] * n_test + [("catch", None)] * n_catch
     rng.shuffle(rating)
@@ -108,12 +116,14 @@ def plan_session(conn, rng: random.Random, target: int, clips_per_rater: int | N
 def assign_slot(conn, rng: random.Random, rater_pk: int, kind: str, target: int) -> str | None:
     """The clip for a test or catch slot now being served, or None when none is left for this rater.
     Call under `lock_assign`. Both kinds run the same queries, so their timing does not tell them apart."""
-    had = set(conn.execute(select(Trial.clip_id).where(Trial.rater_pk == rater_pk, Trial.clip_id.is_not(None)))
-              .scalars())
+    had = set(
+        conn.execute(select(Trial.clip_id).where(Trial.rater_pk == rater_pk, Trial.clip_id.is_not(None))).scalars()
+    )
     cov = coverage(conn)
     if kind == "catch":
-        catch = conn.execute(select(Clip.clip_id).where(Clip.role == "catch", Clip.condition == BAD)
-                             .order_by(Clip.clip_id)).scalars()
+        catch = conn.execute(
+            select(Clip.clip_id).where(Clip.role == "catch", Clip.condition == BAD).order_by(Clip.clip_id)
+        ).scalars()
         left = [c for c in catch if c not in had]
         return rng.choice(left) if left else None
     short = sorted((d + h, rng.random(), c) for c, (d, h) in cov.items() if d + h < target and c not in had)
@@ -146,8 +156,7 @@ def plan_units(conn, rng: random.Random, target: int, per_rater: int | None, des
 def assign_unit(conn, rng: random.Random, rater_pk: int, kind: str, target: int, units):
     """The Unit for a test or catch slot now being served, or None when none is left for this rater. Call under
     `lock_assign`; both kinds run the same queries."""
-    had = set(conn.execute(select(Trial.unit).where(Trial.rater_pk == rater_pk, Trial.unit.is_not(None)))
-              .scalars())
+    had = set(conn.execute(select(Trial.unit).where(Trial.rater_pk == rater_pk, Trial.unit.is_not(None))).scalars())
     cov = unit_coverage(conn, units)
     if kind == "catch":
         left = [u for k, u in sorted(units.items()) if u.role == "catch" and k not in had]

@@ -7,6 +7,7 @@ several clips (`TrialClip`) and store a `Preference` or one `PageRating` per cli
 `StudySetting` row, so a restart can never mix designs in one database. The admin's logins and failed
 token guesses are rows too, so that every gunicorn worker sees a logout and a lockout at once.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -15,8 +16,20 @@ import fcntl
 import os
 from pathlib import Path
 
-from sqlalchemy import (Boolean, CheckConstraint, DateTime, Float, ForeignKey, Integer, String,
-                        UniqueConstraint, create_engine, event, select, text)
+from sqlalchemy import (
+    Boolean,
+    CheckConstraint,
+    DateTime,
+    Float,
+    ForeignKey,
+    Integer,
+    String,
+    UniqueConstraint,
+    create_engine,
+    event,
+    select,
+    text,
+)
 from sqlalchemy.engine import Engine, make_url
 from sqlalchemy.exc import ArgumentError
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
@@ -47,6 +60,7 @@ class Clip(Base):
 
 class Rater(Base):
     """One rater session. `token` is the secret capability used in API URLs; `rater_id` is exported."""
+
     __tablename__ = "raters"
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     token: Mapped[str] = mapped_column(String(64), unique=True)
@@ -63,26 +77,27 @@ class Rater(Base):
     completion_code: Mapped[str] = mapped_column(String(64))
     n_training: Mapped[int] = mapped_column(Integer, default=0)
     n_rating: Mapped[int] = mapped_column(Integer, default=0)
-    client: Mapped[str] = mapped_column(String(32), index=True, default="")    # keyed hash of the address
+    client: Mapped[str] = mapped_column(String(32), index=True, default="")  # keyed hash of the address
     resume_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)  # sha256 of the resume cookie
-    n_early: Mapped[int] = mapped_column(Integer, default=0)                    # answers refused as too early
+    n_early: Mapped[int] = mapped_column(Integer, default=0)  # answers refused as too early
 
 
 class Trial(Base):
     """A slot in a rater's own random order (`position`). Training slots get their clip at creation; a test or
     catch slot gets it only when it is first served, so a session holds a clip's slot only while it is on the
     rater's screen (a session that never progresses holds nothing), and test and catch slots take the same path."""
+
     __tablename__ = "trials"
     __table_args__ = (UniqueConstraint("rater_pk", "clip_id"), UniqueConstraint("rater_pk", "position"))
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     rater_pk: Mapped[int] = mapped_column(ForeignKey("raters.id"), index=True)
     clip_id: Mapped[str | None] = mapped_column(ForeignKey("clips.clip_id"), index=True, nullable=True)
-    kind: Mapped[str] = mapped_column(String(16), default="test")   # training | test | catch (never sent)
-    phase: Mapped[str] = mapped_column(String(16))          # training | rating
-    position: Mapped[int] = mapped_column(Integer)          # 0.. over the whole session
-    index: Mapped[int] = mapped_column(Integer)             # 1.. within the phase
-    served_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)    # first GET next
-    video_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)     # first video request
+    kind: Mapped[str] = mapped_column(String(16), default="test")  # training | test | catch (never sent)
+    phase: Mapped[str] = mapped_column(String(16))  # training | rating
+    position: Mapped[int] = mapped_column(Integer)  # 0.. over the whole session
+    index: Mapped[int] = mapped_column(Integer)  # 1.. within the phase
+    served_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)  # first GET next
+    video_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)  # first video request
     answered_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
     # An expired session's unanswered slots, and a slot no clip was left for, are released: never served
     # and never answerable again.
@@ -93,6 +108,7 @@ class Trial(Base):
 
 class TrialClip(Base):
     """One clip of a pairwise or parallel trial, in the order and under the label the rater sees (A, B, ...)."""
+
     __tablename__ = "trial_clips"
     __table_args__ = (UniqueConstraint("trial_pk", "position"),)
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
@@ -100,28 +116,29 @@ class TrialClip(Base):
     position: Mapped[int] = mapped_column(Integer)
     label: Mapped[str] = mapped_column(String(4))
     clip_id: Mapped[str] = mapped_column(ForeignKey("clips.clip_id"))
-    video_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)     # first video request
+    video_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)  # first video request
 
 
 class Rating(Base):
     __tablename__ = "ratings"
     __table_args__ = (CheckConstraint("rating BETWEEN 1 AND 5", name="rating_range"),)
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    trial_pk: Mapped[int] = mapped_column(ForeignKey("trials.id"), unique=True)   # stored once per trial
+    trial_pk: Mapped[int] = mapped_column(ForeignKey("trials.id"), unique=True)  # stored once per trial
     rater_pk: Mapped[int] = mapped_column(ForeignKey("raters.id"), index=True)
     clip_id: Mapped[str] = mapped_column(ForeignKey("clips.clip_id"), index=True)
     rating: Mapped[int] = mapped_column(Integer)
     watched_ms: Mapped[int | None] = mapped_column(Integer, nullable=True)
     submitted_at: Mapped[dt.datetime] = mapped_column(DateTime)
-    flags: Mapped[str] = mapped_column(String(64), default="")       # e.g. no_video (see export.FLAGS)
+    flags: Mapped[str] = mapped_column(String(64), default="")  # e.g. no_video (see export.FLAGS)
 
 
 class Preference(Base):
     """A pairwise answer: 2 = A clearly more natural .. -2 = B clearly (A = the clip shown as A)."""
+
     __tablename__ = "preferences"
     __table_args__ = (CheckConstraint("preference BETWEEN -2 AND 2", name="preference_range"),)
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    trial_pk: Mapped[int] = mapped_column(ForeignKey("trials.id"), unique=True)   # stored once per trial
+    trial_pk: Mapped[int] = mapped_column(ForeignKey("trials.id"), unique=True)  # stored once per trial
     rater_pk: Mapped[int] = mapped_column(ForeignKey("raters.id"), index=True)
     clip_a: Mapped[str] = mapped_column(ForeignKey("clips.clip_id"))
     clip_b: Mapped[str] = mapped_column(ForeignKey("clips.clip_id"))
@@ -133,9 +150,12 @@ class Preference(Base):
 
 class PageRating(Base):
     """One clip's 0..100 rating on a parallel page; a page's rows are written in one transaction."""
+
     __tablename__ = "page_ratings"
-    __table_args__ = (UniqueConstraint("trial_pk", "clip_id"),
-                      CheckConstraint("rating BETWEEN 0 AND 100", name="page_rating_range"))
+    __table_args__ = (
+        UniqueConstraint("trial_pk", "clip_id"),
+        CheckConstraint("rating BETWEEN 0 AND 100", name="page_rating_range"),
+    )
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     trial_pk: Mapped[int] = mapped_column(ForeignKey("trials.id"), index=True)
     rater_pk: Mapped[int] = mapped_column(ForeignKey("raters.id"), index=True)
@@ -148,6 +168,7 @@ class PageRating(Base):
 
 class StudySetting(Base):
     """Settings fixed for the life of a study's database; `design` is written by the first start."""
+
     __tablename__ = "study_settings"
     name: Mapped[str] = mapped_column(String(32), primary_key=True)
     value: Mapped[str] = mapped_column(String(200))
@@ -155,6 +176,7 @@ class StudySetting(Base):
 
 class Event(Base):
     """Client-reported problems (failed playback, ...), also written to the server log."""
+
     __tablename__ = "events"
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     rater_pk: Mapped[int | None] = mapped_column(ForeignKey("raters.id"), nullable=True)
@@ -166,6 +188,7 @@ class Event(Base):
 
 class AdminLogin(Base):
     """A browser login to the dashboard; logout deletes the row, so a copied cookie stops working."""
+
     __tablename__ = "admin_logins"
     key_hash: Mapped[str] = mapped_column(String(64), primary_key=True)
     created_at: Mapped[dt.datetime] = mapped_column(DateTime)
@@ -173,6 +196,7 @@ class AdminLogin(Base):
 
 class LoginFailure(Base):
     """A wrong admin token, per client: enough of them lock that client out for a while."""
+
     __tablename__ = "login_failures"
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     client: Mapped[str] = mapped_column(String(32), index=True)
@@ -181,6 +205,7 @@ class LoginFailure(Base):
 
 class Lock(Base):
     """A single row taken FOR UPDATE while assigning clips, so concurrent sessions see each other's slots."""
+
     __tablename__ = "locks"
     name: Mapped[str] = mapped_column(String(32), primary_key=True)
 
@@ -188,9 +213,9 @@ class Lock(Base):
 def normalise_url(url: str | None) -> str:
     url = url or os.environ.get("DATABASE_URL") or DEFAULT_DB
     if url.startswith("postgres://"):
-        url = "postgresql://" + url[len("postgres://"):]
+        url = "postgresql://" + url[len("postgres://") :]
     if url.startswith("postgresql://"):
-        url = "postgresql+psycopg://" + url[len("postgresql://"):]
+        url = "postgresql+psycopg://" + url[len("postgresql://") :]
     return url
 
 
@@ -204,8 +229,10 @@ def check_url(url: str | None) -> str:
         raise AppError(f"--db {url!r} is not a database URL (sqlite:///FILE or postgresql://HOST/DB)") from None
     family = parsed.get_backend_name()
     if family not in ("sqlite", "postgresql"):
-        raise AppError(f"--db {parsed.render_as_string(hide_password=True)}: unsupported database {family!r} "
-                       "(sqlite or postgresql)")
+        raise AppError(
+            f"--db {parsed.render_as_string(hide_password=True)}: unsupported database {family!r} "
+            "(sqlite or postgresql)"
+        )
     db = parsed.database or ""
     if family == "sqlite" and db and db != ":memory:" and os.path.exists(db):
         if not os.path.isfile(db):
@@ -228,10 +255,10 @@ def make_engine(url: str | None = None) -> Engine:
 
         @event.listens_for(engine, "connect")
         def _sqlite_connect(dbapi_conn, _record):
-            dbapi_conn.isolation_level = None            # we issue BEGIN ourselves
+            dbapi_conn.isolation_level = None  # we issue BEGIN ourselves
             cur = dbapi_conn.cursor()
             cur.execute("PRAGMA journal_mode=WAL")
-            cur.execute("PRAGMA synchronous=FULL")       # a commit survives a crash of the machine too
+            cur.execute("PRAGMA synchronous=FULL")  # a commit survives a crash of the machine too
             cur.execute("PRAGMA foreign_keys=ON")
             cur.execute("PRAGMA busy_timeout=30000")
             cur.close()
@@ -243,6 +270,7 @@ def make_engine(url: str | None = None) -> Engine:
             # read_only) take no lock, so with WAL they never wait for a writer.
             read_only = conn.get_execution_options().get("read_only", False)
             conn.exec_driver_sql("BEGIN" if read_only else "BEGIN IMMEDIATE")
+
         return engine
     # Per process; keep workers x (pool_size + max_overflow) under the server's max_connections (100 by default).
     pool = int(os.environ.get("DB_POOL_SIZE", "10"))
@@ -276,6 +304,7 @@ def _init_lock(engine: Engine):
 def _add_missing_columns(engine: Engine) -> None:
     """A database made before the designs existed lacks trials.unit: add it (NULL, as for every acr trial)."""
     from sqlalchemy import inspect
+
     if "unit" not in {c["name"] for c in inspect(engine).get_columns("trials")}:
         with engine.begin() as conn:
             conn.execute(text("ALTER TABLE trials ADD COLUMN unit VARCHAR(400)"))
@@ -290,6 +319,7 @@ def init_db(engine: Engine, clips=None, design: str | None = None) -> None:
     """Create the schema (idempotent), upsert the manifest's clips and store the study's design; AppError when
     the database already holds a study of another design (a database that predates designs holds an acr one)."""
     from sqlalchemy.orm import Session
+
     with _init_lock(engine):
         Base.metadata.create_all(engine)
         _add_missing_columns(engine)
@@ -299,11 +329,13 @@ def init_db(engine: Engine, clips=None, design: str | None = None) -> None:
             if design is not None:
                 have = study_design(s)
                 if have is None and s.scalar(select(Rater.id).limit(1)) is not None:
-                    have = "acr"                     # sessions from before designs were stored
+                    have = "acr"  # sessions from before designs were stored
                 if have is not None and have != design:
                     where = make_url(str(engine.url)).render_as_string(hide_password=True)
-                    raise AppError(f"the database {where} holds a {have} study; it cannot be served as {design} "
-                                   "(use another database, or --design " + have + ")")
+                    raise AppError(
+                        f"the database {where} holds a {have} study; it cannot be served as {design} "
+                        "(use another database, or --design " + have + ")"
+                    )
                 if s.get(StudySetting, "design") is None:
                     s.add(StudySetting(name="design", value=design))
             if clips:
@@ -311,8 +343,16 @@ def init_db(engine: Engine, clips=None, design: str | None = None) -> None:
                 for c in clips:
                     row = have.get(c.clip_id)
                     if row is None:
-                        s.add(Clip(clip_id=c.clip_id, condition=c.condition, role=c.role, item=c.item,
-                                   frames=c.frames, fps=c.fps))
+                        s.add(
+                            Clip(
+                                clip_id=c.clip_id,
+                                condition=c.condition,
+                                role=c.role,
+                                item=c.item,
+                                frames=c.frames,
+                                fps=c.fps,
+                            )
+                        )
                     else:
                         row.condition, row.role, row.item = c.condition, c.role, c.item
                         row.frames, row.fps = c.frames, c.fps

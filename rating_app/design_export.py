@@ -5,27 +5,66 @@ extra columns and flags as the acr export (export.py), formula-safe cells includ
 preferring the BAD clip at either level (pairwise), or by rating the BAD clip at or above the page's NAT clip
 (parallel); the dashboard counts those failures per rater.
 """
+
 from __future__ import annotations
 
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, aliased
 
+from core.study import page_catch_failed, pair_catch_failed
+
 from .db import Clip, PageRating, Preference, Rater, Trial, TrialClip
 from .designs import BAD, REFERENCE
 
-PAIR_COLUMNS = ("rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role",
-                "trial_index", "watched_ms", "submitted_at", "external_id", "study_id", "rater_completed", "flags")
-PAGE_COLUMNS = ("rater_id", "page_id", "item", "clip_id", "condition", "rating", "role", "trial_index",
-                "watched_ms", "submitted_at", "external_id", "study_id", "rater_completed", "flags")
+PAIR_COLUMNS = (
+    "rater_id",
+    "item",
+    "clip_a",
+    "clip_b",
+    "condition_a",
+    "condition_b",
+    "preference",
+    "role",
+    "trial_index",
+    "watched_ms",
+    "submitted_at",
+    "external_id",
+    "study_id",
+    "rater_completed",
+    "flags",
+)
+PAGE_COLUMNS = (
+    "rater_id",
+    "page_id",
+    "item",
+    "clip_id",
+    "condition",
+    "rating",
+    "role",
+    "trial_index",
+    "watched_ms",
+    "submitted_at",
+    "external_id",
+    "study_id",
+    "rater_completed",
+    "flags",
+)
 FILENAMES = {"acr": "ratings.csv", "pairwise": "pairs.csv", "parallel": "ratings.csv"}
 
 
 def _common(rater_id, idx, watched, at, ext, study, completed, flags, n_early):
     from .export import row_flags
-    return {"rater_id": rater_id, "trial_index": idx, "watched_ms": "" if watched is None else watched,
-            "submitted_at": at.strftime("%Y-%m-%dT%H:%M:%S.%fZ"), "external_id": ext or "",
-            "study_id": study or "", "rater_completed": int(completed is not None),
-            "flags": row_flags(flags, n_early)}
+
+    return {
+        "rater_id": rater_id,
+        "trial_index": idx,
+        "watched_ms": "" if watched is None else watched,
+        "submitted_at": at.strftime("%Y-%m-%dT%H:%M:%S.%fZ"),
+        "external_id": ext or "",
+        "study_id": study or "",
+        "rater_completed": int(completed is not None),
+        "flags": row_flags(flags, n_early),
+    }
 
 
 RATER_EXTRA = (Rater.external_id, Rater.study_id, Rater.completed_at)
@@ -33,40 +72,115 @@ RATER_EXTRA = (Rater.external_id, Rater.study_id, Rater.completed_at)
 
 def iter_pair_rows(s: Session):
     ca, cb = aliased(Clip), aliased(Clip)
-    q = (select(Rater.rater_id, ca.item, Preference.clip_a, Preference.clip_b, ca.condition, cb.condition,
-                Preference.preference, Trial.kind, Trial.index, Preference.watched_ms, Preference.submitted_at,
-                *RATER_EXTRA, Preference.flags, Rater.n_early)
-         .join(Trial, Trial.id == Preference.trial_pk).join(Rater, Rater.id == Preference.rater_pk)
-         .join(ca, ca.clip_id == Preference.clip_a).join(cb, cb.clip_id == Preference.clip_b)
-         .order_by(Rater.id, Trial.index))
-    for (rater_id, item, a, b, cond_a, cond_b, pref, kind, idx, watched, at, ext, study, completed, flags,
-         n_early) in s.execute(q):
-        row = {"item": item, "clip_a": a, "clip_b": b, "condition_a": cond_a, "condition_b": cond_b,
-               "preference": pref, "role": kind}
+    q = (
+        select(
+            Rater.rater_id,
+            ca.item,
+            Preference.clip_a,
+            Preference.clip_b,
+            ca.condition,
+            cb.condition,
+            Preference.preference,
+            Trial.kind,
+            Trial.index,
+            Preference.watched_ms,
+            Preference.submitted_at,
+            *RATER_EXTRA,
+            Preference.flags,
+            Rater.n_early,
+        )
+        .join(Trial, Trial.id == Preference.trial_pk)
+        .join(Rater, Rater.id == Preference.rater_pk)
+        .join(ca, ca.clip_id == Preference.clip_a)
+        .join(cb, cb.clip_id == Preference.clip_b)
+        .order_by(Rater.id, Trial.index)
+    )
+    for (
+        rater_id,
+        item,
+        a,
+        b,
+        cond_a,
+        cond_b,
+        pref,
+        kind,
+        idx,
+        watched,
+        at,
+        ext,
+        study,
+        completed,
+        flags,
+        n_early,
+    ) in s.execute(q):
+        row = {
+            "item": item,
+            "clip_a": a,
+            "clip_b": b,
+            "condition_a": cond_a,
+            "condition_b": cond_b,
+            "preference": pref,
+            "role": kind,
+        }
         row.update(_common(rater_id, idx, watched, at, ext, study, completed, flags, n_early))
         yield row
 
 
 def iter_page_rows(s: Session):
-    q = (select(Rater.rater_id, PageRating.trial_pk, Clip.item, PageRating.clip_id, Clip.condition,
-                PageRating.rating, Trial.kind, Trial.index, PageRating.watched_ms, PageRating.submitted_at,
-                *RATER_EXTRA, PageRating.flags, Rater.n_early)
-         .join(Trial, Trial.id == PageRating.trial_pk).join(Rater, Rater.id == PageRating.rater_pk)
-         .join(TrialClip, (TrialClip.trial_pk == PageRating.trial_pk) & (TrialClip.clip_id == PageRating.clip_id))
-         .join(Clip, Clip.clip_id == PageRating.clip_id)
-         .order_by(Rater.id, Trial.index, TrialClip.position))
-    for (rater_id, trial_pk, item, clip_id, cond, rating, kind, idx, watched, at, ext, study, completed, flags,
-         n_early) in s.execute(q):
-        row = {"page_id": f"p{trial_pk}", "item": item, "clip_id": clip_id, "condition": cond, "rating": rating,
-               "role": kind}
+    q = (
+        select(
+            Rater.rater_id,
+            PageRating.trial_pk,
+            Clip.item,
+            PageRating.clip_id,
+            Clip.condition,
+            PageRating.rating,
+            Trial.kind,
+            Trial.index,
+            PageRating.watched_ms,
+            PageRating.submitted_at,
+            *RATER_EXTRA,
+            PageRating.flags,
+            Rater.n_early,
+        )
+        .join(Trial, Trial.id == PageRating.trial_pk)
+        .join(Rater, Rater.id == PageRating.rater_pk)
+        .join(TrialClip, (TrialClip.trial_pk == PageRating.trial_pk) & (TrialClip.clip_id == PageRating.clip_id))
+        .join(Clip, Clip.clip_id == PageRating.clip_id)
+        .order_by(Rater.id, Trial.index, TrialClip.position)
+    )
+    for (
+        rater_id,
+        trial_pk,
+        item,
+        clip_id,
+        cond,
+        rating,
+        kind,
+        idx,
+        watched,
+        at,
+        ext,
+        study,
+        completed,
+        flags,
+        n_early,
+    ) in s.execute(q):
+        row = {
+            "page_id": f"p{trial_pk}",
+            "item": item,
+            "clip_id": clip_id,
+            "condition": cond,
+            "rating": rating,
+            "role": kind,
+        }
         row.update(_common(rater_id, idx, watched, at, ext, study, completed, flags, n_early))
         yield row
 
 
 def pair_failed(row) -> bool:
     """A pairwise catch answer that prefers the bad example (either level)."""
-    return ((row["condition_a"] == BAD and row["preference"] > 0)
-            or (row["condition_b"] == BAD and row["preference"] < 0))
+    return bool(pair_catch_failed(row["condition_a"], row["condition_b"], row["preference"]))
 
 
 def page_failures(rows) -> set[str]:
@@ -75,31 +189,59 @@ def page_failures(rows) -> set[str]:
     for r in rows:
         if r["role"] == "catch":
             pages.setdefault(r["page_id"], {}).setdefault(r["condition"], []).append(r["rating"])
-    return {p for p, by in pages.items() if REFERENCE in by and BAD in by and max(by[BAD]) >= min(by[REFERENCE])}
+    return {
+        p
+        for p, by in pages.items()
+        if REFERENCE in by and BAD in by and page_catch_failed(max(by[BAD]), min(by[REFERENCE]))
+    }
 
 
 def progress_units(s: Session, design: str, units: dict, target: int) -> dict:
     """The dashboard's tables for a pairwise or parallel study: per unit (as per_clip), per condition pair or
     condition (as per_condition), and each rater's answers and catch failures."""
     clips = dict(s.execute(select(Clip.clip_id, Clip.condition)).all())
-    done = dict(s.execute(select(Trial.unit, func.count()).where(Trial.unit.is_not(None), Trial.kind != "training",
-                                                                 Trial.answered_at.is_not(None))
-                          .group_by(Trial.unit)).all())
-    pending = dict(s.execute(select(Trial.unit, func.count()).where(
-        Trial.unit.is_not(None), Trial.kind != "training", Trial.answered_at.is_(None), Trial.released.is_(False),
-        Trial.served_at.is_not(None)).group_by(Trial.unit)).all())
+    done = dict(
+        s.execute(
+            select(Trial.unit, func.count())
+            .where(Trial.unit.is_not(None), Trial.kind != "training", Trial.answered_at.is_not(None))
+            .group_by(Trial.unit)
+        ).all()
+    )
+    pending = dict(
+        s.execute(
+            select(Trial.unit, func.count())
+            .where(
+                Trial.unit.is_not(None),
+                Trial.kind != "training",
+                Trial.answered_at.is_(None),
+                Trial.released.is_(False),
+                Trial.served_at.is_not(None),
+            )
+            .group_by(Trial.unit)
+        ).all()
+    )
     rows = list(iter_pair_rows(s) if design == "pairwise" else iter_page_rows(s))
     per_unit, per_cond = [], {}
     for key, u in sorted(units.items(), key=lambda kv: (kv[1].role != "test", kv[0])):
         conds = [clips.get(c, "?") for c in u.clips]
-        per_unit.append({"clip_id": key, "condition": " / ".join(conds), "role": u.role, "item": u.item,
-                         "ratings": done.get(key, 0), "in_progress": pending.get(key, 0),
-                         "target": target if u.role == "test" else None, "mean": None})
+        per_unit.append(
+            {
+                "clip_id": key,
+                "condition": " / ".join(conds),
+                "role": u.role,
+                "item": u.item,
+                "ratings": done.get(key, 0),
+                "in_progress": pending.get(key, 0),
+                "target": target if u.role == "test" else None,
+                "mean": None,
+            }
+        )
     if design == "pairwise":
         for key, u in units.items():
             name = " vs ".join(sorted(clips.get(c, "?") for c in u.clips))
-            d = per_cond.setdefault(name, {"condition": name, "role": u.role, "clips": 0, "ratings": 0,
-                                           "target": 0, "_sum": 0})
+            d = per_cond.setdefault(
+                name, {"condition": name, "role": u.role, "clips": 0, "ratings": 0, "target": 0, "_sum": 0}
+            )
             d["clips"] += 1
             d["target"] += target if u.role == "test" else 0
         for r in rows:
@@ -110,13 +252,17 @@ def progress_units(s: Session, design: str, units: dict, target: int) -> dict:
     else:
         for u in units.values():
             for c in u.clips:
-                d = per_cond.setdefault((clips.get(c, "?"), u.role), {
-                    "condition": clips.get(c, "?"), "role": u.role, "clips": 0, "ratings": 0, "target": 0, "_sum": 0})
+                d = per_cond.setdefault(
+                    (clips.get(c, "?"), u.role),
+                    {"condition": clips.get(c, "?"), "role": u.role, "clips": 0, "ratings": 0, "target": 0, "_sum": 0},
+                )
                 d["clips"] += 1
                 d["target"] += target if u.role == "test" else 0
         for r in rows:
-            d = per_cond.setdefault((r["condition"], r["role"]), {
-                "condition": r["condition"], "role": r["role"], "clips": 0, "ratings": 0, "target": 0, "_sum": 0})
+            d = per_cond.setdefault(
+                (r["condition"], r["role"]),
+                {"condition": r["condition"], "role": r["role"], "clips": 0, "ratings": 0, "target": 0, "_sum": 0},
+            )
             d["ratings"] += 1
             d["_sum"] += r["rating"]
     for d in per_cond.values():
@@ -136,5 +282,10 @@ def progress_units(s: Session, design: str, units: dict, target: int) -> dict:
         answers[rid] = answers.get(rid, 0) + 1
         fails[rid] = fails.get(rid, 0) + failed
         no_video[rid] = no_video.get(rid, 0) + ("no_video" in r["flags"])
-    return {"per_clip": per_unit, "per_condition": list(per_cond.values()), "answers": answers, "fails": fails,
-            "no_video": no_video}
+    return {
+        "per_clip": per_unit,
+        "per_condition": list(per_cond.values()),
+        "answers": answers,
+        "fails": fails,
+        "no_video": no_video,
+    }

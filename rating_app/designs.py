@@ -14,29 +14,34 @@ page holds the catch item's NAT and BAD clips, filled up with its other conditio
 page, so that a page's size never tells a catch page. make_stimuli writes NAT, MG and FL clips of each catch
 item with role `catch` for this; in `acr` only the bad examples (condition BAD) are catch trials.
 """
+
 from __future__ import annotations
 
 import random
 from dataclasses import dataclass
 
+from core import study
+
 from .manifest import AppError
 
-DESIGNS = ("acr", "pairwise", "parallel")
-MAX_PAGE = 8                           # clips on a parallel page (labels A..H)
+DESIGNS = study.DESIGNS
+MAX_PAGE = 8  # clips on a parallel page (labels A..H)
 LABELS = "ABCDEFGH"
-REFERENCE = "NAT"                      # the natural clip a catch trial compares the bad example with
-BAD = "BAD"
-QUESTIONS = {"acr": "How natural does this motion look?",
-             "pairwise": "Which motion looks more natural?",
-             "parallel": "How natural does each motion look?"}
+REFERENCE = study.NATURAL  # the natural clip a catch trial compares the bad example with
+BAD = study.CATCH
+QUESTIONS = {
+    "acr": "How natural does this motion look?",
+    "pairwise": "Which motion looks more natural?",
+    "parallel": "How natural does each motion look?",
+}
 
 
 @dataclass(frozen=True)
 class Unit:
-    key: str                 # stored in trials.unit
-    role: str                # test | catch
+    key: str  # stored in trials.unit
+    role: str  # test | catch
     item: str
-    clips: tuple[str, ...]   # clip ids (shuffled per trial when served)
+    clips: tuple[str, ...]  # clip ids (shuffled per trial when served)
 
 
 def check_design(design: str | None) -> str:
@@ -71,21 +76,25 @@ def build_units(design: str, clips) -> dict[str, Unit]:
     for item, by_cond in sorted(tests.items()):
         twice = [c for c, ids in by_cond.items() if len(ids) > 1]
         if twice:
-            raise AppError(f"{design}: item {item!r} has {len(by_cond[twice[0]])} test clips of condition "
-                           f"{twice[0]}; a {design} study needs one clip per condition and item")
+            raise AppError(
+                f"{design}: item {item!r} has {len(by_cond[twice[0]])} test clips of condition "
+                f"{twice[0]}; a {design} study needs one clip per condition and item"
+            )
         conds = sorted(by_cond)
         if len(conds) < 2:
-            raise AppError(f"{design}: item {item!r} has test clips of one condition only ({conds[0]}); "
-                           "comparisons need at least two")
+            raise AppError(
+                f"{design}: item {item!r} has test clips of one condition only ({conds[0]}); "
+                "comparisons need at least two"
+            )
         if design == "pairwise":
             for i, a in enumerate(conds):
-                for b in conds[i + 1:]:
-                    units[f"pair:{item}:{a}:{b}"] = Unit(f"pair:{item}:{a}:{b}", "test", item,
-                                                         (by_cond[a][0], by_cond[b][0]))
+                for b in conds[i + 1 :]:
+                    units[f"pair:{item}:{a}:{b}"] = Unit(
+                        f"pair:{item}:{a}:{b}", "test", item, (by_cond[a][0], by_cond[b][0])
+                    )
         else:
             if len(conds) > MAX_PAGE:
-                raise AppError(f"parallel: item {item!r} has {len(conds)} conditions; a page shows at most "
-                               f"{MAX_PAGE}")
+                raise AppError(f"parallel: item {item!r} has {len(conds)} conditions; a page shows at most {MAX_PAGE}")
             units[f"page:{item}"] = Unit(f"page:{item}", "test", item, tuple(by_cond[c][0] for c in conds))
     page_size = max((len(u.clips) for u in units.values()), default=0)  # parallel: every test page's size
     for item, by_cond in sorted(catches.items()):
@@ -93,15 +102,17 @@ def build_units(design: str, clips) -> dict[str, Unit]:
         if not bads:
             continue
         if REFERENCE not in by_cond:
-            raise AppError(f"{design}: catch item {item!r} has no {REFERENCE} clip to compare its bad example "
-                           "with; re-run generation.make_stimuli, which writes it (role catch)")
+            raise AppError(
+                f"{design}: catch item {item!r} has no {REFERENCE} clip to compare its bad example "
+                "with; re-run generation.make_stimuli, which writes it (role catch)"
+            )
         nat = by_cond[REFERENCE][0]
         if design == "pairwise":
             for k, bad in enumerate(bads):
                 units[f"catch:{item}:{k}"] = Unit(f"catch:{item}:{k}", "catch", item, (nat, bad))
         else:
             fillers = [ids[0] for cond, ids in sorted(by_cond.items()) if cond not in (REFERENCE, BAD)]
-            page = (nat, bads[0], *fillers)[:max(2, page_size)]
+            page = (nat, bads[0], *fillers)[: max(2, page_size)]
             units[f"catchpage:{item}"] = Unit(f"catchpage:{item}", "catch", item, page)
     return units
 
@@ -132,8 +143,8 @@ def training_groups(design: str, clips, rng: random.Random) -> list[tuple[str, .
     rng.shuffle(single)
     size = 2 if design == "pairwise" else MAX_PAGE
     for i in range(0, len(single), size):
-        chunk = tuple(single[i:i + size])
-        if len(chunk) == 1 and len(training) > 1:       # a lone clip is shown beside another training clip
+        chunk = tuple(single[i : i + size])
+        if len(chunk) == 1 and len(training) > 1:  # a lone clip is shown beside another training clip
             chunk = (chunk[0], rng.choice([c.clip_id for c in training if c.clip_id != chunk[0]]))
         groups.append(chunk)
     rng.shuffle(groups)

@@ -2,6 +2,7 @@
 
 Limits are counted in the database, not in memory, so that they hold across gunicorn workers and restarts.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -10,7 +11,7 @@ from urllib.parse import urlsplit
 
 from flask import abort, current_app, request
 
-MAX_JSON_DEPTH = 8          # the API's bodies are flat objects; deep nesting only serves to exhaust the parser
+MAX_JSON_DEPTH = 8  # the API's bodies are flat objects; deep nesting only serves to exhaust the parser
 
 
 def client_key() -> str:
@@ -40,13 +41,13 @@ def check_depth(raw: bytes, limit: int = MAX_JSON_DEPTH) -> None:
         if in_str:
             if escaped:
                 escaped = False
-            elif b == 0x5C:              # backslash
+            elif b == 0x5C:  # backslash
                 escaped = True
-            elif b == 0x22:              # closing quote
+            elif b == 0x22:  # closing quote
                 in_str = False
         elif b == 0x22:
             in_str = True
-        elif b in (0x5B, 0x7B):          # [ {
+        elif b in (0x5B, 0x7B):  # [ {
             depth += 1
             if depth > limit:
                 abort(400, f"JSON nested deeper than {limit} levels")

@@ -1,4 +1,5 @@
 """Reading the stimulus manifest (CONTRACTS §4) and the metrics.csv written beside it."""
+
 from __future__ import annotations
 
 import csv
@@ -6,9 +7,10 @@ import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
+
 from core.cli import UserError
 
-CLIP_ID = re.compile(r"[a-z0-9]{12,64}")         # always fullmatch
+CLIP_ID = re.compile(r"[a-z0-9]{12,64}")  # always fullmatch
 ROLES = ("test", "catch", "training")
 REQUIRED = ("clip_id", "condition", "role", "item", "video")
 METRIC_COLUMNS = ("foot_skating", "bone_length_std", "jerk", "control_error")
@@ -24,7 +26,7 @@ class ManifestClip:
     condition: str
     role: str
     item: str
-    video: Path          # absolute path of the MP4
+    video: Path  # absolute path of the MP4
     frames: int | None
     fps: float | None
 
@@ -74,14 +76,21 @@ def load_manifest(path, check_files: bool = True) -> list[ManifestClip]:
                 if not condition or len(condition) > 64:
                     raise AppError(f"{where}: condition must be 1-64 characters")
                 video = (base / (row["video"] or "").strip()).resolve()
-                if not video.is_relative_to(base):       # '..', an absolute path or a symlink leading out
+                if not video.is_relative_to(base):  # '..', an absolute path or a symlink leading out
                     raise AppError(f"{where}: video {row['video']!r} leaves the stimulus folder {base}")
                 if check_files and not video.is_file():
                     raise AppError(f"{where}: video {row['video']!r} not found ({video})")
-                clips.append(ManifestClip(
-                    clip_id=cid, condition=condition, role=role, item=(row["item"] or "").strip()[:128],
-                    video=video, frames=_number(row.get("frames"), int, where, "frames"),
-                    fps=_number(row.get("fps"), float, where, "fps")))
+                clips.append(
+                    ManifestClip(
+                        clip_id=cid,
+                        condition=condition,
+                        role=role,
+                        item=(row["item"] or "").strip()[:128],
+                        video=video,
+                        frames=_number(row.get("frames"), int, where, "frames"),
+                        fps=_number(row.get("fps"), float, where, "fps"),
+                    )
+                )
     except UnicodeDecodeError as e:
         raise AppError(f"{path}: not UTF-8 ({e.reason})") from None
     except csv.Error as e:
@@ -103,6 +112,6 @@ def load_metrics(path) -> dict[str, dict]:
             rec = {k: row.get(k, "") for k in ("condition", "role", "item")}
             for m in METRIC_COLUMNS:
                 if m in row:
-                    rec[m] = _number(row[m], float, f"{path}:{line}", m, allow_nan=True)   # nan: not measured
+                    rec[m] = _number(row[m], float, f"{path}:{line}", m, allow_nan=True)  # nan: not measured
             out[row["clip_id"].strip()] = rec
     return out

@@ -1,5 +1,6 @@
 """The rater's page (one HTML page driven by static/study.js through the JSON API) and the videos by clip id
 (for the admin and old links; the page plays each trial's own URL, which records the fetch)."""
+
 from __future__ import annotations
 
 import re
@@ -12,11 +13,13 @@ from .assign import is_full, units_full
 
 bp = Blueprint("pages", __name__)
 
-VIDEO_NAME = re.compile(r"([a-z0-9]{12,64})\.mp4")      # fullmatch
+VIDEO_NAME = re.compile(r"([a-z0-9]{12,64})\.mp4")  # fullmatch
 # Query parameters Prolific appends to a study URL ({{%PROLIFIC_PID%}} etc.), plus generic fallbacks.
-ID_PARAMS = {"external_id": ("PROLIFIC_PID", "participant", "worker_id", "pid"),
-             "study_id": ("STUDY_ID", "study"),
-             "session_id": ("SESSION_ID", "session")}
+ID_PARAMS = {
+    "external_id": ("PROLIFIC_PID", "participant", "worker_id", "pid"),
+    "study_id": ("STUDY_ID", "study"),
+    "session_id": ("SESSION_ID", "session"),
+}
 
 
 @bp.get("/")
@@ -30,12 +33,12 @@ def index():
                 break
     ext = current_app.extensions["rating_app"]
     cfg = current_app.config
-    with Session(ext["engine"].execution_options(read_only=True)) as s:     # no write lock on SQLite
+    with Session(ext["engine"].execution_options(read_only=True)) as s:  # no write lock on SQLite
         target = cfg["RATINGS_PER_CLIP"]
-        full = (is_full(s, target) if cfg["STUDY_DESIGN"] == "acr" else units_full(s, ext["units"], target)) \
-            or not ext["clips"]
-    return render_template("study.html", ids=ids, full=full, design=cfg["STUDY_DESIGN"],
-                           question=cfg["STUDY_QUESTION"])
+        full = (is_full(s, target) if cfg["STUDY_DESIGN"] == "acr" else units_full(s, ext["units"], target)) or not ext[
+            "clips"
+        ]
+    return render_template("study.html", ids=ids, full=full, design=cfg["STUDY_DESIGN"], question=cfg["STUDY_QUESTION"])
 
 
 @bp.get("/videos/<name>")

@@ -19,6 +19,7 @@ prefers the clip of higher quality (its own noise and a tie band; the margin pic
 never the bad example; in a parallel study it rates every clip of the page on 0..100 (the 1..5 quality scaled)
 and the bad example below the page's NAT clip. Careless raters answer at random in every design.
 """
+
 from __future__ import annotations
 
 import json
@@ -38,8 +39,8 @@ DEFAULT_QUALITY = {"NAT": 4.2, "MG": 3.6, "FL": 2.6, "BAD": 1.3}
 OTHER_QUALITY = 3.0
 QUALITY_HIGH, QUALITY_LOW = 4.3, 1.3
 BIAS_SD = 0.3
-PREFERENCE_TIE, PREFERENCE_CLEAR = 0.3, 1.0     # quality margins: below the first no preference, above the second clear
-NOISE_SD = (0.35, 0.7)       # each rater's own noise level is drawn from this range
+PREFERENCE_TIE, PREFERENCE_CLEAR = 0.3, 1.0  # quality margins: below the first no preference, above the second clear
+NOISE_SD = (0.35, 0.7)  # each rater's own noise level is drawn from this range
 MAX_RATERS = 100_000
 
 
@@ -78,6 +79,7 @@ def quality_from_metrics(clips: dict[str, ClipInfo]) -> dict[str, float]:
     by mean badness, so the order of the conditions is the order the metrics give (NAT best and BAD worst
     whenever the metrics say so)."""
     from scipy.stats import rankdata
+
     have = [c for c in clips.values() if any(c.metrics.get(m) is not None for m in METRIC_COLUMNS)]
     if not have:
         return {}
@@ -96,8 +98,12 @@ def quality_from_metrics(clips: dict[str, ClipInfo]) -> dict[str, float]:
         by_cond.setdefault(c.condition, []).append(float(b))
     mean = {k: float(np.mean(v)) for k, v in by_cond.items()}
     lo, hi = min(mean.values()), max(mean.values())
-    quality = {k: (QUALITY_HIGH + QUALITY_LOW) / 2 if hi - lo < 1e-9 else
-               QUALITY_HIGH - (QUALITY_HIGH - QUALITY_LOW) * (b - lo) / (hi - lo) for k, b in mean.items()}
+    quality = {
+        k: (QUALITY_HIGH + QUALITY_LOW) / 2
+        if hi - lo < 1e-9
+        else QUALITY_HIGH - (QUALITY_HIGH - QUALITY_LOW) * (b - lo) / (hi - lo)
+        for k, b in mean.items()
+    }
     for c, b in zip(have, badness):
         # Within a condition, worse clips are rated a little lower (at most 0.4 of a point).
         c.quality = quality[c.condition] - float(np.clip(1.5 * (b - mean[c.condition]), -0.4, 0.4))
@@ -118,16 +124,18 @@ def load_clips(url: str, manifest=None, admin_token=None, timeout=30.0) -> dict[
     if not admin_token:
         raise AppError("simulate needs --manifest, or ADMIN_TOKEN to read the clip table from the server")
     try:
-        r = requests.get(url.rstrip("/") + "/admin/clips.json", timeout=timeout,
-                         headers={"Authorization": f"Bearer {admin_token}"})
+        r = requests.get(
+            url.rstrip("/") + "/admin/clips.json", timeout=timeout, headers={"Authorization": f"Bearer {admin_token}"}
+        )
     except requests.RequestException as e:
         raise AppError(f"{url}: server not reachable ({e.__class__.__name__})") from None
     if r.status_code != 200:
         raise AppError(f"{url}/admin/clips.json: HTTP {r.status_code} ({r.text[:200].strip()})")
     for c in r.json()["clips"]:
         dur = int(1000 * c["frames"] / c["fps"]) if c.get("frames") and c.get("fps") else 2000
-        clips[c["clip_id"]] = ClipInfo(c["clip_id"], c["condition"], c["role"], dur,
-                                       metrics={m: c.get(m) for m in METRIC_COLUMNS})
+        clips[c["clip_id"]] = ClipInfo(
+            c["clip_id"], c["condition"], c["role"], dur, metrics={m: c.get(m) for m in METRIC_COLUMNS}
+        )
     return clips
 
 
@@ -160,7 +168,7 @@ class _Client:
                 if r.status_code < 500:
                     return r.status_code, (r.content if raw and r.status_code == 200 else r.json())
                 err = f"HTTP {r.status_code}"
-            except (requests.RequestException, ValueError) as e:     # dropped connection, restart, bad JSON
+            except (requests.RequestException, ValueError) as e:  # dropped connection, restart, bad JSON
                 err = e.__class__.__name__
             if time.monotonic() + delay > self.deadline:
                 raise TimeoutError(f"{method} {path}: gave up at the time limit ({err})")
@@ -169,10 +177,22 @@ class _Client:
             delay = min(delay * 2, 1.0)
 
 
-def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1, manifest=None,
-                   quality: dict[str, float] | None = None, concurrency: int = 8, timeout_s: float = 600.0,
-                   admin_token: str | None = None, think_s: float = 0.0, prefix: str | None = None,
-                   progress: bool = True, on_ack=None, design: str | None = None) -> dict:
+def run_simulation(
+    url: str,
+    n_raters: int,
+    seed: int = 0,
+    careless: float = 0.1,
+    manifest=None,
+    quality: dict[str, float] | None = None,
+    concurrency: int = 8,
+    timeout_s: float = 600.0,
+    admin_token: str | None = None,
+    think_s: float = 0.0,
+    prefix: str | None = None,
+    progress: bool = True,
+    on_ack=None,
+    design: str | None = None,
+) -> dict:
     """Run the crowd; return a summary of everything submitted and acknowledged (JSON-serialisable).
 
     `on_ack(record)` is called after each acknowledged rating (used by the crash test). `design`: the design the
@@ -202,10 +222,18 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
     n_careless = int(round(careless * n_raters))
     careless_set = set(rng.choice(n_raters, size=n_careless, replace=False).tolist()) if n_careless else set()
     prefix = prefix or f"sim{seed}"
-    specs = [{"index": i, "external_id": f"{prefix}-{i:05d}", "careless": i in careless_set,
-              "session_id": f"{prefix}-{i:05d}-{int(rng.integers(2**62)):x}",
-              "bias": float(rng.normal(0, BIAS_SD)), "noise_sd": float(rng.uniform(*NOISE_SD)),
-              "seed": int(rng.integers(2**31))} for i in range(n_raters)]
+    specs = [
+        {
+            "index": i,
+            "external_id": f"{prefix}-{i:05d}",
+            "careless": i in careless_set,
+            "session_id": f"{prefix}-{i:05d}-{int(rng.integers(2**62)):x}",
+            "bias": float(rng.normal(0, BIAS_SD)),
+            "noise_sd": float(rng.uniform(*NOISE_SD)),
+            "seed": int(rng.integers(2**31)),
+        }
+        for i in range(n_raters)
+    ]
     full = threading.Event()
     lock = threading.Lock()
     ratings: list[dict] = []
@@ -216,6 +244,7 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
     bar = None
     if progress:
         from tqdm import tqdm
+
         bar = tqdm(total=n_raters, desc="simulated raters", unit="rater")
 
     def rate(spec, r_rng, clip: ClipInfo | None) -> tuple[int, int]:
@@ -225,7 +254,7 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
         q = clip.quality if clip and clip.quality is not None else OTHER_QUALITY
         x = int(np.clip(round(q + spec["bias"] + r_rng.normal(0, spec["noise_sd"])), 1, 5))
         if clip is not None and clip.role == "catch":
-            x = min(x, 2)                 # an attentive rater recognises a bad example
+            x = min(x, 2)  # an attentive rater recognises a bad example
         return x, int(dur + r_rng.uniform(0, 300))
 
     def prefer(spec, r_rng, a: ClipInfo | None, b: ClipInfo | None) -> int:
@@ -238,7 +267,7 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
         level = 0 if abs(d) < PREFERENCE_TIE else 1 if abs(d) < PREFERENCE_CLEAR else 2
         pref = level if d > 0 else -level
         if a is not None and b is not None and "BAD" in (a.condition, b.condition):
-            strength = abs(pref) or 1                         # never the bad example, never a tie with it
+            strength = abs(pref) or 1  # never the bad example, never a tie with it
             pref = strength if b.condition == "BAD" else -strength
         return pref
 
@@ -252,7 +281,7 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
             x = 25.0 * (q + spec["bias"] + r_rng.normal(0, spec["noise_sd"]) - 1.0)
             out.append(int(np.clip(round(x), 0, 100)))
         conds = [c.condition if c else None for c in shown]
-        if "BAD" in conds and "NAT" in conds:          # an attentive rater puts the bad example below natural
+        if "BAD" in conds and "NAT" in conds:  # an attentive rater puts the bad example below natural
             nat = out[conds.index("NAT")]
             for i, cond in enumerate(conds):
                 if cond == "BAD" and out[i] >= nat:
@@ -262,10 +291,20 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
         return out
 
     def one_rater(spec):
-        res = {"external_id": spec["external_id"], "careless": spec["careless"], "rater_id": None,
-               "started": False, "completed": False, "completion_code": None, "n_ratings": 0, "n_catch": 0,
-               "n_training": 0, "failed_catch": False, "bias": round(spec["bias"], 3),
-               "noise_sd": round(spec["noise_sd"], 3)}
+        res = {
+            "external_id": spec["external_id"],
+            "careless": spec["careless"],
+            "rater_id": None,
+            "started": False,
+            "completed": False,
+            "completion_code": None,
+            "n_ratings": 0,
+            "n_catch": 0,
+            "n_training": 0,
+            "failed_catch": False,
+            "bias": round(spec["bias"], 3),
+            "noise_sd": round(spec["noise_sd"], 3),
+        }
         results[spec["index"]] = res
         if full.is_set() or time.monotonic() > deadline:
             res["skipped"] = "study full" if full.is_set() else "time limit"
@@ -274,8 +313,9 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
             local.client = _Client(url, deadline)
         cl = local.client
         r_rng = np.random.default_rng(spec["seed"])
-        status, body = cl.call("POST", "/api/sessions", {"external_id": spec["external_id"],
-                                                          "session_id": spec["session_id"]})
+        status, body = cl.call(
+            "POST", "/api/sessions", {"external_id": spec["external_id"], "session_id": spec["session_id"]}
+        )
         if status == 409 and body.get("full"):
             full.set()
             res["skipped"] = "study full"
@@ -304,8 +344,11 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
                 wait += float(r_rng.exponential(think_s))
             time.sleep(max(0.0, shown + wait - time.monotonic()))
             for _ in range(5):
-                status, ans = cl.call("POST", f"/api/sessions/{token}/ratings",
-                                      {"trial_id": t["trial_id"], field_name: value, "watched_ms": watched})
+                status, ans = cl.call(
+                    "POST",
+                    f"/api/sessions/{token}/ratings",
+                    {"trial_id": t["trial_id"], field_name: value, "watched_ms": watched},
+                )
                 if status != 425:
                     return status, ans
                 time.sleep(ans.get("retry_after_ms", 100) / 1000.0)
@@ -350,10 +393,17 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
             if status not in (200, 201):
                 raise AppError(f"rating: HTTP {status}: {ans.get('error')}")
             if status == 200 and ans.get("rating") is not None:
-                value = ans["rating"]        # a retry of a rating the server had already stored
-            rec = {"rater_id": res["rater_id"], "external_id": spec["external_id"], "trial_id": t["trial_id"],
-                   "clip_id": t["clip_id"], "condition": clip.condition if clip else None,
-                   "role": clip.role if clip else None, "rating": value, "careless": spec["careless"]}
+                value = ans["rating"]  # a retry of a rating the server had already stored
+            rec = {
+                "rater_id": res["rater_id"],
+                "external_id": spec["external_id"],
+                "trial_id": t["trial_id"],
+                "clip_id": t["clip_id"],
+                "condition": clip.condition if clip else None,
+                "role": clip.role if clip else None,
+                "rating": value,
+                "careless": spec["careless"],
+            }
             res["n_ratings"] += 1
             if clip is not None and clip.role == "catch":
                 res["n_catch"] += 1
@@ -368,8 +418,13 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
         """Answer a pairwise or parallel trial; the acknowledged records (one per pair, one per clip of a page)."""
         watched = int(sum(c.duration_ms if c else 2000 for c in shown) + r_rng.uniform(0, 300))
         catch = any(c is not None and c.role == "catch" for c in shown)
-        base = {"rater_id": res["rater_id"], "external_id": spec["external_id"], "trial_id": t["trial_id"],
-                "role": "catch" if catch else "test", "careless": spec["careless"]}
+        base = {
+            "rater_id": res["rater_id"],
+            "external_id": spec["external_id"],
+            "trial_id": t["trial_id"],
+            "role": "catch" if catch else "test",
+            "careless": spec["careless"],
+        }
         cond = [c.condition if c else None for c in shown]
         if "a" in t:
             value = prefer(spec, r_rng, shown[0], shown[1])
@@ -380,25 +435,36 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
             raise AppError(f"answer: HTTP {status}: {ans.get('error')}")
         stored = ans.get("preference" if "a" in t else "ratings") if status == 200 else None
         if stored is not None:
-            value = stored                        # a retry of an answer the server had already stored
+            value = stored  # a retry of an answer the server had already stored
         res["n_ratings"] += 1
         res["n_catch"] += catch
         if "a" in t:
             failed = catch and ((cond[0] == "BAD" and value > 0) or (cond[1] == "BAD" and value < 0))
-            recs = [{**base, "clip_a": ids[0], "clip_b": ids[1], "condition_a": cond[0], "condition_b": cond[1],
-                     "condition": " vs ".join(sorted(map(str, cond))), "preference": value}]
+            recs = [
+                {
+                    **base,
+                    "clip_a": ids[0],
+                    "clip_b": ids[1],
+                    "condition_a": cond[0],
+                    "condition_b": cond[1],
+                    "condition": " vs ".join(sorted(map(str, cond))),
+                    "preference": value,
+                }
+            ]
         else:
             by = {c: value[i] for i, c in zip(ids, cond)}
             failed = catch and "BAD" in by and "NAT" in by and by["BAD"] >= by["NAT"]
-            recs = [{**base, "page_id": f"p{t['trial_id']}", "clip_id": i, "condition": c, "rating": value[i]}
-                    for i, c in zip(ids, cond)]
+            recs = [
+                {**base, "page_id": f"p{t['trial_id']}", "clip_id": i, "condition": c, "rating": value[i]}
+                for i, c in zip(ids, cond)
+            ]
         res["failed_catch"] = res["failed_catch"] or bool(failed)
         return recs
 
     def job(spec):
         try:
             one_rater(spec)
-        except Exception as e:              # any failure of one rater is reported, never fatal to the crowd
+        except Exception as e:  # any failure of one rater is reported, never fatal to the crowd
             with lock:
                 errors.append(f"{spec['external_id']}: {e}")
             if results[spec["index"]] is not None:
@@ -418,7 +484,9 @@ def run_simulation(url: str, n_raters: int, seed: int = 0, careless: float = 0.1
         by_cond[str(r["condition"])] = by_cond.get(str(r["condition"]), 0) + 1
     started_raters = [r for r in raters if r["started"]]
     return {
-        "url": url, "seed": seed, "careless_share": careless,
+        "url": url,
+        "seed": seed,
+        "careless_share": careless,
         "quality": {k: round(v, 3) for k, v in q_cond.items()},
         "n_raters_requested": n_raters,
         "n_raters_started": len(started_raters),

@@ -1,4 +1,5 @@
 """Helpers for tests and benchmarks: a small real stimulus folder and throw-away PostgreSQL schemas."""
+
 from __future__ import annotations
 
 import contextlib
@@ -16,20 +17,38 @@ PG_BASE = os.environ.get("RATING_TEST_PG", "postgresql+psycopg://postgres@127.0.
 def write_mp4(path, n_frames=6, size=64, fps=20, shade=0):
     """A few frames of real H.264 yuv420p video (+faststart), as the stimuli contract asks."""
     import imageio_ffmpeg
-    w = imageio_ffmpeg.write_frames(str(path), (size, size), fps=fps, codec="libx264", pix_fmt_out="yuv420p",
-                                    macro_block_size=16, ffmpeg_log_level="error",
-                                    output_params=["-movflags", "+faststart", "-an"])
+
+    w = imageio_ffmpeg.write_frames(
+        str(path),
+        (size, size),
+        fps=fps,
+        codec="libx264",
+        pix_fmt_out="yuv420p",
+        macro_block_size=16,
+        ffmpeg_log_level="error",
+        output_params=["-movflags", "+faststart", "-an"],
+    )
     w.send(None)
     for t in range(n_frames):
         frame = np.full((size, size, 3), 255, np.uint8)
         x = (t * 7 + shade * 5) % (size - 8)
-        frame[size // 2 - 10:size // 2 + 10, x:x + 8] = (20, 20, 20)
+        frame[size // 2 - 10 : size // 2 + 10, x : x + 8] = (20, 20, 20)
         w.send(frame)
     w.close()
 
 
-def make_stimuli(folder, n_items=4, conditions=("NAT", "MG", "FL"), n_catch=2, n_training=3, n_frames=16,
-                 fps=20, metrics=True, seed=0, catch_nat=False) -> Path:
+def make_stimuli(
+    folder,
+    n_items=4,
+    conditions=("NAT", "MG", "FL"),
+    n_catch=2,
+    n_training=3,
+    n_frames=16,
+    fps=20,
+    metrics=True,
+    seed=0,
+    catch_nat=False,
+) -> Path:
     """Write manifest.csv (+ metrics.csv) with one short MP4 per clip; return the manifest path.
 
     NAT/MG/FL share items; BAD clips are catch trials; training clips cover every condition. `catch_nat`: also a
@@ -44,9 +63,19 @@ def make_stimuli(folder, n_items=4, conditions=("NAT", "MG", "FL"), n_catch=2, n
         cid = secrets.token_hex(8)
         video = f"videos/{cid}.mp4"
         write_mp4(folder / video, n_frames=n_frames, fps=fps, shade=len(rows))
-        rows.append({"clip_id": cid, "condition": condition, "role": role, "item": item, "video": video,
-                     "motion": f"clips/{cid}.npz", "seed": "" if condition == "NAT" else str(len(rows)),
-                     "frames": n_frames, "fps": fps})
+        rows.append(
+            {
+                "clip_id": cid,
+                "condition": condition,
+                "role": role,
+                "item": item,
+                "video": video,
+                "motion": f"clips/{cid}.npz",
+                "seed": "" if condition == "NAT" else str(len(rows)),
+                "frames": n_frames,
+                "fps": fps,
+            }
+        )
 
     for i in range(n_items):
         for cond in conditions:
@@ -67,12 +96,23 @@ def make_stimuli(folder, n_items=4, conditions=("NAT", "MG", "FL"), n_catch=2, n
         badness = {"NAT": 0.0, "MG": 1.0, "FL": 2.0, "BAD": 6.0}
         with open(folder / "metrics.csv", "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)
-            w.writerow(["clip_id", "condition", "role", "item", "foot_skating", "bone_length_std", "jerk",
-                        "control_error"])
+            w.writerow(
+                ["clip_id", "condition", "role", "item", "foot_skating", "bone_length_std", "jerk", "control_error"]
+            )
             for r in rows:
                 b = badness.get(r["condition"], 1.5) + rng.normal(0, 0.1)
-                w.writerow([r["clip_id"], r["condition"], r["role"], r["item"], 0.05 + 0.1 * b,
-                            0.001 + 0.01 * b, 20 + 30 * b, 0.02 + 0.1 * b])
+                w.writerow(
+                    [
+                        r["clip_id"],
+                        r["condition"],
+                        r["role"],
+                        r["item"],
+                        0.05 + 0.1 * b,
+                        0.001 + 0.01 * b,
+                        20 + 30 * b,
+                        0.02 + 0.1 * b,
+                    ]
+                )
     return manifest
 
 
@@ -80,6 +120,7 @@ def make_stimuli(folder, n_items=4, conditions=("NAT", "MG", "FL"), n_catch=2, n
 def pg_schema(base_url: str = PG_BASE):
     """A fresh PostgreSQL schema for one test (run), dropped afterwards; yields a URL that uses it."""
     import psycopg
+
     name = "ra_" + secrets.token_hex(6)
     plain = base_url.replace("postgresql+psycopg://", "postgresql://")
     with psycopg.connect(plain, autocommit=True) as conn:

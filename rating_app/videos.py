@@ -5,6 +5,7 @@ or an mtime-based ETag would let a rater sort clips by condition. Videos are the
 all and with an ETag that is a hash of the bytes. The bytes are read once at start-up (up to a cap), so the
 response time does not depend on the file system's cache either. Range requests (video seeking) still work.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -17,7 +18,7 @@ from flask import abort, current_app, send_file
 
 from .manifest import AppError
 
-CACHE_BYTES = int(os.environ.get("VIDEO_CACHE_MB", "512")) * 2**20   # per worker; beyond it, read per request
+CACHE_BYTES = int(os.environ.get("VIDEO_CACHE_MB", "512")) * 2**20  # per worker; beyond it, read per request
 
 
 @dataclass
@@ -41,7 +42,7 @@ class VideoStore:
 
     def _read(self, cid: str) -> bytes:
         path = Path(os.path.realpath(self.paths[cid]))
-        if not path.is_relative_to(self.root):     # a symlink swapped after start-up: never served
+        if not path.is_relative_to(self.root):  # a symlink swapped after start-up: never served
             raise AppError(f"{self.paths[cid]}: leaves the stimulus folder {self.root}")
         return path.read_bytes()
 
@@ -61,7 +62,8 @@ class VideoStore:
         except (OSError, AppError) as e:
             current_app.logger.error("video not served: %s", e)
             abort(404, "unknown video")
-        resp = send_file(io.BytesIO(data), mimetype="video/mp4", conditional=True, etag=v.etag,
-                         last_modified=None, max_age=None)
+        resp = send_file(
+            io.BytesIO(data), mimetype="video/mp4", conditional=True, etag=v.etag, last_modified=None, max_age=None
+        )
         resp.headers["Cache-Control"] = "private, max-age=3600"
         return resp

@@ -7,6 +7,7 @@ A bad setting (no RATING_MANIFEST, a bad number, an unreachable database) prints
 gunicorn's "app failed to load" code (4): gunicorn then stops instead of respawning the worker forever, as it
 does for any other exit code.
 """
+
 import sys
 
 from gunicorn.arbiter import Arbiter
@@ -15,6 +16,6 @@ from . import AppError, create_app
 
 try:
     app = create_app()
-except AppError as e:                      # a clear line in the server log instead of a traceback
+except AppError as e:  # a clear line in the server log instead of a traceback
     print(f"error: {e}", file=sys.stderr, flush=True)
     raise SystemExit(Arbiter.APP_LOAD_ERROR) from None

@@ -1,4 +1,5 @@
 """`python -m rendering CLIP.npz OUT.mp4 [--size 640] [--sheet OUT.png]`: render one clip file."""
+
 import sys
 from pathlib import Path
 
@@ -12,12 +13,20 @@ def _main(argv):
     p = cli.ArgumentParser(prog="python -m rendering", description=__doc__)
     p.add_argument("clip", help="motion clip .npz (CONTRACTS.md §1)")
     p.add_argument("out", help="output .mp4")
-    p.add_argument("--size", type=size_flag, default=640,
-                   help=f"frame width = height in pixels, even, {MIN_SIZE}-{MAX_SIZE} (default 640)")
+    p.add_argument(
+        "--size",
+        type=size_flag,
+        default=640,
+        help=f"frame width = height in pixels, even, {MIN_SIZE}-{MAX_SIZE} (default 640)",
+    )
     p.add_argument("--sheet", help="also write a PNG contact sheet here")
     p.add_argument("--preset", default="ultrafast", choices=PRESETS, help="x264 preset (default ultrafast)")
-    p.add_argument("--qp", type=cli.number(int, 0, 51), default=17,
-                   help="x264 constant quantiser, 0-51, lower is better (default 17)")
+    p.add_argument(
+        "--qp",
+        type=cli.number(int, 0, 51),
+        default=17,
+        help="x264 constant quantiser, 0-51, lower is better (default 17)",
+    )
     p.add_argument("--crf", type=cli.number(int, 0, 51), help="x264 rate factor 0-51 instead of a constant quantiser")
     args = p.parse_args(argv)
     if not Path(args.clip).is_file():
@@ -25,8 +34,7 @@ def _main(argv):
     for flag, path in (("OUT", args.out), ("--sheet", args.sheet)):
         if path is not None and not Path(path).parent.is_dir():
             raise RenderError(f"{flag} {path}: folder {Path(path).parent} does not exist")
-    n = render_clip(args.clip, args.out, size=args.size, sheet=args.sheet, preset=args.preset, qp=args.qp,
-                    crf=args.crf)
+    n = render_clip(args.clip, args.out, size=args.size, sheet=args.sheet, preset=args.preset, qp=args.qp, crf=args.crf)
     print(f"wrote {args.out} ({n} frames, {args.size}x{args.size})")
 
 

@@ -7,6 +7,7 @@ every video of a stimulus set is padded to the same size with a trailing ISO-BMF
 every player skips; the `moov` box stays at the front, so +faststart streaming is unchanged), and
 every file gets the same modification time.
 """
+
 import os
 from pathlib import Path
 

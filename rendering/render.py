@@ -11,6 +11,7 @@ just the 2x2 pixel blocks it touched into the Y/U/V planes, and hand ffmpeg (lib
 quantiser) ready yuv420p frames through a pipe. bench/bench_render.py compares this with a matplotlib
 FuncAnimation + ffmpeg writer; at 1000x1000 a third of our time is drawing, two thirds the pipe and x264.
 """
+
 import argparse
 import functools
 import subprocess
@@ -25,7 +26,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from core import cli
 from core.cli import UserError
-from generation.clip import check_fps, check_joints, load_clip
+from core.clip import check_fps, check_joints, load_clip
 
 
 class RenderError(UserError):
@@ -34,13 +35,13 @@ class RenderError(UserError):
 
 @dataclass(frozen=True)
 class Camera:
-    elevation: float = 12.0     # degrees above the horizon
-    azimuth: float = 40.0       # degrees about +Y, from +Z towards +X (where the camera stands)
-    distance: float = 4.5       # metres from the look-at point
-    fov: float = 35.0           # vertical field of view, degrees
-    height: float = 0.9         # look-at height above the floor, metres
-    follow_sigma: float = 0.5   # seconds; Gaussian smoothing of the root path the camera follows
-    max_lag: float = 0.5        # metres; the look-at point stays this close to the root on the floor
+    elevation: float = 12.0  # degrees above the horizon
+    azimuth: float = 40.0  # degrees about +Y, from +Z towards +X (where the camera stands)
+    distance: float = 4.5  # metres from the look-at point
+    fov: float = 35.0  # vertical field of view, degrees
+    height: float = 0.9  # look-at height above the floor, metres
+    follow_sigma: float = 0.5  # seconds; Gaussian smoothing of the root path the camera follows
+    max_lag: float = 0.5  # metres; the look-at point stays this close to the root on the floor
 
 
 @dataclass(frozen=True)
@@ -53,10 +54,10 @@ class Style:
     centre: tuple = (0.15, 0.15, 0.15)
     left: tuple = (0.15, 0.35, 0.75)
     right: tuple = (0.75, 0.25, 0.15)
-    grid_spacing: float = 1.0   # metres between grid lines
-    grid_radius: float = 8.0    # metres of floor drawn around the look-at point (fading out)
+    grid_spacing: float = 1.0  # metres between grid lines
+    grid_radius: float = 8.0  # metres of floor drawn around the look-at point (fading out)
     bone_width: float = 1 / 150  # line width as a fraction of the frame height
-    head_radius: float = 0.08   # metres
+    head_radius: float = 0.08  # metres
 
 
 MIN_SIZE, MAX_SIZE = 32, 4096  # pixels; beyond 4096 x264's level limits and memory get in the way
@@ -68,6 +69,7 @@ def size_flag(text):
     if size % 2:
         raise argparse.ArgumentTypeError(f"must be even (H.264 yuv420p), got {size}")
     return size
+
 
 DEFAULT_CAMERA = Camera()
 DEFAULT_STYLE = Style()
@@ -114,9 +116,9 @@ def _clip_frustum(a, b, planes):
     da = a @ planes[:, :3].T + planes[:, 3]
     db = b @ planes[:, :3].T + planes[:, 3]
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = da / (da - db)                                  # where each segment crosses each plane
-    t0 = np.where(da < 0, t, 0.0).max(1)                    # entering
-    t1 = np.where(db < 0, t, 1.0).min(1)                    # leaving
+        t = da / (da - db)  # where each segment crosses each plane
+    t0 = np.where(da < 0, t, 0.0).max(1)  # entering
+    t1 = np.where(db < 0, t, 1.0).min(1)  # leaving
     keep = (t0 < t1) & ~((da < 0) & (db < 0)).any(1)
     a, d, t0, t1 = a[keep], b[keep] - a[keep], t0[keep, None], t1[keep, None]
     return a + t0 * d, a + t1 * d
@@ -143,13 +145,14 @@ def _wu_lines(flat, width, a, b, value, alpha):
         return
     slope = dv / np.where(du == 0, 1.0, du)
     # Per line, then per sample: u = k + (start - first k of the line), v = icpt + u slope, strides su, sv.
-    per_line = np.stack([start - (np.cumsum(n) - n), av - au * slope, slope,
-                         np.where(steep, width, 1), np.where(steep, 1, width)])
+    per_line = np.stack(
+        [start - (np.cumsum(n) - n), av - au * slope, slope, np.where(steep, width, 1), np.where(steep, 1, width)]
+    )
     ku, icpt, slope, su, sv = np.repeat(per_line, n, axis=1)
     u = ku + np.arange(total)
     v = icpt + u * slope
-    v0 = np.trunc(v)                                 # v > -1e-6: the floor (or 0 at the edge)
-    p = (u * su + v0 * sv).astype(np.int64)          # flat index of the sample's first pixel
+    v0 = np.trunc(v)  # v > -1e-6: the floor (or 0 at the edge)
+    p = (u * su + v0 * sv).astype(np.int64)  # flat index of the sample's first pixel
     idx = np.concatenate([p, p + sv.astype(np.int64)])  # ... and of its second (v <= width-2)
     al = alpha[p]
     w1 = (v - v0).astype(np.float32) * al
@@ -162,7 +165,7 @@ def _wu_lines(flat, width, a, b, value, alpha):
 _TO_Y = np.array([0.2568, 0.5041, 0.0979], np.float32)
 _TO_U = np.array([-0.1482, -0.2910, 0.4392], np.float32)
 _TO_V = np.array([0.4392, -0.3678, -0.0714], np.float32)
-_RGBA_TO_Y = np.append(_TO_Y, np.float32(0))              # rgba @ _RGBA_TO_Y = Y - 16
+_RGBA_TO_Y = np.append(_TO_Y, np.float32(0))  # rgba @ _RGBA_TO_Y = Y - 16
 # A 2x2 block's 4 rgba pixels in a row [16] @ _BLOCK_TO_UV = the block's mean (U - 128, V - 128).
 _BLOCK_TO_UV = np.tile(np.vstack([np.stack([_TO_U, _TO_V], 1), np.zeros((1, 2), np.float32)]) / 4, (4, 1))
 
@@ -176,8 +179,8 @@ def yuv_to_rgb(frame, size):
     """A yuv420p frame (flat uint8, as FrameDrawer.draw returns) -> RGB uint8 [size, size, 3]."""
     n = size * size
     y = frame[:n].reshape(size, size).astype(np.float32) - 16
-    u = frame[n:n + n // 4].reshape(size // 2, size // 2).repeat(2, 0).repeat(2, 1).astype(np.float32) - 128
-    v = frame[n + n // 4:].reshape(size // 2, size // 2).repeat(2, 0).repeat(2, 1).astype(np.float32) - 128
+    u = frame[n : n + n // 4].reshape(size // 2, size // 2).repeat(2, 0).repeat(2, 1).astype(np.float32) - 128
+    v = frame[n + n // 4 :].reshape(size // 2, size // 2).repeat(2, 0).repeat(2, 1).astype(np.float32) - 128
     rgb = np.stack([1.164 * y + 1.596 * v, 1.164 * y - 0.392 * u - 0.813 * v, 1.164 * y + 2.017 * u], -1)
     return np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
 
@@ -206,12 +209,12 @@ class FrameDrawer:
         self.px = self.rgba.view(np.uint32).reshape(size, size)  # one word per pixel: nonzero where drawn
         self.px_flat = self.px.reshape(-1)
         n = size * size
-        self.frame = np.empty(n * 3 // 2, np.uint8)          # the yuv420p frame written to the encoder
+        self.frame = np.empty(n * 3 // 2, np.uint8)  # the yuv420p frame written to the encoder
         self.y = self.frame[:n].reshape(size, size)
         self.y_flat = self.frame[:n]
         self.uv = self.frame[n:].reshape(2, size // 2, size // 2)
-        self.u_flat, self.v_flat = self.frame[n:n + n // 4], self.frame[n + n // 4:]
-        self.quad = np.array([0, 1, size, size + 1])           # a 2x2 block's pixels from its top left
+        self.u_flat, self.v_flat = self.frame[n : n + n // 4], self.frame[n + n // 4 :]
+        self.quad = np.array([0, 1, size, size + 1])  # a 2x2 block's pixels from its top left
         self.parents = np.asarray(parents)
         child = np.nonzero(self.parents >= 0)[0]
         # A bone's side is its child joint's side (arms, legs); CMU-style names (LeftArm) count too.
@@ -225,15 +228,22 @@ class FrameDrawer:
         edges = np.cumsum([0] + counts)
         self.codes = np.tile(np.array([Path.MOVETO, Path.LINETO], dtype=Path.code_type), len(child))
         # side -> (its bones' slice, its path codes), for the sides that have bones
-        self.sides = {key: (slice(edges[k], edges[k + 1]), self.codes[:2 * counts[k]])
-                      for k, key in enumerate(("left", "centre", "right")) if counts[k]}
+        self.sides = {
+            key: (slice(edges[k], edges[k + 1]), self.codes[: 2 * counts[k]])
+            for k, key in enumerate(("left", "centre", "right"))
+            if counts[k]
+        }
         names = [n.lower() for n in joint_names]
         self.head = names.index("head") if "head" in names else None
         self.circle = Path.unit_circle()
         self.width = style.bone_width * size
         self.gcs = {}
-        for key, colour in [("shadow", (style.shadow,) * 3), ("centre", style.centre), ("left", style.left),
-                            ("right", style.right)]:
+        for key, colour in [
+            ("shadow", (style.shadow,) * 3),
+            ("centre", style.centre),
+            ("left", style.left),
+            ("right", style.right),
+        ]:
             gc = self.renderer.new_gc()
             gc.set_foreground(colour)
             gc.set_linewidth(self.width)
@@ -246,8 +256,10 @@ class FrameDrawer:
         # [0, size-2], so that both pixels of every Wu sample are inside the plane:
         # column = cx + f x / z, row = size - cy - f y / z.
         (cx, cy), f = self.proj.centre, self.proj.focal
-        self.frustum = np.array([[0, 0, 1, -_NEAR], [f, 0, cx, 0], [-f, 0, size - 2 - cx, 0],
-                                 [0, -f, size - cy, 0], [0, f, cy - 2, 0]], np.float64)
+        self.frustum = np.array(
+            [[0, 0, 1, -_NEAR], [f, 0, cx, 0], [-f, 0, size - 2 - cx, 0], [0, -f, size - cy, 0], [0, f, cy - 2, 0]],
+            np.float64,
+        )
         self.grid_y = grey_to_y(style.grid)
 
     def _grid(self, target, eye):
@@ -256,7 +268,7 @@ class FrameDrawer:
         # look-at point (the grid fades out there: see _background).
         xs = np.arange(np.ceil((target[0] - r) / s), np.floor((target[0] + r) / s) + 1) * s
         zs = np.arange(np.ceil((target[2] - r) / s), np.floor((target[2] + r) / s) + 1) * s
-        hx = np.sqrt(np.maximum(r * r - (xs - target[0]) ** 2, 0))      # half-chord of each line
+        hx = np.sqrt(np.maximum(r * r - (xs - target[0]) ** 2, 0))  # half-chord of each line
         hz = np.sqrt(np.maximum(r * r - (zs - target[2]) ** 2, 0))
         a = np.concatenate([np.stack([xs, 0 * xs, target[2] - hx], 1), np.stack([target[0] - hz, 0 * zs, zs], 1)])
         b = np.concatenate([np.stack([xs, 0 * xs, target[2] + hx], 1), np.stack([target[0] + hz, 0 * zs, zs], 1)])
@@ -273,7 +285,7 @@ class FrameDrawer:
         the head radius."""
         r, t = self.renderer, IdentityTransform()
         cam = self.proj.to_camera(joints, eye)
-        scam = cam - self.proj.rot[:, 1] * joints[:, 1:2]            # the joints dropped onto the floor
+        scam = cam - self.proj.rot[:, 1] * joints[:, 1:2]  # the joints dropped onto the floor
         points, radius = [], 0.0
         if (scam[:, 2] > _NEAR).all():
             seg = self.proj.to_screen(scam[self.bone_ends])
@@ -285,7 +297,7 @@ class FrameDrawer:
             depth = cam[self.bone_ends, 2]
             d_left, d_right = (depth[self.sides[k][0]].mean() if k in self.sides else 0.0 for k in ("left", "right"))
             # Painter's order: the farther limb side first, then the trunk, then the nearer side.
-            for key in (("left", "centre", "right") if d_left >= d_right else ("right", "centre", "left")):
+            for key in ("left", "centre", "right") if d_left >= d_right else ("right", "centre", "left"):
                 if key in self.sides:
                     bones, codes = self.sides[key]
                     r.draw_path(self.gcs[key], Path(seg[bones].reshape(-1, 2), codes), t)
@@ -323,14 +335,14 @@ class FrameDrawer:
         """Composite the Agg figure (straight alpha) over the planes in the 2x2 blocks it touched inside rows
         r0:r1, columns c0:c1 (even bounds), and clear those blocks of the Agg buffer for the next frame."""
         box = self.px[r0:r1, c0:c1]
-        pairs = box[0::2] | box[1::2]                   # two rows in one: [h/2, w] words
+        pairs = box[0::2] | box[1::2]  # two rows in one: [h/2, w] words
         blocks = np.flatnonzero(pairs.view(np.uint64) != 0)  # 2x2 blocks with any drawn pixel
         if len(blocks) == 0:
             return
         br, bc = np.divmod(blocks, (c1 - c0) // 2)
         br += r0 // 2
         bc += c0 // 2
-        idx = (2 * self.size * br + 2 * bc)[:, None] + self.quad       # [N, 4] flat pixel indices
+        idx = (2 * self.size * br + 2 * bc)[:, None] + self.quad  # [N, 4] flat pixel indices
         px = self.px_flat[idx]
         self.px_flat[idx] = 0
         px = px.view(np.uint8).reshape(4 * len(blocks), 4).astype(np.float32)
@@ -360,7 +372,7 @@ def _background(camera, style, size):
     """
     proj = Projector(camera, size, size)
     right, up, fwd = proj.rot
-    xc = (np.arange(size) + 0.5 - proj.centre[0]) / proj.focal           # per column
+    xc = (np.arange(size) + 0.5 - proj.centre[0]) / proj.focal  # per column
     yc = (size - (np.arange(size) + 0.5) - proj.centre[1]) / proj.focal  # per row
     ray_y = yc * up[1] + fwd[1]
     down = ray_y < -1e-9
@@ -394,18 +406,51 @@ def ffmpeg_writer(out_mp4, size, fps, preset="ultrafast", qp=17, crf=None, threa
     x264 the per-frame complexity estimate that crf needs (~10% of the encoder's time with ultrafast); for our
     line drawings ultrafast at qp 17 is as close to the frames as superfast at crf 20 (PSNR ~53 dB).
     """
-    cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "yuv420p",
-           "-s", f"{size}x{size}", "-r", f"{fps:g}", "-i", "-", "-an", "-c:v", "libx264", "-preset", preset,
-           *(["-crf", str(crf)] if crf is not None else ["-qp", str(qp)]),
-           "-pix_fmt", "yuv420p", "-movflags", "+faststart"]
+    cmd = [
+        imageio_ffmpeg.get_ffmpeg_exe(),
+        "-y",
+        "-loglevel",
+        "error",
+        "-f",
+        "rawvideo",
+        "-pix_fmt",
+        "yuv420p",
+        "-s",
+        f"{size}x{size}",
+        "-r",
+        f"{fps:g}",
+        "-i",
+        "-",
+        "-an",
+        "-c:v",
+        "libx264",
+        "-preset",
+        preset,
+        *(["-crf", str(crf)] if crf is not None else ["-qp", str(qp)]),
+        "-pix_fmt",
+        "yuv420p",
+        "-movflags",
+        "+faststart",
+    ]
     if threads is not None:
         cmd += ["-threads", str(threads), "-x264-params", f"threads={threads}:lookahead-threads=1"]
     return subprocess.Popen(cmd + [str(out_mp4)], stdin=subprocess.PIPE, stderr=subprocess.PIPE)
 
 
-def render_clip(clip_or_path, out_mp4, size=640, camera=DEFAULT_CAMERA, style=DEFAULT_STYLE, sheet=None,
-                sheet_frames=8, preset="ultrafast", qp=17, crf=None, threads=None):
-    """Render a clip (a path to a clip .npz, or a dict as from generation.clip.load_clip) to an MP4.
+def render_clip(
+    clip_or_path,
+    out_mp4,
+    size=640,
+    camera=DEFAULT_CAMERA,
+    style=DEFAULT_STYLE,
+    sheet=None,
+    sheet_frames=8,
+    preset="ultrafast",
+    qp=17,
+    crf=None,
+    threads=None,
+):
+    """Render a clip (a path to a clip .npz, or a dict as from core.clip.load_clip) to an MP4.
 
     sheet: optional PNG path for a contact sheet of `sheet_frames` evenly spaced frames.
     preset, qp, crf: x264 speed preset and quality (see ffmpeg_writer); ultrafast is the fastest and, for

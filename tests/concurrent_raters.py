@@ -1,4 +1,5 @@
 """A crowd of raters in threads against one app, for the tests that check targets under concurrent sessions."""
+
 import threading
 
 

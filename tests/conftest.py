@@ -1,4 +1,5 @@
 """Shared fixtures. Real data lives in ../shared beside the checkout (CONTRACTS.md, data/README.md)."""
+
 from pathlib import Path
 
 import pytest
@@ -23,6 +24,7 @@ def pytest_addoption(parser):
 
 def pytest_collection_modifyitems(config, items):
     import os
+
     if config.getoption("--run-slow") or os.environ.get("RUN_SLOW") == "1":
         return
     skip = pytest.mark.skip(reason="slow: run with --run-slow (CI runs the short variant)")
@@ -35,6 +37,7 @@ def pytest_collection_modifyitems(config, items):
 def small_take_names(per_category=4):
     """The `per_category` longest Bandai-Namco takes of every locomotion category."""
     from generation.prepare_data import longest_takes
+
     return longest_takes(BANDAI, per_category)
 
 
@@ -42,6 +45,7 @@ def small_take_names(per_category=4):
 def small_dataset(tmp_path_factory):
     """Path of a dataset.npz prepared from 4 real takes of every Bandai-Namco category (about a second)."""
     from generation.prepare_data import prepare
+
     out = tmp_path_factory.mktemp("small_dataset") / "dataset.npz"
     prepare(BANDAI, out, takes=small_take_names(), workers=1, progress=False)
     return out
@@ -52,12 +56,16 @@ def small_dataset(tmp_path_factory):
 def tiny_runs(small_dataset, tmp_path_factory):
     """{'mg': run_dir, 'fl': run_dir}: mg_tiny and fl_tiny trained 150 steps on `small_dataset` (seconds)."""
     import torch
+
     from generation.train import train
+
     threads = torch.get_num_threads()
     root = tmp_path_factory.mktemp("tiny_runs")
     try:
-        runs = {kind: train(kind, "tiny", small_dataset, root / kind, steps=150, seed=0, progress=False, threads=1)
-                for kind in ("mg", "fl")}
+        runs = {
+            kind: train(kind, "tiny", small_dataset, root / kind, steps=150, seed=0, progress=False, threads=1)
+            for kind in ("mg", "fl")
+        }
     finally:
         torch.set_num_threads(threads)
     return runs
@@ -70,6 +78,7 @@ APP_ADMIN_TOKEN = "test-admin-token"
 @pytest.fixture(scope="session")
 def app_stimuli(tmp_path_factory):
     from rating_app.testing import make_stimuli
+
     return make_stimuli(tmp_path_factory.mktemp("app_stimuli"))
 
 
@@ -79,7 +88,8 @@ def app_db_url(request, tmp_path):
         yield f"sqlite:///{tmp_path}/ratings.sqlite"
     else:
         from rating_app.testing import pg_schema
-        with pg_schema() as url:          # a fresh schema per test, dropped afterwards (never skipped)
+
+        with pg_schema() as url:  # a fresh schema per test, dropped afterwards (never skipped)
             yield url
 
 
@@ -87,8 +97,10 @@ def app_db_url(request, tmp_path):
 def app(app_stimuli, app_db_url):
     """The app with target 3 and MIN_VIEW 0 (answers need no wait; tests of the viewing rule use `make_app`)."""
     from rating_app import create_app
-    app = create_app(manifest=app_stimuli, db_url=app_db_url, admin_token=APP_ADMIN_TOKEN, ratings_per_clip=3,
-                     min_view=0)
+
+    app = create_app(
+        manifest=app_stimuli, db_url=app_db_url, admin_token=APP_ADMIN_TOKEN, ratings_per_clip=3, min_view=0
+    )
     app.config["TESTING"] = True
     yield app
     app.extensions["rating_app"]["engine"].dispose()
@@ -103,6 +115,7 @@ def client(app):
 def make_app(app_stimuli, app_db_url):
     """make_app(**settings) -> an app on this test's database; every engine is disposed at the end."""
     from rating_app import create_app
+
     made = []
 
     def make(**kw):
@@ -110,6 +123,7 @@ def make_app(app_stimuli, app_db_url):
         made.append(create_app(**kw))
         made[-1].config["TESTING"] = True
         return made[-1]
+
     yield make
     for a in made:
         a.extensions["rating_app"]["engine"].dispose()
@@ -123,9 +137,24 @@ def quick_stimuli(tmp_path_factory):
     folder `runs/` (`runs/dataset_quick.npz`, `runs/{mg,fl}_tiny/checkpoints/`)."""
     import subprocess
     import sys
+
     root = tmp_path_factory.mktemp("quick_stimuli")
-    r = subprocess.run([sys.executable, "-m", "generation.make_stimuli", "--quick", "--out", str(root / "stimuli"),
-                        "--runs", str(root / "runs")], capture_output=True, text=True, cwd=ROOT, timeout=900)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "generation.make_stimuli",
+            "--quick",
+            "--out",
+            str(root / "stimuli"),
+            "--runs",
+            str(root / "runs"),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=900,
+    )
     if r.returncode != 0:
         pytest.fail(f"make_stimuli --quick failed ({r.returncode}): {r.stderr[-3000:]}")
     (root / "make_stimuli.log").write_text(r.stdout + r.stderr)
@@ -136,6 +165,7 @@ def quick_stimuli(tmp_path_factory):
 def torch_one_thread():
     """Tiny models: one thread is as fast and immune to other jobs on a shared 2-core machine."""
     import torch
+
     n = torch.get_num_threads()
     torch.set_num_threads(1)
     yield

@@ -2,6 +2,7 @@
 Bradley-Terry fit against statsmodels (a logistic regression without ties; the same Davidson likelihood maximised
 by statsmodels' GenericLikelihoodModel with ties), the sign and Wilcoxon tests against scipy with statsmodels'
 Holm; the catch exclusion; bad rows refused with one line naming the row."""
+
 import csv
 import json
 import subprocess
@@ -52,19 +53,38 @@ def simulate_pairs(strength, n_raters=40, items=6, nu=0.6, seed=1, catch_fail=()
                 rows.append([f"r{r}", f"i{it}", f"c{it}{a2}", f"c{it}{b2}", a2, b2, level, "test"])
         bad_first = rng.random() < 0.5
         pref = (2 if bad_first else -2) if r in catch_fail else (-1 if bad_first else 1)
-        rows.append([f"r{r}", "k0", "kb" if bad_first else "kn", "kn" if bad_first else "kb",
-                     "BAD" if bad_first else "NAT", "NAT" if bad_first else "BAD", pref, "catch"])
+        rows.append(
+            [
+                f"r{r}",
+                "k0",
+                "kb" if bad_first else "kn",
+                "kn" if bad_first else "kb",
+                "BAD" if bad_first else "NAT",
+                "NAT" if bad_first else "BAD",
+                pref,
+                "catch",
+            ]
+        )
     return rows
 
 
 # ---------------------------------------------------------------------------------------------- pairwise
 def test_pairwise_counts_by_hand_and_sign_test(tmp_path):
     rows = [  # (rater, A cond, B cond, preference) on item i1; wins counted for the preferred condition
-        ("r1", "NAT", "MG", 2), ("r2", "MG", "NAT", -1), ("r3", "NAT", "MG", 0), ("r4", "MG", "NAT", 1),
-        ("r5", "NAT", "MG", 1), ("r1", "FL", "NAT", -2), ("r2", "NAT", "FL", 0), ("r3", "FL", "NAT", 0),
-        ("r4", "MG", "FL", 2), ("r5", "FL", "MG", -1), ("r1", "MG", "FL", -1)]
+        ("r1", "NAT", "MG", 2),
+        ("r2", "MG", "NAT", -1),
+        ("r3", "NAT", "MG", 0),
+        ("r4", "MG", "NAT", 1),
+        ("r5", "NAT", "MG", 1),
+        ("r1", "FL", "NAT", -2),
+        ("r2", "NAT", "FL", 0),
+        ("r3", "FL", "NAT", 0),
+        ("r4", "MG", "FL", 2),
+        ("r5", "FL", "MG", -1),
+        ("r1", "MG", "FL", -1),
+    ]
     data = [[r, f"i{k}", f"a{k}", f"b{k}", a, b, p, "test"] for k, (r, a, b, p) in enumerate(rows)]
-    data.append(["r2", "k", "x1", "x2", "BAD", "NAT", 1, "catch"])           # r2 prefers BAD: excluded
+    data.append(["r2", "k", "x1", "x2", "BAD", "NAT", 1, "catch"])  # r2 prefers BAD: excluded
     f = write(tmp_path / "pairs.csv", PAIR_COLS, data)
     doc = build_report(f, tmp_path / "rep", n_boot=20, quiet=True)
     assert doc["design"] == "pairwise" and doc["excluded_raters"] == ["r2"] and doc["n_raters_excluded"] == 1
@@ -73,10 +93,17 @@ def test_pairwise_counts_by_hand_and_sign_test(tmp_path):
     # by hand, all raters: FL-MG: MG wins r4 (A, 2) and r5 (B, -1), FL wins r1 (B, -1); FL-NAT: NAT r1, ties r2 r3;
     # MG-NAT: NAT r1 r2 r5, MG r4, tie r3
     assert {k: (v["wins_a"], v["wins_b"], v["ties"], v["n"]) for k, v in everyone.items()} == {
-        ("FL", "MG"): (1, 2, 0, 3), ("FL", "NAT"): (0, 1, 2, 3), ("MG", "NAT"): (1, 3, 1, 5)}
+        ("FL", "MG"): (1, 2, 0, 3),
+        ("FL", "NAT"): (0, 1, 2, 3),
+        ("MG", "NAT"): (1, 3, 1, 5),
+    }
     assert {k: (v["wins_a"], v["wins_b"], v["ties"]) for k, v in kept.items()} == {
-        ("FL", "MG"): (1, 2, 0), ("FL", "NAT"): (0, 1, 1), ("MG", "NAT"): (1, 2, 1)}
+        ("FL", "MG"): (1, 2, 0),
+        ("FL", "NAT"): (0, 1, 1),
+        ("MG", "NAT"): (1, 2, 1),
+    }
     from statsmodels.stats.multitest import multipletests
+
     for table in (everyone, kept):
         keys = sorted(table)
         p = [sps.binomtest(table[k]["wins_a"], table[k]["wins_a"] + table[k]["wins_b"], 0.5).pvalue for k in keys]
@@ -98,6 +125,7 @@ def _design(o, conds, ref):
 
 def test_bradley_terry_without_ties_is_the_logistic_regression():
     import statsmodels.api as sm
+
     rows = simulate_pairs({"NAT": 0.0, "MG": -0.5, "FL": -1.2, "X": 0.4}, nu=0.0, n_raters=30)
     df = pd.DataFrame(rows, columns=PAIR_COLS)
     o = pairwise.oriented(df)
@@ -115,6 +143,7 @@ def test_bradley_terry_without_ties_is_the_logistic_regression():
 
 def test_bradley_terry_with_ties_matches_the_same_likelihood_in_statsmodels():
     from statsmodels.base.model import GenericLikelihoodModel
+
     truth = {"NAT": 0.0, "MG": -0.6, "FL": -1.5}
     rows = simulate_pairs(truth, nu=0.7, n_raters=60, seed=4)
     o = pairwise.oriented(pd.DataFrame(rows, columns=PAIR_COLS))
@@ -124,15 +153,16 @@ def test_bradley_terry_with_ties_matches_the_same_likelihood_in_statsmodels():
 
     class Davidson(GenericLikelihoodModel):
         def loglikeobs(self, params):
-            d = self.exog @ params[:-1]                    # theta_first - theta_second
+            d = self.exog @ params[:-1]  # theta_first - theta_second
             lognu = params[-1]
             # with theta_second as the baseline: P ~ exp(d), 1, nu exp(d / 2)
             terms = np.stack([d, np.zeros_like(d), lognu + d / 2])
             lse = np.logaddexp.reduce(terms, axis=0)
             return np.choose((outcome < 0) + 2 * (outcome == 0), terms) - lse
 
-    m = Davidson(outcome.astype(float), X).fit(start_params=np.zeros(X.shape[1] + 1), method="newton", disp=0,
-                                                 tol=1e-12, maxiter=200)
+    m = Davidson(outcome.astype(float), X).fit(
+        start_params=np.zeros(X.shape[1] + 1), method="newton", disp=0, tol=1e-12, maxiter=200
+    )
     assert m.mle_retvals["converged"]
     fit = pairwise.bradley_terry(o, n_boot=200, seed=1)
     for c, beta in zip([c for c in conds if c != "NAT"], m.params[:-1]):
@@ -140,7 +170,7 @@ def test_bradley_terry_with_ties_matches_the_same_likelihood_in_statsmodels():
         lo, hi = fit["ci"][c]
         assert lo < fit["strengths"][c] < hi
     assert fit["nu"] == pytest.approx(np.exp(m.params[-1]), rel=1e-3)
-    assert fit["strengths"]["MG"] > fit["strengths"]["FL"]           # the order of the truth
+    assert fit["strengths"]["MG"] > fit["strengths"]["FL"]  # the order of the truth
     assert fit["ci"]["NAT"] == [0.0, 0.0]
 
 
@@ -149,7 +179,7 @@ def test_pairwise_catch_exclusion_either_level():
     df = pd.DataFrame(rows, columns=PAIR_COLS).astype(str)
     df["preference"] = df["preference"].astype(int)
     assert pairwise.failed_raters(df) == ["r1", "r4"]
-    df.loc[(df["role"] == "catch") & (df["rater_id"] == "r1"), "preference"] //= 2   # +-1: still preferring BAD
+    df.loc[(df["role"] == "catch") & (df["rater_id"] == "r1"), "preference"] //= 2  # +-1: still preferring BAD
     assert pairwise.failed_raters(df) == ["r1", "r4"]
 
 
@@ -164,13 +194,16 @@ def simulate_pages(means, n_raters=12, items=8, seed=2, fail=()):
                 v = int(np.clip(round(m + bias + rng.normal(0, 12)), 0, 100))
                 rows.append([f"r{r}", f"p{r}_{it}", f"i{it}", f"c{it}{c}", c, v, "test"])
         nat, bad = (40, 40) if r in fail else (80, 10)
-        rows += [[f"r{r}", f"k{r}", "k0", "kn", "NAT", nat, "catch"],
-                 [f"r{r}", f"k{r}", "k0", "kb", "BAD", bad, "catch"]]
+        rows += [
+            [f"r{r}", f"k{r}", "k0", "kn", "NAT", nat, "catch"],
+            [f"r{r}", f"k{r}", "k0", "kb", "BAD", bad, "catch"],
+        ]
     return rows
 
 
 def test_parallel_statistics_against_scipy(tmp_path):
     from statsmodels.stats.multitest import multipletests
+
     rows = simulate_pages({"NAT": 75, "MG": 60, "FL": 58, "X": 30}, fail=(3,))
     f = write(tmp_path / "ratings.csv", PAGE_COLS, rows)
     doc = build_report(f, tmp_path / "rep", n_boot=50, quiet=True)
@@ -207,9 +240,9 @@ def test_parallel_statistics_against_scipy(tmp_path):
 def test_parallel_catch_failure_is_bad_at_or_above_nat():
     rows = simulate_pages({"NAT": 70, "MG": 50}, n_raters=4, items=1, fail=(2,))
     df = pd.DataFrame(rows, columns=PAGE_COLS)
-    assert parallel.failed_raters(df) == ["r2"]                 # BAD 40 == NAT 40: at, so failed
+    assert parallel.failed_raters(df) == ["r2"]  # BAD 40 == NAT 40: at, so failed
     df.loc[(df["rater_id"] == "r0") & (df["condition"] == "BAD") & (df["role"] == "catch"), "rating"] = 79
-    assert parallel.failed_raters(df) == ["r2"]                 # 79 < 80: passed
+    assert parallel.failed_raters(df) == ["r2"]  # 79 < 80: passed
     df.loc[(df["rater_id"] == "r0") & (df["condition"] == "BAD") & (df["role"] == "catch"), "rating"] = 81
     assert parallel.failed_raters(df) == ["r0", "r2"]
 
@@ -262,12 +295,22 @@ def test_bad_page_rows_are_refused_naming_the_row(tmp_path, row, needle):
 
 def test_cli_gives_one_line_for_a_bad_row_and_writes_the_report(tmp_path):
     f = write(tmp_path / "pairs.csv", PAIR_COLS, [GOOD_PAIR, ["r1", "i2", "cc", "cd", "NAT", "FL", "9", "test"]])
-    r = subprocess.run([sys.executable, "-m", "analysis.report", str(f), "--out", str(tmp_path / "o")],
-                       capture_output=True, text=True, cwd=ROOT, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-m", "analysis.report", str(f), "--out", str(tmp_path / "o")],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
     assert r.returncode == 2 and r.stderr.strip().count("\n") == 0 and f"{f}:3: preference '9'" in r.stderr
     f = write(tmp_path / "ok.csv", PAIR_COLS, simulate_pairs({"NAT": 0, "MG": -1}, n_raters=5, items=2))
-    r = subprocess.run([sys.executable, "-m", "analysis.report", str(f), "--out", str(tmp_path / "o"),
-                        "--n-boot", "20"], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-m", "analysis.report", str(f), "--out", str(tmp_path / "o"), "--n-boot", "20"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
     assert r.returncode == 0, r.stderr
     doc = json.loads((tmp_path / "o" / "stats.json").read_text())
     assert doc["design"] == "pairwise" and set(doc["bradley_terry"]) == {"NAT", "MG"}
@@ -277,8 +320,9 @@ def test_cli_gives_one_line_for_a_bad_row_and_writes_the_report(tmp_path):
 
 def test_a_condition_that_never_wins_stays_finite():
     rows = [[f"r{r}", f"i{i}", f"n{i}", f"f{i}", "NAT", "FL", 2, "test"] for r in range(5) for i in range(4)]
-    rows += [[f"r{r}", f"i{i}", f"m{i}", f"n{i}", "MG", "NAT", (-1) ** (r + i), "test"]
-             for r in range(5) for i in range(4)]
+    rows += [
+        [f"r{r}", f"i{i}", f"m{i}", f"n{i}", "MG", "NAT", (-1) ** (r + i), "test"] for r in range(5) for i in range(4)
+    ]
     fit = pairwise.bradley_terry(pairwise.oriented(pd.DataFrame(rows, columns=PAIR_COLS)), n_boot=30)
     assert fit["converged"] and -20 < fit["strengths"]["FL"] < -8 and abs(fit["strengths"]["MG"]) < 1e-6
     assert all(np.isfinite(v).all() for v in fit["ci"].values())

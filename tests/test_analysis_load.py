@@ -1,4 +1,5 @@
 """Every bad ratings.csv / metrics.csv gives one clear line naming the file line or column, exit 2, no traceback."""
+
 import subprocess
 import sys
 from pathlib import Path
@@ -10,8 +11,7 @@ from analysis.report import main
 
 ROOT = Path(__file__).resolve().parents[1]
 HEADER = "rater_id,clip_id,condition,rating,role\n"
-GOOD = ("r1,a1,NAT,4,test\nr1,b1,MG,3,test\nr1,x1,BAD,1,catch\n"
-        "r2,a1,NAT,5,test\nr2,b1,MG,2,test\nr2,x1,BAD,2,catch\n")
+GOOD = "r1,a1,NAT,4,test\nr1,b1,MG,3,test\nr1,x1,BAD,1,catch\nr2,a1,NAT,5,test\nr2,b1,MG,2,test\nr2,x1,BAD,2,catch\n"
 
 # (name, file text, regex the one-line message must match)
 BAD = [
@@ -31,10 +31,16 @@ BAD = [
     ("empty_role", HEADER + GOOD + "r3,a1,NAT,3,\n", r":8: unknown role ''"),
     ("empty_rater", HEADER + GOOD + ",a1,NAT,3,test\n", r":8: empty rater_id"),
     ("empty_clip", HEADER + GOOD + "r3,,NAT,3,test\n", r":8: empty clip_id"),
-    ("duplicate_pair", HEADER + GOOD + "r1,b1,MG,5,test\n",
-     r":8: duplicate rating of clip b1 by rater r1 \(first at line 3\)"),
-    ("clip_in_two_conditions", HEADER + GOOD + "r3,a1,FL,3,test\n",
-     r":8: clip a1 has condition 'FL' but 'NAT' at line 2"),
+    (
+        "duplicate_pair",
+        HEADER + GOOD + "r1,b1,MG,5,test\n",
+        r":8: duplicate rating of clip b1 by rater r1 \(first at line 3\)",
+    ),
+    (
+        "clip_in_two_conditions",
+        HEADER + GOOD + "r3,a1,FL,3,test\n",
+        r":8: clip a1 has condition 'FL' but 'NAT' at line 2",
+    ),
     ("clip_in_two_roles", HEADER + GOOD + "r3,a1,NAT,3,catch\n", r":8: clip a1 has role 'catch' but 'test'"),
     ("only_catch_rows", HEADER + "r1,x1,BAD,1,catch\n", r"no test ratings"),
     ("ragged_row", HEADER + GOOD + "r3,a1,NAT,3,test,extra\n", r"malformed CSV: .*line 8"),
@@ -76,8 +82,13 @@ def test_missing_file(tmp_path, capsys):
 
 def test_cli_as_module_never_prints_a_traceback(tmp_path):
     path = _write(tmp_path, "bad", HEADER + GOOD + "r3,a1,NAT,9,test\n")
-    proc = subprocess.run([sys.executable, "-m", "analysis.report", str(path), "--quiet"], cwd=ROOT,
-                          capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "analysis.report", str(path), "--quiet"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert proc.returncode == 2
     assert proc.stderr.strip() == f"error: {path}:8: rating 9 is out of range 1-5"
     assert "Traceback" not in proc.stderr
@@ -109,8 +120,7 @@ def test_every_rater_excluded_is_an_error(tmp_path, capsys):
     assert "every rater failed the catch trials" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("args", [["--threshold", "0"], ["--threshold", "x"], ["--n-boot", "3"],
-                                  ["--alpha", "2"]])
+@pytest.mark.parametrize("args", [["--threshold", "0"], ["--threshold", "x"], ["--n-boot", "3"], ["--alpha", "2"]])
 def test_bad_options_exit_2(tmp_path, capsys, args):
     path = _write(tmp_path, "good", HEADER + GOOD)
     with pytest.raises(SystemExit) as info:
@@ -121,14 +131,17 @@ def test_bad_options_exit_2(tmp_path, capsys, args):
 METRICS_HEADER = "clip_id,condition,role,item,foot_skating,jerk\n"
 
 
-@pytest.mark.parametrize("text,pattern", [
-    ("", r"file is empty"),
-    ("condition,jerk\nNAT,1\n", r"missing required column clip_id"),
-    (METRICS_HEADER, r"no rows"),
-    (METRICS_HEADER + "a1,NAT,test,1,0.1,2\na1,NAT,test,1,0.2,3\n", r":3: duplicate clip_id a1"),
-    (METRICS_HEADER + "a1,NAT,test,1,fast,2\n", r":2: foot_skating 'fast' is not a number"),
-    ("clip_id,condition,role,item\na1,NAT,test,1\n", r"no metric columns"),
-])
+@pytest.mark.parametrize(
+    "text,pattern",
+    [
+        ("", r"file is empty"),
+        ("condition,jerk\nNAT,1\n", r"missing required column clip_id"),
+        (METRICS_HEADER, r"no rows"),
+        (METRICS_HEADER + "a1,NAT,test,1,0.1,2\na1,NAT,test,1,0.2,3\n", r":3: duplicate clip_id a1"),
+        (METRICS_HEADER + "a1,NAT,test,1,fast,2\n", r":2: foot_skating 'fast' is not a number"),
+        ("clip_id,condition,role,item\na1,NAT,test,1\n", r"no metric columns"),
+    ],
+)
 def test_bad_metrics_file(tmp_path, text, pattern):
     path = tmp_path / "metrics.csv"
     path.write_text(text)
@@ -160,15 +173,32 @@ def _corrupt(draw):
         line = lines[i]
         if kind == "byte" and line:
             j = draw(st.integers(0, len(line) - 1))
-            lines[i] = line[:j] + bytes([draw(st.integers(0, 255))]) + line[j + 1:]
+            lines[i] = line[:j] + bytes([draw(st.integers(0, 255))]) + line[j + 1 :]
         elif kind == "insert":
             j = draw(st.integers(0, len(line)))
-            junk = draw(st.sampled_from([b",", b'"', b"\r", b"\x00", b"\xff\xfe", b"NaN", b"-", b"9" * 30, b"\n",
-                                         "é".encode(), b" ", b"1e3", b"inf"]))
+            junk = draw(
+                st.sampled_from(
+                    [
+                        b",",
+                        b'"',
+                        b"\r",
+                        b"\x00",
+                        b"\xff\xfe",
+                        b"NaN",
+                        b"-",
+                        b"9" * 30,
+                        b"\n",
+                        "é".encode(),
+                        b" ",
+                        b"1e3",
+                        b"inf",
+                    ]
+                )
+            )
             lines[i] = line[:j] + junk + line[j:]
         elif kind == "delete" and line:
             j = draw(st.integers(0, len(line) - 1))
-            lines[i] = line[:j] + line[j + draw(st.integers(1, 5)):]
+            lines[i] = line[:j] + line[j + draw(st.integers(1, 5)) :]
         elif kind == "drop_line" and len(lines) > 1:
             del lines[i]
         elif kind == "dup_line":
@@ -178,12 +208,13 @@ def _corrupt(draw):
             lines[i], lines[j] = lines[j], lines[i]
         elif kind == "cell":
             cells = line.split(b",")
-            cells[draw(st.integers(0, len(cells) - 1))] = draw(st.sampled_from([b"", b"x", b"0", b"7", b"3.0",
-                                                                                 b"catch", b"BAD", b"NAT"]))
+            cells[draw(st.integers(0, len(cells) - 1))] = draw(
+                st.sampled_from([b"", b"x", b"0", b"7", b"3.0", b"catch", b"BAD", b"NAT"])
+            )
             lines[i] = b",".join(cells)
         elif kind == "cut":
             text = b"\n".join(lines)
-            return text[:draw(st.integers(0, len(text)))]
+            return text[: draw(st.integers(0, len(text)))]
     return b"\n".join(lines)
 
 
@@ -195,8 +226,9 @@ def test_fuzzed_ratings_file_is_a_table_or_one_line_error(tmp_path_factory):
 
     folder = tmp_path_factory.mktemp("fuzz")
 
-    @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow], database=None,
-              derandomize=True)
+    @settings(
+        max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow], database=None, derandomize=True
+    )
     @given(st.data())
     def check(data):
         path = folder / "ratings.csv"

@@ -1,5 +1,6 @@
 """The ordinal mixed model and the Satterthwaite df against R (ordinal::clmm, lmerTest), frozen in
 tests/data/analysis/r_reference.json by r_reference.R -- CI never needs R."""
+
 import json
 from pathlib import Path
 
@@ -18,8 +19,11 @@ R = json.loads((DATA / "r_reference.json").read_text())
 @pytest.fixture(scope="module")
 def rows():
     t = only_test_rows(exclude_raters(load_ratings(DATA / "ratings_r_reference.csv"))[0])
-    assert (len(t), t["rater_id"].nunique(), t["clip_id"].nunique()) == (R["data"]["n"], R["data"]["n_raters"],
-                                                                         R["data"]["n_clips"]) == (2970, 66, 90)
+    assert (
+        (len(t), t["rater_id"].nunique(), t["clip_id"].nunique())
+        == (R["data"]["n"], R["data"]["n_raters"], R["data"]["n_clips"])
+        == (2970, 66, 90)
+    )
     return t
 
 
@@ -113,6 +117,7 @@ def test_satterthwaite_matches_lmertest(rows):
     assert m["reml_log_likelihood"] == pytest.approx(ref["reml_log_likelihood"], abs=1e-6)
     # the intervals are t intervals on those df (wider than the old normal ones)
     from scipy import stats as sps
+
     k = "condition[T.MG]"
     half = sps.t.ppf(0.975, ref["df"][k]) * ref["std_errors"][k]
     assert m["ci_high"][k] - m["fixed_effects"][k] == pytest.approx(half, rel=1e-4)

@@ -1,5 +1,6 @@
 """The power planner (python -m analysis.plan): its estimated power against the observed rejection rate of the
 report's own Tukey HSD on studies simulated with a known effect, and its command line."""
+
 import json
 import subprocess
 import sys
@@ -26,8 +27,12 @@ def simulate_study(rng, n_raters, model=TRUE):
     clips = np.concatenate([rng.choice(len(clip_cond), CLIPS_PER_RATER, replace=False) for _ in range(n_raters)])
     rater = np.repeat(np.arange(n_raters), CLIPS_PER_RATER)
     mu = np.array([model["means"][c] for c in clip_cond])
-    y = (mu[clips] + rng.normal(0, model["sd_rater"], n_raters)[rater] + clip_eff[clips]
-         + rng.normal(0, model["sd_residual"], len(clips)))
+    y = (
+        mu[clips]
+        + rng.normal(0, model["sd_rater"], n_raters)[rater]
+        + clip_eff[clips]
+        + rng.normal(0, model["sd_residual"], len(clips))
+    )
     return pd.DataFrame({"rater_id": rater, "clip_id": clips, "condition": clip_cond[clips], "rating": y})
 
 
@@ -70,8 +75,15 @@ def test_planned_power_matches_observed_rejection_rate_short():
 
 def test_clip_variance_matters():
     """Same design, no clip variance: higher power. A planner that left out the clips would promise too much."""
-    design = {"conditions": ["NAT", "MG", "FL"], "means": TRUE["means"], "sd_rater": 0.5, "sd_clip": 0.3,
-              "sd_residual": 1.05, "clips_per_condition": 30, "clips_per_rater": 45}
+    design = {
+        "conditions": ["NAT", "MG", "FL"],
+        "means": TRUE["means"],
+        "sd_rater": 0.5,
+        "sd_clip": 0.3,
+        "sd_residual": 1.05,
+        "clips_per_condition": 30,
+        "clips_per_rater": 45,
+    }
     with_clips = plan.simulate_power(design, ("NAT", "MG"), 20, n_sim=2000, seed=1)[0]
     without = plan.simulate_power({**design, "sd_clip": 0.0}, ("NAT", "MG"), 20, n_sim=2000, seed=1)[0]
     assert without > with_clips + 0.05
@@ -80,16 +92,39 @@ def test_clip_variance_matters():
 def test_null_rejection_rate_is_alpha_where_tukey_is_exact():
     """Two conditions, no rater or clip variance: Tukey HSD is the two-sample t test, so the simulated
     rejection rate under no difference must be alpha (SD 0.0034 with 4000 studies)."""
-    design = {"conditions": ["A", "B"], "means": {"A": 3.0, "B": 3.0}, "sd_rater": 0.0, "sd_clip": 0.0,
-              "sd_residual": 1.0, "clips_per_condition": 10, "clips_per_rater": 5}
+    design = {
+        "conditions": ["A", "B"],
+        "means": {"A": 3.0, "B": 3.0},
+        "sd_rater": 0.0,
+        "sd_clip": 0.0,
+        "sd_residual": 1.0,
+        "clips_per_condition": 10,
+        "clips_per_rater": 5,
+    }
     p, low, high = plan.simulate_power(design, ("A", "B"), 6, n_sim=4000, seed=2)
     assert abs(p - 0.05) < 0.012 and low < p < high
 
 
 def test_plan_cli_writes_curve_and_table(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "analysis.plan", str(DATA / "ratings_small.csv"), "--out",
-                           str(tmp_path), "--n-sim", "200", "--raters", "6", "--quiet"], cwd=ROOT,
-                          capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "analysis.plan",
+            str(DATA / "ratings_small.csv"),
+            "--out",
+            str(tmp_path),
+            "--n-sim",
+            "200",
+            "--raters",
+            "6",
+            "--quiet",
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stderr
     doc = json.loads((tmp_path / "plan.json").read_text())
     assert doc["pair"] == ["NAT", "MG"]  # the pilot's closest pair
@@ -98,21 +133,32 @@ def test_plan_cli_writes_curve_and_table(tmp_path):
     assert "Power 0.8 needs" in proc.stdout and "ratings per clip" in proc.stdout
 
 
-@pytest.mark.parametrize("args,start", [
-    (["--no-pilot", "--sd-rater", "0.5", "--sd-clip", "0.3", "--difference", "0.3"], "error: --no-pilot needs "
-                                                                                        "--sd-residual"),
-    ([str(DATA / "ratings_small.csv"), "--pair", "NAT", "XX"], "error: --pair: condition 'XX'"),
-    ([str(DATA / "ratings_small.csv"), "--power", "2"], "error: python -m analysis.plan: argument --power"),
-    ([], "error: give a pilot ratings file"),
-])
+@pytest.mark.parametrize(
+    "args,start",
+    [
+        (
+            ["--no-pilot", "--sd-rater", "0.5", "--sd-clip", "0.3", "--difference", "0.3"],
+            "error: --no-pilot needs --sd-residual",
+        ),
+        ([str(DATA / "ratings_small.csv"), "--pair", "NAT", "XX"], "error: --pair: condition 'XX'"),
+        ([str(DATA / "ratings_small.csv"), "--power", "2"], "error: python -m analysis.plan: argument --power"),
+        ([], "error: give a pilot ratings file"),
+    ],
+)
 def test_plan_cli_errors_are_one_line(tmp_path, args, start):
-    proc = subprocess.run([sys.executable, "-m", "analysis.plan", *args, "--out", str(tmp_path), "--quiet"],
-                          cwd=ROOT, capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "analysis.plan", *args, "--out", str(tmp_path), "--quiet"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert proc.returncode == 2 and proc.stderr.startswith(start), proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
 
 
 def test_plan_help_says_acr_only():
-    proc = subprocess.run([sys.executable, "-m", "analysis.plan", "--help"], cwd=ROOT, capture_output=True,
-                          text=True, timeout=60)
+    proc = subprocess.run(
+        [sys.executable, "-m", "analysis.plan", "--help"], cwd=ROOT, capture_output=True, text=True, timeout=60
+    )
     assert proc.returncode == 0 and "acr" in proc.stdout and "pairwise" in proc.stdout.lower()

@@ -1,4 +1,5 @@
 """The report end to end: the paper's exclusion rule on a hand-made file, and a frozen ratings.csv -> stats.json."""
+
 import json
 import math
 import re
@@ -14,8 +15,18 @@ from analysis.report import build_report, main
 
 DATA = Path(__file__).parent / "data" / "analysis"
 ROOT = Path(__file__).resolve().parents[1]
-CONTRACT_KEYS = ["n_ratings_total", "n_ratings_removed", "n_ratings_kept", "n_raters_total", "n_raters_excluded",
-                 "condition_means", "condition_counts", "anova", "tukey", "mixed_model"]
+CONTRACT_KEYS = [
+    "n_ratings_total",
+    "n_ratings_removed",
+    "n_ratings_kept",
+    "n_raters_total",
+    "n_raters_excluded",
+    "condition_means",
+    "condition_counts",
+    "anova",
+    "tukey",
+    "mixed_model",
+]
 
 
 # ---------------------------------------------------------------------------------------------- exclusion rule
@@ -49,8 +60,22 @@ def test_exclusion_report_uses_kept_test_rows_only(tmp_path):
 
 
 def test_threshold_option_changes_the_exclusion(tmp_path):
-    assert main([str(DATA / "exclusion.csv"), "--out", str(tmp_path), "--threshold", "4", "--n-boot", "50",
-                 "--no-mixed", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                str(DATA / "exclusion.csv"),
+                "--out",
+                str(tmp_path),
+                "--threshold",
+                "4",
+                "--n-boot",
+                "50",
+                "--no-mixed",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     doc = json.loads((tmp_path / "stats.json").read_text())
     assert doc["excluded_raters"] == ["erin"] and doc["n_ratings_removed"] == 4
     assert doc["mixed_model"]["skipped"] == "--no-mixed"
@@ -60,8 +85,9 @@ def test_threshold_option_changes_the_exclusion(tmp_path):
 @pytest.fixture(scope="module")
 def frozen_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("report")
-    doc = build_report(DATA / "ratings_small.csv", out, metrics_path=DATA / "metrics_small.csv", progress=False,
-                       quiet=True)
+    doc = build_report(
+        DATA / "ratings_small.csv", out, metrics_path=DATA / "metrics_small.csv", progress=False, quiet=True
+    )
     return out, doc
 
 
@@ -119,8 +145,14 @@ def test_frozen_fixture_headline_numbers(frozen_run):
 
 def test_report_folder_contents(frozen_run):
     out, _ = frozen_run
-    for name in ["ratings_histogram", "per_clip_means", "condition_means", "metric_scatter", "ordinal_fit",
-                 "ordinal_fit_all"]:
+    for name in [
+        "ratings_histogram",
+        "per_clip_means",
+        "condition_means",
+        "metric_scatter",
+        "ordinal_fit",
+        "ordinal_fit_all",
+    ]:
         png = out / "figures" / f"{name}.png"
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
     page = (out / "report.html").read_text()
@@ -181,24 +213,43 @@ def test_identical_ratings_are_no_variance_not_significant(tmp_path):
 
 def test_no_variance_within_conditions_is_undefined(tmp_path):
     """Each condition constant (5 vs 2): F = x / 0 is not evidence; the models are not fitted either."""
-    path = _csv(tmp_path, "flat", [(f"r{r}", f"c{c}", ["NAT", "MG"][c % 2], [5, 2][c % 2]) for r in range(4)
-                                   for c in range(4)])
+    path = _csv(
+        tmp_path, "flat", [(f"r{r}", f"c{c}", ["NAT", "MG"][c % 2], [5, 2][c % 2]) for r in range(4) for c in range(4)]
+    )
     doc = build_report(path, tmp_path / "rep", n_boot=50, progress=False, quiet=True)
     assert doc["anova"]["p"] is None and not any(t["reject"] for t in doc["tukey"])
     assert {"anova", "tukey", "mixed_model", "ordinal_model"} <= set(doc["undefined"])
     assert doc["mixed_model"]["fixed_effects"] == {} and doc["ordinal_model"]["fixed_effects"] == {}
 
 
-@pytest.mark.parametrize("name,rows,expect", [
-    ("single_rater", [("r1", f"c{c}", ["NAT", "MG", "FL"][c % 3], 1 + c % 5) for c in range(12)],
-     {"mixed_model": "single rater", "ordinal_model": "single rater", "bootstrap": "one rater"}),
-    ("one_clip_per_condition", [(f"r{r}", f"c{c}", ["NAT", "MG", "FL"][c], 1 + (r + c) % 5) for r in range(6)
-                                for c in range(3)],
-     {"mixed_model": "one clip per condition", "ordinal_model": "one clip per condition",
-      "bootstrap": "one clip per condition"}),
-    ("separation", [(f"r{r}", f"c{c}", ["NAT", "MG", "FL"][c % 3], 5 if c % 3 == 0 else 1 + (r * c) % 4)
-                    for r in range(8) for c in range(9)], {"ordinal_model": "separation"}),
-])
+@pytest.mark.parametrize(
+    "name,rows,expect",
+    [
+        (
+            "single_rater",
+            [("r1", f"c{c}", ["NAT", "MG", "FL"][c % 3], 1 + c % 5) for c in range(12)],
+            {"mixed_model": "single rater", "ordinal_model": "single rater", "bootstrap": "one rater"},
+        ),
+        (
+            "one_clip_per_condition",
+            [(f"r{r}", f"c{c}", ["NAT", "MG", "FL"][c], 1 + (r + c) % 5) for r in range(6) for c in range(3)],
+            {
+                "mixed_model": "one clip per condition",
+                "ordinal_model": "one clip per condition",
+                "bootstrap": "one clip per condition",
+            },
+        ),
+        (
+            "separation",
+            [
+                (f"r{r}", f"c{c}", ["NAT", "MG", "FL"][c % 3], 5 if c % 3 == 0 else 1 + (r * c) % 4)
+                for r in range(8)
+                for c in range(9)
+            ],
+            {"ordinal_model": "separation"},
+        ),
+    ],
+)
 def test_degenerate_designs_give_statements(tmp_path, name, rows, expect):
     path = _csv(tmp_path, name, rows)
     assert main([str(path), "--out", str(tmp_path / "rep"), "--n-boot", "50", "--quiet"]) == 0
@@ -214,13 +265,17 @@ def test_degenerate_designs_give_statements(tmp_path, name, rows, expect):
 
 def html_escape(text):
     import html
+
     return html.escape(text)
 
 
 def test_condition_names_are_escaped_in_the_html(tmp_path):
     evil = "<script>alert(1)</script>"
-    rows = [(f"r{r}", f"c{c}", [evil, "MG&co", "<b>FL</b>"][c % 3], [5, 3, 1][c % 3] if r % 4 else 3)
-            for r in range(8) for c in range(9)]
+    rows = [
+        (f"r{r}", f"c{c}", [evil, "MG&co", "<b>FL</b>"][c % 3], [5, 3, 1][c % 3] if r % 4 else 3)
+        for r in range(8)
+        for c in range(9)
+    ]
     path = _csv(tmp_path, "evil", rows)
     doc = build_report(path, tmp_path / "rep", n_boot=50, progress=False, quiet=True)
     assert any(t["reject"] for t in doc["tukey"])  # the names reach the summary's Tukey sentence
@@ -229,15 +284,31 @@ def test_condition_names_are_escaped_in_the_html(tmp_path):
     assert "&lt;script&gt;alert(1)&lt;/script&gt;" in page and "MG&amp;co" in page
 
 
-@pytest.mark.parametrize("args,pattern", [
-    (["--seed", "-1"], r"--seed: must be >= 0"),
-    (["--n-boot", "5"], r"--n-boot: must be >= 10"),
-    (["--alpha", "0"], r"--alpha: must be > 0"),
-])
+@pytest.mark.parametrize(
+    "args,pattern",
+    [
+        (["--seed", "-1"], r"--seed: must be >= 0"),
+        (["--n-boot", "5"], r"--n-boot: must be >= 10"),
+        (["--alpha", "0"], r"--alpha: must be > 0"),
+    ],
+)
 def test_bad_flags_one_line_exit_2(tmp_path, args, pattern):
-    proc = subprocess.run([sys.executable, "-m", "analysis.report", str(DATA / "exclusion.csv"), "--quiet",
-                           "--out", str(tmp_path / "rep"), *args], cwd=ROOT, capture_output=True, text=True,
-                          timeout=120)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "analysis.report",
+            str(DATA / "exclusion.csv"),
+            "--quiet",
+            "--out",
+            str(tmp_path / "rep"),
+            *args,
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     assert re.search(pattern, proc.stderr) and "Traceback" not in proc.stderr
 
@@ -246,13 +317,20 @@ def test_too_few_ratings_and_bad_out_are_one_line_errors(tmp_path):
     two = _csv(tmp_path, "two", [("r1", "a", "NAT", 3), ("r2", "b", "MG", 4)])
     a_file = tmp_path / "taken"
     a_file.write_text("not a folder")
-    cases = [([str(two)], f"{two}: 2 test ratings in 2 conditions"),
-             ([str(DATA / "exclusion.csv"), "--out", str(a_file)], f"--out {a_file}: is a file"),
-             ([str(DATA / "exclusion.csv"), "--out", str(a_file / "sub")], f"--out {a_file / 'sub'}: cannot create")]
+    cases = [
+        ([str(two)], f"{two}: 2 test ratings in 2 conditions"),
+        ([str(DATA / "exclusion.csv"), "--out", str(a_file)], f"--out {a_file}: is a file"),
+        ([str(DATA / "exclusion.csv"), "--out", str(a_file / "sub")], f"--out {a_file / 'sub'}: cannot create"),
+    ]
     for args, start in cases:
-        proc = subprocess.run([sys.executable, "-m", "analysis.report", *args, "--quiet", "--n-boot", "20"]
-                              + ([] if "--out" in args else ["--out", str(tmp_path / "rep")]),
-                              cwd=ROOT, capture_output=True, text=True, timeout=120)
+        proc = subprocess.run(
+            [sys.executable, "-m", "analysis.report", *args, "--quiet", "--n-boot", "20"]
+            + ([] if "--out" in args else ["--out", str(tmp_path / "rep")]),
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert proc.returncode == 2, (args, proc.stderr)
         assert proc.stderr.startswith(f"error: {start}") and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     assert a_file.read_text() == "not a folder"
@@ -273,6 +351,7 @@ def test_tukey_bound_is_a_true_upper_bound():
     from scipy import stats as sps
 
     from analysis.stats import tukey_p
+
     for q in (6.0, 8.0, 9.5, 10.5):  # where the numerical tail is still accurate, the bound holds above it
         exact = float(sps.studentized_range.sf(q, 3, 200))
         p, bound = tukey_p(q, 3, 200)
@@ -281,11 +360,23 @@ def test_tukey_bound_is_a_true_upper_bound():
 
 
 def test_no_ordinal_flag_and_report_sections(tmp_path, frozen_run):
-    assert main([str(DATA / "exclusion.csv"), "--out", str(tmp_path), "--no-ordinal", "--n-boot", "20",
-                 "--quiet"]) == 0
+    assert main([str(DATA / "exclusion.csv"), "--out", str(tmp_path), "--no-ordinal", "--n-boot", "20", "--quiet"]) == 0
     assert json.loads((tmp_path / "stats.json").read_text())["ordinal_model"]["skipped"] == "--no-ordinal"
-    assert main([str(DATA / "exclusion.csv"), "--out", str(tmp_path), "--ordinal-max-ratings", "5", "--n-boot", "20",
-                 "--quiet"]) == 0
+    assert (
+        main(
+            [
+                str(DATA / "exclusion.csv"),
+                "--out",
+                str(tmp_path),
+                "--ordinal-max-ratings",
+                "5",
+                "--n-boot",
+                "20",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     skipped = json.loads((tmp_path / "stats.json").read_text())["ordinal_model"]["skipped"]
     assert skipped == "9 ratings: above --ordinal-max-ratings 5"
     out, doc = frozen_run

@@ -1,4 +1,5 @@
 """Regression tests of the statistics against certified and published reference values."""
+
 import re
 from decimal import Decimal
 from pathlib import Path
@@ -23,9 +24,14 @@ def read_nist(path):
     first, last = map(int, re.search(r"Data\s+\(lines (\d+) to (\d+)\)", text).groups())
     between = next(ln.split() for ln in lines if re.match(r"\s*Between\b", ln))
     within = next(ln.split() for ln in lines if re.match(r"\s*Within\b", ln))
-    cert = {"df_between": int(between[2]), "ss_between": float(between[3]), "F": float(between[5]),
-            "df_within": int(within[2]), "ss_within": float(within[3])}
-    rows = [ln.split() for ln in lines[first - 1:last]]
+    cert = {
+        "df_between": int(between[2]),
+        "ss_between": float(between[3]),
+        "F": float(between[5]),
+        "df_within": int(within[2]),
+        "ss_within": float(within[3]),
+    }
+    rows = [ln.split() for ln in lines[first - 1 : last]]
     data = pd.DataFrame({"group": [r[0] for r in rows], "y": [Decimal(r[1]) for r in rows]})
     return data, cert
 
@@ -51,8 +57,9 @@ def test_anova_matches_nist_certified_values(path):
     assert sig_digits(res["ss_within"], cert["ss_within"]) >= 9
 
 
-@pytest.mark.parametrize("path", [p for p in NIST if p.stem not in ("SmLs07", "SmLs08", "SmLs09")],
-                         ids=lambda p: p.stem)
+@pytest.mark.parametrize(
+    "path", [p for p in NIST if p.stem not in ("SmLs07", "SmLs08", "SmLs09")], ids=lambda p: p.stem
+)
 def test_anova_float_path_is_stable(path):
     """With float64 input (no decimal), the shifted two-pass algorithm still gives >= 9 digits wherever
     float64 can hold the data. (SmLs07-09 carry 13-15 constant digits: 1000000000000.4 is not a float64, so
@@ -81,9 +88,11 @@ def test_naive_sum_of_squares_fails_where_we_do_not():
 #   trt2-ctrl  0.494 -0.1972161 1.1852161 0.1979960
 #   trt2-trt1  0.865  0.1737839 1.5562161 0.0120064
 # and summary(aov(...)): group Df 2, Residuals 27, F value 4.846, Pr(>F) 0.0159.
-R_TUKEY = [("ctrl", "trt1", -0.371, -1.0622161, 0.3202161, 0.3908711),
-           ("ctrl", "trt2", 0.494, -0.1972161, 1.1852161, 0.1979960),
-           ("trt1", "trt2", 0.865, 0.1737839, 1.5562161, 0.0120064)]
+R_TUKEY = [
+    ("ctrl", "trt1", -0.371, -1.0622161, 0.3202161, 0.3908711),
+    ("ctrl", "trt2", 0.494, -0.1972161, 1.1852161, 0.1979960),
+    ("trt1", "trt2", 0.865, 0.1737839, 1.5562161, 0.0120064),
+]
 
 
 def test_tukey_matches_r_tukeyhsd_on_plantgrowth():
@@ -126,8 +135,7 @@ def test_holm_matches_statsmodels():
 
 
 def test_mannwhitney_effect_size_and_holm():
-    df = pd.DataFrame({"c": ["A"] * 6 + ["B"] * 5 + ["C"] * 4,
-                       "y": [1, 2, 2, 3, 3, 4, 2, 3, 4, 4, 5, 5, 5, 4, 1]})
+    df = pd.DataFrame({"c": ["A"] * 6 + ["B"] * 5 + ["C"] * 4, "y": [1, 2, 2, 3, 3, 4, 2, 3, 4, 4, 5, 5, 5, 4, 1]})
     res = stats.pairwise_mannwhitney(df, "y", "c")
     assert list(zip(res.group1, res.group2)) == [("A", "B"), ("A", "C"), ("B", "C")]
     for row in res.itertuples():  # cles = P(group2 > group1) + P(tie)/2 by brute force over all pairs
@@ -167,8 +175,15 @@ def test_cluster_bootstrap_equals_explicit_weighted_means(small_test_rows):
         members = np.flatnonzero(clip_cond == k)
         wc[:, members] = stats._resample_counts(rng, B, len(members))
     y = t["rating"].to_numpy(float)
-    reps = np.array([[np.sum((w := wr[b, rc] * wc[b, cc])[cond == k] * y[cond == k]) / w[cond == k].sum()
-                      for k in range(len(conds))] for b in range(B)])
+    reps = np.array(
+        [
+            [
+                np.sum((w := wr[b, rc] * wc[b, cc])[cond == k] * y[cond == k]) / w[cond == k].sum()
+                for k in range(len(conds))
+            ]
+            for b in range(B)
+        ]
+    )
     expected_se = pd.Series(reps.std(axis=0, ddof=1), index=conds)
     np.testing.assert_allclose(fast["means"]["boot_se"].loc[conds], expected_se, rtol=1e-12)
     lo = pd.Series(np.percentile(reps, 2.5, axis=0), index=conds)
@@ -191,11 +206,18 @@ def test_mixed_model_matches_statsmodels_reml(small_test_rows):
 
     t = small_test_rows[small_test_rows["rater_id"].isin(sorted(small_test_rows["rater_id"].unique())[:8])]
     ours = stats.mixed_model(t, reference="FL")
-    data = pd.DataFrame({"y": t["rating"].astype(float).to_numpy(), "cond": t["condition"].to_numpy(),
-                         "rater": t["rater_id"].to_numpy(), "clip": t["clip_id"].to_numpy(), "g": 0})
-    ref = smf.mixedlm("y ~ cond", data, groups="g", re_formula="0",
-                      vc_formula={"rater": "0 + C(rater)", "clip": "0 + C(clip)"}).fit(reml=True, method="nm",
-                                                                                        maxiter=4000)
+    data = pd.DataFrame(
+        {
+            "y": t["rating"].astype(float).to_numpy(),
+            "cond": t["condition"].to_numpy(),
+            "rater": t["rater_id"].to_numpy(),
+            "clip": t["clip_id"].to_numpy(),
+            "g": 0,
+        }
+    )
+    ref = smf.mixedlm(
+        "y ~ cond", data, groups="g", re_formula="0", vc_formula={"rater": "0 + C(rater)", "clip": "0 + C(clip)"}
+    ).fit(reml=True, method="nm", maxiter=4000)
     vc = dict(zip(ref.model.exog_vc.names, ref.vcomp))
     assert ours["reml_log_likelihood"] >= ref.llf - 1e-7  # never a worse optimum
     assert ours["reml_log_likelihood"] == pytest.approx(ref.llf, abs=1e-5)
@@ -214,8 +236,12 @@ def test_mixed_model_recovers_simulated_variances():
     r, c = np.meshgrid(np.arange(R), np.arange(C), indexing="ij")
     r, c = r.ravel(), c.ravel()
     cond = np.array(["NAT", "MG", "FL"])[c % 3]
-    y = (np.array([4.0, 3.5, 2.5])[c % 3] + rng.normal(0, np.sqrt(0.2), R)[r] + rng.normal(0, np.sqrt(0.1), C)[c]
-         + rng.normal(0, np.sqrt(0.5), len(r)))
+    y = (
+        np.array([4.0, 3.5, 2.5])[c % 3]
+        + rng.normal(0, np.sqrt(0.2), R)[r]
+        + rng.normal(0, np.sqrt(0.1), C)[c]
+        + rng.normal(0, np.sqrt(0.5), len(r))
+    )
     df = pd.DataFrame({"rating": y, "condition": cond, "rater_id": r, "clip_id": c})
     m = stats.mixed_model(df)
     assert m["reference"] == "NAT" and m["converged"]
@@ -258,7 +284,8 @@ def test_histogram_counts_every_kept_test_rating(small_test_rows):
     assert h.to_numpy().sum() == len(small_test_rows)
     for c in h.index:
         assert (h.loc[c].to_numpy() * np.arange(1, 6)).sum() / h.loc[c].sum() == pytest.approx(
-            small_test_rows.loc[small_test_rows.condition == c, "rating"].mean())
+            small_test_rows.loc[small_test_rows.condition == c, "rating"].mean()
+        )
 
 
 def test_anova_rejects_single_group():

@@ -1,9 +1,9 @@
 """Rating app JSON API (CONTRACTS §5-6): the flow, assignment, idempotency and every bad-input case.
 Each test runs on SQLite and on PostgreSQL (the `app` fixture is parametrised)."""
+
 import csv
 import io
 import threading
-
 
 from rating_app.manifest import load_manifest
 
@@ -24,8 +24,10 @@ def nxt(client, token):
 
 def answer(client, token, trial, rating=3, watched_ms=500):
     rating = None if trial["phase"] == "training" else rating
-    return client.post(f"/api/sessions/{token}/ratings",
-                       json={"trial_id": trial["trial_id"], "rating": rating, "watched_ms": watched_ms})
+    return client.post(
+        f"/api/sessions/{token}/ratings",
+        json={"trial_id": trial["trial_id"], "rating": rating, "watched_ms": watched_ms},
+    )
 
 
 def complete(client, token, rating=lambda t: 3):
@@ -67,17 +69,28 @@ def test_whole_session_flow_and_export(client, app_stimuli):
     assert phases == ["training"] * len(roles["training"]) + ["rating"] * (len(roles["test"]) + len(roles["catch"]))
     assert {t["clip_id"] for t in trials if t["phase"] == "training"} == roles["training"]
     assert {t["clip_id"] for t in trials if t["phase"] == "rating"} == roles["test"] | roles["catch"]
-    assert [t["index"] for t in trials if t["phase"] == "rating"] == list(range(1, len(roles["test"]) + len(roles["catch"]) + 1))
+    assert [t["index"] for t in trials if t["phase"] == "rating"] == list(
+        range(1, len(roles["test"]) + len(roles["catch"]) + 1)
+    )
     # never a hint of the condition: the trial carries only opaque ids, the video URL only the clip id
     for t in trials:
         assert set(t) == {"trial_id", "clip_id", "video_url", "phase", "index", "of"}
         assert t["video_url"] == f"/api/sessions/{token}/trials/{t['trial_id']}/video.mp4"
     assert done["done"] is True and done["completion_code"]
-    assert nxt(client, token) == done           # stays done, same code
+    assert nxt(client, token) == done  # stays done, same code
     rows = export_rows(client)
-    assert len(rows) == len(roles["test"]) + len(roles["catch"])     # training acks are never exported
-    for col in ("rater_id", "clip_id", "condition", "rating", "role", "item", "trial_index", "watched_ms",
-                "submitted_at"):
+    assert len(rows) == len(roles["test"]) + len(roles["catch"])  # training acks are never exported
+    for col in (
+        "rater_id",
+        "clip_id",
+        "condition",
+        "rating",
+        "role",
+        "item",
+        "trial_index",
+        "watched_ms",
+        "submitted_at",
+    ):
         assert col in rows[0]
     by_clip = {row["clip_id"]: row for row in rows}
     for t in trials:
@@ -101,14 +114,14 @@ def test_random_order_per_rater(client):
 def test_repeated_submission_stored_once(client):
     token = start(client)
     t = nxt(client, token)["trial"]
-    assert answer(client, token, t).status_code == 201                     # training ack
+    assert answer(client, token, t).status_code == 201  # training ack
     assert answer(client, token, t).status_code == 200
     while t["phase"] == "training":
         t = nxt(client, token)["trial"]
         if t["phase"] == "training":
             assert answer(client, token, t).status_code == 201
     assert answer(client, token, t, rating=2).status_code == 201
-    again = answer(client, token, t, rating=5)                              # no going back, no change
+    again = answer(client, token, t, rating=5)  # no going back, no change
     assert again.status_code == 200 and again.json["rating"] == 2
     rows = [r for r in export_rows(client) if r["clip_id"] == t["clip_id"]]
     assert len(rows) == 1 and rows[0]["rating"] == "2"
@@ -147,7 +160,7 @@ def test_resume_by_external_id(client):
 
 def test_assignment_fills_targets_with_fewest_raters_then_closes(client, app_stimuli):
     roles = clips_by_role(app_stimuli)
-    for _ in range(3):                                  # target is 3 ratings per clip
+    for _ in range(3):  # target is 3 ratings per clip
         trials, _ = complete(client, start(client))
         assert {t["clip_id"] for t in trials if t["phase"] == "rating"} == roles["test"] | roles["catch"]
     r = client.post("/api/sessions", json={})
@@ -171,13 +184,13 @@ def test_balanced_share_and_abandoned_slots(app_stimuli, make_app):
         trials, _ = complete(c, start(c))
         tests = {t["clip_id"] for t in trials if t["clip_id"] in roles["test"]}
         assert len(tests) == n_test // 3
-        assert roles["catch"] <= {t["clip_id"] for t in trials}      # every rater gets every catch clip
+        assert roles["catch"] <= {t["clip_id"] for t in trials}  # every rater gets every catch clip
         got.append(tests)
-    assert set().union(*got) == roles["test"] and sum(map(len, got)) == n_test   # each clip exactly once
+    assert set().union(*got) == roles["test"] and sum(map(len, got)) == n_test  # each clip exactly once
     assert c.post("/api/sessions", json={}).status_code == 409
 
     # A rater who walks away on a test trial holds that one slot, and only until the timeout has passed.
-    app = make_app(ratings_per_clip=2, slot_timeout_s=3600, min_view=0)     # each clip has 1 rating already
+    app = make_app(ratings_per_clip=2, slot_timeout_s=3600, min_view=0)  # each clip has 1 rating already
     c = app.test_client()
     ghost = start(c)
     t = nxt(c, ghost)["trial"]
@@ -189,10 +202,10 @@ def test_balanced_share_and_abandoned_slots(app_stimuli, make_app):
     assert {x["clip_id"] for x in trials} >= roles["test"] - {held} and held not in {x["clip_id"] for x in trials}
     r = c.post("/api/sessions", json={})
     assert r.status_code == 409 and "for now" in r.json["error"]
-    idle(app, ghost)                                  # nothing answered for longer than the slot timeout
+    idle(app, ghost)  # nothing answered for longer than the slot timeout
     trials, _ = complete(c, start(c))
     assert held in {x["clip_id"] for x in trials}
-    r = c.get(f"/api/sessions/{ghost}/next")          # the ghost is told it expired, and gets no code
+    r = c.get(f"/api/sessions/{ghost}/next")  # the ghost is told it expired, and gets no code
     assert r.status_code == 410 and r.json["expired"] is True and "completion_code" not in r.json
     assert c.post("/api/sessions", json={}).status_code == 409
 
@@ -200,8 +213,11 @@ def test_balanced_share_and_abandoned_slots(app_stimuli, make_app):
 def idle(app, token, hours=2):
     """Move a session's last answer (and last poll) `hours` into the past, as if it had been idle that long."""
     import datetime as dt
+
     from sqlalchemy import update
+
     from rating_app.db import Rater, utcnow
+
     with app.extensions["rating_app"]["engine"].begin() as conn:
         past = utcnow() - dt.timedelta(hours=hours)
         conn.execute(update(Rater).where(Rater.token == token).values(last_progress=past, last_seen=past))
@@ -243,7 +259,7 @@ def test_rating_bad_input(client):
         r = client.post(f"/api/sessions/{token}/ratings", json=body)
         assert r.status_code == status, (case, r.json)
         assert needle in r.json["error"], case
-        assert nxt(client, token)["trial"]["trial_id"] == t["trial_id"]    # nothing was stored
+        assert nxt(client, token)["trial"]["trial_id"] == t["trial_id"]  # nothing was stored
     assert export_rows(client) == []
 
 
@@ -256,10 +272,10 @@ def test_training_trial_rejects_a_rating(client):
 
 
 MALFORMED = [
-    ({"data": "rating=3", "content_type": "application/x-www-form-urlencoded"}, 415),   # a cross-site form
+    ({"data": "rating=3", "content_type": "application/x-www-form-urlencoded"}, 415),  # a cross-site form
     ({"data": "{not json", "content_type": "application/json"}, 400),
     ({"data": "[1, 2]", "content_type": "application/json"}, 400),
-    ({"data": "{\"trial_id\": 1, \"pad\": \"" + "x" * 20000 + "\"}", "content_type": "application/json"}, 413),
+    ({"data": '{"trial_id": 1, "pad": "' + "x" * 20000 + '"}', "content_type": "application/json"}, 413),
 ]
 
 
@@ -291,9 +307,11 @@ def test_session_bad_input(client):
 def test_unknown_tokens_404(client):
     start(client)
     for token in ("nosuchtokennosuchtoken", "short", "..%2F..%2Fetc", "a" * 65):
-        for r in (client.get(f"/api/sessions/{token}/next"),
-                  client.post(f"/api/sessions/{token}/ratings", json={"trial_id": 1, "rating": 3}),
-                  client.post(f"/api/sessions/{token}/events", json={"kind": "video_error"})):
+        for r in (
+            client.get(f"/api/sessions/{token}/next"),
+            client.post(f"/api/sessions/{token}/ratings", json={"trial_id": 1, "rating": 3}),
+            client.post(f"/api/sessions/{token}/events", json={"kind": "video_error"}),
+        ):
             assert r.status_code == 404 and "error" in r.json, token
 
 
@@ -301,11 +319,20 @@ def test_videos_only_by_clip_id(client, app_stimuli):
     clip = load_manifest(app_stimuli)[0]
     r = client.get(f"/videos/{clip.clip_id}.mp4")
     assert r.status_code == 200 and r.mimetype == "video/mp4" and r.data == clip.video.read_bytes()
-    r = client.get(f"/videos/{clip.clip_id}.mp4", headers={"Range": "bytes=0-99"})    # seeking / Safari
+    r = client.get(f"/videos/{clip.clip_id}.mp4", headers={"Range": "bytes=0-99"})  # seeking / Safari
     assert r.status_code == 206 and len(r.data) == 100
-    for bad in ("/videos/", "/videos", "/videos/0000000000000000.mp4", f"/videos/{clip.clip_id}",
-                "/videos/..%2Fmanifest.csv", "/videos/../manifest.csv", f"/videos/videos%2F{clip.clip_id}.mp4",
-                "/static/", "/static/../manifest.csv", "/manifest.csv"):
+    for bad in (
+        "/videos/",
+        "/videos",
+        "/videos/0000000000000000.mp4",
+        f"/videos/{clip.clip_id}",
+        "/videos/..%2Fmanifest.csv",
+        "/videos/../manifest.csv",
+        f"/videos/videos%2F{clip.clip_id}.mp4",
+        "/static/",
+        "/static/../manifest.csv",
+        "/manifest.csv",
+    ):
         r = client.get(bad)
         assert r.status_code == 404, bad
         assert b"clip_id" not in r.data and b"<li>" not in r.data
@@ -335,7 +362,7 @@ def test_admin_disabled_without_token(make_app):
 def test_dashboard_progress_and_catch_failures(client, app_stimuli):
     roles = clips_by_role(app_stimuli)
     complete(client, start(client, external_id="good"), rating=lambda t: 1)
-    complete(client, start(client, external_id="bad"), rating=lambda t: 5)      # rates the catch clips 5
+    complete(client, start(client, external_id="bad"), rating=lambda t: 5)  # rates the catch clips 5
     p = client.get("/admin/progress.json", headers=TOKEN_HDR).json
     raters = {r["external_id"]: r for r in p["raters"]}
     assert raters["good"]["catch_failures"] == 0 and raters["bad"]["catch_failures"] == len(roles["catch"])
@@ -353,22 +380,27 @@ def test_failed_playback_is_logged(client, caplog):
     token = start(client)
     t = nxt(client, token)["trial"]
     with caplog.at_level("WARNING"):
-        r = client.post(f"/api/sessions/{token}/events",
-                        json={"kind": "video_error", "trial_id": t["trial_id"], "detail": "MEDIA_ERR_DECODE"})
+        r = client.post(
+            f"/api/sessions/{token}/events",
+            json={"kind": "video_error", "trial_id": t["trial_id"], "detail": "MEDIA_ERR_DECODE"},
+        )
     assert r.status_code == 201
     assert any("video_error" in m and "MEDIA_ERR_DECODE" in m and t["clip_id"] in m for m in caplog.messages)
     p = client.get("/admin/progress.json", headers=TOKEN_HDR).json
     assert p["events"][0]["kind"] == "video_error"
     assert client.post(f"/api/sessions/{token}/events", json={"kind": "rm -rf"}).status_code == 400
-    assert client.post(f"/api/sessions/{token}/events", json={"kind": "video_error", "trial_id": 10**6}).status_code == 404
+    assert (
+        client.post(f"/api/sessions/{token}/events", json={"kind": "video_error", "trial_id": 10**6}).status_code == 404
+    )
 
 
 def test_errors_are_json_without_stack_traces(app):
     def boom():
         raise RuntimeError("secret internal detail")
+
     app.add_url_rule("/boom", "boom", boom)
     c = app.test_client()
-    app.config["TESTING"] = False            # behave as in production (no exception propagation)
+    app.config["TESTING"] = False  # behave as in production (no exception propagation)
     app.config["PROPAGATE_EXCEPTIONS"] = False
     r = c.get("/boom")
     assert r.status_code == 500 and r.json == {"error": "internal server error"}
@@ -395,8 +427,12 @@ def test_pages_carry_ids_and_no_condition(client):
 
 
 def test_completion_code_and_redirect(make_app):
-    app = make_app(ratings_per_clip=3, min_view=0, completion_code="C1ABCDEF",
-                   completion_url="https://app.prolific.com/submissions/complete?cc={code}")
+    app = make_app(
+        ratings_per_clip=3,
+        min_view=0,
+        completion_code="C1ABCDEF",
+        completion_url="https://app.prolific.com/submissions/complete?cc={code}",
+    )
     c = app.test_client()
     _, done = complete(c, start(c))
     assert done["completion_code"] == "C1ABCDEF"

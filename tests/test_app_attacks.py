@@ -1,5 +1,6 @@
 """Issue 11, the rating app: a study nobody can game, stall or crash. One test (or more) per finding of the attack
 review; each runs on SQLite and PostgreSQL (the `app_db_url` fixture is parametrised)."""
+
 import collections
 import csv
 import datetime as dt
@@ -8,14 +9,13 @@ import io
 import os
 
 import pytest
+from concurrent_raters import run_raters
 from sqlalchemy import update
+from test_app_api import TOKEN_HDR, answer, clips_by_role, complete, export_rows, idle, nxt, start
 
 from rating_app.db import Trial, utcnow
 from rating_app.manifest import AppError, load_manifest
 from rating_app.testing import make_stimuli
-
-from concurrent_raters import run_raters
-from test_app_api import TOKEN_HDR, answer, clips_by_role, complete, export_rows, idle, nxt, start
 
 
 def at(app, i):
@@ -36,8 +36,9 @@ def to_test_trial(c, token, roles):
 
 def backdate_served(app, trial_id, seconds=60):
     with app.extensions["rating_app"]["engine"].begin() as conn:
-        conn.execute(update(Trial).where(Trial.id == trial_id)
-                     .values(served_at=utcnow() - dt.timedelta(seconds=seconds)))
+        conn.execute(
+            update(Trial).where(Trial.id == trial_id).values(served_at=utcnow() - dt.timedelta(seconds=seconds))
+        )
 
 
 # 1 --------------------------------------------------------------------------------------------------- blinding
@@ -45,7 +46,7 @@ def test_video_responses_carry_nothing_that_sorts_by_condition(tmp_path, app_db_
     manifest = make_stimuli(tmp_path / "stimuli")
     clips = load_manifest(manifest)
     order = {"NAT": 1, "MG": 2, "FL": 3, "BAD": 4}
-    for c in clips:                                   # rendered condition by condition, as make_stimuli did
+    for c in clips:  # rendered condition by condition, as make_stimuli did
         t = 1_700_000_000 + 3600 * order[c.condition]
         os.utime(c.video, (t, t))
     app = make_app(manifest=manifest, ratings_per_clip=1, min_view=0)
@@ -61,14 +62,14 @@ def test_video_responses_carry_nothing_that_sorts_by_condition(tmp_path, app_db_
             data = c.video.read_bytes()
             assert r.status_code == 200 and r.data == data
             assert "Last-Modified" not in r.headers and "Expires" not in r.headers
-            assert r.headers["ETag"] == '"%s"' % hashlib.sha256(data).hexdigest()[:32]      # a content hash
+            assert r.headers["ETag"] == '"%s"' % hashlib.sha256(data).hexdigest()[:32]  # a content hash
     # Date is the time of the response (it changes when the responses cross a second), not of the file.
     varying = ("Content-Length", "ETag", "Date")
     names = {tuple(sorted(k for k, _ in r.headers if k not in varying)) for r in seen.values()}
     values = {tuple(sorted((k, v) for k, v in r.headers if k not in varying)) for r in seen.values()}
-    assert len(names) == 1 and len(values) == 1       # the same headers and values for every clip
+    assert len(names) == 1 and len(values) == 1  # the same headers and values for every clip
     url = next(iter(seen.values())).request.path
-    r = cl.get(url, headers={"Range": "bytes=0-99"})                   # seeking still works
+    r = cl.get(url, headers={"Range": "bytes=0-99"})  # seeking still works
     assert r.status_code == 206 and len(r.data) == 100
     r = cl.get(url, headers={"If-None-Match": seen[next(iter(seen))].headers["ETag"]})
     assert r.status_code in (200, 304)
@@ -79,7 +80,7 @@ def test_sixty_hoarders_cannot_keep_real_raters_out(make_app, app_stimuli):
     roles = clips_by_role(app_stimuli)
     app = make_app(ratings_per_clip=3, min_view=0)
     hoarders = []
-    for i in range(60):                               # 60 sessions from 60 addresses, polling but never answering
+    for i in range(60):  # 60 sessions from 60 addresses, polling but never answering
         c = at(app, i)
         hoarders.append((c, start(c)))
     for _ in range(3):
@@ -98,7 +99,7 @@ def test_sixty_hoarders_cannot_keep_real_raters_out(make_app, app_stimuli):
         raise AssertionError("the study never filled")
     rows = export_rows(app.test_client())
     per_clip = collections.Counter(r["clip_id"] for r in rows if r["role"] == "test")
-    assert per_clip == {c: 3 for c in roles["test"]}          # filled completely, by the real raters only
+    assert per_clip == {c: 3 for c in roles["test"]}  # filled completely, by the real raters only
     assert len(real) == 3
 
 
@@ -111,7 +112,7 @@ def test_a_session_holds_one_slot_and_polling_does_not_keep_it(make_app, app_sti
     p = c.get("/admin/progress.json", headers=TOKEN_HDR).json
     assert sum(x["in_progress"] for x in p["per_clip"] if x["role"] == "test") == 1
     idle(app, ghost)
-    assert c.get(f"/api/sessions/{ghost}/next").status_code == 410     # a poll after the timeout does not revive
+    assert c.get(f"/api/sessions/{ghost}/next").status_code == 410  # a poll after the timeout does not revive
     trials, _ = complete(c, start(c))
     assert held["clip_id"] in {t["clip_id"] for t in trials}
 
@@ -125,11 +126,15 @@ def test_sessions_per_client_and_only_same_site_json(make_app):
     assert r.status_code == 429 and "error" in r.json
     assert at(app, 8).post("/api/sessions", json={}).status_code == 201
     c = at(app, 9)
-    assert c.post("/api/sessions").status_code == 415                                   # empty body
+    assert c.post("/api/sessions").status_code == 415  # empty body
     assert c.post("/api/sessions", data="{}", content_type="text/plain").status_code == 415
     assert c.post("/api/sessions", data="", content_type="application/json").status_code == 400
-    for hdr in ({"Sec-Fetch-Site": "cross-site"}, {"Sec-Fetch-Site": "same-site"}, {"Origin": "https://evil.example"},
-                {"Origin": "null"}):
+    for hdr in (
+        {"Sec-Fetch-Site": "cross-site"},
+        {"Sec-Fetch-Site": "same-site"},
+        {"Origin": "https://evil.example"},
+        {"Origin": "null"},
+    ):
         r = c.post("/api/sessions", json={}, headers=hdr)
         assert r.status_code == 403 and "cross-site" in r.json["error"], hdr
     ok = c.post("/api/sessions", json={}, headers={"Origin": "http://localhost", "Sec-Fetch-Site": "same-origin"})
@@ -140,18 +145,18 @@ def test_sessions_per_client_and_only_same_site_json(make_app):
 
 # 3 ---------------------------------------------------------------------------------------- viewing enforced
 def test_answer_before_the_clip_could_play_is_refused_and_flagged(make_app, app_stimuli):
-    app = make_app(ratings_per_clip=3)                # MIN_VIEW: the default, the whole clip
+    app = make_app(ratings_per_clip=3)  # MIN_VIEW: the default, the whole clip
     c = app.test_client()
     token = start(c, external_id="fast")
     t = nxt(c, token)["trial"]
-    r = answer(c, token, t)                           # 8 ms after GET next, watched_ms claimed
+    r = answer(c, token, t)  # 8 ms after GET next, watched_ms claimed
     assert r.status_code == 425 and r.json["too_early"] is True
     clip = {x.clip_id: x for x in load_manifest(app_stimuli)}[t["clip_id"]]
     assert 0 < r.json["retry_after_ms"] <= clip.duration_ms - 250
-    backdate_served(app, t["trial_id"])               # as if the clip had played meanwhile
+    backdate_served(app, t["trial_id"])  # as if the clip had played meanwhile
     assert answer(c, token, t).status_code == 201
     t = nxt(c, token)["trial"]
-    while True:                                       # the rest: video never fetched, no early attempt
+    while True:  # the rest: video never fetched, no early attempt
         backdate_served(app, t["trial_id"])
         assert answer(c, token, t).status_code == 201
         j = nxt(c, token)
@@ -212,7 +217,7 @@ def test_released_trial_cannot_push_a_clip_over_target(make_app, app_stimuli):
     late = start(c)
     t = to_test_trial(c, late, roles)
     idle(app, late)
-    complete(c, start(c))                             # takes the released slot
+    complete(c, start(c))  # takes the released slot
     r = answer(c, late, t)
     assert r.status_code == 410
     per_clip = collections.Counter(r["clip_id"] for r in export_rows(c) if r["role"] == "test")
@@ -239,9 +244,9 @@ def test_participant_id_alone_does_not_hand_out_a_session(app):
         r = attacker.post("/api/sessions", json=body)
         assert r.status_code == 409 and "session" not in r.json and token not in r.data.decode(), body
     r = attacker.post("/api/sessions", json={"external_id": "PID-victim", "session_id": "PROLIFIC-SESS-1"})
-    assert r.status_code == 200 and r.json["session"] == token           # the platform's session id is proof
+    assert r.status_code == 200 and r.json["session"] == token  # the platform's session id is proof
     r = victim.post("/api/sessions", json={"external_id": "PID-victim"})
-    assert r.status_code == 200 and r.json["session"] == token           # so is the resume cookie
+    assert r.status_code == 200 and r.json["session"] == token  # so is the resume cookie
 
 
 # 7 ------------------------------------------------------------------------------------------------------ admin
@@ -277,8 +282,9 @@ def test_nested_json_and_ids_are_refused_with_400(client):
         r = client.post(path, data='{"external_id": ' + deep + "}", content_type="application/json")
         assert r.status_code == 400 and "nested" in r.json["error"]
     token = start(client)
-    r = client.post(f"/api/sessions/{token}/ratings", data='{"trial_id": ' + deep + "}",
-                    content_type="application/json")
+    r = client.post(
+        f"/api/sessions/{token}/ratings", data='{"trial_id": ' + deep + "}", content_type="application/json"
+    )
     assert r.status_code == 400
     for bad in ("PID1\n", "x" * 128 + "\n", "x" * 129, "PID\r"):
         r = client.post("/api/sessions", json={"external_id": bad})
@@ -299,15 +305,17 @@ def test_export_neutralises_formulas(client):
 def test_events_are_escaped_and_limited(client, caplog):
     token = start(client)
     with caplog.at_level("WARNING"):
-        r = client.post(f"/api/sessions/{token}/events",
-                        json={"kind": "page_error", "detail": "x\nERROR forged line\r\n"})
+        r = client.post(
+            f"/api/sessions/{token}/events", json={"kind": "page_error", "detail": "x\nERROR forged line\r\n"}
+        )
     assert r.status_code == 201
     assert not any("\n" in m for m in caplog.messages)
     assert any("x\\nERROR forged line\\r\\n" in m for m in caplog.messages)
     p = client.get("/admin/progress.json", headers=TOKEN_HDR).json
     assert p["events"][0]["detail"] == "x\\nERROR forged line\\r\\n"
-    codes = [client.post(f"/api/sessions/{token}/events", json={"kind": "video_stalled"}).status_code
-             for _ in range(40)]
+    codes = [
+        client.post(f"/api/sessions/{token}/events", json={"kind": "video_stalled"}).status_code for _ in range(40)
+    ]
     assert codes.count(201) == 29 and codes[-1] == 429
 
 

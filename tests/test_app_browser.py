@@ -1,6 +1,7 @@
 """A real browser (Debian chromium, headless, phone-sized) takes a rater through the whole flow against the app
 served over HTTP; the ratings it clicked appear in the export. SAVE_SCREENSHOTS=1 writes
 docs/img/rating_page.png (SCREENSHOT_MANIFEST=path/manifest.csv to show real stimuli)."""
+
 import csv
 import io
 import os
@@ -26,9 +27,11 @@ live_server_manifest = []
 @pytest.fixture
 def live_server(app_stimuli, app_db_url):
     from werkzeug.serving import make_server
+
     manifest = os.environ.get("SCREENSHOT_MANIFEST") or app_stimuli
-    app = create_app(manifest=manifest, db_url=app_db_url, admin_token="browser-token", ratings_per_clip=5,
-                     clips_per_rater=3)
+    app = create_app(
+        manifest=manifest, db_url=app_db_url, admin_token="browser-token", ratings_per_clip=5, clips_per_rater=3
+    )
     server = make_server("127.0.0.1", 0, app, threaded=True)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
@@ -45,12 +48,23 @@ def browser(tmp_path):
         pytest.fail("Debian chromium and chromedriver are needed (apt-get install chromium chromium-driver)")
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
+
     opts = webdriver.ChromeOptions()
     opts.binary_location = CHROMIUM
-    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-extensions",
-                "--disable-dev-shm-usage", "--mute-audio", "--window-size=390,844",
-                f"--user-data-dir={tmp_path / 'chrome-profile'}"):
+    for arg in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--no-first-run",
+        "--disable-extensions",
+        "--disable-dev-shm-usage",
+        "--mute-audio",
+        "--window-size=390,844",
+        f"--user-data-dir={tmp_path / 'chrome-profile'}",
+    ):
         opts.add_argument(arg)
     driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
     driver.set_page_load_timeout(30)
@@ -68,7 +82,7 @@ def test_rater_flow_in_a_real_browser(live_server, browser):
     wait = WebDriverWait(browser, 20)
     browser.get(live_server + "/?PROLIFIC_PID=browserpid1&STUDY_ID=st1&SESSION_ID=se1")
     start = browser.find_element(By.ID, "start")
-    assert not start.is_enabled()                                   # consent first
+    assert not start.is_enabled()  # consent first
     browser.find_element(By.ID, "consent").click()
     wait.until(EC.element_to_be_clickable((By.ID, "start"))).click()
     wait.until(EC.visibility_of_element_located((By.ID, "intro")))
@@ -85,7 +99,8 @@ def test_rater_flow_in_a_real_browser(live_server, browser):
         " count: document.getElementById('trial-count').textContent, ended: v.ended, src: v.currentSrc,"
         " disabled: Array.prototype.every.call(document.querySelectorAll('button.rate'),"
         "   function(b){return b.disabled}),"
-        " fits: document.documentElement.scrollWidth <= window.innerWidth + 1};")
+        " fits: document.documentElement.scrollWidth <= window.innerWidth + 1};"
+    )
 
     def key(s):
         return (s["section"], s["label"], s["count"])
@@ -113,7 +128,7 @@ def test_rater_flow_in_a_real_browser(live_server, browser):
                     (ROOT / "docs" / "img").mkdir(parents=True, exist_ok=True)
                     browser.save_screenshot(str(ROOT / "docs" / "img" / "rating_page.png"))
                 btn.click()
-                clicked[int(s["src"].rsplit("/", 2)[1])] = rating     # .../trials/ID/video.mp4
+                clicked[int(s["src"].rsplit("/", 2)[1])] = rating  # .../trials/ID/video.mp4
         # the page moves on only once the server has acknowledged the answer
         wait.until(lambda d: d.execute_script(state_js)["section"] and key(d.execute_script(state_js)) != key(s))
     else:
@@ -121,7 +136,7 @@ def test_rater_flow_in_a_real_browser(live_server, browser):
     code = browser.find_element(By.ID, "completion-code").text
     roles = [c.role for c in load_manifest(live_server_manifest[0])]
     assert code and n_training == roles.count("training")
-    assert len(clicked) == min(3, roles.count("test")) + roles.count("catch")    # 3 test clips + every catch clip
+    assert len(clicked) == min(3, roles.count("test")) + roles.count("catch")  # 3 test clips + every catch clip
     assert seen_before_end >= 1
     errors = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
     assert not errors, errors
@@ -129,12 +144,15 @@ def test_rater_flow_in_a_real_browser(live_server, browser):
     r = requests.get(live_server + "/admin/export.csv", headers={"Authorization": "Bearer browser-token"}, timeout=10)
     rows = [row for row in csv.DictReader(io.StringIO(r.text)) if row["external_id"] == "browserpid1"]
     from sqlalchemy import select
+
     from rating_app.db import Trial
+
     with live_server_manifest[1].extensions["rating_app"]["engine"].connect() as conn:
         clip_of = dict(conn.execute(select(Trial.id, Trial.clip_id)).all())
     assert {row["clip_id"]: int(row["rating"]) for row in rows} == {clip_of[t]: v for t, v in clicked.items()}
-    assert all(row["flags"] == "" for row in rows)                 # watched in full, video fetched
+    assert all(row["flags"] == "" for row in rows)  # watched in full, video fetched
     assert all(int(row["watched_ms"]) > 0 for row in rows)
-    p = requests.get(live_server + "/admin/progress.json", headers={"Authorization": "Bearer browser-token"},
-                     timeout=10).json()
-    assert not p["events"], p["events"]                            # no failed playback
+    p = requests.get(
+        live_server + "/admin/progress.json", headers={"Authorization": "Bearer browser-token"}, timeout=10
+    ).json()
+    assert not p["events"], p["events"]  # no failed playback

@@ -3,6 +3,7 @@ served over HTTP, with the server's full viewing rule (MIN_VIEW 1): the answers 
 The pairwise page is checked on a phone (A above B, played one after the other) and on a wide screen (side by
 side). SAVE_SCREENSHOTS=1 writes docs/img/pairwise_page.png and docs/img/parallel_page.png
 (SCREENSHOT_MANIFEST=path/manifest.csv to show real stimuli)."""
+
 import csv
 import io
 import os
@@ -12,13 +13,12 @@ from pathlib import Path
 import pytest
 import requests
 from sqlalchemy import select
+from test_app_browser import browser  # noqa: F401  (the fixture)
 
 from rating_app import create_app
 from rating_app.db import TrialClip
 from rating_app.manifest import load_manifest
 from rating_app.testing import make_stimuli
-
-from test_app_browser import browser  # noqa: F401  (the fixture)
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.browser
@@ -26,14 +26,22 @@ pytestmark = pytest.mark.browser
 
 @pytest.fixture(scope="module")
 def design_stimuli(tmp_path_factory):
-    return os.environ.get("SCREENSHOT_MANIFEST") or make_stimuli(tmp_path_factory.mktemp("design_stimuli"),
-                                                                 catch_nat=True)
+    return os.environ.get("SCREENSHOT_MANIFEST") or make_stimuli(
+        tmp_path_factory.mktemp("design_stimuli"), catch_nat=True
+    )
 
 
 def serve(manifest, db_url, design):
     from werkzeug.serving import make_server
-    app = create_app(manifest=manifest, db_url=db_url, admin_token="browser-token", ratings_per_clip=5,
-                     clips_per_rater=3, design=design)
+
+    app = create_app(
+        manifest=manifest,
+        db_url=db_url,
+        admin_token="browser-token",
+        ratings_per_clip=5,
+        clips_per_rater=3,
+        design=design,
+    )
     server = make_server("127.0.0.1", 0, app, threaded=True)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
@@ -60,7 +68,7 @@ return {section: sec,
 
 
 def _trial_of(src):
-    return int(src.rsplit("/", 3)[1])            # .../trials/ID/clips/A.mp4
+    return int(src.rsplit("/", 3)[1])  # .../trials/ID/clips/A.mp4
 
 
 def _run_flow(browser, url, design, answer):  # noqa: F811
@@ -69,6 +77,7 @@ def _run_flow(browser, url, design, answer):  # noqa: F811
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
     from selenium.webdriver.support.ui import WebDriverWait
+
     wait = WebDriverWait(browser, 30)
     browser.get(url + f"/?PROLIFIC_PID={design}pid&STUDY_ID=st1&SESSION_ID=se1")
     browser.find_element(By.ID, "consent").click()
@@ -112,6 +121,7 @@ def _run_flow(browser, url, design, answer):  # noqa: F811
 def play_page(browser, wait):  # noqa: F811
     """Click every clip of a parallel page in turn and wait until it has played to the end."""
     from selenium.webdriver.common.by import By
+
     videos = browser.find_elements(By.CSS_SELECTOR, "#page-clips video")
     for i, v in enumerate(videos):
         v.click()
@@ -142,16 +152,19 @@ def _screenshot(browser, name):  # noqa: F811
 @pytest.mark.parametrize("app_db_url", ["postgres"], indirect=True)
 def test_pairwise_flow_in_a_real_browser(design_stimuli, app_db_url, browser):  # noqa: F811
     from selenium.webdriver.common.by import By
+
     app, server, thread = serve(design_stimuli, app_db_url, "pairwise")
     url = f"http://127.0.0.1:{server.server_port}"
     levels = [2, 1, 0, -1, -2]
     layouts = []
     try:
+
         def answer(s, wait):
             from selenium.webdriver.support import expected_conditions as EC
+
             index = int(s["count"].split()[0])
             layouts.append(("phone", s["a"], s["b"]))
-            if index == 1:                          # the same page on a wide screen: A and B side by side
+            if index == 1:  # the same page on a wide screen: A and B side by side
                 browser.set_window_size(1280, 900)
                 wide = browser.execute_script(STATE_JS)
                 layouts.append(("wide", wide["a"], wide["b"]))
@@ -174,8 +187,9 @@ def test_pairwise_flow_in_a_real_browser(design_stimuli, app_db_url, browser):  
     assert "pairs.csv" in resp.headers["Content-Disposition"]
     n_catch_pairs = sum(c.role == "catch" and c.condition == "BAD" for c in load_manifest(design_stimuli))
     assert len(given) == 3 + n_catch_pairs
-    assert {(row["clip_a"], row["clip_b"]): int(row["preference"]) for row in rows} == \
-        {(shown[t]["A"], shown[t]["B"]): v for t, v in given.items()}
+    assert {(row["clip_a"], row["clip_b"]): int(row["preference"]) for row in rows} == {
+        (shown[t]["A"], shown[t]["B"]): v for t, v in given.items()
+    }
     assert sum(row["role"] == "catch" for row in rows) == n_catch_pairs
     assert all(row["flags"] == "" and row["item"] for row in rows)
     phone = [(a, b) for kind, a, b in layouts if kind == "phone"]
@@ -189,11 +203,14 @@ def test_pairwise_flow_in_a_real_browser(design_stimuli, app_db_url, browser):  
 @pytest.mark.parametrize("app_db_url", ["postgres"], indirect=True)
 def test_parallel_flow_in_a_real_browser(design_stimuli, app_db_url, browser):  # noqa: F811
     from selenium.webdriver.common.by import By
+
     app, server, thread = serve(design_stimuli, app_db_url, "parallel")
     url = f"http://127.0.0.1:{server.server_port}"
     try:
+
         def answer(s, wait):
             from selenium.webdriver.support import expected_conditions as EC
+
             index = int(s["count"].split()[0])
             if index == 1:
                 browser.set_window_size(1280, 900)
@@ -203,8 +220,9 @@ def test_parallel_flow_in_a_real_browser(design_stimuli, app_db_url, browser):  
             for i, sl in enumerate(sliders):
                 assert sl.is_enabled()
                 v = (17 * (i + 1) + 7 * index) % 101
-                browser.execute_script("arguments[0].value = arguments[1];"
-                                       "arguments[0].dispatchEvent(new Event('input'));", sl, str(v))
+                browser.execute_script(
+                    "arguments[0].value = arguments[1];arguments[0].dispatchEvent(new Event('input'));", sl, str(v)
+                )
                 values[sl.get_attribute("data-clip-id")] = v
             btn = wait.until(EC.element_to_be_clickable((By.ID, "page-submit")))
             if index == 1:
@@ -226,8 +244,9 @@ def test_parallel_flow_in_a_real_browser(design_stimuli, app_db_url, browser):  
     for row in rows:
         pages.setdefault(row["page_id"], {})[row["clip_id"]] = int(row["rating"])
         assert row["flags"] == "" and 0 <= int(row["rating"]) <= 100
-    assert sorted(map(sorted, (p.items() for p in pages.values()))) == \
-        sorted(map(sorted, (v.items() for v in given.values())))
+    assert sorted(map(sorted, (p.items() for p in pages.values()))) == sorted(
+        map(sorted, (v.items() for v in given.values()))
+    )
     assert {p for p in pages} == {f"p{t}" for t in given}
     errors = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
     assert not errors, errors

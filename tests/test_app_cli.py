@@ -1,4 +1,5 @@
 """`python -m rating_app serve | export | simulate`, the manifest reader and the simulated crowd's model."""
+
 import collections
 import csv
 import json
@@ -21,16 +22,29 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def cli(*args, timeout=120, **kw):
-    return subprocess.run([sys.executable, "-m", "rating_app", *map(str, args)], cwd=ROOT, capture_output=True,
-                          text=True, timeout=timeout, **kw)
+    return subprocess.run(
+        [sys.executable, "-m", "rating_app", *map(str, args)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        **kw,
+    )
 
 
 @pytest.fixture
 def live(app_stimuli, app_db_url):
     from werkzeug.serving import make_server
+
     # The crowd waits as the server requires: 10% of each clip here, so that the test stays short.
-    app = create_app(manifest=app_stimuli, db_url=app_db_url, admin_token="cli-token", ratings_per_clip=6,
-                     min_view=0.1, sessions_per_client=0)
+    app = create_app(
+        manifest=app_stimuli,
+        db_url=app_db_url,
+        admin_token="cli-token",
+        ratings_per_clip=6,
+        min_view=0.1,
+        sessions_per_client=0,
+    )
     server = make_server("127.0.0.1", 0, app, threaded=True)
     th = threading.Thread(target=server.serve_forever, daemon=True)
     th.start()
@@ -43,27 +57,47 @@ def live(app_stimuli, app_db_url):
 def test_simulated_crowd_matches_export(live, app_stimuli, tmp_path):
     url, db = live
     out = tmp_path / "summary.json"
-    r = cli("simulate", "--url", url, "--raters", 8, "--seed", 1, "--careless", 0.5, "--manifest", app_stimuli,
-            "--summary", out, "--quiet", "--concurrency", 1)
+    r = cli(
+        "simulate",
+        "--url",
+        url,
+        "--raters",
+        8,
+        "--seed",
+        1,
+        "--careless",
+        0.5,
+        "--manifest",
+        app_stimuli,
+        "--summary",
+        out,
+        "--quiet",
+        "--concurrency",
+        1,
+    )
     assert r.returncode == 0, r.stderr
     s = json.loads(out.read_text())
-    assert s["errors"] == [] and s["n_raters_completed"] == 6 and s["study_full"] is True   # target 6, all clips
+    assert s["errors"] == [] and s["n_raters_completed"] == 6 and s["study_full"] is True  # target 6, all clips
     assert len(s["careless_raters"]) >= 1
     # export through the CLI, compare with what the crowd says it submitted
     csv_path = tmp_path / "ratings.csv"
     r = cli("export", "--db", db, "--out", csv_path)
     assert r.returncode == 0, r.stderr
     rows = list(csv.DictReader(csv_path.open()))
-    assert collections.Counter((x["rater_id"], x["clip_id"], int(x["rating"])) for x in rows) == \
-        collections.Counter((x["rater_id"], x["clip_id"], x["rating"]) for x in s["ratings"])
+    assert collections.Counter((x["rater_id"], x["clip_id"], int(x["rating"])) for x in rows) == collections.Counter(
+        (x["rater_id"], x["clip_id"], x["rating"]) for x in s["ratings"]
+    )
     per_rater = collections.Counter(x["rater_id"] for x in rows)
     assert per_rater == {x["rater_id"]: x["n_ratings"] for x in s["raters"] if x["started"]}
     failed = {x["rater_id"] for x in rows if x["role"] == "catch" and int(x["rating"]) >= 3}
     assert failed == set(s["failed_catch_raters"])
-    assert failed <= set(s["careless_raters"])                     # attentive raters never fail a catch trial
+    assert failed <= set(s["careless_raters"])  # attentive raters never fail a catch trial
     attentive = [x for x in rows if x["rater_id"] not in s["careless_raters"]]
-    mean = {c: sum(int(x["rating"]) for x in attentive if x["condition"] == c) /
-            max(1, sum(x["condition"] == c for x in attentive)) for c in ("NAT", "MG", "FL", "BAD")}
+    mean = {
+        c: sum(int(x["rating"]) for x in attentive if x["condition"] == c)
+        / max(1, sum(x["condition"] == c for x in attentive))
+        for c in ("NAT", "MG", "FL", "BAD")
+    }
     # NAT has the best metrics, BAD the worst (finer orderings: test_quality_follows_the_metrics)
     assert mean["NAT"] > mean["MG"] and mean["NAT"] > mean["FL"] and mean["NAT"] > mean["BAD"] + 1
     # the study is full now: another crowd is told so and submits nothing
@@ -83,8 +117,12 @@ def test_simulate_reads_clips_from_admin(live):
 def test_simulate_arg_errors():
     url = "http://127.0.0.1:9"
     env = {k: v for k, v in os.environ.items() if k != "ADMIN_TOKEN"}
-    for args, needle in ((("--raters", 0), "--raters"), (("--raters", 2, "--careless", 1.5), "--careless"),
-                         (("--raters", 2, "--quality", "NAT=9"), "--quality"), (("--raters", 2), "ADMIN_TOKEN")):
+    for args, needle in (
+        (("--raters", 0), "--raters"),
+        (("--raters", 2, "--careless", 1.5), "--careless"),
+        (("--raters", 2, "--quality", "NAT=9"), "--quality"),
+        (("--raters", 2), "ADMIN_TOKEN"),
+    ):
         r = cli("simulate", "--url", url, *args, env=env)
         assert r.returncode == 2 and r.stderr.startswith("error:") and needle in r.stderr, r.stderr
         assert "Traceback" not in r.stderr
@@ -102,9 +140,23 @@ def test_serve_cli(app_stimuli, tmp_path):
     r = cli("serve", "--manifest", tmp_path / "nope.csv")
     assert r.returncode == 2 and "nope.csv" in r.stderr and "Traceback" not in r.stderr
     port = free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "rating_app", "serve", "--manifest", str(app_stimuli), "--db",
-                             f"sqlite:///{tmp_path}/r.sqlite", "--port", str(port)], cwd=ROOT,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "rating_app",
+            "serve",
+            "--manifest",
+            str(app_stimuli),
+            "--db",
+            f"sqlite:///{tmp_path}/r.sqlite",
+            "--port",
+            str(port),
+        ],
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         for _ in range(100):
             try:
@@ -121,14 +173,17 @@ def test_serve_cli(app_stimuli, tmp_path):
     assert journal
 
 
-@pytest.mark.parametrize("edit,needle", [
-    (lambda rows: rows[1].__setitem__("clip_id", "NAT_clip_1"), ":3: clip_id"),
-    (lambda rows: rows[2].__setitem__("clip_id", rows[1]["clip_id"]), ":4: duplicate clip_id"),
-    (lambda rows: rows[1].__setitem__("role", "bonus"), ":3: role"),
-    (lambda rows: rows[1].__setitem__("video", "videos/none.mp4"), ":3: video"),
-    (lambda rows: rows[1].__setitem__("fps", "fast"), ":3: field 'fps'"),
-    (lambda rows: [r.pop("condition") for r in rows], ":1: missing column(s) condition"),
-])
+@pytest.mark.parametrize(
+    "edit,needle",
+    [
+        (lambda rows: rows[1].__setitem__("clip_id", "NAT_clip_1"), ":3: clip_id"),
+        (lambda rows: rows[2].__setitem__("clip_id", rows[1]["clip_id"]), ":4: duplicate clip_id"),
+        (lambda rows: rows[1].__setitem__("role", "bonus"), ":3: role"),
+        (lambda rows: rows[1].__setitem__("video", "videos/none.mp4"), ":3: video"),
+        (lambda rows: rows[1].__setitem__("fps", "fast"), ":3: field 'fps'"),
+        (lambda rows: [r.pop("condition") for r in rows], ":1: missing column(s) condition"),
+    ],
+)
 def test_manifest_errors_name_file_and_line(app_stimuli, tmp_path, edit, needle):
     rows = list(csv.DictReader(open(app_stimuli, encoding="utf-8")))
     edit(rows)
@@ -147,18 +202,22 @@ def test_manifest_errors_name_file_and_line(app_stimuli, tmp_path, edit, needle)
 
 def test_quality_follows_the_metrics(app_stimuli):
     from rating_app.simulate import load_clips
+
     clips = load_clips("http://unused", manifest=app_stimuli)
     q = quality_from_metrics(clips)
     assert q["NAT"] > q["MG"] > q["FL"] > q["BAD"]
     assert q["NAT"] == pytest.approx(4.3) and q["BAD"] == pytest.approx(1.3)
     # metrics decide: if the 'NAT' clips had the worst metrics they would get the lowest quality
-    flipped = {k: ClipInfo(k, {"NAT": "BAD", "BAD": "NAT"}.get(c.condition, c.condition), c.role, metrics=c.metrics)
-               for k, c in clips.items()}
+    flipped = {
+        k: ClipInfo(k, {"NAT": "BAD", "BAD": "NAT"}.get(c.condition, c.condition), c.role, metrics=c.metrics)
+        for k, c in clips.items()
+    }
     q2 = quality_from_metrics(flipped)
     assert q2["BAD"] > q2["NAT"]
     assert parse_quality("NAT=4.5, MG=3") == {"NAT": 4.5, "MG": 3.0}
     # a metric that could not be measured ('nan', e.g. foot skating without contacts) is skipped, not an error
     from rating_app.manifest import load_metrics
+
     text = app_stimuli.with_name("metrics.csv").read_text().splitlines()
     head, first = text[0].split(","), text[1].split(",")
     first[head.index("foot_skating")] = "nan"
@@ -180,12 +239,15 @@ def _one_line_error(r, needle):
     assert len(lines) == 1 and lines[0].startswith("error:") and needle in lines[0], r.stderr[-2000:]
 
 
-@pytest.mark.parametrize("db,needle", [
-    ("notaurl", "not a database URL"),
-    ("mysql://u@127.0.0.1/x", "unsupported database 'mysql'"),
-    ("TEXTFILE", "not an SQLite database"),
-    ("postgresql://postgres@127.0.0.1:1/test", "cannot"),
-])
+@pytest.mark.parametrize(
+    "db,needle",
+    [
+        ("notaurl", "not a database URL"),
+        ("mysql://u@127.0.0.1/x", "unsupported database 'mysql'"),
+        ("TEXTFILE", "not an SQLite database"),
+        ("postgresql://postgres@127.0.0.1:1/test", "cannot"),
+    ],
+)
 def test_bad_database_is_one_line(app_stimuli, tmp_path, db, needle):
     if db == "TEXTFILE":
         (tmp_path / "notes.txt").write_text("not a database\n")
@@ -194,27 +256,44 @@ def test_bad_database_is_one_line(app_stimuli, tmp_path, db, needle):
     _one_line_error(cli("export", "--db", db, "--out", tmp_path / "x.csv", timeout=60), needle)
 
 
-@pytest.mark.parametrize("args,env,needle", [
-    (("--slot-timeout", "-5"), {}, "--slot-timeout"),
-    (("--port", "99999"), {}, "--port"),
-    (("--min-view", "2"), {}, "--min-view"),
-    ((), {"SLOT_TIMEOUT": "nan"}, "SLOT_TIMEOUT"),
-    ((), {"RATINGS_PER_CLIP": "0"}, "RATINGS_PER_CLIP"),
-])
+@pytest.mark.parametrize(
+    "args,env,needle",
+    [
+        (("--slot-timeout", "-5"), {}, "--slot-timeout"),
+        (("--port", "99999"), {}, "--port"),
+        (("--min-view", "2"), {}, "--min-view"),
+        ((), {"SLOT_TIMEOUT": "nan"}, "SLOT_TIMEOUT"),
+        ((), {"RATINGS_PER_CLIP": "0"}, "RATINGS_PER_CLIP"),
+    ],
+)
 def test_bad_settings_stop_the_start(app_stimuli, tmp_path, args, env, needle):
-    r = cli("serve", "--manifest", app_stimuli, "--db", f"sqlite:///{tmp_path}/r.sqlite", *args,
-            timeout=60, env=dict(os.environ, **env))
+    r = cli(
+        "serve",
+        "--manifest",
+        app_stimuli,
+        "--db",
+        f"sqlite:///{tmp_path}/r.sqlite",
+        *args,
+        timeout=60,
+        env=dict(os.environ, **env),
+    )
     _one_line_error(r, needle)
 
 
-@pytest.mark.parametrize("env,needle", [({"RATING_MANIFEST": ""}, "no stimulus manifest"),
-                                        ({"SLOT_TIMEOUT": "nan"}, "SLOT_TIMEOUT")])
+@pytest.mark.parametrize(
+    "env,needle", [({"RATING_MANIFEST": ""}, "no stimulus manifest"), ({"SLOT_TIMEOUT": "nan"}, "SLOT_TIMEOUT")]
+)
 def test_gunicorn_with_a_bad_environment_stops(app_stimuli, tmp_path, env, needle):
     base = dict(os.environ, RATING_MANIFEST=str(app_stimuli), DATABASE_URL=f"sqlite:///{tmp_path}/r.sqlite")
     # One worker: with two, gunicorn halting on the first one's load error may interrupt the second one's import,
     # and that interrupted import's traceback is gunicorn's shutdown, not our error line.
-    r = subprocess.run([sys.executable, "-m", "gunicorn", "-w", "1", "-b", f"127.0.0.1:{free_port()}",
-                        "rating_app.wsgi:app"], cwd=ROOT, env=dict(base, **env), capture_output=True, text=True,
-                       timeout=60)                    # respawning forever would run into the timeout
+    r = subprocess.run(
+        [sys.executable, "-m", "gunicorn", "-w", "1", "-b", f"127.0.0.1:{free_port()}", "rating_app.wsgi:app"],
+        cwd=ROOT,
+        env=dict(base, **env),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )  # respawning forever would run into the timeout
     assert r.returncode != 0 and f"error: {needle}" in r.stderr and needle in r.stderr
     assert "Traceback" not in r.stderr

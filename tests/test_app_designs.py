@@ -1,6 +1,7 @@
 """Pairwise and parallel studies through the JSON API (CONTRACTS §8): the flow, the units and their balance (also
 under concurrent sessions), catch trials and their failures, the viewing rule, idempotency, bad input, the design
 stored with the study, export and dashboard. Each test runs on SQLite and on PostgreSQL."""
+
 import collections
 import csv
 import datetime as dt
@@ -12,15 +13,14 @@ import threading
 from pathlib import Path
 
 import pytest
+from concurrent_raters import run_raters
 from sqlalchemy import update
+from test_app_api import TOKEN_HDR, idle
 
 from rating_app import create_app
 from rating_app.db import Trial, utcnow
 from rating_app.manifest import AppError, load_manifest
 from rating_app.testing import make_stimuli
-
-from concurrent_raters import run_raters
-from test_app_api import TOKEN_HDR, idle
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -33,8 +33,9 @@ def stimuli(tmp_path_factory):
 @pytest.fixture(scope="module")
 def big_stimuli(tmp_path_factory):
     """3 conditions x 30 items, 4 catch items (BAD + NAT, MG, FL), 3 training clips."""
-    return make_stimuli(tmp_path_factory.mktemp("big_stimuli"), n_items=30, n_catch=4, n_frames=4, metrics=False,
-                        catch_nat=True)
+    return make_stimuli(
+        tmp_path_factory.mktemp("big_stimuli"), n_items=30, n_catch=4, n_frames=4, metrics=False, catch_nat=True
+    )
 
 
 @pytest.fixture
@@ -46,6 +47,7 @@ def make(app_db_url):
         made.append(create_app(manifest=manifest, db_url=app_db_url, design=design, **kw))
         made[-1].config["TESTING"] = True
         return made[-1]
+
     yield build
     for a in made:
         a.extensions["rating_app"]["engine"].dispose()
@@ -60,7 +62,7 @@ def shown(t):
 
 
 def value_for(t, pref=1, rating=lambda i, c: 40 + i):
-    if "clip_id" in t:                                    # acr
+    if "clip_id" in t:  # acr
         return {"rating": None if t["phase"] == "training" else 3}
     if t["phase"] == "training":
         return {"preference": None} if "a" in t else {"ratings": None}
@@ -121,12 +123,12 @@ def test_pairwise_flow_units_catch_and_export(make, stimuli):
     units = collections.Counter()
     for t in rating:
         a, b = clips[t["a"]["clip_id"]], clips[t["b"]["clip_id"]]
-        assert a.item == b.item and a.condition != b.condition          # two conditions of the same item
+        assert a.item == b.item and a.condition != b.condition  # two conditions of the same item
         units[(a.item, *sorted((a.condition, b.condition)))] += 1
     items = {x.item for x in clips.values() if x.role == "test"}
     want = {(i, *p) for i in items for p in itertools.combinations(sorted(["NAT", "MG", "FL"]), 2)}
     catch = {(x.item, "BAD", "NAT") for x in clips.values() if x.role == "catch"}
-    assert set(units) == want | catch and set(units.values()) == {1}   # every pair once, every catch pair
+    assert set(units) == want | catch and set(units.values()) == {1}  # every pair once, every catch pair
     rows, resp = export(c)
     assert "pairs.csv" in resp.headers["Content-Disposition"]
     assert len(rows) == len(rating)
@@ -139,10 +141,13 @@ def test_pairwise_flow_units_catch_and_export(make, stimuli):
         assert row["item"] == a.item and row["role"] == a.role and row["external_id"] == "P1"
         assert int(row["trial_index"]) == t["index"] and row["submitted_at"].endswith("Z") and row["flags"] == ""
     # A/B sides are drawn per trial: NAT is shown as A in some pairs and as B in others
-    sides = collections.Counter(clips[t["a"]["clip_id"]].condition == "NAT"
-                                for t in rating if "NAT" in {clips[x["clip_id"]].condition for x in shown(t)})
+    sides = collections.Counter(
+        clips[t["a"]["clip_id"]].condition == "NAT"
+        for t in rating
+        if "NAT" in {clips[x["clip_id"]].condition for x in shown(t)}
+    )
     assert sides[True] and sides[False]
-    assert c.post("/api/sessions", json={}).status_code == 409          # every unit has its target
+    assert c.post("/api/sessions", json={}).status_code == 409  # every unit has its target
 
 
 def test_pairwise_catch_failures_on_the_dashboard(make, stimuli):
@@ -156,11 +161,16 @@ def test_pairwise_catch_failures_on_the_dashboard(make, stimuli):
             if "BAD" not in (a, clips[t["b"]["clip_id"]].condition):
                 return 0
             return level if a == "BAD" else -level
+
         return pref
 
     outcomes = {}
-    for name, pref in (("clearly", prefer_bad(2)), ("slightly", prefer_bad(1)), ("none", prefer_bad(0)),
-                       ("good", prefer_bad(-2))):
+    for name, pref in (
+        ("clearly", prefer_bad(2)),
+        ("slightly", prefer_bad(1)),
+        ("none", prefer_bad(0)),
+        ("good", prefer_bad(-2)),
+    ):
         token = start(c, external_id=name)
         complete(c, token, pref=pref)
         outcomes[name] = token
@@ -180,20 +190,29 @@ def test_pairwise_bad_input_and_training(make, stimuli):
     token = start(c)
     t = c.get(f"/api/sessions/{token}/next").json["trial"]
     assert t["phase"] == "training"
-    assert post(c, token, t, preference=1).status_code == 400            # familiarisation: null only
+    assert post(c, token, t, preference=1).status_code == 400  # familiarisation: null only
     assert post(c, token, t, preference=None).status_code == 201
     while t["phase"] == "training":
         t = c.get(f"/api/sessions/{token}/next").json["trial"]
         if t["phase"] == "training":
             assert post(c, token, t, preference=None).status_code == 201
-    for body, needle in (({"preference": 3}, "between -2 and 2"), ({"preference": 1.5}, "integer"),
-                         ({"preference": "1"}, "integer"), ({"preference": True}, "integer"),
-                         ({"rating": 3}, "unknown field"), ({"ratings": {}}, "unknown field"), ({}, "preference")):
-        r = post(c, token, t, **body) if body else c.post(f"/api/sessions/{token}/ratings",
-                                                          json={"trial_id": t["trial_id"]})
+    for body, needle in (
+        ({"preference": 3}, "between -2 and 2"),
+        ({"preference": 1.5}, "integer"),
+        ({"preference": "1"}, "integer"),
+        ({"preference": True}, "integer"),
+        ({"rating": 3}, "unknown field"),
+        ({"ratings": {}}, "unknown field"),
+        ({}, "preference"),
+    ):
+        r = (
+            post(c, token, t, **body)
+            if body
+            else c.post(f"/api/sessions/{token}/ratings", json={"trial_id": t["trial_id"]})
+        )
         assert r.status_code == 400 and needle in r.json["error"], (body, r.json)
     assert post(c, token, t, preference=-2).status_code == 201
-    again = post(c, token, t, preference=2)                             # a repeat: stored once, not changed
+    again = post(c, token, t, preference=2)  # a repeat: stored once, not changed
     assert again.status_code == 200 and again.json["preference"] == -2
     rows, _ = export(c)
     assert len(rows) == 1 and rows[0]["preference"] == "-2"
@@ -216,8 +235,11 @@ def test_viewing_rule_counts_every_clip(make, stimuli, design):
         want = need if need is not None else n * dur - 250
         assert want - 300 < r.json["retry_after_ms"] <= want
         with app.extensions["rating_app"]["engine"].begin() as conn:
-            conn.execute(update(Trial).where(Trial.id == t["trial_id"])
-                         .values(served_at=utcnow() - dt.timedelta(milliseconds=want + 50)))
+            conn.execute(
+                update(Trial)
+                .where(Trial.id == t["trial_id"])
+                .values(served_at=utcnow() - dt.timedelta(milliseconds=want + 50))
+            )
         assert post(c, token, t).status_code == 201
         p = c.get("/admin/progress.json", headers=TOKEN_HDR).json
         assert p["raters"][-1]["early_answers"] == 1 and "too_fast" in p["raters"][-1]["flags"]
@@ -231,13 +253,13 @@ def test_parallel_pages_catch_and_export(make, stimuli):
     orders = []
 
     def rating(i, x):
-        return {"NAT": 80, "MG": 60, "FL": 30, "BAD": 90}[clips[x["clip_id"]].condition]   # fails each catch
+        return {"NAT": 80, "MG": 60, "FL": 30, "BAD": 90}[clips[x["clip_id"]].condition]  # fails each catch
 
     for k in range(2):
         token = start(c, external_id=f"R{k}")
         trials, done = complete(c, token, rating=rating)
         for t in trials:
-            assert t["design"] == "parallel" and [x["label"] for x in t["clips"]] == list("ABCDEFGH"[:len(t["clips"])])
+            assert t["design"] == "parallel" and [x["label"] for x in t["clips"]] == list("ABCDEFGH"[: len(t["clips"])])
             assert len({clips[x["clip_id"]].item for x in t["clips"]}) == 1 or t["phase"] == "training"
         pages = [t for t in trials if t["phase"] == "rating"]
         tests = [t for t in pages if clips[t["clips"][0]["clip_id"]].role == "test"]
@@ -247,7 +269,7 @@ def test_parallel_pages_catch_and_export(make, stimuli):
         # A catch page is as large as a test page (NAT, BAD and filler conditions), so its size tells nothing.
         assert all(sorted(clips[x["clip_id"]].condition for x in t["clips"]) == ["BAD", "FL", "NAT"] for t in catches)
         orders += [tuple(clips[x["clip_id"]].condition for x in t["clips"]) for t in tests]
-    assert len(set(orders)) > 1                                   # page order drawn per trial
+    assert len(set(orders)) > 1  # page order drawn per trial
     assert c.post("/api/sessions", json={}).status_code == 409
     rows, resp = export(c)
     assert "ratings.csv" in resp.headers["Content-Disposition"]
@@ -270,10 +292,15 @@ def test_parallel_bad_input(make, stimuli):
         t = c.get(f"/api/sessions/{token}/next").json["trial"]
     ids = [x["clip_id"] for x in t["clips"]]
     full = {i: 50 for i in ids}
-    for ratings, needle in (([50] * len(ids), "object"), ({**full, ids[0]: 101}, "between 0 and 100"),
-                            ({**full, ids[0]: -1}, "between 0 and 100"), ({**full, ids[0]: 5.5}, "integer"),
-                            ({k: v for k, v in full.items() if k != ids[0]}, "every clip"),
-                            ({**full, "0123456789abcdef": 3}, "every clip"), (None, "ratings")):
+    for ratings, needle in (
+        ([50] * len(ids), "object"),
+        ({**full, ids[0]: 101}, "between 0 and 100"),
+        ({**full, ids[0]: -1}, "between 0 and 100"),
+        ({**full, ids[0]: 5.5}, "integer"),
+        ({k: v for k, v in full.items() if k != ids[0]}, "every clip"),
+        ({**full, "0123456789abcdef": 3}, "every clip"),
+        (None, "ratings"),
+    ):
         r = post(c, token, t, ratings=ratings)
         assert r.status_code == 400 and needle in r.json["error"], (ratings, r.json)
     assert post(c, token, t, rating=3).status_code == 400
@@ -306,8 +333,9 @@ def unit_counts(rows, clips, design):
     if design == "acr":
         return collections.Counter(r["clip_id"] for r in rows if r["role"] == "test")
     if design == "pairwise":
-        return collections.Counter((r["item"], *sorted((r["condition_a"], r["condition_b"])))
-                                   for r in rows if r["role"] == "test")
+        return collections.Counter(
+            (r["item"], *sorted((r["condition_a"], r["condition_b"]))) for r in rows if r["role"] == "test"
+        )
     pages = {}
     for r in rows:
         if r["role"] == "test":
@@ -356,23 +384,47 @@ def test_a_database_holds_one_design(make, stimuli, app_db_url, tmp_path):
     make(stimuli, "pairwise")
     with pytest.raises(AppError, match="holds a pairwise study; it cannot be served as parallel"):
         make(stimuli, "parallel")
-    r = subprocess.run([sys.executable, "-m", "rating_app", "serve", "--manifest", str(stimuli), "--db", app_db_url,
-                        "--design", "acr", "--port", "1"], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "rating_app",
+            "serve",
+            "--manifest",
+            str(stimuli),
+            "--db",
+            app_db_url,
+            "--design",
+            "acr",
+            "--port",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=60,
+    )
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "holds a pairwise study" in r.stderr, r.stderr
-    make(stimuli, "pairwise")                         # the same design again: fine
+    make(stimuli, "pairwise")  # the same design again: fine
 
 
 def test_design_setting_and_manifest_errors(tmp_path, app_db_url, stimuli):
     with pytest.raises(AppError, match="design 'mushra' must be one of acr, pairwise, parallel"):
         create_app(manifest=stimuli, db_url=app_db_url, design="mushra")
-    old = make_stimuli(tmp_path / "old", n_items=2, n_catch=1, n_training=1, metrics=False)   # no NAT on catch items
+    old = make_stimuli(tmp_path / "old", n_items=2, n_catch=1, n_training=1, metrics=False)  # no NAT on catch items
     with pytest.raises(AppError, match="catch item 'bad00' has no NAT clip"):
         create_app(manifest=old, db_url=app_db_url, design="pairwise")
     one = make_stimuli(tmp_path / "one", n_items=2, conditions=("NAT",), n_catch=0, n_training=1, metrics=False)
     with pytest.raises(AppError, match="one condition only"):
         create_app(manifest=one, db_url=app_db_url, design="parallel")
-    nine = make_stimuli(tmp_path / "nine", n_items=1, conditions=tuple(f"C{i}" for i in range(9)), n_catch=0,
-                        n_training=1, metrics=False)
+    nine = make_stimuli(
+        tmp_path / "nine",
+        n_items=1,
+        conditions=tuple(f"C{i}" for i in range(9)),
+        n_catch=0,
+        n_training=1,
+        metrics=False,
+    )
     with pytest.raises(AppError, match="at most 8"):
         create_app(manifest=nine, db_url=app_db_url, design="parallel")
 
@@ -389,8 +441,10 @@ def test_acr_never_serves_the_nat_reference_of_a_catch_item(make, stimuli):
             break
         t = j["trial"]
         served.add(t["clip_id"])
-        r = c.post(f"/api/sessions/{token}/ratings",
-                   json={"trial_id": t["trial_id"], "rating": None if t["phase"] == "training" else 2})
+        r = c.post(
+            f"/api/sessions/{token}/ratings",
+            json={"trial_id": t["trial_id"], "rating": None if t["phase"] == "training" else 2},
+        )
         assert r.status_code == 201
     refs = {i for i, x in clips.items() if x.role == "catch" and x.condition == "NAT"}
     bads = {i for i, x in clips.items() if x.role == "catch" and x.condition == "BAD"}
@@ -403,10 +457,20 @@ def test_simulated_crowd_answers_each_design_as_the_page_does(stimuli, app_db_ur
     """The crowd fetches every clip, waits as the server requires (10% here) and answers the design; what it
     was acknowledged is what the export holds, careless raters fail catch trials and attentive ones never do."""
     from werkzeug.serving import make_server
+
     from rating_app.simulate import run_simulation
+
     # 2 test units per rater, so that many raters (half of them careless) take part before the study is full
-    app = create_app(manifest=stimuli, db_url=app_db_url, admin_token="test-admin-token", ratings_per_clip=6,
-                     clips_per_rater=2, min_view=0.1, sessions_per_client=0, design=design)
+    app = create_app(
+        manifest=stimuli,
+        db_url=app_db_url,
+        admin_token="test-admin-token",
+        ratings_per_clip=6,
+        clips_per_rater=2,
+        min_view=0.1,
+        sessions_per_client=0,
+        design=design,
+    )
     server = make_server("127.0.0.1", 0, app, threaded=True)
     th = threading.Thread(target=server.serve_forever, daemon=True)
     th.start()
@@ -415,8 +479,9 @@ def test_simulated_crowd_answers_each_design_as_the_page_does(stimuli, app_db_ur
         other = "parallel" if design == "pairwise" else "pairwise"
         with pytest.raises(AppError, match=f"--design {other}: the server at .* runs a {design} study"):
             run_simulation(url, 2, design=other, manifest=stimuli, progress=False)
-        summary = run_simulation(url, 40, seed=5, careless=0.5, manifest=stimuli, concurrency=4, progress=False,
-                                 design=design, timeout_s=300)
+        summary = run_simulation(
+            url, 40, seed=5, careless=0.5, manifest=stimuli, concurrency=4, progress=False, design=design, timeout_s=300
+        )
         c = app.test_client()
         rows, _ = export(c)
         p = c.get("/admin/progress.json", headers=TOKEN_HDR).json
@@ -425,15 +490,19 @@ def test_simulated_crowd_answers_each_design_as_the_page_does(stimuli, app_db_ur
         th.join(5)
         app.extensions["rating_app"]["engine"].dispose()
     assert summary["errors"] == [] and summary["study_full"]
-    key = ("rater_id", "clip_a", "clip_b", "preference") if design == "pairwise" else \
-        ("rater_id", "page_id", "clip_id", "rating")
+    key = (
+        ("rater_id", "clip_a", "clip_b", "preference")
+        if design == "pairwise"
+        else ("rater_id", "page_id", "clip_id", "rating")
+    )
     acked = collections.Counter(tuple(str(r[k]) for k in key) for r in summary["ratings"])
     assert acked == collections.Counter(tuple(r[k] for k in key) for r in rows) and max(acked.values()) == 1
-    assert all(r["flags"] == "" for r in rows)                         # every video fetched, none too early
+    assert all(r["flags"] == "" for r in rows)  # every video fetched, none too early
     failed = {r["rater_id"] for r in p["raters"] if r["catch_failures"]}
     assert failed and failed == set(summary["failed_catch_raters"]) and failed <= set(summary["careless_raters"])
     # the report excludes exactly the raters the dashboard lists as failing a catch trial
     from analysis import pairwise, parallel
+
     f = tmp_path / "export.csv"
     with open(f, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
@@ -450,8 +519,13 @@ def test_cli_export_writes_the_design_file(make, stimuli, app_db_url, tmp_path, 
     complete(c, start(c))
     want, _ = export(c)
     out = tmp_path / "export.csv"
-    r = subprocess.run([sys.executable, "-m", "rating_app", "export", "--db", app_db_url, "--out", str(out)],
-                       capture_output=True, text=True, cwd=ROOT, timeout=60)
+    r = subprocess.run(
+        [sys.executable, "-m", "rating_app", "export", "--db", app_db_url, "--out", str(out)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=60,
+    )
     assert r.returncode == 0, r.stderr
     with open(out, newline="") as fh:
         got = list(csv.DictReader(fh))

@@ -1,6 +1,7 @@
 """Bounded load test on loopback: 200 concurrent simulated raters complete sessions against gunicorn; the server
 is killed with SIGKILL mid-run and restarted; no acknowledged rating is missing and none is counted twice. In every
 design (acr, pairwise, parallel), on SQLite and PostgreSQL."""
+
 import collections
 import os
 import signal
@@ -24,8 +25,22 @@ N_RATERS = 200
 
 
 def start_gunicorn(port, env, log):
-    cmd = [sys.executable, "-m", "gunicorn", "-w", "3", "-k", "gthread", "--threads", "16", "--backlog", "2048",
-           "-b", f"127.0.0.1:{port}", "rating_app.wsgi:app"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "gunicorn",
+        "-w",
+        "3",
+        "-k",
+        "gthread",
+        "--threads",
+        "16",
+        "--backlog",
+        "2048",
+        "-b",
+        f"127.0.0.1:{port}",
+        "rating_app.wsgi:app",
+    ]
     proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline:
@@ -41,7 +56,7 @@ def start_gunicorn(port, env, log):
 
 
 def kill9(proc):
-    os.killpg(proc.pid, signal.SIGKILL)       # master and workers at once, no clean shutdown
+    os.killpg(proc.pid, signal.SIGKILL)  # master and workers at once, no clean shutdown
     proc.wait(10)
 
 
@@ -51,10 +66,18 @@ def kill9(proc):
 # a test row (None: the row is counted through another row of its unit).
 DESIGNS = {
     "acr": (("rater_id", "clip_id", "rating"), iter_rows, 4, lambda r: r["clip_id"]),
-    "pairwise": (("rater_id", "clip_a", "clip_b", "preference"), iter_pair_rows, 4,
-                 lambda r: (r["item"], *sorted((r["condition_a"], r["condition_b"])))),
-    "parallel": (("rater_id", "page_id", "clip_id", "rating"), iter_page_rows, 12,
-                 lambda r: r["item"] if r["condition"] == "NAT" else None),
+    "pairwise": (
+        ("rater_id", "clip_a", "clip_b", "preference"),
+        iter_pair_rows,
+        4,
+        lambda r: (r["item"], *sorted((r["condition_a"], r["condition_b"]))),
+    ),
+    "parallel": (
+        ("rater_id", "page_id", "clip_id", "rating"),
+        iter_page_rows,
+        12,
+        lambda r: r["item"] if r["condition"] == "NAT" else None,
+    ),
 }
 
 
@@ -70,21 +93,41 @@ def test_200_raters_with_a_server_crash(app_stimuli, design_stimuli, app_db_url,
     key, rows_of, per_rater, unit = DESIGNS[design]
     stimuli = app_stimuli if design == "acr" else design_stimuli
     port = free_port()
-    env = dict(os.environ, RATING_MANIFEST=str(stimuli), DATABASE_URL=app_db_url, ADMIN_TOKEN="load-token",
-               RATINGS_PER_CLIP="1000", CLIPS_PER_RATER="2", MIN_VIEW="0", SESSIONS_PER_CLIENT="0",   # all on loopback
-               STUDY_DESIGN=design)
+    env = dict(
+        os.environ,
+        RATING_MANIFEST=str(stimuli),
+        DATABASE_URL=app_db_url,
+        ADMIN_TOKEN="load-token",
+        RATINGS_PER_CLIP="1000",
+        CLIPS_PER_RATER="2",
+        MIN_VIEW="0",
+        SESSIONS_PER_CLIENT="0",  # all on loopback
+        STUDY_DESIGN=design,
+    )
     log = open(tmp_path / "gunicorn.log", "w")
     acks, killed = [0], threading.Event()
-    kill_at = raters * per_rater // 3          # a third of the way through
+    kill_at = raters * per_rater // 3  # a third of the way through
     procs = [start_gunicorn(port, env, log)]
 
     def on_ack(rec):
         acks[0] += 1
 
     summary = {}
-    sim = threading.Thread(target=lambda: summary.update(run_simulation(
-        f"http://127.0.0.1:{port}", raters, seed=3, careless=0.1, manifest=stimuli, concurrency=raters,
-        timeout_s=150, progress=False, on_ack=on_ack)))
+    sim = threading.Thread(
+        target=lambda: summary.update(
+            run_simulation(
+                f"http://127.0.0.1:{port}",
+                raters,
+                seed=3,
+                careless=0.1,
+                manifest=stimuli,
+                concurrency=raters,
+                timeout_s=150,
+                progress=False,
+                on_ack=on_ack,
+            )
+        )
+    )
     try:
         sim.start()
         while acks[0] < kill_at and sim.is_alive():
@@ -112,13 +155,14 @@ def test_200_raters_with_a_server_crash(app_stimuli, design_stimuli, app_db_url,
     engine = make_engine(app_db_url)
     try:
         from sqlalchemy.orm import Session
+
         with Session(engine) as s:
             rows = list(rows_of(s))
     finally:
         engine.dispose()
     stored = collections.Counter(tuple(r[k] for k in key) for r in rows)
-    assert max(stored.values()) == 1                 # never double-counted
-    assert stored == acked                           # nothing acknowledged is missing, nothing extra
+    assert max(stored.values()) == 1  # never double-counted
+    assert stored == acked  # nothing acknowledged is missing, nothing extra
     # the balanced assignment spread the 2 test slots per rater evenly over the test units
     per_unit = collections.Counter(unit(r) for r in rows if r["role"] == "test" and unit(r) is not None)
     assert max(per_unit.values()) - min(per_unit.values()) <= 3

@@ -1,19 +1,20 @@
 """Bad and hostile input to the motion tools: one line naming the file, line or flag, exit code 2, never a
 traceback or a runaway allocation (issue 11, finding 10); and property-based fuzzing of the BVH and clip readers
 on random corruptions of real files."""
+
 import gzip
 import zipfile
 
 import numpy as np
 import pytest
+from conftest import BANDAI, ROOT
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from conftest import BANDAI, ROOT
 from core.cli import UserError
+from core.clip import ClipError, load_clip, save_clip
 from generation import import_motion
 from generation.bvh import read_bvh
-from generation.clip import ClipError, load_clip, save_clip
 from rendering import __main__ as render_cli
 
 TAKE = BANDAI / "dataset-1" / "data" / "dataset-1_dash_normal_001.bvh.gz"  # the smallest real take (85 frames)
@@ -46,14 +47,17 @@ def one_line_error(main, argv, capsys):
 
 
 # ------------------------------------------------------------------ import_motion
-@pytest.mark.parametrize("flags, says", [
-    (["--fps", "1e9"], "--fps: must be >= 1.0 and <= 1000.0"),   # once a MemoryError
-    (["--fps", "inf"], "--fps: must be finite"),                  # once an OverflowError
-    (["--fps", "0"], "--fps: must be >= 1.0"),
-    (["--scale", "inf"], "--scale: must be finite"),              # once exit 0 with infinite joints
-    (["--scale", "-1"], "--scale: must be > 0"),
-    (["--fps", "abc"], "--fps: expected a number"),
-])
+@pytest.mark.parametrize(
+    "flags, says",
+    [
+        (["--fps", "1e9"], "--fps: must be >= 1.0 and <= 1000.0"),  # once a MemoryError
+        (["--fps", "inf"], "--fps: must be finite"),  # once an OverflowError
+        (["--fps", "0"], "--fps: must be >= 1.0"),
+        (["--scale", "inf"], "--scale: must be finite"),  # once exit 0 with infinite joints
+        (["--scale", "-1"], "--scale: must be > 0"),
+        (["--fps", "abc"], "--fps: expected a number"),
+    ],
+)
 def test_import_motion_bad_flags(tmp_path, capsys, flags, says):
     code, line = one_line_error(import_motion.main, [str(TAKE), str(tmp_path / "o.npz"), *flags], capsys)
     assert code == 2 and says in line
@@ -93,18 +97,23 @@ def _variant(real_clip, tmp_path, name, **changes):
     return tmp_path / name
 
 
-@pytest.mark.parametrize("changes, says", [
-    (dict(fps=np.float64(0)), "fps must be between 1 and 1000, got 0"),
-    (dict(fps=np.float64(-20)), "fps must be between"),
-    (dict(fps=np.float64("nan")), "got nan"),
-    (dict(fps=np.float64(1e12)), "got 1e+12"),
-    (dict(fps=np.array("fast")), "fps must be a number"),
-    (dict(fps=np.arange(3.0)), "'fps' must be a single number"),
-    (dict(parents=np.full(22, 40)), "has parent 40"),
-    (dict(parents=np.full(22, -1.0)), "'parents' must be integers"),
-    (dict(joints=np.zeros((5, 0, 3), np.float32), parents=np.zeros(0, np.int64), joint_names=np.zeros(0, str)),
-     "[T >= 1, J >= 1, 3]"),
-])
+@pytest.mark.parametrize(
+    "changes, says",
+    [
+        (dict(fps=np.float64(0)), "fps must be between 1 and 1000, got 0"),
+        (dict(fps=np.float64(-20)), "fps must be between"),
+        (dict(fps=np.float64("nan")), "got nan"),
+        (dict(fps=np.float64(1e12)), "got 1e+12"),
+        (dict(fps=np.array("fast")), "fps must be a number"),
+        (dict(fps=np.arange(3.0)), "'fps' must be a single number"),
+        (dict(parents=np.full(22, 40)), "has parent 40"),
+        (dict(parents=np.full(22, -1.0)), "'parents' must be integers"),
+        (
+            dict(joints=np.zeros((5, 0, 3), np.float32), parents=np.zeros(0, np.int64), joint_names=np.zeros(0, str)),
+            "[T >= 1, J >= 1, 3]",
+        ),
+    ],
+)
 def test_render_refuses_broken_clip_files(real_clip, tmp_path, capsys, changes, says):
     bad = _variant(real_clip, tmp_path, "bad.npz", **changes)
     code, line = one_line_error(render_cli.main, [str(bad), str(tmp_path / "o.mp4")], capsys)
@@ -117,20 +126,29 @@ def test_render_refuses_files_that_are_not_clips(tmp_path, capsys):
     (tmp_path / "junk.npz").write_bytes(b"PK\x03\x04" + b"junk" * 50)
     np.save(tmp_path / "array.npy", np.zeros(4))
     (tmp_path / "array.npy").rename(tmp_path / "array.npz")
-    for name, says in (("empty.npz", "missing key 'joints'"), ("junk.npz", "not a readable .npz"),
-                       ("array.npz", "a single .npy array")):
+    for name, says in (
+        ("empty.npz", "missing key 'joints'"),
+        ("junk.npz", "not a readable .npz"),
+        ("array.npz", "a single .npy array"),
+    ):
         code, line = one_line_error(render_cli.main, [str(tmp_path / name), str(tmp_path / "o.mp4")], capsys)
         assert code == 2 and says in line and name in line
 
 
-@pytest.mark.parametrize("flags, says", [
-    (["--size", "100000"], "--size: must be >= 32 and <= 4096"),
-    (["--size", "101"], "--size: must be even"),
-    (["--qp", "99"], "--qp: must be >= 0 and <= 51"),
-    (["--crf", "-1"], "--crf: must be >= 0"),
-    (["--preset", "warp"], "--preset: invalid choice"),
-    (["--sheet", "/nonexistent/dir/s.png"], "--sheet /nonexistent/dir/s.png: folder /nonexistent/dir does not exist"),
-])
+@pytest.mark.parametrize(
+    "flags, says",
+    [
+        (["--size", "100000"], "--size: must be >= 32 and <= 4096"),
+        (["--size", "101"], "--size: must be even"),
+        (["--qp", "99"], "--qp: must be >= 0 and <= 51"),
+        (["--crf", "-1"], "--crf: must be >= 0"),
+        (["--preset", "warp"], "--preset: invalid choice"),
+        (
+            ["--sheet", "/nonexistent/dir/s.png"],
+            "--sheet /nonexistent/dir/s.png: folder /nonexistent/dir does not exist",
+        ),
+    ],
+)
 def test_render_bad_flags(real_clip, tmp_path, capsys, flags, says):
     code, line = one_line_error(render_cli.main, [str(real_clip), str(tmp_path / "o.mp4"), *flags], capsys)
     assert code == 2 and says in line
@@ -140,8 +158,13 @@ def test_cli_entry_point_prints_one_line(tmp_path):
     """The real `python -m` entry, not only main(): still one line and exit code 2."""
     import subprocess
     import sys
-    r = subprocess.run([sys.executable, "-m", "rendering", str(tmp_path / "none.npz"), str(tmp_path / "o.mp4")],
-                       capture_output=True, text=True, cwd=ROOT)
+
+    r = subprocess.run(
+        [sys.executable, "-m", "rendering", str(tmp_path / "none.npz"), str(tmp_path / "o.mp4")],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert r.returncode == 2 and r.stderr.strip().splitlines() == [f"error: {tmp_path / 'none.npz'}: no such file"]
 
 
@@ -156,21 +179,26 @@ def _corrupt(data, edits):
     for kind, where, payload in edits:
         at = int(where * len(data))
         if kind == "overwrite":
-            data[at:at + len(payload)] = payload
+            data[at : at + len(payload)] = payload
         elif kind == "insert":
             data[at:at] = payload
         elif kind == "delete":
-            del data[at:at + 1 + len(payload) * 16]
+            del data[at : at + 1 + len(payload) * 16]
         else:
             del data[at:]
     return bytes(data)
 
 
 NUMBERS = st.sampled_from([b"1e308", b"-1e308", b"inf", b"nan", b"1e-9", b"0", b"-0", b"1e9", b"x", b"", b"3.5e2"])
-EDITS = st.lists(st.tuples(st.sampled_from(["overwrite", "insert", "delete", "truncate"]),
-                           st.floats(0, 1, exclude_max=True),
-                           st.one_of(st.binary(max_size=12), NUMBERS, st.sampled_from([b"{", b"}", b"\n", b"\xff"]))),
-                 min_size=1, max_size=4)
+EDITS = st.lists(
+    st.tuples(
+        st.sampled_from(["overwrite", "insert", "delete", "truncate"]),
+        st.floats(0, 1, exclude_max=True),
+        st.one_of(st.binary(max_size=12), NUMBERS, st.sampled_from([b"{", b"}", b"\n", b"\xff"])),
+    ),
+    min_size=1,
+    max_size=4,
+)
 FUZZ = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
 
@@ -202,9 +230,16 @@ def test_fuzz_clip_reader_gives_a_valid_clip_or_one_line(tmp_path_factory, real_
     assert clip["joints"].ndim == 3 and np.isfinite(clip["joints"]).all() and 1 <= clip["fps"] <= 1000
 
 
-VALUES = st.one_of(st.just(np.float64("nan")), st.just(np.float64(1e12)), st.just(np.zeros((0, 0, 3))),
-                   st.just(np.array(["a", "b"])), st.just(np.zeros((4, 22, 3), np.float32) + 1e30),
-                   st.just(np.arange(22) - 5), st.just(np.int64(20)), st.just(np.zeros((85, 22, 2))))
+VALUES = st.one_of(
+    st.just(np.float64("nan")),
+    st.just(np.float64(1e12)),
+    st.just(np.zeros((0, 0, 3))),
+    st.just(np.array(["a", "b"])),
+    st.just(np.zeros((4, 22, 3), np.float32) + 1e30),
+    st.just(np.arange(22) - 5),
+    st.just(np.int64(20)),
+    st.just(np.zeros((85, 22, 2))),
+)
 
 
 @FUZZ
@@ -228,7 +263,7 @@ def test_zip_member_corruption_is_one_line(real_clip, tmp_path):
     with zipfile.ZipFile(real_clip) as z:
         info = z.getinfo("joints.npy")
     start = info.header_offset + 30 + len(info.filename) + len(info.extra) + 20
-    raw[start:start + 40] = bytes(40)
+    raw[start : start + 40] = bytes(40)
     (tmp_path / "c.npz").write_bytes(bytes(raw))
     with pytest.raises(ClipError) as e:
         load_clip(tmp_path / "c.npz")

@@ -1,13 +1,14 @@
 """BVH reader and forward kinematics (issue 2): exactness against scipy, real files, malformed files."""
+
 import gzip
 import subprocess
 import sys
 
 import numpy as np
 import pytest
+from conftest import BANDAI, PFNN, ROOT
 from scipy.spatial.transform import Rotation
 
-from conftest import BANDAI, PFNN, ROOT
 from generation import import_motion
 from generation.bvh import BvhError, fk_positions, read_bvh
 
@@ -78,8 +79,11 @@ def motion_values(seed=0):
 
 
 def bvh_text(motion, frames=None, crlf=True):
-    lines = HIERARCHY.split("\n")[:-1] + ["MOTION", f"Frames: {len(motion) if frames is None else frames}",
-                                          "Frame Time: 0.04"]
+    lines = HIERARCHY.split("\n")[:-1] + [
+        "MOTION",
+        f"Frames: {len(motion) if frames is None else frames}",
+        "Frame Time: 0.04",
+    ]
     lines += ["\t".join(f"{v:.4f}" for v in row) + " " for row in motion]
     return ("\r\n" if crlf else "\n").join(lines) + ("\r\n" if crlf else "\n")
 
@@ -91,7 +95,7 @@ def scipy_fk(motion):
         col, g_rot, g_pos = 0, [], []
         for name, parent, offset, chans in JOINTS:
             chans = chans.split()
-            vals = row[col:col + len(chans)]
+            vals = row[col : col + len(chans)]
             col += len(chans)
             trans = np.array(offset, float)
             rot_axes, rot_angles = "", []
@@ -174,12 +178,12 @@ FIRST_FRAME = HEADER_LINES + 4
 
 def _edit(kind):
     lines = _lines()
-    if kind == "truncated_block":          # file ends two frames early
-        return "\n".join(lines[:FIRST_FRAME - 1 + N_FRAMES - 2]) + "\n", FRAMES_LINE, "truncated"
-    if kind == "truncated_line":           # file cut in the middle of the last frame
+    if kind == "truncated_block":  # file ends two frames early
+        return "\n".join(lines[: FIRST_FRAME - 1 + N_FRAMES - 2]) + "\n", FRAMES_LINE, "truncated"
+    if kind == "truncated_line":  # file cut in the middle of the last frame
         last = FIRST_FRAME - 1 + N_FRAMES - 1
         return "\n".join(lines[:last] + [lines[last][:40]]), last + 1, "truncated frame"
-    if kind == "wrong_count":              # one value too many on the third frame
+    if kind == "wrong_count":  # one value too many on the third frame
         lines[FIRST_FRAME + 1] += " 1.0"
         return "\n".join(lines), FIRST_FRAME + 2, "expected 24 values, got 25"
     if kind == "unknown_channel":
@@ -191,10 +195,10 @@ def _edit(kind):
         parts[5] = "12.x5"
         lines[FIRST_FRAME + 3] = "\t".join(parts)
         return "\n".join(lines), FIRST_FRAME + 4, "non-numeric value '12.x5'"
-    if kind == "frames_too_few":            # Frames says fewer than the data holds
+    if kind == "frames_too_few":  # Frames says fewer than the data holds
         lines[FRAMES_LINE - 1] = f"Frames: {N_FRAMES - 2}"
         return "\n".join(lines), FIRST_FRAME + N_FRAMES - 2, "more frame lines"
-    if kind == "frames_too_many":           # Frames says more than the data holds
+    if kind == "frames_too_many":  # Frames says more than the data holds
         lines[FRAMES_LINE - 1] = f"Frames: {N_FRAMES + 3}"
         return "\n".join(lines), FRAMES_LINE, "Frames says 10"
     if kind == "no_motion":
@@ -215,9 +219,21 @@ def _edit(kind):
     raise AssertionError(kind)
 
 
-CASES = ["truncated_block", "truncated_line", "wrong_count", "unknown_channel", "non_numeric",
-         "frames_too_few", "frames_too_many", "no_motion", "bad_offset", "unclosed", "bad_frame_time",
-         "empty", "not_bvh"]
+CASES = [
+    "truncated_block",
+    "truncated_line",
+    "wrong_count",
+    "unknown_channel",
+    "non_numeric",
+    "frames_too_few",
+    "frames_too_many",
+    "no_motion",
+    "bad_offset",
+    "unclosed",
+    "bad_frame_time",
+    "empty",
+    "not_bvh",
+]
 
 
 @pytest.mark.parametrize("kind", CASES)
@@ -241,8 +257,12 @@ def test_cli_subprocess_no_traceback(tmp_path):
     text, line, _ = _edit("non_numeric")
     bad = tmp_path / "bad.bvh.gz"
     bad.write_bytes(gzip.compress(text.encode()))
-    r = subprocess.run([sys.executable, "-m", "generation.import_motion", str(bad), str(tmp_path / "o.npz")],
-                       cwd=ROOT, capture_output=True, text=True)
+    r = subprocess.run(
+        [sys.executable, "-m", "generation.import_motion", str(bad), str(tmp_path / "o.npz")],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 2
     assert r.stderr.startswith(f"error: {bad}:{line}: non-numeric") and r.stderr.count("\n") == 1
     assert "Traceback" not in r.stderr
@@ -255,18 +275,20 @@ def test_cli_subprocess_no_traceback(tmp_path):
 
 
 def test_import_motion_writes_clip(tmp_path, handwritten):
-    from generation.clip import load_clip
+    from core.clip import load_clip
+
     path, motion = handwritten
     out = tmp_path / "clip.npz"
     assert import_motion.main([str(path), str(out), "--scale", "0.5"]) == 0
     clip = load_clip(out)
     assert clip["joint_names"] == [j[0] for j in JOINTS] and clip["fps"] == pytest.approx(25.0)
-    np.testing.assert_allclose(clip["joints"], 0.5 * scipy_fk(motion)[:, :len(JOINTS)], atol=1e-4)
+    np.testing.assert_allclose(clip["joints"], 0.5 * scipy_fk(motion)[:, : len(JOINTS)], atol=1e-4)
     assert "control" not in clip  # unknown skeleton: no 21-joint body, so no control
 
 
 def test_import_motion_real_take_resampled(tmp_path):
-    from generation.clip import load_clip
+    from core.clip import load_clip
+
     out = tmp_path / "walk.npz"
     take = next(BANDAI.glob("dataset-2/data/dataset-2_walk_*.bvh.gz"))
     assert import_motion.main([str(take), str(out), "--fps", "20"]) == 0

@@ -1,5 +1,6 @@
 """The whole study as real processes (issue 7): stimuli → rating app on PostgreSQL → simulated crowd →
 export → report. The stimulus folder is the one `make_stimuli --quick` run of the session (quick_stimuli)."""
+
 import csv
 import json
 import os
@@ -42,8 +43,23 @@ def _processes_mentioning(text: str) -> list[str]:
 
 
 def _run_demo(out: Path, stimuli: Path, db: str, raters: int, careless: float, seed: int):
-    cmd = [sys.executable, "-m", "analysis.demo", "--out", str(out), "--stimuli", str(stimuli), "--db", db,
-           "--raters", str(raters), "--careless", str(careless), "--seed", str(seed)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "analysis.demo",
+        "--out",
+        str(out),
+        "--stimuli",
+        str(stimuli),
+        "--db",
+        db,
+        "--raters",
+        str(raters),
+        "--careless",
+        str(careless),
+        "--seed",
+        str(seed),
+    ]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=900)
 
 

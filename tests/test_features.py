@@ -1,20 +1,21 @@
 """Features (issue 2): exact round trip on every real take, augmentation identities, physical sanity."""
-from concurrent.futures import ProcessPoolExecutor
+
 import os
+from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
-
 from conftest import BANDAI, PFNN
+
 from generation import skeleton
 from generation.bvh import BvhError, fk_positions, read_bvh
-from generation.features import (SKELETON_MAPS, load_take, mirror, reverse, root_trajectory, to_features,
-                                 to_world)
+from generation.features import SKELETON_MAPS, load_take, mirror, reverse, root_trajectory, to_features, to_world
 from generation.prepare_data import category_of, find_takes
 
 FPS = 20.0
-PFNN_TAKES = sorted((PFNN / "animations").glob("Locomotion*.bvh.gz")) + \
-    sorted((PFNN / "animations").glob("NewCaptures*.bvh.gz"))
+PFNN_TAKES = sorted((PFNN / "animations").glob("Locomotion*.bvh.gz")) + sorted(
+    (PFNN / "animations").glob("NewCaptures*.bvh.gz")
+)
 
 
 @pytest.fixture(scope="module")
@@ -69,8 +70,10 @@ def test_units_and_floor(all_takes):
 
 
 def test_walk_speeds_and_runs_faster(all_takes):
-    speed = {cat: np.mean([to_features(j, FPS)[1][1:, 0].mean() * FPS for j in js])
-             for cat, js in _by_category(all_takes).items()}
+    speed = {
+        cat: np.mean([to_features(j, FPS)[1][1:, 0].mean() * FPS for j in js])
+        for cat, js in _by_category(all_takes).items()
+    }
     for walk in ("walk", "walk_turn_left", "walk_turn_right"):
         assert 0.8 <= speed[walk] <= 2.0, speed
         assert speed["run"] > speed[walk] + 0.5, speed
@@ -80,8 +83,9 @@ def test_walk_speeds_and_runs_faster(all_takes):
 
 def test_control_signs_match_labels(all_takes):
     """Left is positive: turning left gives yaw > 0, side-stepping left gives sideways > 0."""
-    mean_c = {cat: np.array([to_features(j, FPS)[1][1:].mean(0) for j in js])
-              for cat, js in _by_category(all_takes).items()}
+    mean_c = {
+        cat: np.array([to_features(j, FPS)[1][1:].mean(0) for j in js]) for cat, js in _by_category(all_takes).items()
+    }
     assert (mean_c["walk_turn_left"][:, 2] > 0).mean() > 0.95
     assert (mean_c["walk_turn_right"][:, 2] < 0).mean() > 0.95
     assert (mean_c["sidestep_left"][:, 1] > 0).all() and (mean_c["sidestep_right"][:, 1] < 0).all()
@@ -152,8 +156,14 @@ def test_to_world_batched_and_start():
     c2[..., 0, :] = 5.0
     np.testing.assert_array_equal(to_world(x, c2, (1.0, -2.0), 0.5), w)
     p = x[0, 0, 0].reshape(21, 3)
-    expect = np.stack([np.cos(.5) * p[:, 0] + np.sin(.5) * p[:, 2] + 1, p[:, 1],
-                       -np.sin(.5) * p[:, 0] + np.cos(.5) * p[:, 2] - 2], -1)
+    expect = np.stack(
+        [
+            np.cos(0.5) * p[:, 0] + np.sin(0.5) * p[:, 2] + 1,
+            p[:, 1],
+            -np.sin(0.5) * p[:, 0] + np.cos(0.5) * p[:, 2] - 2,
+        ],
+        -1,
+    )
     np.testing.assert_allclose(w[0, 0, 0], expect, atol=1e-5)
 
 
@@ -204,6 +214,7 @@ def test_pfnn_lowpass_removes_jitter():
 
 def test_unknown_skeleton_is_a_clear_error(tmp_path):
     from test_bvh import bvh_text, motion_values
+
     path = tmp_path / "odd.bvh"
     path.write_text(bvh_text(motion_values()))
     with pytest.raises(BvhError, match=r"odd\.bvh:1: unknown skeleton"):

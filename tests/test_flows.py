@@ -1,11 +1,11 @@
 """Flow layers and both models: invertibility and log-determinants (one generic test), ActNorm init,
 MG causality. All at small sizes."""
+
 import pytest
 import torch
 
-from generation.flows import (ActNorm, AffineCoupling, Chain, ConvNet, FlowStep, InvertibleLinearLU, Split,
-                              SqueezeTime)
 from generation.fl import FL
+from generation.flows import ActNorm, AffineCoupling, Chain, ConvNet, FlowStep, InvertibleLinearLU, Split, SqueezeTime
 from generation.moglow import LSTMNet, MoGlow
 
 C, CC, T, TAU = 6, 2, 4, 3
@@ -23,15 +23,17 @@ def perturb(module, scale=0.1):
 
 def layer_case(make):
     """Case for a layer acting on x [B, C, T] with cond [B, CC, T]."""
+
     def build(dtype):
         layer = make().to(dtype)
         cond = torch.randn(3, CC, T, dtype=dtype)
         layer(torch.randn(3, C, T, dtype=dtype) * 2 + 1, cond)  # data-dependent init where there is one
         perturb(layer)
         layer.eval()
-        fwd = lambda x: layer(x.reshape(-1, C, T), cond[:x.reshape(-1, C, T).shape[0]])
-        inv = lambda y: layer.inverse(y, cond[:y.shape[0]])[0]
+        fwd = lambda x: layer(x.reshape(-1, C, T), cond[: x.reshape(-1, C, T).shape[0]])
+        inv = lambda y: layer.inverse(y, cond[: y.shape[0]])[0]
         return fwd, inv, torch.randn(3, C, T, dtype=dtype)
+
     return build
 
 
@@ -40,8 +42,8 @@ def fl_case(dtype):
     c = torch.randn(3, T, 3, dtype=dtype)
     model(torch.randn(3, T, 63, dtype=dtype), c)
     perturb(model, 0.05).eval()
-    fwd = lambda x: model(x.reshape(-1, T, 63), c[:x.reshape(-1, T, 63).shape[0]])
-    inv = lambda z: model.inverse(z, c[:z.shape[0]])[0]
+    fwd = lambda x: model(x.reshape(-1, T, 63), c[: x.reshape(-1, T, 63).shape[0]])
+    inv = lambda z: model.inverse(z, c[: z.shape[0]])[0]
     return fwd, inv, torch.randn(3, T, 63, dtype=dtype)
 
 
@@ -56,9 +58,9 @@ def mg_case(dtype):
 
     def fwd(x):
         x = x.reshape(-1, n, 63)
-        return model(torch.cat([hist[:len(x)], x], dim=1), c[:len(x)])
+        return model(torch.cat([hist[: len(x)], x], dim=1), c[: len(x)])
 
-    inv = lambda z: model.inverse(z, hist[:len(z)], c[:len(z)])
+    inv = lambda z: model.inverse(z, hist[: len(z)], c[: len(z)])
     return fwd, inv, torch.randn(3, n, 63, dtype=dtype)
 
 
@@ -102,7 +104,7 @@ def test_invertible_and_logdet_matches_jacobian(name):
 
 def test_actnorm_initialises_to_zero_mean_unit_variance():
     torch.manual_seed(1)
-    x = torch.randn(16, 5, 30) * torch.tensor([0.1, 1, 3, 10, 0.5])[None, :, None] + torch.arange(5.)[None, :, None]
+    x = torch.randn(16, 5, 30) * torch.tensor([0.1, 1, 3, 10, 0.5])[None, :, None] + torch.arange(5.0)[None, :, None]
     layer = ActNorm(5)
     y, _ = layer(x)
     assert torch.allclose(y.mean(dim=(0, 2)), torch.zeros(5), atol=1e-5)
@@ -125,8 +127,8 @@ def test_coupling_starts_near_identity():
     layer = AffineCoupling(C, ConvNet(C // 2, CC, 2 * (C - C // 2), 8))
     x = torch.randn(2, C, T)
     y, _ = layer(x, torch.randn(2, CC, T))
-    assert torch.equal(y[:, :C // 2], x[:, :C // 2])
-    assert torch.allclose(y[:, C // 2:], x[:, C // 2:] * torch.sigmoid(torch.tensor(2.0)))
+    assert torch.equal(y[:, : C // 2], x[:, : C // 2])
+    assert torch.allclose(y[:, C // 2 :], x[:, C // 2 :] * torch.sigmoid(torch.tensor(2.0)))
 
 
 def test_mg_is_causal():
@@ -142,13 +144,13 @@ def test_mg_is_causal():
         x2[:, t + 1] += 1.0
         c2[:, t + 1] += 1.0
         z2, _ = model(x2, c2)
-        assert torch.equal(z2[:, :t + 1 - TAU], z[:, :t + 1 - TAU])
+        assert torch.equal(z2[:, : t + 1 - TAU], z[:, : t + 1 - TAU])
         assert not torch.equal(z2[:, t + 1 - TAU], z[:, t + 1 - TAU])
         # sampling: the same latents, the control changed from frame 3 of the generated part on
         zs = torch.randn(2, 6, 63)
         a = model.inverse(zs, x[:, :TAU], c)
         c3 = c.clone()
-        c3[:, TAU + 3:] += 1.0
+        c3[:, TAU + 3 :] += 1.0
         b = model.inverse(zs, x[:, :TAU], c3)
         assert torch.equal(a[:, :3], b[:, :3])
         assert not torch.equal(a[:, 3], b[:, 3])
@@ -158,11 +160,11 @@ def test_mg_history_dropout_only_in_training():
     torch.manual_seed(4)
     model = MoGlow(dict(K=1, hidden=8, tau=TAU, dropout=0.95))
     x, c = torch.randn(64, TAU + 2, 63), torch.randn(64, TAU + 2, 3)
-    hist = model.make_cond(x, c)[..., :TAU * 63].reshape(64, 2, TAU, 63)
+    hist = model.make_cond(x, c)[..., : TAU * 63].reshape(64, 2, TAU, 63)
     dropped = (hist == 0).all(dim=-1).float().mean().item()
     assert 0.9 < dropped < 0.99
     model.eval()
-    assert (model.make_cond(x, c)[..., :TAU * 63] != 0).all()
+    assert (model.make_cond(x, c)[..., : TAU * 63] != 0).all()
 
 
 def test_actnorm_follows_a_loaded_init_flag():

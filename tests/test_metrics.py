@@ -1,19 +1,23 @@
 """Objective motion metrics on real takes and on motion spoiled in known ways."""
+
 import csv
 
 import numpy as np
 import pytest
-
 from conftest import DATA
+
 from generation import skeleton
 from generation.features import load_take, to_features
-from generation.metrics import (CONTACT_HEIGHT, bone_length_std, clip_metrics, control_error, foot_skating, jerk)
+from generation.metrics import CONTACT_HEIGHT, bone_length_std, clip_metrics, control_error, foot_skating, jerk
 
 
 def takes(category, n, min_seconds=5.0):
     with open(DATA / "MANIFEST.csv", newline="") as f:
-        rows = [r for r in csv.DictReader(f) if r["locomotion"] == category and float(r["seconds"]) >= min_seconds
-                and r["path"].startswith("bandai")]
+        rows = [
+            r
+            for r in csv.DictReader(f)
+            if r["locomotion"] == category and float(r["seconds"]) >= min_seconds and r["path"].startswith("bandai")
+        ]
     return [DATA / r["path"] for r in sorted(rows, key=lambda r: r["path"])[:n]]
 
 
@@ -27,17 +31,17 @@ def test_metrics_real_walks_are_plausible(walks):
     for j in walks:
         m = clip_metrics(j, 20.0, to_features(j, 20.0)[1])
         speed = np.linalg.norm(j[-1, 0, [0, 2]] - j[0, 0, [0, 2]]) / 4.0
-        assert speed > 0.7                             # it is a walk...
-        assert m["foot_skating"] < 0.2 * speed         # ...and planted feet barely slide
-        assert m["bone_length_std"] < 1e-3            # rigid skeleton (resampling keeps bone lengths)
-        assert m["control_error"] < 0.02              # the control was measured on this very body
+        assert speed > 0.7  # it is a walk...
+        assert m["foot_skating"] < 0.2 * speed  # ...and planted feet barely slide
+        assert m["bone_length_std"] < 1e-3  # rigid skeleton (resampling keeps bone lengths)
+        assert m["control_error"] < 0.02  # the control was measured on this very body
         assert 10 < m["jerk"] < 300
 
 
 def test_metrics_foot_skating_sees_sliding_feet(walks):
     j = walks[0].astype(np.float64)
     slide = j.copy()
-    slide[..., 0] += 0.6 * np.arange(80)[:, None] / 20.0      # the whole body glides sideways at 0.6 m/s
+    slide[..., 0] += 0.6 * np.arange(80)[:, None] / 20.0  # the whole body glides sideways at 0.6 m/s
     assert foot_skating(slide, 20.0) > foot_skating(j, 20.0) + 0.45
     assert foot_skating(j, 20.0) < 0.15
 
@@ -47,7 +51,7 @@ def test_metrics_foot_skating_contact_threshold_and_fallback():
     t = np.arange(40)[:, None] / 20.0
     j = np.zeros((40, skeleton.N_JOINTS, 3))
     j[:, :, 1] = 0.0
-    j[:, :, 0] = 2.0 * t                                       # on the floor, gliding at 2 m/s
+    j[:, :, 0] = 2.0 * t  # on the floor, gliding at 2 m/s
     assert foot_skating(j, 20.0) == pytest.approx(2.0)
     # Feet that never rest (bobbing 30 cm, so never two frames within 1 cm of the lowest point): the
     # lowest 10% of frame pairs count as contact; gliding at 1 m/s then shows, standing still does not.
@@ -67,7 +71,7 @@ def test_metrics_bone_length_and_jerk_see_noise(walks):
     assert jerk(noisy, 20.0) > 5 * jerk(j, 20.0)
     line = np.zeros((30, skeleton.N_JOINTS, 3))
     line[..., 2] = 1.5 * np.arange(30)[:, None] / 20.0 + 0.1 * (np.arange(30)[:, None] / 20.0) ** 2
-    assert jerk(line, 20.0) == pytest.approx(0.0, abs=1e-6)    # constant acceleration: no jerk
+    assert jerk(line, 20.0) == pytest.approx(0.0, abs=1e-6)  # constant acceleration: no jerk
     assert np.isnan(jerk(line[:3], 20.0))
 
 
@@ -76,7 +80,7 @@ def test_metrics_control_error_compares_paths_up_to_placement(walks):
     straight = walks[2]
     c_turn, c_straight = to_features(turn)[1], to_features(straight)[1]
     assert control_error(turn, c_turn) < 0.02
-    assert control_error(turn, c_straight) > 0.1     # a curved body path against a straight request
+    assert control_error(turn, c_straight) > 0.1  # a curved body path against a straight request
     # Placement in the world does not count: rotate and move the clip.
     a = 1.1
     rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
@@ -95,6 +99,7 @@ def test_metrics_clip_metrics_keys_and_bad_shape(walks):
 def test_control_following_real_walks_follow_and_a_body_on_the_wrong_control_does_not(walks):
     from generation.features import to_world
     from generation.metrics import control_following
+
     windows = [to_features(j, 20.0) for j in walks]
     for x, c in windows:
         assert control_following(to_world(x, c), c) < 0.05  # feet carry the body along its own control
@@ -111,6 +116,7 @@ def test_control_following_real_walks_follow_and_a_body_on_the_wrong_control_doe
 
 def test_frechet_distance_matches_the_closed_form_for_diagonal_gaussians():
     from generation.motion_encoder import frechet_distance
+
     mu_a, mu_b = np.array([0.0, 1.0, 2.0]), np.array([1.0, 1.0, 0.0])
     var_a, var_b = np.array([1.0, 4.0, 0.25]), np.array([9.0, 1.0, 0.25])
     expected = np.sum((mu_a - mu_b) ** 2) + np.sum((np.sqrt(var_a) - np.sqrt(var_b)) ** 2)
@@ -121,8 +127,9 @@ def test_frechet_distance_matches_the_closed_form_for_diagonal_gaussians():
 def test_shipped_motion_encoder_ranks_real_held_out_motion_first(small_dataset):
     """The FMD floor (held-out real motion) lies well below the same motion spoiled: frames shuffled in time,
     held still (a standing pose), or shaken by 2 cm of noise per frame."""
-    from generation.pretrained import MOTION_ENCODER
     from generation.motion_encoder import MotionEncoder
+    from generation.pretrained import MOTION_ENCODER
+
     enc = MotionEncoder.load(MOTION_ENCODER)
     with np.load(small_dataset) as d:
         real, cats = d["test_x"], d["test_labels"]

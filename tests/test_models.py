@@ -1,4 +1,5 @@
 """Sampling API and CLI of trained tiny FL/MG checkpoints: reproducibility, streaming, fast vs plain MG."""
+
 import subprocess
 import sys
 
@@ -6,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from generation.clip import load_clip
+from core.clip import load_clip
 from generation.moglow import MoGlow
 from generation.sample import SampleError, load_model, mg_stream, sample_fl, sample_mg
 from generation.sample import main as sample_main
@@ -102,8 +103,18 @@ def test_sampling_errors(tiny_runs, test_split, tmp_path):
 def test_sample_cli_writes_clips(tiny_runs, small_dataset, tmp_path, capsys):
     for kind in ("mg", "fl"):
         out = tmp_path / kind
-        args = ["--checkpoint", str(last_ckpt(tiny_runs[kind])), "--data", str(small_dataset), "--split", "test",
-                "--n", "2", "--out", str(out)]
+        args = [
+            "--checkpoint",
+            str(last_ckpt(tiny_runs[kind])),
+            "--data",
+            str(small_dataset),
+            "--split",
+            "test",
+            "--n",
+            "2",
+            "--out",
+            str(out),
+        ]
         if kind == "mg":  # the real command line once; in-process for the rest (saves a torch start-up)
             r = subprocess.run([sys.executable, "-m", "generation.sample", *args], capture_output=True, text=True)
             assert r.returncode == 0, r.stderr
@@ -116,8 +127,12 @@ def test_sample_cli_writes_clips(tiny_runs, small_dataset, tmp_path, capsys):
         assert np.isfinite(clip["joints"]).all()
         assert clip["joints"][:, :, 1].min() > -0.3  # roughly above the floor
     capsys.readouterr()
-    assert sample_main(["--checkpoint", str(tmp_path / "none.pt"), "--data", str(small_dataset),
-                        "--out", str(tmp_path / "x")]) == 2
+    assert (
+        sample_main(
+            ["--checkpoint", str(tmp_path / "none.pt"), "--data", str(small_dataset), "--out", str(tmp_path / "x")]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "none.pt" in err and len(err.strip().splitlines()) == 1
 
@@ -137,6 +152,7 @@ def test_paper_configs_build_models_of_the_papers_size():
 def test_layout_is_a_fixed_choice_never_a_timing(tiny_runs, monkeypatch):
     """The two layouts round differently, so the choice must not depend on a timing (issue 15, item 5)."""
     from generation.moglow import LAYOUTS, MGStream, cpu_vendor, default_layout
+
     model = load_model(last_ckpt(tiny_runs["mg"]))
     hist, hist_c = torch.zeros(3, model.tau, 63), torch.zeros(3, model.tau, 3)
     monkeypatch.delenv("MOGLOW_LAYOUT", raising=False)
@@ -159,9 +175,25 @@ def test_two_sampling_processes_give_identical_bits(tiny_runs, small_dataset, tm
     """The same checkpoint, seed and inputs in two fresh processes: the same clip files, byte for byte."""
     outs = []
     for run in ("a", "b"):
-        r = subprocess.run([sys.executable, "-m", "generation.sample", "--checkpoint", str(last_ckpt(tiny_runs["mg"])),
-                            "--data", str(small_dataset), "--n", "3", "--seed", "4", "--out", str(tmp_path / run)],
-                           capture_output=True, text=True)
+        r = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "generation.sample",
+                "--checkpoint",
+                str(last_ckpt(tiny_runs["mg"])),
+                "--data",
+                str(small_dataset),
+                "--n",
+                "3",
+                "--seed",
+                "4",
+                "--out",
+                str(tmp_path / run),
+            ],
+            capture_output=True,
+            text=True,
+        )
         assert r.returncode == 0, r.stderr
         outs.append(sorted((tmp_path / run).glob("*.npz")))
     assert len(outs[0]) == 3

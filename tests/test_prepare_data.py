@@ -1,10 +1,11 @@
 """prepare_data (issue 2): the dataset contract, splits by take, windows, history, augmentation, CLI."""
+
 import gzip
 
 import numpy as np
 import pytest
-
 from conftest import BANDAI, small_take_names
+
 from generation import prepare_data, skeleton
 from generation.features import load_take, mirror, reverse, to_features
 from generation.prepare_data import find_takes, prepare, window_starts
@@ -47,8 +48,15 @@ def test_splits_by_take_and_balanced(ds):
         for take, label in zip(ds[f"{s}_take"], ds[f"{s}_labels"]):
             cats.setdefault(str(label), set()).add(str(take))
         # every category that has long-enough takes is held out, with the same number of takes
-        assert set(cats) == {"run", "walk", "walk_backward", "walk_turn_left", "walk_turn_right",
-                             "sidestep_left", "sidestep_right"}  # dashes are all shorter than 4.5 s
+        assert set(cats) == {
+            "run",
+            "walk",
+            "walk_backward",
+            "walk_turn_left",
+            "walk_turn_right",
+            "sidestep_left",
+            "sidestep_right",
+        }  # dashes are all shorter than 4.5 s
         assert len({len(v) for v in cats.values()}) == 1, cats
 
 
@@ -68,10 +76,10 @@ def test_windows_and_history_are_the_source_frames(ds):
             take, start = str(ds[f"{s}_take"][i]), int(ds[f"{s}_start"][i])
             path = next(BANDAI.glob(f"*/data/{take}.bvh.gz"))
             x, c = to_features(load_take(path, 20.0), 20.0)
-            np.testing.assert_array_equal(ds[f"{s}_x"][i], x[start:start + 80])
-            np.testing.assert_array_equal(ds[f"{s}_c"][i], c[start:start + 80])
-            np.testing.assert_array_equal(ds[f"{s}_hist"][i], x[start - 10:start])
-            np.testing.assert_array_equal(ds[f"{s}_hist_c"][i], c[start - 10:start])
+            np.testing.assert_array_equal(ds[f"{s}_x"][i], x[start : start + 80])
+            np.testing.assert_array_equal(ds[f"{s}_c"][i], c[start : start + 80])
+            np.testing.assert_array_equal(ds[f"{s}_hist"][i], x[start - 10 : start])
+            np.testing.assert_array_equal(ds[f"{s}_hist_c"][i], c[start - 10 : start])
 
 
 def test_augmentation_in_train_only(ds):
@@ -85,8 +93,8 @@ def test_augmentation_in_train_only(ds):
     for i in np.flatnonzero(ds["train_take"] == take):
         vx, vc = variants[int(ds["train_aug"][i])]
         s = int(ds["train_start"][i])
-        np.testing.assert_array_equal(ds["train_x"][i], vx[s:s + 80])
-        np.testing.assert_allclose(ds["train_c"][i], vc[s:s + 80], atol=1e-7)
+        np.testing.assert_array_equal(ds["train_x"][i], vx[s : s + 80])
+        np.testing.assert_allclose(ds["train_c"][i], vc[s : s + 80], atol=1e-7)
 
 
 def test_window_starts_cover_the_tail():

@@ -1,5 +1,6 @@
 """The models and held-out data shipped in generation/pretrained/ (issue 15, item 4): they load, sample, keep
 the quality recorded when they were shipped, fit the size budget, and make the default stimulus set alone."""
+
 import csv
 import json
 
@@ -48,8 +49,24 @@ def test_shipped_models_keep_their_recorded_quality():
 
 def test_default_job_uses_the_shipped_models_and_nothing_beside_the_checkout(tmp_path, capsys):
     out, runs = tmp_path / "stimuli", tmp_path / "runs"
-    code = make_stimuli.main(["--out", str(out), "--runs", str(runs), "--n-items", "3", "--n-catch", "1",
-                              "--n-training", "1", "--size", "64", "--jobs", "1"])
+    code = make_stimuli.main(
+        [
+            "--out",
+            str(out),
+            "--runs",
+            str(runs),
+            "--n-items",
+            "3",
+            "--n-catch",
+            "1",
+            "--n-training",
+            "1",
+            "--size",
+            "64",
+            "--jobs",
+            "1",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 0, err[-2000:]
     assert not runs.exists()  # no dataset prepared, nothing trained

@@ -1,4 +1,5 @@
 """Stick-figure rendering: real MP4 files that decode, a fixed camera that follows the figure, the CLI."""
+
 import re
 import subprocess
 import sys
@@ -6,11 +7,11 @@ import sys
 import imageio_ffmpeg
 import numpy as np
 import pytest
+from conftest import BANDAI, ROOT
 from PIL import Image
 
-from conftest import BANDAI, ROOT
+from core.clip import ClipError, save_clip
 from generation import skeleton
-from generation.clip import ClipError, save_clip
 from generation.features import load_take
 from rendering import Camera, RenderError, render_clip
 from rendering.render import FrameDrawer, camera_targets, yuv_to_rgb
@@ -20,14 +21,22 @@ WALK = BANDAI / "dataset-1" / "data" / "dataset-1_walk_angry_002.bvh.gz"
 
 def probe(path):
     """(frames, width, height, pix_fmt, codec, has_audio, moov_before_mdat) of a video, decoded for real."""
-    info = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-i", str(path)],
-                          capture_output=True, text=True).stderr
+    info = subprocess.run(
+        [imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-i", str(path)], capture_output=True, text=True
+    ).stderr
     video = re.search(r"Video: (\w+).*?, (\w+)\(.*?\), (\d+)x(\d+)", info)
     assert video, info
     frames = sum(1 for _ in list(imageio_ffmpeg.read_frames(str(path)))[1:])
     data = open(path, "rb").read()
-    return dict(frames=frames, width=int(video.group(3)), height=int(video.group(4)), pix_fmt=video.group(2),
-                codec=video.group(1), audio="Audio:" in info, faststart=data.find(b"moov") < data.find(b"mdat"))
+    return dict(
+        frames=frames,
+        width=int(video.group(3)),
+        height=int(video.group(4)),
+        pix_fmt=video.group(2),
+        codec=video.group(1),
+        audio="Audio:" in info,
+        faststart=data.find(b"moov") < data.find(b"mdat"),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -45,21 +54,21 @@ def test_render_real_clip_to_h264_mp4_and_contact_sheet(walk_clip, tmp_path):
     p = probe(tmp_path / "walk.mp4")
     assert p == dict(frames=40, width=320, height=320, pix_fmt="yuv420p", codec="h264", audio=False, faststart=True)
     sheet = Image.open(tmp_path / "walk.png")
-    assert sheet.size[0] == 4 * 240 and sheet.size[1] > 2 * 240     # 8 frames, 4 per row
+    assert sheet.size[0] == 4 * 240 and sheet.size[1] > 2 * 240  # 8 frames, 4 per row
 
 
 def _figure_pixels(rgb):
     """Mask of pixels drawn in the figure's colours (dark trunk, blue left, red right limbs)."""
     rgb = rgb.astype(int)
     dark = rgb.max(-1) < 90
-    coloured = (np.abs(rgb[..., 0] - rgb[..., 2]) > 80)
+    coloured = np.abs(rgb[..., 0] - rgb[..., 2]) > 80
     return dark | coloured
 
 
 def test_render_camera_follows_so_the_figure_never_leaves_the_frame(walk_clip):
     joints = load_take(WALK, 20.0)[:40].astype(np.float64)
     fast = joints.copy()
-    fast[..., 2] += 8.0 * np.arange(40)[:, None] / 20.0         # pushed along at 8 m/s: 16 m in 2 s
+    fast[..., 2] += 8.0 * np.arange(40)[:, None] / 20.0  # pushed along at 8 m/s: 16 m in 2 s
     drawer = FrameDrawer(skeleton.PARENTS, skeleton.JOINT_NAMES, 200)
     targets = camera_targets(fast, 20.0)
     for t in range(0, 40, 3):
@@ -80,10 +89,10 @@ def test_render_same_camera_set_up_wherever_the_clip_is(walk_clip):
     for t in (0, 17, 39):
         fa = a.draw(joints[t], ta[t]).copy()
         fb = a.draw(moved[t], tb[t]).copy()
-        assert fa.shape == (160 * 160 * 3 // 2,)                 # a yuv420p frame
+        assert fa.shape == (160 * 160 * 3 // 2,)  # a yuv420p frame
         fa, fb = (yuv_to_rgb(f, 160) for f in (fa, fb))
         diff = np.abs(fa.astype(int) - fb.astype(int))
-        assert diff[1:-1, 1:-1].max() <= 2            # (lines clipped at the image border may differ by a pixel)
+        assert diff[1:-1, 1:-1].max() <= 2  # (lines clipped at the image border may differ by a pixel)
     # ...while another camera does change the picture.
     other = FrameDrawer(skeleton.PARENTS, skeleton.JOINT_NAMES, 160, camera=Camera(azimuth=150.0))
     assert np.abs(other.draw(joints[0], ta[0]).astype(int) - a.draw(joints[0], ta[0]).astype(int)).max() > 100
@@ -108,11 +117,11 @@ def test_render_colours_survive_the_yuv_path():
     drawer = FrameDrawer(skeleton.PARENTS, skeleton.JOINT_NAMES, 240)
     drawer.draw(joints[0], camera_targets(joints, 20.0)[0])
     rgb = drawer.rgb().astype(int)
-    assert np.abs(rgb[2, 2] - 0.97 * 255).max() <= 3                  # sky, top left
-    assert np.abs(rgb[-2, 120] - 0.88 * 255).max() <= 8               # floor near the camera (or a grid line)
+    assert np.abs(rgb[2, 2] - 0.97 * 255).max() <= 3  # sky, top left
+    assert np.abs(rgb[-2, 120] - 0.88 * 255).max() <= 8  # floor near the camera (or a grid line)
     red = (rgb[..., 0] > 150) & (rgb[..., 2] < 90)
     blue = (rgb[..., 2] > 150) & (rgb[..., 0] < 90)
-    assert red.sum() > 30 and blue.sum() > 30                         # right and left limbs
+    assert red.sum() > 30 and blue.sum() > 30  # right and left limbs
 
 
 def test_render_rejects_bad_clips(tmp_path):
@@ -127,17 +136,40 @@ def test_render_rejects_bad_clips(tmp_path):
 
 
 def test_render_cli(walk_clip, tmp_path):
-    ok = subprocess.run([sys.executable, "-m", "rendering", str(walk_clip[0]), str(tmp_path / "o.mp4"),
-                         "--size", "128"], capture_output=True, text=True, cwd=ROOT)
+    ok = subprocess.run(
+        [sys.executable, "-m", "rendering", str(walk_clip[0]), str(tmp_path / "o.mp4"), "--size", "128"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert ok.returncode == 0, ok.stderr
     assert probe(tmp_path / "o.mp4")["frames"] == 40
-    crf = subprocess.run([sys.executable, "-m", "rendering", str(walk_clip[0]), str(tmp_path / "c.mp4"),
-                          "--size", "64", "--preset", "superfast", "--crf", "23"],
-                         capture_output=True, text=True, cwd=ROOT)
+    crf = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "rendering",
+            str(walk_clip[0]),
+            str(tmp_path / "c.mp4"),
+            "--size",
+            "64",
+            "--preset",
+            "superfast",
+            "--crf",
+            "23",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert crf.returncode == 0, crf.stderr
     assert probe(tmp_path / "c.mp4")["frames"] == 40
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
-    bad = subprocess.run([sys.executable, "-m", "rendering", str(tmp_path / "junk.npz"), str(tmp_path / "j.mp4")],
-                         capture_output=True, text=True, cwd=ROOT)
+    bad = subprocess.run(
+        [sys.executable, "-m", "rendering", str(tmp_path / "junk.npz"), str(tmp_path / "j.mp4")],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert bad.returncode == 2
     assert bad.stderr.startswith("error: ") and "junk.npz" in bad.stderr and bad.stderr.count("\n") == 1

@@ -1,4 +1,5 @@
 """make_stimuli: the stimulus folder of one real --quick run (CONTRACTS.md §4), system import, bad input."""
+
 import csv
 import re
 import shutil
@@ -7,10 +8,10 @@ import sys
 
 import numpy as np
 import pytest
-
 from conftest import BANDAI, DATA, ROOT
+
+from core.clip import load_clip
 from generation import make_stimuli
-from generation.clip import load_clip
 from generation.features import root_trajectory
 
 CONDITION_NAMES = ("nat", "mg", "fl", "bad")
@@ -24,8 +25,23 @@ def read_csv(path):
 def decode(path):
     """(frames decoded, width, height, pix_fmt, codec, audio?) by decoding the whole video with ffmpeg."""
     import imageio_ffmpeg
-    r = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-nostats", "-i", str(path), "-map", "0:v:0",
-                        "-f", "framemd5", "-"], capture_output=True, text=True)
+
+    r = subprocess.run(
+        [
+            imageio_ffmpeg.get_ffmpeg_exe(),
+            "-hide_banner",
+            "-nostats",
+            "-i",
+            str(path),
+            "-map",
+            "0:v:0",
+            "-f",
+            "framemd5",
+            "-",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     frames = sum(1 for line in r.stdout.splitlines() if line and not line.startswith("#"))
     v = re.search(r"Video: (\w+).*?, (\w+)\(.*?\), (\d+)x(\d+)", r.stderr)
@@ -43,7 +59,7 @@ def test_stimuli_quick_run_counts_and_columns(manifest, quick_stimuli):
     for m in manifest:
         count[m["role"], m["condition"]] = count.get((m["role"], m["condition"]), 0) + 1
     assert count["test", "NAT"] == count["test", "MG"] == count["test", "FL"] == 30
-    assert count["catch", "BAD"] == count["catch", "NAT"] == 4      # NAT: the reference of pairwise/parallel catches
+    assert count["catch", "BAD"] == count["catch", "NAT"] == 4  # NAT: the reference of pairwise/parallel catches
     assert sum(v for (r, _), v in count.items() if r == "catch") == 16  # BAD, and NAT, MG, FL of each catch item
     training = {c for (r, c) in count if r == "training"}
     assert training >= {"NAT", "MG", "FL"} and sum(v for (r, _), v in count.items() if r == "training") >= 3
@@ -57,13 +73,14 @@ def test_stimuli_quick_run_counts_and_columns(manifest, quick_stimuli):
 
 def test_stimuli_every_video_decodes_as_stated(manifest, quick_stimuli):
     from concurrent.futures import ThreadPoolExecutor
-    with ThreadPoolExecutor(2) as pool:   # ffmpeg processes; threads just wait on them
+
+    with ThreadPoolExecutor(2) as pool:  # ffmpeg processes; threads just wait on them
         decoded = list(pool.map(lambda m: decode(quick_stimuli / m["video"]), manifest))
     for m, (frames, w, h, pix_fmt, codec, audio) in zip(manifest, decoded):
         assert (frames, w, h) == (int(m["frames"]), int(m["width"]), int(m["height"])), m["clip_id"]
         assert (pix_fmt, codec, audio) == ("yuv420p", "h264", False)
         data = (quick_stimuli / m["video"]).read_bytes()
-        assert data.find(b"moov") < data.find(b"mdat")       # +faststart
+        assert data.find(b"moov") < data.find(b"mdat")  # +faststart
     assert {int(m["frames"]) for m in manifest} == {80} and {m["fps"] for m in manifest} == {"20"}
 
 
@@ -101,8 +118,11 @@ def _condition_runs(conditions):
 def test_stimuli_files_tell_nothing_outside_their_pixels(manifest, quick_stimuli):
     """A bot that sorts clips by byte size, time stamp or creation order learns nothing (issue 11, finding 1)."""
     videos = [quick_stimuli / m["video"] for m in manifest]
-    files = videos + [quick_stimuli / m["motion"] for m in manifest] + \
-        [quick_stimuli / "sheets" / f"{m['clip_id']}.png" for m in manifest]
+    files = (
+        videos
+        + [quick_stimuli / m["motion"] for m in manifest]
+        + [quick_stimuli / "sheets" / f"{m['clip_id']}.png" for m in manifest]
+    )
     assert len({v.stat().st_size for v in videos}) == 1  # padded to one size
     assert len({f.stat().st_mtime_ns for f in files}) == 1  # one time stamp
     conditions = [m["condition"] for m in manifest]
@@ -114,13 +134,22 @@ def test_stimuli_files_tell_nothing_outside_their_pixels(manifest, quick_stimuli
 
 def test_stimuli_metrics_plausible_and_bad_clips_worse(manifest, quick_stimuli):
     rows = read_csv(quick_stimuli / "metrics.csv")
-    assert list(rows[0]) == ["clip_id", "condition", "role", "item", "foot_skating", "bone_length_std", "jerk",
-                             "control_error", "control_following"]
+    assert list(rows[0]) == [
+        "clip_id",
+        "condition",
+        "role",
+        "item",
+        "foot_skating",
+        "bone_length_std",
+        "jerk",
+        "control_error",
+        "control_following",
+    ]
     assert sorted(r["clip_id"] for r in rows) == sorted(m["clip_id"] for m in manifest)
-    assert all(np.isfinite(float(r[k])) for r in rows for k in list(r)[4:])    # every metric defined
+    assert all(np.isfinite(float(r[k])) for r in rows for k in list(r)[4:])  # every metric defined
     val = lambda cond, key: np.array([float(r[key]) for r in rows if r["condition"] == cond])  # noqa: E731
     nat_skate = val("NAT", "foot_skating")
-    assert np.isfinite(nat_skate).all() and np.median(nat_skate) < 0.1      # planted feet barely slide
+    assert np.isfinite(nat_skate).all() and np.median(nat_skate) < 0.1  # planted feet barely slide
     assert val("NAT", "bone_length_std").max() < 1e-3
     assert val("NAT", "control_error").max() < 0.01
     assert np.median(val("NAT", "control_following")) < 0.05  # real feet carry the body along its control
@@ -134,15 +163,31 @@ def test_stimuli_metrics_plausible_and_bad_clips_worse(manifest, quick_stimuli):
 
 
 def _walk_takes(n):
-    rows = [r for r in read_csv(DATA / "MANIFEST.csv") if r["locomotion"] == "walk" and float(r["seconds"]) > 5
-            and r["path"].startswith("bandai")]
+    rows = [
+        r
+        for r in read_csv(DATA / "MANIFEST.csv")
+        if r["locomotion"] == "walk" and float(r["seconds"]) > 5 and r["path"].startswith("bandai")
+    ]
     return [DATA / r["path"] for r in rows[:n]]
 
 
 def test_stimuli_import_bvh_folder_adds_a_condition(quick_stimuli, tmp_path, capsys):
     runs = quick_stimuli.parent / "runs"
-    common = ["--quick", "--runs", str(runs), "--n-items", "4", "--n-catch", "1", "--n-training", "1",
-              "--size", "96", "--jobs", "1"]
+    common = [
+        "--quick",
+        "--runs",
+        str(runs),
+        "--n-items",
+        "4",
+        "--n-catch",
+        "1",
+        "--n-training",
+        "1",
+        "--size",
+        "96",
+        "--jobs",
+        "1",
+    ]
     assert make_stimuli.main(common + ["--export-items", str(tmp_path / "ask")]) == 0
     items = read_csv(tmp_path / "ask" / "items.csv")
     assert [r["role"] for r in items] == ["test"] * 4 + ["training"]
@@ -158,8 +203,19 @@ def test_stimuli_import_bvh_folder_adds_a_condition(quick_stimuli, tmp_path, cap
     fl = sorted((runs / "fl_tiny" / "checkpoints").glob("step_*.pt"))[-1]
     out = tmp_path / "stimuli"
     capsys.readouterr()
-    code = make_stimuli.main([*common, "--out", str(out), "--mg-checkpoint", str(mg), "--fl-checkpoint", str(fl),
-                              "--system", f"MOCAP={sysdir}"])
+    code = make_stimuli.main(
+        [
+            *common,
+            "--out",
+            str(out),
+            "--mg-checkpoint",
+            str(mg),
+            "--fl-checkpoint",
+            str(fl),
+            "--system",
+            f"MOCAP={sysdir}",
+        ]
+    )
     printed = capsys.readouterr()
     assert code == 0, printed.err[-2000:]
     man = read_csv(out / "manifest.csv")
@@ -173,8 +229,8 @@ def test_stimuli_import_bvh_folder_adds_a_condition(quick_stimuli, tmp_path, cap
         if m["condition"] == "MOCAP":
             assert decode(out / m["video"])[:3] == (80, 96, 96)
     metrics = [x for x in read_csv(out / "metrics.csv") if x["condition"] == "MOCAP"]
-    assert len(metrics) == 5 and all(float(x["foot_skating"]) < 0.15 for x in metrics)   # real walks
-    assert "MOCAP" in printed.out                                                        # in the summary
+    assert len(metrics) == 5 and all(float(x["foot_skating"]) < 0.15 for x in metrics)  # real walks
+    assert "MOCAP" in printed.out  # in the summary
 
 
 def _error(argv, capsys):
@@ -228,14 +284,17 @@ def _hostile_bvh(text, how):
     return "\n".join(lines).encode()
 
 
-@pytest.mark.parametrize("how, says", [
-    ("frame_time=1e-9", "Frame Time must be between"),   # once tried to allocate 15 GB
-    ("frame_time=1e308", "out of range"),                 # once a ZeroDivisionError
-    ("frame_time=inf", "out of range"),
-    ("huge_position", "out of range"),                    # once exit 0 with infinite joints
-    ("renamed_joint", "has no joint 'Hand_R'"),       # once a KeyError
-    ("non_utf8_name", "has no joint 'Hand_R'"),
-])
+@pytest.mark.parametrize(
+    "how, says",
+    [
+        ("frame_time=1e-9", "Frame Time must be between"),  # once tried to allocate 15 GB
+        ("frame_time=1e308", "out of range"),  # once a ZeroDivisionError
+        ("frame_time=inf", "out of range"),
+        ("huge_position", "out of range"),  # once exit 0 with infinite joints
+        ("renamed_joint", "has no joint 'Hand_R'"),  # once a KeyError
+        ("non_utf8_name", "has no joint 'Hand_R'"),
+    ],
+)
 def test_stimuli_hostile_system_file_one_line(quick_stimuli, tmp_path, capsys, how, says):
     runs = quick_stimuli.parent / "runs"
     base = ["--quick", "--runs", str(runs), "--n-items", "2", "--n-catch", "1", "--n-training", "0"]
@@ -245,6 +304,7 @@ def test_stimuli_hostile_system_file_one_line(quick_stimuli, tmp_path, capsys, h
     sysdir.mkdir()
     take = BANDAI / "dataset-1" / "data" / "dataset-1_walk_angry_002.bvh.gz"
     import gzip
+
     text = gzip.decompress(take.read_bytes()).decode()
     for it in items[1:]:
         shutil.copy(take, sysdir / f"{it}.bvh.gz")
@@ -261,8 +321,13 @@ def test_stimuli_hostile_system_file_one_line(quick_stimuli, tmp_path, capsys, h
 def test_stimuli_full_default_run(tmp_path):
     """The default job at full size: the whole data set, the cpu configs, 640x640 videos."""
     out = tmp_path / "stimuli"
-    r = subprocess.run([sys.executable, "-m", "generation.make_stimuli", "--out", str(out), "--runs",
-                        str(tmp_path / "runs")], capture_output=True, text=True, cwd=ROOT, timeout=4 * 3600)
+    r = subprocess.run(
+        [sys.executable, "-m", "generation.make_stimuli", "--out", str(out), "--runs", str(tmp_path / "runs")],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=4 * 3600,
+    )
     assert r.returncode == 0, r.stderr[-3000:]
     man = read_csv(out / "manifest.csv")
     assert sum(m["role"] == "test" for m in man) == 90 and sum(m["role"] == "catch" for m in man) == 16
@@ -276,6 +341,10 @@ def test_stimuli_full_default_run(tmp_path):
 def test_render_workers_load_no_torch():
     """make_stimuli's render workers are spawned and import generation.make_stimuli: that import must not load
     torch (seconds and hundreds of MB per worker); sampling and training import it where they run."""
-    r = subprocess.run([sys.executable, "-c", "import sys, generation.make_stimuli; print('torch' in sys.modules)"],
-                       capture_output=True, text=True, cwd=ROOT)
+    r = subprocess.run(
+        [sys.executable, "-c", "import sys, generation.make_stimuli; print('torch' in sys.modules)"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert r.returncode == 0 and r.stdout.strip() == "False", r.stderr[-500:]

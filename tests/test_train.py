@@ -1,4 +1,5 @@
 """Training: NLL falls on real data, files per CONTRACTS.md §3, reproducible and resumable, CLI errors."""
+
 import csv
 import json
 import subprocess
@@ -87,11 +88,28 @@ def test_config_names_and_errors(tmp_path):
 
 
 def test_cli_errors_are_one_line(tmp_path, small_dataset, capsys):
-    r = subprocess.run([sys.executable, "-m", "generation.train", "--model", "mg", "--config", "tiny", "--data",
-                        str(tmp_path / "missing.npz"), "--out", str(tmp_path / "o")], capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "generation.train",
+            "--model",
+            "mg",
+            "--config",
+            "tiny",
+            "--data",
+            str(tmp_path / "missing.npz"),
+            "--out",
+            str(tmp_path / "o"),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 2
     assert r.stderr.startswith("error: ") and "missing.npz" in r.stderr and len(r.stderr.strip().splitlines()) == 1
-    assert main(["--model", "mg", "--config", "nosuch", "--data", str(small_dataset), "--out", str(tmp_path / "o")]) == 2
+    assert (
+        main(["--model", "mg", "--config", "nosuch", "--data", str(small_dataset), "--out", str(tmp_path / "o")]) == 2
+    )
     err = capsys.readouterr().err
     assert err.startswith("error: config 'nosuch' not found") and len(err.strip().splitlines()) == 1
 
@@ -106,13 +124,39 @@ def test_ddp_two_cpu_processes_match_one(small_dataset, tmp_path):
     import torch
 
     from generation.train import train
+
     steps = 12
     train("mg", "tiny", small_dataset, tmp_path / "one", steps=steps, progress=False, threads=1)
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    r = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
-                        "-m", "generation.train", "--model", "mg", "--config", "tiny", "--data", str(small_dataset),
-                        "--out", str(tmp_path / "two"), "--steps", str(steps), "--threads", "1", "--no-progress"],
-                       capture_output=True, text=True, env=env, timeout=300)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "torch.distributed.run",
+            "--standalone",
+            "--nproc_per_node",
+            "2",
+            "-m",
+            "generation.train",
+            "--model",
+            "mg",
+            "--config",
+            "tiny",
+            "--data",
+            str(small_dataset),
+            "--out",
+            str(tmp_path / "two"),
+            "--steps",
+            str(steps),
+            "--threads",
+            "1",
+            "--no-progress",
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
     assert r.returncode == 0, r.stderr[-3000:]
     name = f"checkpoints/step_{steps:07d}.pt"
     one = torch.load(tmp_path / "one" / name, weights_only=False)["state"]
@@ -132,6 +176,7 @@ def test_core_share_leaves_a_busy_neighbour_its_core():
     import time
 
     from generation.core_share import CoreShare
+
     before = torch.get_num_threads()
     busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
     try:

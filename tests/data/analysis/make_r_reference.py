@@ -7,6 +7,7 @@ fail a catch trial, so 66 raters and 2,970 test ratings are kept. Responses come
 with crossed rater and clip intercepts -- the model the ordinal fit assumes -- so the R comparison exercises
 a well-posed fit with moderate effects (MG a little, FL clearly below NAT), not a degenerate one.
 """
+
 import argparse
 from pathlib import Path
 
@@ -24,8 +25,9 @@ def make(seed=2024, n_attentive=66, n_careless=4, clips_per_condition=30, clips_
     conds = list(EFFECTS)
     clip_cond = np.repeat(conds, clips_per_condition)
     n_clips = len(clip_cond)
-    clip_ids = np.array([f"{c.lower()}{i:02d}" for c, i in zip(clip_cond, np.tile(np.arange(clips_per_condition),
-                                                                                   len(conds)))])
+    clip_ids = np.array(
+        [f"{c.lower()}{i:02d}" for c, i in zip(clip_cond, np.tile(np.arange(clips_per_condition), len(conds)))]
+    )
     clip_eff = rng.normal(0, SD_CLIP, n_clips)
     n_raters = n_attentive + n_careless
     rater_ids = np.array([f"w{i:03d}" for i in rng.permutation(n_raters)])

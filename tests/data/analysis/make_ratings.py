@@ -6,6 +6,7 @@ clip has a quality (condition mean + clip effect), every rater a leniency, each 
 plus noise cut into the 1-5 scale; a share of careless raters answer at random (and mostly fail the catch
 trials), and attentive raters now and then give a catch clip a 3.
 """
+
 import argparse
 import string
 
@@ -27,8 +28,17 @@ def _tokens(rng, n, length=12):
     return out
 
 
-def make_ratings(n_raters=20, clips_per_condition=30, n_catch=4, careless_share=0.1, clips_per_rater=None, seed=0,
-                 clip_sd=0.35, rater_sd=0.35, noise_sd=0.75):
+def make_ratings(
+    n_raters=20,
+    clips_per_condition=30,
+    n_catch=4,
+    careless_share=0.1,
+    clips_per_rater=None,
+    seed=0,
+    clip_sd=0.35,
+    rater_sd=0.35,
+    noise_sd=0.75,
+):
     rng = np.random.default_rng(seed)
     conds = list(CONDITION_MEANS)
     clip_cond = np.repeat(conds + ["BAD"], [clips_per_condition] * len(conds) + [n_catch])
@@ -62,29 +72,44 @@ def make_ratings(n_raters=20, clips_per_condition=30, n_catch=4, careless_share=
     start = np.datetime64("2024-05-06T09:00:00") + (rng.random(n_raters) * 7 * 86400).astype("timedelta64[s]")
     when = start[rater] + (trial * 12 + rng.integers(0, 8, len(clip))).astype("timedelta64[s]")
     rater_ids = np.array([f"r{i:05d}" for i in range(n_raters)])
-    return pd.DataFrame({
-        "rater_id": rater_ids[rater], "clip_id": clip_ids[clip], "condition": clip_cond[clip], "rating": rating,
-        "role": np.where(clip_cond[clip] == "BAD", "catch", "test"), "item": clip_item[clip],
-        "trial_index": trial, "watched_ms": watched,
-        "submitted_at": pd.to_datetime(when).strftime("%Y-%m-%dT%H:%M:%SZ"),
-    })
+    return pd.DataFrame(
+        {
+            "rater_id": rater_ids[rater],
+            "clip_id": clip_ids[clip],
+            "condition": clip_cond[clip],
+            "rating": rating,
+            "role": np.where(clip_cond[clip] == "BAD", "catch", "test"),
+            "item": clip_item[clip],
+            "trial_index": trial,
+            "watched_ms": watched,
+            "submitted_at": pd.to_datetime(when).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        }
+    )
 
 
 def make_metrics(ratings, seed=0):
     """A metrics.csv for the rated clips: objective scores loosely tied to the clips' mean rating."""
     rng = np.random.default_rng(seed + 1)
-    clips = ratings[ratings["role"] == "test"].groupby("clip_id").agg(condition=("condition", "first"),
-                                                                      item=("item", "first"),
-                                                                      mean=("rating", "mean")).reset_index()
+    clips = (
+        ratings[ratings["role"] == "test"]
+        .groupby("clip_id")
+        .agg(condition=("condition", "first"), item=("item", "first"), mean=("rating", "mean"))
+        .reset_index()
+    )
     q = clips["mean"].to_numpy()
     n = len(clips)
-    return pd.DataFrame({
-        "clip_id": clips["clip_id"], "condition": clips["condition"], "role": "test", "item": clips["item"],
-        "foot_skating": np.round(np.maximum(0.0, 0.5 - 0.1 * q + rng.normal(0, 0.05, n)), 6),
-        "bone_length_std": np.round(np.abs(rng.normal(0.004, 0.002, n)) * (clips["condition"] != "NAT"), 6),
-        "jerk": np.round(np.exp(rng.normal(5.0 - 0.2 * q, 0.2)), 4),
-        "control_error": np.round(np.abs(rng.normal(0.1, 0.05, n)) * (clips["condition"] != "NAT"), 6),
-    })
+    return pd.DataFrame(
+        {
+            "clip_id": clips["clip_id"],
+            "condition": clips["condition"],
+            "role": "test",
+            "item": clips["item"],
+            "foot_skating": np.round(np.maximum(0.0, 0.5 - 0.1 * q + rng.normal(0, 0.05, n)), 6),
+            "bone_length_std": np.round(np.abs(rng.normal(0.004, 0.002, n)) * (clips["condition"] != "NAT"), 6),
+            "jerk": np.round(np.exp(rng.normal(5.0 - 0.2 * q, 0.2)), 4),
+            "control_error": np.round(np.abs(rng.normal(0.1, 0.05, n)) * (clips["condition"] != "NAT"), 6),
+        }
+    )
 
 
 if __name__ == "__main__":

@@ -5,6 +5,7 @@ far beyond real motion capture, and they exist so that a corrupt or hostile file
 instead of asking for gigabytes (a frame rate of 1e9 resampled to 20 fps, a 100000-pixel video) or
 writing infinite coordinates.
 """
+
 import struct
 import zipfile
 import zlib
@@ -61,8 +62,9 @@ def check_skeleton(parents, n_joints, where):
         raise ClipError(f"{where}: 'parents' must have J={n_joints} entries, got shape {parents.shape}")
     bad = np.flatnonzero((parents < -1) | (parents >= n_joints) | (parents == np.arange(n_joints)))
     if len(bad):
-        raise ClipError(f"{where}: joint {bad[0]} has parent {parents[bad[0]]}, not -1 or another of the "
-                        f"{n_joints} joints")
+        raise ClipError(
+            f"{where}: joint {bad[0]} has parent {parents[bad[0]]}, not -1 or another of the {n_joints} joints"
+        )
     return parents.astype(np.int64)
 
 
@@ -84,8 +86,13 @@ def save_clip(path, joints, parents, joint_names, fps, control=None, **extra):
         raise ClipError(f"{path}: joints must be [T >= 1, J >= 1, 3], got {joints.shape}")
     check_joints(joints, path)
     fps = check_fps(fps, path)
-    arrays = dict(joints=joints, parents=check_skeleton(parents, joints.shape[1], path),
-                  joint_names=np.asarray(joint_names, dtype=str), fps=np.float64(fps), **extra)
+    arrays = dict(
+        joints=joints,
+        parents=check_skeleton(parents, joints.shape[1], path),
+        joint_names=np.asarray(joint_names, dtype=str),
+        fps=np.float64(fps),
+        **extra,
+    )
     if control is not None:
         arrays["control"] = np.asarray(control, dtype=np.float32)
     path.parent.mkdir(parents=True, exist_ok=True)
