@@ -30,7 +30,9 @@ from matplotlib.animation import FFMpegWriter, FuncAnimation  # noqa: E402
 
 from generation import skeleton  # noqa: E402
 from generation.features import load_take  # noqa: E402
-from rendering.render import FrameDrawer, _background, camera_targets, render_clip  # noqa: E402
+from rendering.camera import camera_targets  # noqa: E402
+from rendering.raster import FrameDrawer, _background  # noqa: E402
+from rendering.render import render_clip  # noqa: E402
 
 WALK = (
     Path(__file__).resolve().parents[2]

@@ -1,5 +1,12 @@
-"""Stick-figure rendering of motion clips to MP4 videos and PNG contact sheets."""
+"""Stick-figure rendering of motion clips to MP4 videos and PNG contact sheets.
 
-from rendering.render import DEFAULT_CAMERA, Camera, RenderError, Style, contact_sheet, render_clip
+`render` composes `camera` (where the camera looks), `raster` (drawing frames) and `encode` (ffmpeg);
+`blinding` makes a stimulus set's files tell nothing outside their pixels. rendering imports only `core`.
+"""
+
+from rendering.camera import DEFAULT_CAMERA, Camera
+from rendering.errors import RenderError
+from rendering.raster import Style
+from rendering.render import contact_sheet, render_clip
 
 __all__ = ["Camera", "DEFAULT_CAMERA", "RenderError", "Style", "contact_sheet", "render_clip"]

@@ -4,7 +4,8 @@ import sys
 from pathlib import Path
 
 from core import cli
-from rendering.render import MAX_SIZE, MIN_SIZE, RenderError, render_clip, size_flag
+from rendering.errors import RenderError
+from rendering.render import MAX_SIZE, MIN_SIZE, render_clip, size_flag
 
 PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower", "veryslow")
 

@@ -14,7 +14,8 @@ from core.clip import ClipError, save_clip
 from generation import skeleton
 from generation.features import load_take
 from rendering import Camera, RenderError, render_clip
-from rendering.render import FrameDrawer, camera_targets, yuv_to_rgb
+from rendering.camera import camera_targets
+from rendering.raster import FrameDrawer, yuv_to_rgb
 
 WALK = BANDAI / "dataset-1" / "data" / "dataset-1_walk_angry_002.bvh.gz"
 

@@ -1,0 +1,75 @@
+"""The camera every clip is seen through: one fixed set-up whose look-at point follows the clip's root.
+
+Every clip is seen through the same camera set-up (`Camera`: elevation, azimuth, distance, field of view,
+look-at height) whose look-at point follows the clip's smoothed root path on the floor, so the figure never
+leaves the frame and nothing on screen depends on where a clip came from. The camera only translates, so a
+`Projector` (a pinhole projection in numpy) is built once per clip.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+
+@dataclass(frozen=True)
+class Camera:
+    elevation: float = 12.0  # degrees above the horizon
+    azimuth: float = 40.0  # degrees about +Y, from +Z towards +X (where the camera stands)
+    distance: float = 4.5  # metres from the look-at point
+    fov: float = 35.0  # vertical field of view, degrees
+    height: float = 0.9  # look-at height above the floor, metres
+    follow_sigma: float = 0.5  # seconds; Gaussian smoothing of the root path the camera follows
+    max_lag: float = 0.5  # metres; the look-at point stays this close to the root on the floor
+
+
+DEFAULT_CAMERA = Camera()
+NEAR = 0.2  # metres; floor lines are clipped to this depth in front of the camera
+
+
+def camera_targets(joints, fps, camera=DEFAULT_CAMERA):
+    """Look-at point per frame [T, 3]: the smoothed floor projection of the root, held within max_lag of it."""
+    root = joints[:, 0, [0, 2]].astype(np.float64)
+    smooth = gaussian_filter1d(root, camera.follow_sigma * fps, axis=0, mode="nearest") if len(root) > 1 else root
+    lag = smooth - root
+    norm = np.linalg.norm(lag, axis=1, keepdims=True)
+    lag *= np.minimum(1.0, camera.max_lag / np.maximum(norm, 1e-9))
+    xz = root + lag
+    return np.stack([xz[:, 0], np.full(len(xz), camera.height), xz[:, 1]], axis=1)
+
+
+class Projector:
+    """Pinhole projection for a camera at a fixed orientation, translated to each frame's target."""
+
+    def __init__(self, camera, width, height):
+        el, az = np.radians(camera.elevation), np.radians(camera.azimuth)
+        self.offset = camera.distance * np.array([np.cos(el) * np.sin(az), np.sin(el), np.cos(el) * np.cos(az)])
+        fwd = -self.offset / camera.distance
+        right = np.cross(fwd, [0.0, 1.0, 0.0])
+        right /= np.linalg.norm(right)
+        up = np.cross(right, fwd)
+        self.rot = np.stack([right, up, fwd])  # rows: camera x, y, depth
+        self.focal = 0.5 * height / np.tan(np.radians(camera.fov) / 2)
+        self.centre = np.array([width / 2, height / 2])
+
+    def to_camera(self, points, eye):
+        """World points [..., 3] -> camera coordinates [..., 3] (x right, y up, z depth) for eye [3]."""
+        return (points - eye) @ self.rot.T
+
+    def to_screen(self, cam):
+        """Camera coordinates [..., 3] -> Agg display pixels [..., 2] (origin bottom left)."""
+        return self.centre + self.focal * cam[..., :2] / np.maximum(cam[..., 2:3], 1e-6)
+
+
+def clip_to_frustum(a, b, planes):
+    """Liang-Barsky clipping of camera-space segments a->b [N, 3] to the half-spaces planes[:, :3] . p +
+    planes[:, 3] >= 0 (the view frustum); returns the kept (a, b)."""
+    da = a @ planes[:, :3].T + planes[:, 3]
+    db = b @ planes[:, :3].T + planes[:, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = da / (da - db)  # where each segment crosses each plane
+    t0 = np.where(da < 0, t, 0.0).max(1)  # entering
+    t1 = np.where(db < 0, t, 1.0).min(1)  # leaving
+    keep = (t0 < t1) & ~((da < 0) & (db < 0)).any(1)
+    a, d, t0, t1 = a[keep], b[keep] - a[keep], t0[keep, None], t1[keep, None]
+    return a + t0 * d, a + t1 * d

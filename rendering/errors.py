@@ -1,0 +1,7 @@
+"""The one error type of rendering."""
+
+from core.cli import UserError
+
+
+class RenderError(UserError):
+    """A clip that cannot be rendered, or ffmpeg failing; the message names the file."""

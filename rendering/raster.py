@@ -1,0 +1,307 @@
+"""The software rasteriser: one clip's frames drawn as yuv420p, ready for the encoder.
+
+Speed: we keep the grey background and floor grid in the luma plane (the blank floor is computed once per size
+and cached; grid lines are Wu lines drawn with numpy), draw only the figure with a bare matplotlib Agg renderer
+(no figure, axes or artists, and no global backend switch), and blend just the 2x2 pixel blocks it touched into
+the Y/U/V planes. bench/bench_render.py compares the whole pipeline with a matplotlib FuncAnimation + ffmpeg
+writer.
+"""
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+from matplotlib.backends.backend_agg import RendererAgg
+from matplotlib.path import Path
+from matplotlib.transforms import IdentityTransform
+
+from .camera import DEFAULT_CAMERA, NEAR, Projector, clip_to_frustum
+from .errors import RenderError
+
+
+@dataclass(frozen=True)
+class Style:
+    # Background, floor, grid and shadow are grey levels (FrameDrawer keeps them in the luma plane).
+    background: float = 0.97
+    floor: float = 0.88
+    grid: float = 0.55
+    shadow: float = 0.74
+    centre: tuple = (0.15, 0.15, 0.15)
+    left: tuple = (0.15, 0.35, 0.75)
+    right: tuple = (0.75, 0.25, 0.15)
+    grid_spacing: float = 1.0  # metres between grid lines
+    grid_radius: float = 8.0  # metres of floor drawn around the look-at point (fading out)
+    bone_width: float = 1 / 150  # line width as a fraction of the frame height
+    head_radius: float = 0.08  # metres
+
+
+DEFAULT_STYLE = Style()
+
+
+def _wu_lines(flat, width, a, b, value, alpha):
+    """Draw antialiased 1-px lines a->b [N, 2] (x=column, y=row, inside [0, width-2]) of `value` into a
+    flat uint8 plane of row length `width` (the luma plane: the lines and the floor under them are grey).
+
+    Xiaolin Wu's method, vectorised over every pixel column (or row, for steep lines) of every line:
+    each sample covers the two pixels straddling the line with weights 1-f and f, times alpha (flat, the
+    grid's fade). A sample's pixels are u*su + v*sv in the flat plane, with (su, sv) = (1, width) for
+    shallow lines (stepping along columns) and (width, 1) for steep ones (stepping along rows).
+    """
+    d = b - a
+    steep = np.abs(d[:, 1]) > np.abs(d[:, 0])
+    au, av = np.where(steep, a[:, 1], a[:, 0]), np.where(steep, a[:, 0], a[:, 1])  # u: the stepping coordinate
+    du, dv = np.where(steep, d[:, 1], d[:, 0]), np.where(steep, d[:, 0], d[:, 1])
+    # (A rounding margin, so that an end clipped to the plane's edge always gets its edge sample.)
+    start = np.ceil(np.minimum(au, au + du) - 1e-6)
+    n = np.maximum(np.floor(np.maximum(au, au + du) + 1e-6) - start + 1, 0).astype(np.int64)
+    total = int(n.sum())
+    if total == 0:
+        return
+    slope = dv / np.where(du == 0, 1.0, du)
+    # Per line, then per sample: u = k + (start - first k of the line), v = icpt + u slope, strides su, sv.
+    per_line = np.stack(
+        [start - (np.cumsum(n) - n), av - au * slope, slope, np.where(steep, width, 1), np.where(steep, 1, width)]
+    )
+    ku, icpt, slope, su, sv = np.repeat(per_line, n, axis=1)
+    u = ku + np.arange(total)
+    v = icpt + u * slope
+    v0 = np.trunc(v)  # v > -1e-6: the floor (or 0 at the edge)
+    p = (u * su + v0 * sv).astype(np.int64)  # flat index of the sample's first pixel
+    idx = np.concatenate([p, p + sv.astype(np.int64)])  # ... and of its second (v <= width-2)
+    al = alpha[p]
+    w1 = (v - v0).astype(np.float32) * al
+    w = np.concatenate([al - w1, w1])
+    y = flat[idx].astype(np.float32)
+    flat[idx] = (y + w * (np.float32(value) - y) + np.float32(0.5)).astype(np.uint8)
+
+
+# BT.601 limited range, what ffmpeg's own rgb -> yuv420p conversion uses.
+_TO_Y = np.array([0.2568, 0.5041, 0.0979], np.float32)
+_TO_U = np.array([-0.1482, -0.2910, 0.4392], np.float32)
+_TO_V = np.array([0.4392, -0.3678, -0.0714], np.float32)
+_RGBA_TO_Y = np.append(_TO_Y, np.float32(0))  # rgba @ _RGBA_TO_Y = Y - 16
+# A 2x2 block's 4 rgba pixels in a row [16] @ _BLOCK_TO_UV = the block's mean (U - 128, V - 128).
+_BLOCK_TO_UV = np.tile(np.vstack([np.stack([_TO_U, _TO_V], 1), np.zeros((1, 2), np.float32)]) / 4, (4, 1))
+
+
+def grey_to_y(g):
+    """Luma of a grey level g in [0, 1]."""
+    return 16.0 + 219.0 * g
+
+
+def yuv_to_rgb(frame, size):
+    """A yuv420p frame (flat uint8, as FrameDrawer.draw returns) -> RGB uint8 [size, size, 3]."""
+    n = size * size
+    y = frame[:n].reshape(size, size).astype(np.float32) - 16
+    u = frame[n : n + n // 4].reshape(size // 2, size // 2).repeat(2, 0).repeat(2, 1).astype(np.float32) - 128
+    v = frame[n + n // 4 :].reshape(size // 2, size // 2).repeat(2, 0).repeat(2, 1).astype(np.float32) - 128
+    rgb = np.stack([1.164 * y + 1.596 * v, 1.164 * y - 0.392 * u - 0.813 * v, 1.164 * y + 2.017 * u], -1)
+    return np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
+
+
+class FrameDrawer:
+    """Draws the frames of one clip as yuv420p (what the encoder wants); reused for every frame.
+
+    The camera only translates (its orientation and height are fixed), so which floor point each pixel
+    sees, relative to the look-at point, never changes: the floor disc and the grid's distance fade are
+    computed once per size. Everything but the limbs is grey, so the background and grid live in the luma
+    plane alone and the chroma planes are flat except where the figure is. Per frame: copy the blank luma
+    plane, draw the world-fixed grid lines into it with numpy (Wu lines), draw the shadow, bones and head
+    with Agg on a transparent buffer, and blend only the 2x2 pixel blocks the figure touched into the three
+    planes (the figure covers a few percent of its bounding box). This saves ffmpeg the RGBA -> yuv420p
+    conversion and the pipe 60% of the bytes.
+    """
+
+    def __init__(self, parents, joint_names, size, camera=DEFAULT_CAMERA, style=DEFAULT_STYLE):
+        if size % 2:
+            raise RenderError(f"size must be even for yuv420p, got {size}")
+        self.size, self.camera, self.style = size, camera, style
+        self.proj = Projector(camera, size, size)
+        self.renderer = RendererAgg(size, size, 72)
+        self.rgba = np.asarray(self.renderer.buffer_rgba())  # the figure, on transparent black
+        self.rgba.fill(0)
+        self.px = self.rgba.view(np.uint32).reshape(size, size)  # one word per pixel: nonzero where drawn
+        self.px_flat = self.px.reshape(-1)
+        n = size * size
+        self.frame = np.empty(n * 3 // 2, np.uint8)  # the yuv420p frame written to the encoder
+        self.y = self.frame[:n].reshape(size, size)
+        self.y_flat = self.frame[:n]
+        self.uv = self.frame[n:].reshape(2, size // 2, size // 2)
+        self.u_flat, self.v_flat = self.frame[n : n + n // 4], self.frame[n + n // 4 :]
+        self.quad = np.array([0, 1, size, size + 1])  # a 2x2 block's pixels from its top left
+        self.parents = np.asarray(parents)
+        child = np.nonzero(self.parents >= 0)[0]
+        # A bone's side is its child joint's side (arms, legs); CMU-style names (LeftArm) count too.
+        side = np.array([n.endswith("_L") or n.startswith("Left") for n in joint_names])
+        side_r = np.array([n.endswith("_R") or n.startswith("Right") for n in joint_names])
+        bone_side = np.where(side[child], -1, np.where(side_r[child], 1, 0))
+        # Bones ordered left, centre, right, so that each side's bones are one slice of the projected ends.
+        order = np.argsort(bone_side, kind="stable")
+        self.bone_ends = np.stack([child, self.parents[child]], 1)[order]
+        counts = [int((bone_side == s).sum()) for s in (-1, 0, 1)]
+        edges = np.cumsum([0] + counts)
+        self.codes = np.tile(np.array([Path.MOVETO, Path.LINETO], dtype=Path.code_type), len(child))
+        # side -> (its bones' slice, its path codes), for the sides that have bones
+        self.sides = {
+            key: (slice(edges[k], edges[k + 1]), self.codes[: 2 * counts[k]])
+            for k, key in enumerate(("left", "centre", "right"))
+            if counts[k]
+        }
+        names = [n.lower() for n in joint_names]
+        self.head = names.index("head") if "head" in names else None
+        self.circle = Path.unit_circle()
+        self.width = style.bone_width * size
+        self.gcs = {}
+        for key, colour in [
+            ("shadow", (style.shadow,) * 3),
+            ("centre", style.centre),
+            ("left", style.left),
+            ("right", style.right),
+        ]:
+            gc = self.renderer.new_gc()
+            gc.set_foreground(colour)
+            gc.set_linewidth(self.width)
+            gc.set_antialiased(True)
+            gc.set_capstyle("round")
+            gc.set_joinstyle("round")
+            self.gcs[key] = gc
+        self.blank_y, self.grid_alpha = _background(camera, style, size)
+        # Floor lines are clipped in camera space (x, y, z) to depth >= NEAR and to image columns and rows
+        # [0, size-2], so that both pixels of every Wu sample are inside the plane:
+        # column = cx + f x / z, row = size - cy - f y / z.
+        (cx, cy), f = self.proj.centre, self.proj.focal
+        self.frustum = np.array(
+            [[0, 0, 1, -NEAR], [f, 0, cx, 0], [-f, 0, size - 2 - cx, 0], [0, -f, size - cy, 0], [0, f, cy - 2, 0]],
+            np.float64,
+        )
+        self.grid_y = grey_to_y(style.grid)
+
+    def _grid(self, target, eye):
+        s, r = self.style.grid_spacing, self.style.grid_radius
+        # World-fixed lines x = k s and z = k s, each only where it crosses the disc of radius r around the
+        # look-at point (the grid fades out there: see _background).
+        xs = np.arange(np.ceil((target[0] - r) / s), np.floor((target[0] + r) / s) + 1) * s
+        zs = np.arange(np.ceil((target[2] - r) / s), np.floor((target[2] + r) / s) + 1) * s
+        hx = np.sqrt(np.maximum(r * r - (xs - target[0]) ** 2, 0))  # half-chord of each line
+        hz = np.sqrt(np.maximum(r * r - (zs - target[2]) ** 2, 0))
+        a = np.concatenate([np.stack([xs, 0 * xs, target[2] - hx], 1), np.stack([target[0] - hz, 0 * zs, zs], 1)])
+        b = np.concatenate([np.stack([xs, 0 * xs, target[2] + hx], 1), np.stack([target[0] + hz, 0 * zs, zs], 1)])
+        a, b = clip_to_frustum(self.proj.to_camera(a, eye), self.proj.to_camera(b, eye), self.frustum)
+        a, b = (np.clip(self._rows(self.proj.to_screen(p)), 0, self.size - 2) for p in (a, b))
+        _wu_lines(self.y_flat, self.size, a, b, self.grid_y, self.grid_alpha)
+
+    def _rows(self, xy):
+        """Agg display coordinates (y up) -> image (column, row)."""
+        return xy * np.array([1.0, -1.0]) + np.array([0.0, self.size])
+
+    def _figure(self, joints, eye):
+        """Draw shadow, bones and head with Agg (on the cleared buffer); returns the screen points drawn and
+        the head radius."""
+        r, t = self.renderer, IdentityTransform()
+        cam = self.proj.to_camera(joints, eye)
+        scam = cam - self.proj.rot[:, 1] * joints[:, 1:2]  # the joints dropped onto the floor
+        points, radius = [], 0.0
+        if (scam[:, 2] > NEAR).all():
+            seg = self.proj.to_screen(scam[self.bone_ends])
+            r.draw_path(self.gcs["shadow"], Path(seg.reshape(-1, 2), self.codes), t)
+            points.append(seg.reshape(-1, 2))
+        if (cam[:, 2] > NEAR).all():
+            seg = self.proj.to_screen(cam[self.bone_ends])
+            points.append(seg.reshape(-1, 2))
+            depth = cam[self.bone_ends, 2]
+            d_left, d_right = (depth[self.sides[k][0]].mean() if k in self.sides else 0.0 for k in ("left", "right"))
+            # Painter's order: the farther limb side first, then the trunk, then the nearer side.
+            for key in ("left", "centre", "right") if d_left >= d_right else ("right", "centre", "left"):
+                if key in self.sides:
+                    bones, codes = self.sides[key]
+                    r.draw_path(self.gcs[key], Path(seg[bones].reshape(-1, 2), codes), t)
+            if self.head is not None and self.parents[self.head] >= 0:
+                # Head: a disc of fixed size in metres, just beyond the head joint along the neck bone.
+                neck = joints[self.head] - joints[self.parents[self.head]]
+                centre = joints[self.head] + self.style.head_radius * neck / max(np.linalg.norm(neck), 1e-6)
+                hc = self.proj.to_camera(centre, eye)
+                if hc[2] > NEAR:
+                    radius = self.proj.focal * self.style.head_radius / hc[2]
+                    centre = self.proj.to_screen(hc)
+                    disc = Path(self.circle.vertices * radius + centre, self.circle.codes)
+                    r.draw_path(self.gcs["centre"], disc, t, rgbFace=self.style.centre)
+                    points.append(centre[None])
+        return (np.concatenate(points) if points else np.zeros((0, 2))), radius
+
+    def draw(self, joints, target):
+        """Render one frame (joints [J, 3], look-at target [3]); returns the yuv420p frame (flat uint8 view)."""
+        eye = target + self.proj.offset
+        np.copyto(self.y, self.blank_y)
+        self.uv.fill(128)
+        self._grid(target, eye)
+        points, radius = self._figure(joints, eye)
+        if len(points):
+            # The figure's bounding box in image rows/columns, on even pixels (for the 2x2 chroma blocks).
+            pad = radius + self.width + 2
+            xy = self._rows(points)
+            c0, r0 = (np.floor((xy.min(0) - pad) / 2) * 2).clip(0, self.size).astype(int)
+            c1, r1 = (np.ceil((xy.max(0) + pad) / 2) * 2).clip(0, self.size).astype(int)
+            if c1 > c0 and r1 > r0:
+                self._blend(r0, r1, c0, c1)
+        return self.frame
+
+    def _blend(self, r0, r1, c0, c1):
+        """Composite the Agg figure (straight alpha) over the planes in the 2x2 blocks it touched inside rows
+        r0:r1, columns c0:c1 (even bounds), and clear those blocks of the Agg buffer for the next frame."""
+        box = self.px[r0:r1, c0:c1]
+        pairs = box[0::2] | box[1::2]  # two rows in one: [h/2, w] words
+        blocks = np.flatnonzero(pairs.view(np.uint64) != 0)  # 2x2 blocks with any drawn pixel
+        if len(blocks) == 0:
+            return
+        br, bc = np.divmod(blocks, (c1 - c0) // 2)
+        br += r0 // 2
+        bc += c0 // 2
+        idx = (2 * self.size * br + 2 * bc)[:, None] + self.quad  # [N, 4] flat pixel indices
+        px = self.px_flat[idx]
+        self.px_flat[idx] = 0
+        px = px.view(np.uint8).reshape(4 * len(blocks), 4).astype(np.float32)
+        a = px[:, 3] * np.float32(1 / 255)
+        y = self.y_flat[idx].reshape(-1).astype(np.float32)
+        self.y_flat[idx] = (y + a * (px @ _RGBA_TO_Y + 16 - y) + np.float32(0.5)).astype(np.uint8).reshape(-1, 4)
+        # Over the grey background (chroma 128) the chroma is 128 + a * (the figure's), averaged per 2x2 block:
+        # one product of the block's 4 alpha-weighted RGBA pixels [N, 16] with the stacked chroma rows [16, 2].
+        c = (px * a[:, None]).reshape(-1, 16) @ _BLOCK_TO_UV + np.float32(128.5)
+        b = br * (self.size // 2) + bc
+        self.u_flat[b] = c[:, 0].astype(np.uint8)
+        self.v_flat[b] = c[:, 1].astype(np.uint8)
+
+    def rgb(self):
+        """The current frame as RGB [size, size, 3] (for contact sheets and tests)."""
+        return yuv_to_rgb(self.frame, self.size)
+
+
+@functools.lru_cache(maxsize=4)
+def _background(camera, style, size):
+    """The blank luma plane [size, size] (sky, a grey floor disc fading out around the look-at point) and the
+    grid's alpha map (flat), both read-only; cached, since every clip of a run shares them.
+
+    The camera's x axis is horizontal, so a pixel row's ray has one downward slope: the distance along the
+    ray to the floor depends on the row alone, and the floor point (relative to the look-at point) is
+    affine in the column within a row.
+    """
+    proj = Projector(camera, size, size)
+    right, up, fwd = proj.rot
+    xc = (np.arange(size) + 0.5 - proj.centre[0]) / proj.focal  # per column
+    yc = (size - (np.arange(size) + 0.5) - proj.centre[1]) / proj.focal  # per row
+    ray_y = yc * up[1] + fwd[1]
+    down = ray_y < -1e-9
+    t = np.where(down, (proj.offset[1] + camera.height) / np.where(down, -ray_y, 1.0), 0.0)
+    hx = proj.offset[0] + t * (yc * up[0] + fwd[0])
+    hz = proj.offset[2] + t * (yc * up[2] + fwd[2])
+    hit_x = (hx[:, None] + (t * right[0])[:, None] * xc[None]).astype(np.float32)
+    hit_z = (hz[:, None] + (t * right[2])[:, None] * xc[None]).astype(np.float32)
+    dist = np.sqrt(hit_x * hit_x + hit_z * hit_z)
+    dist[~down] = np.inf
+    r = np.float32(style.grid_radius)
+    floor_a = np.clip((1.2 * r - dist) / (0.6 * r), 0, 1)
+    grid_a = np.clip((r - dist) / (0.5 * r), 0, 1)
+    grey = style.background + floor_a * np.float32(style.floor - style.background)
+    blank = np.round(grey_to_y(grey)).astype(np.uint8)
+    grid_a = grid_a.reshape(-1)
+    blank.flags.writeable = grid_a.flags.writeable = False
+    return blank, grid_a
