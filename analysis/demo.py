@@ -29,6 +29,7 @@ import urllib.request
 from pathlib import Path
 
 from core import cli
+from core.study import DESIGNS
 
 
 class DemoError(cli.UserError):
@@ -271,8 +272,6 @@ def run_demo(
 
 
 def _main(argv) -> int:
-    from rating_app.designs import DESIGNS
-
     p = cli.ArgumentParser(
         prog="python -m analysis.demo", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )

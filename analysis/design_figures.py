@@ -6,7 +6,9 @@ clear wins; bradley_terry: log strengths with bootstrap intervals; parallel_boxp
 condition, with the means marked.
 """
 
-from .figures import STYLE, _save, colours, plt, text
+import matplotlib
+
+from .figures import STYLE, _save, colours, subplots, text
 
 LEVEL_COLOURS = ("#1b7837", "#7fbf7b", "#d9d9d9", "#af8dc3", "#762a83")
 LEVEL_NAMES = ("clearly", "slightly", "no preference", "slightly", "clearly")
@@ -15,8 +17,8 @@ LEVEL_NAMES = ("clearly", "slightly", "no preference", "slightly", "clearly")
 def preference_bars(pairs, path, title=None):
     """Stacked shares of the five answer levels per pair; `pairs` from pairwise.pair_counts."""
     keys = ("share_a_clearly", "share_a_slightly", "share_none", "share_b_slightly", "share_b_clearly")
-    with plt.rc_context(STYLE):
-        fig, ax = plt.subplots(figsize=(6.4, 0.55 * len(pairs) + 1.2))
+    with matplotlib.rc_context(STYLE):
+        fig, ax = subplots(figsize=(6.4, 0.55 * len(pairs) + 1.2))
         for row_i, (_, r) in enumerate(pairs.iloc[::-1].iterrows()):
             left = 0.0
             for k, (key, colour) in enumerate(zip(keys, LEVEL_COLOURS)):
@@ -62,8 +64,8 @@ def bradley_terry(bt, path, title=None):
     """Log strengths (reference 0) with their bootstrap intervals, strongest on top."""
     order = sorted(bt["strengths"], key=bt["strengths"].get)
     col = colours(order)
-    with plt.rc_context(STYLE):
-        fig, ax = plt.subplots(figsize=(5.0, 0.45 * len(order) + 1.0))
+    with matplotlib.rc_context(STYLE):
+        fig, ax = subplots(figsize=(5.0, 0.45 * len(order) + 1.0))
         for i, c in enumerate(order):
             lo, hi = bt["ci"][c]
             ax.plot([lo, hi], [i, i], color=col[c], lw=2)
@@ -84,8 +86,8 @@ def parallel_boxplot(t, summary, path, title=None):
     """Box plot of the 0-100 test ratings per condition (means as white diamonds)."""
     conds = list(summary.index)
     col = colours(conds)
-    with plt.rc_context(STYLE):
-        fig, ax = plt.subplots(figsize=(1.0 + 0.9 * len(conds), 3.6))
+    with matplotlib.rc_context(STYLE):
+        fig, ax = subplots(figsize=(1.0 + 0.9 * len(conds), 3.6))
         data = [t.loc[t["condition"] == c, "rating"].to_numpy() for c in conds]
         box = ax.boxplot(
             data,

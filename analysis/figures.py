@@ -9,10 +9,8 @@ power_curve: the power planner's estimated power against the number of raters.
 """
 
 import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import numpy as np
+from matplotlib.figure import Figure
 
 from core import study
 
@@ -48,9 +46,15 @@ def colours(conditions):
     return out
 
 
+def subplots(*args, **kwargs):
+    """(figure, axes) as pyplot.subplots gives them, but a bare Figure: no pyplot state and no backend choice,
+    which belong to the program that imports the analysis, not to the analysis."""
+    fig = Figure(figsize=kwargs.pop("figsize", None))
+    return fig, fig.subplots(*args, **kwargs)
+
+
 def _save(fig, path):
     fig.savefig(path)
-    plt.close(fig)
     return path
 
 
@@ -59,8 +63,8 @@ def ratings_histogram(hist, means, path, title=None):
     conds = list(hist.index)
     col = colours(conds)
     scale = [int(s) for s in hist.columns]
-    with plt.rc_context(STYLE):
-        fig, ax = plt.subplots(figsize=(7.8, 3.4))
+    with matplotlib.rc_context(STYLE):
+        fig, ax = subplots(figsize=(7.8, 3.4))
         width = 0.8 / len(conds)
         top = hist.to_numpy().max()
         for i, c in enumerate(conds):
@@ -111,8 +115,8 @@ def per_clip_means(clips, path, title=None):
     """clips: per_clip_means() table (sorted within condition, with rank, mean, ci_low, ci_high)."""
     conds = list(dict.fromkeys(clips["condition"]))
     col = colours(conds)
-    with plt.rc_context(STYLE):
-        fig, ax = plt.subplots(figsize=(6.4, 3.4))
+    with matplotlib.rc_context(STYLE):
+        fig, ax = subplots(figsize=(6.4, 3.4))
         most = clips.groupby("condition").size().max()
         ms = 3.5 if most <= 60 else 1.5 if most <= 400 else 0.0
         for c in conds:
@@ -146,8 +150,8 @@ def condition_means(panels, path):
     """panels: list of (label, summary table with mean, t_low, t_high, boot_low, boot_high per condition)."""
     conds = list(dict.fromkeys(c for _, t in panels for c in t.index))
     col = colours(conds)
-    with plt.rc_context(STYLE):
-        fig, ax = plt.subplots(figsize=(6.4, 0.55 * len(conds) * len(panels) + 1.2))
+    with matplotlib.rc_context(STYLE):
+        fig, ax = subplots(figsize=(6.4, 0.55 * len(conds) * len(panels) + 1.2))
         y, ticks, labels = 0, [], []
         markers = ["o", "s", "^", "D"]
         for c in conds:
@@ -189,8 +193,8 @@ def metric_scatter(clips, metrics, corr, path):
     col = colours(conds)
     ncol = min(4, len(names))
     nrow = int(np.ceil(len(names) / ncol))
-    with plt.rc_context(STYLE):
-        fig, axes = plt.subplots(nrow, ncol, figsize=(1.75 * ncol + 0.6, 1.9 * nrow + 0.4), sharey=True, squeeze=False)
+    with matplotlib.rc_context(STYLE):
+        fig, axes = subplots(nrow, ncol, figsize=(1.75 * ncol + 0.6, 1.9 * nrow + 0.4), sharey=True, squeeze=False)
         for ax, m in zip(axes.ravel(), names):
             for c in conds:
                 part = merged[merged["condition"] == c]
@@ -217,8 +221,8 @@ def ordinal_fit(model, path):
     col = colours(conds)
     levels = list(next(iter(model["observed_distribution"].values())))
     x = np.arange(len(levels))
-    with plt.rc_context(STYLE):
-        fig, axes = plt.subplots(1, len(conds), figsize=(2.3 * len(conds) + 0.6, 2.6), sharey=True, squeeze=False)
+    with matplotlib.rc_context(STYLE):
+        fig, axes = subplots(1, len(conds), figsize=(2.3 * len(conds) + 0.6, 2.6), sharey=True, squeeze=False)
         for ax, c in zip(axes[0], conds):
             obs = [model["observed_distribution"][c][k] for k in levels]
             fit = [model["fitted_distribution"][c][k] for k in levels]
@@ -236,8 +240,8 @@ def ordinal_fit(model, path):
 
 def power_curve(curve, target, path, title=None):
     """curve: plan.power_curve() table (raters, raters_per_clip, power, low, high); target: the power asked."""
-    with plt.rc_context(STYLE):
-        fig, ax = plt.subplots(figsize=(6.0, 3.4))
+    with matplotlib.rc_context(STYLE):
+        fig, ax = subplots(figsize=(6.0, 3.4))
         ax.fill_between(
             curve["raters"],
             curve["low"],

@@ -184,12 +184,12 @@ def _pair(design, given):
     return x, y
 
 
-def _main(argv):
+def _parser():
     ap = cli.ArgumentParser(
         prog="python -m analysis.plan",
         description=__doc__.splitlines()[0],
-        epilog="Covers the acr design (one clip rated 1-5 per trial). Pairwise and parallel "
-        "(MUSHRA-like) designs do not exist in the analysis yet, so they have no planner.",
+        epilog="Covers the acr design (one clip rated 1-5 per trial); the pairwise and parallel designs have no "
+        "planner yet.",
     )
     ap.add_argument("pilot", nargs="?", help="pilot ratings.csv (CONTRACTS.md §6); omit with --no-pilot")
     ap.add_argument(
@@ -247,47 +247,57 @@ def _main(argv):
     ap.add_argument("--seed", type=cli.number(int, 0, 2**32 - 1), default=0, help="simulation seed (default 0)")
     ap.add_argument("--out", default="plan", help="folder for power_curve.png and plan.json (default plan/)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
-    args = ap.parse_args(argv)
+    return ap
 
-    if args.no_pilot:
-        need = [f for f in ("sd_rater", "sd_clip", "sd_residual", "difference") if getattr(args, f) is None]
-        if need:
-            raise AnalysisError(f"--no-pilot needs --{need[0].replace('_', '-')}")
-        if args.pilot:
-            raise AnalysisError(f"{args.pilot}: give a pilot file or --no-pilot, not both")
-        conds = [f"C{i + 1}" for i in range(args.conditions)]
-        C = args.clips_per_condition or 30
-        design = {
-            "conditions": conds,
-            "means": {c: 0.0 for c in conds},
-            "sd_rater": args.sd_rater,
-            "sd_clip": args.sd_clip,
-            "sd_residual": args.sd_residual,
-            "clips_per_condition": C,
-            "clips_per_rater": args.clips_per_rater or args.conditions * C,
-            "n_raters": None,
-        }
-        source = "variance components from the command line"
-        pair = tuple(args.pair) if args.pair else (conds[0], conds[1])
-        if args.pair:
-            pair = _pair(design, args.pair)
-    else:
-        if not args.pilot:
-            raise AnalysisError("give a pilot ratings file (or --no-pilot with the variance components)")
-        df = load_ratings(args.pilot)
-        test = only_test_rows(exclude_raters(df, args.threshold)[0])
-        if test["condition"].nunique() < 2:
-            raise AnalysisError(f"{args.pilot}: the pilot's kept test rows hold fewer than 2 conditions")
-        problem = stats.random_effects_problem(test)
-        if problem:
-            raise AnalysisError(f"{args.pilot}: the pilot cannot be fitted: {problem}")
-        design = pilot_design(test)
-        if args.clips_per_condition:
-            design["clips_per_condition"] = args.clips_per_condition
-        if args.clips_per_rater:
-            design["clips_per_rater"] = args.clips_per_rater
-        source = f"pilot {args.pilot} ({design['n_raters']} raters after the exclusion)"
-        pair = _pair(design, args.pair)
+
+def _design_from_flags(args):
+    """(design, source, pair) for --no-pilot: everything from the command line."""
+    need = [f for f in ("sd_rater", "sd_clip", "sd_residual", "difference") if getattr(args, f) is None]
+    if need:
+        raise AnalysisError(f"--no-pilot needs --{need[0].replace('_', '-')}")
+    if args.pilot:
+        raise AnalysisError(f"{args.pilot}: give a pilot file or --no-pilot, not both")
+    conds = [f"C{i + 1}" for i in range(args.conditions)]
+    C = args.clips_per_condition or 30
+    design = {
+        "conditions": conds,
+        "means": {c: 0.0 for c in conds},
+        "sd_rater": args.sd_rater,
+        "sd_clip": args.sd_clip,
+        "sd_residual": args.sd_residual,
+        "clips_per_condition": C,
+        "clips_per_rater": args.clips_per_rater or args.conditions * C,
+        "n_raters": None,
+    }
+    source = "variance components from the command line"
+    pair = _pair(design, args.pair) if args.pair else (conds[0], conds[1])
+    return design, source, pair
+
+
+def _design_from_pilot(args):
+    """(design, source, pair) from a pilot's ratings, with the flags' overrides."""
+    if not args.pilot:
+        raise AnalysisError("give a pilot ratings file (or --no-pilot with the variance components)")
+    df = load_ratings(args.pilot)
+    test = only_test_rows(exclude_raters(df, args.threshold)[0])
+    if test["condition"].nunique() < 2:
+        raise AnalysisError(f"{args.pilot}: the pilot's kept test rows hold fewer than 2 conditions")
+    problem = stats.random_effects_problem(test)
+    if problem:
+        raise AnalysisError(f"{args.pilot}: the pilot cannot be fitted: {problem}")
+    design = pilot_design(test)
+    if args.clips_per_condition:
+        design["clips_per_condition"] = args.clips_per_condition
+    if args.clips_per_rater:
+        design["clips_per_rater"] = args.clips_per_rater
+    source = f"pilot {args.pilot} ({design['n_raters']} raters after the exclusion)"
+    pair = _pair(design, args.pair)
+    return design, source, pair
+
+
+def _main(argv):
+    args = _parser().parse_args(argv)
+    design, source, pair = (_design_from_flags if args.no_pilot else _design_from_pilot)(args)
     pilot_diff = design["means"][pair[1]] - design["means"][pair[0]]
     diff = args.difference if args.difference is not None else abs(pilot_diff)
     if not diff > 0:
