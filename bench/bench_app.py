@@ -33,10 +33,12 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))  # the fake stimulus folder the app's tests use (tests/fake_stimuli.py)
+
+from fake_stimuli import free_port, pg_schema, write_fake_stimuli  # noqa: E402
 
 from core import cli  # noqa: E402
-from rating_app.designs import DESIGNS  # noqa: E402
-from rating_app.testing import free_port, make_stimuli, pg_schema  # noqa: E402
+from core.study import DESIGNS  # noqa: E402
 
 
 def start_server(port, env, workers, threads, log):
@@ -180,7 +182,7 @@ def main():
     stim = Path(a.stimuli) if a.stimuli else tmp / "stimuli"
     manifest = stim / "manifest.csv"
     if not manifest.is_file():
-        manifest = make_stimuli(stim, n_items=30, n_catch=4, n_training=4, n_frames=20, catch_nat=True)
+        manifest = write_fake_stimuli(stim, n_items=30, n_catch=4, n_training=4, n_frames=20, catch_nat=True)
     ctx = pg_schema() if a.db == "postgres" else None
     url = ctx.__enter__() if ctx else (f"sqlite:///{tmp}/ratings.sqlite" if a.db == "sqlite" else a.db)
     port = free_port()

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import logging
 import os
 from pathlib import Path
 
@@ -76,62 +75,106 @@ def create_app(
     """`design`: acr (default), pairwise or parallel (designs.py); fixed for the life of the database.
     `ratings_per_clip` and `clips_per_rater` count the design's units: clips (acr), pairs of conditions of an
     item (pairwise) or pages (parallel)."""
-    from . import db as dbm
     from .admin import bp as admin_bp
     from .api import bp as api_bp
-    from .designs import QUESTIONS, build_units, check_design
+    from .designs import build_units
     from .pages import bp as pages_bp
     from .videos import VideoStore
 
     manifest = manifest or _env("RATING_MANIFEST")
     if not manifest:
         raise AppError("no stimulus manifest: set RATING_MANIFEST (or --manifest) to stimuli/manifest.csv")
-    ratings_per_clip = setting("RATINGS_PER_CLIP", ratings_per_clip)
-    clips_per_rater = setting("CLIPS_PER_RATER", clips_per_rater) or None  # 0 / None: all clips still short
-    slot_timeout_s = setting("SLOT_TIMEOUT", slot_timeout_s)
-    min_view = setting("MIN_VIEW", min_view)
-    sessions_per_client = setting("SESSIONS_PER_CLIENT", sessions_per_client)
+    config = _config(
+        ratings_per_clip=ratings_per_clip,
+        clips_per_rater=clips_per_rater,
+        slot_timeout_s=slot_timeout_s,
+        min_view=min_view,
+        sessions_per_client=sessions_per_client,
+        design=design,
+        question=question,
+        admin_token=admin_token,
+        completion_code=completion_code,
+        completion_url=completion_url,
+    )
     proxies = setting("PROXY_COUNT")
-    design = check_design(design if design is not None else _env("STUDY_DESIGN"))
-    question = (question if question is not None else _env("STUDY_QUESTION")) or QUESTIONS[design]
-    if len(question) > 200 or not question.isprintable():
-        raise AppError("question: at most 200 printable characters on one line")
-    admin_token = admin_token if admin_token is not None else _env("ADMIN_TOKEN")
-    completion_code = completion_code if completion_code is not None else _env("COMPLETION_CODE")
-    completion_url = completion_url if completion_url is not None else _env("COMPLETION_URL")
-    if completion_url and not completion_url.startswith(("https://", "http://")):
-        raise AppError(f"completion URL must start with https:// or http://, got {completion_url!r}")
-
     app = Flask(__name__)
     if proxies:
         from werkzeug.middleware.proxy_fix import ProxyFix
 
         app.wsgi_app = ProxyFix(app.wsgi_app, x_for=proxies, x_proto=proxies, x_host=proxies)
-    # Workers must share the cookie key: derive it from the admin token unless one is given.
-    secret_key = (
-        secret_key
-        or _env("SECRET_KEY")
-        or hashlib.sha256(b"rating-app:" + (admin_token or os.urandom(32).hex()).encode()).hexdigest()
-    )
     app.config.update(
-        SECRET_KEY=secret_key,
+        SECRET_KEY=secret_key or _env("SECRET_KEY") or _derived_secret(config["ADMIN_TOKEN"]),
         SESSION_COOKIE_HTTPONLY=True,
         SESSION_COOKIE_SAMESITE="Strict",
         SESSION_COOKIE_SECURE=os.environ.get("COOKIE_SECURE", "") == "1",  # set behind HTTPS
         MAX_CONTENT_LENGTH=16 * 1024,
-        RATINGS_PER_CLIP=ratings_per_clip,
-        CLIPS_PER_RATER=clips_per_rater,
-        SLOT_TIMEOUT_S=float(slot_timeout_s),
-        MIN_VIEW=float(min_view),
-        SESSIONS_PER_CLIENT=sessions_per_client,
-        ADMIN_TOKEN=admin_token,
-        COMPLETION_CODE=completion_code,
-        COMPLETION_URL=completion_url,
-        STUDY_DESIGN=design,
-        STUDY_QUESTION=question,
+        **config,
     )
     clips = load_manifest(manifest, check_files=check_files)
-    units = build_units(design, clips)
+    units = build_units(config["STUDY_DESIGN"], clips)
+    app.extensions["rating_app"] = {
+        "engine": _open_database(db_url, clips, config["STUDY_DESIGN"]),
+        "clips": {c.clip_id: c for c in clips},
+        "videos": VideoStore(clips, Path(manifest).resolve().parent, preload=check_files),
+        "units": units,
+    }
+    app.register_blueprint(pages_bp)
+    app.register_blueprint(api_bp)
+    app.register_blueprint(admin_bp)
+    _handle_errors(app)
+    app.after_request(_headers)
+    return app
+
+
+def _config(
+    ratings_per_clip,
+    clips_per_rater,
+    slot_timeout_s,
+    min_view,
+    sessions_per_client,
+    design,
+    question,
+    admin_token,
+    completion_code,
+    completion_url,
+) -> dict:
+    """The study's settings as app.config entries: each given value, else its environment variable, checked."""
+    from .designs import QUESTIONS, check_design
+
+    numbers = {  # checked first, in the order the settings are documented
+        "RATINGS_PER_CLIP": setting("RATINGS_PER_CLIP", ratings_per_clip),
+        "CLIPS_PER_RATER": setting("CLIPS_PER_RATER", clips_per_rater) or None,  # 0 / None: all clips still short
+        "SLOT_TIMEOUT_S": float(setting("SLOT_TIMEOUT", slot_timeout_s)),
+        "MIN_VIEW": float(setting("MIN_VIEW", min_view)),
+        "SESSIONS_PER_CLIENT": setting("SESSIONS_PER_CLIENT", sessions_per_client),
+    }
+    design = check_design(design if design is not None else _env("STUDY_DESIGN"))
+    question = (question if question is not None else _env("STUDY_QUESTION")) or QUESTIONS[design]
+    if len(question) > 200 or not question.isprintable():
+        raise AppError("question: at most 200 printable characters on one line")
+    completion_url = completion_url if completion_url is not None else _env("COMPLETION_URL")
+    if completion_url and not completion_url.startswith(("https://", "http://")):
+        raise AppError(f"completion URL must start with https:// or http://, got {completion_url!r}")
+    return {
+        **numbers,
+        "ADMIN_TOKEN": admin_token if admin_token is not None else _env("ADMIN_TOKEN"),
+        "COMPLETION_CODE": completion_code if completion_code is not None else _env("COMPLETION_CODE"),
+        "COMPLETION_URL": completion_url,
+        "STUDY_DESIGN": design,
+        "STUDY_QUESTION": question,
+    }
+
+
+def _derived_secret(admin_token):
+    # Workers must share the cookie key: derive it from the admin token unless one is given.
+    return hashlib.sha256(b"rating-app:" + (admin_token or os.urandom(32).hex()).encode()).hexdigest()
+
+
+def _open_database(db_url, clips, design):
+    """The engine, with the schema created and the manifest's clips and the design stored; AppError, one line,
+    when the database cannot be opened."""
+    from . import db as dbm
+
     engine = dbm.make_engine(db_url)
     try:
         dbm.init_db(engine, clips, design)
@@ -142,30 +185,10 @@ def create_app(
     finally:
         # Close connections opened during set-up so that forked workers (gunicorn --preload) start clean.
         engine.dispose()
-    metrics = {}
-    if (Path(manifest).resolve().parent / "metrics.csv").is_file():
-        from .manifest import load_metrics
+    return engine
 
-        try:
-            metrics = load_metrics(Path(manifest).resolve().parent / "metrics.csv")
-        except (AppError, OSError, ValueError) as e:
-            logging.getLogger(__name__).warning("metrics.csv ignored: %s", e)
-    app.extensions["rating_app"] = {
-        "engine": engine,
-        "clips": {c.clip_id: c for c in clips},
-        "videos": VideoStore(clips, Path(manifest).resolve().parent, preload=check_files),
-        "metrics": metrics,
-        "manifest": str(manifest),
-        "design": design,
-        "units": units,
-    }
-    if not app.logger.handlers or app.logger.level == logging.NOTSET:
-        app.logger.setLevel(logging.INFO)
 
-    app.register_blueprint(pages_bp)
-    app.register_blueprint(api_bp)
-    app.register_blueprint(admin_bp)
-
+def _handle_errors(app: Flask) -> None:
     @app.errorhandler(HTTPException)
     def _http_error(e: HTTPException):
         resp = jsonify(error=e.description or e.name)
@@ -185,18 +208,16 @@ def create_app(
         app.logger.exception("unhandled error on %s %s", request.method, request.path)
         return jsonify(error="internal server error"), 500
 
-    @app.after_request
-    def _headers(resp):
-        resp.headers.setdefault("X-Content-Type-Options", "nosniff")
-        resp.headers.setdefault("X-Frame-Options", "DENY")
-        resp.headers.setdefault("Referrer-Policy", "same-origin")
-        resp.headers.setdefault(
-            "Content-Security-Policy",
-            "default-src 'self'; media-src 'self'; img-src 'self' data:; style-src 'self'; "
-            "script-src 'self'; frame-ancestors 'none'; form-action 'self'",
-        )
-        if request.path.startswith(("/api/", "/admin")):
-            resp.headers.setdefault("Cache-Control", "no-store")
-        return resp
 
-    return app
+def _headers(resp):
+    resp.headers.setdefault("X-Content-Type-Options", "nosniff")
+    resp.headers.setdefault("X-Frame-Options", "DENY")
+    resp.headers.setdefault("Referrer-Policy", "same-origin")
+    resp.headers.setdefault(
+        "Content-Security-Policy",
+        "default-src 'self'; media-src 'self'; img-src 'self' data:; style-src 'self'; "
+        "script-src 'self'; frame-ancestors 'none'; form-action 'self'",
+    )
+    if request.path.startswith(("/api/", "/admin")):
+        resp.headers.setdefault("Cache-Control", "no-store")
+    return resp

@@ -3,14 +3,18 @@
 from __future__ import annotations
 
 import json
+import logging
 import os
 import sys
 
 from core import cli
+from core.study import DESIGNS
 
 from . import SETTINGS
-from .designs import DESIGNS
 from .manifest import AppError
+
+# Diagnostics (where the app runs, how many rows were exported) go to the log, on stderr; results to stdout.
+log = logging.getLogger("rating_app")
 
 
 def _flag(name):
@@ -40,19 +44,18 @@ def _serve(a):
     from .db import normalise_url
 
     db = make_url(normalise_url(a.db)).render_as_string(hide_password=True)
-    print(
-        f"rating app on http://{a.host}:{a.port}/  ({app.config['STUDY_DESIGN']} design; database {db}; "
-        "admin at /admin"
-        f"{'' if app.config['ADMIN_TOKEN'] else ' disabled: set ADMIN_TOKEN'})",
-        file=sys.stderr,
-        flush=True,
+    log.info(
+        "rating app on http://%s:%s/  (%s design; database %s; admin at /admin%s)",
+        a.host,
+        a.port,
+        app.config["STUDY_DESIGN"],
+        db,
+        "" if app.config["ADMIN_TOKEN"] else " disabled: set ADMIN_TOKEN",
     )
     if app.config["MIN_VIEW"] < 1:
-        print(
-            f"warning: minimum viewing time lowered to {app.config['MIN_VIEW']:g} of each clip (tests and "
-            "simulations only)",
-            file=sys.stderr,
-            flush=True,
+        log.warning(
+            "warning: minimum viewing time lowered to %g of each clip (tests and simulations only)",
+            app.config["MIN_VIEW"],
         )
     app.run(host=a.host, port=a.port, threaded=True, debug=False, use_reloader=False)
     return 0
@@ -86,7 +89,7 @@ def _export(a):
         raise AppError(f"cannot read the database: {first[0] if first else e.__class__.__name__}") from None
     finally:
         engine.dispose()
-    print(f"{n} ratings -> {a.out}", file=sys.stderr)
+    log.info("%s ratings -> %s", n, a.out)
     return 0
 
 
@@ -96,13 +99,12 @@ def _simulate(a):
     summary = run_simulation(
         a.url,
         a.raters,
+        manifest=a.manifest,
         seed=a.seed,
         careless=a.careless,
-        manifest=a.manifest,
         quality=parse_quality(a.quality),
         concurrency=a.concurrency,
         timeout_s=a.timeout,
-        admin_token=a.admin_token or os.environ.get("ADMIN_TOKEN"),
         think_s=a.think,
         prefix=a.prefix,
         progress=not a.quiet,
@@ -207,7 +209,12 @@ def build_parser():
     m.add_argument(
         "--careless", type=cli.number(float, 0, 1), default=0.1, help="share of careless raters answering at random"
     )
-    m.add_argument("--manifest", default=None, help="manifest.csv (+ metrics.csv beside it); else /admin/clips.json")
+    m.add_argument(
+        "--manifest",
+        required=True,
+        help="the manifest.csv the app serves: the clips' conditions and durations (+ metrics.csv beside it: "
+        "their quality)",
+    )
     m.add_argument("--quality", default=None, help="per-condition mean rating, e.g. NAT=4.3,MG=3.8,FL=2.5,BAD=1.3")
     m.add_argument(
         "--design",
@@ -223,7 +230,6 @@ def build_parser():
         "--think", type=cli.number(float, 0, 3600), default=0.0, help="mean pause before each answer, seconds"
     )
     m.add_argument("--prefix", default=None, help="external id prefix (default sim{seed})")
-    m.add_argument("--admin-token", default=None, help="default $ADMIN_TOKEN")
     m.add_argument("--summary", default=None, help="write the full summary (raters, ratings) as JSON here")
     m.add_argument("--quiet", action="store_true", help="no progress bar")
     m.set_defaults(fn=_simulate)
@@ -236,6 +242,8 @@ def _main(argv):
 
 
 def main(argv=None) -> int:
+    # The one place that configures logging: library code (create_app, the crowd) only logs.
+    logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
     return cli.run(_main, argv)
 
 

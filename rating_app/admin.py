@@ -1,4 +1,4 @@
-"""Admin: dashboard, ratings.csv export and the clip table, all behind ADMIN_TOKEN.
+"""Admin: dashboard, progress and the ratings.csv export, all behind ADMIN_TOKEN.
 
 A script sends `Authorization: Bearer TOKEN`; a browser logs in once through a form and then carries an
 HttpOnly, SameSite=Strict session cookie naming a login row in the database (the dashboard only reads, so there
@@ -17,7 +17,7 @@ import secrets
 from flask import Blueprint, Response, abort, current_app, jsonify, redirect, render_template, request, session, url_for
 from sqlalchemy import delete, func, insert, select
 
-from .db import AdminLogin, LoginFailure, utcnow
+from .db import AdminLogin, LoginFailure, app_engine, utcnow
 from .export import export_csv, progress
 from .guard import client_key
 
@@ -26,10 +26,6 @@ bp = Blueprint("admin", __name__, url_prefix="/admin")
 LOCKOUT_FAILURES = 10
 LOCKOUT_WINDOW = dt.timedelta(minutes=15)
 LOGIN_MAX_AGE = dt.timedelta(hours=12)
-
-
-def _engine():
-    return current_app.extensions["rating_app"]["engine"]
 
 
 def _locked_out(conn, client, now) -> bool:
@@ -47,7 +43,7 @@ def _check_token(given: str | None) -> bool:
     if not want:
         return False
     client, now = client_key(), utcnow()
-    with _engine().begin() as conn:
+    with app_engine().begin() as conn:
         if _locked_out(conn, client, now):
             abort(429, "too many wrong admin tokens from this address; try again in 15 minutes")
         ok = given is not None and hmac.compare_digest(given.encode(), want.encode())
@@ -67,7 +63,7 @@ def authorised() -> bool:
     key = session.get("admin")
     if not current_app.config["ADMIN_TOKEN"] or not isinstance(key, str):
         return False
-    with _engine().connect() as conn:
+    with app_engine().connect() as conn:
         created = conn.execute(select(AdminLogin.created_at).where(AdminLogin.key_hash == _login_hash(key))).scalar()
     return created is not None and utcnow() - created < LOGIN_MAX_AGE
 
@@ -92,14 +88,14 @@ def dashboard():
 
 def _progress():
     cfg, ext = current_app.config, current_app.extensions["rating_app"]
-    return progress(_engine(), cfg["RATINGS_PER_CLIP"], cfg["STUDY_DESIGN"], ext["units"])
+    return progress(app_engine(), cfg["RATINGS_PER_CLIP"], cfg["STUDY_DESIGN"], ext["units"])
 
 
 @bp.post("/login")
 def login():
     if _check_token(request.form.get("token")):
         key = secrets.token_urlsafe(24)
-        with _engine().begin() as conn:
+        with app_engine().begin() as conn:
             conn.execute(insert(AdminLogin).values(key_hash=_login_hash(key), created_at=utcnow()))
         session.clear()
         session["admin"] = key
@@ -111,7 +107,7 @@ def login():
 def logout():
     key = session.get("admin")
     if isinstance(key, str):
-        with _engine().begin() as conn:
+        with app_engine().begin() as conn:
             conn.execute(delete(AdminLogin).where(AdminLogin.key_hash == _login_hash(key)))
     session.clear()
     return redirect(url_for("admin.dashboard"))
@@ -122,7 +118,7 @@ def export():
     require_admin()
     from .design_export import FILENAMES
 
-    body = export_csv(_engine())
+    body = export_csv(app_engine())
     name = FILENAMES[current_app.config["STUDY_DESIGN"]]
     return Response(body, mimetype="text/csv", headers={"Content-Disposition": f"attachment; filename={name}"})
 
@@ -138,25 +134,3 @@ def progress_json():
     for e in data["events"]:
         e["at"] = e["at"].isoformat() + "Z"
     return jsonify(data)
-
-
-@bp.get("/clips.json")
-def clips_json():
-    """The clip table with conditions and metrics: what the simulated crowd needs to play its part."""
-    require_admin()
-    ext = current_app.extensions["rating_app"]
-    out = []
-    for c in ext["clips"].values():
-        rec = {
-            "clip_id": c.clip_id,
-            "condition": c.condition,
-            "role": c.role,
-            "item": c.item,
-            "frames": c.frames,
-            "fps": c.fps,
-        }
-        rec.update(
-            {k: v for k, v in ext["metrics"].get(c.clip_id, {}).items() if k not in ("condition", "role", "item")}
-        )
-        out.append(rec)
-    return jsonify(clips=out)

@@ -28,8 +28,8 @@ from sqlalchemy import and_, func, insert, or_, select, text, update
 from sqlalchemy.exc import IntegrityError
 
 from .assign import StudyFull, assign_slot, assign_unit, expire_idle, lock_assign, plan_session, plan_units
-from .db import Event, PageRating, Preference, Rater, Rating, Trial, TrialClip, utcnow
-from .designs import LABELS
+from .db import Event, PageRating, Preference, Rater, Rating, Trial, TrialClip, app_engine, utcnow
+from .designs import ANSWER_FIELD, LABELS
 from .designs import required_ms as design_required_ms
 from .guard import check_depth, client_key, escape_text, same_site_only
 
@@ -43,10 +43,6 @@ MAX_EVENTS = 30  # per session: enough for every trial's playback problem, not a
 TOLERANCE_MS = 250  # clock and decoding slack on the minimum viewing time
 RESUME_COOKIE = "rating_resume"
 CLIENT_WINDOW = dt.timedelta(hours=1)
-
-
-def engine():
-    return current_app.extensions["rating_app"]["engine"]
 
 
 def json_body(allowed: tuple[str, ...], required: tuple[str, ...] = ()) -> dict:
@@ -157,7 +153,7 @@ def create_session():
     cfg = current_app.config
     now = utcnow()
     try:
-        with engine().begin() as conn:
+        with app_engine().begin() as conn:
             if external_id is not None:
                 # The same participant again (a new tab, a retried request): resume, with proof.
                 resumed = _resume(conn, external_id, ext_session, now)
@@ -247,7 +243,7 @@ def create_session():
         # Two concurrent requests with the same external id: the other one won; resume it (with proof).
         if external_id is None:
             raise
-        with engine().begin() as conn:
+        with app_engine().begin() as conn:
             resumed = _resume(conn, external_id, ext_session, now)
             if resumed is None:
                 raise
@@ -387,7 +383,7 @@ def _trial_reply(token, rater, trial, conn=None):
     if design == "acr":
         out.update(clip_id=trial.clip_id, video_url=url_for("api.trial_video", token=token, trial_id=trial.id))
         return jsonify(trial=out)
-    own = engine().connect().execution_options(read_only=True) if conn is None else contextlib.nullcontext(conn)
+    own = app_engine().connect().execution_options(read_only=True) if conn is None else contextlib.nullcontext(conn)
     with own as c:
         shown = [
             {
@@ -411,12 +407,12 @@ def _trial_reply(token, rater, trial, conn=None):
 @bp.get("/sessions/<token>/next")
 def next_trial(token):
     now = utcnow()
-    with engine().connect().execution_options(read_only=True) as conn, conn.begin():
+    with app_engine().connect().execution_options(read_only=True) as conn, conn.begin():
         rater = _rater(conn, token)
         trial = _current(conn, rater.id)
     if trial is not None and trial.served_at is not None and not _idle(rater, now) and not _stale(rater, now):
         return _trial_reply(token, rater, trial)
-    with engine().begin() as conn:
+    with app_engine().begin() as conn:
         rater = _rater(conn, token, now)
         if rater.completed_at is None and _idle(rater, now):
             expire_idle(conn, current_app.config["SLOT_TIMEOUT_S"], now, rater.id)
@@ -442,7 +438,7 @@ def next_trial(token):
 @bp.get("/sessions/<token>/trials/<int(max=2147483647):trial_id>/video.mp4")
 def trial_video(token, trial_id):
     """The video of a served trial; the first request is recorded (an answer without it is flagged)."""
-    with engine().connect().execution_options(read_only=True) as conn, conn.begin():
+    with app_engine().connect().execution_options(read_only=True) as conn, conn.begin():
         rater = _rater(conn, token)
         t = conn.execute(
             select(Trial.clip_id, Trial.video_at, Trial.released, Trial.served_at).where(
@@ -452,7 +448,7 @@ def trial_video(token, trial_id):
     if t is None or t.clip_id is None or t.served_at is None or t.released:
         abort(404, "unknown video")
     if t.video_at is None:
-        with engine().begin() as conn:
+        with app_engine().begin() as conn:
             conn.execute(update(Trial).where(Trial.id == trial_id, Trial.video_at.is_(None)).values(video_at=utcnow()))
     return current_app.extensions["rating_app"]["videos"].response(t.clip_id)
 
@@ -461,7 +457,7 @@ def trial_video(token, trial_id):
 def clip_video(token, trial_id, label):
     """One clip of a served pairwise or parallel trial, by the label the rater sees; the first request is
     recorded per clip (an answer before every clip's video was fetched is flagged)."""
-    with engine().connect().execution_options(read_only=True) as conn, conn.begin():
+    with app_engine().connect().execution_options(read_only=True) as conn, conn.begin():
         rater = _rater(conn, token)
         t = conn.execute(
             select(TrialClip.id, TrialClip.clip_id, TrialClip.video_at, Trial.released, Trial.served_at)
@@ -471,7 +467,7 @@ def clip_video(token, trial_id, label):
     if t is None or t.served_at is None or t.released:
         abort(404, "unknown video")
     if t.video_at is None:
-        with engine().begin() as conn:
+        with app_engine().begin() as conn:
             conn.execute(
                 update(TrialClip).where(TrialClip.id == t.id, TrialClip.video_at.is_(None)).values(video_at=utcnow())
             )
@@ -493,9 +489,6 @@ def required_ms(clip_id: str | None, clip_ids=None) -> int:
     else:
         total = duration(clip_id)
     return int(current_app.config["MIN_VIEW"] * max(0, total - TOLERANCE_MS))
-
-
-ANSWER_FIELD = {"acr": "rating", "pairwise": "preference", "parallel": "ratings"}
 
 
 def _parse_answer(body, design, training, shown):
@@ -528,7 +521,7 @@ def post_rating(token):
     trial_id = _int_field(body, "trial_id", 1, 2**31 - 1)
     watched_ms = _int_field(body, "watched_ms", 0, MAX_WATCHED_MS, nullable=True)
     now = utcnow()
-    with engine().begin() as conn:
+    with app_engine().begin() as conn:
         rater = _rater(conn, token, now)
         trial = conn.execute(
             select(
@@ -669,7 +662,7 @@ def post_event(token):
         abort(400, "field 'detail' must be a string")
     detail = escape_text(detail)[:500]
     trial_id = _int_field(body, "trial_id", 1, 2**31 - 1, nullable=True)
-    with engine().begin() as conn:
+    with app_engine().begin() as conn:
         rater = _rater(conn, token)
         clip = None
         if trial_id is not None:

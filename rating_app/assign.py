@@ -23,8 +23,10 @@ import random
 
 from sqlalchemy import and_, case, func, select, update
 
+from core import study
+
 from .db import Clip, Lock, Rater, Trial
-from .designs import BAD, training_groups
+from .designs import training_groups
 
 
 class StudyFull(Exception):
@@ -104,7 +106,7 @@ def plan_session(conn, rng: random.Random, target: int, clips_per_rater: int | N
     short = _short_or_full(cov, target, "clip", "ratings", "rated")
     n_test = short if not clips_per_rater else min(clips_per_rater, short)
     n_catch = conn.execute(
-        select(func.count()).select_from(Clip).where(Clip.role == "catch", Clip.condition == BAD)
+        select(func.count()).select_from(Clip).where(Clip.role == "catch", Clip.condition == study.CATCH)
     ).scalar()
     training = list(conn.execute(select(Clip.clip_id).where(Clip.role == "training").order_by(Clip.clip_id)).scalars())
     rng.shuffle(training)
@@ -122,7 +124,7 @@ def assign_slot(conn, rng: random.Random, rater_pk: int, kind: str, target: int)
     cov = coverage(conn)
     if kind == "catch":
         catch = conn.execute(
-            select(Clip.clip_id).where(Clip.role == "catch", Clip.condition == BAD).order_by(Clip.clip_id)
+            select(Clip.clip_id).where(Clip.role == "catch", Clip.condition == study.CATCH).order_by(Clip.clip_id)
         ).scalars()
         left = [c for c in catch if c not in had]
         return rng.choice(left) if left else None

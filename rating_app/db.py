@@ -16,6 +16,7 @@ import fcntl
 import os
 from pathlib import Path
 
+from flask import current_app
 from sqlalchemy import (
     Boolean,
     CheckConstraint,
@@ -246,6 +247,11 @@ def check_url(url: str | None) -> str:
 
 def is_sqlite(engine: Engine) -> bool:
     return engine.dialect.name == "sqlite"
+
+
+def app_engine(app=None) -> Engine:
+    """The database engine of `app` (default: the app handling the current request), which create_app made."""
+    return (app or current_app).extensions["rating_app"]["engine"]
 
 
 def make_engine(url: str | None = None) -> Engine:

@@ -11,10 +11,9 @@ from __future__ import annotations
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, aliased
 
-from core.study import page_catch_failed, pair_catch_failed
+from core.study import CATCH, NATURAL, page_catch_failed, pair_catch_failed
 
 from .db import Clip, PageRating, Preference, Rater, Trial, TrialClip
-from .designs import BAD, REFERENCE
 
 PAIR_COLUMNS = (
     "rater_id",
@@ -192,7 +191,7 @@ def page_failures(rows) -> set[str]:
     return {
         p
         for p, by in pages.items()
-        if REFERENCE in by and BAD in by and page_catch_failed(max(by[BAD]), min(by[REFERENCE]))
+        if NATURAL in by and CATCH in by and page_catch_failed(max(by[CATCH]), min(by[NATURAL]))
     }
 
 

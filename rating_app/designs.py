@@ -24,11 +24,12 @@ from core import study
 
 from .manifest import AppError
 
+# analysis/demo.py imports the designs from here; everything in rating_app uses study.DESIGNS.
 DESIGNS = study.DESIGNS
 MAX_PAGE = 8  # clips on a parallel page (labels A..H)
 LABELS = "ABCDEFGH"
-REFERENCE = study.NATURAL  # the natural clip a catch trial compares the bad example with
-BAD = study.CATCH
+# The JSON field that carries a trial's answer, in the API (CONTRACTS §8) and so in the simulated crowd.
+ANSWER_FIELD = {"acr": "rating", "pairwise": "preference", "parallel": "ratings"}
 QUESTIONS = {
     "acr": "How natural does this motion look?",
     "pairwise": "Which motion looks more natural?",
@@ -46,14 +47,14 @@ class Unit:
 
 def check_design(design: str | None) -> str:
     design = (design or "acr").strip()
-    if design not in DESIGNS:
-        raise AppError(f"design {design!r} must be one of {', '.join(DESIGNS)}")
+    if design not in study.DESIGNS:
+        raise AppError(f"design {design!r} must be one of {', '.join(study.DESIGNS)}")
     return design
 
 
 def acr_catch(clip) -> bool:
     """A catch trial of an acr study: a bad example, never the other clips a catch item also holds."""
-    return clip.role == "catch" and clip.condition == BAD
+    return clip.role == "catch" and clip.condition == study.CATCH
 
 
 def _by_item(clips, role):
@@ -69,52 +70,56 @@ def build_units(design: str, clips) -> dict[str, Unit]:
     make that design (an item with one condition, a page over MAX_PAGE, a catch item without its NAT clip)."""
     if design == "acr":
         return {}
-    units: dict[str, Unit] = {}
-    tests, catches = _by_item(clips, "test"), _by_item(clips, "catch")
+    tests = _by_item(clips, "test")
     if not tests:
         raise AppError("the manifest has no test clips")
+    units: dict[str, Unit] = {}
     for item, by_cond in sorted(tests.items()):
-        twice = [c for c, ids in by_cond.items() if len(ids) > 1]
-        if twice:
-            raise AppError(
-                f"{design}: item {item!r} has {len(by_cond[twice[0]])} test clips of condition "
-                f"{twice[0]}; a {design} study needs one clip per condition and item"
-            )
-        conds = sorted(by_cond)
-        if len(conds) < 2:
-            raise AppError(
-                f"{design}: item {item!r} has test clips of one condition only ({conds[0]}); "
-                "comparisons need at least two"
-            )
-        if design == "pairwise":
-            for i, a in enumerate(conds):
-                for b in conds[i + 1 :]:
-                    units[f"pair:{item}:{a}:{b}"] = Unit(
-                        f"pair:{item}:{a}:{b}", "test", item, (by_cond[a][0], by_cond[b][0])
-                    )
-        else:
-            if len(conds) > MAX_PAGE:
-                raise AppError(f"parallel: item {item!r} has {len(conds)} conditions; a page shows at most {MAX_PAGE}")
-            units[f"page:{item}"] = Unit(f"page:{item}", "test", item, tuple(by_cond[c][0] for c in conds))
+        units.update(_test_units(design, item, by_cond))
     page_size = max((len(u.clips) for u in units.values()), default=0)  # parallel: every test page's size
-    for item, by_cond in sorted(catches.items()):
-        bads = by_cond.get(BAD, [])
-        if not bads:
-            continue
-        if REFERENCE not in by_cond:
-            raise AppError(
-                f"{design}: catch item {item!r} has no {REFERENCE} clip to compare its bad example "
-                "with; re-run generation.make_stimuli, which writes it (role catch)"
-            )
-        nat = by_cond[REFERENCE][0]
-        if design == "pairwise":
-            for k, bad in enumerate(bads):
-                units[f"catch:{item}:{k}"] = Unit(f"catch:{item}:{k}", "catch", item, (nat, bad))
-        else:
-            fillers = [ids[0] for cond, ids in sorted(by_cond.items()) if cond not in (REFERENCE, BAD)]
-            page = (nat, bads[0], *fillers)[: max(2, page_size)]
-            units[f"catchpage:{item}"] = Unit(f"catchpage:{item}", "catch", item, page)
+    for item, by_cond in sorted(_by_item(clips, "catch").items()):
+        units.update(_catch_units(design, item, by_cond, page_size))
     return units
+
+
+def _test_units(design: str, item: str, by_cond: dict[str, list]) -> dict[str, Unit]:
+    """The units of one test item: every pair of its conditions (pairwise) or its page (parallel)."""
+    twice = [c for c, ids in by_cond.items() if len(ids) > 1]
+    if twice:
+        raise AppError(
+            f"{design}: item {item!r} has {len(by_cond[twice[0]])} test clips of condition "
+            f"{twice[0]}; a {design} study needs one clip per condition and item"
+        )
+    conds = sorted(by_cond)
+    if len(conds) < 2:
+        raise AppError(
+            f"{design}: item {item!r} has test clips of one condition only ({conds[0]}); comparisons need at least two"
+        )
+    if design == "pairwise":
+        keys = {(a, b): f"pair:{item}:{a}:{b}" for i, a in enumerate(conds) for b in conds[i + 1 :]}
+        return {key: Unit(key, "test", item, (by_cond[a][0], by_cond[b][0])) for (a, b), key in keys.items()}
+    if len(conds) > MAX_PAGE:
+        raise AppError(f"parallel: item {item!r} has {len(conds)} conditions; a page shows at most {MAX_PAGE}")
+    return {f"page:{item}": Unit(f"page:{item}", "test", item, tuple(by_cond[c][0] for c in conds))}
+
+
+def _catch_units(design: str, item: str, by_cond: dict[str, list], page_size: int) -> dict[str, Unit]:
+    """The units of one catch item: each bad example beside the item's NAT clip (pairwise), or one page of NAT,
+    the bad example and the item's other clips, as many as a test page holds (parallel)."""
+    bads = by_cond.get(study.CATCH, [])
+    if not bads:
+        return {}
+    if study.NATURAL not in by_cond:
+        raise AppError(
+            f"{design}: catch item {item!r} has no {study.NATURAL} clip to compare its bad example "
+            "with; re-run generation.make_stimuli, which writes it (role catch)"
+        )
+    nat = by_cond[study.NATURAL][0]
+    if design == "pairwise":
+        return {f"catch:{item}:{k}": Unit(f"catch:{item}:{k}", "catch", item, (nat, bad)) for k, bad in enumerate(bads)}
+    fillers = [ids[0] for cond, ids in sorted(by_cond.items()) if cond not in (study.NATURAL, study.CATCH)]
+    page = (nat, bads[0], *fillers)[: max(2, page_size)]
+    return {f"catchpage:{item}": Unit(f"catchpage:{item}", "catch", item, page)}
 
 
 def training_groups(design: str, clips, rng: random.Random) -> list[tuple[str, ...]]:

@@ -15,10 +15,9 @@ from sqlalchemy import func, select
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
-from core.study import acr_catch_failed
+from core.study import CATCH, acr_catch_failed
 
 from .db import Clip, Event, Rater, Rating, Trial, study_design
-from .designs import BAD
 
 COLUMNS = (
     "rater_id",
@@ -142,7 +141,7 @@ def progress(engine: Engine, target: int, design: str = "acr", units=None) -> di
     with Session(engine.execution_options(read_only=True)) as s:
         clips = s.execute(
             select(Clip.clip_id, Clip.condition, Clip.role, Clip.item)
-            .where(Clip.role != "training", (Clip.role != "catch") | (Clip.condition == BAD))
+            .where(Clip.role != "training", (Clip.role != "catch") | (Clip.condition == CATCH))
             .order_by(Clip.role, Clip.condition, Clip.clip_id)
         ).all()
         # One pass over the ratings: count and sum per clip (condition means come from the exact sums).

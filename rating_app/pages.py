@@ -8,12 +8,15 @@ import re
 from flask import Blueprint, abort, current_app, jsonify, render_template, request
 from sqlalchemy.orm import Session
 
+from core import study
+
 from .api import EXTERNAL
 from .assign import is_full, units_full
+from .db import app_engine
 
 bp = Blueprint("pages", __name__)
 
-VIDEO_NAME = re.compile(r"([a-z0-9]{12,64})\.mp4")  # fullmatch
+VIDEO_NAME = re.compile(rf"({study.CLIP_ID.pattern})\.mp4")  # fullmatch
 # Query parameters Prolific appends to a study URL ({{%PROLIFIC_PID%}} etc.), plus generic fallbacks.
 ID_PARAMS = {
     "external_id": ("PROLIFIC_PID", "participant", "worker_id", "pid"),
@@ -33,7 +36,7 @@ def index():
                 break
     ext = current_app.extensions["rating_app"]
     cfg = current_app.config
-    with Session(ext["engine"].execution_options(read_only=True)) as s:  # no write lock on SQLite
+    with Session(app_engine().execution_options(read_only=True)) as s:  # no write lock on SQLite
         target = cfg["RATINGS_PER_CLIP"]
         full = (is_full(s, target) if cfg["STUDY_DESIGN"] == "acr" else units_full(s, ext["units"], target)) or not ext[
             "clips"

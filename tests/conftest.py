@@ -77,9 +77,9 @@ APP_ADMIN_TOKEN = "test-admin-token"
 
 @pytest.fixture(scope="session")
 def app_stimuli(tmp_path_factory):
-    from rating_app.testing import make_stimuli
+    from fake_stimuli import write_fake_stimuli
 
-    return make_stimuli(tmp_path_factory.mktemp("app_stimuli"))
+    return write_fake_stimuli(tmp_path_factory.mktemp("app_stimuli"))
 
 
 @pytest.fixture(params=["sqlite", "postgres"])
@@ -87,7 +87,7 @@ def app_db_url(request, tmp_path):
     if request.param == "sqlite":
         yield f"sqlite:///{tmp_path}/ratings.sqlite"
     else:
-        from rating_app.testing import pg_schema
+        from fake_stimuli import pg_schema
 
         with pg_schema() as url:  # a fresh schema per test, dropped afterwards (never skipped)
             yield url
@@ -97,13 +97,14 @@ def app_db_url(request, tmp_path):
 def app(app_stimuli, app_db_url):
     """The app with target 3 and MIN_VIEW 0 (answers need no wait; tests of the viewing rule use `make_app`)."""
     from rating_app import create_app
+    from rating_app.db import app_engine
 
     app = create_app(
         manifest=app_stimuli, db_url=app_db_url, admin_token=APP_ADMIN_TOKEN, ratings_per_clip=3, min_view=0
     )
     app.config["TESTING"] = True
     yield app
-    app.extensions["rating_app"]["engine"].dispose()
+    app_engine(app).dispose()
 
 
 @pytest.fixture
@@ -115,6 +116,7 @@ def client(app):
 def make_app(app_stimuli, app_db_url):
     """make_app(**settings) -> an app on this test's database; every engine is disposed at the end."""
     from rating_app import create_app
+    from rating_app.db import app_engine
 
     made = []
 
@@ -126,7 +128,7 @@ def make_app(app_stimuli, app_db_url):
 
     yield make
     for a in made:
-        a.extensions["rating_app"]["engine"].dispose()
+        app_engine(a).dispose()
 
 
 # --- stimuli (issue 4): one real `make_stimuli --quick` run per session ---

@@ -1,4 +1,6 @@
-"""Helpers for tests and benchmarks: a small real stimulus folder and throw-away PostgreSQL schemas."""
+"""Helpers for the rating app's tests and bench/bench_app.py: a small stimulus folder of real MP4s, throw-away
+PostgreSQL schemas and a free port. They live beside the tests, not in rating_app, so that the product ships no
+fake stimuli under the name of the real `generation.make_stimuli`."""
 
 from __future__ import annotations
 
@@ -10,6 +12,8 @@ import socket
 from pathlib import Path
 
 import numpy as np
+
+from core import study
 
 PG_BASE = os.environ.get("RATING_TEST_PG", "postgresql+psycopg://postgres@127.0.0.1:5432/test")
 
@@ -37,10 +41,10 @@ def write_mp4(path, n_frames=6, size=64, fps=20, shade=0):
     w.close()
 
 
-def make_stimuli(
+def write_fake_stimuli(
     folder,
     n_items=4,
-    conditions=("NAT", "MG", "FL"),
+    conditions=study.BUILTIN,
     n_catch=2,
     n_training=3,
     n_frames=16,
@@ -57,10 +61,10 @@ def make_stimuli(
     folder = Path(folder)
     (folder / "videos").mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
-    rows = []
+    rows, taken = [], set()
 
     def add(condition, role, item):
-        cid = secrets.token_hex(8)
+        cid = study.new_clip_id(taken)  # as make_stimuli names clips: no id spells a condition
         video = f"videos/{cid}.mp4"
         write_mp4(folder / video, n_frames=n_frames, fps=fps, shade=len(rows))
         rows.append(
@@ -71,7 +75,7 @@ def make_stimuli(
                 "item": item,
                 "video": video,
                 "motion": f"clips/{cid}.npz",
-                "seed": "" if condition == "NAT" else str(len(rows)),
+                "seed": "" if condition == study.NATURAL else str(len(rows)),
                 "frames": n_frames,
                 "fps": fps,
             }
@@ -81,39 +85,40 @@ def make_stimuli(
         for cond in conditions:
             add(cond, "test", f"item{i:02d}")
     for i in range(n_catch):
-        add("BAD", "catch", f"bad{i:02d}")
+        add(study.CATCH, "catch", f"bad{i:02d}")
         if catch_nat:
             for cond in conditions:
                 add(cond, "catch", f"bad{i:02d}")
     for i in range(n_training):
-        add((list(conditions) + ["BAD"])[i % (len(conditions) + 1)], "training", f"train{i:02d}")
+        add((*conditions, study.CATCH)[i % (len(conditions) + 1)], "training", f"train{i:02d}")
     manifest = folder / "manifest.csv"
     with open(manifest, "w", newline="", encoding="utf-8") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
     if metrics:
-        badness = {"NAT": 0.0, "MG": 1.0, "FL": 2.0, "BAD": 6.0}
-        with open(folder / "metrics.csv", "w", newline="", encoding="utf-8") as fh:
-            w = csv.writer(fh)
-            w.writerow(
-                ["clip_id", "condition", "role", "item", "foot_skating", "bone_length_std", "jerk", "control_error"]
-            )
-            for r in rows:
-                b = badness.get(r["condition"], 1.5) + rng.normal(0, 0.1)
-                w.writerow(
-                    [
-                        r["clip_id"],
-                        r["condition"],
-                        r["role"],
-                        r["item"],
-                        0.05 + 0.1 * b,
-                        0.001 + 0.01 * b,
-                        20 + 30 * b,
-                        0.02 + 0.1 * b,
-                    ]
-                )
+        _write_fake_metrics(folder / "metrics.csv", rows, rng)
     return manifest
+
+
+def _write_fake_metrics(path, rows, rng):
+    """metrics.csv for the clips `rows`: NAT best and BAD worst by every metric (MG, then FL, between), so that
+    the simulated crowd's quality, which follows the metrics, has the paper's order. Only the first four metrics:
+    metrics.csv need not have every one (CONTRACTS §4), and the reader must cope."""
+    badness = {study.NATURAL: 0.0, **dict(zip(study.GENERATED, (1.0, 2.0))), study.CATCH: 6.0}
+    scale = {
+        "foot_skating": (0.05, 0.1),
+        "bone_length_std": (0.001, 0.01),
+        "jerk": (20, 30),
+        "control_error": (0.02, 0.1),
+    }
+    assert tuple(scale) == study.METRIC_NAMES[:4]
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow([*study.METRIC_KEYS, *scale])
+        for r in rows:
+            b = badness.get(r["condition"], 1.5) + rng.normal(0, 0.1)
+            w.writerow([*(r[k] for k in study.METRIC_KEYS), *(lo + step * b for lo, step in scale.values())])
 
 
 @contextlib.contextmanager

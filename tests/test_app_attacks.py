@@ -10,12 +10,12 @@ import os
 
 import pytest
 from concurrent_raters import run_raters
+from fake_stimuli import write_fake_stimuli
 from sqlalchemy import update
 from test_app_api import TOKEN_HDR, answer, clips_by_role, complete, export_rows, idle, nxt, start
 
-from rating_app.db import Trial, utcnow
+from rating_app.db import Trial, app_engine, utcnow
 from rating_app.manifest import AppError, load_manifest
-from rating_app.testing import make_stimuli
 
 
 def at(app, i):
@@ -35,7 +35,7 @@ def to_test_trial(c, token, roles):
 
 
 def backdate_served(app, trial_id, seconds=60):
-    with app.extensions["rating_app"]["engine"].begin() as conn:
+    with app_engine(app).begin() as conn:
         conn.execute(
             update(Trial).where(Trial.id == trial_id).values(served_at=utcnow() - dt.timedelta(seconds=seconds))
         )
@@ -43,7 +43,7 @@ def backdate_served(app, trial_id, seconds=60):
 
 # 1 --------------------------------------------------------------------------------------------------- blinding
 def test_video_responses_carry_nothing_that_sorts_by_condition(tmp_path, app_db_url, make_app):
-    manifest = make_stimuli(tmp_path / "stimuli")
+    manifest = write_fake_stimuli(tmp_path / "stimuli")
     clips = load_manifest(manifest)
     order = {"NAT": 1, "MG": 2, "FL": 3, "BAD": 4}
     for c in clips:  # rendered condition by condition, as make_stimuli did
@@ -185,7 +185,7 @@ def test_answer_before_the_clip_could_play_is_refused_and_flagged(make_app, app_
 
 def test_lowered_minimum_is_shown_on_the_dashboard(make_app, tmp_path):
     # 10-s clips: a quarter of one is a 2.4-s window, which a loaded machine cannot miss between next and answer.
-    app = make_app(manifest=make_stimuli(tmp_path / "long", n_frames=200), ratings_per_clip=3, min_view=0.25)
+    app = make_app(manifest=write_fake_stimuli(tmp_path / "long", n_frames=200), ratings_per_clip=3, min_view=0.25)
     c = app.test_client()
     token = start(c)
     t = nxt(c, token)["trial"]
@@ -320,7 +320,7 @@ def test_events_are_escaped_and_limited(client, caplog):
 
 
 def test_videos_outside_the_stimulus_folder_are_refused(tmp_path, make_app):
-    manifest = make_stimuli(tmp_path / "stimuli")
+    manifest = write_fake_stimuli(tmp_path / "stimuli")
     outside = tmp_path / "secret.mp4"
     outside.write_bytes(b"not for raters")
     rows = list(csv.DictReader(open(manifest, encoding="utf-8")))

@@ -13,6 +13,7 @@ import pytest
 import requests
 
 from rating_app import create_app
+from rating_app.db import app_engine
 from rating_app.manifest import load_manifest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,7 +40,7 @@ def live_server(app_stimuli, app_db_url):
     yield f"http://127.0.0.1:{server.server_port}"
     server.shutdown()
     thread.join(5)
-    app.extensions["rating_app"]["engine"].dispose()
+    app_engine(app).dispose()
 
 
 @pytest.fixture
@@ -147,7 +148,7 @@ def test_rater_flow_in_a_real_browser(live_server, browser):
 
     from rating_app.db import Trial
 
-    with live_server_manifest[1].extensions["rating_app"]["engine"].connect() as conn:
+    with app_engine(live_server_manifest[1]).connect() as conn:
         clip_of = dict(conn.execute(select(Trial.id, Trial.clip_id)).all())
     assert {row["clip_id"]: int(row["rating"]) for row in rows} == {clip_of[t]: v for t, v in clicked.items()}
     assert all(row["flags"] == "" for row in rows)  # watched in full, video fetched

@@ -12,13 +12,13 @@ from pathlib import Path
 
 import pytest
 import requests
+from fake_stimuli import write_fake_stimuli
 from sqlalchemy import select
 from test_app_browser import browser  # noqa: F401  (the fixture)
 
 from rating_app import create_app
-from rating_app.db import TrialClip
+from rating_app.db import TrialClip, app_engine
 from rating_app.manifest import load_manifest
-from rating_app.testing import make_stimuli
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.browser
@@ -26,7 +26,7 @@ pytestmark = pytest.mark.browser
 
 @pytest.fixture(scope="module")
 def design_stimuli(tmp_path_factory):
-    return os.environ.get("SCREENSHOT_MANIFEST") or make_stimuli(
+    return os.environ.get("SCREENSHOT_MANIFEST") or write_fake_stimuli(
         tmp_path_factory.mktemp("design_stimuli"), catch_nat=True
     )
 
@@ -135,7 +135,7 @@ def _export(url, pid):
 
 
 def _shown(app):
-    with app.extensions["rating_app"]["engine"].connect() as conn:
+    with app_engine(app).connect() as conn:
         rows = conn.execute(select(TrialClip.trial_pk, TrialClip.label, TrialClip.clip_id)).all()
     out = {}
     for t, label, clip in rows:
@@ -182,7 +182,7 @@ def test_pairwise_flow_in_a_real_browser(design_stimuli, app_db_url, browser):  
     finally:
         server.shutdown()
         thread.join(5)
-        app.extensions["rating_app"]["engine"].dispose()
+        app_engine(app).dispose()
     assert code and n_training >= 1
     assert "pairs.csv" in resp.headers["Content-Disposition"]
     n_catch_pairs = sum(c.role == "catch" and c.condition == "BAD" for c in load_manifest(design_stimuli))
@@ -236,7 +236,7 @@ def test_parallel_flow_in_a_real_browser(design_stimuli, app_db_url, browser):  
     finally:
         server.shutdown()
         thread.join(5)
-        app.extensions["rating_app"]["engine"].dispose()
+        app_engine(app).dispose()
     assert code and n_training >= 1
     n_catch_pages = len({c.item for c in load_manifest(design_stimuli) if c.role == "catch"})
     assert len(given) == 3 + n_catch_pages

@@ -10,13 +10,16 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import requests
+from fake_stimuli import free_port
 
+from core.tables import read_metrics
 from rating_app import create_app
+from rating_app.db import app_engine
 from rating_app.manifest import AppError, load_manifest
-from rating_app.simulate import ClipInfo, parse_quality, quality_from_metrics
-from rating_app.testing import free_port
+from rating_app.simulate.raters import ClipInfo, load_clips, parse_quality, quality_from_metrics
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -51,7 +54,7 @@ def live(app_stimuli, app_db_url):
     yield f"http://127.0.0.1:{server.server_port}", app_db_url
     server.shutdown()
     th.join(5)
-    app.extensions["rating_app"]["engine"].dispose()
+    app_engine(app).dispose()
 
 
 def test_simulated_crowd_matches_export(live, app_stimuli, tmp_path):
@@ -106,24 +109,21 @@ def test_simulated_crowd_matches_export(live, app_stimuli, tmp_path):
     assert json.loads(r.stdout)["n_ratings"] == 0
 
 
-def test_simulate_reads_clips_from_admin(live):
-    url, _ = live
-    env = dict(os.environ, ADMIN_TOKEN="cli-token")
-    r = cli("simulate", "--url", url, "--raters", 1, "--careless", 0, "--quiet", env=env)
-    assert r.returncode == 0, r.stderr
-    assert json.loads(r.stdout)["n_ratings"] == 14
-
-
-def test_simulate_arg_errors():
+def test_simulate_arg_errors(app_stimuli, tmp_path):
     url = "http://127.0.0.1:9"
-    env = {k: v for k, v in os.environ.items() if k != "ADMIN_TOKEN"}
+    bad_metrics = tmp_path / "stimuli"
+    bad_metrics.mkdir()
+    (bad_metrics / "manifest.csv").write_text(app_stimuli.read_text())
+    (bad_metrics / "metrics.csv").write_text("clip_id,jerk\nabcdefabcdef12,fast\n")
     for args, needle in (
-        (("--raters", 0), "--raters"),
-        (("--raters", 2, "--careless", 1.5), "--careless"),
-        (("--raters", 2, "--quality", "NAT=9"), "--quality"),
-        (("--raters", 2), "ADMIN_TOKEN"),
+        (("--raters", 0, "--manifest", app_stimuli), "--raters"),
+        (("--raters", 2, "--careless", 1.5, "--manifest", app_stimuli), "--careless"),
+        (("--raters", 2, "--quality", "NAT=9", "--manifest", app_stimuli), "--quality"),
+        (("--raters", 2), "--manifest"),  # the crowd learns the clips' conditions from the manifest only
+        (("--raters", 2, "--manifest", tmp_path / "none.csv"), "none.csv"),
+        (("--raters", 2, "--manifest", bad_metrics / "manifest.csv"), "metrics.csv:2: jerk 'fast' is not a number"),
     ):
-        r = cli("simulate", "--url", url, *args, env=env)
+        r = cli("simulate", "--url", url, *args)
         assert r.returncode == 2 and r.stderr.startswith("error:") and needle in r.stderr, r.stderr
         assert "Traceback" not in r.stderr
 
@@ -201,9 +201,7 @@ def test_manifest_errors_name_file_and_line(app_stimuli, tmp_path, edit, needle)
 
 
 def test_quality_follows_the_metrics(app_stimuli):
-    from rating_app.simulate import load_clips
-
-    clips = load_clips("http://unused", manifest=app_stimuli)
+    clips = load_clips(app_stimuli)
     q = quality_from_metrics(clips)
     assert q["NAT"] > q["MG"] > q["FL"] > q["BAD"]
     assert q["NAT"] == pytest.approx(4.3) and q["BAD"] == pytest.approx(1.3)
@@ -215,22 +213,29 @@ def test_quality_follows_the_metrics(app_stimuli):
     q2 = quality_from_metrics(flipped)
     assert q2["BAD"] > q2["NAT"]
     assert parse_quality("NAT=4.5, MG=3") == {"NAT": 4.5, "MG": 3.0}
-    # a metric that could not be measured ('nan', e.g. foot skating without contacts) is skipped, not an error
-    from rating_app.manifest import load_metrics
-
-    text = app_stimuli.with_name("metrics.csv").read_text().splitlines()
-    head, first = text[0].split(","), text[1].split(",")
-    first[head.index("foot_skating")] = "nan"
-    nan_file = app_stimuli.parent / "metrics_nan_test.csv"
-    nan_file.write_text("\n".join([text[0], ",".join(first)] + text[2:]) + "\n")
-    try:
-        rec = load_metrics(nan_file)[first[0]]
-        assert rec["foot_skating"] is None and rec["jerk"] > 0
-    finally:
-        nan_file.unlink()
     for bad in ("NAT", "NAT=x", "=3", "NAT=0.5"):
         with pytest.raises(AppError):
             parse_quality(bad)
+
+
+def test_unmeasured_metrics_are_skipped(app_stimuli, tmp_path):
+    """A metric that could not be measured ('nan' or empty, e.g. foot skating without contacts) is missing for
+    that clip, not an error, and the quality still follows the metrics that were measured."""
+    folder = tmp_path / "stimuli"
+    folder.mkdir()
+    (folder / "manifest.csv").write_text(app_stimuli.read_text())
+    text = app_stimuli.with_name("metrics.csv").read_text().splitlines()
+    head, first, second = text[0].split(","), text[1].split(","), text[2].split(",")
+    first[head.index("foot_skating")] = "nan"
+    second[head.index("jerk")] = ""
+    (folder / "metrics.csv").write_text("\n".join([text[0], ",".join(first), ",".join(second)] + text[3:]) + "\n")
+    table = read_metrics(folder / "metrics.csv")
+    assert np.isnan(table.at[first[0], "foot_skating"]) and table.at[first[0], "jerk"] > 0
+    assert np.isnan(table.at[second[0], "jerk"]) and table.at[second[0], "foot_skating"] > 0
+    clips = load_clips(folder / "manifest.csv")
+    assert np.isnan(clips[first[0]].metrics["foot_skating"]) and clips[first[0]].metrics["jerk"] > 0
+    q = quality_from_metrics(clips)
+    assert q["NAT"] > q["MG"] > q["FL"] > q["BAD"]
 
 
 def _one_line_error(r, needle):

@@ -14,26 +14,26 @@ from pathlib import Path
 
 import pytest
 from concurrent_raters import run_raters
+from fake_stimuli import write_fake_stimuli
 from sqlalchemy import update
 from test_app_api import TOKEN_HDR, idle
 
 from rating_app import create_app
-from rating_app.db import Trial, utcnow
+from rating_app.db import Trial, app_engine, utcnow
 from rating_app.manifest import AppError, load_manifest
-from rating_app.testing import make_stimuli
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
 def stimuli(tmp_path_factory):
-    return make_stimuli(tmp_path_factory.mktemp("design_stimuli"), catch_nat=True)
+    return write_fake_stimuli(tmp_path_factory.mktemp("design_stimuli"), catch_nat=True)
 
 
 @pytest.fixture(scope="module")
 def big_stimuli(tmp_path_factory):
     """3 conditions x 30 items, 4 catch items (BAD + NAT, MG, FL), 3 training clips."""
-    return make_stimuli(
+    return write_fake_stimuli(
         tmp_path_factory.mktemp("big_stimuli"), n_items=30, n_catch=4, n_frames=4, metrics=False, catch_nat=True
     )
 
@@ -50,7 +50,7 @@ def make(app_db_url):
 
     yield build
     for a in made:
-        a.extensions["rating_app"]["engine"].dispose()
+        app_engine(a).dispose()
 
 
 def clips_of(manifest):
@@ -234,7 +234,7 @@ def test_viewing_rule_counts_every_clip(make, stimuli, design):
         n = len(shown(t))
         want = need if need is not None else n * dur - 250
         assert want - 300 < r.json["retry_after_ms"] <= want
-        with app.extensions["rating_app"]["engine"].begin() as conn:
+        with app_engine(app).begin() as conn:
             conn.execute(
                 update(Trial)
                 .where(Trial.id == t["trial_id"])
@@ -411,13 +411,14 @@ def test_a_database_holds_one_design(make, stimuli, app_db_url, tmp_path):
 def test_design_setting_and_manifest_errors(tmp_path, app_db_url, stimuli):
     with pytest.raises(AppError, match="design 'mushra' must be one of acr, pairwise, parallel"):
         create_app(manifest=stimuli, db_url=app_db_url, design="mushra")
-    old = make_stimuli(tmp_path / "old", n_items=2, n_catch=1, n_training=1, metrics=False)  # no NAT on catch items
+    # no NAT on catch items
+    old = write_fake_stimuli(tmp_path / "old", n_items=2, n_catch=1, n_training=1, metrics=False)
     with pytest.raises(AppError, match="catch item 'bad00' has no NAT clip"):
         create_app(manifest=old, db_url=app_db_url, design="pairwise")
-    one = make_stimuli(tmp_path / "one", n_items=2, conditions=("NAT",), n_catch=0, n_training=1, metrics=False)
+    one = write_fake_stimuli(tmp_path / "one", n_items=2, conditions=("NAT",), n_catch=0, n_training=1, metrics=False)
     with pytest.raises(AppError, match="one condition only"):
         create_app(manifest=one, db_url=app_db_url, design="parallel")
-    nine = make_stimuli(
+    nine = write_fake_stimuli(
         tmp_path / "nine",
         n_items=1,
         conditions=tuple(f"C{i}" for i in range(9)),
@@ -488,7 +489,7 @@ def test_simulated_crowd_answers_each_design_as_the_page_does(stimuli, app_db_ur
     finally:
         server.shutdown()
         th.join(5)
-        app.extensions["rating_app"]["engine"].dispose()
+        app_engine(app).dispose()
     assert summary["errors"] == [] and summary["study_full"]
     key = (
         ("rater_id", "clip_a", "clip_b", "preference")

@@ -13,12 +13,12 @@ from pathlib import Path
 
 import pytest
 import requests
+from fake_stimuli import free_port, write_fake_stimuli
 
 from rating_app.db import make_engine
 from rating_app.design_export import iter_page_rows, iter_pair_rows
 from rating_app.export import iter_rows
 from rating_app.simulate import run_simulation
-from rating_app.testing import free_port, make_stimuli
 
 ROOT = Path(__file__).resolve().parents[1]
 N_RATERS = 200
@@ -83,7 +83,7 @@ DESIGNS = {
 
 @pytest.fixture(scope="module")
 def design_stimuli(tmp_path_factory):
-    return make_stimuli(tmp_path_factory.mktemp("load_stimuli"), catch_nat=True)
+    return write_fake_stimuli(tmp_path_factory.mktemp("load_stimuli"), catch_nat=True)
 
 
 @pytest.mark.parametrize("raters", [pytest.param(N_RATERS, marks=pytest.mark.slow), 60])

@@ -1,0 +1,130 @@
+"""The simulated crowd's side of the HTTP API (CONTRACTS §5, §8): it answers exactly as the rater's page does.
+
+A rater creates a session (with a platform session id, as Prolific's link gives one, which is also its proof for
+resuming after a lost reply), and for every trial fetches every video and waits until the server would accept
+an answer: the clips' duration (the longest of a pair, the sum of a page) times the server's `min_view` (from the
+session reply; 1 = the whole clip). Familiarisation trials are acknowledged with a null answer.
+"""
+
+from __future__ import annotations
+
+import time
+
+import requests
+
+from ..designs import ANSWER_FIELD, required_ms
+from ..manifest import AppError
+from .raters import ClipInfo, Rater, duration_ms
+
+
+def check_design(url: str, design: str, timeout=30.0) -> None:
+    """AppError unless the server at `url` runs `design` (its /healthz names it)."""
+    try:
+        r = requests.get(url.rstrip("/") + "/healthz", timeout=timeout)
+        running = r.json().get("design", "acr")
+    except (requests.RequestException, ValueError) as e:
+        raise AppError(f"{url}: server not reachable ({e.__class__.__name__})") from None
+    if running != design:
+        raise AppError(f"--design {design}: the server at {url} runs a {running} study")
+
+
+class Client:
+    """HTTP with retries: a server restart or a dropped connection is waited out until the deadline.
+    Every call the crowd makes is idempotent (session by external id, GET next, rating per trial), so a retry
+    of a call whose reply was lost stores nothing twice."""
+
+    def __init__(self, base: str, deadline: float, request_timeout: float = 30.0):
+        self.base, self.deadline, self.request_timeout = base.rstrip("/"), deadline, request_timeout
+        self.http = requests.Session()
+        self.retries = 0
+
+    def call(self, method: str, path: str, body=None, raw=False):
+        """(status, JSON body), or (status, bytes) with `raw` (a video)."""
+        delay = 0.05
+        while True:
+            try:
+                r = self.http.request(method, self.base + path, json=body, timeout=self.request_timeout)
+                if r.status_code < 500:
+                    return r.status_code, (r.content if raw and r.status_code == 200 else r.json())
+                err = f"HTTP {r.status_code}"
+            except (requests.RequestException, ValueError) as e:  # dropped connection, restart, bad JSON
+                err = e.__class__.__name__
+            if time.monotonic() + delay > self.deadline:
+                raise TimeoutError(f"{method} {path}: gave up at the time limit ({err})")
+            self.retries += 1
+            time.sleep(delay)
+            delay = min(delay * 2, 1.0)
+
+
+def trial_parts(trial: dict) -> list[dict]:
+    """The clips a trial shows, each with its clip_id and video_url: one (acr), A and B (pairwise) or a page."""
+    if "a" in trial:
+        return [trial["a"], trial["b"]]
+    return trial.get("clips") or [trial]
+
+
+class Visit:
+    """One rater's session on the server, driven as the page drives it."""
+
+    def __init__(self, client: Client, rater: Rater, clips: dict[str, ClipInfo], think_s: float = 0.0):
+        self.client, self.rater, self.clips, self.think_s = client, rater, clips, think_s
+        self.token = self.rater_id = None
+        self.design, self.min_view, self.n_trials = "acr", 1.0, 0
+
+    def start(self) -> bool:
+        """Open (or resume) the session; False when the study is full."""
+        status, body = self.client.call(
+            "POST", "/api/sessions", {"external_id": self.rater.external_id, "session_id": self.rater.session_id}
+        )
+        if status == 409 and body.get("full"):
+            return False
+        if status not in (200, 201):
+            raise AppError(f"POST /api/sessions: HTTP {status}: {body.get('error')}")
+        self.token, self.rater_id = body["session"], body["rater_id"]
+        self.min_view = float(body.get("min_view", 1.0))
+        self.design = body.get("design", "acr")
+        self.n_trials = int(body["n_trials"])
+        return True
+
+    def next(self) -> tuple[str, object]:
+        """("trial", the trial), ("done", the completion code) or ("full", None): every slot was dropped."""
+        status, body = self.client.call("GET", f"/api/sessions/{self.token}/next")
+        if status == 409 and body.get("full"):
+            return "full", None
+        if status != 200:
+            raise AppError(f"GET next: HTTP {status}: {body.get('error')}")
+        if body.get("done"):
+            return "done", body["completion_code"]
+        return "trial", body["trial"]
+
+    def shown(self, trial: dict) -> tuple[list[str], list[ClipInfo | None]]:
+        """The clip ids of a trial and what the crowd knows of them (None: a clip not in its manifest)."""
+        ids = [part["clip_id"] for part in trial_parts(trial)]
+        return ids, [self.clips.get(i) for i in ids]
+
+    def submit(self, trial: dict, shown: list[ClipInfo | None], value, watched: int, what: str):
+        """Watch the trial and post `value`; the answer the server holds (a retry's is the first one's)."""
+        status, ans = self._post_when_watched(trial, shown, value, watched)
+        if status not in (200, 201):
+            raise AppError(f"{what}: HTTP {status}: {ans.get('error')}")
+        stored = ans.get(ANSWER_FIELD[self.design]) if status == 200 else None
+        return value if stored is None else stored
+
+    def _post_when_watched(self, trial, shown, value, watched):
+        """Fetch every video of the trial, wait as the server requires, post; wait again if the server says
+        too early."""
+        started = time.monotonic()
+        for part in trial_parts(trial):
+            status, _ = self.client.call("GET", part["video_url"], raw=True)
+            if status != 200:
+                raise AppError(f"video of trial {trial['trial_id']}: HTTP {status}")
+        need = required_ms(self.design, [duration_ms(c) for c in shown])
+        wait = self.min_view * need / 1000.0 + self.rater.think(self.think_s)
+        time.sleep(max(0.0, started + wait - time.monotonic()))
+        body = {"trial_id": trial["trial_id"], ANSWER_FIELD[self.design]: value, "watched_ms": watched}
+        for _ in range(5):
+            status, ans = self.client.call("POST", f"/api/sessions/{self.token}/ratings", body)
+            if status != 425:
+                break
+            time.sleep(ans.get("retry_after_ms", 100) / 1000.0)
+        return status, ans

@@ -1,0 +1,231 @@
+"""The simulated raters' model: how good each clip looks to them, and the answer each design's page would get.
+
+An attentive rater answers round(quality(clip) + bias + noise), clipped to the scale, with a personal bias and
+noise level, and recognises the bad examples (catch clips) as such: it rates them below CATCH_FAIL_AT (acr),
+never prefers them (pairwise) and puts them below the page's NAT clip (parallel). A careless rater answers
+uniformly at random in every design, and so fails catch trials.
+
+The per-clip quality comes by default from metrics.csv (worse objective metrics -> lower quality; the best
+condition by the metrics gets QUALITY_HIGH, the worst QUALITY_LOW), else from DEFAULT_QUALITY, and can be set per
+condition. Only the manifest and metrics.csv say which condition a clip is: the server never tells.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from core import study
+from core.tables import read_metrics
+
+from ..manifest import AppError, load_manifest
+
+# The paper's order (MG above FL); a condition the metrics rank overrides these.
+DEFAULT_QUALITY = {study.NATURAL: 4.2, **dict(zip(study.GENERATED, (3.6, 2.6))), study.CATCH: 1.3}
+OTHER_QUALITY = 3.0  # an imported system without metrics, or a clip missing from the manifest
+QUALITY_HIGH, QUALITY_LOW = 4.3, 1.3
+BIAS_SD = 0.3
+PREFERENCE_TIE, PREFERENCE_CLEAR = 0.3, 1.0  # quality margins: below the first no preference, above the second clear
+NOISE_SD = (0.35, 0.7)  # each rater's own noise level is drawn from this range
+UNKNOWN_DURATION_MS = 2000  # a clip the manifest gives no frames/fps for
+
+
+@dataclass
+class ClipInfo:
+    clip_id: str
+    condition: str
+    role: str
+    duration_ms: int = UNKNOWN_DURATION_MS
+    quality: float | None = None
+    metrics: dict = field(default_factory=dict)  # metric name -> value; nan where not measured
+
+
+def duration_ms(clip: ClipInfo | None) -> int:
+    return clip.duration_ms if clip else UNKNOWN_DURATION_MS
+
+
+def quality_of(clip: ClipInfo | None) -> float:
+    return clip.quality if clip and clip.quality is not None else OTHER_QUALITY
+
+
+def parse_quality(text: str | None) -> dict[str, float]:
+    """--quality "NAT=4.3,MG=3.8" -> {condition: mean rating 1..5}."""
+    out = {}
+    for part in (text or "").split(","):
+        if not part.strip():
+            continue
+        name, sep, value = part.partition("=")
+        try:
+            q = float(value)
+        except ValueError:
+            q = math.nan
+        if not sep or not name.strip() or not 1.0 <= q <= 5.0:
+            raise AppError(f"--quality: {part.strip()!r} must be CONDITION=NUMBER with 1 <= NUMBER <= 5")
+        out[name.strip()] = q
+    return out
+
+
+def load_clips(manifest) -> dict[str, ClipInfo]:
+    """The manifest's clips, with their metrics from metrics.csv beside it when there is one."""
+    clips = {
+        c.clip_id: ClipInfo(c.clip_id, c.condition, c.role, c.duration_ms or UNKNOWN_DURATION_MS)
+        for c in load_manifest(manifest, check_files=False)
+    }
+    metrics_csv = Path(manifest).resolve().parent / "metrics.csv"
+    if metrics_csv.is_file():
+        table = read_metrics(metrics_csv, AppError)
+        names = [m for m in study.METRIC_NAMES if m in table.columns]
+        for cid, row in table[names].iterrows():
+            if cid in clips:
+                clips[cid].metrics = {m: float(row[m]) for m in names}
+    return clips
+
+
+def quality_from_metrics(clips: dict[str, ClipInfo]) -> dict[str, float]:
+    """Per-condition quality from the clips' objective metrics; also sets a small per-clip offset.
+
+    Each metric is turned into a percentile rank over all clips (0 = best, 1 = worst; ranks, so one extreme
+    condition such as NAT with zero bone-length error does not squash the others together); a clip's badness is
+    its mean rank. Conditions are placed linearly between QUALITY_HIGH (least bad) and QUALITY_LOW (most bad)
+    by mean badness, so the order of the conditions is the order the metrics give (NAT best and BAD worst
+    whenever the metrics say so)."""
+    from scipy.stats import rankdata
+
+    def value(c, m):
+        x = c.metrics.get(m)
+        return np.nan if x is None else x
+
+    have = [c for c in clips.values() if any(np.isfinite(value(c, m)) for m in study.METRIC_NAMES)]
+    if not have:
+        return {}
+    total = np.zeros(len(have))
+    n = np.zeros(len(have))
+    for m in study.METRIC_NAMES:
+        vals = np.array([value(c, m) for c in have], float)
+        ok = np.isfinite(vals)
+        if ok.sum() < 2 or np.ptp(vals[ok]) == 0:
+            continue
+        total[ok] += (rankdata(vals[ok], method="average") - 1) / (ok.sum() - 1)
+        n[ok] += 1
+    badness = np.where(n > 0, total / np.maximum(n, 1), 0.5)
+    by_cond: dict[str, list[float]] = {}
+    for c, b in zip(have, badness):
+        by_cond.setdefault(c.condition, []).append(float(b))
+    mean = {k: float(np.mean(v)) for k, v in by_cond.items()}
+    lo, hi = min(mean.values()), max(mean.values())
+    quality = {
+        k: (QUALITY_HIGH + QUALITY_LOW) / 2
+        if hi - lo < 1e-9
+        else QUALITY_HIGH - (QUALITY_HIGH - QUALITY_LOW) * (b - lo) / (hi - lo)
+        for k, b in mean.items()
+    }
+    for c, b in zip(have, badness):
+        # Within a condition, worse clips are rated a little lower (at most 0.4 of a point).
+        c.quality = quality[c.condition] - float(np.clip(1.5 * (b - mean[c.condition]), -0.4, 0.4))
+    return quality
+
+
+def set_qualities(clips: dict[str, ClipInfo], override: dict[str, float] | None) -> dict[str, float]:
+    """Give every clip its quality (the metrics', else the default, --quality over both); the per-condition
+    qualities used."""
+    by_condition = dict(DEFAULT_QUALITY)
+    by_condition.update(quality_from_metrics(clips))
+    by_condition.update(override or {})
+    for c in clips.values():
+        if c.quality is None or (override and c.condition in override):
+            c.quality = by_condition.get(c.condition, OTHER_QUALITY)
+    return by_condition
+
+
+@dataclass
+class Rater:
+    """One simulated rater: who it says it is to the server, and how it answers."""
+
+    index: int
+    external_id: str
+    session_id: str  # as Prolific's link gives one: also the proof for resuming after a lost reply
+    careless: bool
+    bias: float
+    noise_sd: float
+    seed: int
+
+    def __post_init__(self):
+        self.rng = np.random.default_rng(self.seed)
+
+    def answer(self, design: str, ids: list[str], shown: list[ClipInfo | None]):
+        """(the answer to a rating trial of `design` showing the clips `ids`, the watched_ms it reports)."""
+        if design == "acr":
+            return self.rate(shown[0])
+        # Drawn before the answer, so that a crowd's answers stay what they were for a given seed.
+        watched = int(sum(map(duration_ms, shown)) + self.rng.uniform(0, 300))
+        if design == "pairwise":
+            return self.prefer(shown[0], shown[1]), watched
+        return dict(zip(ids, self.page(shown))), watched
+
+    def rate(self, clip: ClipInfo | None) -> tuple[int, int]:
+        """An acr rating 1..5 and the watched_ms it reports (careless raters skip ahead)."""
+        dur = duration_ms(clip)
+        if self.careless:
+            return int(self.rng.integers(1, 6)), int(dur * self.rng.uniform(0.2, 1.0))
+        x = int(np.clip(round(quality_of(clip) + self.bias + self.rng.normal(0, self.noise_sd)), 1, 5))
+        if clip is not None and clip.role == "catch":
+            x = min(x, study.CATCH_FAIL_AT - 1)  # an attentive rater recognises a bad example
+        return x, int(dur + self.rng.uniform(0, 300))
+
+    def prefer(self, a: ClipInfo | None, b: ClipInfo | None) -> int:
+        """A pairwise answer: 2 = A clearly .. -2 = B clearly."""
+        if self.careless:
+            return int(self.rng.integers(-2, 3))
+        d = quality_of(a) - quality_of(b) + self.rng.normal(0, self.noise_sd)
+        level = 0 if abs(d) < PREFERENCE_TIE else 1 if abs(d) < PREFERENCE_CLEAR else 2
+        pref = level if d > 0 else -level
+        if a is not None and b is not None and study.CATCH in (a.condition, b.condition):
+            strength = abs(pref) or 1  # never the bad example, never a tie with it
+            pref = strength if b.condition == study.CATCH else -strength
+        return pref
+
+    def page(self, shown: list[ClipInfo | None]) -> list[int]:
+        """Parallel ratings 0..100 of the clips of one page, in order (the 1..5 quality scaled)."""
+        if self.careless:
+            return [int(self.rng.integers(0, 101)) for _ in shown]
+        out = [
+            int(np.clip(round(25.0 * (quality_of(c) + self.bias + self.rng.normal(0, self.noise_sd) - 1.0)), 0, 100))
+            for c in shown
+        ]
+        conds = [c.condition if c else None for c in shown]
+        if study.CATCH in conds and study.NATURAL in conds:
+            _below_natural(out, conds)
+        return out
+
+    def think(self, mean_s: float) -> float:
+        """A pause before answering, seconds (exponential with mean `mean_s`)."""
+        return float(self.rng.exponential(mean_s)) if mean_s else 0.0
+
+
+def _below_natural(ratings: list[int], conds: list[str | None]) -> None:
+    """An attentive rater puts the bad example below the natural clip of its page."""
+    at = conds.index(study.NATURAL)
+    nat = ratings[at]
+    for i, cond in enumerate(conds):
+        if cond == study.CATCH and study.page_catch_failed(ratings[i], nat):
+            ratings[i] = max(0, nat - 10)
+            if nat == 0:
+                ratings[at] = 10
+
+
+def make_raters(n: int, seed: int, careless: float, prefix: str) -> list[Rater]:
+    """`n` raters, round(careless * n) of them careless, each with its own bias, noise and random stream."""
+    rng = np.random.default_rng(seed)
+    n_careless = int(round(careless * n))
+    careless_set = set(rng.choice(n, size=n_careless, replace=False).tolist()) if n_careless else set()
+    raters = []
+    for i in range(n):
+        external_id = f"{prefix}-{i:05d}"
+        session_id = f"{external_id}-{int(rng.integers(2**62)):x}"
+        bias = float(rng.normal(0, BIAS_SD))
+        noise_sd = float(rng.uniform(*NOISE_SD))
+        raters.append(Rater(i, external_id, session_id, i in careless_set, bias, noise_sd, int(rng.integers(2**31))))
+    return raters
