@@ -37,7 +37,7 @@ def make_big_bvh(src, target_bytes, path):
     """A BVH of about target_bytes: the header of `src` and its frames repeated."""
     text = gzip.decompress(Path(src).read_bytes()).decode() if str(src).endswith(".gz") else Path(src).read_text()
     head, _, rest = text.partition("MOTION")
-    frames = [l for l in rest.split("\n")[3:] if l.strip()]
+    frames = [line for line in rest.split("\n")[3:] if line.strip()]
     block = "\n".join(frames) + "\n"
     reps = max(1, int(np.ceil(target_bytes / len(block))))
     n = len(frames) * reps
@@ -48,8 +48,8 @@ def make_big_bvh(src, target_bytes, path):
 def naive_parse(path):
     """Baseline: the usual loop, one float() per token, list of lists -> array."""
     lines = Path(path).read_text().split("\n")
-    k = next(i for i, l in enumerate(lines) if l.startswith("Frame Time"))
-    return np.array([[float(v) for v in l.split()] for l in lines[k + 1 :] if l.strip()])
+    k = next(i for i, line in enumerate(lines) if line.startswith("Frame Time"))
+    return np.array([[float(v) for v in line.split()] for line in lines[k + 1 :] if line.strip()])
 
 
 def best_of(fn, n=3):

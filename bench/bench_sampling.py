@@ -2,10 +2,10 @@
 
     python bench/bench_sampling.py [--frames 60] [--threads 2]
 
-Compares the streaming sampler (generation.moglow.MGStream: fused weights, every product known at the start
+Compares the streaming sampler (generation.mg_stream.MGStream: fused weights, every product known at the start
 of a frame done for all K steps in batched matmuls, no autograd) in both of its memory layouts ("row" and
 "col", timed frame by frame in turn so that both see the same machine) and the one `default_layout` chooses,
-with a plain baseline measured in the same run (MoGlow.inverse_naive: each coupling's nn.LSTM called per
+with a plain baseline measured in the same run (tests/reference/moglow_naive.py: each coupling's nn.LSTM called per
 frame with its carried state, also without autograd), for 1 stream and a batch of 30 streams, and with a
 floor measured beside them (the fastest of four matmul forms reading the same number of weights).
 Targets (issue 3): <= 12 ms (1) and <= 25 ms (30).
@@ -22,7 +22,11 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from generation.moglow import LAYOUTS, MGStream, MoGlow, default_layout  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the plain reference sampler
+from reference.moglow_naive import inverse_naive  # noqa: E402
+
+from generation.mg_stream import LAYOUTS, MGStream, default_layout  # noqa: E402
+from generation.moglow import MoGlow  # noqa: E402
 from generation.train import load_config, model_config  # noqa: E402
 
 
@@ -95,7 +99,7 @@ def bench(model, batch, frames):
         fast = time_interleaved({name: (lambda st=st: st.step(ctrl)) for name, st in streams.items()}, frames)
         c_all = torch.randn(batch, tau + 1, 3)
         z = torch.randn(batch, 1, 63)
-        naive = time_frames(lambda: model.inverse_naive(z, hist, c_all), max(5, frames // 3))
+        naive = time_frames(lambda: inverse_naive(model, z, hist, c_all), max(5, frames // 3))
     return fast, naive, default_layout(next(model.parameters()).device, batch)
 
 

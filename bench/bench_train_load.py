@@ -6,8 +6,8 @@ Each setting runs in a fresh process (OpenMP reads its environment when torch lo
 training steps at mg_cpu's size on the real training set, first alone, then beside a process that keeps one
 core busy (a Python busy loop). Settings: torch's defaults (all cores, OpenMP's default spin-waiting), all cores
 with OpenMP's waiting threads sleeping at once (OMP_WAIT_POLICY=PASSIVE) or after a bounded spin (GOMP_SPINCOUNT,
-libgomp's), one thread, and the CLI's default, the cores other processes leave free (generation/core_share.py). Prints steps/s and each setting's slowdown beside the busy core; run it with nothing
-else on the machine.
+libgomp's), one thread, and the CLI's default, the cores other processes leave free (generation/core_share.py).
+Prints steps/s and each setting's slowdown beside the busy core; run it with nothing else on the machine.
 """
 
 import argparse

@@ -14,13 +14,13 @@ import statistics
 import sys
 from pathlib import Path
 
-import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from sample_quality import clip_figures  # noqa: E402
 
+from generation.dataset import read_arrays, require  # noqa: E402
 from generation.make_stimuli import checkpoints_in  # noqa: E402
 from generation.sample import load_model, sample_split  # noqa: E402
 
@@ -54,8 +54,9 @@ def main():
     ap.add_argument("--figure", default=None)
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
-    with np.load(a.data) as d:
-        nat, c, labels, fps = d["test_x"], d["test_c"], d["test_labels"], float(d["fps"])
+    d = read_arrays(a.data, ["test_x", "test_c", "test_labels", "fps"])
+    require(d, ["test_x", "test_c", "test_labels", "fps"], a.data)
+    nat, c, labels, fps = d["test_x"], d["test_c"], d["test_labels"], float(d["fps"])
     curves = {}
     print(
         "| run | step | valid NLL | skating / NAT | jerk / NAT | following (m) | late stepping / NAT, worst category |"

@@ -7,7 +7,8 @@ Every window of the test split is sampled once per model (MG seeded with the tau
 Per category it prints the median of three figures per clip:
 - late stepping (m): how far the feet swing about each other over the last 2 s: the standard deviation of
   the horizontal vector from the right foot to the left (root frame; forward and sideways, so side-steps
-  count too). Stepping swings it by tens of centimetres; a gait that dies out into a standing pose gives ~0. Given beside NAT's, and as the median ratio to NAT on the same window.
+  count too). Stepping swings it by tens of centimetres; a gait that dies out into a standing pose gives ~0.
+  Given beside NAT's, and as the median ratio to NAT on the same window.
 - jerk (m/s^3), foot skating (m/s) and control following (m): generation.metrics, on the clip in world
   coordinates.
 Over all windows it also prints each system's Fréchet motion distance to training motion of the same categories
@@ -24,7 +25,9 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from core.study import NATURAL as NAT  # noqa: E402
 from generation import skeleton  # noqa: E402
+from generation.dataset import read_arrays, require  # noqa: E402
 from generation.features import to_world  # noqa: E402
 from generation.metrics import control_following, foot_skating, jerk  # noqa: E402
 from generation.motion_encoder import MotionEncoder  # noqa: E402
@@ -63,9 +66,10 @@ def main():
     ap.add_argument("--encoder", default=str(MOTION_ENCODER), help="motion encoder for the FMD")
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
-    with np.load(a.data) as d:
-        x_nat, c, labels, fps = d["test_x"], d["test_c"], d["test_labels"], float(d["fps"])
-    systems = {"NAT": x_nat}
+    d = read_arrays(a.data, ["test_x", "test_c", "test_labels", "fps"])
+    require(d, ["test_x", "test_c", "test_labels", "fps"], a.data)
+    x_nat, c, labels, fps = d["test_x"], d["test_c"], d["test_labels"], float(d["fps"])
+    systems = {NAT: x_nat}
     for spec in a.model:
         name, _, ckpt = spec.partition("=")
         x, _ = sample_split(load_model(ckpt), a.data, "test", temperature=a.temperature, seed=a.seed)
@@ -89,7 +93,7 @@ def main():
         idx = [i for i in range(len(c)) if cat == "all" or labels[i] == cat]
         med = lambda name, key: statistics.median(figures[name][i][key] for i in idx)  # noqa: E731
         ratio = lambda name: statistics.median(  # noqa: E731
-            figures[name][i]["stepping"] / max(figures["NAT"][i]["stepping"], 1e-6) for i in idx
+            figures[name][i]["stepping"] / max(figures[NAT][i]["stepping"], 1e-6) for i in idx
         )
         row = (
             [cat, str(len(idx))]
@@ -106,13 +110,14 @@ def main():
     overall = lambda name, key: statistics.median(f[key] for f in figures[name])  # noqa: E731
     print("\nall windows: FMD to training motion of the same categories, and medians as ratios to NAT's")
     print(
-        "| system | FMD | FMD / NAT | skating / NAT | jerk / NAT | following (m) | late stepping / NAT, worst category |"
+        "| system | FMD | FMD / NAT | skating / NAT | jerk / NAT | following (m) "
+        "| late stepping / NAT, worst category |"
     )
     print("|---|---|---|---|---|---|---|")
     for name in names:
         worst = min(
             statistics.median(
-                figures[name][i]["stepping"] / max(figures["NAT"][i]["stepping"], 1e-6)
+                figures[name][i]["stepping"] / max(figures[NAT][i]["stepping"], 1e-6)
                 for i in range(len(c))
                 if labels[i] == cat
             )

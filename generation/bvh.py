@@ -1,4 +1,4 @@
-"""BVH motion-capture files: a reader for any hierarchy and vectorised forward kinematics.
+"""BVH motion-capture files: a reader for any hierarchy, and forward kinematics.
 
 Reads `.bvh` and `.bvh.gz`; any number of joints, 3 or 6 (or any subset of the six) channels per joint,
 any rotation order per joint, End Sites, tabs and CRLF line ends. The MOTION block is parsed in one
@@ -8,6 +8,8 @@ line by line to name the offending line. Errors are `BvhError("FILE:LINE: messag
 Conventions (the usual BVH ones): rotation channels are intrinsic rotations applied in the listed
 order, so `Zrotation Xrotation Yrotation` gives R = Rz @ Rx @ Ry, angles in degrees; a joint's
 position channels give its local translation and replace its OFFSET (CONTRACTS.md §1).
+The product turns channels into rotations as quaternions (resample.local_quaternions, which resamples them);
+tests/reference/bvh_fk.py does it with matrices, the plain way, as the reference.
 """
 
 import gzip
@@ -22,7 +24,7 @@ from core.cli import UserError
 from core.clip import MAX_FPS, MIN_FPS
 
 CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
-_AXIS = {"X": 0, "Y": 1, "Z": 2}
+AXIS = {"X": 0, "Y": 1, "Z": 2}  # a channel name's first letter -> coordinate axis
 # Beyond any real channel value (1e9 cm is 10,000 km); larger ones overflow forward kinematics.
 MAX_VALUE = 1e9
 
@@ -92,104 +94,147 @@ def read_bvh(path):
     # Only the header is split into lines; the MOTION block stays one buffer for the numeric parse.
     m = _MOTION.search(raw)
     if m is None:
-        lines = raw.decode("utf-8", errors="replace").split("\n")
-        last = len(lines) - (1 if lines[-1].strip() == "" else 0)
-        if not "".join(lines).strip():
-            raise BvhError(f"{name}:1: empty file")
-        if lines[0].split()[:1] != ["HIERARCHY"]:
-            raise BvhError(f"{name}:1: expected 'HIERARCHY' at the start of the file")
-        raise BvhError(f"{name}:{last}: no MOTION section (file truncated?)")
+        _no_motion(raw, name)
     lines = raw[: m.start()].decode("utf-8", errors="replace").split("\n")
     motion_line = len(lines) - 1  # 0-based index of the MOTION line
+    h = _Hierarchy(lines[:motion_line], motion_line, name)
+    n_channels = sum(len(c) for c in h.channels)
+    cursor, line_no, n_frames, frames_line, dt = _motion_header(raw, m.end(), motion_line + 1, name)
+    block = raw[cursor + 1 :] if cursor >= 0 else b""
+    motion = _parse_motion(block, line_no + 1, n_frames, n_channels, frames_line, name)
+    return Bvh(
+        names=h.names,
+        parents=np.array(h.parents, dtype=np.int64),
+        offsets=np.array(h.offsets),
+        channels=h.channels,
+        motion=motion,
+        frame_time=dt,
+        end_sites=h.end_sites,
+        path=name,
+    )
 
-    # Header: a token stream with line numbers, so layout (braces on their own line or not) is free.
-    tokens = []
-    for i, line in enumerate(lines[:motion_line]):
-        tokens.extend((t, i + 1) for t in line.split())
-    if not tokens or tokens[0][0] != "HIERARCHY":
-        raise BvhError(f"{name}:{tokens[0][1] if tokens else 1}: expected 'HIERARCHY' at the start of the file")
 
-    names, parents, offsets, channels, end_sites = [], [], [], [], []
-    stack = []  # indices of open joints; None for an open End Site
-    pos = 1
-    n_tok = len(tokens)
+def _no_motion(raw, name):
+    """The error for a file without a MOTION line: empty, not BVH at all, or truncated."""
+    lines = raw.decode("utf-8", errors="replace").split("\n")
+    last = len(lines) - (1 if lines[-1].strip() == "" else 0)
+    if not "".join(lines).strip():
+        raise BvhError(f"{name}:1: empty file")
+    if lines[0].split()[:1] != ["HIERARCHY"]:
+        raise BvhError(f"{name}:1: expected 'HIERARCHY' at the start of the file")
+    raise BvhError(f"{name}:{last}: no MOTION section (file truncated?)")
 
-    def take(what):
-        nonlocal pos
-        if pos >= n_tok:
-            raise BvhError(f"{name}:{motion_line + 1}: hierarchy ends early, expected {what}")
-        tok = tokens[pos]
-        pos += 1
-        return tok
 
-    while pos < n_tok:
-        tok, ln = take("a joint")
-        where = f"{name}:{ln}"
-        if tok in ("ROOT", "JOINT"):
-            if tok == "ROOT" and stack:
-                raise BvhError(f"{where}: ROOT inside another joint")
-            if tok == "JOINT" and (not stack or stack[-1] is None):
-                raise BvhError(f"{where}: JOINT outside a joint")
-            jname, _ = take("a joint name")
-            brace, bl = take("'{'")
-            if brace != "{":
-                raise BvhError(f"{name}:{bl}: expected '{{' after {tok} {jname}, got {brace!r}")
-            parents.append(stack[-1] if stack else -1)
-            names.append(jname)
-            offsets.append(None)
-            channels.append([])
-            stack.append(len(names) - 1)
-        elif tok == "End":
-            site, sl = take("'Site'")
-            if site != "Site" or not stack or stack[-1] is None:
-                raise BvhError(f"{name}:{sl}: misplaced End Site")
-            brace, bl = take("'{'")
-            if brace != "{":
-                raise BvhError(f"{name}:{bl}: expected '{{' after End Site, got {brace!r}")
-            end_sites.append([stack[-1], None])
-            stack.append(None)
-        elif tok == "OFFSET":
-            if not stack:
-                raise BvhError(f"{where}: OFFSET outside a joint")
-            vals = np.array([_number(take("three OFFSET values")[0], where) for _ in range(3)])
-            if stack[-1] is None:
-                end_sites[-1][1] = vals
-            else:
-                offsets[stack[-1]] = vals
-        elif tok == "CHANNELS":
-            if not stack or stack[-1] is None:
-                raise BvhError(f"{where}: CHANNELS outside a joint")
-            n_str, _ = take("a channel count")
-            if not n_str.isdigit():
-                raise BvhError(f"{where}: channel count must be an integer, got {n_str!r}")
-            chans = []
-            for _ in range(int(n_str)):
-                ch, cl = take("a channel name")
-                if ch not in CHANNEL_NAMES:
-                    raise BvhError(
-                        f"{name}:{cl}: unknown channel name {ch!r} (expected one of {', '.join(CHANNEL_NAMES)})"
-                    )
-                chans.append(ch)
-            channels[stack[-1]] = chans
-        elif tok == "}":
-            if not stack:
-                raise BvhError(f"{where}: unmatched '}}'")
-            stack.pop()
+class _Hierarchy:
+    """The HIERARCHY section parsed from its lines: names, parents, offsets, channels and end sites.
+
+    The header is read as a token stream with line numbers, so layout (braces on their own line or not) is
+    free; each keyword has its own method.
+    """
+
+    def __init__(self, lines, motion_line, name):
+        self.name, self.motion_line = name, motion_line
+        self.tokens = [(t, i + 1) for i, line in enumerate(lines) for t in line.split()]
+        if not self.tokens or self.tokens[0][0] != "HIERARCHY":
+            at = self.tokens[0][1] if self.tokens else 1
+            raise BvhError(f"{name}:{at}: expected 'HIERARCHY' at the start of the file")
+        self.names, self.parents, self.offsets, self.channels, self.end_sites = [], [], [], [], []
+        self.stack = []  # indices of open joints; None for an open End Site
+        self.pos = 1
+        keywords = {
+            "ROOT": self._joint,
+            "JOINT": self._joint,
+            "End": self._end_site,
+            "OFFSET": self._offset,
+            "CHANNELS": self._channels,
+            "}": self._close,
+        }
+        while self.pos < len(self.tokens):
+            tok, ln = self._take("a joint")
+            where = f"{name}:{ln}"
+            if tok not in keywords:
+                raise BvhError(f"{where}: unexpected {tok!r} in HIERARCHY")
+            keywords[tok](tok, where)
+        self._check_complete()
+
+    def _take(self, what):
+        if self.pos >= len(self.tokens):
+            raise BvhError(f"{self.name}:{self.motion_line + 1}: hierarchy ends early, expected {what}")
+        self.pos += 1
+        return self.tokens[self.pos - 1]
+
+    def _open_brace(self, after):
+        brace, bl = self._take("'{'")
+        if brace != "{":
+            raise BvhError(f"{self.name}:{bl}: expected '{{' after {after}, got {brace!r}")
+
+    def _joint(self, tok, where):
+        if tok == "ROOT" and self.stack:
+            raise BvhError(f"{where}: ROOT inside another joint")
+        if tok == "JOINT" and (not self.stack or self.stack[-1] is None):
+            raise BvhError(f"{where}: JOINT outside a joint")
+        jname, _ = self._take("a joint name")
+        self._open_brace(f"{tok} {jname}")
+        self.parents.append(self.stack[-1] if self.stack else -1)
+        self.names.append(jname)
+        self.offsets.append(None)
+        self.channels.append([])
+        self.stack.append(len(self.names) - 1)
+
+    def _end_site(self, tok, where):
+        site, sl = self._take("'Site'")
+        if site != "Site" or not self.stack or self.stack[-1] is None:
+            raise BvhError(f"{self.name}:{sl}: misplaced End Site")
+        self._open_brace("End Site")
+        self.end_sites.append([self.stack[-1], None])
+        self.stack.append(None)
+
+    def _offset(self, tok, where):
+        if not self.stack:
+            raise BvhError(f"{where}: OFFSET outside a joint")
+        vals = np.array([_number(self._take("three OFFSET values")[0], where) for _ in range(3)])
+        if self.stack[-1] is None:
+            self.end_sites[-1][1] = vals
         else:
-            raise BvhError(f"{where}: unexpected {tok!r} in HIERARCHY")
-    if stack:
-        raise BvhError(f"{name}:{motion_line + 1}: hierarchy not closed ({len(stack)} '{{' left open)")
-    if not names:
-        raise BvhError(f"{name}:{motion_line + 1}: hierarchy has no joints")
-    for j, off in enumerate(offsets):
-        if off is None:
-            raise BvhError(f"{name}: joint {names[j]!r} has no OFFSET")
-    end_sites = [(p, off if off is not None else np.zeros(3)) for p, off in end_sites]
+            self.offsets[self.stack[-1]] = vals
 
-    # MOTION header lines: "Frames: N" and "Frame Time: dt".
-    n_channels = sum(len(c) for c in channels)
-    cursor = raw.find(b"\n", m.end())
-    line_no = motion_line + 1  # 1-based number of the line `cursor` ends
+    def _channels(self, tok, where):
+        if not self.stack or self.stack[-1] is None:
+            raise BvhError(f"{where}: CHANNELS outside a joint")
+        n_str, _ = self._take("a channel count")
+        if not n_str.isdigit():
+            raise BvhError(f"{where}: channel count must be an integer, got {n_str!r}")
+        chans = []
+        for _ in range(int(n_str)):
+            ch, cl = self._take("a channel name")
+            if ch not in CHANNEL_NAMES:
+                raise BvhError(
+                    f"{self.name}:{cl}: unknown channel name {ch!r} (expected one of {', '.join(CHANNEL_NAMES)})"
+                )
+            chans.append(ch)
+        self.channels[self.stack[-1]] = chans
+
+    def _close(self, tok, where):
+        if not self.stack:
+            raise BvhError(f"{where}: unmatched '}}'")
+        self.stack.pop()
+
+    def _check_complete(self):
+        at = f"{self.name}:{self.motion_line + 1}"
+        if self.stack:
+            raise BvhError(f"{at}: hierarchy not closed ({len(self.stack)} '{{' left open)")
+        if not self.names:
+            raise BvhError(f"{at}: hierarchy has no joints")
+        for j, off in enumerate(self.offsets):
+            if off is None:
+                raise BvhError(f"{self.name}: joint {self.names[j]!r} has no OFFSET")
+        self.end_sites = [(p, off if off is not None else np.zeros(3)) for p, off in self.end_sites]
+
+
+def _motion_header(raw, start, line_no, name):
+    """The "Frames: N" and "Frame Time: dt" lines after the MOTION keyword (ending at byte `start`, line
+    `line_no`) -> (cursor: the newline before the first frame, or -1; its line number; N; the Frames line; dt)."""
+    cursor = raw.find(b"\n", start)
     header = {}
     while len(header) < 2:
         if cursor < 0:
@@ -201,36 +246,29 @@ def read_bvh(path):
         text = raw[cursor + 1 : end if end >= 0 else len(raw)].decode("utf-8", errors="replace")
         cursor, line_no = end, line_no + 1
         parts = text.split()
-        if not parts:
-            continue
-        if parts[0] == "Frames:" and len(parts) == 2 and "frames" not in header:
-            if not parts[1].isdigit():
-                raise BvhError(f"{name}:{line_no}: Frames must be a non-negative integer, got {parts[1]!r}")
-            header["frames"] = (int(parts[1]), line_no)
-        elif parts[:2] == ["Frame", "Time:"] and len(parts) == 3 and "frames" in header:
-            dt = _number(parts[2], f"{name}:{line_no}")
-            if not 1 / MAX_FPS <= dt <= 1 / MIN_FPS:  # also false for nan and inf
-                raise BvhError(
-                    f"{name}:{line_no}: Frame Time must be between {1 / MAX_FPS:g} and "
-                    f"{1 / MIN_FPS:g} s ({MIN_FPS:g}-{MAX_FPS:g} fps), got {parts[2]!r}"
-                )
-            header["dt"] = dt
-        else:
-            want = "'Frames: N'" if "frames" not in header else "'Frame Time: SECONDS'"
-            raise BvhError(f"{name}:{line_no}: expected {want}, got {text.strip()[:60]!r}")
+        if parts:
+            _motion_header_line(parts, text, header, f"{name}:{line_no}", line_no)
     n_frames, frames_line = header["frames"]
-    block = raw[cursor + 1 :] if cursor >= 0 else b""
-    motion = _parse_motion(block, line_no + 1, n_frames, n_channels, frames_line, name)
-    return Bvh(
-        names=names,
-        parents=np.array(parents, dtype=np.int64),
-        offsets=np.array(offsets),
-        channels=channels,
-        motion=motion,
-        frame_time=header["dt"],
-        end_sites=end_sites,
-        path=name,
-    )
+    return cursor, line_no, n_frames, frames_line, header["dt"]
+
+
+def _motion_header_line(parts, text, header, where, line_no):
+    """One non-blank MOTION header line into `header` ("frames": (N, line), then "dt")."""
+    if parts[0] == "Frames:" and len(parts) == 2 and "frames" not in header:
+        if not parts[1].isdigit():
+            raise BvhError(f"{where}: Frames must be a non-negative integer, got {parts[1]!r}")
+        header["frames"] = (int(parts[1]), line_no)
+    elif parts[:2] == ["Frame", "Time:"] and len(parts) == 3 and "frames" in header:
+        dt = _number(parts[2], where)
+        if not 1 / MAX_FPS <= dt <= 1 / MIN_FPS:  # also false for nan and inf
+            raise BvhError(
+                f"{where}: Frame Time must be between {1 / MAX_FPS:g} and "
+                f"{1 / MIN_FPS:g} s ({MIN_FPS:g}-{MAX_FPS:g} fps), got {parts[2]!r}"
+            )
+        header["dt"] = dt
+    else:
+        want = "'Frames: N'" if "frames" not in header else "'Frame Time: SECONDS'"
+        raise BvhError(f"{where}: expected {want}, got {text.strip()[:60]!r}")
 
 
 def _parse_motion(block, first, n_frames, n_channels, frames_line, name):
@@ -293,43 +331,6 @@ def _find_bad_number(lines, first, name):
                 raise BvhError(f"{name}:{first + k}: non-numeric value {tok[:40]!r}") from None
 
 
-def _axis_rotations(axis, degrees):
-    """Rotation matrices [T, 3, 3] about one coordinate axis (0=X, 1=Y, 2=Z)."""
-    a = np.radians(degrees)
-    c, s = np.cos(a), np.sin(a)
-    R = np.zeros(a.shape + (3, 3))
-    i, j = [(1, 2), (2, 0), (0, 1)][axis]
-    R[..., axis, axis] = 1.0
-    R[..., i, i] = c
-    R[..., j, j] = c
-    R[..., i, j] = -s
-    R[..., j, i] = s
-    return R
-
-
-def local_transforms(bvh, frames=None):
-    """Local rotation matrices [T, J, 3, 3] and translations [T, J, 3] of every joint.
-
-    `frames` optionally selects frames (index or slice) before any work is done.
-    """
-    motion = bvh.motion if frames is None else bvh.motion[frames]
-    T, J = motion.shape[0], len(bvh.names)
-    rot = np.broadcast_to(np.eye(3), (T, J, 3, 3)).copy()
-    trans = np.broadcast_to(bvh.offsets, (T, J, 3)).copy()
-    for j, (chans, col) in enumerate(zip(bvh.channels, bvh.channel_columns())):
-        R = None
-        for k, ch in enumerate(chans):
-            axis = _AXIS[ch[0]]
-            if ch.endswith("position"):
-                trans[:, j, axis] = motion[:, col + k]
-            else:
-                Ra = _axis_rotations(axis, motion[:, col + k])
-                R = Ra if R is None else R @ Ra
-        if R is not None:
-            rot[:, j] = R
-    return rot, trans
-
-
 def forward_kinematics(parents, rot, trans):
     """Global positions [T, J, 3] and rotations [T, J, 3, 3] from local ones (parents before children)."""
     T, J = trans.shape[:2]
@@ -343,13 +344,3 @@ def forward_kinematics(parents, rot, trans):
             g_pos[:, j] = g_pos[:, p] + np.einsum("tab,tb->ta", g_rot[:, p], trans[:, j])
             g_rot[:, j] = g_rot[:, p] @ rot[:, j]
     return g_pos, g_rot
-
-
-def fk_positions(bvh, end_sites=False):
-    """World positions [T, J, 3] of every joint in file units (End Sites appended when asked)."""
-    rot, trans = local_transforms(bvh)
-    pos, g_rot = forward_kinematics(bvh.parents, rot, trans)
-    if end_sites and bvh.end_sites:
-        ends = [pos[:, p] + g_rot[:, p] @ off for p, off in bvh.end_sites]
-        pos = np.concatenate([pos, np.stack(ends, axis=1)], axis=1)
-    return pos

@@ -10,10 +10,25 @@ A thread count changes the float rounding of the products, so an adaptive run is
 the machine's load is; `--threads N` fixes it (the shipped models were trained with --threads 1).
 """
 
+import contextlib
 import os
 import time
 
 import torch
+
+
+@contextlib.contextmanager
+def torch_threads(threads):
+    """torch's CPU thread count set to `threads` (None: left as it is) inside the block, and whatever it was
+    (CoreShare may change it too) restored on leaving: library code never leaves process-wide state changed."""
+    before = torch.get_num_threads()
+    if threads is not None:
+        torch.set_num_threads(int(threads))
+    try:
+        yield
+    finally:
+        if torch.get_num_threads() != before:
+            torch.set_num_threads(before)
 
 
 def _busy_seconds():

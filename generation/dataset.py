@@ -1,18 +1,71 @@
-"""The prepared dataset (CONTRACTS.md §2) as standardised tensors, and random training batches."""
+"""The prepared dataset (CONTRACTS.md §2): the one reader of its .npz, its standardised tensors for training,
+and random training batches.
 
+Every reader of a dataset (training, sampling, the stimulus pipeline, the shipped held-out set, the benches)
+goes through `read_arrays`, so a broken or foreign file fails the same way everywhere: one DatasetError line
+naming the file and the key.
+
+torch is imported inside the two functions that make tensors, not at module level: make_stimuli reads the
+held-out windows through this module, and `import generation.make_stimuli` must stay torch-free (its --help,
+--export-items and item checks run before any model is needed; tests/test_stimuli.py guards it).
+"""
+
+from __future__ import annotations
+
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
 from core.cli import UserError
 
+if TYPE_CHECKING:
+    import torch
+
 REQUIRED = ("train_x", "train_c", "valid_x", "valid_c", "x_mean", "x_std", "c_mean", "c_std", "fps", "window")
+HELD_OUT = ("valid", "test")
+# What each held-out window carries: the window, its control, category, take, first frame, and the tau real
+# frames (and their control) before it, which MG is seeded with.
+WINDOW_KEYS = ("x", "c", "labels", "take", "start", "hist", "hist_c")
 
 
 class DatasetError(UserError):
     """A prepared dataset that cannot be used; the message names the file and the key."""
+
+
+def read_arrays(path, keys=None):
+    """{key: numpy array} of a prepared dataset .npz: the `keys` it has (every key when None), reading no other
+    array (the training split is most of the file). Callers check for the keys they need with `require`."""
+    path = Path(path)
+    try:
+        f = np.load(path, allow_pickle=False)
+        if not isinstance(f, np.lib.npyio.NpzFile):
+            raise ValueError("a single .npy array, not an .npz")
+        with f:
+            return {k: f[k] for k in (f.files if keys is None else keys) if k in f.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+        raise DatasetError(f"{path}: not a readable prepared dataset .npz ({e})") from None
+
+
+def require(arrays, keys, path, why="see CONTRACTS.md §2"):
+    """DatasetError naming the first of `keys` missing from `arrays` (as read_arrays gives them)."""
+    for key in keys:
+        if key not in arrays:
+            raise DatasetError(f"{path}: missing key '{key}' ({why})")
+
+
+def read_heldout(path):
+    """The held-out windows of a prepared dataset, or of the shipped heldout.npz: ({split: {key: array}} for the
+    splits that have every WINDOW_KEYS key, fps, window length). DatasetError without a test split."""
+    wanted = [f"{s}_{k}" for s in HELD_OUT for k in WINDOW_KEYS] + ["fps", "window"]
+    d = read_arrays(path, wanted)
+    require(d, ("fps", "window"), path)
+    splits = {s: {k: d[f"{s}_{k}"] for k in WINDOW_KEYS} for s in HELD_OUT if all(f"{s}_{k}" in d for k in WINDOW_KEYS)}
+    if "test" not in splits:
+        raise DatasetError(f"{path}: no test split with history (test_x, test_hist, ...); re-run prepare_data")
+    return splits, float(d["fps"]), int(d["window"])
 
 
 @dataclass
@@ -39,14 +92,8 @@ class Dataset:
 def load_dataset(path):
     """Read a prepared .npz; returns a Dataset with standardised train/valid(/test) splits."""
     path = Path(path)
-    try:
-        with np.load(path, allow_pickle=False) as f:
-            d = {k: f[k] for k in f.files}
-    except (OSError, ValueError) as e:
-        raise DatasetError(f"{path}: not a readable prepared dataset .npz ({e})") from None
-    for key in REQUIRED:
-        if key not in d:
-            raise DatasetError(f"{path}: missing key '{key}' (see CONTRACTS.md §2)")
+    d = read_arrays(path)
+    require(d, REQUIRED, path)
     stats = {k: d[k].astype(np.float32) for k in ("x_mean", "x_std", "c_mean", "c_std")}
     if np.any(stats["x_std"] <= 0) or np.any(stats["c_std"] <= 0):
         raise DatasetError(f"{path}: 'x_std'/'c_std' must be positive")
@@ -76,12 +123,16 @@ def load_dataset(path):
 
 
 def standardize(a, mean, std):
+    import torch  # (see the module docstring)
+
     return torch.from_numpy(((np.asarray(a, np.float32) - mean) / std).astype(np.float32))
 
 
 def batch_indices(n, batch_size, seed, step):
     """Indices of training batch `step`: a function of (seed, step) only, so a resumed run sees the same
     batches as an uninterrupted one."""
+    import torch  # (see the module docstring)
+
     rng = np.random.default_rng([seed, step])
     return torch.from_numpy(rng.choice(n, size=batch_size, replace=n < batch_size))
 

@@ -141,8 +141,9 @@ def _np(a, dtype=None):
     return np.asarray(a, dtype=dtype)
 
 
-def _rotate_y(v, yaw):
-    """Rotate vectors v [..., 3] (or [..., 2] as (x, z)) about +Y by yaw [...]."""
+def rotate_y(v, yaw):
+    """Rotate vectors v [..., 3] (or [..., 2] as (x, z)) about +Y by yaw [...]: the one yaw rotation of the
+    project (features, their inverse, time reversal and systems.canonical_placement all use it)."""
     c, s = np.cos(yaw), np.sin(yaw)
     if v.shape[-1] == 2:
         return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]], -1)
@@ -159,10 +160,10 @@ def to_features(joints, fps=20.0):
     rel = joints.copy()
     rel[..., 0] -= root[:, None, 0]
     rel[..., 2] -= root[:, None, 1]
-    x = _rotate_y(rel, -yaw[:, None]).reshape(T, skeleton.POSE_DIM)
+    x = rotate_y(rel, -yaw[:, None]).reshape(T, skeleton.POSE_DIM)
     c = np.zeros((T, skeleton.CONTROL_DIM))
     if T > 1:
-        step = _rotate_y(np.diff(root, axis=0), -yaw[:-1])  # (sideways, forward) in frame t-1
+        step = rotate_y(np.diff(root, axis=0), -yaw[:-1])  # (sideways, forward) in frame t-1
         c[1:, 0] = step[:, 1]
         c[1:, 1] = step[:, 0]
         c[1:, 2] = np.diff(yaw)
@@ -182,11 +183,11 @@ def to_world(x, c, start_xz=(0.0, 0.0), start_yaw=0.0):
     yaw = _np(start_yaw, np.float64)[..., None] + np.concatenate(
         [np.zeros(c.shape[:-1][:-1] + (1,)), np.cumsum(c[..., 1:, 2], axis=-1)], axis=-1
     )
-    step = _rotate_y(np.stack([c[..., 1:, 1], c[..., 1:, 0]], -1), yaw[..., :-1])  # world (x, z)
+    step = rotate_y(np.stack([c[..., 1:, 1], c[..., 1:, 0]], -1), yaw[..., :-1])  # world (x, z)
     start = _np(start_xz, np.float64)
     root = np.concatenate([np.zeros(step.shape[:-2] + (1, 2)), np.cumsum(step, axis=-2)], axis=-2) + start[..., None, :]
     local = x.reshape(x.shape[:-1] + (skeleton.N_JOINTS, 3))
-    world = _rotate_y(local, yaw[..., None])
+    world = rotate_y(local, yaw[..., None])
     world[..., 0] += root[..., None, 0]
     world[..., 2] += root[..., None, 1]
     return world.astype(np.float32)
@@ -206,12 +207,9 @@ def mirror(x, c):
 def _reverse_step(c):
     """Control of the reversed step: the same root move backwards, seen from the frame it arrives at."""
     d = -c[..., 2]
-    cos, sin = np.cos(d), np.sin(d)
-    side, fwd = c[..., 1], c[..., 0]
     # -R(-yaw_step) applied to (side, fwd) as an (x, z) vector
-    new_side = -(cos * side + sin * fwd)
-    new_fwd = -(-sin * side + cos * fwd)
-    return np.stack([new_fwd, new_side, d], axis=-1)
+    back = rotate_y(np.stack([c[..., 1], c[..., 0]], axis=-1), d)
+    return np.stack([-back[..., 1], -back[..., 0], d], axis=-1)
 
 
 def reverse(x, c):

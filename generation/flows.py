@@ -110,9 +110,20 @@ class InvertibleLinearLU(nn.Module):
         return x, -self.log_s.sum().expand(y.shape[0]) * y.shape[2]
 
 
+# The coupling's scale is sigmoid(raw + SCALE_OFFSET): with the zero-initialised last layer every coupling starts
+# at scale sigmoid(2) ~ 0.88, near the identity but contracting a little (Glow's choice). MGStream folds the offset
+# into its fused output bias, so this is the one place it is defined.
+SCALE_OFFSET = 2.0
+
+
+def coupling_scale(raw):
+    """The affine coupling's scale from the network's raw scale output: sigmoid(raw + SCALE_OFFSET) > 0."""
+    return torch.sigmoid(raw + SCALE_OFFSET)
+
+
 class AffineCoupling(nn.Module):
     """Affine coupling (Glow §3.3): the first half x_a passes unchanged; the second half becomes
-    y_b = (x_b + shift) * scale with (shift, raw) = net(x_a, cond) and scale = sigmoid(raw + 2) > 0.
+    y_b = (x_b + shift) * scale with (shift, raw) = net(x_a, cond) and scale = coupling_scale(raw) > 0.
 
     `net(x_a [B, Ca, T], cond [B, Cc, T]) -> [B, 2 * Cb, T]` must end in a zero-initialised layer, so that
     the coupling starts near the identity (scale = sigmoid(2) everywhere, shift = 0)."""
@@ -125,7 +136,7 @@ class AffineCoupling(nn.Module):
     def _shift_scale(self, x_a, cond):
         h = self.net(x_a, cond)
         shift, raw = h[:, 0::2], h[:, 1::2]
-        return shift, torch.sigmoid(raw + 2.0)
+        return shift, coupling_scale(raw)
 
     def forward(self, x, cond=None):
         x_a, x_b = x[:, : self.c_a], x[:, self.c_a :]

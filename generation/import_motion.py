@@ -8,6 +8,7 @@ keep their lengths). When the skeleton is one the project knows (Bandai-Namco, C
 also gets the root `control` of its 21-joint body (features.to_features), in the clip's units.
 """
 
+import logging
 import sys
 
 import numpy as np
@@ -18,6 +19,8 @@ from core.clip import MAX_FPS, MIN_FPS, clip_path, save_clip
 from .bvh import BvhError, read_bvh
 from .features import bvh_world_positions, detect_skeleton, map_joints, to_features
 from .resample import clean_fps
+
+log = logging.getLogger(__name__)
 
 
 def import_motion(in_path, out_path, scale=0.01, fps=None):
@@ -32,7 +35,7 @@ def import_motion(in_path, out_path, scale=0.01, fps=None):
     try:
         key = detect_skeleton(bvh.names, f"{in_path}:1")
     except BvhError as e:  # any skeleton imports; only the control needs a known one
-        print(f"note: no control written: {e}", file=sys.stderr)
+        log.warning(f"note: no control written: {e}")
         key = None
     if key is not None and len(joints) > 1:
         # control in the clip's own units (so it integrates back onto its joints whatever --scale is)
@@ -58,6 +61,7 @@ def _main(argv):
         help="resample to this frame rate (default: keep the file's)",
     )
     args = ap.parse_args(argv)
+    logging.basicConfig(format="%(message)s", stream=sys.stderr)
     joints = import_motion(args.input, clip_path(args.output), args.scale, args.fps)
     print(f"{args.output}: {joints.shape[0]} frames, {joints.shape[1]} joints")
 

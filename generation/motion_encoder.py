@@ -29,7 +29,7 @@ from tqdm import tqdm
 
 from core import cli
 
-from .dataset import batch_indices, load_dataset
+from .dataset import batch_indices, load_dataset, read_arrays, require
 
 CHUNK, STRIDE = 34, 8  # frames per chunk (GENEA's FGD uses 34) and between chunk starts within a window
 FEATURES = 32
@@ -150,8 +150,9 @@ def train_encoder(data_path, steps=3000, batch_size=128, lr=1e-3, seed=0, progre
         opt.step()
     net.eval()
     feats = encode_windows(net, windows.numpy())
-    with np.load(data_path) as d:
-        labels = np.repeat(d["train_labels"].astype(str), len(feats) // n)  # chunks come window by window
+    d = read_arrays(data_path, ["train_labels"])
+    require(d, ["train_labels"], data_path)
+    labels = np.repeat(d["train_labels"].astype(str), len(feats) // n)  # chunks come window by window
     return dict(
         state=net.state_dict(),
         x_mean=ds.stats["x_mean"],

@@ -155,52 +155,95 @@ def prepare(
 
     `takes`: optional subset, as paths or take names (with or without extension) under `data_dir`.
     """
-    from tqdm import tqdm
-
-    files = find_takes(data_dir)
-    if takes is not None:
-        wanted = {take_name(t) for t in takes}
-        files = [f for f in files if take_name(f) in wanted]
-        missing = wanted - {take_name(f) for f in files}
-        if missing:
-            raise PrepareError(f"{data_dir}: takes not found: {', '.join(sorted(missing)[:5])}")
+    files = _select_files(data_dir, takes)
     if window < 2 or stride < 1 or tau < 0:
         raise PrepareError(f"window must be >= 2, stride >= 1, tau >= 0 (got {window}, {stride}, {tau})")
-
-    workers = workers or min(len(files), os.cpu_count() or 1)
-    jobs = [(str(f), float(fps)) for f in files]
-    bar = tqdm(total=len(jobs), desc="takes", unit="take", disable=not progress, file=sys.stderr)
-    feats = []
-    if workers <= 1:
-        for job in jobs:
-            feats.append(_load_features(job))
-            bar.update()
-    else:
-        with ProcessPoolExecutor(workers) as pool:
-            for res in pool.map(_load_features, jobs, chunksize=max(1, len(jobs) // (8 * workers))):
-                feats.append(res)
-                bar.update()
-    bar.close()
-
+    feats = _load_all(files, fps, workers, progress)
     names = [take_name(f) for f in files]
     cats = [category_of(f) for f in files]
     lengths = [x.shape[0] for x, _ in feats]
     split = split_takes(cats, lengths, tau + window, held_out, seed)
+    arrays = _stack(_cut_windows(feats, split, cats, names, window, stride, tau), window, tau)
+    if len(arrays["train_x"]) == 0:
+        raise PrepareError(f"{data_dir}: no training windows (takes shorter than window={window} frames?)")
+    arrays.update(_standardisation(arrays))
+    arrays.update(
+        fps=np.float64(fps),
+        window=np.int64(window),
+        tau=np.int64(tau),
+        stride=np.int64(stride),
+        seed=np.int64(seed),
+        joint_names=np.array(skeleton.JOINT_NAMES, dtype=str),
+        parents=skeleton.PARENTS,
+        aug_names=np.array(AUG_NAMES, dtype=str),
+    )
+    out_path = Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out_path.with_name(out_path.name + ".tmp.npz")
+    np.savez(tmp, **arrays)  # uncompressed: mocap floats barely compress and saving stays fast
+    os.replace(tmp, out_path)
+    return dict(
+        out=str(out_path),
+        n_takes=len(files),
+        rows=_summary_rows(arrays, cats, split, lengths, fps),
+        n_windows={s: int(len(arrays[f"{s}_x"])) for s in SPLITS},
+    )
 
+
+def _select_files(data_dir, takes):
+    """The take files under `data_dir`, or only those named in `takes`."""
+    files = find_takes(data_dir)
+    if takes is None:
+        return files
+    wanted = {take_name(t) for t in takes}
+    files = [f for f in files if take_name(f) in wanted]
+    missing = wanted - {take_name(f) for f in files}
+    if missing:
+        raise PrepareError(f"{data_dir}: takes not found: {', '.join(sorted(missing)[:5])}")
+    return files
+
+
+def _load_all(files, fps, workers, progress):
+    """Features (x, c) of every take, on `workers` processes (default: one per core, at most one per take)."""
+    from tqdm import tqdm
+
+    workers = workers or min(len(files), os.cpu_count() or 1)
+    jobs = [(str(f), float(fps)) for f in files]
+    feats = []
+    with tqdm(total=len(jobs), desc="takes", unit="take", disable=not progress, file=sys.stderr) as bar:
+        if workers <= 1:
+            for job in jobs:
+                feats.append(_load_features(job))
+                bar.update()
+            return feats
+        with ProcessPoolExecutor(workers) as pool:
+            for res in pool.map(_load_features, jobs, chunksize=max(1, len(jobs) // (8 * workers))):
+                feats.append(res)
+                bar.update()
+    return feats
+
+
+def _variants(x, c, s):
+    """(x, c, augmentation index) of a take: as it is, plus, for training takes, mirrored, reversed and both."""
+    variants = [(x, c, 0)]
+    if s == "train":
+        xm, cm = mirror(x, c)
+        variants += [(xm, cm, 1), (*reverse(x, c), 2), (*reverse(xm, cm), 3)]
+    return variants
+
+
+def _cut_windows(feats, split, cats, names, window, stride, tau):
+    """{split: {key: list of per-take arrays or values}}: every take's windows, held-out ones with their history."""
     out = {s: {k: [] for k in ("x", "c", "labels", "take", "start", "aug", "hist", "hist_c")} for s in SPLITS}
     for i, (x, c) in enumerate(feats):
         s = SPLITS[split[i]]
-        variants = [(x, c, 0)]
-        if s == "train":
-            xm, cm = mirror(x, c)
-            variants += [(xm, cm, 1), (*reverse(x, c), 2), (*reverse(xm, cm), 3)]
-        first = 0 if s == "train" else tau
-        starts = window_starts(len(x), window, stride, first)
+        starts = window_starts(len(x), window, stride, 0 if s == "train" else tau)
         if len(starts) == 0:
             continue
         idx = starts[:, None] + np.arange(window)
-        for xv, cv, aug in variants:
-            d = out[s]
+        hidx = starts[:, None] - tau + np.arange(tau)
+        d = out[s]
+        for xv, cv, aug in _variants(x, c, s):
             d["x"].append(xv[idx])
             d["c"].append(cv[idx])
             d["labels"] += [cats[i]] * len(starts)
@@ -208,11 +251,13 @@ def prepare(
             d["start"].append(starts)
             d["aug"].append(np.full(len(starts), aug))
             if s != "train":
-                hidx = starts[:, None] - tau + np.arange(tau)
                 d["hist"].append(xv[hidx])
                 d["hist_c"].append(cv[hidx])
+    return out
 
-    # Shape and dtype of each stacked key when a split has no windows.
+
+def _stack(out, window, tau):
+    """The per-split lists of _cut_windows as the file's arrays ({split}_{key}); empty splits keep their shapes."""
     empty = dict(
         x=((0, window, skeleton.POSE_DIM), np.float32),
         c=((0, window, skeleton.CONTROL_DIM), np.float32),
@@ -230,37 +275,27 @@ def prepare(
             if s == "train" and key.startswith("hist"):
                 continue
             arrays[f"{s}_{key}"] = np.concatenate(d[key]) if d[key] else np.zeros(shape, dtype)
-    if len(arrays["train_x"]) == 0:
-        raise PrepareError(f"{data_dir}: no training windows (takes shorter than window={window} frames?)")
+    return arrays
 
-    # Standardisation from the training split only. Some dimensions are constant by construction
-    # (the hips' x and z in the root frame are 0), hence the floor on the standard deviation.
+
+def _standardisation(arrays):
+    """Mean and std of x and c from the training split only. Some dimensions are constant by construction
+    (the hips' x and z in the root frame are 0), hence the floor on the standard deviation."""
     x_mean, x_std = _mean_std(arrays["train_x"])
     c_mean, c_std = _mean_std(arrays["train_c"])
-    arrays.update(
+    return dict(
         x_mean=x_mean,
         x_std=np.maximum(x_std, 1e-3).astype(np.float32),
         c_mean=c_mean,
         c_std=np.maximum(c_std, 1e-3).astype(np.float32),
-        fps=np.float64(fps),
-        window=np.int64(window),
-        tau=np.int64(tau),
-        stride=np.int64(stride),
-        seed=np.int64(seed),
-        joint_names=np.array(skeleton.JOINT_NAMES, dtype=str),
-        parents=skeleton.PARENTS,
-        aug_names=np.array(AUG_NAMES, dtype=str),
     )
-    out_path = Path(out_path)
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out_path.with_name(out_path.name + ".tmp.npz")
-    np.savez(tmp, **arrays)  # uncompressed: mocap floats barely compress and saving stays fast
-    os.replace(tmp, out_path)
 
+
+def _summary_rows(arrays, cats, split, lengths, fps):
     rows = []
     for cat in sorted(set(cats)):
         for si, s in enumerate(SPLITS):
-            members = [i for i in range(len(files)) if cats[i] == cat and split[i] == si]
+            members = [i for i in range(len(cats)) if cats[i] == cat and split[i] == si]
             n_win = int(np.sum((arrays[f"{s}_labels"] == cat) & (arrays[f"{s}_aug"] == 0)))
             rows.append(
                 dict(
@@ -272,9 +307,7 @@ def prepare(
                     windows_augmented=int(np.sum(arrays[f"{s}_labels"] == cat)),
                 )
             )
-    return dict(
-        out=str(out_path), n_takes=len(files), rows=rows, n_windows={s: int(len(arrays[f"{s}_x"])) for s in SPLITS}
-    )
+    return rows
 
 
 def summary_table(summary):

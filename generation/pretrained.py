@@ -6,8 +6,9 @@ writes generation/pretrained/{mg,bad,fl}.pt (checkpoints of generation.train wit
 half the size, and no visible change in the sampled motion, which sample.load_model runs in float32) and
 heldout.npz: the valid and test windows with their tau real history frames, the standardisation and the
 skeleton, which is all make_stimuli reads of a prepared dataset, and quality.json, the models' foot skating
-and jerk against NAT's on part of the test split (`quality`), which the tests hold them to. The motion is from the Bandai-Namco-Research-
-Motiondataset (Bandai Namco Research Inc.), licensed CC BY-NC 4.0: non-commercial use only, with attribution.
+and jerk against NAT's on part of the test split (`quality`), which the tests hold them to. The motion is from
+the Bandai-Namco-Research-Motiondataset (Bandai Namco Research Inc.), licensed CC BY-NC 4.0: non-commercial use
+only, with attribution.
 """
 
 import json
@@ -16,7 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from core import cli
+from core import cli, study
+
+from .dataset import HELD_OUT, WINDOW_KEYS, read_arrays, require
 
 FOLDER = Path(__file__).resolve().parent / "pretrained"
 CHECKPOINTS = {"mg": FOLDER / "mg.pt", "fl": FOLDER / "fl.pt", "bad": FOLDER / "bad.pt"}
@@ -29,7 +32,6 @@ ATTRIBUTION = (
     "(https://creativecommons.org/licenses/by-nc/4.0/); windows of held-out takes, re-expressed as "
     "21-joint root-frame features"
 )
-HELDOUT_KEYS = ("x", "c", "labels", "take", "start", "hist", "hist_c")
 SHARED_KEYS = ("fps", "window", "joint_names", "parents", "x_mean", "x_std", "c_mean", "c_std", "tau")
 
 
@@ -50,9 +52,9 @@ def export_checkpoint(src, dst):
 
 def export_heldout(dataset, dst):
     """The held-out splits of a prepared dataset (no training windows), with the attribution."""
-    with np.load(dataset, allow_pickle=False) as d:
-        arrays = {f"{s}_{k}": d[f"{s}_{k}"] for s in ("valid", "test") for k in HELDOUT_KEYS}
-        arrays.update({k: d[k] for k in SHARED_KEYS if k in d.files})
+    keys = [f"{s}_{k}" for s in HELD_OUT for k in WINDOW_KEYS]
+    arrays = read_arrays(dataset, keys + list(SHARED_KEYS))
+    require(arrays, keys, dataset)
     np.savez_compressed(dst, **arrays, attribution=np.str_(ATTRIBUTION))
 
 
@@ -62,24 +64,24 @@ def quality(stride=QUALITY_STRIDE, seed=0):
     recomputed by the tests, which fail if the models fall back."""
     from .features import to_world
     from .metrics import foot_skating, jerk
-    from .sample import load_model, sample_fl, sample_mg
+    from .sample import load_model, sample_windows
 
-    with np.load(HELDOUT) as d:
-        x, c, hist, hist_c = (d[f"test_{k}"][::stride] for k in ("x", "c", "hist", "hist_c"))
-        fps = float(d["fps"])
+    d = read_arrays(HELDOUT, ["test_x", "test_c", "test_hist", "test_hist_c", "fps"])
+    x, c, hist, hist_c = (d[f"test_{k}"][::stride] for k in ("x", "c", "hist", "hist_c"))
+    fps = float(d["fps"])
     out = {}
-    samples = {
-        "NAT": x,
-        "MG": sample_mg(load_model(CHECKPOINTS["mg"], "cpu"), c, hist, hist_c, seed=seed),
-        "FL": sample_fl(load_model(CHECKPOINTS["fl"], "cpu"), c, seed=seed),
-    }
+    samples = {study.NATURAL: x}
+    for name in study.GENERATED:
+        model = load_model(CHECKPOINTS[name.lower()], "cpu")
+        samples[name] = sample_windows(model, c, hist, hist_c, seed=seed)
     for name, xs in samples.items():
         world = [to_world(xs[i], c[i]) for i in range(len(c))]
         out[name] = {
             "foot_skating": float(np.median([foot_skating(w, fps) for w in world])),
             "jerk": float(np.median([jerk(w, fps) for w in world])),
         }
-    return {name: {k: v / out["NAT"][k] for k, v in m.items()} for name, m in out.items() if name != "NAT"}
+    nat = out[study.NATURAL]
+    return {name: {k: v / nat[k] for k, v in m.items()} for name, m in out.items() if name != study.NATURAL}
 
 
 def _main(argv):

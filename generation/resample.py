@@ -9,7 +9,7 @@ Quaternions are (w, x, y, z) numpy arrays in the last axis.
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from .bvh import _AXIS
+from .bvh import AXIS
 
 
 def quat_mul(a, b):
@@ -44,7 +44,7 @@ def local_quaternions(bvh, frames=None):
     """Local rotations as quaternions [T, J, 4] and translations [T, J, 3] of a `bvh.Bvh`.
 
     Built straight from the Euler channels (product of one quaternion per rotation channel, in file
-    order, matching `bvh.local_transforms`), which is cheaper and exact compared with matrix -> quaternion.
+    order, matching tests/reference/bvh_fk.py), which is cheaper and exact compared with matrix -> quaternion.
     """
     motion = bvh.motion if frames is None else bvh.motion[frames]
     T, J = motion.shape[0], len(bvh.names)
@@ -60,7 +60,7 @@ def local_quaternions(bvh, frames=None):
         cols = np.array([col for _, col in members])
         qg = None
         for k, ch in enumerate(chans):
-            axis = _AXIS[ch[0]]
+            axis = AXIS[ch[0]]
             values = motion[:, cols + k]  # [T, G]
             if ch.endswith("position"):
                 trans[:, js, axis] = values
@@ -104,6 +104,15 @@ def resample_times(n_frames, fps_in, fps_out):
     return np.arange(n_out) * (fps_in / fps_out)
 
 
+def lerp_indices(n_frames, fps_in, fps_out):
+    """For each output frame, the input frames i0, i1 [n_out] it lies between and its weight w [n_out] on i1,
+    so that a linear resampling is a[i0] * (1 - w) + a[i1] * w (slerp for rotations)."""
+    u = resample_times(n_frames, fps_in, fps_out)
+    i0 = np.minimum(np.floor(u).astype(np.int64), n_frames - 1)
+    i1 = np.minimum(i0 + 1, n_frames - 1)
+    return i0, i1, u - i0
+
+
 def resample_local(q, trans, fps_in, fps_out):
     """Resample local rotations q [T, J, 4] and translations [T, J, 3] from fps_in to fps_out.
 
@@ -120,11 +129,9 @@ def resample_local(q, trans, fps_in, fps_out):
         q = gaussian_filter1d(q, sigma, axis=0, mode="nearest")
         q /= np.linalg.norm(q, axis=-1, keepdims=True)
         trans = gaussian_filter1d(trans, sigma, axis=0, mode="nearest")
-    u = resample_times(q.shape[0], fps_in, fps_out)
-    i0 = np.minimum(np.floor(u).astype(np.int64), q.shape[0] - 1)
-    i1 = np.minimum(i0 + 1, q.shape[0] - 1)
-    w = (u - i0)[:, None]
-    q_out = slerp(q[i0], q[i1], np.broadcast_to(w, (len(u),) + q.shape[1:-1]))
+    i0, i1, w = lerp_indices(q.shape[0], fps_in, fps_out)
+    w = w[:, None]
+    q_out = slerp(q[i0], q[i1], np.broadcast_to(w, (len(i0),) + q.shape[1:-1]))
     t_out = trans[i0] * (1 - w[..., None]) + trans[i1] * w[..., None]
     return q_out, t_out
 

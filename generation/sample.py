@@ -6,6 +6,7 @@ API (arrays in and out are un-standardised features, numpy or torch; outputs are
     model = load_model(ckpt_path)                                     # eval mode, carries its stats/config
     x = sample_mg(model, control [B,T,3], history [B,tau,63], history_control [B,tau,3], temperature, seed)
     x = sample_fl(model, control [B,T,3], temperature, seed)
+    x = sample_windows(model, control, history, history_control, temperature, seed)   # either kind
     stream = mg_stream(model, history [B,tau,63], history_control [B,tau,3], temperature, seed)
     pose = stream(control_t [B,3])                                    # one frame in, one pose out [B,63]
 """
@@ -21,8 +22,10 @@ from core.cli import UserError
 from core.clip import save_clip
 
 from . import skeleton
+from .dataset import read_arrays, require
 from .fl import FL
-from .moglow import MGStream, MoGlow
+from .mg_stream import MGStream
+from .moglow import MoGlow
 from .train import MODELS, pick_device
 
 
@@ -100,23 +103,25 @@ def sample_fl(model, control, temperature=1.0, seed=0):
     return model.unstandardize_x(x).cpu().numpy().astype(np.float32)
 
 
+def sample_windows(model, control, history=None, history_control=None, temperature=1.0, seed=0):
+    """The one entry point for sampling windows of either kind: MG from the real frames before each window
+    (sample_mg), FL from the control alone (sample_fl, which ignores the history)."""
+    if model.kind == "mg":
+        if history is None or history_control is None:
+            raise SampleError("sample_windows: MG needs the frames before each window (history, history_control)")
+        return sample_mg(model, control, history, history_control, temperature, seed)
+    return sample_fl(model, control, temperature, seed)
+
+
 def sample_split(model, data_path, split="test", n=None, temperature=1.0, seed=0):
     """Sample for the first n windows of a split of a prepared dataset -> (x [n,T,63], c [n,T,3])."""
-    try:
-        with np.load(data_path, allow_pickle=False) as f:
-            d = {k: f[k] for k in f.files if k.startswith(split + "_")}
-    except (OSError, ValueError) as e:
-        raise SampleError(f"{data_path}: not a readable prepared dataset ({e})") from None
-    if f"{split}_c" not in d:
-        raise SampleError(f"{data_path}: no split '{split}' (missing key '{split}_c')")
-    c = d[f"{split}_c"][:n]
+    d = read_arrays(data_path, [f"{split}_c", f"{split}_hist", f"{split}_hist_c"])
+    require(d, [f"{split}_c"], data_path, f"no split '{split}'")
     if model.kind == "mg":
-        if f"{split}_hist" not in d:
-            raise SampleError(f"{data_path}: missing key '{split}_hist' (MG needs the frames before each window)")
-        x = sample_mg(model, c, d[f"{split}_hist"][:n], d[f"{split}_hist_c"][:n], temperature, seed)
-    else:
-        x = sample_fl(model, c, temperature, seed)
-    return x, c
+        require(d, [f"{split}_hist", f"{split}_hist_c"], data_path, "MG needs the frames before each window")
+    c = d[f"{split}_c"][:n]
+    hist, hist_c = (d[k][:n] if k in d else None for k in (f"{split}_hist", f"{split}_hist_c"))
+    return sample_windows(model, c, hist, hist_c, temperature, seed), c
 
 
 def _main(argv):

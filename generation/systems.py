@@ -24,8 +24,8 @@ from core.study import RESERVED
 
 from . import skeleton
 from .bvh import BvhError
-from .features import detect_skeleton, load_take, map_joints, root_trajectory
-from .resample import resample_times
+from .features import detect_skeleton, load_take, map_joints, root_trajectory, rotate_y
+from .resample import lerp_indices
 
 NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,31}$")
 EXTENSIONS = (".bvh.gz", ".bvh", ".npz")
@@ -82,10 +82,8 @@ def resample_positions(joints, fps_in, fps_out):
     """Linear resampling of positions [T, J, 3] to fps_out over the same time span."""
     if abs(fps_in - fps_out) < 1e-9 * fps_out:
         return joints
-    u = resample_times(len(joints), fps_in, fps_out)
-    i0 = np.minimum(np.floor(u).astype(np.int64), len(joints) - 1)
-    i1 = np.minimum(i0 + 1, len(joints) - 1)
-    w = (u - i0)[:, None, None]
+    i0, i1, w = lerp_indices(len(joints), fps_in, fps_out)
+    w = w[:, None, None]
     return joints[i0] * (1 - w) + joints[i1] * w
 
 
@@ -126,10 +124,7 @@ def canonical_placement(joints, fps, frame=0):
     tell where it came from.
     """
     root, yaw = root_trajectory(joints, fps)
-    c, s = np.cos(-yaw[frame]), np.sin(-yaw[frame])
     out = np.asarray(joints, dtype=np.float64).copy()
     out[..., 0] -= root[frame, 0]
     out[..., 2] -= root[frame, 1]
-    x, z = out[..., 0].copy(), out[..., 2].copy()
-    out[..., 0], out[..., 2] = c * x + s * z, -s * x + c * z
-    return out.astype(np.float32)
+    return rotate_y(out, -yaw[frame]).astype(np.float32)

@@ -31,7 +31,7 @@ from core import cli
 from core.cli import UserError
 
 from . import fl, moglow
-from .core_share import CoreShare
+from .core_share import CoreShare, torch_threads
 from .dataset import batch_indices, eval_batches, load_dataset
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
@@ -51,6 +51,9 @@ TRAIN_DEFAULTS = dict(
     train_window=None,
     noise=0.01,
 )
+
+
+METRICS_COLUMNS = ["step", "train_nll", "valid_nll", "lr", "grad_norm", "elapsed_s", "steps_per_s"]
 
 
 class TrainError(UserError):
@@ -174,130 +177,164 @@ def train(
 ):
     """Train `model` ('fl' or 'mg') with `config` on a prepared dataset; returns out_dir (see module doc).
     `threads`: CPU threads for torch: None keeps torch's choice, a number fixes it (and the bits of the result),
-    "auto" follows the cores other processes leave free (core_share.CoreShare; the command's default)."""
-    share = CoreShare() if threads == "auto" else None
-    if threads not in (None, "auto"):
-        torch.set_num_threads(int(threads))
+    "auto" follows the cores other processes leave free (core_share.CoreShare; the command's default). The
+    thread count is restored on return."""
+    with torch_threads(None if threads in (None, "auto") else threads):
+        return _train(model, config, data_path, out_dir, steps, seed, progress, resume, device, threads == "auto")
+
+
+def _config_and_data(model, config, steps, data_path):
     cfg = load_config(model, config)
     if steps is not None:
         cfg["steps"] = int(steps)
     ds = load_dataset(data_path)
     if "valid" not in ds.splits or "train" not in ds.splits:
         raise TrainError(f"{data_path}: needs 'train' and 'valid' splits")
+    return cfg, ds
+
+
+def _train(model, config, data_path, out_dir, steps, seed, progress, resume, device, share_cores):
+    cfg, ds = _config_and_data(model, config, steps, data_path)
     rank, world = join_ranks()
     if cfg["batch_size"] % world:
         raise TrainError(f"batch_size {cfg['batch_size']} does not split evenly over {world} ranks")
     device = pick_device(device)
     out = Path(out_dir)
-    writes = rank == 0  # validation, metrics and checkpoints: rank 0 only
     (out / "checkpoints").mkdir(parents=True, exist_ok=True)
-    train_split, valid_split = ds.splits["train"], ds.splits["valid"]
     torch.manual_seed(seed)
     net = build_model(model, cfg, ds.stats).to(device)
     if model == "fl":
         net.check_length(cfg["train_window"] or ds.window)
     opt = torch.optim.Adam(net.parameters(), lr=cfg["lr"])
-    start, elapsed = 0, 0.0
-    resume_path = out / "resume.pt"
-    if resume and resume_path.exists():
-        state = torch.load(resume_path, map_location=device, weights_only=False)
-        net.load_state_dict(state["state"])
-        opt.load_state_dict(state["opt"])
-        start, elapsed = state["step"], state.get("elapsed", 0.0)
-    elif resume:
-        raise TrainError(f"{resume_path}: nothing to resume")
-    metrics_path = out / "metrics.csv"
-    if writes:
-        (out / "config.json").write_text(
-            json.dumps({**cfg, "data": str(data_path), "seed": seed, "device": str(device), "ranks": world}, indent=2)
-        )
-        if start == 0 or not metrics_path.exists():
-            with open(metrics_path, "w", newline="") as f:
-                csv.writer(f).writerow(
-                    ["step", "train_nll", "valid_nll", "lr", "grad_norm", "elapsed_s", "steps_per_s"]
-                )
-
-    tx, tc = train_split.x.to(device), train_split.c.to(device)
-    window = tx.shape[1]
-    crop = cfg["train_window"] or window
-    early = set(cfg["early_ckpts"])
+    start, elapsed = _resume(out / "resume.pt", resume, net, opt, device)
+    run = _Run(out, rank == 0, cfg, ds, net, opt, start, elapsed)
+    if run.writes:
+        run.write_config(data_path, seed, device, world)
+    tx, tc = ds.splits["train"].x.to(device), ds.splits["train"].c.to(device)
+    crop = cfg["train_window"] or tx.shape[1]
     rows = slice(rank * cfg["batch_size"] // world, (rank + 1) * cfg["batch_size"] // world)
-    step_nll = _BatchNLL(net)
-    if world > 1:
-        step_nll = nn.parallel.DistributedDataParallel(step_nll, device_ids=[device] if device.type == "cuda" else None)
+    step_nll = _wrap_ranks(net, world, device)
     net.train()
+    share = CoreShare() if share_cores and device.type == "cpu" else None
     bar = tqdm(
         range(start, cfg["steps"]),
         initial=start,
         total=cfg["steps"],
-        disable=not (progress and writes),
+        disable=not (progress and run.writes),
         desc=f"train {model}",
         unit="step",
         dynamic_ncols=True,
     )
-    run_nll, run_n, bad, t0, valid_nll, t_row, s_row = (
-        0.0,
-        0,
-        0,
-        time.perf_counter(),
-        float("nan"),
-        time.perf_counter(),
-        start,
-    )
+    bad = 0
     for step in bar:
         lr = learning_rate(cfg, step)
         for group in opt.param_groups:
             group["lr"] = lr
-        if share is not None and device.type == "cpu":
+        if share is not None:
             share.step()
         x, c, keep = draw_batch(net, tx, tc, cfg, seed, step, crop)
         loss = step_nll(x[rows], c[rows], None if keep is None else keep[rows]).mean()
-        opt.zero_grad(set_to_none=True)
-        if not _finite_on_every_rank(loss, world):
+        grad_norm = _optimise(loss, net, opt, cfg, world)
+        if grad_norm is None:
             bad += 1
             if bad > 20:
                 raise TrainError(f"training diverged: NLL not finite at step {step + 1} (lower 'lr' in the config)")
             continue
-        loss.backward()
-        grad_norm = float(torch.nn.utils.clip_grad_norm_(net.parameters(), cfg["clip_grad"]))
-        opt.step()
-        run_nll += loss.item()
-        run_n += 1
-        done = step + 1
-        last = done == cfg["steps"]
-        if not writes:
-            continue
-        if done % cfg["valid_every"] == 0 or last or done == 1:
-            valid_nll = evaluate(net, valid_split, cfg, device)
-            now = time.perf_counter()
-            sps = (done - s_row) / max(1e-9, now - t_row)
-            t_row, s_row = now, done
-            with open(metrics_path, "a", newline="") as f:
-                csv.writer(f).writerow(
-                    [
-                        done,
-                        f"{run_nll / max(1, run_n):.5f}",
-                        f"{valid_nll:.5f}",
-                        f"{lr:.3g}",
-                        f"{grad_norm:.3f}",
-                        f"{elapsed + now - t0:.1f}",
-                        f"{sps:.3f}",
-                    ]
-                )
-            run_nll, run_n = 0.0, 0
-        bar.set_postfix(nll=f"{loss.item():.3f}", valid=f"{valid_nll:.3f}")
-        if done in early or done % cfg["ckpt_every"] == 0 or last:
-            save_checkpoint(out / "checkpoints" / f"step_{done:07d}.pt", net, cfg, ds, done, valid_nll)
-            torch.save(
-                dict(
-                    state=net.state_dict(), opt=opt.state_dict(), step=done, elapsed=elapsed + time.perf_counter() - t0
-                ),
-                resume_path,
-            )
+        if run.writes:
+            run.after_step(step + 1, loss.item(), lr, grad_norm, device)
+            bar.set_postfix(nll=f"{loss.item():.3f}", valid=f"{run.valid_nll:.3f}")
     bar.close()
     if world > 1:
         torch.distributed.barrier()  # rank 0's last checkpoint is written before any rank returns
     return out
+
+
+def _optimise(loss, net, opt, cfg, world):
+    """One optimiser step on `loss` with gradient-norm clipping; returns the norm, or None (no step) when the loss
+    is not finite on some rank."""
+    opt.zero_grad(set_to_none=True)
+    if not _finite_on_every_rank(loss, world):
+        return None
+    loss.backward()
+    grad_norm = float(torch.nn.utils.clip_grad_norm_(net.parameters(), cfg["clip_grad"]))
+    opt.step()
+    return grad_norm
+
+
+def _wrap_ranks(net, world, device):
+    """The model's NLL as a module, wrapped for DistributedDataParallel under torchrun."""
+    step_nll = _BatchNLL(net)
+    if world > 1:
+        step_nll = nn.parallel.DistributedDataParallel(step_nll, device_ids=[device] if device.type == "cuda" else None)
+    return step_nll
+
+
+def _resume(path, resume, net, opt, device):
+    """(first step, seconds trained so far): from `path` with `resume` (net and opt loaded), else (0, 0)."""
+    if not resume:
+        return 0, 0.0
+    if not path.exists():
+        raise TrainError(f"{path}: nothing to resume")
+    state = torch.load(path, map_location=device, weights_only=False)
+    net.load_state_dict(state["state"])
+    opt.load_state_dict(state["opt"])
+    return state["step"], state.get("elapsed", 0.0)
+
+
+class _Run:
+    """What rank 0 writes while training: config.json, metrics.csv rows, checkpoints and resume.pt."""
+
+    def __init__(self, out, writes, cfg, ds, net, opt, start, elapsed):
+        self.out, self.writes, self.cfg, self.ds, self.net, self.opt = out, writes, cfg, ds, net, opt
+        self.start, self.elapsed, self.metrics = start, elapsed, out / "metrics.csv"
+        self.early = set(cfg["early_ckpts"])
+        self.run_nll, self.run_n, self.valid_nll = 0.0, 0, float("nan")
+        self.t0 = self.t_row = time.perf_counter()
+        self.s_row = start
+
+    def write_config(self, data_path, seed, device, world):
+        info = {**self.cfg, "data": str(data_path), "seed": seed, "device": str(device), "ranks": world}
+        (self.out / "config.json").write_text(json.dumps(info, indent=2))
+        if self.start == 0 or not self.metrics.exists():
+            with open(self.metrics, "w", newline="") as f:
+                csv.writer(f).writerow(
+                    ["step", "train_nll", "valid_nll", "lr", "grad_norm", "elapsed_s", "steps_per_s"]
+                )
+
+    def after_step(self, done, nll, lr, grad_norm, device):
+        """Book step `done`: validate and write a metrics row, and checkpoint, when due."""
+        self.run_nll += nll
+        self.run_n += 1
+        last = done == self.cfg["steps"]
+        if done % self.cfg["valid_every"] == 0 or last or done == 1:
+            self._metrics_row(done, lr, grad_norm, device)
+        if done in self.early or done % self.cfg["ckpt_every"] == 0 or last:
+            self._checkpoint(done)
+
+    def _metrics_row(self, done, lr, grad_norm, device):
+        self.valid_nll = evaluate(self.net, self.ds.splits["valid"], self.cfg, device)
+        now = time.perf_counter()
+        sps = (done - self.s_row) / max(1e-9, now - self.t_row)
+        self.t_row, self.s_row = now, done
+        row = [
+            done,
+            f"{self.run_nll / max(1, self.run_n):.5f}",
+            f"{self.valid_nll:.5f}",
+            f"{lr:.3g}",
+            f"{grad_norm:.3f}",
+            f"{self.elapsed + now - self.t0:.1f}",
+            f"{sps:.3f}",
+        ]
+        with open(self.metrics, "a", newline="") as f:
+            csv.writer(f).writerow(row)
+        self.run_nll, self.run_n = 0.0, 0
+
+    def _checkpoint(self, done):
+        ckpt = self.out / "checkpoints" / f"step_{done:07d}.pt"
+        save_checkpoint(ckpt, self.net, self.cfg, self.ds, done, self.valid_nll)
+        elapsed = self.elapsed + time.perf_counter() - self.t0
+        state = dict(state=self.net.state_dict(), opt=self.opt.state_dict(), step=done, elapsed=elapsed)
+        torch.save(state, self.out / "resume.pt")
 
 
 def draw_batch(net, tx, tc, cfg, seed, step, crop):
@@ -348,7 +385,7 @@ def _main(argv):
         help="CPU threads, fixed (and then the same bits run after run), or 'auto' (default): the cores "
         "other processes leave free, checked every 2 s",
     )
-    ap.add_argument("--no-progress", action="store_true")
+    ap.add_argument("--quiet", action="store_true", help="no progress bar")
     a = ap.parse_args(argv)
     out = train(
         a.model,
@@ -357,7 +394,7 @@ def _main(argv):
         a.out,
         steps=a.steps,
         seed=a.seed,
-        progress=not a.no_progress,
+        progress=not a.quiet,
         resume=a.resume,
         device=a.device,
         threads=a.threads,

@@ -7,10 +7,11 @@ import sys
 import numpy as np
 import pytest
 from conftest import BANDAI, PFNN, ROOT
+from reference.bvh_fk import fk_positions
 from scipy.spatial.transform import Rotation
 
 from generation import import_motion
-from generation.bvh import BvhError, fk_positions, read_bvh
+from generation.bvh import BvhError, read_bvh
 
 # Mixed channel counts and rotation orders, interleaved position/rotation channels, a proper-Euler
 # order (X Z X), End Sites, tabs; written with CRLF line ends below.
@@ -178,6 +179,14 @@ FIRST_FRAME = HEADER_LINES + 4
 
 def _edit(kind):
     lines = _lines()
+    edited = _edit_motion(kind, lines) or _edit_header(kind, lines)
+    if edited is None:
+        raise AssertionError(kind)
+    return edited
+
+
+def _edit_motion(kind, lines):
+    """Edits of the MOTION block (None for other kinds)."""
     if kind == "truncated_block":  # file ends two frames early
         return "\n".join(lines[: FIRST_FRAME - 1 + N_FRAMES - 2]) + "\n", FRAMES_LINE, "truncated"
     if kind == "truncated_line":  # file cut in the middle of the last frame
@@ -186,10 +195,6 @@ def _edit(kind):
     if kind == "wrong_count":  # one value too many on the third frame
         lines[FIRST_FRAME + 1] += " 1.0"
         return "\n".join(lines), FIRST_FRAME + 2, "expected 24 values, got 25"
-    if kind == "unknown_channel":
-        i = next(k for k, l in enumerate(lines) if "CHANNELS 3 Yrotation" in l)
-        lines[i] = lines[i].replace("Zrotation", "Wrotation")
-        return "\n".join(lines), i + 1, "unknown channel name 'Wrotation'"
     if kind == "non_numeric":
         parts = lines[FIRST_FRAME + 3].split("\t")
         parts[5] = "12.x5"
@@ -201,6 +206,15 @@ def _edit(kind):
     if kind == "frames_too_many":  # Frames says more than the data holds
         lines[FRAMES_LINE - 1] = f"Frames: {N_FRAMES + 3}"
         return "\n".join(lines), FRAMES_LINE, "Frames says 10"
+    return None
+
+
+def _edit_header(kind, lines):
+    """Edits of the hierarchy and the MOTION header, and files that are not BVH (None for other kinds)."""
+    if kind == "unknown_channel":
+        i = next(k for k, line in enumerate(lines) if "CHANNELS 3 Yrotation" in line)
+        lines[i] = lines[i].replace("Zrotation", "Wrotation")
+        return "\n".join(lines), i + 1, "unknown channel name 'Wrotation'"
     if kind == "no_motion":
         return "\n".join(lines[:HEADER_LINES]) + "\n", HEADER_LINES, "no MOTION"
     if kind == "bad_offset":
@@ -216,7 +230,7 @@ def _edit(kind):
         return "\n\n", 1, "empty file"
     if kind == "not_bvh":
         return "time,x,y\n0,1,2\n", 1, "expected 'HIERARCHY'"
-    raise AssertionError(kind)
+    return None
 
 
 CASES = [

@@ -6,9 +6,10 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 import pytest
 from conftest import BANDAI, PFNN
+from reference.bvh_fk import fk_positions
 
 from generation import skeleton
-from generation.bvh import BvhError, fk_positions, read_bvh
+from generation.bvh import BvhError, read_bvh
 from generation.features import SKELETON_MAPS, load_take, mirror, reverse, root_trajectory, to_features, to_world
 from generation.prepare_data import category_of, find_takes
 
@@ -93,14 +94,14 @@ def test_control_signs_match_labels(all_takes):
 
 def test_facing_is_forward(all_takes):
     """In the root frame, toes are ahead of the ankles (z > 0) and left joints have x > 0 (walks)."""
-    I = skeleton.INDEX
+    index = skeleton.INDEX
     for cat, js in _by_category(all_takes).items():
         if not cat.startswith(("walk", "sidestep")):
             continue  # sprinting feet point backwards much of the time
         for j in js[:20]:
             p = to_features(j, FPS)[0].reshape(-1, 21, 3).mean(0)
-            assert p[I["Toes_L"], 2] > p[I["Foot_L"], 2] and p[I["Toes_R"], 2] > p[I["Foot_R"], 2], cat
-            assert p[I["UpperLeg_L"], 0] > 0 > p[I["UpperLeg_R"], 0], cat
+            assert p[index["Toes_L"], 2] > p[index["Foot_L"], 2] and p[index["Toes_R"], 2] > p[index["Foot_R"], 2], cat
+            assert p[index["UpperLeg_L"], 0] > 0 > p[index["UpperLeg_R"], 0], cat
 
 
 def _turn_left_take(all_takes):
@@ -208,7 +209,10 @@ def test_pfnn_lowpass_removes_jitter():
     hand = b.names.index("LeftHand")
     plain = fk_positions(b)[::6, hand] * scale
     filtered = load_take(take, FPS)[:, skeleton.INDEX["Hand_L"]]
-    accel = lambda p: np.abs(np.diff(p, 2, axis=0)).mean()
+
+    def accel(p):
+        return np.abs(np.diff(p, 2, axis=0)).mean()
+
     assert accel(filtered) < accel(plain[: len(filtered)])
 
 

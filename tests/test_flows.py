@@ -30,8 +30,13 @@ def layer_case(make):
         layer(torch.randn(3, C, T, dtype=dtype) * 2 + 1, cond)  # data-dependent init where there is one
         perturb(layer)
         layer.eval()
-        fwd = lambda x: layer(x.reshape(-1, C, T), cond[: x.reshape(-1, C, T).shape[0]])
-        inv = lambda y: layer.inverse(y, cond[: y.shape[0]])[0]
+
+        def fwd(x):
+            return layer(x.reshape(-1, C, T), cond[: x.reshape(-1, C, T).shape[0]])
+
+        def inv(y):
+            return layer.inverse(y, cond[: y.shape[0]])[0]
+
         return fwd, inv, torch.randn(3, C, T, dtype=dtype)
 
     return build
@@ -42,8 +47,13 @@ def fl_case(dtype):
     c = torch.randn(3, T, 3, dtype=dtype)
     model(torch.randn(3, T, 63, dtype=dtype), c)
     perturb(model, 0.05).eval()
-    fwd = lambda x: model(x.reshape(-1, T, 63), c[: x.reshape(-1, T, 63).shape[0]])
-    inv = lambda z: model.inverse(z, c[: z.shape[0]])[0]
+
+    def fwd(x):
+        return model(x.reshape(-1, T, 63), c[: x.reshape(-1, T, 63).shape[0]])
+
+    def inv(z):
+        return model.inverse(z, c[: z.shape[0]])[0]
+
     return fwd, inv, torch.randn(3, T, 63, dtype=dtype)
 
 
@@ -60,7 +70,9 @@ def mg_case(dtype):
         x = x.reshape(-1, n, 63)
         return model(torch.cat([hist[: len(x)], x], dim=1), c[: len(x)])
 
-    inv = lambda z: model.inverse(z, hist[: len(z)], c[: len(z)])
+    def inv(z):
+        return model.inverse(z, hist[: len(z)], c[: len(z)])
+
     return fwd, inv, torch.randn(3, n, 63, dtype=dtype)
 
 

@@ -109,7 +109,7 @@ def test_split_is_seeded(tmp_path):
     names = small_take_names(3)
     a = prepare(BANDAI, tmp_path / "a.npz", takes=names, seed=1, workers=1, progress=False)
     b = prepare(BANDAI, tmp_path / "b.npz", takes=names, seed=1, workers=1, progress=False)
-    c = prepare(BANDAI, tmp_path / "c.npz", takes=names, seed=2, workers=1, progress=False)
+    prepare(BANDAI, tmp_path / "c.npz", takes=names, seed=2, workers=1, progress=False)
     test_takes = {k: set(np.load(tmp_path / f"{k}.npz")["test_take"]) for k in "abc"}
     assert a["rows"] == b["rows"] and test_takes["a"] == test_takes["b"]
     assert test_takes["a"] != test_takes["c"]
@@ -140,7 +140,7 @@ def test_cli_errors(tmp_path, capsys, monkeypatch):
     bad = data / "dataset-2_walk_bad_001.bvh"
     src = next((BANDAI / "dataset-2" / "data").glob("dataset-2_walk_*.bvh.gz"))
     text = gzip.decompress(src.read_bytes()).decode().split("\n")
-    k = next(i for i, l in enumerate(text) if l.startswith("Frame Time")) + 3
+    k = next(i for i, line in enumerate(text) if line.startswith("Frame Time")) + 3
     text[k] = text[k].rsplit(" ", 1)[0]  # one value short
     bad.write_text("\n".join(text))
     assert prepare_data.main(["--data", str(data), "--out", str(tmp_path / "o.npz"), "--quiet"]) == 2

@@ -63,7 +63,7 @@ def test_default_job_uses_the_shipped_models_and_nothing_beside_the_checkout(tmp
             "1",
             "--size",
             "64",
-            "--jobs",
+            "--workers",
             "1",
         ]
     )

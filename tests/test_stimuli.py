@@ -185,7 +185,7 @@ def test_stimuli_import_bvh_folder_adds_a_condition(quick_stimuli, tmp_path, cap
         "1",
         "--size",
         "96",
-        "--jobs",
+        "--workers",
         "1",
     ]
     assert make_stimuli.main(common + ["--export-items", str(tmp_path / "ask")]) == 0
@@ -338,11 +338,13 @@ def test_stimuli_full_default_run(tmp_path):
     assert np.median(nat) < 0.1
 
 
-def test_render_workers_load_no_torch():
-    """make_stimuli's render workers are spawned and import generation.make_stimuli: that import must not load
-    torch (seconds and hundreds of MB per worker); sampling and training import it where they run."""
+@pytest.mark.parametrize("module", ["generation.render_pool", "generation.make_stimuli"])
+def test_render_workers_load_no_torch(module):
+    """make_stimuli's render workers are spawned and import generation.render_pool: that import must not load
+    torch (seconds and hundreds of MB per worker); nor must make_stimuli's own (--help, --export-items).
+    Sampling and training import it where they run."""
     r = subprocess.run(
-        [sys.executable, "-c", "import sys, generation.make_stimuli; print('torch' in sys.modules)"],
+        [sys.executable, "-c", f"import sys, {module}; print('torch' in sys.modules)"],
         capture_output=True,
         text=True,
         cwd=ROOT,

@@ -150,7 +150,7 @@ def test_ddp_two_cpu_processes_match_one(small_dataset, tmp_path):
             str(steps),
             "--threads",
             "1",
-            "--no-progress",
+            "--quiet",
         ],
         capture_output=True,
         text=True,
@@ -195,3 +195,16 @@ def test_core_share_leaves_a_busy_neighbour_its_core():
         assert torch.get_num_threads() == 2
     finally:
         torch.set_num_threads(before)
+
+
+def test_torch_threads_are_restored():
+    """Library code sets torch's thread count only inside a block that restores it (CoreShare may change it)."""
+    from generation.core_share import torch_threads
+
+    before = torch.get_num_threads()
+    with torch_threads(1):
+        assert torch.get_num_threads() == 1
+        torch.set_num_threads(2)
+    assert torch.get_num_threads() == before
+    with torch_threads(None):
+        assert torch.get_num_threads() == before
