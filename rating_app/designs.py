@@ -24,8 +24,6 @@ from core import study
 
 from .manifest import AppError
 
-# analysis/demo.py imports the designs from here; everything in rating_app uses study.DESIGNS.
-DESIGNS = study.DESIGNS
 MAX_PAGE = 8  # clips on a parallel page (labels A..H)
 LABELS = "ABCDEFGH"
 # The JSON field that carries a trial's answer, in the API (CONTRACTS §8) and so in the simulated crowd.
