@@ -11,6 +11,7 @@ keeps its traceback.
 """
 
 import argparse
+import logging
 import math
 import sys
 
@@ -66,3 +67,14 @@ def run(main, argv=None):
         print("error: interrupted", file=sys.stderr)
         return 130
     return EXIT_USAGE
+
+
+def log_to_stderr(quiet=False, formatter=None):
+    """Send a command's diagnostics (`logging`) to stderr as plain lines, warnings only with `quiet`.
+
+    Only a command's `main` calls this: logging is process-wide state (CONTRIBUTING.md). `force` because an
+    earlier command run in the same process (a test, the demo) may have left a handler on a stream now gone.
+    """
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(formatter or logging.Formatter("%(message)s"))
+    logging.basicConfig(level=logging.WARNING if quiet else logging.INFO, handlers=[handler], force=True)

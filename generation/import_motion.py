@@ -61,7 +61,7 @@ def _main(argv):
         help="resample to this frame rate (default: keep the file's)",
     )
     args = ap.parse_args(argv)
-    logging.basicConfig(format="%(message)s", stream=sys.stderr)
+    cli.log_to_stderr()
     joints = import_motion(args.input, clip_path(args.output), args.scale, args.fps)
     print(f"{args.output}: {joints.shape[0]} frames, {joints.shape[1]} joints")
 

@@ -431,9 +431,7 @@ class _Elapsed(logging.Formatter):
 
 def _main(argv):
     args = parse_args(argv)
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(_Elapsed())
-    logging.basicConfig(level=logging.WARNING if args.quiet else logging.INFO, handlers=[handler], force=True)
+    cli.log_to_stderr(args.quiet, _Elapsed())
     return run(args)
 
 

@@ -243,7 +243,7 @@ def _main(argv):
 
 def main(argv=None) -> int:
     # The one place that configures logging: library code (create_app, the crowd) only logs.
-    logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
+    cli.log_to_stderr()
     return cli.run(_main, argv)
 
 
