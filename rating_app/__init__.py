@@ -113,7 +113,9 @@ def create_app(
     clips = load_manifest(manifest, check_files=check_files)
     units = build_units(config["STUDY_DESIGN"], clips)
     app.extensions["rating_app"] = {
-        "engine": _open_database(db_url, clips, config["STUDY_DESIGN"]),
+        "engine": _open_database(
+            db_url, clips, config["STUDY_DESIGN"], _cover_keys(config["STUDY_DESIGN"], clips, units)
+        ),
         "clips": {c.clip_id: c for c in clips},
         "videos": VideoStore(clips, Path(manifest).resolve().parent, preload=check_files),
         "units": units,
@@ -170,14 +172,21 @@ def _derived_secret(admin_token):
     return hashlib.sha256(b"rating-app:" + (admin_token or os.urandom(32).hex()).encode()).hexdigest()
 
 
-def _open_database(db_url, clips, design):
+def _cover_keys(design, clips, units):
+    """What assignment balances: the test clips (acr) or the test units (pairwise, parallel)."""
+    if design == "acr":
+        return [c.clip_id for c in clips if c.role == "test"]
+    return [k for k, u in units.items() if u.role == "test"]
+
+
+def _open_database(db_url, clips, design, cover_keys):
     """The engine, with the schema created and the manifest's clips and the design stored; AppError, one line,
     when the database cannot be opened."""
     from . import db as dbm
 
     engine = dbm.make_engine(db_url)
     try:
-        dbm.init_db(engine, clips, design)
+        dbm.init_db(engine, clips, design, cover_keys)
     except SQLAlchemyError as e:
         where = make_url(str(engine.url)).render_as_string(hide_password=True)
         first = str(getattr(e, "orig", None) or e).strip().splitlines()

@@ -27,7 +27,17 @@ from flask import Blueprint, abort, current_app, jsonify, request, url_for
 from sqlalchemy import and_, func, insert, or_, select, text, update
 from sqlalchemy.exc import IntegrityError
 
-from .assign import StudyFull, assign_slot, assign_unit, expire_idle, lock_assign, plan_session, plan_units
+from .assign import (
+    StudyFull,
+    answer,
+    assign_slot,
+    assign_unit,
+    expire_idle,
+    hold,
+    lock_assign,
+    plan_session,
+    plan_units,
+)
 from .db import Event, PageRating, Preference, Rater, Rating, Trial, TrialClip, app_engine, utcnow
 from .designs import ANSWER_FIELD, LABELS
 from .designs import required_ms as design_required_ms
@@ -340,6 +350,8 @@ def _serve(conn, rater_pk: int, now):
             clip = assign_slot(conn, rng, rater_pk, t.kind, cfg["RATINGS_PER_CLIP"])
             if clip is not None:
                 conn.execute(update(Trial).where(Trial.id == t.id).values(clip_id=clip, served_at=now))
+                if t.kind == "test":
+                    hold(conn, clip)
                 continue
         else:
             unit = assign_unit(
@@ -353,6 +365,8 @@ def _serve(conn, rater_pk: int, now):
                     [{"trial_pk": t.id, "position": i, "label": LABELS[i], "clip_id": c} for i, c in enumerate(order)],
                 )
                 conn.execute(update(Trial).where(Trial.id == t.id).values(unit=unit.key, served_at=now))
+                if t.kind == "test":
+                    hold(conn, unit.key)
                 continue
         # No clip left for this slot: drop it; the later rating trials move up one.
         conn.execute(update(Trial).where(Trial.id == t.id).values(released=True))
@@ -533,6 +547,8 @@ def post_rating(token):
                 Trial.released,
                 Trial.served_at,
                 Trial.video_at,
+                Trial.kind,
+                Trial.unit,
             ).where(Trial.id == trial_id, Trial.rater_pk == rater.id)
         ).first()
         if trial is None:
@@ -583,6 +599,8 @@ def post_rating(token):
             return _duplicate(conn, trial.id, training)
         if not training:
             _store(conn, design, trial, rater.id, shown, rating, watched_ms, now)
+        if trial.kind == "test":
+            answer(conn, trial.clip_id if design == "acr" else trial.unit)
         return jsonify(stored=True), 201
 
 

@@ -4,7 +4,8 @@ Every rater sees all training clips (familiarisation) and all catch clips. A new
 the training clips, one slot per catch clip and up to `clips_per_rater` test slots, in a random order. A test or
 catch slot gets its clip when it is first served (GET next): the least-covered test clip still short of its
 target that this rater has not had, ties broken at random (a catch slot: a catch clip the rater has not had).
-A clip's cover = stored ratings + slots held, i.e. served and unanswered in a live session. So a session holds at
+A clip's cover = stored ratings + slots held, i.e. served and unanswered in a live session; db.Cover keeps both
+counts per clip, updated in the same transactions as the trials they count. So a session holds at
 most one slot, only once it has come that far, and only until it answers or expires: creating sessions, or
 polling GET next, holds nothing. A slot for which no test clip is left is dropped (the session gets shorter).
 
@@ -21,11 +22,11 @@ from __future__ import annotations
 import datetime as dt
 import random
 
-from sqlalchemy import and_, case, func, select, update
+from sqlalchemy import func, select, update
 
 from core import study
 
-from .db import Clip, Lock, Rater, Trial
+from .db import Clip, Cover, Lock, Rater, Trial
 from .designs import training_groups
 
 
@@ -50,33 +51,35 @@ def expire_idle(conn, slot_timeout_s: float, now: dt.datetime, rater_pk: int | N
         stmt = stmt.where(Rater.id == rater_pk)
     ids = list(conn.execute(stmt.values(expired_at=now).returning(Rater.id)).scalars())
     if ids:
-        conn.execute(
-            update(Trial)
-            .where(Trial.rater_pk.in_(ids), Trial.answered_at.is_(None), Trial.released.is_(False))
-            .values(released=True)
-        )
+        open_slot = (Trial.rater_pk.in_(ids), Trial.answered_at.is_(None), Trial.released.is_(False))
+        key = func.coalesce(Trial.clip_id, Trial.unit)
+        held = conn.execute(
+            select(key, func.count()).where(*open_slot, Trial.kind == "test", key.is_not(None)).group_by(key)
+        ).all()
+        conn.execute(update(Trial).where(*open_slot).values(released=True))
+        for k, n in sorted(held):  # one order for every transaction that updates several rows
+            conn.execute(update(Cover).where(Cover.key == k).values(held=Cover.held - n))
     return ids
 
 
-def _answered_and_held(conn, key, *where):
-    """{key: (answered trials, held slots)} over test trials, in ONE statement. Two statements would each see
-    the data as of their own start (PostgreSQL's read committed), and an answer committed between them would be
-    in neither count: its clip would look short and be handed out once too often. An answered test trial and
-    its stored answer are written in one transaction, so answered trials are the stored answers."""
-    held = case((and_(Trial.answered_at.is_(None), Trial.released.is_(False)), 1), else_=0)
-    rows = conn.execute(
-        select(key, func.count(Trial.answered_at), func.sum(held))
-        .where(Trial.kind == "test", key.is_not(None), *where)
-        .group_by(key)
-    ).all()
-    return {k: (int(done), int(h or 0)) for k, done, h in rows}
+def _cover(conn, *where) -> dict[str, tuple[int, int]]:
+    """{key: (answered, held)} from the Cover rows."""
+    return {k: (a, h) for k, a, h in conn.execute(select(Cover.key, Cover.answered, Cover.held).where(*where))}
+
+
+def hold(conn, key: str) -> None:
+    """A slot for `key` was just assigned (in the assigning transaction)."""
+    conn.execute(update(Cover).where(Cover.key == key).values(held=Cover.held + 1))
+
+
+def answer(conn, key: str) -> None:
+    """A held slot for `key` was just answered (in the answering transaction)."""
+    conn.execute(update(Cover).where(Cover.key == key).values(held=Cover.held - 1, answered=Cover.answered + 1))
 
 
 def coverage(conn) -> dict[str, tuple[int, int]]:
-    """{clip_id: (stored ratings, held slots)} for every test clip."""
-    counts = _answered_and_held(conn, Trial.clip_id)
-    tests = conn.execute(select(Clip.clip_id).where(Clip.role == "test")).scalars().all()
-    return {c: counts.get(c, (0, 0)) for c in tests}
+    """{clip_id: (stored ratings, held slots)} for every test clip (of this manifest: rows are never deleted)."""
+    return _cover(conn, Cover.key.in_(select(Clip.clip_id).where(Clip.role == "test")))
 
 
 def is_full(conn, target: int) -> bool:
@@ -134,9 +137,9 @@ def assign_slot(conn, rng: random.Random, rater_pk: int, kind: str, target: int)
 
 # ---------------------------------------------------------------------------------------- pairwise / parallel
 def unit_coverage(conn, units) -> dict[str, tuple[int, int]]:
-    """{unit key: (answered trials, held slots)} for every test unit."""
-    counts = _answered_and_held(conn, Trial.unit)
-    return {k: counts.get(k, (0, 0)) for k, u in units.items() if u.role == "test"}
+    """{unit key: (answered trials, held slots)} for every test unit of this manifest."""
+    cov = _cover(conn)
+    return {k: cov.get(k, (0, 0)) for k, u in units.items() if u.role == "test"}
 
 
 def units_full(conn, units, target: int) -> bool:

@@ -26,8 +26,11 @@ from sqlalchemy import (
     Integer,
     String,
     UniqueConstraint,
+    and_,
+    case,
     create_engine,
     event,
+    func,
     select,
     text,
 )
@@ -204,6 +207,31 @@ class LoginFailure(Base):
     at: Mapped[dt.datetime] = mapped_column(DateTime)
 
 
+class Cover(Base):
+    """How far each test clip (acr) or test unit (pairwise, parallel) is covered: its answered trials and the
+    slots held for it now (served, unanswered, not released). The transactions that assign, answer and release
+    a slot update its row, so assignment reads one small row per clip or unit instead of counting every trial
+    under the assignment lock; `trial_cover` is the count from the trials that these rows always equal."""
+
+    __tablename__ = "cover"
+    key: Mapped[str] = mapped_column(String(400), primary_key=True)  # clip_id (acr) or designs.Unit.key
+    answered: Mapped[int] = mapped_column(Integer, default=0)
+    held: Mapped[int] = mapped_column(Integer, default=0)
+
+
+def trial_cover(conn, key):
+    """{key: (answered trials, held slots)} over test trials, counted from the trials in ONE statement (two
+    statements would each see the data as of their own start under PostgreSQL's read committed, and an answer
+    committed between them would be in neither count). `key` is Trial.clip_id or Trial.unit."""
+    held = case((and_(Trial.answered_at.is_(None), Trial.released.is_(False)), 1), else_=0)
+    rows = conn.execute(
+        select(key, func.count(Trial.answered_at), func.sum(held))
+        .where(Trial.kind == "test", key.is_not(None))
+        .group_by(key)
+    ).all()
+    return {k: (int(done), int(h or 0)) for k, done, h in rows}
+
+
 class Lock(Base):
     """A single row taken FOR UPDATE while assigning clips, so concurrent sessions see each other's slots."""
 
@@ -321,9 +349,22 @@ def study_design(conn) -> str | None:
     return conn.execute(select(StudySetting.value).where(StudySetting.name == "design")).scalar()
 
 
-def init_db(engine: Engine, clips=None, design: str | None = None) -> None:
-    """Create the schema (idempotent), upsert the manifest's clips and store the study's design; AppError when
-    the database already holds a study of another design (a database that predates designs holds an acr one)."""
+def _add_cover_rows(session, keys, key_column) -> None:
+    """Cover rows for keys that have none: zero in a new study, counted from the trials in a database made
+    before the rows existed. Under the assignment lock, so no slot is assigned meanwhile."""
+    have = set(session.scalars(select(Cover.key)))
+    missing = [k for k in keys if k not in have]
+    if missing:
+        if session.bind.dialect.name != "sqlite":  # SQLite: BEGIN IMMEDIATE already holds the write lock
+            session.execute(select(Lock).where(Lock.name == "assign").with_for_update())
+        counts = trial_cover(session.connection(), key_column)
+        session.add_all(Cover(key=k, answered=counts.get(k, (0, 0))[0], held=counts.get(k, (0, 0))[1]) for k in missing)
+
+
+def init_db(engine: Engine, clips=None, design: str | None = None, cover_keys=None) -> None:
+    """Create the schema (idempotent), upsert the manifest's clips, store the study's design and give every key
+    in `cover_keys` (test clips or units) its Cover row; AppError when the database already holds a study of
+    another design (a database that predates designs holds an acr one)."""
     from sqlalchemy.orm import Session
 
     with _init_lock(engine):
@@ -362,3 +403,5 @@ def init_db(engine: Engine, clips=None, design: str | None = None) -> None:
                     else:
                         row.condition, row.role, row.item = c.condition, c.role, c.item
                         row.frames, row.fps = c.frames, c.fps
+            if cover_keys:
+                _add_cover_rows(s, cover_keys, Trial.clip_id if design in (None, "acr") else Trial.unit)

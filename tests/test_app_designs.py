@@ -13,7 +13,7 @@ import threading
 from pathlib import Path
 
 import pytest
-from concurrent_raters import run_raters
+from concurrent_raters import cover_mismatches, run_raters
 from fake_stimuli import write_fake_stimuli
 from sqlalchemy import update
 from test_app_api import TOKEN_HDR, idle
@@ -327,6 +327,7 @@ def test_targets_reached_exactly_with_fewest_raters(make, big_stimuli, design, u
         raters += 1
     assert raters == units * target // per_rater
     check_exact(c, clips, design, units, target)
+    assert cover_mismatches(app_engine(app), design) == {}
 
 
 def unit_counts(rows, clips, design):
@@ -357,6 +358,7 @@ def test_targets_exact_under_concurrent_sessions(make, big_stimuli, design, unit
     errors = run_raters(app, post)
     assert not errors, errors[:3]
     check_exact(app.test_client(), clips, design, units, target)
+    assert cover_mismatches(app_engine(app), design) == {}
 
 
 def test_an_idle_session_gives_its_pair_back(make, stimuli):
@@ -375,6 +377,7 @@ def test_an_idle_session_gives_its_pair_back(make, stimuli):
     assert r.status_code == 409 and "for now" in r.json["error"]
     idle(app, ghost)
     assert post(c, ghost, t).status_code == 410
+    assert cover_mismatches(app_engine(app), "pairwise") == {}  # the expiry gave the held pair back
     trials, _ = complete(c, start(c))
     assert held in [{x["a"]["clip_id"], x["b"]["clip_id"]} for x in trials]
 
