@@ -22,6 +22,7 @@ import math
 import random
 import re
 import secrets
+from types import SimpleNamespace
 
 from flask import Blueprint, abort, current_app, jsonify, request, url_for
 from sqlalchemy import and_, func, insert, or_, select, text, update
@@ -293,10 +294,15 @@ TRIAL_COLS = (
 
 
 def _rater(conn, token: str, now=None):
-    """The rater's row; 404 for an unknown token. With `now`, refreshes last_seen when it is stale."""
+    """The rater's row; 404 for an unknown token. With `now` (in a write transaction), the row is locked first
+    of all, so one session's writes (serving, answering, expiring) run one at a time and every transaction takes
+    a rater row before any other; and last_seen is refreshed when it is stale."""
     if not TOKEN.fullmatch(token):
         abort(404, "unknown session")
-    row = conn.execute(select(*RATER_COLS).where(Rater.token == token)).first()
+    q = select(*RATER_COLS).where(Rater.token == token)
+    if now is not None and conn.dialect.name != "sqlite":  # SQLite: BEGIN IMMEDIATE already holds the write lock
+        q = q.with_for_update()
+    row = conn.execute(q).first()
     if row is None:
         abort(404, "unknown session")
     if now is not None and _stale(row, now):
@@ -325,49 +331,60 @@ def _current(conn, rater_pk):
     ).first()
 
 
+def _assign(conn, rng, rater_pk, t, wait):
+    """The clip (acr) or Unit for trial `t`, or None."""
+    cfg = current_app.config
+    if cfg["STUDY_DESIGN"] == "acr":
+        return assign_slot(conn, rng, rater_pk, t.kind, cfg["RATINGS_PER_CLIP"], wait)
+    units = current_app.extensions["rating_app"]["units"]
+    return assign_unit(conn, rng, rater_pk, t.kind, cfg["RATINGS_PER_CLIP"], units, wait)
+
+
+def _give(conn, rng, t, assigned, now):
+    """Trial `t` gets its clip (acr) or unit, is marked served, and a test slot is held in its Cover row;
+    returns the trial as served."""
+    if isinstance(assigned, str):
+        key, served = assigned, {"clip_id": assigned}
+    else:
+        key, served = assigned.key, {"unit": assigned.key}
+        # Sides (pairwise) and page order (parallel) are drawn per trial; labels follow the order shown.
+        order = rng.sample(assigned.clips, len(assigned.clips))
+        conn.execute(
+            insert(TrialClip),
+            [{"trial_pk": t.id, "position": i, "label": LABELS[i], "clip_id": c} for i, c in enumerate(order)],
+        )
+    conn.execute(update(Trial).where(Trial.id == t.id).values(served_at=now, **served))
+    if t.kind == "test":
+        hold(conn, key)
+    return SimpleNamespace(**{**t._asdict(), "served_at": now, **served})
+
+
 def _serve(conn, rater_pk: int, now):
-    """The current trial, served: a test or catch slot gets its clip (or is dropped when none is left), and the
-    first serving time is recorded. In a write transaction."""
+    """(the current trial, served; whether slots were dropped): a test or catch slot gets its clip (or is dropped
+    when none is left), and the first serving time is recorded. In a write transaction that holds the rater's
+    row (`_rater` with `now`), so no concurrent GET next of this session can serve the same trial."""
+    dropped = False
     while True:
         t = _current(conn, rater_pk)
         if t is None or t.served_at is not None:
-            return t
+            return t, dropped
         if t.clip_id is not None or t.unit is not None:
             conn.execute(update(Trial).where(Trial.id == t.id, Trial.served_at.is_(None)).values(served_at=now))
-            continue
+            return SimpleNamespace(**{**t._asdict(), "served_at": now}), dropped
         if conn.dialect.name == "postgresql":
             # Handing out a slot is not an answer: if a crash loses this commit, the trial is served again. Not
-            # waiting for the WAL flush shortens the time every worker queues on the assignment lock.
+            # waiting for the WAL flush shortens the time the claimed Cover row stays locked.
             conn.execute(text("SET LOCAL synchronous_commit TO OFF"))
-        lock_assign(conn)
-        t = _current(conn, rater_pk)  # re-read under the lock (a concurrent GET next may have won)
-        if t is None or t.clip_id is not None or t.unit is not None:
-            continue
-        cfg = current_app.config
-        expire_idle(conn, cfg["SLOT_TIMEOUT_S"], now)
         rng = random.Random(secrets.randbits(64))
-        if cfg["STUDY_DESIGN"] == "acr":
-            clip = assign_slot(conn, rng, rater_pk, t.kind, cfg["RATINGS_PER_CLIP"])
-            if clip is not None:
-                conn.execute(update(Trial).where(Trial.id == t.id).values(clip_id=clip, served_at=now))
-                if t.kind == "test":
-                    hold(conn, clip)
-                continue
-        else:
-            unit = assign_unit(
-                conn, rng, rater_pk, t.kind, cfg["RATINGS_PER_CLIP"], current_app.extensions["rating_app"]["units"]
-            )
-            if unit is not None:
-                # Sides (pairwise) and page order (parallel) are drawn per trial; labels follow the order shown.
-                order = rng.sample(unit.clips, len(unit.clips))
-                conn.execute(
-                    insert(TrialClip),
-                    [{"trial_pk": t.id, "position": i, "label": LABELS[i], "clip_id": c} for i, c in enumerate(order)],
-                )
-                conn.execute(update(Trial).where(Trial.id == t.id).values(unit=unit.key, served_at=now))
-                if t.kind == "test":
-                    hold(conn, unit.key)
-                continue
+        assigned = _assign(conn, rng, rater_pk, t, wait=False)
+        if assigned is None:
+            # Nothing free to claim: release what idle sessions hold and look again, waiting for rows other
+            # servers are claiming. Under the assignment lock, so one server at a time does this.
+            lock_assign(conn)
+            expire_idle(conn, current_app.config["SLOT_TIMEOUT_S"], now)
+            assigned = _assign(conn, rng, rater_pk, t, wait=True)
+        if assigned is not None:
+            return _give(conn, rng, t, assigned, now), dropped
         # No clip left for this slot: drop it; the later rating trials move up one.
         conn.execute(update(Trial).where(Trial.id == t.id).values(released=True))
         conn.execute(
@@ -376,6 +393,7 @@ def _serve(conn, rater_pk: int, now):
             .values(index=Trial.index - 1)
         )
         conn.execute(update(Rater).where(Rater.id == rater_pk).values(n_rating=Rater.n_rating - 1))
+        dropped = True
 
 
 def _trial_clips(conn, trial_pk):
@@ -431,9 +449,9 @@ def next_trial(token):
         if rater.completed_at is None and _idle(rater, now):
             expire_idle(conn, current_app.config["SLOT_TIMEOUT_S"], now, rater.id)
             return _expired_reply()
-        trial = _serve(conn, rater.id, now) if rater.completed_at is None else None
+        trial, dropped = _serve(conn, rater.id, now) if rater.completed_at is None else (None, False)
         if trial is not None:
-            return _trial_reply(token, _rater(conn, token), trial, conn)
+            return _trial_reply(token, _rater(conn, token) if dropped else rater, trial, conn)
         if rater.completed_at is None:
             if _rater(conn, token).n_rating == 0:
                 # Every slot was dropped (the study filled meanwhile): nothing was rated, so no code.

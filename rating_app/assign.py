@@ -46,9 +46,14 @@ def expire_idle(conn, slot_timeout_s: float, now: dt.datetime, rater_pk: int | N
     The UPDATE on the rater row is what an answer takes first too, so an answer and the expiry of its session
     never both succeed."""
     cutoff = now - dt.timedelta(seconds=slot_timeout_s)
-    stmt = update(Rater).where(Rater.completed_at.is_(None), Rater.expired_at.is_(None), Rater.last_progress < cutoff)
+    idle = (Rater.completed_at.is_(None), Rater.expired_at.is_(None), Rater.last_progress < cutoff)
+    stmt = update(Rater).where(*idle)
     if rater_pk is not None:
         stmt = stmt.where(Rater.id == rater_pk)
+    elif conn.dialect.name != "sqlite":
+        # A session whose row another transaction holds is busy, not idle: skip it rather than wait for it,
+        # which could close a cycle with a server that holds that row and waits for the assignment lock.
+        stmt = stmt.where(Rater.id.in_(select(Rater.id).where(*idle).with_for_update(skip_locked=True)))
     ids = list(conn.execute(stmt.values(expired_at=now).returning(Rater.id)).scalars())
     if ids:
         open_slot = (Trial.rater_pk.in_(ids), Trial.answered_at.is_(None), Trial.released.is_(False))
@@ -118,21 +123,38 @@ def plan_session(conn, rng: random.Random, target: int, clips_per_rater: int | N
     return [("training", c) for c in training] + rating
 
 
-def assign_slot(conn, rng: random.Random, rater_pk: int, kind: str, target: int) -> str | None:
-    """The clip for a test or catch slot now being served, or None when none is left for this rater.
-    Call under `lock_assign`. Both kinds run the same queries, so their timing does not tell them apart."""
-    had = set(
-        conn.execute(select(Trial.clip_id).where(Trial.rater_pk == rater_pk, Trial.clip_id.is_not(None))).scalars()
+def claim(conn, keys, had, target: int, wait: bool, lock: bool = True):
+    """The least-covered key among `keys` still short of `target` and not in `had`, ties at random, with its
+    Cover row locked for this transaction; None when there is none. Without `wait`, rows that other servers are
+    claiming at this moment are skipped (PostgreSQL's SKIP LOCKED), so concurrent servers claim different rows
+    instead of queueing on one lock. The row's counts are checked again once it is locked, so no key is ever
+    handed out beyond its target. Without `lock` the same query only looks (a catch slot runs it too, so that
+    its timing matches a test slot's, but must not hold a row it does not use)."""
+    cover = Cover.answered + Cover.held
+    q = (
+        select(Cover.key)
+        .where(Cover.key.in_(keys), cover < target, Cover.key.not_in(had))
+        .order_by(cover, func.random())
+        .limit(1)
     )
-    cov = coverage(conn)
+    return conn.execute(q.with_for_update(skip_locked=not wait) if lock else q).scalar()
+
+
+def assign_slot(conn, rng: random.Random, rater_pk: int, kind: str, target: int, wait=False) -> str | None:
+    """The clip for a test or catch slot now being served, or None when none is left for this rater (None also
+    when, without `wait`, the only ones left are being claimed by other servers: call again under
+    `lock_assign` with `wait`). Both kinds run the same queries, so their timing does not tell them apart."""
+    had = select(Trial.clip_id).where(Trial.rater_pk == rater_pk, Trial.clip_id.is_not(None))
+    test = claim(conn, select(Clip.clip_id).where(Clip.role == "test"), had, target, wait, lock=kind == "test")
     if kind == "catch":
         catch = conn.execute(
-            select(Clip.clip_id).where(Clip.role == "catch", Clip.condition == study.CATCH).order_by(Clip.clip_id)
+            select(Clip.clip_id)
+            .where(Clip.role == "catch", Clip.condition == study.CATCH, Clip.clip_id.not_in(had))
+            .order_by(Clip.clip_id)
         ).scalars()
-        left = [c for c in catch if c not in had]
+        left = list(catch)
         return rng.choice(left) if left else None
-    short = sorted((d + h, rng.random(), c) for c, (d, h) in cov.items() if d + h < target and c not in had)
-    return short[0][2] if short else None
+    return test
 
 
 # ---------------------------------------------------------------------------------------- pairwise / parallel
@@ -158,13 +180,13 @@ def plan_units(conn, rng: random.Random, target: int, per_rater: int | None, des
     return [("training", g) for g in training_groups(design, clips, rng)] + rating
 
 
-def assign_unit(conn, rng: random.Random, rater_pk: int, kind: str, target: int, units):
-    """The Unit for a test or catch slot now being served, or None when none is left for this rater. Call under
-    `lock_assign`; both kinds run the same queries."""
-    had = set(conn.execute(select(Trial.unit).where(Trial.rater_pk == rater_pk, Trial.unit.is_not(None))).scalars())
-    cov = unit_coverage(conn, units)
+def assign_unit(conn, rng: random.Random, rater_pk: int, kind: str, target: int, units, wait=False):
+    """The Unit for a test or catch slot now being served, or None when none is left for this rater (as
+    assign_slot, whose rules it follows); both kinds run the same queries."""
+    had = select(Trial.unit).where(Trial.rater_pk == rater_pk, Trial.unit.is_not(None))
+    test = claim(conn, [k for k, u in units.items() if u.role == "test"], had, target, wait, lock=kind == "test")
     if kind == "catch":
-        left = [u for k, u in sorted(units.items()) if u.role == "catch" and k not in had]
+        taken = set(conn.execute(had).scalars())
+        left = [u for k, u in sorted(units.items()) if u.role == "catch" and k not in taken]
         return rng.choice(left) if left else None
-    short = sorted((d + h, rng.random(), k) for k, (d, h) in cov.items() if d + h < target and k not in had)
-    return units[short[0][2]] if short else None
+    return units[test] if test is not None else None
