@@ -66,7 +66,7 @@ def _export(a):
     from sqlalchemy.engine import make_url
     from sqlalchemy.exc import SQLAlchemyError
 
-    from .db import check_url, make_engine
+    from .db import check_url, make_engine, study_design
     from .export import export_csv
 
     url = check_url(a.db)
@@ -79,6 +79,8 @@ def _export(a):
             raise AppError(
                 f"{parsed.render_as_string(hide_password=True)}: no ratings table (not a rating app database)"
             )
+        with engine.connect() as conn:
+            design = study_design(conn) or "acr"
         if a.out == "-":
             n = export_csv(engine, sys.stdout)
         else:
@@ -89,7 +91,8 @@ def _export(a):
         raise AppError(f"cannot read the database: {first[0] if first else e.__class__.__name__}") from None
     finally:
         engine.dispose()
-    log.info("%s ratings -> %s", n, a.out)
+    rows = {"acr": "ratings", "pairwise": "pairwise answers", "parallel": "clip ratings of parallel pages"}
+    log.info("%s %s -> %s", n, rows.get(design, "rows"), a.out)
     return 0
 
 

@@ -535,3 +535,5 @@ def test_cli_export_writes_the_design_file(make, stimuli, app_db_url, tmp_path, 
         got = list(csv.DictReader(fh))
     assert got == want and len(got) > 0
     assert ("preference" in got[0]) == (design == "pairwise") and ("page_id" in got[0]) == (design == "parallel")
+    noun = "pairwise answers" if design == "pairwise" else "clip ratings of parallel pages"
+    assert f"{len(got)} {noun} -> {out}" in r.stderr, r.stderr  # not "N ratings" for pairs
