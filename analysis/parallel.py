@@ -20,7 +20,7 @@ from .load import AnalysisError, read_export
 
 REQUIRED = ("rater_id", "page_id", "item", "clip_id", "condition", "rating", "role")
 ROLES = ("test", "catch")
-BAD, REFERENCE = "BAD", "NAT"
+BAD, REFERENCE = study.CATCH, study.NATURAL
 
 
 def load_pages(path):

@@ -236,7 +236,7 @@ def _parser():
         "--threshold",
         type=cli.number(int, 1, 6),
         default=DEFAULT_THRESHOLD,
-        help="the report's catch-trial exclusion threshold for the pilot (default 3)",
+        help=f"the report's catch-trial exclusion threshold for the pilot (default {DEFAULT_THRESHOLD})",
     )
     ap.add_argument(
         "--n-sim",

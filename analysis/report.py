@@ -602,8 +602,8 @@ def _main(argv):
         "--threshold",
         type=cli.number(int, 1, 6),
         default=DEFAULT_THRESHOLD,
-        help="exclude raters who rated any catch clip at or above this (1-6; default 3, as in the "
-        "paper; 6 keeps every rater)",
+        help=f"exclude raters who rated any catch clip at or above this (1-6; default {DEFAULT_THRESHOLD}, as "
+        "in the paper; 6 keeps every rater)",
     )
     ap.add_argument("--no-mixed", action="store_true", help="skip the linear mixed model")
     ap.add_argument("--no-ordinal", action="store_true", help="skip the ordinal (cumulative-logit) mixed model")

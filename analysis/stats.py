@@ -14,6 +14,7 @@ import pandas as pd
 from scipy import sparse
 from scipy import stats as sps
 
+from core import study
 from core.study import condition_order
 
 NO_VARIANCE = "no variance (every rating is the same): test undefined"
@@ -439,7 +440,7 @@ def mixed_model(df, dv="rating", between="condition", rater="rater_id", clip="cl
         raise ModelUndefined(problem)
     levels = sorted(df[between].unique())
     if reference is None:
-        reference = "NAT" if "NAT" in levels else levels[0]
+        reference = study.NATURAL if study.NATURAL in levels else levels[0]
     others = [c for c in levels if c != reference]
     cond = df[between].to_numpy()
     X = np.column_stack([np.ones(len(df))] + [(cond == c).astype(float) for c in others])
@@ -491,7 +492,7 @@ def ordinal_model(df, dv="rating", between="condition", rater="rater_id", clip="
             )
     levels = sorted(df[between].unique())
     if reference is None:
-        reference = "NAT" if "NAT" in levels else levels[0]
+        reference = study.NATURAL if study.NATURAL in levels else levels[0]
     others = [c for c in levels if c != reference]
     cond = df[between].to_numpy()
     X = np.column_stack([(cond == c).astype(float) for c in others])
