@@ -618,7 +618,7 @@ def post_rating(token):
         if not training:
             _store(conn, design, trial, rater.id, shown, rating, watched_ms, now)
         if trial.kind == "test":
-            answer(conn, trial.clip_id if design == "acr" else trial.unit)
+            answer(conn, trial.clip_id or trial.unit)  # the trial's db.COVER_KEY
         return jsonify(stored=True), 201
 
 

@@ -26,7 +26,7 @@ from sqlalchemy import func, select, update
 
 from core import study
 
-from .db import Clip, Cover, Lock, Rater, Trial
+from .db import COVER_KEY, Clip, Cover, Lock, Rater, Trial
 from .designs import training_groups
 
 
@@ -57,9 +57,10 @@ def expire_idle(conn, slot_timeout_s: float, now: dt.datetime, rater_pk: int | N
     ids = list(conn.execute(stmt.values(expired_at=now).returning(Rater.id)).scalars())
     if ids:
         open_slot = (Trial.rater_pk.in_(ids), Trial.answered_at.is_(None), Trial.released.is_(False))
-        key = func.coalesce(Trial.clip_id, Trial.unit)
         held = conn.execute(
-            select(key, func.count()).where(*open_slot, Trial.kind == "test", key.is_not(None)).group_by(key)
+            select(COVER_KEY, func.count())
+            .where(*open_slot, Trial.kind == "test", COVER_KEY.is_not(None))
+            .group_by(COVER_KEY)
         ).all()
         conn.execute(update(Trial).where(*open_slot).values(released=True))
         for k, n in sorted(held):  # one order for every transaction that updates several rows

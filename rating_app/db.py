@@ -219,15 +219,19 @@ class Cover(Base):
     held: Mapped[int] = mapped_column(Integer, default=0)
 
 
-def trial_cover(conn, key):
-    """{key: (answered trials, held slots)} over test trials, counted from the trials in ONE statement (two
-    statements would each see the data as of their own start under PostgreSQL's read committed, and an answer
-    committed between them would be in neither count). `key` is Trial.clip_id or Trial.unit."""
+# A trial's Cover key: its clip (acr) or its unit (pairwise, parallel); a served test trial has exactly one.
+COVER_KEY = func.coalesce(Trial.clip_id, Trial.unit)
+
+
+def trial_cover(conn):
+    """{Cover key: (answered trials, held slots)} over test trials, counted from the trials in ONE statement
+    (two statements would each see the data as of their own start under PostgreSQL's read committed, and an
+    answer committed between them would be in neither count)."""
     held = case((and_(Trial.answered_at.is_(None), Trial.released.is_(False)), 1), else_=0)
     rows = conn.execute(
-        select(key, func.count(Trial.answered_at), func.sum(held))
-        .where(Trial.kind == "test", key.is_not(None))
-        .group_by(key)
+        select(COVER_KEY, func.count(Trial.answered_at), func.sum(held))
+        .where(Trial.kind == "test", COVER_KEY.is_not(None))
+        .group_by(COVER_KEY)
     ).all()
     return {k: (int(done), int(h or 0)) for k, done, h in rows}
 
@@ -349,7 +353,7 @@ def study_design(conn) -> str | None:
     return conn.execute(select(StudySetting.value).where(StudySetting.name == "design")).scalar()
 
 
-def _add_cover_rows(session, keys, key_column) -> None:
+def _add_cover_rows(session, keys) -> None:
     """Cover rows for keys that have none: zero in a new study, counted from the trials in a database made
     before the rows existed. Under the assignment lock, so no slot is assigned meanwhile."""
     have = set(session.scalars(select(Cover.key)))
@@ -357,7 +361,7 @@ def _add_cover_rows(session, keys, key_column) -> None:
     if missing:
         if session.bind.dialect.name != "sqlite":  # SQLite: BEGIN IMMEDIATE already holds the write lock
             session.execute(select(Lock).where(Lock.name == "assign").with_for_update())
-        counts = trial_cover(session.connection(), key_column)
+        counts = trial_cover(session.connection())
         session.add_all(Cover(key=k, answered=counts.get(k, (0, 0))[0], held=counts.get(k, (0, 0))[1]) for k in missing)
 
 
@@ -404,4 +408,4 @@ def init_db(engine: Engine, clips=None, design: str | None = None, cover_keys=No
                         row.condition, row.role, row.item = c.condition, c.role, c.item
                         row.frames, row.fps = c.frames, c.fps
             if cover_keys:
-                _add_cover_rows(s, cover_keys, Trial.clip_id if design in (None, "acr") else Trial.unit)
+                _add_cover_rows(s, cover_keys)

@@ -33,16 +33,16 @@ def run_raters(app, answer, n=8, timeout=300):
     return errors
 
 
-def cover_mismatches(engine, design):
+def cover_mismatches(engine):
     """{key: (Cover row, count from the trials)} wherever the app's running counts (rating_app.db.Cover) differ
     from counting the trials; {} when they agree, as they must after any crowd, crash or expiry."""
     from sqlalchemy import select
 
-    from rating_app.db import Cover, Trial, trial_cover
+    from rating_app.db import Cover, trial_cover
 
     with engine.connect() as conn:
         rows = {k: (a, h) for k, a, h in conn.execute(select(Cover.key, Cover.answered, Cover.held))}
-        counted = trial_cover(conn, Trial.clip_id if design == "acr" else Trial.unit)
+        counted = trial_cover(conn)
     return {
         k: (rows.get(k), counted.get(k, (0, 0)))
         for k in rows.keys() | counted.keys()

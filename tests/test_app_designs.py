@@ -327,7 +327,7 @@ def test_targets_reached_exactly_with_fewest_raters(make, big_stimuli, design, u
         raters += 1
     assert raters == units * target // per_rater
     check_exact(c, clips, design, units, target)
-    assert cover_mismatches(app_engine(app), design) == {}
+    assert cover_mismatches(app_engine(app)) == {}
 
 
 def unit_counts(rows, clips, design):
@@ -358,7 +358,7 @@ def test_targets_exact_under_concurrent_sessions(make, big_stimuli, design, unit
     errors = run_raters(app, post)
     assert not errors, errors[:3]
     check_exact(app.test_client(), clips, design, units, target)
-    assert cover_mismatches(app_engine(app), design) == {}
+    assert cover_mismatches(app_engine(app)) == {}
 
 
 def test_an_idle_session_gives_its_pair_back(make, stimuli):
@@ -377,7 +377,7 @@ def test_an_idle_session_gives_its_pair_back(make, stimuli):
     assert r.status_code == 409 and "for now" in r.json["error"]
     idle(app, ghost)
     assert post(c, ghost, t).status_code == 410
-    assert cover_mismatches(app_engine(app), "pairwise") == {}  # the expiry gave the held pair back
+    assert cover_mismatches(app_engine(app)) == {}  # the expiry gave the held pair back
     trials, _ = complete(c, start(c))
     assert held in [{x["a"]["clip_id"], x["b"]["clip_id"]} for x in trials]
 
