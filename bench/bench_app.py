@@ -1,13 +1,21 @@
 """Latency of the rating POST and the next-trial GET with 200 concurrent raters, gunicorn on this machine.
 
-    python bench/bench_app.py [--raters 200] [--duration 30] [--think 2.0] [--db sqlite|postgres|URL]
-        [--workers 4] [--threads 16] [--json out.json] [--design acr|pairwise|parallel]
+    python bench/bench_app.py [--design acr|pairwise|parallel] [--pace app|stress] [--raters 200]
+        [--duration 30] [--think S] [--db sqlite|postgres|URL] [--workers 4] [--threads 16] [--json out.json]
 
 A real gunicorn process (gthread workers) serves a paper-sized study (30 items x NAT/MG/FL + 4 catch + 4
-training clips, real MP4s) from a fresh PostgreSQL schema (or SQLite file). Each simulated rater keeps one
-keep-alive connection and loops: GET next -> pause (exponential, mean --think seconds, standing in for watching
-the clip and deciding) -> POST the rating. Latencies are client-side wall times (http.client, no retries);
-the first --warmup seconds are discarded. Target: p99 <= 100 ms, 0 errors.
+training clips, real MP4s of --clip-frames frames at 20 fps, 4 s like the paper's) from a fresh PostgreSQL schema
+(or SQLite file). Each simulated rater keeps one keep-alive connection and loops, as the page does:
+
+- `--pace app` (default): GET next -> GET every video of the trial -> wait until the clips can have played to the
+  end (the app's own rule, MIN_VIEW=1, its default: the clip in acr, the longer clip in pairwise, the sum of a
+  parallel page's clips) -> a decision pause (exponential, mean --think, default 1 s) -> POST the answer. This is
+  the fastest a rater can go: the app refuses an earlier answer.
+- `--pace stress`: the app's viewing rule off (MIN_VIEW=0), no video fetches, and a pause of mean --think
+  (default 2 s) between GET and POST: more answers per second than raters could give (the earlier benchmark).
+
+Latencies are client-side wall times (http.client, no retries); the first --warmup seconds are discarded.
+Target: p99 <= 100 ms for the answer POST and the next-trial GET, 0 errors.
 
 --design pairwise / parallel runs that test design (CONTRACTS §8): each answer is a preference for the trial's two
 clips, or a 0-100 rating of every clip of its page (one POST per page); the stimuli then include the NAT clip of
@@ -74,9 +82,9 @@ def start_server(port, env, workers, threads, log):
 
 
 class Rater(threading.Thread):
-    def __init__(self, port, i, stop_at, warm_at, think, rec, lock, errors, design="acr"):
+    def __init__(self, port, i, stop_at, warm_at, think, rec, lock, errors, design="acr", clip_s=None):
         super().__init__(daemon=True)
-        self.design = design
+        self.design, self.clip_s = design, clip_s  # clip_s: None = stress pace (no videos, no viewing time)
         self.port, self.i, self.stop_at, self.warm_at, self.think = port, i, stop_at, warm_at, think
         self.rec, self.lock, self.errors = rec, lock, errors
         self.rng = random.Random(i)
@@ -108,6 +116,8 @@ class Rater(threading.Thread):
             with self.lock:
                 self.errors.append(f"{method} {path}: {e.__class__.__name__}")
             return None, None, time.perf_counter() - t0
+        if resp.getheader("Content-Type", "").startswith("video/"):
+            return resp.status, len(payload), time.perf_counter() - t0
         return resp.status, json.loads(payload), time.perf_counter() - t0
 
     def record(self, kind, status, ok, dt):
@@ -119,6 +129,13 @@ class Rater(threading.Thread):
                 self.errors.append(f"{kind}: HTTP {status}")
 
     def run(self):
+        try:
+            self.loop()
+        except Exception as e:  # a rater that dies must count, not vanish from the figures
+            with self.lock:
+                self.errors.append(f"rater {self.i}: {e!r}")
+
+    def loop(self):
         status, body, dt = self.call("POST", "/api/sessions", {"external_id": f"bench-{os.getpid()}-{self.i}"})
         self.record("session", status, (201, 200), dt)
         if status not in (200, 201):
@@ -130,7 +147,19 @@ class Rater(threading.Thread):
             if status != 200 or body.get("done"):
                 return
             t = body["trial"]
-            time.sleep(min(self.rng.expovariate(1.0 / self.think), 10 * self.think) if self.think else 0)
+            shown = time.monotonic()
+            pause = min(self.rng.expovariate(1.0 / self.think), 10 * self.think) if self.think else 0
+            if self.clip_s is not None:
+                clips = t.get("clips") or [t[k] for k in ("a", "b") if k in t] or [t]
+                urls = [c["video_url"] for c in clips]
+                for url in urls:
+                    status, _, dt = self.call("GET", url)
+                    self.record("video", status, (200,), dt)
+                # The page enables the answer once every clip has played: at once side by side (pairwise), one
+                # after the other (parallel).
+                n = len(urls) if self.design == "parallel" else 1
+                pause += max(0.0, shown + n * self.clip_s + 0.05 - time.monotonic())
+            time.sleep(pause)
             if time.monotonic() >= self.stop_at:
                 return
             status, body, dt = self.call(
@@ -170,19 +199,30 @@ def main():
     p.add_argument("--duration", type=float, default=30.0, help="seconds of measurement after the warm-up")
     p.add_argument("--warmup", type=float, default=10.0, help="seconds discarded (raters arrive over --ramp)")
     p.add_argument("--ramp", type=float, default=5.0, help="seconds over which the raters arrive")
-    p.add_argument("--think", type=float, default=2.0, help="mean pause between GET next and POST, seconds")
+    p.add_argument(
+        "--pace",
+        choices=("app", "stress"),
+        default="app",
+        help="raters as fast as the app lets them (app) or faster (stress)",
+    )
+    p.add_argument(
+        "--think", type=float, default=None, help="mean decision pause, seconds (app: 1, after viewing; stress: 2)"
+    )
+    p.add_argument("--clip-frames", type=int, default=80, help="frames per clip at 20 fps (80: 4 s, the paper's)")
     p.add_argument("--db", default="postgres", help="postgres (fresh schema at 127.0.0.1), sqlite, or a URL")
     p.add_argument("--workers", type=int, default=4)
     p.add_argument("--threads", type=int, default=16)
     p.add_argument("--json", default=None)
     p.add_argument("--stimuli", default=None, help="reuse (or create) the benchmark's stimulus folder here")
     a = p.parse_args()
+    if a.think is None:
+        a.think = 1.0 if a.pace == "app" else 2.0
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_app_"))
     stim = Path(a.stimuli) if a.stimuli else tmp / "stimuli"
     manifest = stim / "manifest.csv"
     if not manifest.is_file():
-        manifest = write_fake_stimuli(stim, n_items=30, n_catch=4, n_training=4, n_frames=20, catch_nat=True)
+        manifest = write_fake_stimuli(stim, n_items=30, n_catch=4, n_training=4, n_frames=a.clip_frames, catch_nat=True)
     ctx = pg_schema() if a.db == "postgres" else None
     url = ctx.__enter__() if ctx else (f"sqlite:///{tmp}/ratings.sqlite" if a.db == "sqlite" else a.db)
     port = free_port()
@@ -192,18 +232,21 @@ def main():
         DATABASE_URL=url,
         ADMIN_TOKEN="bench",
         RATINGS_PER_CLIP="100000",
-        MIN_VIEW="0",
+        MIN_VIEW="1" if a.pace == "app" else "0",
         SESSIONS_PER_CLIENT="0",  # every rater is on loopback
         STUDY_DESIGN=a.design,
     )
     log = open(tmp / "gunicorn.log", "w")
     proc = start_server(port, env, a.workers, a.threads, log)
-    rec = {"session": [], "next": [], "rating": [], "training_ack": []}
+    rec = {"session": [], "next": [], "rating": [], "training_ack": [], "video": []}
+    clip_s = a.clip_frames / 20 if a.pace == "app" else None
     errors, lock = [], threading.Lock()
     try:
         t0 = time.monotonic()
         warm_at, stop_at = t0 + a.warmup, t0 + a.warmup + a.duration
-        raters = [Rater(port, i, stop_at, warm_at, a.think, rec, lock, errors, a.design) for i in range(a.raters)]
+        raters = [
+            Rater(port, i, stop_at, warm_at, a.think, rec, lock, errors, a.design, clip_s) for i in range(a.raters)
+        ]
         for r in raters:  # participants arrive over --ramp seconds
             r.start()
             time.sleep(a.ramp / a.raters)
@@ -216,11 +259,13 @@ def main():
         log.close()
         if ctx:
             ctx.__exit__(None, None, None)
-    measured = len(rec["next"]) + len(rec["rating"]) + len(rec["training_ack"])
+    measured = sum(len(v) for k, v in rec.items() if k != "session")
     out = {
         "design": a.design,
         "raters": a.raters,
+        "pace": a.pace,
         "think_s": a.think,
+        "clip_s": a.clip_frames / 20,
         "db": a.db if a.db in ("sqlite", "postgres") else "url",
         "workers": a.workers,
         "threads": a.threads,
@@ -233,11 +278,14 @@ def main():
         "next": stats(rec["next"]),
         "rating": stats(rec["rating"]),
         "training_ack": stats(rec["training_ack"]),
+        "video": stats(rec["video"]),
         "session": stats(rec["session"]),
     }
     print(json.dumps(out, indent=1))
+    if not out["next"]["n"] or not out["rating"]["n"]:
+        raise SystemExit("bench_app: no trial was answered; see the server log " + str(tmp / "gunicorn.log"))
     ok = out["errors"] == 0 and out["next"].get("p99_ms", 1e9) <= 100 and out["rating"].get("p99_ms", 1e9) <= 100
-    db = a.db if a.design == "acr" else f"{a.db} {a.design}"
+    db = f"{a.db} {a.design} {a.pace}"
     print(
         f"| {db} | {a.raters} | {a.think} | {a.workers}x{a.threads} | {out['throughput_rps']} | "
         f"{out['rating']['p50_ms']} / {out['rating']['p99_ms']} | {out['next']['p50_ms']} / {out['next']['p99_ms']} | "

@@ -77,6 +77,7 @@ def create_app(
     item (pairwise) or pages (parallel)."""
     from .admin import bp as admin_bp
     from .api import bp as api_bp
+    from .db import make_read_engine
     from .designs import build_units
     from .pages import bp as pages_bp
     from .videos import VideoStore
@@ -112,10 +113,10 @@ def create_app(
     )
     clips = load_manifest(manifest, check_files=check_files)
     units = build_units(config["STUDY_DESIGN"], clips)
+    engine = _open_database(db_url, clips, config["STUDY_DESIGN"], _cover_keys(config["STUDY_DESIGN"], clips, units))
     app.extensions["rating_app"] = {
-        "engine": _open_database(
-            db_url, clips, config["STUDY_DESIGN"], _cover_keys(config["STUDY_DESIGN"], clips, units)
-        ),
+        "engine": engine,
+        "read_engine": make_read_engine(engine),
         "clips": {c.clip_id: c for c in clips},
         "videos": VideoStore(clips, Path(manifest).resolve().parent, preload=check_files),
         "units": units,

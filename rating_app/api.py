@@ -25,8 +25,9 @@ import secrets
 from types import SimpleNamespace
 
 from flask import Blueprint, abort, current_app, jsonify, request, url_for
-from sqlalchemy import and_, func, insert, or_, select, text, update
+from sqlalchemy import and_, bindparam, func, insert, or_, select, text, update
 from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import aliased
 
 from .assign import (
     StudyFull,
@@ -39,7 +40,7 @@ from .assign import (
     plan_session,
     plan_units,
 )
-from .db import Event, PageRating, Preference, Rater, Rating, Trial, TrialClip, app_engine, utcnow
+from .db import Event, PageRating, Preference, Rater, Rating, Trial, TrialClip, app_engine, read_engine, utcnow
 from .designs import ANSWER_FIELD, LABELS
 from .designs import required_ms as design_required_ms
 from .guard import check_depth, client_key, escape_text, same_site_only
@@ -293,16 +294,40 @@ TRIAL_COLS = (
 )
 
 
+# The hot statements are built once: building one costs about as much Python time as running it.
+_RATER = select(*RATER_COLS).where(Rater.token == bindparam("token"))
+_RATER_LOCKED = _RATER.with_for_update()
+_OPEN = (Trial.answered_at.is_(None), Trial.released.is_(False))
+_CURRENT = select(*TRIAL_COLS).where(Trial.rater_pk == bindparam("rater_pk"), *_OPEN).order_by(Trial.position).limit(1)
+_open = aliased(Trial)
+# The rater and its current trial in one read (GET next's read-only first step). A read only: under a row lock,
+# PostgreSQL would re-check the locked row but not the trial read beside it, so the write paths lock first and
+# read the trial in a statement of its own.
+_RATER_CURRENT = (
+    select(*RATER_COLS, *(c.label("t_" + c.key) for c in TRIAL_COLS))
+    .select_from(Rater)
+    .outerjoin(
+        Trial,
+        Trial.id
+        == select(_open.id)
+        .where(_open.rater_pk == Rater.id, _open.answered_at.is_(None), _open.released.is_(False))
+        .order_by(_open.position)
+        .limit(1)
+        .correlate(Rater)
+        .scalar_subquery(),
+    )
+    .where(Rater.token == bindparam("token"))
+)
+
+
 def _rater(conn, token: str, now=None):
     """The rater's row; 404 for an unknown token. With `now` (in a write transaction), the row is locked first
     of all, so one session's writes (serving, answering, expiring) run one at a time and every transaction takes
     a rater row before any other; and last_seen is refreshed when it is stale."""
     if not TOKEN.fullmatch(token):
         abort(404, "unknown session")
-    q = select(*RATER_COLS).where(Rater.token == token)
-    if now is not None and conn.dialect.name != "sqlite":  # SQLite: BEGIN IMMEDIATE already holds the write lock
-        q = q.with_for_update()
-    row = conn.execute(q).first()
+    lock = now is not None and conn.dialect.name != "sqlite"  # SQLite: BEGIN IMMEDIATE already holds the lock
+    row = conn.execute(_RATER_LOCKED if lock else _RATER, {"token": token}).first()
     if row is None:
         abort(404, "unknown session")
     if now is not None and _stale(row, now):
@@ -323,12 +348,20 @@ def _idle(row, now) -> bool:
 
 def _current(conn, rater_pk):
     """The trial on the rater's screen: the first unanswered one in the rater's order."""
-    return conn.execute(
-        select(*TRIAL_COLS)
-        .where(Trial.rater_pk == rater_pk, Trial.answered_at.is_(None), Trial.released.is_(False))
-        .order_by(Trial.position)
-        .limit(1)
-    ).first()
+    return conn.execute(_CURRENT, {"rater_pk": rater_pk}).first()
+
+
+def _rater_current(conn, token: str):
+    """(rater, its current trial or None) in one read, for a read-only transaction; 404 for an unknown token."""
+    if not TOKEN.fullmatch(token):
+        abort(404, "unknown session")
+    row = conn.execute(_RATER_CURRENT, {"token": token}).first()
+    if row is None:
+        abort(404, "unknown session")
+    m = row._mapping
+    rater = SimpleNamespace(**{c.key: m[c.key] for c in RATER_COLS})
+    trial = SimpleNamespace(**{c.key: m["t_" + c.key] for c in TRIAL_COLS}) if m["t_id"] is not None else None
+    return rater, trial
 
 
 def _assign(conn, rng, rater_pk, t, wait):
@@ -343,20 +376,22 @@ def _assign(conn, rng, rater_pk, t, wait):
 def _give(conn, rng, t, assigned, now):
     """Trial `t` gets its clip (acr) or unit, is marked served, and a test slot is held in its Cover row;
     returns the trial as served."""
+    shown = None
     if isinstance(assigned, str):
         key, served = assigned, {"clip_id": assigned}
     else:
         key, served = assigned.key, {"unit": assigned.key}
         # Sides (pairwise) and page order (parallel) are drawn per trial; labels follow the order shown.
         order = rng.sample(assigned.clips, len(assigned.clips))
+        shown = [SimpleNamespace(label=LABELS[i], clip_id=c) for i, c in enumerate(order)]
         conn.execute(
             insert(TrialClip),
-            [{"trial_pk": t.id, "position": i, "label": LABELS[i], "clip_id": c} for i, c in enumerate(order)],
+            [{"trial_pk": t.id, "position": i, "label": r.label, "clip_id": r.clip_id} for i, r in enumerate(shown)],
         )
     conn.execute(update(Trial).where(Trial.id == t.id).values(served_at=now, **served))
     if t.kind == "test":
         hold(conn, key)
-    return SimpleNamespace(**{**t._asdict(), "served_at": now, **served})
+    return SimpleNamespace(**{**t._asdict(), "served_at": now, **served, "shown": shown})
 
 
 def _serve(conn, rater_pk: int, now):
@@ -405,6 +440,8 @@ def _trial_clips(conn, trial_pk):
 
 
 def _trial_reply(token, rater, trial, conn=None):
+    """The trial as sent to the page; the clips of a pairwise or parallel trial are read unless `trial.shown`
+    holds them (a trial just served)."""
     out = {
         "trial_id": trial.id,
         "phase": trial.phase,
@@ -415,16 +452,19 @@ def _trial_reply(token, rater, trial, conn=None):
     if design == "acr":
         out.update(clip_id=trial.clip_id, video_url=url_for("api.trial_video", token=token, trial_id=trial.id))
         return jsonify(trial=out)
-    own = app_engine().connect().execution_options(read_only=True) if conn is None else contextlib.nullcontext(conn)
-    with own as c:
-        shown = [
-            {
-                "clip_id": r.clip_id,
-                "label": r.label,
-                "video_url": url_for("api.clip_video", token=token, trial_id=trial.id, label=r.label),
-            }
-            for r in _trial_clips(c, trial.id)
-        ]
+    clips = getattr(trial, "shown", None)
+    if clips is None:
+        own = read_engine().connect() if conn is None else contextlib.nullcontext(conn)
+        with own as c:
+            clips = _trial_clips(c, trial.id)
+    shown = [
+        {
+            "clip_id": r.clip_id,
+            "label": r.label,
+            "video_url": url_for("api.clip_video", token=token, trial_id=trial.id, label=r.label),
+        }
+        for r in clips
+    ]
     out["design"] = design
     if design == "pairwise" and len(shown) == 2:
         out.update(a=shown[0], b=shown[1])
@@ -434,16 +474,18 @@ def _trial_reply(token, rater, trial, conn=None):
 
 
 # The two hot calls use Core statements on a plain connection (no ORM unit of work): they are what 200
-# concurrent raters hit. GET next only reads once its trial has been served (a write serves a new trial, ends a
-# session, or refreshes a stale last_seen); every answer is committed before it is acknowledged.
+# concurrent raters hit. Every answer is committed before it is acknowledged. On SQLite, GET next only reads once
+# its trial has been served (a write serves a new trial, ends a session, or refreshes a stale last_seen): a
+# write transaction there takes the whole database. On PostgreSQL it locks only the session's row, so GET next
+# goes straight to the write transaction, which saves a round trip in the usual case, a trial not yet served.
 @bp.get("/sessions/<token>/next")
 def next_trial(token):
     now = utcnow()
-    with app_engine().connect().execution_options(read_only=True) as conn, conn.begin():
-        rater = _rater(conn, token)
-        trial = _current(conn, rater.id)
-    if trial is not None and trial.served_at is not None and not _idle(rater, now) and not _stale(rater, now):
-        return _trial_reply(token, rater, trial)
+    if app_engine().dialect.name == "sqlite":
+        with read_engine().connect() as conn, conn.begin():
+            rater, trial = _rater_current(conn, token)
+        if trial is not None and trial.served_at is not None and not _idle(rater, now) and not _stale(rater, now):
+            return _trial_reply(token, rater, trial)
     with app_engine().begin() as conn:
         rater = _rater(conn, token, now)
         if rater.completed_at is None and _idle(rater, now):
@@ -467,16 +509,36 @@ def next_trial(token):
     return jsonify(_completion(rater))
 
 
+# A video request reads the session, the trial and (pairwise, parallel) the clip in one statement: the page
+# fetches every clip of every trial, so these are the app's most frequent requests.
+_TRIAL_VIDEO = (
+    select(Trial.clip_id, Trial.video_at, Trial.released, Trial.served_at)
+    .join(Rater, Rater.id == Trial.rater_pk)
+    .where(Rater.token == bindparam("token"), Trial.id == bindparam("trial_id"))
+)
+_CLIP_VIDEO = (
+    select(TrialClip.id, TrialClip.clip_id, TrialClip.video_at, Trial.released, Trial.served_at)
+    .join(Trial, Trial.id == TrialClip.trial_pk)
+    .join(Rater, Rater.id == Trial.rater_pk)
+    .where(Rater.token == bindparam("token"), Trial.id == bindparam("trial_id"), TrialClip.label == bindparam("label"))
+)
+
+
+def _video_row(stmt, token, **params):
+    """The row of a video request, or None; 404 "unknown session" for a token no session has."""
+    if not TOKEN.fullmatch(token):
+        abort(404, "unknown session")
+    with read_engine().connect() as conn, conn.begin():
+        row = conn.execute(stmt, {"token": token, **params}).first()
+        if row is None:
+            _rater(conn, token)  # only to tell an unknown session from an unknown video
+    return row
+
+
 @bp.get("/sessions/<token>/trials/<int(max=2147483647):trial_id>/video.mp4")
 def trial_video(token, trial_id):
     """The video of a served trial; the first request is recorded (an answer without it is flagged)."""
-    with app_engine().connect().execution_options(read_only=True) as conn, conn.begin():
-        rater = _rater(conn, token)
-        t = conn.execute(
-            select(Trial.clip_id, Trial.video_at, Trial.released, Trial.served_at).where(
-                Trial.id == trial_id, Trial.rater_pk == rater.id
-            )
-        ).first()
+    t = _video_row(_TRIAL_VIDEO, token, trial_id=trial_id)
     if t is None or t.clip_id is None or t.served_at is None or t.released:
         abort(404, "unknown video")
     if t.video_at is None:
@@ -489,13 +551,7 @@ def trial_video(token, trial_id):
 def clip_video(token, trial_id, label):
     """One clip of a served pairwise or parallel trial, by the label the rater sees; the first request is
     recorded per clip (an answer before every clip's video was fetched is flagged)."""
-    with app_engine().connect().execution_options(read_only=True) as conn, conn.begin():
-        rater = _rater(conn, token)
-        t = conn.execute(
-            select(TrialClip.id, TrialClip.clip_id, TrialClip.video_at, Trial.released, Trial.served_at)
-            .join(Trial, Trial.id == TrialClip.trial_pk)
-            .where(Trial.id == trial_id, Trial.rater_pk == rater.id, TrialClip.label == label)
-        ).first()
+    t = _video_row(_CLIP_VIDEO, token, trial_id=trial_id, label=label)
     if t is None or t.served_at is None or t.released:
         abort(404, "unknown video")
     if t.video_at is None:
@@ -545,6 +601,43 @@ def _parse_answer(body, design, training, shown):
     return {cid: _int_field(ratings, cid, 0, 100) for cid in sorted(want)}
 
 
+# The trial being answered, with the position of the rater's first open trial: only the trial on screen can be
+# answered, the first unanswered, unreleased one once served. (This trial itself counts as open here, in case a
+# concurrent duplicate has just answered it.)
+_ANSWERED_TRIAL = select(
+    Trial.id,
+    Trial.phase,
+    Trial.clip_id,
+    Trial.position,
+    Trial.answered_at,
+    Trial.released,
+    Trial.served_at,
+    Trial.video_at,
+    Trial.kind,
+    Trial.unit,
+    select(func.min(_open.position))
+    .where(
+        _open.rater_pk == Trial.rater_pk,
+        or_(and_(_open.answered_at.is_(None), _open.released.is_(False)), _open.id == Trial.id),
+    )
+    .correlate(Trial)
+    .scalar_subquery()
+    .label("first"),
+).where(Trial.id == bindparam("trial_id"), Trial.rater_pk == bindparam("rater_pk"))
+
+
+# ... and, in pairwise and parallel, with one row per clip of the trial, in the order shown.
+_ANSWERED_TRIAL_CLIPS = (
+    _ANSWERED_TRIAL.add_columns(
+        TrialClip.label.label("clip_label"),
+        TrialClip.clip_id.label("clip_clip_id"),
+        TrialClip.video_at.label("clip_video_at"),
+    )
+    .outerjoin(TrialClip, TrialClip.trial_pk == Trial.id)
+    .order_by(TrialClip.position)
+)
+
+
 @bp.post("/sessions/<token>/ratings")
 def post_rating(token):
     cfg = current_app.config
@@ -555,39 +648,25 @@ def post_rating(token):
     now = utcnow()
     with app_engine().begin() as conn:
         rater = _rater(conn, token, now)
-        trial = conn.execute(
-            select(
-                Trial.id,
-                Trial.phase,
-                Trial.clip_id,
-                Trial.position,
-                Trial.answered_at,
-                Trial.released,
-                Trial.served_at,
-                Trial.video_at,
-                Trial.kind,
-                Trial.unit,
-            ).where(Trial.id == trial_id, Trial.rater_pk == rater.id)
-        ).first()
-        if trial is None:
+        rows = conn.execute(
+            _ANSWERED_TRIAL if design == "acr" else _ANSWERED_TRIAL_CLIPS, {"trial_id": trial_id, "rater_pk": rater.id}
+        ).all()
+        if not rows:
             abort(404, "unknown trial for this session")
+        trial = rows[0]
         training = trial.phase == "training"
-        shown = _trial_clips(conn, trial.id) if design != "acr" else []
+        shown = [
+            SimpleNamespace(label=r.clip_label, clip_id=r.clip_clip_id, video_at=r.clip_video_at)
+            for r in rows
+            if design != "acr" and r.clip_label is not None
+        ]
         rating = _parse_answer(body, design, training, shown)
         if trial.answered_at is not None:  # a repeat: acknowledged, stored once
             return _duplicate(conn, trial.id, training)
         if _idle(rater, now):
             expire_idle(conn, cfg["SLOT_TIMEOUT_S"], now, rater.id)
             return _expired_reply()
-        # Only the trial on screen can be answered: the first unanswered, unreleased one, once served. (This
-        # trial itself counts as unanswered here, in case a concurrent duplicate has just answered it.)
-        first = conn.execute(
-            select(func.min(Trial.position)).where(
-                Trial.rater_pk == rater.id,
-                or_(and_(Trial.answered_at.is_(None), Trial.released.is_(False)), Trial.id == trial.id),
-            )
-        ).scalar()
-        if trial.released or trial.served_at is None or trial.position != first:
+        if trial.released or trial.served_at is None or trial.position != trial.first:
             abort(409, "this trial has not been shown yet")
         need = required_ms(trial.clip_id, [r.clip_id for r in shown])
         elapsed = (now - trial.served_at).total_seconds() * 1000

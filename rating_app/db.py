@@ -286,6 +286,20 @@ def app_engine(app=None) -> Engine:
     return (app or current_app).extensions["rating_app"]["engine"]
 
 
+def read_engine(app=None) -> Engine:
+    """The engine for a request's single reads (the current trial, a video's trial), made by make_read_engine."""
+    return (app or current_app).extensions["rating_app"]["read_engine"]
+
+
+def make_read_engine(engine: Engine) -> Engine:
+    """`engine` for single reads: PostgreSQL runs them in autocommit, without the BEGIN and COMMIT round trips of
+    a transaction; SQLite in a read-only transaction, which takes no write lock (make_engine). It shares
+    `engine`'s pool."""
+    if is_sqlite(engine):
+        return engine.execution_options(read_only=True)
+    return engine.execution_options(isolation_level="AUTOCOMMIT")
+
+
 def make_engine(url: str | None = None) -> Engine:
     url = check_url(url)
     if url.startswith("sqlite"):

@@ -537,3 +537,42 @@ def test_cli_export_writes_the_design_file(make, stimuli, app_db_url, tmp_path, 
     assert ("preference" in got[0]) == (design == "pairwise") and ("page_id" in got[0]) == (design == "parallel")
     noun = "pairwise answers" if design == "pairwise" else "clip ratings of parallel pages"
     assert f"{len(got)} {noun} -> {out}" in r.stderr, r.stderr  # not "N ratings" for pairs
+
+
+# ------------------------------------------------------------------------------------------- cost per call
+# The most SQL statements each hot call may send for a rating trial, by database (catch slots included: they
+# run the test slots' queries too). Under 200 raters the CPU per statement is what sets the tail latency
+# (bench/RESULTS.md, issue 13); this guards the count, never a time.
+HOT_CALL_LIMITS = {
+    "postgresql": {"next": 7, "video": 2, "answer": 6},
+    "sqlite": {"next": 9, "video": 4, "answer": 7},  # its BEGINs are statements too (db.make_engine)
+}
+
+
+@pytest.mark.parametrize("design", ["acr", "pairwise", "parallel"])
+def test_hot_calls_send_few_statements(make, big_stimuli, design):
+    from sqlalchemy import event
+
+    app = make(big_stimuli, design, ratings_per_clip=5)
+    engine = app_engine(app)
+    sent = []
+    event.listen(engine, "before_cursor_execute", lambda *a: sent.append(a[2]))
+    c = app.test_client()
+    most = collections.Counter()
+
+    def count(kind, resp):
+        most[kind] = max(most[kind], len(sent))
+        sent.clear()
+        return resp
+
+    token = start(c)
+    for _ in range(12):
+        sent.clear()
+        t = count("next", c.get(f"/api/sessions/{token}/next")).json["trial"]
+        for x in shown(t):
+            assert count("video", c.get(x["video_url"])).status_code == 200
+        assert count("answer", post(c, token, t)).status_code == 201
+    limits = dict(HOT_CALL_LIMITS[engine.dialect.name])
+    limits["next"] -= design == "acr"  # no clips of a unit to insert
+    assert all(most[k] <= limits[k] for k in limits), (dict(most), limits)
+    assert min(most.values()) > 0  # the listener saw the calls

@@ -1,0 +1,119 @@
+"""What one rater's request costs the app: SQL statements and CPU milliseconds per call, by design.
+
+    python bench/app_request_cost.py [--design acr|pairwise|parallel] [--db postgres|sqlite] [--answers 600]
+
+Raters go through a paper-sized study (30 items x NAT/MG/FL, 4 catch, 4 training clips) in one process, one
+call at a time, through Flask's test client: create a session, then GET next, GET every video of the trial and
+POST the answer, as the page does, until --answers answers are in. For each kind of call it prints the median
+and mean CPU time of this process (time.process_time: the app's Python, the driver and SQLAlchemy; the
+database server's own work is not in it) and the median number of SQL statements sent. Under 200 concurrent
+raters (bench_app.py) the two cores run out of CPU, so this is the cost that sets the tail latency there.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))  # the fake stimulus folder the app's tests use (tests/fake_stimuli.py)
+
+from fake_stimuli import pg_schema, write_fake_stimuli  # noqa: E402
+from sqlalchemy import event  # noqa: E402
+
+from core import cli  # noqa: E402
+from core.study import DESIGNS  # noqa: E402
+from rating_app import create_app  # noqa: E402
+from rating_app.db import app_engine  # noqa: E402
+
+SAME_SITE = {"Sec-Fetch-Site": "same-origin"}
+
+
+def answer(design, trial, clips):
+    """The page's answer to `trial`: null for familiarisation, else a fixed valid value."""
+    training = trial["phase"] == "training"
+    if design == "pairwise":
+        return {"preference": None if training else 1}
+    if design == "parallel":
+        return {"ratings": None if training else {c["clip_id"]: 50 for c in clips}}
+    return {"rating": None if training else 3}
+
+
+def run(app, design, n_answers):
+    """{call kind: ([cpu seconds], [statements])} over raters until `n_answers` answers."""
+    sent = []
+    event.listen(app_engine(app), "before_cursor_execute", lambda *a: sent.append(1))
+    client = app.test_client()
+    cost = defaultdict(lambda: ([], []))
+
+    def call(kind, fn):
+        sent.clear()
+        t0 = time.process_time()
+        resp = fn()
+        cost[kind][0].append(time.process_time() - t0)
+        cost[kind][1].append(len(sent))
+        return resp
+
+    while len(cost["answer POST"][0]) < n_answers:
+        token = call("session POST", lambda: client.post("/api/sessions", json={}, headers=SAME_SITE)).get_json()
+        token = token["session"]
+        while len(cost["answer POST"][0]) < n_answers:
+            body = call("next GET", lambda: client.get(f"/api/sessions/{token}/next")).get_json()
+            if "trial" not in body:
+                break
+            trial = body["trial"]
+            clips = trial.get("clips") or [trial[k] for k in ("a", "b") if k in trial] or [trial]
+            for clip in clips:
+                call("video GET", lambda: client.get(clip["video_url"]))
+            payload = {"trial_id": trial["trial_id"], "watched_ms": 4000, **answer(design, trial, clips)}
+            resp = call("answer POST", lambda: client.post(f"/api/sessions/{token}/ratings", json=payload))
+            if resp.status_code != 201:
+                raise SystemExit(f"app_request_cost: answer refused: {resp.status_code} {resp.get_data(as_text=True)}")
+    return cost
+
+
+def main():
+    p = cli.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--design", choices=DESIGNS, default="pairwise")
+    p.add_argument("--db", choices=("postgres", "sqlite"), default="postgres")
+    p.add_argument("--answers", type=int, default=600)
+    p.add_argument("--stimuli", default=None, help="reuse (or create) the stimulus folder here")
+    a = p.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="app_cost_"))
+    stim = Path(a.stimuli) if a.stimuli else tmp / "stimuli"
+    manifest = stim / "manifest.csv"
+    if not manifest.is_file():
+        manifest = write_fake_stimuli(stim, n_items=30, n_catch=4, n_training=4, n_frames=80, catch_nat=True)
+    ctx = pg_schema() if a.db == "postgres" else None
+    url = ctx.__enter__() if ctx else f"sqlite:///{tmp}/ratings.sqlite"
+    try:
+        app = create_app(
+            manifest=manifest,
+            db_url=url,
+            ratings_per_clip=100000,
+            min_view=0,
+            design=a.design,
+            admin_token="bench",
+            sessions_per_client=0,
+        )
+        cost = run(app, a.design, a.answers)
+    finally:
+        if ctx:
+            ctx.__exit__(None, None, None)
+    print(f"| call | n | CPU ms, median / mean | statements (median) |  ({a.design}, {a.db})")
+    for kind, (cpu, stmts) in cost.items():
+        ms = [1000 * x for x in cpu]
+        print(
+            f"| {kind} | {len(ms)} | {statistics.median(ms):.2f} / {statistics.mean(ms):.2f} | "
+            f"{statistics.median(stmts):g} |"
+        )
+
+
+if __name__ == "__main__":
+    main()
