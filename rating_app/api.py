@@ -297,12 +297,20 @@ TRIAL_COLS = (
 # The hot statements are built once: building one costs about as much Python time as running it.
 _RATER = select(*RATER_COLS).where(Rater.token == bindparam("token"))
 _RATER_LOCKED = _RATER.with_for_update()
-_OPEN = (Trial.answered_at.is_(None), Trial.released.is_(False))
-_CURRENT = select(*TRIAL_COLS).where(Trial.rater_pk == bindparam("rater_pk"), *_OPEN).order_by(Trial.position).limit(1)
+
+
+def _is_open(t=Trial):
+    """Trial `t` (or an alias of it) is still to be answered: unanswered and not released."""
+    return and_(t.answered_at.is_(None), t.released.is_(False))
+
+
+_CURRENT = (
+    select(*TRIAL_COLS).where(Trial.rater_pk == bindparam("rater_pk"), _is_open()).order_by(Trial.position).limit(1)
+)
 _open = aliased(Trial)
-# The rater and its current trial in one read (GET next's read-only first step). A read only: under a row lock,
-# PostgreSQL would re-check the locked row but not the trial read beside it, so the write paths lock first and
-# read the trial in a statement of its own.
+# The rater and its current trial in one read (GET next's read-only first step on SQLite). A read only: under a
+# row lock, PostgreSQL would re-check the locked row but not the trial read beside it, so the write paths lock
+# first and read the trial in a statement of its own.
 _RATER_CURRENT = (
     select(*RATER_COLS, *(c.label("t_" + c.key) for c in TRIAL_COLS))
     .select_from(Rater)
@@ -310,7 +318,7 @@ _RATER_CURRENT = (
         Trial,
         Trial.id
         == select(_open.id)
-        .where(_open.rater_pk == Rater.id, _open.answered_at.is_(None), _open.released.is_(False))
+        .where(_open.rater_pk == Rater.id, _is_open(_open))
         .order_by(_open.position)
         .limit(1)
         .correlate(Rater)
@@ -618,7 +626,7 @@ _ANSWERED_TRIAL = select(
     select(func.min(_open.position))
     .where(
         _open.rater_pk == Trial.rater_pk,
-        or_(and_(_open.answered_at.is_(None), _open.released.is_(False)), _open.id == Trial.id),
+        or_(_is_open(_open), _open.id == Trial.id),
     )
     .correlate(Trial)
     .scalar_subquery()
@@ -687,11 +695,7 @@ def post_rating(token):
         ).rowcount
         if ok != 1:
             return _expired_reply()
-        claimed = conn.execute(
-            update(Trial)
-            .where(Trial.id == trial.id, Trial.answered_at.is_(None), Trial.released.is_(False))
-            .values(answered_at=now)
-        ).rowcount
+        claimed = conn.execute(update(Trial).where(Trial.id == trial.id, _is_open()).values(answered_at=now)).rowcount
         if claimed != 1:
             return _duplicate(conn, trial.id, training)
         if not training:
