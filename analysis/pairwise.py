@@ -20,7 +20,6 @@ from itertools import combinations
 
 import numpy as np
 import pandas as pd
-from scipy import optimize
 from scipy import stats as sps
 
 from core import study
@@ -154,64 +153,90 @@ def _tables(o, conds):
     return t, np.array(pairs, dtype=int)
 
 
-def _negloglik(params, counts, pairs, ref, k, ties):
-    """Davidson's tie model (nu = exp(params[-1])) or plain Bradley-Terry; returns (value, gradient)."""
-    theta = np.zeros(k)
-    free = [c for c in range(k) if c != ref]
-    theta[free] = params[: k - 1]
-    i, j = pairs[:, 0], pairs[:, 1]
-    w, lost, t = counts[:, 0], counts[:, 1], counts[:, 2]
-    ti, tj = theta[i], theta[j]
-    if ties:
-        lognu = params[-1]
-        terms = np.stack([ti, tj, lognu + 0.5 * (ti + tj)])
-    else:
-        terms = np.stack([ti, tj])
-    lse = np.logaddexp.reduce(terms, axis=0)
-    n = w + lost + t
-    ll = w * ti + lost * tj - n * lse
-    if ties:
-        ll = ll + t * (lognu + 0.5 * (ti + tj))
-    prob = np.exp(terms - lse)  # P(i), P(j), P(tie)
-    d_ti = w - n * prob[0]
-    d_tj = lost - n * prob[1]
-    if ties:
-        d_ti = d_ti + 0.5 * (t - n * prob[2])
-        d_tj = d_tj + 0.5 * (t - n * prob[2])
-    g_theta = np.bincount(i, d_ti, minlength=k) + np.bincount(j, d_tj, minlength=k)
-    grad = list(g_theta[free])
-    if ties:
-        grad.append(float(np.sum(t - n * prob[2])))
-    return -float(ll.sum()), -np.array(grad)
+def _outcome_map(pairs, k, ref, ties):
+    """A [P, K, m]: how the logits of each pair's K outcomes (first wins, second wins, and with ties a tie) depend
+    on the m free parameters (the strengths but the reference's, then log nu). P(outcome) = softmax(A @ x)."""
+    col = {c: n for n, c in enumerate(c for c in range(k) if c != ref)}
+    A = np.zeros((len(pairs), 2 + ties, k - 1 + ties))
+    for p, (i, j) in enumerate(pairs):
+        for c, row in ((i, 0), (j, 1)):
+            if c in col:
+                A[p, row, col[c]] = 1.0
+                if ties:
+                    A[p, 2, col[c]] = 0.5  # the tie's logit: log nu + (theta_i + theta_j) / 2
+        if ties:
+            A[p, 2, -1] = 1.0
+    return A
+
+
+def _newton(counts, A, ridge, x0, max_iter=200):
+    """Maximum likelihood for a batch of count tables at once: counts [B, P, K], start x0 [m]. The negative
+    log-likelihood is convex in the parameters (a log-sum-exp of affine logits less a linear term) and the ridge
+    makes it strictly so, so damped Newton steps reach the one optimum. -> (x [B, m], nll [B], grad [B, m])."""
+    n = counts.sum(axis=2)
+
+    def evaluate(x):
+        logits = np.einsum("pkm,bm->bpk", A, x)
+        lse = np.logaddexp.reduce(logits, axis=2)
+        nll = (n * lse - (counts * logits).sum(axis=2)).sum(axis=1) + (ridge * x**2).sum(axis=1)
+        prob = np.exp(logits - lse[..., None])
+        grad = np.einsum("bpk,pkm->bm", n[..., None] * prob - counts, A) + 2 * ridge * x
+        return nll, grad, prob
+
+    x = np.broadcast_to(np.asarray(x0, dtype=float), (len(counts), A.shape[2])).copy()
+    nll, grad, prob = evaluate(x)
+    for _ in range(max_iter):
+        todo = np.max(np.abs(grad), axis=1) > 1e-9
+        if not todo.any():
+            break
+        # Hessian: sum over pairs of n A' (diag(p) - p p') A, plus the ridge.
+        outer = prob[..., :, None] * prob[..., None, :]
+        cov = n[..., None, None] * (prob[..., :, None] * np.eye(prob.shape[2]) - outer)
+        hess = np.einsum("pkm,bpkl,pln->bmn", A, cov, A) + np.diag(2 * ridge)
+        step = np.linalg.solve(hess, grad[..., None])[..., 0]
+        step[~todo] = 0.0
+        t = np.ones(len(x))
+        for _ in range(30):  # halve the step where it does not lower the objective
+            new = x - t[:, None] * step
+            new_nll, new_grad, new_prob = evaluate(new)
+            worse = new_nll > nll + 1e-12 * np.abs(nll)
+            if not worse.any():
+                break
+            t[worse] /= 2
+        x, nll, grad, prob = new, new_nll, new_grad, new_prob
+    return x, nll, grad
 
 
 def fit_bradley_terry(counts, pairs, conds, reference=None, ties=None, x0=None):
-    """ML fit on pair counts [P, 3] (wins of the first, wins of the second, ties) ->
-    {"strengths": {cond: log strength, reference 0}, "nu": tie parameter or 0, "log_likelihood", "converged"};
-    `x0`: starting parameters (a bootstrap starts from the full fit's "params")."""
+    """ML fit on pair counts [P, 3] (wins of the first, wins of the second, ties), or on a batch of them
+    [B, P, 3] (the bootstrap) -> {"strengths": {cond: log strength, reference 0}, "nu": tie parameter or 0,
+    "log_likelihood", "converged"}, or a list of those for a batch; `x0`: starting parameters (a bootstrap starts
+    from the full fit's "params")."""
     k = len(conds)
     ref = conds.index(reference) if reference in conds else 0
-    ties = bool(counts[:, 2].sum() > 0) if ties is None else ties
-    x0 = np.zeros(k - 1 + ties) if x0 is None else x0
+    batch = np.asarray(counts, dtype=float)
+    single = batch.ndim == 2
+    batch = batch[None] if single else batch
+    ties = bool(batch[..., 2].sum() > 0) if ties is None else ties
+    A = _outcome_map(pairs, k, ref, ties)
     ridge = np.r_[np.full(k - 1, RIDGE), np.zeros(int(ties))]
-
-    def objective(x):
-        value, grad = _negloglik(x, counts, pairs, ref, k, ties)
-        return value + float(ridge @ x**2), grad + 2 * ridge * x
-
-    # BFGS: a few dozen iterations on at most 8 parameters (L-BFGS-B costs ten times as much per call here).
-    res = optimize.minimize(objective, x0, jac=True, method="BFGS", options={"maxiter": 2000, "gtol": 1e-9})
-    converged = bool(np.max(np.abs(objective(res.x)[1]), initial=0.0) < 1e-4)
-    theta = np.zeros(k)
-    theta[[c for c in range(k) if c != ref]] = res.x[: k - 1]
-    return {
-        "strengths": {c: float(theta[n]) for n, c in enumerate(conds)},
-        "nu": float(math.exp(res.x[-1])) if ties else 0.0,
-        "log_likelihood": -_negloglik(res.x, counts, pairs, ref, k, ties)[0],
-        "converged": converged,
-        "reference": conds[ref],
-        "params": res.x,
-    }
+    x, nll, grad = _newton(batch[..., : 2 + ties], A, ridge, np.zeros(k - 1 + ties) if x0 is None else x0)
+    free = [c for c in range(k) if c != ref]
+    fits = []
+    for b in range(len(batch)):
+        theta = np.zeros(k)
+        theta[free] = x[b, : k - 1]
+        fits.append(
+            {
+                "strengths": {c: float(theta[n]) for n, c in enumerate(conds)},
+                "nu": float(math.exp(x[b, -1])) if ties else 0.0,
+                "log_likelihood": -float(nll[b] - (ridge * x[b] ** 2).sum()),
+                "converged": bool(np.max(np.abs(grad[b]), initial=0.0) < 1e-4),
+                "reference": conds[ref],
+                "params": x[b],
+            }
+        )
+    return fits[0] if single else fits
 
 
 def bradley_terry(o, n_boot=1000, seed=0, level=0.95):
@@ -225,13 +250,11 @@ def bradley_terry(o, n_boot=1000, seed=0, level=0.95):
     fit = fit_bradley_terry(total, pairs, conds, reference, ties)
     rng = np.random.default_rng(seed)
     n_r = tables.shape[0]
-    boot = np.full((n_boot, len(conds)), np.nan)
-    flat = tables.reshape(n_r, -1)
-    for b in range(n_boot):
-        w = np.bincount(rng.integers(0, n_r, n_r), minlength=n_r).astype(float)
-        c = (w @ flat).reshape(total.shape)
-        f = fit_bradley_terry(c, pairs, conds, reference, ties, x0=fit["params"])
-        boot[b] = [f["strengths"][x] for x in conds]
+    # Each resample's counts: how often each rater was drawn, times that rater's table. All fits run at once.
+    weights = np.stack([np.bincount(rng.integers(0, n_r, n_r), minlength=n_r) for _ in range(n_boot)]).astype(float)
+    resampled = np.einsum("br,rpk->bpk", weights, tables)
+    fits = fit_bradley_terry(resampled, pairs, conds, reference, ties, x0=fit["params"])
+    boot = np.array([[f["strengths"][x] for x in conds] for f in fits]).reshape(n_boot, len(conds))
     lo, hi = 100 * (1 - level) / 2, 100 * (1 + level) / 2
     ci = {c: [float(np.percentile(boot[:, n], lo)), float(np.percentile(boot[:, n], hi))] for n, c in enumerate(conds)}
     fit.pop("params")
