@@ -1,0 +1,77 @@
+"""Is generated foot skating frame-to-frame noise or slow sliding? Skating and jerk before and after a low-pass.
+
+    python bench/skating_spectrum.py --data runs/dataset.npz [--model MG=generation/pretrained/mg.pt]
+        [--model FL=generation/pretrained/fl.pt] [--cutoff 2 4 6]
+
+Every test window is sampled once per model (temperature 1, seed 0, as make_stimuli samples). Each clip, NAT's
+included, is then low-passed along time (zero-phase 4th-order Butterworth on the root-frame pose features) at each
+--cutoff in Hz, and foot skating and jerk (generation.metrics, in world coordinates) are measured again. The
+table gives medians over the windows as ratios to NAT's at the same cutoff.
+
+How to read it: if a model's skating ratio falls to NAT's level once the high frequencies are gone, its feet
+slide because each frame is sampled with independent noise (a density too wide around the next pose). If the
+ratio stays high, the feet slide slowly and steadily: the stance foot is not tied to the floor at all.
+"""
+
+import argparse
+import statistics
+import sys
+from pathlib import Path
+
+import torch
+from scipy import signal
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from core.study import NATURAL as NAT  # noqa: E402
+from generation.dataset import read_arrays, require  # noqa: E402
+from generation.features import to_world  # noqa: E402
+from generation.metrics import foot_skating, jerk  # noqa: E402
+from generation.pretrained import CHECKPOINTS  # noqa: E402
+from generation.sample import load_model, sample_split  # noqa: E402
+
+
+def low_pass(x, cutoff, fps):
+    """x [T, D] along time; the clip itself when cutoff is 0."""
+    if not cutoff:
+        return x
+    b, a = signal.butter(4, cutoff / (fps / 2))
+    return signal.filtfilt(b, a, x, axis=0, padlen=min(len(x) - 1, 3 * max(len(a), len(b))))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", required=True, help="prepared dataset .npz (test split)")
+    ap.add_argument("--model", action="append", metavar="NAME=CHECKPOINT")
+    ap.add_argument("--cutoff", type=float, nargs="+", default=[6.0, 4.0, 2.0], help="low-pass cutoffs (Hz)")
+    ap.add_argument("--threads", type=int, default=1)
+    a = ap.parse_args()
+    torch.set_num_threads(a.threads)
+    models = a.model or [f"MG={CHECKPOINTS['mg']}", f"FL={CHECKPOINTS['fl']}"]
+    d = read_arrays(a.data, ["test_x", "test_c", "fps"])
+    require(d, ["test_x", "test_c", "fps"], a.data)
+    c, fps = d["test_c"], float(d["fps"])
+    systems = {NAT: d["test_x"]}
+    for spec in models:
+        name, _, ckpt = spec.partition("=")
+        systems[name] = sample_split(load_model(ckpt), a.data, "test", temperature=1.0, seed=0)[0]
+    cutoffs = [0.0] + a.cutoff
+    med = {}
+    for name, xs in systems.items():
+        for f in cutoffs:
+            worlds = [to_world(low_pass(xs[i], f, fps), c[i]) for i in range(len(c))]
+            med[name, f] = (
+                statistics.median(foot_skating(w, fps) for w in worlds),
+                statistics.median(jerk(w, fps) for w in worlds),
+            )
+    label = lambda f: "raw" if not f else f"low-pass {f:g} Hz"  # noqa: E731
+    print("| system | " + " | ".join(f"skating / NAT, {label(f)}" for f in cutoffs) + " | jerk / NAT, raw |")
+    print("|---|" + "---|" * (len(cutoffs) + 1))
+    nat = " | ".join(f"{med[NAT, f][0]:.3f}" for f in cutoffs)
+    print(f"| NAT (m/s) | {nat} | {med[NAT, 0.0][1]:.0f} m/s^3 |")
+    for name in list(systems)[1:]:
+        cells = [f"{med[name, f][0] / med[NAT, f][0]:.1f}" for f in cutoffs]
+        print(f"| {name} | " + " | ".join(cells) + f" | {med[name, 0.0][1] / med[NAT, 0.0][1]:.2f} |")
+
+
+if __name__ == "__main__":
+    main()
