@@ -1,6 +1,6 @@
-"""Is generated foot skating frame-to-frame noise or slow sliding? Skating and jerk before and after a low-pass.
+"""Where generated foot skating comes from: frame-to-frame noise or slow sliding, and which way the feet slide.
 
-    python bench/skating_spectrum.py --data runs/dataset.npz [--model MG=generation/pretrained/mg.pt]
+    python bench/skating_causes.py --data runs/dataset.npz [--model MG=generation/pretrained/mg.pt]
         [--model FL=generation/pretrained/fl.pt] [--cutoff 2 4 6]
 
 Every test window is sampled once per model (temperature 1, seed 0, as make_stimuli samples). Each clip, NAT's
@@ -11,6 +11,11 @@ table gives medians over the windows as ratios to NAT's at the same cutoff.
 How to read it: if a model's skating ratio falls to NAT's level once the high frequencies are gone, its feet
 slide because each frame is sampled with independent noise (a density too wide around the next pose). If the
 ratio stays high, the feet slide slowly and steadily: the stance foot is not tied to the floor at all.
+
+A second table looks at the frames where a foot is in contact (generation.metrics.foot_contacts) while the root
+moves at over 0.3 m/s. It gives the foot's world velocity along the root's direction of travel (signed: positive
+means carried forward with the body, i.e. the leg sweeps back more slowly than the control moves the root) and
+across it (unsigned), as medians, and their share of the root's speed.
 """
 
 import argparse
@@ -18,14 +23,16 @@ import statistics
 import sys
 from pathlib import Path
 
+import numpy as np
 import torch
 from scipy import signal
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from core.study import NATURAL as NAT  # noqa: E402
+from generation import skeleton  # noqa: E402
 from generation.dataset import read_arrays, require  # noqa: E402
 from generation.features import to_world  # noqa: E402
-from generation.metrics import foot_skating, jerk  # noqa: E402
+from generation.metrics import foot_contacts, foot_skating, jerk  # noqa: E402
 from generation.pretrained import CHECKPOINTS  # noqa: E402
 from generation.sample import load_model, sample_split  # noqa: E402
 
@@ -36,6 +43,23 @@ def low_pass(x, cutoff, fps):
         return x
     b, a = signal.butter(4, cutoff / (fps / 2))
     return signal.filtfilt(b, a, x, axis=0, padlen=min(len(x) - 1, 3 * max(len(a), len(b))))
+
+
+def stance_drift(world, fps, moving=0.3):
+    """Per contact frame pair of either foot while the root moves faster than `moving` (m/s): the foot's world
+    velocity along the root's travel (signed), across it (unsigned), and the root's speed -> three arrays."""
+    root = np.diff(world[:, 0, [0, 2]], axis=0) * fps
+    speed = np.linalg.norm(root, axis=1)
+    heading = root / np.maximum(speed[:, None], 1e-9)
+    contact = foot_contacts(world)
+    along, across, speeds = [], [], []
+    for f, pair in enumerate(np.asarray(skeleton.FEET).reshape(-1, 2)):
+        v = np.diff(world[:, pair][..., [0, 2]], axis=0).mean(axis=1) * fps
+        m = contact[f] & (speed > moving)
+        along.append((v[m] * heading[m]).sum(axis=1))
+        across.append(np.abs(v[m, 0] * heading[m, 1] - v[m, 1] * heading[m, 0]))
+        speeds.append(speed[m])
+    return np.concatenate(along), np.concatenate(across), np.concatenate(speeds)
 
 
 def main():
@@ -71,6 +95,17 @@ def main():
     for name in list(systems)[1:]:
         cells = [f"{med[name, f][0] / med[NAT, f][0]:.1f}" for f in cutoffs]
         print(f"| {name} | " + " | ".join(cells) + f" | {med[name, 0.0][1] / med[NAT, 0.0][1]:.2f} |")
+
+    print("\nfeet in contact while the root moves (> 0.3 m/s): medians over those frame pairs")
+    print("| system | frame pairs | along travel (m/s) | across (m/s) | along / root speed | root speed (m/s) |")
+    print("|---|---|---|---|---|---|")
+    for name, xs in systems.items():
+        parts = [stance_drift(to_world(x, ci), fps) for x, ci in zip(xs, c)]
+        along, across, speed = (np.concatenate(v) for v in zip(*parts))
+        print(
+            f"| {name} | {len(along)} | {np.median(along):.3f} | {np.median(across):.3f} | "
+            f"{np.median(along / speed):.3f} | {np.median(speed):.2f} |"
+        )
 
 
 if __name__ == "__main__":
