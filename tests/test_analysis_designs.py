@@ -174,6 +174,29 @@ def test_bradley_terry_with_ties_matches_the_same_likelihood_in_statsmodels():
     assert fit["ci"]["NAT"] == [0.0, 0.0]
 
 
+def test_bradley_terry_batch_fits_each_table_as_alone():
+    """The bootstrap fits its resamples as one batch: each must come out as it would alone, including a table
+    where one condition never wins (the ridge keeps it finite) and one without ties in a model with them."""
+    conds, pairs = ["FL", "MG", "NAT"], np.array([[0, 1], [0, 2], [1, 2]])
+    tables = np.array(
+        [
+            [[5, 7, 3], [2, 9, 4], [4, 8, 2]],
+            [[0, 6, 0], [0, 7, 0], [3, 3, 3]],  # FL never wins nor ties
+            [[6, 4, 0], [3, 5, 0], [2, 6, 0]],
+        ],
+        dtype=float,
+    )
+    batch = pairwise.fit_bradley_terry(tables, pairs, conds, "NAT", ties=True)
+    for table, together in zip(tables, batch):
+        alone = pairwise.fit_bradley_terry(table, pairs, conds, "NAT", ties=True)
+        assert together["converged"] and alone["converged"]
+        for c in conds:
+            assert together["strengths"][c] == pytest.approx(alone["strengths"][c], abs=1e-7)
+        assert together["nu"] == pytest.approx(alone["nu"], rel=1e-6)
+    assert batch[1]["strengths"]["FL"] < -5  # never wins: far below, but finite
+    assert np.isfinite(batch[1]["strengths"]["FL"])
+
+
 def test_pairwise_catch_exclusion_either_level():
     rows = simulate_pairs({"NAT": 0, "MG": -1}, n_raters=6, items=1, catch_fail=(1, 4))
     df = pd.DataFrame(rows, columns=PAIR_COLS).astype(str)
