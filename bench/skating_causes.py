@@ -3,10 +3,10 @@
     python bench/skating_causes.py --data runs/dataset.npz [--model MG=generation/pretrained/mg.pt]
         [--model FL=generation/pretrained/fl.pt] [--cutoff 2 4 6]
 
-Every test window is sampled once per model (temperature 1, seed 0, as make_stimuli samples). Each clip, NAT's
-included, is then low-passed along time (zero-phase 4th-order Butterworth on the root-frame pose features) at each
---cutoff in Hz, and foot skating and jerk (generation.metrics, in world coordinates) are measured again. The
-table gives medians over the windows as ratios to NAT's at the same cutoff.
+Every test window is sampled once per model (seed 0; temperature 1, as make_stimuli samples, unless
+--temperature). Each clip, NAT's included, is then low-passed along time (zero-phase 4th-order Butterworth on the
+root-frame pose features) at each --cutoff in Hz, and foot skating and jerk (generation.metrics, in world
+coordinates) are measured again. The table gives medians over the windows as ratios to NAT's at the same cutoff.
 
 How to read it: if a model's skating ratio falls to NAT's level once the high frequencies are gone, its feet
 slide because each frame is sampled with independent noise (a density too wide around the next pose). If the
@@ -67,6 +67,7 @@ def main():
     ap.add_argument("--data", required=True, help="prepared dataset .npz (test split)")
     ap.add_argument("--model", action="append", metavar="NAME=CHECKPOINT")
     ap.add_argument("--cutoff", type=float, nargs="+", default=[6.0, 4.0, 2.0], help="low-pass cutoffs (Hz)")
+    ap.add_argument("--temperature", type=float, default=1.0, help="(make_stimuli's default is 1.0)")
     ap.add_argument("--threads", type=int, default=1)
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
@@ -77,7 +78,7 @@ def main():
     systems = {NAT: d["test_x"]}
     for spec in models:
         name, _, ckpt = spec.partition("=")
-        systems[name] = sample_split(load_model(ckpt), a.data, "test", temperature=1.0, seed=0)[0]
+        systems[name] = sample_split(load_model(ckpt), a.data, "test", temperature=a.temperature, seed=0)[0]
     cutoffs = [0.0] + a.cutoff
     med = {}
     for name, xs in systems.items():
