@@ -15,7 +15,8 @@ ratio stays high, the feet slide slowly and steadily: the stance foot is not tie
 A second table looks at the frames where a foot is in contact (generation.metrics.foot_contacts) while the root
 moves at over 0.3 m/s. It gives the foot's world velocity along the root's direction of travel (signed: positive
 means carried forward with the body, i.e. the leg sweeps back more slowly than the control moves the root) and
-across it (unsigned), as medians, and their share of the root's speed.
+across it (unsigned), as medians, and their share of the root's speed. A third gives that share per 1-s stretch
+of the clips: drift that grows along the clip builds up frame by frame as the model feeds on its own output.
 """
 
 import argparse
@@ -107,6 +108,18 @@ def main():
             f"| {name} | {len(along)} | {np.median(along):.3f} | {np.median(across):.3f} | "
             f"{np.median(along / speed):.3f} | {np.median(speed):.2f} |"
         )
+
+    seconds = range(0, len(c[0]), int(fps))
+    print("\nstance foot along travel / root speed, medians per second of the clips")
+    print("| system | " + " | ".join(f"{t / fps:g}-{min(t + int(fps), len(c[0])) / fps:g} s" for t in seconds) + " |")
+    print("|---|" + "---|" * len(seconds))
+    for name, xs in systems.items():
+        cells = []
+        for t in seconds:
+            parts = [stance_drift(to_world(x[t : t + int(fps)], ci[t : t + int(fps)]), fps) for x, ci in zip(xs, c)]
+            along, _, speed = (np.concatenate(v) for v in zip(*parts))
+            cells.append(f"{np.median(along / speed):.3f}")
+        print(f"| {name} | " + " | ".join(cells) + " |")
 
 
 if __name__ == "__main__":
