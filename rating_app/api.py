@@ -328,12 +328,17 @@ _RATER_CURRENT = (
 )
 
 
+def _check_token(token: str) -> None:
+    """404 for a string that cannot be a session token, before it reaches the database."""
+    if not TOKEN.fullmatch(token):
+        abort(404, "unknown session")
+
+
 def _rater(conn, token: str, now=None):
     """The rater's row; 404 for an unknown token. With `now` (in a write transaction), the row is locked first
     of all, so one session's writes (serving, answering, expiring) run one at a time and every transaction takes
     a rater row before any other; and last_seen is refreshed when it is stale."""
-    if not TOKEN.fullmatch(token):
-        abort(404, "unknown session")
+    _check_token(token)
     lock = now is not None and conn.dialect.name != "sqlite"  # SQLite: BEGIN IMMEDIATE already holds the lock
     row = conn.execute(_RATER_LOCKED if lock else _RATER, {"token": token}).first()
     if row is None:
@@ -361,8 +366,7 @@ def _current(conn, rater_pk):
 
 def _rater_current(conn, token: str):
     """(rater, its current trial or None) in one read, for a read-only transaction; 404 for an unknown token."""
-    if not TOKEN.fullmatch(token):
-        abort(404, "unknown session")
+    _check_token(token)
     row = conn.execute(_RATER_CURRENT, {"token": token}).first()
     if row is None:
         abort(404, "unknown session")
@@ -534,8 +538,7 @@ _CLIP_VIDEO = (
 
 def _video_row(stmt, token, **params):
     """The row of a video request, or None; 404 "unknown session" for a token no session has."""
-    if not TOKEN.fullmatch(token):
-        abort(404, "unknown session")
+    _check_token(token)
     with read_engine().connect() as conn, conn.begin():
         row = conn.execute(stmt, {"token": token, **params}).first()
         if row is None:
