@@ -13,6 +13,7 @@ raters (bench_app.py) the two cores run out of CPU, so this is the cost that set
 from __future__ import annotations
 
 import argparse
+import random
 import statistics
 import sys
 import tempfile
@@ -22,8 +23,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))  # bench_app: the page's answers, as the load benchmark sends them
 sys.path.insert(0, str(ROOT / "tests"))  # the fake stimulus folder the app's tests use (tests/fake_stimuli.py)
 
+from bench_app import answer, trial_clips  # noqa: E402
 from fake_stimuli import pg_schema, write_fake_stimuli  # noqa: E402
 from sqlalchemy import event  # noqa: E402
 
@@ -35,21 +38,12 @@ from rating_app.db import app_engine  # noqa: E402
 SAME_SITE = {"Sec-Fetch-Site": "same-origin"}
 
 
-def answer(design, trial, clips):
-    """The page's answer to `trial`: null for familiarisation, else a fixed valid value."""
-    training = trial["phase"] == "training"
-    if design == "pairwise":
-        return {"preference": None if training else 1}
-    if design == "parallel":
-        return {"ratings": None if training else {c["clip_id"]: 50 for c in clips}}
-    return {"rating": None if training else 3}
-
-
 def run(app, design, n_answers):
     """{call kind: ([cpu seconds], [statements])} over raters until `n_answers` answers."""
     sent = []
     event.listen(app_engine(app), "before_cursor_execute", lambda *a: sent.append(1))
     client = app.test_client()
+    rng = random.Random(0)
     cost = defaultdict(lambda: ([], []))
 
     def call(kind, fn):
@@ -68,10 +62,9 @@ def run(app, design, n_answers):
             if "trial" not in body:
                 break
             trial = body["trial"]
-            clips = trial.get("clips") or [trial[k] for k in ("a", "b") if k in trial] or [trial]
-            for clip in clips:
+            for clip in trial_clips(trial):
                 call("video GET", lambda: client.get(clip["video_url"]))
-            payload = {"trial_id": trial["trial_id"], "watched_ms": 4000, **answer(design, trial, clips)}
+            payload = {"trial_id": trial["trial_id"], "watched_ms": 4000, **answer(design, trial, rng)}
             resp = call("answer POST", lambda: client.post(f"/api/sessions/{token}/ratings", json=payload))
             if resp.status_code != 201:
                 raise SystemExit(f"app_request_cost: answer refused: {resp.status_code} {resp.get_data(as_text=True)}")

@@ -81,6 +81,21 @@ def start_server(port, env, workers, threads, log):
     raise SystemExit("gunicorn did not start")
 
 
+def trial_clips(t):
+    """The clips of a trial as the API sends it: its one clip (acr), A and B (pairwise) or its page (parallel)."""
+    return t.get("clips") or [t[k] for k in ("a", "b") if k in t] or [t]
+
+
+def answer(design, t, rng):
+    """The answer field of `design` for trial `t`, null for a familiarisation trial; values drawn from `rng`."""
+    training = t["phase"] == "training"
+    if design == "pairwise":
+        return {"preference": None if training else rng.randint(-2, 2)}
+    if design == "parallel":
+        return {"ratings": None if training else {c["clip_id"]: rng.randint(0, 100) for c in t["clips"]}}
+    return {"rating": None if training else rng.randint(1, 5)}
+
+
 class Rater(threading.Thread):
     def __init__(self, port, i, stop_at, warm_at, think, rec, lock, errors, design="acr", clip_s=None):
         super().__init__(daemon=True)
@@ -150,8 +165,7 @@ class Rater(threading.Thread):
             shown = time.monotonic()
             pause = min(self.rng.expovariate(1.0 / self.think), 10 * self.think) if self.think else 0
             if self.clip_s is not None:
-                clips = t.get("clips") or [t[k] for k in ("a", "b") if k in t] or [t]
-                urls = [c["video_url"] for c in clips]
+                urls = [c["video_url"] for c in trial_clips(t)]
                 for url in urls:
                     status, _, dt = self.call("GET", url)
                     self.record("video", status, (200,), dt)
@@ -165,18 +179,9 @@ class Rater(threading.Thread):
             status, body, dt = self.call(
                 "POST",
                 f"/api/sessions/{token}/ratings",
-                {"trial_id": t["trial_id"], "watched_ms": 4000, **self.answer(t)},
+                {"trial_id": t["trial_id"], "watched_ms": 4000, **answer(self.design, t, self.rng)},
             )
             self.record("training_ack" if t["phase"] == "training" else "rating", status, (201,), dt)
-
-    def answer(self, t):
-        """The answer field of the design, null for a familiarisation trial."""
-        training = t["phase"] == "training"
-        if self.design == "pairwise":
-            return {"preference": None if training else self.rng.randint(-2, 2)}
-        if self.design == "parallel":
-            return {"ratings": None if training else {c["clip_id"]: self.rng.randint(0, 100) for c in t["clips"]}}
-        return {"rating": None if training else self.rng.randint(1, 5)}
 
 
 def stats(xs):
