@@ -63,6 +63,12 @@ def stance_drift(world, fps, moving=0.3):
     return np.concatenate(along), np.concatenate(across), np.concatenate(speeds)
 
 
+def pooled_drift(xs, c, fps, frames=slice(None)):
+    """stance_drift over every clip of a system (only `frames` of each), pooled -> (along, across, speed)."""
+    parts = [stance_drift(to_world(x[frames], ci[frames]), fps) for x, ci in zip(xs, c)]
+    return tuple(np.concatenate(v) for v in zip(*parts))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data", required=True, help="prepared dataset .npz (test split)")
@@ -102,8 +108,7 @@ def main():
     print("| system | frame pairs | along travel (m/s) | across (m/s) | along / root speed | root speed (m/s) |")
     print("|---|---|---|---|---|---|")
     for name, xs in systems.items():
-        parts = [stance_drift(to_world(x, ci), fps) for x, ci in zip(xs, c)]
-        along, across, speed = (np.concatenate(v) for v in zip(*parts))
+        along, across, speed = pooled_drift(xs, c, fps)
         print(
             f"| {name} | {len(along)} | {np.median(along):.3f} | {np.median(across):.3f} | "
             f"{np.median(along / speed):.3f} | {np.median(speed):.2f} |"
@@ -116,8 +121,7 @@ def main():
     for name, xs in systems.items():
         cells = []
         for t in seconds:
-            parts = [stance_drift(to_world(x[t : t + int(fps)], ci[t : t + int(fps)]), fps) for x, ci in zip(xs, c)]
-            along, _, speed = (np.concatenate(v) for v in zip(*parts))
+            along, _, speed = pooled_drift(xs, c, fps, slice(t, t + int(fps)))
             cells.append(f"{np.median(along / speed):.3f}")
         print(f"| {name} | " + " | ".join(cells) + " |")
 
