@@ -94,9 +94,9 @@ class FL(MotionFlow):
                 h = unsqueeze_time(h)
         return h.transpose(1, 2), logdet
 
-    def nll(self, x, c, keep=None):
+    def nll(self, x, c, keep=None, history=None):
         """Negative log-likelihood in nats per dimension of the standardised data, per batch element.
-        (`keep`: MG's history dropout mask; FL has no history.)"""
+        (`keep`, `history`: MG's history dropout mask and noisy history; FL has no history.)"""
         z, logdet = self(x, c)
         return -(gaussian_logp(z) + logdet) / z.shape[1]
 

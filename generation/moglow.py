@@ -68,18 +68,19 @@ class MoGlow(MotionFlow):
         ctrl = c.unfold(1, tau + 1, 1).transpose(2, 3)  # [B, n, tau + 1, 3]
         return torch.cat([hist.flatten(2), ctrl.flatten(2)], dim=2)
 
-    def forward(self, x, c, keep=None):
+    def forward(self, x, c, keep=None, history=None):
         """Window x [B, T, 63], c [B, T, 3] (standardised) -> (z [B, T - tau, 63] for frames tau..T-1, logdet [B]).
-        `keep`: history dropout mask while training (see history_keep)."""
+        `keep`: history dropout mask while training (see history_keep); `history`: the poses [B, T, 63] that the
+        conditioning reads instead of x (training's history noise)."""
         if x.shape[1] <= self.tau:
             raise ValueError(f"MG needs windows longer than tau={self.tau} frames, got {x.shape[1]}")
-        cond = self.make_cond(x, c, keep).transpose(1, 2)
+        cond = self.make_cond(x if history is None else history, c, keep).transpose(1, 2)
         z, logdet = self.flow(x[:, self.tau :].transpose(1, 2), cond)
         return z.transpose(1, 2), logdet
 
-    def nll(self, x, c, keep=None):
+    def nll(self, x, c, keep=None, history=None):
         """Negative log-likelihood of frames tau..T-1 in nats per dimension (standardised data), per element."""
-        z, logdet = self(x, c, keep)
+        z, logdet = self(x, c, keep, history)
         return -(gaussian_logp(z) + logdet) / z[0].numel()
 
     @torch.no_grad()

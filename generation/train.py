@@ -50,6 +50,7 @@ TRAIN_DEFAULTS = dict(
     early_ckpts=[50, 100, 200, 500],
     train_window=None,
     noise=0.01,
+    history_noise=0.0,
 )
 
 
@@ -96,8 +97,8 @@ class _BatchNLL(nn.Module):
         super().__init__()
         self.net = net
 
-    def forward(self, x, c, keep):
-        return self.net.nll(x, c, keep)
+    def forward(self, x, c, keep, history):
+        return self.net.nll(x, c, keep, history)
 
 
 def load_config(model, config):
@@ -232,8 +233,8 @@ def _train(model, config, data_path, out_dir, steps, seed, progress, resume, dev
             group["lr"] = lr
         if share is not None:
             share.step()
-        x, c, keep = draw_batch(net, tx, tc, cfg, seed, step, crop)
-        loss = step_nll(x[rows], c[rows], None if keep is None else keep[rows]).mean()
+        x, c, keep, history = draw_batch(net, tx, tc, cfg, seed, step, crop)
+        loss = step_nll(*(None if v is None else v[rows] for v in (x, c, keep, history))).mean()
         grad_norm = _optimise(loss, net, opt, cfg, world)
         if grad_norm is None:
             bad += 1
@@ -339,7 +340,8 @@ class _Run:
 
 def draw_batch(net, tx, tc, cfg, seed, step, crop):
     """The whole training batch of `step` (every rank draws the same): windows, their random crop, the
-    dequantisation noise and MG's history dropout mask (None for FL), all functions of (seed, step)."""
+    dequantisation noise, and for MG the history dropout mask and the history the conditioning reads (None where
+    unused), all functions of (seed, step)."""
     idx = batch_indices(len(tx), cfg["batch_size"], seed, step).to(tx.device)
     x, c = tx[idx], tc[idx]
     torch.manual_seed(seed * 1_000_003 + step)
@@ -353,7 +355,13 @@ def draw_batch(net, tx, tc, cfg, seed, step, crop):
     keep = None
     if net.kind == "mg" and net.config["dropout"] > 0:
         keep = net.history_keep(x.shape[0], x.shape[1], x.device)
-    return x, c, keep
+    history = None
+    if net.kind == "mg" and cfg["history_noise"] > 0:
+        # The history with noise of its own, the target clean: at sampling time the history is the model's own
+        # output, slightly off, and a model trained only on clean histories lets such errors add up frame after
+        # frame (exposure bias). Drawn after the mask, so that runs without it draw as before.
+        history = x + cfg["history_noise"] * torch.randn_like(x)
+    return x, c, keep, history
 
 
 def _finite_on_every_rank(loss, world):

@@ -8,7 +8,7 @@ import sys
 import pytest
 import torch
 
-from generation.train import TrainError, learning_rate, load_config, main, train
+from generation.train import TrainError, build_model, draw_batch, learning_rate, load_config, main, train
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
@@ -55,6 +55,28 @@ def test_seeded_run_is_reproducible_and_resume_is_exact(small_dataset, tmp_path)
     assert all(torch.equal(sa[k], sb[k]) for k in sa)
     assert not all(torch.equal(sa[k], sc[k]) for k in sa)
     assert [r["step"] for r in rows(b)] == ["1", "6", "12"]
+
+
+def test_history_noise_reaches_the_history_only():
+    """history_noise perturbs the poses that MG's conditioning reads and leaves the target clean; without it the
+    batch is drawn exactly as before (the shipped recipe's random stream), and FL never gets a history."""
+    torch.manual_seed(0)
+    tx, tc = torch.randn(20, 40, 63), torch.randn(20, 40, 3)
+    cfg = {**load_config("mg", "tiny"), "train_window": 30}
+    net = build_model("mg", cfg)
+    x0, c0, keep0, hist0 = draw_batch(net, tx, tc, cfg, 0, 3, 30)
+    x1, c1, keep1, hist1 = draw_batch(net, tx, tc, {**cfg, "history_noise": 0.05}, 0, 3, 30)
+    assert hist0 is None
+    assert torch.equal(x0, x1) and torch.equal(c0, c1) and torch.equal(keep0, keep1)
+    assert 0.04 < (hist1 - x1).std().item() < 0.06
+    with torch.no_grad():  # couplings that read their conditioning (the last layers start at zero)
+        for step in net.flow.layers:
+            step.layers[2].net.out.weight.normal_(0, 0.1)
+    net.train()
+    assert not torch.equal(net.nll(x1, c1, keep1), net.nll(x1, c1, keep1, hist1))
+    assert torch.equal(net.nll(x1, c1, keep1), net.nll(x1, c1, keep1, x1))
+    fl_cfg = {**load_config("fl", "tiny"), "history_noise": 0.05}
+    assert draw_batch(build_model("fl", fl_cfg), tx, tc, fl_cfg, 0, 3, 32)[3] is None
 
 
 def test_learning_rate_warms_up_then_holds_or_decays_to_lr_min():
