@@ -46,7 +46,7 @@ def export_checkpoint(src, dst):
 
     ck = torch.load(src, map_location="cpu", weights_only=False)
     ck["state"] = {k: v.half() if v.is_floating_point() else v for k, v in ck["state"].items()}
-    ck["source"] = Path(src).as_posix()
+    ck.setdefault("source", Path(src).as_posix())  # re-exporting a shipped file keeps the run it came from
     torch.save(ck, dst)
 
 

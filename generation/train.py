@@ -51,6 +51,9 @@ TRAIN_DEFAULTS = dict(
     train_window=None,
     noise=0.01,
     history_noise=0.0,
+    restart_step=None,
+    restart_lr=None,
+    restart_lr_min=None,
 )
 
 
@@ -63,13 +66,22 @@ class TrainError(UserError):
 
 def learning_rate(cfg, step):
     """Linear warm-up over `warmup` steps to `lr`; then constant, or, with `lr_min` set, a cosine decay that
-    reaches lr_min at the last step (a function of the step alone, so a resumed run follows the same curve)."""
+    reaches lr_min at the last step (a function of the step alone, so a resumed run follows the same curve).
+    With `restart_step` set, the first phase ends there and a second one, warm-up and cosine from `restart_lr`
+    to `restart_lr_min`, runs to `steps` (a warm restart; the training loop also resets Adam's moments there)."""
+    start, end, lr, lr_min = 0, cfg["steps"], cfg["lr"], cfg["lr_min"]
+    if cfg["restart_step"] is not None:
+        if step >= cfg["restart_step"]:
+            start, lr, lr_min = cfg["restart_step"], cfg["restart_lr"], cfg["restart_lr_min"]
+        else:
+            end = cfg["restart_step"]
+    step -= start
     if step < cfg["warmup"]:
-        return cfg["lr"] * (step + 1) / cfg["warmup"]
-    if cfg["lr_min"] is None:
-        return cfg["lr"]
-    progress = (step - cfg["warmup"]) / max(1, cfg["steps"] - 1 - cfg["warmup"])
-    return cfg["lr_min"] + (cfg["lr"] - cfg["lr_min"]) * 0.5 * (1 + math.cos(math.pi * min(1.0, progress)))
+        return lr * (step + 1) / cfg["warmup"]
+    if lr_min is None:
+        return lr
+    progress = (step - cfg["warmup"]) / max(1, end - start - 1 - cfg["warmup"])
+    return lr_min + (lr - lr_min) * 0.5 * (1 + math.cos(math.pi * min(1.0, progress)))
 
 
 def pick_device(device=None):
@@ -120,13 +132,26 @@ def load_config(model, config):
         where = str(path)
     if cfg.get("model", model) != model:
         raise TrainError(f"{where}: field 'model' is '{cfg['model']}' but --model is '{model}'")
+    cfg = {**TRAIN_DEFAULTS, **_checked_fields(cfg, model, where), "model": model}
+    if cfg["restart_step"] is not None:
+        if not 0 < cfg["restart_step"] < cfg["steps"]:
+            raise TrainError(f"{where}: field 'restart_step' must lie between 0 and 'steps' ({cfg['steps']})")
+        for key in ("restart_lr", "restart_lr_min"):
+            if cfg[key] is None:
+                raise TrainError(f"{where}: field 'restart_step' needs '{key}' too")
+    return cfg
+
+
+def _checked_fields(cfg, model, where):
+    """`cfg` itself, once every field is known and a number (or unset, where the default is unset)."""
     allowed = set(TRAIN_DEFAULTS) | set(MODEL_DEFAULTS[model]) | {"model", "name", "note"}
     for key, value in cfg.items():
         if key not in allowed:
             raise TrainError(f"{where}: unknown field '{key}'")
-        if key not in ("model", "name", "note", "early_ckpts", "train_window") and not isinstance(value, (int, float)):
+        unset = value is None and key in TRAIN_DEFAULTS and TRAIN_DEFAULTS[key] is None
+        if key not in ("model", "name", "note", "early_ckpts") and not unset and not isinstance(value, (int, float)):
             raise TrainError(f"{where}: field '{key}' must be a number, got {value!r}")
-    return {**TRAIN_DEFAULTS, **cfg, "model": model}
+    return cfg
 
 
 def model_config(kind, cfg):
@@ -231,6 +256,8 @@ def _train(model, config, data_path, out_dir, steps, seed, progress, resume, dev
         lr = learning_rate(cfg, step)
         for group in opt.param_groups:
             group["lr"] = lr
+        if step == cfg["restart_step"]:
+            opt.state.clear()  # a warm restart starts Adam afresh: its moments belong to the finished phase
         if share is not None:
             share.step()
         x, c, keep, history = draw_batch(net, tx, tc, cfg, seed, step, crop)

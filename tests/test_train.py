@@ -92,6 +92,33 @@ def test_learning_rate_warms_up_then_holds_or_decays_to_lr_min():
     assert lrs[60] == pytest.approx((1e-3 + 1e-5) / 2, rel=0.02)  # halfway down at mid-decay
 
 
+def test_warm_restart_keeps_the_first_phase_and_starts_a_second():
+    plain = load_config("mg", {"lr": 1e-3, "lr_min": 1e-4, "warmup": 10, "steps": 60})
+    cfg = {**plain, "steps": 100, "restart_step": 60, "restart_lr": 3e-4, "restart_lr_min": 3e-5}
+    assert [learning_rate(cfg, s) for s in range(60)] == [learning_rate(plain, s) for s in range(60)]
+    second = [learning_rate(cfg, s) for s in range(60, 100)]
+    assert second[0] == pytest.approx(3e-5) and second[9] == pytest.approx(3e-4)  # warm-up again
+    assert second[-1] == pytest.approx(3e-5) and all(a >= b for a, b in zip(second[9:], second[10:]))
+
+
+def test_warm_restart_resets_adam_and_resumes_exactly(small_dataset, tmp_path):
+    cfg = {**load_config("mg", "tiny"), "steps": 10, "restart_step": 6, "restart_lr": 3e-4, "restart_lr_min": 3e-5}
+    a = train("mg", cfg, small_dataset, tmp_path / "a", steps=10, seed=1, progress=False)
+    b = train("mg", cfg, small_dataset, tmp_path / "b", steps=6, seed=1, progress=False)
+    b = train("mg", cfg, small_dataset, tmp_path / "b", steps=10, seed=1, progress=False, resume=True)
+    sa, sb = state(a), state(b)
+    assert all(torch.equal(sa[k], sb[k]) for k in sa)
+    opt = torch.load(a / "resume.pt", weights_only=False)["opt"]["state"]
+    assert {int(v["step"]) for v in opt.values()} == {4}  # Adam counted afresh from step 6
+
+
+def test_warm_restart_config_errors():
+    with pytest.raises(TrainError, match="'restart_step' must lie between 0 and 'steps'"):
+        load_config("fl", {"steps": 100, "restart_step": 100, "restart_lr": 1e-4, "restart_lr_min": 1e-5})
+    with pytest.raises(TrainError, match="needs 'restart_lr_min'"):
+        load_config("fl", {"steps": 100, "restart_step": 50, "restart_lr": 1e-4})
+
+
 def test_config_names_and_errors(tmp_path):
     assert load_config("mg", "tiny")["K"] == 2
     assert load_config("fl", "cpu")["model"] == "fl"
