@@ -213,6 +213,8 @@ def _config_and_data(model, config, steps, data_path):
     cfg = load_config(model, config)
     if steps is not None:
         cfg["steps"] = int(steps)
+        if cfg["restart_step"] is not None and cfg["restart_step"] >= cfg["steps"]:
+            cfg["restart_step"] = None  # a run too short for the restart: one cosine phase to `steps`, as before
     ds = load_dataset(data_path)
     if "valid" not in ds.splits or "train" not in ds.splits:
         raise TrainError(f"{data_path}: needs 'train' and 'valid' splits")

@@ -110,6 +110,8 @@ def test_warm_restart_resets_adam_and_resumes_exactly(small_dataset, tmp_path):
     assert all(torch.equal(sa[k], sb[k]) for k in sa)
     opt = torch.load(a / "resume.pt", weights_only=False)["opt"]["state"]
     assert {int(v["step"]) for v in opt.values()} == {4}  # Adam counted afresh from step 6
+    short = train("mg", cfg, small_dataset, tmp_path / "short", steps=5, seed=1, progress=False)
+    assert json.loads((short / "config.json").read_text())["restart_step"] is None  # too short to restart
 
 
 def test_warm_restart_config_errors():
