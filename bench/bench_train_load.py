@@ -52,7 +52,7 @@ while True:
         start = time.perf_counter()
     if share is not None:
         share.step()
-    x, c, keep, history = draw_batch(net, tr.x, tr.c, cfg, 0, step, crop)
+    x, c, keep, history, _ = draw_batch(net, tr.x, tr.c, cfg, 0, step, crop)
     loss = net.nll(x, c, keep, history).mean()
     opt.zero_grad(set_to_none=True)
     loss.backward()

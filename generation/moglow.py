@@ -83,6 +83,14 @@ class MoGlow(MotionFlow):
         z, logdet = self(x, c, keep, history)
         return -(gaussian_logp(z) + logdet) / z[0].numel()
 
+    def predict_frames(self, x, c, z=None, keep=None, history=None):
+        """Frames tau..T-1 of a window x [B, T, 63], c [B, T, 3] from latents z [B, T - tau, 63] (None: zeros, the
+        most likely frames), each predicted from the real history before it, all frames at once and
+        differentiable (stance.stance_loss)."""
+        cond = self.make_cond(x if history is None else history, c, keep).transpose(1, 2)
+        z = x.new_zeros(x.shape[0], x.shape[1] - self.tau, self.pose_dim) if z is None else z
+        return self.flow.inverse(z.transpose(1, 2), cond)[0].transpose(1, 2)
+
     @torch.no_grad()
     def inverse(self, z, history, c, layout=None):
         """Frames from latents: z [B, n, 63], history [B, tau, 63], c [B, tau + n, 3] (all standardised)

@@ -33,6 +33,7 @@ from core.cli import UserError
 from . import fl, moglow
 from .core_share import CoreShare, torch_threads
 from .dataset import batch_indices, eval_batches, load_dataset
+from .stance import stance_loss
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 MODELS = {"fl": fl.FL, "mg": moglow.MoGlow}
@@ -54,10 +55,14 @@ TRAIN_DEFAULTS = dict(
     restart_step=None,
     restart_lr=None,
     restart_lr_min=None,
+    stance_weight=0.0,
+    stance_start=0,
+    stance_temperature=0.0,
 )
 
 
-METRICS_COLUMNS = ["step", "train_nll", "valid_nll", "lr", "grad_norm", "elapsed_s", "steps_per_s"]
+# train_stance: the stance-foot loss (m/s, stance.py) averaged like train_nll, 0 while it is off.
+METRICS_COLUMNS = ["step", "train_nll", "valid_nll", "lr", "grad_norm", "elapsed_s", "steps_per_s", "train_stance"]
 
 
 class TrainError(UserError):
@@ -102,15 +107,19 @@ def join_ranks():
     return torch.distributed.get_rank(), world
 
 
-class _BatchNLL(nn.Module):
-    """The model's NLL as a module's forward, so that DistributedDataParallel can wrap it."""
+class _BatchLoss(nn.Module):
+    """The model's NLL, and with `stance` its stance-foot loss (stance.py), per batch element, as a module's
+    forward, so that DistributedDataParallel can wrap it."""
 
-    def __init__(self, net):
+    def __init__(self, net, fps):
         super().__init__()
-        self.net = net
+        self.net, self.fps = net, fps
 
-    def forward(self, x, c, keep, history):
-        return self.net.nll(x, c, keep, history)
+    def forward(self, x, c, keep, history, stance_z, stance):
+        nll = self.net.nll(x, c, keep, history)
+        if not stance:
+            return nll, torch.zeros_like(nll)
+        return nll, stance_loss(self.net, x, c, self.fps, keep, history, stance_z)
 
 
 def load_config(model, config):
@@ -132,13 +141,20 @@ def load_config(model, config):
         where = str(path)
     if cfg.get("model", model) != model:
         raise TrainError(f"{where}: field 'model' is '{cfg['model']}' but --model is '{model}'")
-    cfg = {**TRAIN_DEFAULTS, **_checked_fields(cfg, model, where), "model": model}
+    return _checked_values({**TRAIN_DEFAULTS, **_checked_fields(cfg, model, where), "model": model}, where)
+
+
+def _checked_values(cfg, where):
+    """`cfg` itself, once its restart and stance-loss fields agree with the rest."""
     if cfg["restart_step"] is not None:
         if not 0 < cfg["restart_step"] < cfg["steps"]:
             raise TrainError(f"{where}: field 'restart_step' must lie between 0 and 'steps' ({cfg['steps']})")
         for key in ("restart_lr", "restart_lr_min"):
             if cfg[key] is None:
                 raise TrainError(f"{where}: field 'restart_step' needs '{key}' too")
+    for key in ("stance_weight", "stance_start", "stance_temperature"):
+        if cfg[key] < 0:
+            raise TrainError(f"{where}: field '{key}' must be at least 0, got {cfg[key]}")
     return cfg
 
 
@@ -241,7 +257,7 @@ def _train(model, config, data_path, out_dir, steps, seed, progress, resume, dev
     tx, tc = ds.splits["train"].x.to(device), ds.splits["train"].c.to(device)
     crop = cfg["train_window"] or tx.shape[1]
     rows = slice(rank * cfg["batch_size"] // world, (rank + 1) * cfg["batch_size"] // world)
-    step_nll = _wrap_ranks(net, world, device)
+    step_loss = _wrap_ranks(net, ds.fps, world, device)
     net.train()
     share = CoreShare() if share_cores and device.type == "cpu" else None
     bar = tqdm(
@@ -262,17 +278,19 @@ def _train(model, config, data_path, out_dir, steps, seed, progress, resume, dev
             opt.state.clear()  # a warm restart starts Adam afresh: its moments belong to the finished phase
         if share is not None:
             share.step()
-        x, c, keep, history = draw_batch(net, tx, tc, cfg, seed, step, crop)
-        loss = step_nll(*(None if v is None else v[rows] for v in (x, c, keep, history))).mean()
-        grad_norm = _optimise(loss, net, opt, cfg, world)
+        x, c, keep, history, stance_z = draw_batch(net, tx, tc, cfg, seed, step, crop)
+        stance = cfg["stance_weight"] > 0 and step >= cfg["stance_start"]
+        nll, foot = step_loss(*(None if v is None else v[rows] for v in (x, c, keep, history, stance_z)), stance)
+        nll, foot = nll.mean(), foot.mean()
+        grad_norm = _optimise(nll + cfg["stance_weight"] * foot if stance else nll, net, opt, cfg, world)
         if grad_norm is None:
             bad += 1
             if bad > 20:
                 raise TrainError(f"training diverged: NLL not finite at step {step + 1} (lower 'lr' in the config)")
             continue
         if run.writes:
-            run.after_step(step + 1, loss.item(), lr, grad_norm, device)
-            bar.set_postfix(nll=f"{loss.item():.3f}", valid=f"{run.valid_nll:.3f}")
+            run.after_step(step + 1, nll.item(), foot.item(), lr, grad_norm, device)
+            bar.set_postfix(nll=f"{nll.item():.3f}", valid=f"{run.valid_nll:.3f}")
     bar.close()
     if world > 1:
         torch.distributed.barrier()  # rank 0's last checkpoint is written before any rank returns
@@ -291,12 +309,13 @@ def _optimise(loss, net, opt, cfg, world):
     return grad_norm
 
 
-def _wrap_ranks(net, world, device):
-    """The model's NLL as a module, wrapped for DistributedDataParallel under torchrun."""
-    step_nll = _BatchNLL(net)
+def _wrap_ranks(net, fps, world, device):
+    """The model's loss as a module, wrapped for DistributedDataParallel under torchrun."""
+    step_loss = _BatchLoss(net, fps)
     if world > 1:
-        step_nll = nn.parallel.DistributedDataParallel(step_nll, device_ids=[device] if device.type == "cuda" else None)
-    return step_nll
+        ids = [device] if device.type == "cuda" else None
+        step_loss = nn.parallel.DistributedDataParallel(step_loss, device_ids=ids)
+    return step_loss
 
 
 def _resume(path, resume, net, opt, device):
@@ -318,7 +337,7 @@ class _Run:
         self.out, self.writes, self.cfg, self.ds, self.net, self.opt = out, writes, cfg, ds, net, opt
         self.start, self.elapsed, self.metrics = start, elapsed, out / "metrics.csv"
         self.early = set(cfg["early_ckpts"])
-        self.run_nll, self.run_n, self.valid_nll = 0.0, 0, float("nan")
+        self.run_nll, self.run_stance, self.run_n, self.valid_nll = 0.0, 0.0, 0, float("nan")
         self.t0 = self.t_row = time.perf_counter()
         self.s_row = start
 
@@ -327,13 +346,12 @@ class _Run:
         (self.out / "config.json").write_text(json.dumps(info, indent=2))
         if self.start == 0 or not self.metrics.exists():
             with open(self.metrics, "w", newline="") as f:
-                csv.writer(f).writerow(
-                    ["step", "train_nll", "valid_nll", "lr", "grad_norm", "elapsed_s", "steps_per_s"]
-                )
+                csv.writer(f).writerow(METRICS_COLUMNS)
 
-    def after_step(self, done, nll, lr, grad_norm, device):
+    def after_step(self, done, nll, stance, lr, grad_norm, device):
         """Book step `done`: validate and write a metrics row, and checkpoint, when due."""
         self.run_nll += nll
+        self.run_stance += stance
         self.run_n += 1
         last = done == self.cfg["steps"]
         if done % self.cfg["valid_every"] == 0 or last or done == 1:
@@ -354,10 +372,11 @@ class _Run:
             f"{grad_norm:.3f}",
             f"{self.elapsed + now - self.t0:.1f}",
             f"{sps:.3f}",
+            f"{self.run_stance / max(1, self.run_n):.5f}",
         ]
         with open(self.metrics, "a", newline="") as f:
             csv.writer(f).writerow(row)
-        self.run_nll, self.run_n = 0.0, 0
+        self.run_nll, self.run_stance, self.run_n = 0.0, 0.0, 0
 
     def _checkpoint(self, done):
         ckpt = self.out / "checkpoints" / f"step_{done:07d}.pt"
@@ -369,8 +388,8 @@ class _Run:
 
 def draw_batch(net, tx, tc, cfg, seed, step, crop):
     """The whole training batch of `step` (every rank draws the same): windows, their random crop, the
-    dequantisation noise, and for MG the history dropout mask and the history the conditioning reads (None where
-    unused), all functions of (seed, step)."""
+    dequantisation noise, for MG the history dropout mask and the history the conditioning reads, and the latents
+    of the stance loss's prediction (None where unused), all functions of (seed, step)."""
     idx = batch_indices(len(tx), cfg["batch_size"], seed, step).to(tx.device)
     x, c = tx[idx], tc[idx]
     torch.manual_seed(seed * 1_000_003 + step)
@@ -390,7 +409,10 @@ def draw_batch(net, tx, tc, cfg, seed, step, crop):
         # output, slightly off, and a model trained only on clean histories lets such errors add up frame after
         # frame (exposure bias). Drawn after the mask, so that runs without it draw as before.
         history = x + cfg["history_noise"] * torch.randn_like(x)
-    return x, c, keep, history
+    stance_z = None
+    if cfg["stance_weight"] > 0 and step >= cfg["stance_start"] and cfg["stance_temperature"] > 0:
+        stance_z = cfg["stance_temperature"] * torch.randn_like(x)  # drawn last: other runs draw as before
+    return x, c, keep, history, stance_z
 
 
 def _finite_on_every_rank(loss, world):

@@ -64,8 +64,8 @@ def test_history_noise_reaches_the_history_only():
     tx, tc = torch.randn(20, 40, 63), torch.randn(20, 40, 3)
     cfg = {**load_config("mg", "tiny"), "train_window": 30}
     net = build_model("mg", cfg)
-    x0, c0, keep0, hist0 = draw_batch(net, tx, tc, cfg, 0, 3, 30)
-    x1, c1, keep1, hist1 = draw_batch(net, tx, tc, {**cfg, "history_noise": 0.05}, 0, 3, 30)
+    x0, c0, keep0, hist0, _ = draw_batch(net, tx, tc, cfg, 0, 3, 30)
+    x1, c1, keep1, hist1, _ = draw_batch(net, tx, tc, {**cfg, "history_noise": 0.05}, 0, 3, 30)
     assert hist0 is None
     assert torch.equal(x0, x1) and torch.equal(c0, c1) and torch.equal(keep0, keep1)
     assert 0.04 < (hist1 - x1).std().item() < 0.06
@@ -77,6 +77,20 @@ def test_history_noise_reaches_the_history_only():
     assert torch.equal(net.nll(x1, c1, keep1), net.nll(x1, c1, keep1, x1))
     fl_cfg = {**load_config("fl", "tiny"), "history_noise": 0.05}
     assert draw_batch(build_model("fl", fl_cfg), tx, tc, fl_cfg, 0, 3, 32)[3] is None
+
+
+def test_stance_latents_are_drawn_last_and_only_when_used():
+    """With stance_temperature the stance loss's latents come with the batch (every rank draws the same and keeps
+    its rows, as for the rest); without it, or before stance_start, the batch is drawn exactly as before."""
+    torch.manual_seed(0)
+    tx, tc = torch.randn(20, 40, 63), torch.randn(20, 40, 3)
+    cfg = {**load_config("mg", "tiny"), "stance_weight": 1.0, "stance_start": 2, "stance_temperature": 0.5}
+    net = build_model("mg", cfg)
+    drawn = draw_batch(net, tx, tc, cfg, 0, 3, 30)
+    plain = draw_batch(net, tx, tc, {**cfg, "stance_temperature": 0.0}, 0, 3, 30)
+    assert plain[4] is None and all(torch.equal(a, b) for a, b in zip(drawn[:3], plain[:3]))
+    assert drawn[4].shape == drawn[0].shape and 0.45 < drawn[4].std().item() < 0.55
+    assert draw_batch(net, tx, tc, cfg, 0, 1, 30)[4] is None  # before stance_start
 
 
 def test_learning_rate_warms_up_then_holds_or_decays_to_lr_min():
@@ -119,6 +133,18 @@ def test_warm_restart_config_errors():
         load_config("fl", {"steps": 100, "restart_step": 100, "restart_lr": 1e-4, "restart_lr_min": 1e-5})
     with pytest.raises(TrainError, match="needs 'restart_lr_min'"):
         load_config("fl", {"steps": 100, "restart_step": 50, "restart_lr": 1e-4})
+
+
+def test_stance_loss_starts_at_its_step_and_is_booked(small_dataset, tmp_path):
+    cfg = {**load_config("mg", "tiny"), "steps": 6, "valid_every": 1, "stance_weight": 1.0, "stance_start": 3}
+    run = train("mg", cfg, small_dataset, tmp_path / "a", seed=1, progress=False)
+    stance = [float(r["train_stance"]) for r in rows(run)]
+    assert stance[:3] == [0.0, 0.0, 0.0] and all(s > 0 for s in stance[3:])
+    plain = {**cfg, "steps": 3, "stance_weight": 0.0}
+    plain = train("mg", plain, small_dataset, tmp_path / "b", seed=1, progress=False)
+    assert [r["train_nll"] for r in rows(plain)] == [r["train_nll"] for r in rows(run)[:3]]
+    with pytest.raises(TrainError, match="field 'stance_weight' must be at least 0"):
+        load_config("fl", {"stance_weight": -1})
 
 
 def test_config_names_and_errors(tmp_path):
@@ -167,7 +193,8 @@ def test_cli_errors_are_one_line(tmp_path, small_dataset, capsys):
 
 def test_ddp_two_cpu_processes_match_one(small_dataset, tmp_path):
     """torchrun with 2 gloo processes trains the same MG as one process (issue 15, item 8): the batch is split
-    over the ranks, its random draws are shared, and ActNorm starts from the whole batch's statistics."""
+    over the ranks, its random draws are shared, and ActNorm starts from the whole batch's statistics. The last
+    steps add the stance loss on sampled latents, whose draws must be shared too."""
     import os
     import subprocess
     import sys
@@ -177,7 +204,11 @@ def test_ddp_two_cpu_processes_match_one(small_dataset, tmp_path):
     from generation.train import train
 
     steps = 12
-    train("mg", "tiny", small_dataset, tmp_path / "one", steps=steps, progress=False, threads=1)
+    config = tmp_path / "mg_stance.json"
+    config.write_text(
+        json.dumps({**load_config("mg", "tiny"), "stance_weight": 1.0, "stance_start": 8, "stance_temperature": 1.0})
+    )
+    train("mg", str(config), small_dataset, tmp_path / "one", steps=steps, progress=False, threads=1)
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     r = subprocess.run(
         [
@@ -192,7 +223,7 @@ def test_ddp_two_cpu_processes_match_one(small_dataset, tmp_path):
             "--model",
             "mg",
             "--config",
-            "tiny",
+            str(config),
             "--data",
             str(small_dataset),
             "--out",

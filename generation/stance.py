@@ -1,0 +1,74 @@
+"""A training loss on the stance foot: how fast a model's most likely motion moves a foot that the real motion
+keeps planted (bench/RESULTS.md, issue 15).
+
+Maximum likelihood alone left the flows' most likely motion (every latent zero: the mode path) carrying the
+stance foot along with the body, where real motion keeps it still: sliding that no sampling temperature removes.
+This loss takes the frame pairs where the real foot is down (the rule of metrics.foot_contacts: ankle and toe
+within CONTACT_HEIGHT of their lowest point in the window, in both frames) and there the world speed of the same
+foot in the model's mode prediction, in metres per second. FL predicts the whole window and MG each frame from
+the real frames before it, so the loss costs one inverse pass of the flow, all frames at once. It lowered FL's
+foot skating by a quarter; MG's sampled clips it did not change (RESULTS).
+
+Units: features are in metres in the root frame of each frame, and control frame t is the root's step from
+frame t-1 (forward, sideways, yaw; features.to_features). A foot's displacement from frame t-1 to frame t,
+seen from frame t-1's root, is rotate_y(p_t, yaw step) + (sideways, 0, forward) - p_{t-1}.
+"""
+
+import torch
+
+from . import skeleton
+from .metrics import CONTACT_FALLBACK, CONTACT_HEIGHT
+
+_FEET = torch.tensor(skeleton.FEET).reshape(-1, 2)  # (ankle, toe) per foot
+
+
+def _feet(x):
+    """Foot joints of poses [B, T, 63] (metres): [B, T, n_feet, 2, 3]."""
+    return x.reshape(*x.shape[:-1], skeleton.N_JOINTS, 3)[..., _FEET.to(x.device), :]
+
+
+def foot_world_steps(prev, cur, ctrl):
+    """Horizontal displacement (x, z) of each foot joint from poses prev [B, n, 63] to cur [B, n, 63] under the
+    control of cur's frames ctrl [B, n, 3], all in metres and radians: [B, n, n_feet, 2, 2]."""
+    p0, p1 = _feet(prev), _feet(cur)
+    yaw = ctrl[..., 2][..., None, None]
+    cos, sin = torch.cos(yaw), torch.sin(yaw)
+    x = cos * p1[..., 0] + sin * p1[..., 2] + ctrl[..., 1][..., None, None]
+    z = -sin * p1[..., 0] + cos * p1[..., 2] + ctrl[..., 0][..., None, None]
+    return torch.stack([x - p0[..., 0], z - p0[..., 2]], dim=-1)
+
+
+def contacts(window, first, contact_height=CONTACT_HEIGHT, fallback=CONTACT_FALLBACK):
+    """Contact of each foot in the frame pairs (t-1, t), t = first..T-1, of poses window [B, T, 63] (metres):
+    bool [B, T - first, n_feet], by metrics.foot_contacts' rule, its fallback included (a foot of a jittery
+    sample that is never still counts as down in its lowest `fallback` share of pairs, so the loss sees it).
+    Not differentiable: the loss weighs the feet that are down, not where they are."""
+    height = _feet(window)[..., 1]  # [B, T, n_feet, 2]
+    rel = (height - height.amin(dim=1, keepdim=True)).amax(dim=-1)  # [B, T, n_feet], the higher joint
+    score = torch.maximum(rel[:, first:], rel[:, first - 1 : -1])
+    floor = torch.quantile(score, fallback, dim=1, keepdim=True).clamp_min(contact_height)
+    return score <= floor
+
+
+def stance_speed(prev, cur, ctrl, contact, fps):
+    """Mean horizontal speed (m/s) of the feet of cur over the frame pairs where `contact` [B, n, n_feet] holds,
+    per batch element [B] (0 where a window has no contact)."""
+    speed = foot_world_steps(prev, cur, ctrl).norm(dim=-1).mean(dim=-1) * fps  # [B, n, n_feet]
+    mask = contact.to(speed.dtype)
+    return (speed * mask).sum(dim=(1, 2)) / mask.sum(dim=(1, 2)).clamp_min(1.0)
+
+
+def stance_loss(net, x, c, fps, keep=None, history=None, z=None):
+    """Stance-foot speed (m/s) of `net`'s prediction of training windows x [B, T, 63], c [B, T, 3] (standardised)
+    from latents z [B, T, 63] (None: zeros, the most likely motion; MG reads frames tau..T-1 of it), over the real
+    windows' contact frames, per batch element [B]. Both
+    frames of each pair are predictions: FL predicts the whole window; MG predicts frames tau..T-1, each from the
+    real frames before it (with its NLL's history dropout mask and history noise), so an offset that the model
+    makes in every frame cancels, as it does in a sampled clip, and the loss sees the foot's motion alone."""
+    real, ctrl = net.unstandardize_x(x), c * net.c_std + net.c_mean
+    if net.kind == "mg":
+        pred = net.predict_frames(x, c, None if z is None else z[:, net.tau :], keep, history)
+        pred, first = net.unstandardize_x(pred), net.tau + 1
+    else:
+        pred, first = net.unstandardize_x(net.inverse((torch.zeros_like(x) if z is None else z).flatten(1), c)[0]), 1
+    return stance_speed(pred[:, :-1], pred[:, 1:], ctrl[:, first:], contacts(real, first), fps)

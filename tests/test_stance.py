@@ -1,0 +1,80 @@
+"""The stance-foot loss (generation/stance.py): its geometry, its contacts, the mode it reads, and its gradient."""
+
+import numpy as np
+import pytest
+import torch
+from test_metrics import takes
+
+from generation import skeleton
+from generation.dataset import load_dataset
+from generation.features import load_take, rotate_y, to_features, to_world
+from generation.metrics import foot_skating
+from generation.sample import load_model
+from generation.stance import contacts, foot_world_steps, stance_loss, stance_speed
+
+pytestmark = pytest.mark.usefixtures("torch_one_thread")
+
+
+def test_foot_steps_are_world_steps_seen_from_the_previous_root():
+    """Random poses under a control that turns hard: the same displacement as features.to_world gives."""
+    g = np.random.default_rng(0)
+    x = g.normal(0, 0.3, (12, 63))
+    c = np.stack([g.normal(0.05, 0.02, 12), g.normal(0, 0.02, 12), g.normal(0, 0.3, 12)], axis=1)
+    world = to_world(x, c).astype(np.float64)[..., [0, 2]]  # [T, 21, 2] (x, z)
+    yaw = np.concatenate([[0.0], np.cumsum(c[1:, 2])])
+    expected = rotate_y(world[1:] - world[:-1], -yaw[:-1, None])  # in frame t-1's root
+    got = foot_world_steps(*(torch.from_numpy(a[None]) for a in (x[:-1], x[1:], c[1:])))[0]
+    feet = np.reshape(skeleton.FEET, (-1, 2))
+    np.testing.assert_allclose(got.numpy(), expected[:, feet], atol=1e-5)
+
+
+@pytest.mark.parametrize("category", ["walk", "walk-turn-left"])
+def test_stance_speed_of_real_motion_is_the_foot_skating_metric(category):
+    for path in takes(category, 3):
+        joints = load_take(path, 20.0)[:80]
+        x, c = (torch.from_numpy(a)[None].double() for a in to_features(joints))
+        speed = stance_speed(x[:, :-1], x[:, 1:], c[:, 1:], contacts(x, 1), 20.0)
+        assert float(speed) == pytest.approx(foot_skating(joints, 20.0), rel=1e-4)
+
+
+def test_contacts_need_both_frames_down():
+    x = torch.zeros(1, 4, 63)
+    x[0, 2, 3 * skeleton.INDEX["Toes_L"] + 1] = 0.05  # left toe lifted in frame 2 only
+    contact = contacts(x, 1)[0]  # pairs (0,1), (1,2), (2,3)
+    assert contact[:, 0].tolist() == [True, False, False] and contact[:, 1].all()
+
+
+@pytest.mark.parametrize("temperature", [0.0, 1.0])
+def test_mg_predicted_frames_are_its_stream(tiny_runs, small_dataset, temperature):
+    """Fed the frames its own stream made from latents z as history, MG predicts those frames from the same z."""
+    model = load_model(sorted((tiny_runs["mg"] / "checkpoints").glob("step_*.pt"))[-1])
+    valid = load_dataset(small_dataset).splits["valid"]
+    x, c = valid.x[:3, :30], valid.c[:3, :30]
+    z = temperature * torch.randn(3, 30 - model.tau, 63, generator=torch.Generator().manual_seed(0))
+    with torch.no_grad():
+        made = model.inverse(z, x[:, : model.tau], c)
+        again = model.predict_frames(torch.cat([x[:, : model.tau], made], dim=1), c, None if temperature == 0 else z)
+        other = model.predict_frames(x, c, z)
+    assert torch.allclose(again, made, atol=1e-4), (again - made).abs().max()
+    assert not torch.allclose(other, made, atol=1e-2)  # a different history predicts differently
+
+
+@pytest.mark.parametrize("kind", ["mg", "fl"])
+def test_stance_loss_trains_the_stance_feet_still(tiny_runs, small_dataset, kind):
+    model = load_model(sorted((tiny_runs[kind] / "checkpoints").glob("step_*.pt"))[-1]).train()
+    if kind == "mg":
+        model.config["dropout"] = 0.0
+    split = load_dataset(small_dataset).splits["train"]
+    x, c = split.x[:8, :32], split.c[:8, :32]
+
+    def loss():
+        return stance_loss(model, x, c, 20.0).mean()
+
+    before = float(loss().detach())
+    opt = torch.optim.Adam(model.parameters(), lr=3e-3)
+    for _ in range(15):
+        opt.zero_grad()
+        loss().backward()
+        opt.step()
+    after = float(loss().detach())
+    assert after < 0.7 * before, (before, after)
