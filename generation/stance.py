@@ -1,13 +1,14 @@
-"""A training loss on the stance foot: how fast a model's most likely motion moves a foot that the real motion
+"""A training loss on the stance foot: how fast a model's predicted motion moves a foot that the real motion
 keeps planted (bench/RESULTS.md, issue 15).
 
-Maximum likelihood alone left the flows' most likely motion (every latent zero: the mode path) carrying the
-stance foot along with the body, where real motion keeps it still: sliding that no sampling temperature removes.
-This loss takes the frame pairs where the real foot is down (the rule of metrics.foot_contacts: ankle and toe
-within CONTACT_HEIGHT of their lowest point in the window, in both frames) and there the world speed of the same
-foot in the model's mode prediction, in metres per second. FL predicts the whole window and MG each frame from
-the real frames before it, so the loss costs one inverse pass of the flow, all frames at once. It lowered FL's
-foot skating by a quarter; MG's sampled clips it did not change (RESULTS).
+Maximum likelihood alone left both flows sliding their stance feet, and their most likely motion (every latent
+zero: the mode path) carrying the stance foot along with the body, where real motion keeps it still. This loss
+takes the frame pairs where the real foot is down (the rule of metrics.foot_contacts: ankle and toe within
+CONTACT_HEIGHT of their lowest point in the window, in both frames) and there the world speed of the same foot in
+the model's prediction, in metres per second. The prediction is the mode, or a sample from latents drawn at a
+temperature (the config's `stance_temperature`), which makes the loss see the sampling noise too. FL predicts the
+whole window and MG each frame from the real frames before it, so the loss costs one inverse pass of the flow,
+all frames at once. The shipped fl_cpu uses it on the mode and mg_cpu on samples at temperature 1.
 
 Units: features are in metres in the root frame of each frame, and control frame t is the root's step from
 frame t-1 (forward, sideways, yaw; features.to_features). A foot's displacement from frame t-1 to frame t,
@@ -30,7 +31,7 @@ def _feet(x):
 def foot_world_steps(prev, cur, ctrl):
     """Horizontal displacement (x, z) of each foot joint from poses prev [B, n, 63] to cur [B, n, 63] under the
     control of cur's frames ctrl [B, n, 3], all in metres and radians: [B, n, n_feet, 2, 2]."""
-    p0, p1 = _feet(prev), _feet(cur)
+    p0, p1 = _feet(prev), _feet(cur)  # features.rotate_y's rotation, written in torch so that gradients pass
     yaw = ctrl[..., 2][..., None, None]
     cos, sin = torch.cos(yaw), torch.sin(yaw)
     x = cos * p1[..., 0] + sin * p1[..., 2] + ctrl[..., 1][..., None, None]
@@ -61,10 +62,10 @@ def stance_speed(prev, cur, ctrl, contact, fps):
 def stance_loss(net, x, c, fps, keep=None, history=None, z=None):
     """Stance-foot speed (m/s) of `net`'s prediction of training windows x [B, T, 63], c [B, T, 3] (standardised)
     from latents z [B, T, 63] (None: zeros, the most likely motion; MG reads frames tau..T-1 of it), over the real
-    windows' contact frames, per batch element [B]. Both
-    frames of each pair are predictions: FL predicts the whole window; MG predicts frames tau..T-1, each from the
-    real frames before it (with its NLL's history dropout mask and history noise), so an offset that the model
-    makes in every frame cancels, as it does in a sampled clip, and the loss sees the foot's motion alone."""
+    windows' contact frames, per batch element [B]. Both frames of each pair are predictions: FL predicts the
+    whole window; MG predicts frames tau..T-1, each from the real frames before it (with its NLL's history dropout
+    mask and history noise), so an offset that the model makes in every frame cancels, as it does in a sampled
+    clip, and the loss sees the foot's motion alone."""
     real, ctrl = net.unstandardize_x(x), c * net.c_std + net.c_mean
     if net.kind == "mg":
         pred = net.predict_frames(x, c, None if z is None else z[:, net.tau :], keep, history)
