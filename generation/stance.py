@@ -8,7 +8,7 @@ CONTACT_HEIGHT of their lowest point in the window, in both frames) and there th
 the model's prediction, in metres per second. The prediction is the mode, or a sample from latents drawn at a
 temperature (the config's `stance_temperature`), which makes the loss see the sampling noise too. FL predicts the
 whole window and MG each frame from the real frames before it, so the loss costs one inverse pass of the flow,
-all frames at once. The shipped fl_cpu uses it on the mode and mg_cpu on samples at temperature 1.
+all frames at once. The shipped fl_cpu and mg_cpu use it on samples at temperature 1.
 
 Units: features are in metres in the root frame of each frame, and control frame t is the root's step from
 frame t-1 (forward, sideways, yaw; features.to_features). A foot's displacement from frame t-1 to frame t,
