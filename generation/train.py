@@ -279,7 +279,7 @@ def _train(model, config, data_path, out_dir, steps, seed, progress, resume, dev
         if share is not None:
             share.step()
         x, c, keep, history, stance_z = draw_batch(net, tx, tc, cfg, seed, step, crop)
-        stance = cfg["stance_weight"] > 0 and step >= cfg["stance_start"]
+        stance = stance_on(cfg, step)
         nll, foot = step_loss(*(None if v is None else v[rows] for v in (x, c, keep, history, stance_z)), stance)
         nll, foot = nll.mean(), foot.mean()
         grad_norm = _optimise(nll + cfg["stance_weight"] * foot if stance else nll, net, opt, cfg, world)
@@ -386,6 +386,11 @@ class _Run:
         torch.save(state, self.out / "resume.pt")
 
 
+def stance_on(cfg, step):
+    """Whether the stance-foot loss joins the NLL at `step`."""
+    return cfg["stance_weight"] > 0 and step >= cfg["stance_start"]
+
+
 def draw_batch(net, tx, tc, cfg, seed, step, crop):
     """The whole training batch of `step` (every rank draws the same): windows, their random crop, the
     dequantisation noise, for MG the history dropout mask and the history the conditioning reads, and the latents
@@ -410,7 +415,7 @@ def draw_batch(net, tx, tc, cfg, seed, step, crop):
         # frame (exposure bias). Drawn after the mask, so that runs without it draw as before.
         history = x + cfg["history_noise"] * torch.randn_like(x)
     stance_z = None
-    if cfg["stance_weight"] > 0 and step >= cfg["stance_start"] and cfg["stance_temperature"] > 0:
+    if stance_on(cfg, step) and cfg["stance_temperature"] > 0:
         stance_z = cfg["stance_temperature"] * torch.randn_like(x)  # drawn last: other runs draw as before
     return x, c, keep, history, stance_z
 
