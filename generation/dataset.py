@@ -74,6 +74,7 @@ class Split:
     c: torch.Tensor  # [N, T, 3] standardised
     hist: torch.Tensor | None = None  # [N, tau, 63] standardised frames before each window, if stored
     hist_c: torch.Tensor | None = None  # [N, tau, 3]
+    labels: np.ndarray | None = None  # [N] category of each window, if stored
 
     def __len__(self):
         return self.x.shape[0]
@@ -115,6 +116,10 @@ def load_dataset(path):
         if not (np.isfinite(x).all() and np.isfinite(c).all()):
             raise DatasetError(f"{path}: '{split}_x' or '{split}_c' holds NaN or inf")
         sp = Split(standardize(x, stats["x_mean"], stats["x_std"]), standardize(c, stats["c_mean"], stats["c_std"]))
+        if f"{split}_labels" in d:
+            sp.labels = np.asarray(d[f"{split}_labels"]).astype(str)
+            if sp.labels.shape != (len(x),):
+                raise DatasetError(f"{path}: '{split}_labels' {sp.labels.shape} does not match {len(x)} windows")
         if f"{split}_hist" in d and f"{split}_hist_c" in d:
             sp.hist = standardize(d[f"{split}_hist"], stats["x_mean"], stats["x_std"])
             sp.hist_c = standardize(d[f"{split}_hist_c"], stats["c_mean"], stats["c_std"])
@@ -128,13 +133,23 @@ def standardize(a, mean, std):
     return torch.from_numpy(((np.asarray(a, np.float32) - mean) / std).astype(np.float32))
 
 
-def batch_indices(n, batch_size, seed, step):
+def batch_indices(n, batch_size, seed, step, p=None):
     """Indices of training batch `step`: a function of (seed, step) only, so a resumed run sees the same
-    batches as an uninterrupted one."""
+    batches as an uninterrupted one. `p`: each window's probability (`category_weights`); None: uniform."""
     import torch  # (see the module docstring)
 
     rng = np.random.default_rng([seed, step])
-    return torch.from_numpy(rng.choice(n, size=batch_size, replace=n < batch_size))
+    return torch.from_numpy(rng.choice(n, size=batch_size, replace=n < batch_size, p=p))
+
+
+def category_weights(labels, balance):
+    """Each window's probability of being drawn, proportional to (windows in its category)^-balance: 0 draws
+    every window alike, so common categories dominate; 1 draws every category alike. None for 0 (uniform)."""
+    if balance == 0:
+        return None
+    _, inverse, counts = np.unique(labels, return_inverse=True, return_counts=True)
+    w = counts[inverse].astype(np.float64) ** -balance
+    return w / w.sum()
 
 
 def eval_batches(split, batch_size, max_windows=None):

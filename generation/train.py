@@ -32,7 +32,7 @@ from core.cli import UserError
 
 from . import fl, moglow
 from .core_share import CoreShare, torch_threads
-from .dataset import batch_indices, eval_batches, load_dataset
+from .dataset import batch_indices, category_weights, eval_batches, load_dataset
 from .stance import stance_loss
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
@@ -58,6 +58,7 @@ TRAIN_DEFAULTS = dict(
     stance_weight=0.0,
     stance_start=0,
     stance_temperature=0.0,
+    category_balance=0.0,
 )
 
 
@@ -152,7 +153,7 @@ def _checked_values(cfg, where):
         for key in ("restart_lr", "restart_lr_min"):
             if cfg[key] is None:
                 raise TrainError(f"{where}: field 'restart_step' needs '{key}' too")
-    for key in ("stance_weight", "stance_start", "stance_temperature"):
+    for key in ("stance_weight", "stance_start", "stance_temperature", "category_balance"):
         if cfg[key] < 0:
             raise TrainError(f"{where}: field '{key}' must be at least 0, got {cfg[key]}")
     return cfg
@@ -234,6 +235,8 @@ def _config_and_data(model, config, steps, data_path):
     ds = load_dataset(data_path)
     if "valid" not in ds.splits or "train" not in ds.splits:
         raise TrainError(f"{data_path}: needs 'train' and 'valid' splits")
+    if cfg["category_balance"] > 0 and ds.splits["train"].labels is None:
+        raise TrainError(f"{data_path}: config field 'category_balance' needs 'train_labels' (re-run prepare_data)")
     return cfg, ds
 
 
@@ -256,6 +259,7 @@ def _train(model, config, data_path, out_dir, steps, seed, progress, resume, dev
         run.write_config(data_path, seed, device, world)
     tx, tc = ds.splits["train"].x.to(device), ds.splits["train"].c.to(device)
     crop = cfg["train_window"] or tx.shape[1]
+    weights = category_weights(ds.splits["train"].labels, cfg["category_balance"])
     rows = slice(rank * cfg["batch_size"] // world, (rank + 1) * cfg["batch_size"] // world)
     step_loss = _wrap_ranks(net, ds.fps, world, device)
     net.train()
@@ -278,7 +282,7 @@ def _train(model, config, data_path, out_dir, steps, seed, progress, resume, dev
             opt.state.clear()  # a warm restart starts Adam afresh: its moments belong to the finished phase
         if share is not None:
             share.step()
-        x, c, keep, history, stance_z = draw_batch(net, tx, tc, cfg, seed, step, crop)
+        x, c, keep, history, stance_z = draw_batch(net, tx, tc, cfg, seed, step, crop, weights)
         stance = stance_on(cfg, step)
         nll, foot = step_loss(*(None if v is None else v[rows] for v in (x, c, keep, history, stance_z)), stance)
         nll, foot = nll.mean(), foot.mean()
@@ -391,11 +395,12 @@ def stance_on(cfg, step):
     return cfg["stance_weight"] > 0 and step >= cfg["stance_start"]
 
 
-def draw_batch(net, tx, tc, cfg, seed, step, crop):
-    """The whole training batch of `step` (every rank draws the same): windows, their random crop, the
-    dequantisation noise, for MG the history dropout mask and the history the conditioning reads, and the latents
-    of the stance loss's prediction (None where unused), all functions of (seed, step)."""
-    idx = batch_indices(len(tx), cfg["batch_size"], seed, step).to(tx.device)
+def draw_batch(net, tx, tc, cfg, seed, step, crop, weights=None):
+    """The whole training batch of `step` (every rank draws the same): windows (drawn with probabilities
+    `weights`, None: uniform), their random crop, the dequantisation noise, for MG the history dropout mask and
+    the history the conditioning reads, and the latents of the stance loss's prediction (None where unused), all
+    functions of (seed, step)."""
+    idx = batch_indices(len(tx), cfg["batch_size"], seed, step, weights).to(tx.device)
     x, c = tx[idx], tc[idx]
     torch.manual_seed(seed * 1_000_003 + step)
     if crop < x.shape[1]:

@@ -5,9 +5,11 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 import torch
 
+from generation.dataset import batch_indices, category_weights
 from generation.train import TrainError, build_model, draw_batch, learning_rate, load_config, main, train
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
@@ -145,6 +147,38 @@ def test_stance_loss_starts_at_its_step_and_is_booked(small_dataset, tmp_path):
     assert [r["train_nll"] for r in rows(plain)] == [r["train_nll"] for r in rows(run)[:3]]
     with pytest.raises(TrainError, match="field 'stance_weight' must be at least 0"):
         load_config("fl", {"stance_weight": -1})
+
+
+def test_category_weights_balance_the_categories():
+    labels = np.array(["walk"] * 900 + ["side"] * 100)
+    assert category_weights(labels, 0.0) is None  # uniform: batch_indices draws as it always has
+    even = category_weights(labels, 1.0)
+    assert even.sum() == pytest.approx(1) and even[labels == "side"].sum() == pytest.approx(0.5)
+    half = category_weights(labels, 0.5)
+    assert half[labels == "walk"].sum() / half[labels == "side"].sum() == pytest.approx(3.0)  # sqrt(900 / 100)
+    drawn = np.concatenate([batch_indices(1000, 32, 0, step, even).numpy() for step in range(100)])
+    assert 0.45 < np.mean(drawn >= 900) < 0.55  # against 0.1 without the weights
+    assert np.array_equal(batch_indices(1000, 32, 3, 7, even), batch_indices(1000, 32, 3, 7, even))
+
+
+def test_category_balance_draws_rare_categories_more_often(small_dataset, tmp_path):
+    """A balanced run trains on other batches than a uniform one, reproducibly; a dataset without labels, or a
+    negative balance, is a one-line config error."""
+    cfg = {**load_config("mg", "tiny"), "steps": 3, "valid_every": 1}
+    plain = train("mg", cfg, small_dataset, tmp_path / "a", seed=1, progress=False)
+    bal = {**cfg, "category_balance": 1.0}
+    b1 = train("mg", bal, small_dataset, tmp_path / "b", seed=1, progress=False)
+    b2 = train("mg", bal, small_dataset, tmp_path / "c", seed=1, progress=False)
+    assert [r["train_nll"] for r in rows(b1)] == [r["train_nll"] for r in rows(b2)]
+    assert [r["train_nll"] for r in rows(b1)] != [r["train_nll"] for r in rows(plain)]
+    with pytest.raises(TrainError, match="field 'category_balance' must be at least 0"):
+        load_config("mg", {"category_balance": -0.5})
+    d = dict(np.load(small_dataset))
+    del d["train_labels"]
+    unlabelled = tmp_path / "unlabelled.npz"
+    np.savez(unlabelled, **d)
+    with pytest.raises(TrainError, match="unlabelled.npz: config field 'category_balance' needs 'train_labels'"):
+        train("mg", bal, unlabelled, tmp_path / "d", seed=1, progress=False)
 
 
 def test_config_names_and_errors(tmp_path):
