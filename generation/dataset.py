@@ -135,7 +135,9 @@ def standardize(a, mean, std):
 
 def batch_indices(n, batch_size, seed, step, p=None):
     """Indices of training batch `step`: a function of (seed, step) only, so a resumed run sees the same
-    batches as an uninterrupted one. `p`: each window's probability (`category_weights`); None: uniform."""
+    batches as an uninterrupted one. `p`: each window's probability (`category_weights`); None: uniform. A batch
+    holds no window twice, so a category with fewer windows than its share of a batch is drawn less than `p` says
+    (not so for the training split: 32 windows of 9780)."""
     import torch  # (see the module docstring)
 
     rng = np.random.default_rng([seed, step])
