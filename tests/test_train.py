@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from generation.dataset import batch_indices, category_weights
+from generation.dataset import DatasetError, batch_indices, category_weights
 from generation.train import TrainError, build_model, draw_batch, learning_rate, load_config, main, train
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
@@ -179,6 +179,11 @@ def test_category_balance_draws_rare_categories_more_often(small_dataset, tmp_pa
     np.savez(unlabelled, **d)
     with pytest.raises(TrainError, match="unlabelled.npz: config field 'category_balance' needs 'train_labels'"):
         train("mg", bal, unlabelled, tmp_path / "d", seed=1, progress=False)
+    d["train_labels"] = np.array(["walk"] * 3)
+    short = tmp_path / "short_labels.npz"
+    np.savez(short, **d)
+    with pytest.raises(DatasetError, match=r"short_labels.npz: 'train_labels' \(3,\) does not match \d+ windows"):
+        train("mg", bal, short, tmp_path / "e", seed=1, progress=False)
 
 
 def test_config_names_and_errors(tmp_path):
