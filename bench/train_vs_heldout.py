@@ -20,17 +20,12 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from sample_quality import clip_figures  # noqa: E402  (bench/, this script's folder)
+
 from generation.dataset import read_arrays, require  # noqa: E402
-from generation.features import to_world  # noqa: E402
-from generation.metrics import foot_skating, jerk  # noqa: E402
 from generation.sample import load_model, sample_windows  # noqa: E402
 
 SPLITS = ("train", "test")
-
-
-def figures(x, c, fps):
-    world = to_world(x, c)
-    return float(foot_skating(world, fps)), float(jerk(world, fps))
 
 
 def compare(model, d, split, cat, n, seed):
@@ -38,19 +33,21 @@ def compare(model, d, split, cat, n, seed):
     labels, aug = d[f"{split}_labels"], d[f"{split}_aug"]
     idx = np.flatnonzero((labels == cat) & (aug == 0))
     idx = np.sort(np.random.default_rng(seed).permutation(idx)[:n])
-    if len(idx) == 0:
-        return None
     tau = int(d["tau"])
     x, c = d[f"{split}_x"][idx], d[f"{split}_c"][idx]
     if model.kind == "mg":
         gen = sample_windows(model, c[:, tau:], x[:, :tau], c[:, :tau], 1.0, seed)
     else:  # FL makes whole windows from the control alone; its first tau frames are dropped alike
         gen = sample_windows(model, c, temperature=1.0, seed=seed)[:, tau:]
-    real = [figures(x[i, tau:], c[i, tau:], float(d["fps"])) for i in range(len(idx))]
-    fake = [figures(gen[i], c[i, tau:], float(d["fps"])) for i in range(len(idx))]
-    skate = statistics.median(f[0] for f in fake) / statistics.median(r[0] for r in real)
-    jerk_ratio = statistics.median(f[1] for f in fake) / statistics.median(r[1] for r in real)
-    return len(idx), skate, jerk_ratio, statistics.median(f[0] for f in fake)
+    real = [clip_figures(x[i, tau:], c[i, tau:], float(d["fps"])) for i in range(len(idx))]
+    fake = [clip_figures(gen[i], c[i, tau:], float(d["fps"])) for i in range(len(idx))]
+    med = lambda figs, key: statistics.median(f[key] for f in figs)  # noqa: E731
+    return (
+        len(idx),
+        med(fake, "skating") / med(real, "skating"),
+        med(fake, "jerk") / med(real, "jerk"),
+        med(fake, "skating"),
+    )
 
 
 def plot(rows, path):
@@ -63,7 +60,7 @@ def plot(rows, path):
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), sharey=False)
     for ax, k, name, target in ((axes[0], 1, "foot skating / real", 3), (axes[1], 2, "jerk / real", 2)):
         for j, split in enumerate(SPLITS):
-            vals = [rows[cat][split][k] if rows[cat][split] else 0 for cat in cats]
+            vals = [rows[cat][split][k] for cat in cats]
             ax.bar(np.arange(len(cats)) + (j - 0.5) * 0.4, vals, 0.4, label=f"{split} takes")
         ax.axhline(target, color="k", lw=0.8, ls="--", label=f"target {target}x")
         ax.set_xticks(np.arange(len(cats)), [cat.replace("_", "\n") for cat in cats], fontsize=7)
@@ -87,7 +84,8 @@ def main():
     d = read_arrays(a.data, keys)
     require(d, keys, a.data)
     model = load_model(a.model)
-    cats = sorted(set(d["test_labels"].tolist()))
+    # Categories with unaugmented windows in both splits.
+    cats = sorted(set(d["test_labels"].tolist()) & set(d["train_labels"][d["train_aug"] == 0].tolist()))
     train_share = {cat: float(np.mean(d["train_labels"] == cat)) for cat in cats}
     test_share = {cat: float(np.mean(d["test_labels"] == cat)) for cat in cats}
     rows = {cat: {s: compare(model, d, s, cat, a.per_category, a.seed) for s in SPLITS} for cat in cats}
