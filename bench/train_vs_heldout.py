@@ -8,7 +8,8 @@ random with a fixed seed) and of the test split, and gives each clip's foot skat
 to the real motion of the same windows. Both splits are treated alike: the first tau frames of each window are
 the history (and are not scored), and MG generates the remaining frames on the window's control. FL, which has
 no history, makes the whole window and loses its first tau frames alike. A model that
-skates on held-out takes of a category but not on its training takes lacks data there, not training steps.
+skates on held-out takes of a category but not on its training takes generalises poorly there, which more training
+steps will not fix.
 """
 
 import argparse
