@@ -30,7 +30,8 @@ SPLITS = ("train", "test")
 
 
 def compare(model, d, split, cat, n, seed):
-    """-> (windows, skating ratio, jerk ratio, generated skating m/s), medians over windows of one category."""
+    """-> dict(n windows, skating and jerk as ratios to real, generated skating in m/s), medians over the windows of
+    one category."""
     labels, aug = d[f"{split}_labels"], d[f"{split}_aug"]
     idx = np.flatnonzero((labels == cat) & (aug == 0))
     idx = np.sort(np.random.default_rng(seed).permutation(idx)[:n])
@@ -43,11 +44,11 @@ def compare(model, d, split, cat, n, seed):
     real = [clip_figures(x[i, tau:], c[i, tau:], float(d["fps"])) for i in range(len(idx))]
     fake = [clip_figures(gen[i], c[i, tau:], float(d["fps"])) for i in range(len(idx))]
     med = lambda figs, key: statistics.median(f[key] for f in figs)  # noqa: E731
-    return (
-        len(idx),
-        med(fake, "skating") / med(real, "skating"),
-        med(fake, "jerk") / med(real, "jerk"),
-        med(fake, "skating"),
+    return dict(
+        n=len(idx),
+        skating=med(fake, "skating") / med(real, "skating"),
+        jerk=med(fake, "jerk") / med(real, "jerk"),
+        skating_ms=med(fake, "skating"),
     )
 
 
@@ -59,9 +60,9 @@ def plot(rows, path):
 
     cats = list(rows)
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), sharey=False)
-    for ax, k, name, target in ((axes[0], 1, "foot skating / real", 3), (axes[1], 2, "jerk / real", 2)):
+    for ax, key, name, target in ((axes[0], "skating", "foot skating / real", 3), (axes[1], "jerk", "jerk / real", 2)):
         for j, split in enumerate(SPLITS):
-            vals = [rows[cat][split][k] for cat in cats]
+            vals = [rows[cat][split][key] for cat in cats]
             ax.bar(np.arange(len(cats)) + (j - 0.5) * 0.4, vals, 0.4, label=f"{split} takes")
         ax.axhline(target, color="k", lw=0.8, ls="--", label=f"target {target}x")
         ax.set_xticks(np.arange(len(cats)), [cat.replace("_", "\n") for cat in cats], fontsize=7)
@@ -100,8 +101,9 @@ def main():
     for cat in cats:
         tr, te = rows[cat]["train"], rows[cat]["test"]
         print(
-            f"| {cat} | {train_share[cat]:.1%} | {test_share[cat]:.0%} | {tr[1]:.1f}x (n={tr[0]}) | "
-            f"{te[1]:.1f}x (n={te[0]}) | {tr[2]:.2f}x | {te[2]:.2f}x | {tr[3]:.3f} / {te[3]:.3f} |"
+            f"| {cat} | {train_share[cat]:.1%} | {test_share[cat]:.0%} | {tr['skating']:.1f}x (n={tr['n']}) | "
+            f"{te['skating']:.1f}x (n={te['n']}) | {tr['jerk']:.2f}x | {te['jerk']:.2f}x | "
+            f"{tr['skating_ms']:.3f} / {te['skating_ms']:.3f} |"
         )
     if a.figure:
         plot(rows, a.figure)
