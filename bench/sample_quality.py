@@ -17,7 +17,6 @@ The figure shows the feet of the first window of five categories (rows: NAT, the
 """
 
 import argparse
-import statistics
 import sys
 from pathlib import Path
 
@@ -43,6 +42,12 @@ def late_stepping(x, fps):
     joints = x.reshape(len(x), skeleton.N_JOINTS, 3)[-int(2 * fps) :]
     sep = joints[:, FOOT_L, ::2] - joints[:, FOOT_R, ::2]  # (x, z)
     return float(np.sqrt(np.var(sep, axis=0).sum()))
+
+
+def _median(values):
+    """Median over the finite values (a diverged model's windows give NaN figures; they are counted apart)."""
+    values = np.array(list(values), dtype=np.float64)
+    return float(np.median(values[np.isfinite(values)])) if np.isfinite(values).any() else float("nan")
 
 
 def clip_figures(x, c, fps):
@@ -74,6 +79,9 @@ def main():
         name, _, ckpt = spec.partition("=")
         x, _ = sample_split(load_model(ckpt), a.data, "test", temperature=a.temperature, seed=a.seed)
         systems[name] = x
+        bad = int((~np.isfinite(x).reshape(len(x), -1).all(axis=1)).sum())
+        if bad:
+            print(f"{name}: {bad} of {len(x)} windows are not finite (NaN or inf); figures and FMD use the rest")
     figures = {name: [clip_figures(x[i], c[i], fps) for i in range(len(c))] for name, x in systems.items()}
 
     cats = sorted(set(labels.tolist()))
@@ -91,8 +99,8 @@ def main():
     print("|" + "---|" * len(head))
     for cat in cats + ["all"]:
         idx = [i for i in range(len(c)) if cat == "all" or labels[i] == cat]
-        med = lambda name, key: statistics.median(figures[name][i][key] for i in idx)  # noqa: E731
-        ratio = lambda name: statistics.median(  # noqa: E731
+        med = lambda name, key: _median(figures[name][i][key] for i in idx)  # noqa: E731
+        ratio = lambda name: _median(  # noqa: E731
             figures[name][i]["stepping"] / max(figures[NAT][i]["stepping"], 1e-6) for i in idx
         )
         row = (
@@ -106,8 +114,9 @@ def main():
         print("| " + " | ".join(row) + " |")
 
     encoder = MotionEncoder.load(a.encoder)
-    fmd = {name: encoder.fmd(x, labels) for name, x in systems.items()}
-    overall = lambda name, key: statistics.median(f[key] for f in figures[name])  # noqa: E731
+    finite = {name: np.isfinite(x).reshape(len(x), -1).all(axis=1) for name, x in systems.items()}
+    fmd = {name: encoder.fmd(x[finite[name]], labels[finite[name]]) for name, x in systems.items()}
+    overall = lambda name, key: _median(f[key] for f in figures[name])  # noqa: E731
     print("\nall windows: FMD to training motion of the same categories, and medians as ratios to NAT's")
     print(
         "| system | FMD | FMD / NAT | skating / NAT | jerk / NAT | following (m) "
@@ -116,7 +125,7 @@ def main():
     print("|---|---|---|---|---|---|---|")
     for name in names:
         worst = min(
-            statistics.median(
+            _median(
                 figures[name][i]["stepping"] / max(figures[NAT][i]["stepping"], 1e-6)
                 for i in range(len(c))
                 if labels[i] == cat

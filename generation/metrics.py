@@ -93,7 +93,10 @@ def jerk(joints, fps):
 
 
 def _rigid_align_error(a, b):
-    """Mean distance between 2-D paths a and b [T, 2] after the best rotation + translation of b onto a."""
+    """Mean distance between 2-D paths a and b [T, 2] after the best rotation + translation of b onto a; NaN
+    where a path is not finite (a diverged model's clip), since SVD cannot align it."""
+    if not (np.isfinite(a).all() and np.isfinite(b).all()):
+        return float("nan")
     ca, cb = a - a.mean(0), b - b.mean(0)
     u, _, vt = np.linalg.svd(cb.T @ ca)
     d = np.sign(np.linalg.det(u @ vt))

@@ -91,20 +91,21 @@ def learning_rate(cfg, step):
 
 
 def pick_device(device=None):
-    if device:
-        return torch.device(device)
-    if torch.cuda.is_available():
+    """`device`, or CUDA when present, else the CPU; under torchrun a bare 'cuda' is the rank's own GPU."""
+    device = torch.device(device) if device else torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if device.type == "cuda" and device.index is None:
         return torch.device("cuda", int(os.environ.get("LOCAL_RANK", 0)))
-    return torch.device("cpu")
+    return device
 
 
-def join_ranks():
-    """(rank, world size): (0, 1) alone; under torchrun, after joining the process group (nccl on CUDA)."""
+def join_ranks(device):
+    """(rank, world size): (0, 1) alone; under torchrun, after joining the process group: nccl where the ranks
+    train on CUDA, gloo on the CPU (also on a machine that has a GPU, when --device cpu asks for it)."""
     world = int(os.environ.get("WORLD_SIZE", "1"))
     if world == 1:
         return 0, 1
     if not torch.distributed.is_initialized():
-        torch.distributed.init_process_group("nccl" if torch.cuda.is_available() else "gloo")
+        torch.distributed.init_process_group("nccl" if device.type == "cuda" else "gloo")
     return torch.distributed.get_rank(), world
 
 
@@ -242,10 +243,10 @@ def _config_and_data(model, config, steps, data_path):
 
 def _train(model, config, data_path, out_dir, steps, seed, progress, resume, device, share_cores):
     cfg, ds = _config_and_data(model, config, steps, data_path)
-    rank, world = join_ranks()
+    device = pick_device(device)
+    rank, world = join_ranks(device)
     if cfg["batch_size"] % world:
         raise TrainError(f"batch_size {cfg['batch_size']} does not split evenly over {world} ranks")
-    device = pick_device(device)
     out = Path(out_dir)
     (out / "checkpoints").mkdir(parents=True, exist_ok=True)
     torch.manual_seed(seed)

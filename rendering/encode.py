@@ -2,8 +2,6 @@
 
 import subprocess
 
-import imageio_ffmpeg
-
 
 def ffmpeg_writer(out_mp4, size, fps, preset="ultrafast", qp=17, crf=None, threads=None):
     """An ffmpeg process reading raw yuv420p frames on stdin and writing H.264 yuv420p +faststart MP4, no audio.
@@ -12,6 +10,8 @@ def ffmpeg_writer(out_mp4, size, fps, preset="ultrafast", qp=17, crf=None, threa
     x264 the per-frame complexity estimate that crf needs (~10% of the encoder's time with ultrafast); for our
     line drawings ultrafast at qp 17 is as close to the frames as superfast at crf 20 (PSNR ~53 dB).
     """
+    import imageio_ffmpeg  # here, not at the top: loading and sampling the models must not need an encoder
+
     cmd = [
         imageio_ffmpeg.get_ffmpeg_exe(),
         "-y",

@@ -112,6 +112,10 @@ def test_control_following_real_walks_follow_and_a_body_on_the_wrong_control_doe
     rng = np.random.default_rng(0)
     shaky = to_world(x + rng.normal(0, 0.02, x.shape).astype(np.float32), c)
     assert control_following(shaky, c) < 0.1 and foot_skating(shaky, 20.0) > 0.3
+    # A diverged model's clip (one NaN frame) scores NaN rather than stopping the whole table (SVD would raise).
+    broken = to_world(x, c)
+    broken[40] = np.nan
+    assert np.isnan(control_following(broken, c)) and np.isnan(clip_metrics(broken, 20.0, c)["control_error"])
 
 
 def test_frechet_distance_matches_the_closed_form_for_diagonal_gaussians():

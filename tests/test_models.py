@@ -50,7 +50,7 @@ def test_samples_are_in_the_data_range(tiny_runs, test_split):
     s = test_split
     model = load_model(last_ckpt(tiny_runs["mg"]))
     x = sample_mg(model, s["c"], s["hist"], s["hist_c"], temperature=0.7, seed=0)
-    mean, std = model.x_mean.numpy(), model.x_std.numpy()
+    mean, std = model.x_mean.cpu().numpy(), model.x_std.cpu().numpy()  # the model is on CUDA where there is one
     assert np.abs((x - mean) / std).mean() < 3.0
     head_y = x[..., 3 * 4 + 1]  # the head is above the hips in the root frame
     assert (head_y > 0.2).mean() > 0.9
@@ -70,9 +70,10 @@ def test_fast_sampler_matches_plain_lstm_and_inverts_forward(tiny_runs, test_spl
     """MGStream (fused weights, either layout) == nn.LSTM called per step; and forward(inverse(z)) == z."""
     model = load_model(last_ckpt(tiny_runs["mg"]))
     s = test_split
-    hist = model.standardize_x(torch.from_numpy(s["hist"]))
-    c = model.standardize_c(torch.from_numpy(np.concatenate([s["hist_c"], s["c"][:, :15]], axis=1)))
-    z = torch.randn(4, 15, 63, generator=torch.Generator().manual_seed(0))
+    dev = model.x_mean.device  # load_model puts it on CUDA where there is one
+    hist = model.standardize_x(torch.from_numpy(s["hist"]).to(dev))
+    c = model.standardize_c(torch.from_numpy(np.concatenate([s["hist_c"], s["c"][:, :15]], axis=1)).to(dev))
+    z = torch.randn(4, 15, 63, generator=torch.Generator().manual_seed(0)).to(dev)
     fast = model.inverse(z, hist, c, layout=layout)
     plain = inverse_naive(model, z, hist, c)
     assert torch.allclose(fast, plain, atol=1e-5), (fast - plain).abs().max()

@@ -48,9 +48,10 @@ def test_contacts_need_both_frames_down():
 def test_mg_predicted_frames_are_its_stream(tiny_runs, small_dataset, temperature):
     """Fed the frames its own stream made from latents z as history, MG predicts those frames from the same z."""
     model = load_model(sorted((tiny_runs["mg"] / "checkpoints").glob("step_*.pt"))[-1])
+    dev = model.x_mean.device  # load_model puts it on CUDA where there is one
     valid = load_dataset(small_dataset).splits["valid"]
-    x, c = valid.x[:3, :30], valid.c[:3, :30]
-    z = temperature * torch.randn(3, 30 - model.tau, 63, generator=torch.Generator().manual_seed(0))
+    x, c = valid.x[:3, :30].to(dev), valid.c[:3, :30].to(dev)
+    z = temperature * torch.randn(3, 30 - model.tau, 63, generator=torch.Generator().manual_seed(0)).to(dev)
     with torch.no_grad():
         made = model.inverse(z, x[:, : model.tau], c)
         again = model.predict_frames(torch.cat([x[:, : model.tau], made], dim=1), c, None if temperature == 0 else z)
@@ -65,7 +66,7 @@ def test_stance_loss_trains_the_stance_feet_still(tiny_runs, small_dataset, kind
     if kind == "mg":
         model.config["dropout"] = 0.0
     split = load_dataset(small_dataset).splits["train"]
-    x, c = split.x[:8, :32], split.c[:8, :32]
+    x, c = split.x[:8, :32].to(model.x_mean.device), split.c[:8, :32].to(model.x_mean.device)
 
     def loss():
         return stance_loss(model, x, c, 20.0).mean()

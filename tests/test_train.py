@@ -247,7 +247,8 @@ def test_ddp_two_cpu_processes_match_one(small_dataset, tmp_path):
     config.write_text(
         json.dumps({**load_config("mg", "tiny"), "stance_weight": 1.0, "stance_start": 8, "stance_temperature": 1.0})
     )
-    train("mg", str(config), small_dataset, tmp_path / "one", steps=steps, progress=False, threads=1)
+    # On the CPU on any machine (gloo), a GPU machine included: two ranks cannot share one GPU under nccl.
+    train("mg", str(config), small_dataset, tmp_path / "one", steps=steps, progress=False, threads=1, device="cpu")
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     r = subprocess.run(
         [
@@ -271,6 +272,8 @@ def test_ddp_two_cpu_processes_match_one(small_dataset, tmp_path):
             str(steps),
             "--threads",
             "1",
+            "--device",
+            "cpu",
             "--quiet",
         ],
         capture_output=True,
