@@ -31,7 +31,7 @@ from generation.features import to_world  # noqa: E402
 from generation.metrics import control_following, foot_skating, jerk  # noqa: E402
 from generation.motion_encoder import MotionEncoder  # noqa: E402
 from generation.pretrained import MOTION_ENCODER  # noqa: E402
-from generation.sample import load_model, sample_split  # noqa: E402
+from generation.sample import load_model, nonfinite_windows, sample_split  # noqa: E402
 
 FOOT_L, FOOT_R = skeleton.INDEX["Foot_L"], skeleton.INDEX["Foot_R"]
 SHOWN = ("walk", "run", "walk_backward", "walk_turn_left", "sidestep_left")
@@ -79,7 +79,7 @@ def main():
         name, _, ckpt = spec.partition("=")
         x, _ = sample_split(load_model(ckpt), a.data, "test", temperature=a.temperature, seed=a.seed)
         systems[name] = x
-        bad = int((~np.isfinite(x).reshape(len(x), -1).all(axis=1)).sum())
+        bad = len(nonfinite_windows(x))
         if bad:
             print(f"{name}: {bad} of {len(x)} windows are not finite (NaN or inf); figures and FMD use the rest")
     figures = {name: [clip_figures(x[i], c[i], fps) for i in range(len(c))] for name, x in systems.items()}
@@ -114,8 +114,10 @@ def main():
         print("| " + " | ".join(row) + " |")
 
     encoder = MotionEncoder.load(a.encoder)
-    finite = {name: np.isfinite(x).reshape(len(x), -1).all(axis=1) for name, x in systems.items()}
-    fmd = {name: encoder.fmd(x[finite[name]], labels[finite[name]]) for name, x in systems.items()}
+    fmd = {}
+    for name, x in systems.items():
+        keep = np.setdiff1d(np.arange(len(x)), nonfinite_windows(x))
+        fmd[name] = encoder.fmd(x[keep], labels[keep])
     overall = lambda name, key: _median(f[key] for f in figures[name])  # noqa: E731
     print("\nall windows: FMD to training motion of the same categories, and medians as ratios to NAT's")
     print(

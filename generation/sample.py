@@ -113,6 +113,13 @@ def sample_windows(model, control, history=None, history_control=None, temperatu
     return sample_fl(model, control, temperature, seed)
 
 
+def nonfinite_windows(x):
+    """Indices of the windows of x [B, T, D] that hold a NaN or inf: a flow whose inverse overflows (a diverged
+    or barely trained model, a high temperature) gives such windows, which must never reach a video."""
+    x = np.asarray(x)
+    return np.flatnonzero(~np.isfinite(x.reshape(len(x), -1)).all(axis=1))
+
+
 def sample_split(model, data_path, split="test", n=None, temperature=1.0, seed=0):
     """Sample for the first n windows of a split of a prepared dataset -> (x [n,T,63], c [n,T,3])."""
     d = read_arrays(data_path, [f"{split}_c", f"{split}_hist", f"{split}_hist_c"])
@@ -137,6 +144,12 @@ def _main(argv):
     a = ap.parse_args(argv)
     model = load_model(a.checkpoint, a.device)
     x, c = sample_split(model, a.data, a.split, a.n, a.temperature, a.seed)
+    bad = nonfinite_windows(x)
+    if len(bad):
+        raise SampleError(
+            f"{a.checkpoint}: {len(bad)} of {len(x)} sampled windows hold NaN or inf (first: window {bad[0]}); "
+            "the model diverged or is barely trained: try another checkpoint or a lower --temperature"
+        )
     from .features import to_world
 
     out = Path(a.out)
