@@ -173,8 +173,10 @@ def test_layout_is_a_fixed_choice_never_a_timing(tiny_runs, monkeypatch):
         MGStream(model, hist, hist_c, layout="diagonal")
 
 
-def test_two_sampling_processes_give_identical_bits(tiny_runs, small_dataset, tmp_path):
-    """The same checkpoint, seed and inputs in two fresh processes: the same clip files, byte for byte."""
+@pytest.mark.parametrize("kind", ["mg", "fl"])
+def test_two_sampling_processes_give_identical_bits(tiny_runs, small_dataset, tmp_path, kind):
+    """The same checkpoint, seed and inputs in two fresh processes: the same clip files, byte for byte (on a GPU
+    too: MG's products go through cuBLAS, FL's convolutions through cuDNN)."""
     outs = []
     for run in ("a", "b"):
         r = subprocess.run(
@@ -183,7 +185,7 @@ def test_two_sampling_processes_give_identical_bits(tiny_runs, small_dataset, tm
                 "-m",
                 "generation.sample",
                 "--checkpoint",
-                str(last_ckpt(tiny_runs["mg"])),
+                str(last_ckpt(tiny_runs[kind])),
                 "--data",
                 str(small_dataset),
                 "--n",
