@@ -75,13 +75,17 @@ def main():
     require(d, ["test_x", "test_c", "test_labels", "fps"], a.data)
     x_nat, c, labels, fps = d["test_x"], d["test_c"], d["test_labels"], float(d["fps"])
     systems = {NAT: x_nat}
+    finite = {NAT: np.arange(len(x_nat))}  # per system, the windows without NaN or inf
     for spec in a.model:
         name, _, ckpt = spec.partition("=")
         x, _ = sample_split(load_model(ckpt), a.data, "test", temperature=a.temperature, seed=a.seed)
         systems[name] = x
-        bad = len(nonfinite_windows(x))
-        if bad:
-            print(f"{name}: {bad} of {len(x)} windows are not finite (NaN or inf); figures and FMD use the rest")
+        finite[name] = np.setdiff1d(np.arange(len(x)), nonfinite_windows(x))
+        if len(finite[name]) < len(x):
+            print(
+                f"{name}: {len(x) - len(finite[name])} of {len(x)} windows are not finite (NaN or inf); "
+                "figures and FMD use the rest"
+            )
     figures = {name: [clip_figures(x[i], c[i], fps) for i in range(len(c))] for name, x in systems.items()}
 
     cats = sorted(set(labels.tolist()))
@@ -114,10 +118,10 @@ def main():
         print("| " + " | ".join(row) + " |")
 
     encoder = MotionEncoder.load(a.encoder)
-    fmd = {}
-    for name, x in systems.items():
-        keep = np.setdiff1d(np.arange(len(x)), nonfinite_windows(x))
-        fmd[name] = encoder.fmd(x[keep], labels[keep])
+    fmd = {
+        name: encoder.fmd(x[finite[name]], labels[finite[name]]) if len(finite[name]) else float("nan")
+        for name, x in systems.items()
+    }
     overall = lambda name, key: _median(f[key] for f in figures[name])  # noqa: E731
     print("\nall windows: FMD to training motion of the same categories, and medians as ratios to NAT's")
     print(
