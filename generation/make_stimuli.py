@@ -124,7 +124,7 @@ def ensure_model(kind, args, dataset):
 
 def sample_condition(kind, ckpt, arrays, idx, temperature, seed, device):
     """Features x [B, T, 63] sampled by the `kind` model in `ckpt` for the items at `idx`."""
-    from .sample import load_model, nonfinite_windows, sample_windows
+    from .sample import load_model, require_finite, sample_windows
 
     model = load_model(ckpt, device=device)
     if model.kind != kind:
@@ -133,13 +133,7 @@ def sample_condition(kind, ckpt, arrays, idx, temperature, seed, device):
     x = np.asarray(x, dtype=np.float32)
     if x.shape != arrays["x"][idx].shape:
         raise StimuliError(f"{ckpt}: sampled {x.shape}, expected {arrays['x'][idx].shape}")
-    bad = nonfinite_windows(x)
-    if len(bad):  # a broken clip would render as an empty or frozen video, which tells raters the condition
-        raise StimuliError(
-            f"{ckpt}: {len(bad)} of {len(x)} sampled clips hold NaN or inf; the model diverged or is barely "
-            "trained: use another checkpoint or a lower --temperature"
-        )
-    return x
+    return require_finite(x, ckpt)
 
 
 # ---------------------------------------------------------------- the pipeline's stages

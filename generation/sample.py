@@ -120,6 +120,18 @@ def nonfinite_windows(x):
     return np.flatnonzero(~np.isfinite(x.reshape(len(x), -1)).all(axis=1))
 
 
+def require_finite(x, checkpoint):
+    """x, where every window is finite; else a one-line SampleError naming the checkpoint. Whatever writes clips
+    calls it: a broken clip renders as an empty or frozen video, which would tell raters the condition."""
+    bad = nonfinite_windows(x)
+    if len(bad):
+        raise SampleError(
+            f"{checkpoint}: {len(bad)} of {len(x)} sampled windows hold NaN or inf (first: window {bad[0]}); "
+            "the model diverged or is barely trained: try another checkpoint or a lower --temperature"
+        )
+    return x
+
+
 def sample_split(model, data_path, split="test", n=None, temperature=1.0, seed=0):
     """Sample for the first n windows of a split of a prepared dataset -> (x [n,T,63], c [n,T,3])."""
     d = read_arrays(data_path, [f"{split}_c", f"{split}_hist", f"{split}_hist_c"])
@@ -144,12 +156,7 @@ def _main(argv):
     a = ap.parse_args(argv)
     model = load_model(a.checkpoint, a.device)
     x, c = sample_split(model, a.data, a.split, a.n, a.temperature, a.seed)
-    bad = nonfinite_windows(x)
-    if len(bad):
-        raise SampleError(
-            f"{a.checkpoint}: {len(bad)} of {len(x)} sampled windows hold NaN or inf (first: window {bad[0]}); "
-            "the model diverged or is barely trained: try another checkpoint or a lower --temperature"
-        )
+    require_finite(x, a.checkpoint)
     from .features import to_world
 
     out = Path(a.out)

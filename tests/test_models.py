@@ -208,7 +208,7 @@ def test_two_sampling_processes_give_identical_bits(tiny_runs, small_dataset, tm
 def test_non_finite_samples_never_become_clips(tiny_runs, test_split, small_dataset, tmp_path, capsys):
     """A model whose inverse gives NaN (here: one poisoned weight) stops the sample CLI and make_stimuli with one
     line each, instead of writing clips that would render as broken videos."""
-    from generation.make_stimuli import StimuliError, sample_condition
+    from generation.make_stimuli import sample_condition
 
     ck = torch.load(last_ckpt(tiny_runs["mg"]), weights_only=False)
     name = next(k for k, v in ck["state"].items() if k.endswith("weight") and v.is_floating_point())
@@ -222,6 +222,6 @@ def test_non_finite_samples_never_become_clips(tiny_runs, test_split, small_data
     assert "poisoned.pt" in err and "NaN or inf" in err and len(err.strip().splitlines()) == 1
     assert not out.exists() or not list(out.glob("*.npz"))
     arrays = {k: test_split[k] for k in ("x", "c", "hist", "hist_c")}
-    with pytest.raises(StimuliError, match="2 of 2 sampled clips hold NaN or inf"):
+    with pytest.raises(SampleError, match="poisoned.pt: 2 of 2 sampled windows hold NaN or inf"):
         sample_condition("mg", poisoned, arrays, [0, 1], 1.0, 0, None)
     assert sample_condition("mg", last_ckpt(tiny_runs["mg"]), arrays, [0, 1], 1.0, 0, None).shape == (2, 80, 63)
