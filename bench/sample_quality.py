@@ -44,7 +44,7 @@ def late_stepping(x, fps):
     return float(np.sqrt(np.var(sep, axis=0).sum()))
 
 
-def _median(values):
+def median_finite(values):
     """Median over the finite values (a diverged model's windows give NaN figures; they are counted apart)."""
     values = np.array(list(values), dtype=np.float64)
     return float(np.median(values[np.isfinite(values)])) if np.isfinite(values).any() else float("nan")
@@ -103,8 +103,8 @@ def main():
     print("|" + "---|" * len(head))
     for cat in cats + ["all"]:
         idx = [i for i in range(len(c)) if cat == "all" or labels[i] == cat]
-        med = lambda name, key: _median(figures[name][i][key] for i in idx)  # noqa: E731
-        ratio = lambda name: _median(  # noqa: E731
+        med = lambda name, key: median_finite(figures[name][i][key] for i in idx)  # noqa: E731
+        ratio = lambda name: median_finite(  # noqa: E731
             figures[name][i]["stepping"] / max(figures[NAT][i]["stepping"], 1e-6) for i in idx
         )
         row = (
@@ -122,7 +122,7 @@ def main():
         name: encoder.fmd(x[finite[name]], labels[finite[name]]) if len(finite[name]) else float("nan")
         for name, x in systems.items()
     }
-    overall = lambda name, key: _median(f[key] for f in figures[name])  # noqa: E731
+    overall = lambda name, key: median_finite(f[key] for f in figures[name])  # noqa: E731
     print("\nall windows: FMD to training motion of the same categories, and medians as ratios to NAT's")
     print(
         "| system | FMD | FMD / NAT | skating / NAT | jerk / NAT | following (m) "
@@ -131,7 +131,7 @@ def main():
     print("|---|---|---|---|---|---|---|")
     for name in names:
         worst = min(
-            _median(
+            median_finite(
                 figures[name][i]["stepping"] / max(figures[NAT][i]["stepping"], 1e-6)
                 for i in range(len(c))
                 if labels[i] == cat

@@ -13,7 +13,6 @@ steps will not fix.
 """
 
 import argparse
-import statistics
 import sys
 from pathlib import Path
 
@@ -21,7 +20,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from sample_quality import clip_figures  # noqa: E402  (bench/, this script's folder)
+from sample_quality import clip_figures, median_finite  # noqa: E402  (bench/, this script's folder)
 
 from generation.dataset import read_arrays, require  # noqa: E402
 from generation.sample import load_model, sample_windows  # noqa: E402
@@ -43,7 +42,7 @@ def compare(model, d, split, cat, n, seed):
         gen = sample_windows(model, c, temperature=1.0, seed=seed)[:, tau:]
     real = [clip_figures(x[i, tau:], c[i, tau:], float(d["fps"])) for i in range(len(idx))]
     fake = [clip_figures(gen[i], c[i, tau:], float(d["fps"])) for i in range(len(idx))]
-    med = lambda figs, key: statistics.median(f[key] for f in figs)  # noqa: E731
+    med = lambda figs, key: median_finite(f[key] for f in figs)  # noqa: E731
     return dict(
         n=len(idx),
         skating=med(fake, "skating") / med(real, "skating"),
