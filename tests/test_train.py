@@ -301,6 +301,11 @@ def test_core_share_leaves_a_busy_neighbour_its_core():
 
     from generation.core_share import CoreShare
 
+    quiet = CoreShare(interval=0.5, cores=2)
+    time.sleep(1.0)
+    load = quiet.others()
+    if load > 0.4:  # CoreShare reads the whole machine: another job's load would look like the neighbour's
+        pytest.skip(f"the machine is busy with other work ({load:.1f} cores): this test needs it quiet")
     before = torch.get_num_threads()
     busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
     try:
