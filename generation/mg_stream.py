@@ -131,6 +131,8 @@ class MGStream:
             # Inverse LU linear map with the inverse actnorm folded in: x = diag(e^-logs) W^-1 y - bias.
             y = torch.addmm(bn, *mm(winv, y_ab))
         y = y if fd else y.T.contiguous()
+        if self.model.config["residual"]:
+            y = y + self.hist[:, -1]
         self.hist = torch.cat([self.hist[:, 1:], y[:, None]], dim=1)
         self.hist_c = ctrl[:, 1:]
         return y

@@ -8,6 +8,11 @@ dropped with rate 0.95 in training, so the model must listen to the control (§4
 Training runs each coupling LSTM over a whole window at once (frames tau..T-1, history from the window,
 h = 0 at frame tau): that equals the frame-by-frame flow, because every other layer acts frame-wise.
 Sampling (mg_stream.MGStream) runs the same flow inverted, one frame at a time, with pre-fused weights.
+
+`residual` (not in the paper; off in mg_paper): the flow models the step x_t - x_{t-1} from the previous pose
+(standardised) instead of the pose itself. The shift depends on the history alone, so its Jacobian is 1 and the
+NLL is still that of the poses; but the coupling networks no longer have to reproduce the previous pose to within
+millimetres to keep the body still, and what they missed was MG's frame-to-frame jitter (bench/RESULTS.md).
 """
 
 import torch
@@ -16,7 +21,7 @@ from torch import nn
 from .flows import Chain, FlowStep, MotionFlow, gaussian_logp
 from .mg_stream import MGStream
 
-DEFAULTS = dict(K=16, hidden=512, lstm_layers=2, tau=10, dropout=0.95)
+DEFAULTS = dict(K=16, hidden=512, lstm_layers=2, tau=10, dropout=0.95, residual=False)
 
 
 class LSTMNet(nn.Module):
@@ -74,9 +79,17 @@ class MoGlow(MotionFlow):
         conditioning reads instead of x (training's history noise)."""
         if x.shape[1] <= self.tau:
             raise ValueError(f"MG needs windows longer than tau={self.tau} frames, got {x.shape[1]}")
-        cond = self.make_cond(x if history is None else history, c, keep).transpose(1, 2)
-        z, logdet = self.flow(x[:, self.tau :].transpose(1, 2), cond)
+        src = x if history is None else history
+        cond = self.make_cond(src, c, keep).transpose(1, 2)
+        z, logdet = self.flow((x[:, self.tau :] - self.base(src)).transpose(1, 2), cond)
         return z.transpose(1, 2), logdet
+
+    def base(self, history):
+        """What the flow's output is added to, for frames tau..T-1 of a window: with `residual`, the previous
+        frame of `history` [B, T, 63], else 0."""
+        if not self.config["residual"]:
+            return history.new_zeros(())
+        return history[:, self.tau - 1 : -1]
 
     def nll(self, x, c, keep=None, history=None):
         """Negative log-likelihood of frames tau..T-1 in nats per dimension (standardised data), per element."""
@@ -87,9 +100,10 @@ class MoGlow(MotionFlow):
         """Frames tau..T-1 of a window x [B, T, 63], c [B, T, 3] from latents z [B, T - tau, 63] (None: zeros, the
         most likely frames), each predicted from the real history before it, all frames at once and
         differentiable (stance.stance_loss)."""
-        cond = self.make_cond(x if history is None else history, c, keep).transpose(1, 2)
+        src = x if history is None else history
+        cond = self.make_cond(src, c, keep).transpose(1, 2)
         z = x.new_zeros(x.shape[0], x.shape[1] - self.tau, self.pose_dim) if z is None else z
-        return self.flow.inverse(z.transpose(1, 2), cond)[0].transpose(1, 2)
+        return self.flow.inverse(z.transpose(1, 2), cond)[0].transpose(1, 2) + self.base(src)
 
     @torch.no_grad()
     def inverse(self, z, history, c, layout=None):

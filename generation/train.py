@@ -166,6 +166,8 @@ def _checked_fields(cfg, model, where):
     for key, value in cfg.items():
         if key not in allowed:
             raise TrainError(f"{where}: unknown field '{key}'")
+        if key == "residual" and not isinstance(value, bool):
+            raise TrainError(f"{where}: field 'residual' must be true or false, got {value!r}")
         unset = value is None and key in TRAIN_DEFAULTS and TRAIN_DEFAULTS[key] is None
         if key not in ("model", "name", "note", "early_ckpts") and not unset and not isinstance(value, (int, float)):
             raise TrainError(f"{where}: field '{key}' must be a number, got {value!r}")

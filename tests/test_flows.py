@@ -3,6 +3,7 @@ MG causality. All at small sizes."""
 
 import pytest
 import torch
+from reference.moglow_naive import inverse_naive
 
 from generation.fl import FL
 from generation.flows import ActNorm, AffineCoupling, Chain, ConvNet, FlowStep, InvertibleLinearLU, Split, SqueezeTime
@@ -57,9 +58,9 @@ def fl_case(dtype):
     return fwd, inv, torch.randn(3, T, 63, dtype=dtype)
 
 
-def mg_case(dtype):
+def mg_case(dtype, residual=False):
     """MG as a map from the frames after the history to their latents; its inverse is the streaming sampler."""
-    model = MoGlow(dict(K=2, hidden=8, tau=TAU)).to(dtype)
+    model = MoGlow(dict(K=2, hidden=8, tau=TAU, residual=residual)).to(dtype)
     n = 3
     hist = torch.randn(3, TAU, 63, dtype=dtype)
     c = torch.randn(3, TAU + n, 3, dtype=dtype)
@@ -87,6 +88,7 @@ CASES = {
     "chain": layer_case(lambda: Chain(*[FlowStep(C, ConvNet(C // 2, CC, 2 * (C - C // 2), 8)) for _ in range(3)])),
     "fl_model": fl_case,
     "mg_model": mg_case,
+    "mg_model_residual": lambda dtype: mg_case(dtype, residual=True),
 }
 
 
@@ -166,6 +168,28 @@ def test_mg_is_causal():
         b = model.inverse(zs, x[:, :TAU], c3)
         assert torch.equal(a[:, :3], b[:, :3])
         assert not torch.equal(a[:, 3], b[:, 3])
+
+
+@pytest.mark.parametrize("layout", ["row", "col"])
+def test_mg_residual_samples_steps_from_the_previous_pose(layout):
+    """With `residual` the flow's output is the step from the previous pose: the streaming sampler (either layout)
+    equals the plain per-frame inverse, and the same weights without `residual` give the same steps, not poses."""
+    torch.manual_seed(5)
+    model = MoGlow(dict(K=2, hidden=8, tau=TAU, residual=True))
+    hist, c = torch.randn(2, TAU, 63), torch.randn(2, TAU + 4, 3)
+    model(torch.randn(2, TAU + 4, 63), c)
+    perturb(model, 0.05).eval()
+    z = torch.randn(2, 4, 63)
+    fast = model.inverse(z, hist, c, layout=layout)
+    assert torch.allclose(fast, inverse_naive(model, z, hist, c), atol=1e-5)
+    with torch.no_grad():
+        pred = model.predict_frames(torch.cat([hist, fast], dim=1), c, z)
+    assert torch.allclose(pred, fast, atol=1e-4)
+    plain = MoGlow(dict(K=2, hidden=8, tau=TAU))
+    plain.load_state_dict(model.state_dict())
+    first = plain.eval().inverse(z[:, :1], hist, c[:, : TAU + 1], layout=layout)
+    assert torch.allclose(fast[:, 0] - hist[:, -1], first[:, 0], atol=1e-5)
+    assert not torch.allclose(fast[:, 0], first[:, 0], atol=1e-2)
 
 
 def test_mg_history_dropout_only_in_training():

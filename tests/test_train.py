@@ -201,6 +201,10 @@ def test_config_names_and_errors(tmp_path):
         load_config("mg", str(bad))
     with pytest.raises(TrainError, match="'model' is 'fl'"):
         load_config("mg", {"model": "fl"})
+    with pytest.raises(TrainError, match="config: field 'residual' must be true or false, got 'yes'"):
+        load_config("mg", {"residual": "yes"})
+    with pytest.raises(TrainError, match="unknown field 'residual'"):
+        load_config("fl", {"residual": True})
 
 
 def test_cli_errors_are_one_line(tmp_path, small_dataset, capsys):
