@@ -10,6 +10,7 @@ Every layer maps a sequence x [B, C, T] (channels = pose features, T = frames) t
 that do not need it ignore it.
 """
 
+import contextlib
 import math
 
 import numpy as np
@@ -25,6 +26,25 @@ def _sum_over_ranks(total, count):
         torch.distributed.all_reduce(both)
         return (both[:-1] / both[-1]).view_as(total)
     return total / count
+
+
+def run_net(layer, x_a, cond):
+    """`layer.net(x_a, cond)` as float32 (x_a's dtype). With `layer.net_dtype` set (set_net_precision), the network
+    runs under autocast to that dtype: only the coupling and prior networks, never the invertible maps or the
+    log-determinants, so the flow stays exactly invertible and its likelihood is still computed in float32."""
+    dtype = getattr(layer, "net_dtype", None)
+    ctx = torch.autocast(x_a.device.type, dtype=dtype) if dtype is not None else contextlib.nullcontext()
+    with ctx:
+        h = layer.net(x_a, cond)
+    return h.to(x_a.dtype)
+
+
+def set_net_precision(flow, dtype):
+    """Run every coupling and prior network of `flow` in `dtype` (None: the weights' own dtype). Mixed-precision
+    training (train.py's 'precision' field): the weights and Adam stay float32."""
+    for module in flow.modules():
+        if isinstance(module, (AffineCoupling, Split)):
+            module.net_dtype = dtype
 
 
 class ActNorm(nn.Module):
@@ -134,7 +154,7 @@ class AffineCoupling(nn.Module):
         self.net = net
 
     def _shift_scale(self, x_a, cond):
-        h = self.net(x_a, cond)
+        h = run_net(self, x_a, cond)
         shift, raw = h[:, 0::2], h[:, 1::2]
         return shift, coupling_scale(raw)
 
@@ -188,7 +208,7 @@ class Split(nn.Module):
         self.net = net
 
     def _mu_logsigma(self, x_a, cond):
-        h = self.net(x_a, cond)
+        h = run_net(self, x_a, cond)
         return h[:, 0::2], h[:, 1::2]
 
     def forward(self, x, cond=None):

@@ -29,14 +29,17 @@ class LSTMNet(nn.Module):
 
     def __init__(self, in_channels, cond_channels, out_channels, hidden, layers):
         super().__init__()
-        self.lstm = nn.LSTM(in_channels + cond_channels, hidden, num_layers=layers, batch_first=True)
+        self.lstm = nn.LSTM(in_channels + cond_channels, hidden, num_layers=layers)  # frames first: no copy inside
         self.out = nn.Linear(hidden, out_channels)
         nn.init.zeros_(self.out.weight)
         nn.init.zeros_(self.out.bias)
 
     def forward(self, x_a, cond):
-        h, _ = self.lstm(torch.cat([x_a, cond], dim=1).transpose(1, 2).contiguous())  # zero initial state
-        return self.out(h).transpose(1, 2)
+        # Joined straight into the LSTM's [frames, batch, channels] layout: one copy per coupling.
+        h, _ = self.lstm(torch.cat([x_a.permute(2, 0, 1), cond.permute(2, 0, 1)], dim=2))  # zero initial state
+        # Batch first again for the output layer: its weight gradient then adds the frames up in the order that
+        # trained the shipped models, so float32 training keeps their bits.
+        return self.out(h.transpose(0, 1)).transpose(1, 2)
 
 
 class MoGlow(MotionFlow):

@@ -6,7 +6,17 @@ import torch
 from reference.moglow_naive import inverse_naive
 
 from generation.fl import FL
-from generation.flows import ActNorm, AffineCoupling, Chain, ConvNet, FlowStep, InvertibleLinearLU, Split, SqueezeTime
+from generation.flows import (
+    ActNorm,
+    AffineCoupling,
+    Chain,
+    ConvNet,
+    FlowStep,
+    InvertibleLinearLU,
+    Split,
+    SqueezeTime,
+    set_net_precision,
+)
 from generation.moglow import LSTMNet, MoGlow
 
 C, CC, T, TAU = 6, 2, 4, 3
@@ -114,6 +124,29 @@ def test_invertible_and_logdet_matches_jacobian(name):
     # the layer is not the identity (the test would pass trivially otherwise)
     if name != "squeeze_time":
         assert not torch.allclose(fwd(x)[0].reshape(x.shape), x, atol=1e-3)
+
+
+@pytest.mark.parametrize("name", ["coupling_conv", "coupling_lstm", "split", "chain", "fl_model"])
+def test_bfloat16_networks_leave_the_flow_float32_and_invertible(name):
+    """Mixed precision (train.py's 'precision'): the networks run in bfloat16, while the outputs, the
+    log-determinants and the inverse stay float32 and exact, since a coupling's inverse sees the same network
+    output as its forward."""
+    torch.manual_seed(0)
+    fwd, inv, x = CASES[name](torch.float32)
+    with torch.no_grad():
+        y32, logdet32 = fwd(x)
+        model = next(c.cell_contents for c in fwd.__closure__ if isinstance(c.cell_contents, torch.nn.Module))
+        seen = []
+        for net in (m.net for m in model.modules() if isinstance(m, (AffineCoupling, Split))):
+            net.register_forward_hook(lambda mod, args, out: seen.append(out.dtype))
+        set_net_precision(model, torch.bfloat16)
+        y, logdet = fwd(x)
+        assert seen and set(seen) == {torch.bfloat16}
+        assert y.dtype == logdet.dtype == torch.float32
+        assert (inv(y) - x).abs().max().item() < 1e-4
+        assert 0 < (y - y32).abs().max().item() < 0.1  # the networks' rounding shows, and stays small
+        set_net_precision(model, None)
+        assert torch.equal(fwd(x)[0], y32)
 
 
 def test_actnorm_initialises_to_zero_mean_unit_variance():

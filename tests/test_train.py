@@ -10,7 +10,16 @@ import pytest
 import torch
 
 from generation.dataset import DatasetError, batch_indices, category_weights
-from generation.train import TrainError, build_model, draw_batch, learning_rate, load_config, main, train
+from generation.train import (
+    TrainError,
+    build_model,
+    draw_batch,
+    learning_rate,
+    load_config,
+    main,
+    make_optimiser,
+    train,
+)
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
@@ -57,6 +66,37 @@ def test_seeded_run_is_reproducible_and_resume_is_exact(small_dataset, tmp_path)
     assert all(torch.equal(sa[k], sb[k]) for k in sa)
     assert not all(torch.equal(sa[k], sc[k]) for k in sa)
     assert [r["step"] for r in rows(b)] == ["1", "6", "12"]
+
+
+def test_bfloat16_training_follows_float32_and_is_recorded(small_dataset, tmp_path):
+    """precision 'bfloat16' (the coupling networks under autocast) trains the same model to nearly the same
+    NLL as float32, not to the same bits, and the run's config.json says which it was."""
+    a = train("mg", "tiny", small_dataset, tmp_path / "a", steps=30, progress=False)
+    b = train("mg", "tiny", small_dataset, tmp_path / "b", steps=30, progress=False, precision="bfloat16")
+    assert json.loads((b / "config.json").read_text())["precision"] == "bfloat16"
+    assert json.loads((a / "config.json").read_text())["precision"] == "float32"
+    nll_a, nll_b = (float(rows(r)[-1]["valid_nll"]) for r in (a, b))
+    assert nll_a != nll_b and abs(nll_a - nll_b) < 0.05, (nll_a, nll_b)
+    assert float(rows(a)[-1]["valid_nll"]) < float(rows(a)[0]["valid_nll"]) - 0.2
+
+
+def test_float32_optimiser_keeps_the_bits_of_the_shipped_recipe():
+    """The shipped models were trained with torch's one-tensor-at-a-time Adam; training's optimiser must give the
+    same bits in float32 (so --retrain reproduces them), while bfloat16 runs may take the fused kernel."""
+    cfg = load_config("mg", "tiny")
+    x, c = torch.randn(4, 14, 63), torch.randn(4, 14, 3)
+    states = []
+    for make in (lambda net: make_optimiser(net, cfg), lambda net: torch.optim.Adam(net.parameters(), cfg["lr"])):
+        torch.manual_seed(0)
+        net = build_model("mg", cfg)
+        opt = make(net)
+        for _ in range(3):
+            opt.zero_grad()
+            net.nll(x, c).mean().backward()
+            opt.step()
+        states.append(net.state_dict())
+    assert all(torch.equal(states[0][k], states[1][k]) for k in states[0])
+    assert make_optimiser(net, {**cfg, "precision": "bfloat16"}).defaults["fused"]
 
 
 def test_history_noise_reaches_the_history_only():
@@ -205,6 +245,10 @@ def test_config_names_and_errors(tmp_path):
         load_config("mg", {"residual": "yes"})
     with pytest.raises(TrainError, match="unknown field 'residual'"):
         load_config("fl", {"residual": True})
+    with pytest.raises(
+        TrainError, match="config: field 'precision' must be one of \\['bfloat16', 'float32'\\], got 'half'"
+    ):
+        load_config("fl", {"precision": "half"})
 
 
 def test_cli_errors_are_one_line(tmp_path, small_dataset, capsys):

@@ -21,9 +21,9 @@ def inverse_naive(model, z, history, c):
         for k in reversed(range(len(steps))):
             actnorm, linear, coupling = steps[k].layers
             y_a = y[:, : coupling.c_a]
-            inp = torch.cat([y_a, cond], dim=1).transpose(1, 2)
+            inp = torch.cat([y_a, cond], dim=1).permute(2, 0, 1)  # [1 frame, B, channels]
             h, states[k] = coupling.net.lstm(inp, states[k])
-            out = coupling.net.out(h).transpose(1, 2)
+            out = coupling.net.out(h).permute(1, 2, 0)
             shift, scale = out[:, 0::2], coupling_scale(out[:, 1::2])
             y = torch.cat([y_a, y[:, coupling.c_a :] / scale - shift], dim=1)
             y = linear.inverse(y)[0]
