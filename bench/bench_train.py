@@ -4,7 +4,7 @@
                                 [--runs RUN_DIR ...]
 
 Times `--steps` optimiser steps of mg_cpu and fl_cpu on the real training set (after 2 warm-up steps), as
-generation.train takes them (fused Adam, the networks in `--precision`);
+generation.train takes them (its optimiser, the networks in `--precision`);
 for every run folder given with --runs (written by generation.train) it also reports the steps, wall
 time, overall steps/s and the last valid NLL from its metrics.csv.
 """

@@ -61,8 +61,9 @@ TRAIN_DEFAULTS = dict(
     category_balance=0.0,
     precision="float32",
 )
-# 'bfloat16': the coupling networks run under autocast (flows.set_net_precision); 1.3-1.6x the steps/s on a CPU with
-# AVX512-BF16 at mg_cpu's size, at the same likelihood per step (bench/RESULTS.md). Slower where the CPU lacks it.
+# 'bfloat16': the coupling networks run under autocast (flows.set_net_precision); about 1.4x the steps/s of float32 on
+# a CPU with AVX512-BF16 at mg_cpu's size, at the same likelihood per step (bench/RESULTS.md). Slower where the CPU
+# lacks bfloat16 arithmetic; not yet measured on a GPU.
 PRECISIONS = {"float32": None, "bfloat16": torch.bfloat16}
 
 
@@ -252,7 +253,7 @@ def train(
 def _config_and_data(model, config, steps, data_path, precision=None):
     cfg = load_config(model, config)
     if precision is not None:
-        cfg = _checked_fields({**cfg, "precision": precision}, model, "precision")
+        cfg = _checked_fields({**cfg, "precision": precision}, model, "--precision")
     if steps is not None:
         cfg["steps"] = int(steps)
         if cfg["restart_step"] is not None and cfg["restart_step"] >= cfg["steps"]:
@@ -491,8 +492,7 @@ def _main(argv):
         "--precision",
         choices=sorted(PRECISIONS),
         default=None,
-        help="override the config's: bfloat16 runs the coupling networks in bfloat16 (faster on CPUs with "
-        "AVX512-BF16 and on GPUs)",
+        help="override the config's: bfloat16 runs the coupling networks in bfloat16 (faster on CPUs with AVX512-BF16)",
     )
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     a = ap.parse_args(argv)
