@@ -250,6 +250,8 @@ def test_stimuli_bad_input_one_line_errors(quick_stimuli, tmp_path, capsys):
     assert code == 2 and "built-in" in err
     code, err = _error(base + ["--data", str(tmp_path / "nodata"), "--dataset", str(tmp_path / "none.npz")], capsys)
     assert code == 2 and "nodata" in err
+    code, err = _error(base + ["--precision", "half"], capsys)  # passed to training, which names it
+    assert code == 2 and err.startswith("error: --precision") and "bfloat16" in err
     # A system folder that lacks items, then one whose BVH is broken.
     sysdir = tmp_path / "sys"
     sysdir.mkdir()
