@@ -8,7 +8,10 @@ of a frame done for all K steps in batched matmuls, no autograd) in both of its 
 with a plain baseline measured in the same run (tests/reference/moglow_naive.py: each coupling's nn.LSTM called per
 frame with its carried state, also without autograd), for 1 stream and a batch of 30 streams, and with a
 floor measured beside them (the fastest of four matmul forms reading the same number of weights).
-Targets (issue 3): <= 12 ms (1) and <= 25 ms (30).
+Beside them: the chosen layout with precision="bfloat16" (the big products in bfloat16, accumulated in float32)
+and a bfloat16 floor (the same forms on bfloat16 weights).
+Targets: issue 3, <= 12 ms (1) and <= 25 ms (30); issue 15, 30 streams <= 45 ms and <= 1.15x the floor, 1 stream
+<= 1.3x the floor.
 """
 
 import argparse
@@ -64,7 +67,7 @@ def time_interleaved(step_fns, frames, warmup=3):
     return {name: (1000 * statistics.median(w), 1000 * statistics.median(c)) for name, (w, c) in times.items()}
 
 
-def floor(n_params, batch, frames):
+def floor(n_params, batch, frames, dtype=torch.float32):
     """The memory/compute floor measured here and now: reading as many weights (and doing as many
     multiply-adds per stream) as one MG frame in the fastest of four forms, so contention from other jobs
     hits it the same way: one wide matmul X @ W, and batched matmuls over 16 blocks [2048, n / 32768] in
@@ -72,16 +75,15 @@ def floor(n_params, batch, frames):
     (its "row" layout), and X @ W^T. Returns (wall ms, CPU ms, form) of the fastest."""
     k, rows = 16, 2048
     cols = n_params // (k * rows)
-    w = torch.randn(k, rows, cols)
+    w = torch.randn(k, rows, cols, dtype=dtype)
+    x_row, x_col = torch.randn(k, batch, cols, dtype=dtype), torch.randn(k, cols, batch, dtype=dtype)
+    o_row, o_col = torch.empty(k, batch, rows, dtype=dtype), torch.empty(k, rows, batch, dtype=dtype)
+    x_wide, w_wide, w_in_out = x_row.permute(1, 0, 2).reshape(batch, -1), w.view(k * cols, rows), w.view(k, cols, rows)
     forms = {
-        "matmul": (lambda x=torch.randn(batch, k * cols), w2=w.view(k * cols, rows): x @ w2),
-        "bmm W@X": (lambda x=torch.randn(k, cols, batch), o=torch.empty(k, rows, batch): torch.bmm(w, x, out=o)),
-        "bmm X@W^T": (lambda x=torch.randn(k, batch, cols), o=torch.empty(k, batch, rows): torch.bmm(x, w.mT, out=o)),
-        "bmm X@W": (
-            lambda x=torch.randn(k, batch, cols), o=torch.empty(k, batch, rows), wt=w.view(k, cols, rows): torch.bmm(
-                x, wt, out=o
-            )
-        ),
+        "matmul": lambda: x_wide @ w_wide,
+        "bmm W@X": lambda: torch.bmm(w, x_col, out=o_col),
+        "bmm X@W^T": lambda: torch.bmm(x_row, w.mT, out=o_row),
+        "bmm X@W": lambda: torch.bmm(x_row, w_in_out, out=o_row),
     }
     with torch.inference_mode():
         timed = {name: time_frames(f, frames) for name, f in forms.items()}
@@ -89,18 +91,23 @@ def floor(n_params, batch, frames):
     return (*timed[name], name)
 
 
+BF16 = "bfloat16"  # the picked layout with precision="bfloat16"
+
+
 def bench(model, batch, frames):
     tau = model.tau
     hist, hist_c = torch.randn(batch, tau, 63), torch.randn(batch, tau, 3)
     ctrl = torch.randn(batch, 3)
     gen = torch.Generator().manual_seed(0)
+    picked = default_layout(next(model.parameters()).device, batch)
     with torch.inference_mode():
         streams = {name: MGStream(model, hist, hist_c, 1.0, gen, layout=name) for name in LAYOUTS}
+        streams[BF16] = MGStream(model, hist, hist_c, 1.0, gen, layout=picked, precision="bfloat16")
         fast = time_interleaved({name: (lambda st=st: st.step(ctrl)) for name, st in streams.items()}, frames)
         c_all = torch.randn(batch, tau + 1, 3)
         z = torch.randn(batch, 1, 63)
         naive = time_frames(lambda: inverse_naive(model, z, hist, c_all), max(5, frames // 3))
-    return fast, naive, default_layout(next(model.parameters()).device, batch)
+    return fast, naive, picked
 
 
 def main():
@@ -122,14 +129,17 @@ def main():
     print(
         "| streams | row ms/frame (wall, CPU) | col ms/frame (wall, CPU) | picked | plain nn.LSTM ms/frame (wall, CPU) "
         "| picked vs plain (wall, CPU) | floor ms/frame (wall, CPU; fastest matmul form reading the same weights) "
-        "| picked / floor (wall, CPU) |"
+        "| picked / floor (wall, CPU) | bfloat16 ms/frame (wall, CPU) | bfloat16 floor ms/frame (wall, CPU) "
+        "| bfloat16 / its floor (wall) | bfloat16 / float32 floor (wall) |"
     )
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for batch in (1, 30):
         frames = a.frames if batch == 1 else max(20, a.frames // 2)
         fast, (nm, nc), picked = bench(model, batch, frames)
         fm, fc = fast[picked]
         lm, lc, form = floor(n_all, batch, frames)
+        bm, bc = fast[BF16]
+        blm, blc, bform = floor(n_all, batch, frames, torch.bfloat16)
         rows[batch] = dict(
             layouts={name: dict(ms=w, cpu_ms=c) for name, (w, c) in fast.items()},
             picked=picked,
@@ -138,11 +148,15 @@ def main():
             floor_ms=lm,
             floor_cpu_ms=lc,
             floor_form=form,
+            bf16_floor_ms=blm,
+            bf16_floor_cpu_ms=blc,
+            bf16_floor_form=bform,
         )
         print(
             f"| {batch} | {fast['row'][0]:.1f}, {fast['row'][1]:.1f} | {fast['col'][0]:.1f}, {fast['col'][1]:.1f} "
             f"| {picked} | {nm:.1f}, {nc:.1f} | {nm / fm:.2f}x, {nc / fc:.2f}x "
-            f"| {lm:.1f}, {lc:.1f} ({form}) | {fm / lm:.2f}, {fc / lc:.2f} |",
+            f"| {lm:.1f}, {lc:.1f} ({form}) | {fm / lm:.2f}, {fc / lc:.2f} | {bm:.1f}, {bc:.1f} "
+            f"| {blm:.1f}, {blc:.1f} ({bform}) | {bm / blm:.2f} | {bm / lm:.2f} |",
             flush=True,
         )
     if a.json:

@@ -29,6 +29,7 @@ from generation import skeleton  # noqa: E402
 from generation.dataset import read_arrays, require  # noqa: E402
 from generation.features import to_world  # noqa: E402
 from generation.metrics import control_following, foot_skating, jerk  # noqa: E402
+from generation.mg_stream import PRECISIONS  # noqa: E402
 from generation.motion_encoder import MotionEncoder  # noqa: E402
 from generation.pretrained import MOTION_ENCODER  # noqa: E402
 from generation.sample import load_model, nonfinite_windows, sample_split  # noqa: E402
@@ -67,6 +68,9 @@ def main():
     ap.add_argument("--temperature", type=float, default=1.0, help="(make_stimuli's default is 1.0)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument(
+        "--precision", default="float32", choices=sorted(PRECISIONS), help="MG's sampler (mg_stream.MGStream)"
+    )
     ap.add_argument("--figure", default=None, help="write the feet figure to this PNG")
     ap.add_argument("--encoder", default=str(MOTION_ENCODER), help="motion encoder for the FMD")
     a = ap.parse_args()
@@ -78,7 +82,9 @@ def main():
     finite = {NAT: np.arange(len(x_nat))}  # per system, the windows without NaN or inf
     for spec in a.model:
         name, _, ckpt = spec.partition("=")
-        x, _ = sample_split(load_model(ckpt), a.data, "test", temperature=a.temperature, seed=a.seed)
+        x, _ = sample_split(
+            load_model(ckpt), a.data, "test", temperature=a.temperature, seed=a.seed, precision=a.precision
+        )
         systems[name] = x
         finite[name] = np.setdiff1d(np.arange(len(x)), nonfinite_windows(x))
         if len(finite[name]) < len(x):

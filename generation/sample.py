@@ -24,7 +24,7 @@ from core.clip import save_clip
 from . import skeleton
 from .dataset import read_arrays, require
 from .fl import FL
-from .mg_stream import MGStream
+from .mg_stream import PRECISIONS, MGStream
 from .moglow import MoGlow
 from .train import MODELS, pick_device
 
@@ -58,16 +58,17 @@ def _generator(seed):
     return torch.Generator().manual_seed(int(seed))  # CPU generator: the same samples on any device
 
 
-def _mg_stream(model, history, history_control, temperature, seed):
+def _mg_stream(model, history, history_control, temperature, seed, precision="float32"):
     """MGStream seeded with the last tau frames of un-standardised history."""
     hist = model.standardize_x(_tensor(history, model)[:, -model.tau :])
     hist_c = model.standardize_c(_tensor(history_control, model)[:, -model.tau :])
-    return MGStream(model, hist, hist_c, temperature, _generator(seed))
+    return MGStream(model, hist, hist_c, temperature, _generator(seed), precision=precision)
 
 
-def mg_stream(model, history, history_control, temperature=1.0, seed=0):
-    """Real-time form of MG: returns f(control_t [B, 3]) -> pose [B, 63] (numpy, un-standardised)."""
-    stream = _mg_stream(model, history, history_control, temperature, seed)
+def mg_stream(model, history, history_control, temperature=1.0, seed=0, precision="float32"):
+    """Real-time form of MG: returns f(control_t [B, 3]) -> pose [B, 63] (numpy, un-standardised).
+    `precision`: "bfloat16" for many streams on a CPU with AVX512-BF16 (mg_stream.MGStream)."""
+    stream = _mg_stream(model, history, history_control, temperature, seed, precision)
 
     @torch.inference_mode()
     def step(control):
@@ -79,15 +80,16 @@ def mg_stream(model, history, history_control, temperature=1.0, seed=0):
 
 
 @torch.inference_mode()
-def sample_mg(model, control, history, history_control, temperature=1.0, seed=0):
+def sample_mg(model, control, history, history_control, temperature=1.0, seed=0, precision="float32"):
     """MG batch sampling: control [B, T, 3] of the frames to generate, the real frames just before them
-    (history [B, >=tau, 63], history_control [B, >=tau, 3]) -> poses [B, T, 63]. LSTM state starts at 0."""
+    (history [B, >=tau, 63], history_control [B, >=tau, 3]) -> poses [B, T, 63]. LSTM state starts at 0.
+    `precision`: the streaming sampler's (mg_stream.MGStream)."""
     if not isinstance(model, MoGlow):
         raise SampleError("sample_mg needs an MG model")
     control = _tensor(control, model)
     if control.ndim != 3 or history.shape[1] < model.tau or np.shape(history_control)[1] < model.tau:
         raise SampleError(f"sample_mg: need control [B,T,3] and >= tau={model.tau} history frames")
-    stream = _mg_stream(model, history, history_control, temperature, seed)
+    stream = _mg_stream(model, history, history_control, temperature, seed, precision)
     c = model.standardize_c(control)
     out = torch.stack([stream.step(c[:, t]) for t in range(c.shape[1])], dim=1)
     return model.unstandardize_x(out).cpu().numpy().astype(np.float32)
@@ -103,13 +105,14 @@ def sample_fl(model, control, temperature=1.0, seed=0):
     return model.unstandardize_x(x).cpu().numpy().astype(np.float32)
 
 
-def sample_windows(model, control, history=None, history_control=None, temperature=1.0, seed=0):
+def sample_windows(model, control, history=None, history_control=None, temperature=1.0, seed=0, precision="float32"):
     """The one entry point for sampling windows of either kind: MG from the real frames before each window
-    (sample_mg), FL from the control alone (sample_fl, which ignores the history)."""
+    (sample_mg), FL from the control alone (sample_fl, which ignores the history). `precision` is MG's sampler's
+    (mg_stream.MGStream); FL samples in its weights' precision."""
     if model.kind == "mg":
         if history is None or history_control is None:
             raise SampleError("sample_windows: MG needs the frames before each window (history, history_control)")
-        return sample_mg(model, control, history, history_control, temperature, seed)
+        return sample_mg(model, control, history, history_control, temperature, seed, precision)
     return sample_fl(model, control, temperature, seed)
 
 
@@ -132,7 +135,7 @@ def require_finite(x, checkpoint):
     return x
 
 
-def sample_split(model, data_path, split="test", n=None, temperature=1.0, seed=0):
+def sample_split(model, data_path, split="test", n=None, temperature=1.0, seed=0, precision="float32"):
     """Sample for the first n windows of a split of a prepared dataset -> (x [n,T,63], c [n,T,3])."""
     d = read_arrays(data_path, [f"{split}_c", f"{split}_hist", f"{split}_hist_c"])
     require(d, [f"{split}_c"], data_path, f"no split '{split}'")
@@ -140,7 +143,7 @@ def sample_split(model, data_path, split="test", n=None, temperature=1.0, seed=0
         require(d, [f"{split}_hist", f"{split}_hist_c"], data_path, "MG needs the frames before each window")
     c = d[f"{split}_c"][:n]
     hist, hist_c = (d[k][:n] if k in d else None for k in (f"{split}_hist", f"{split}_hist_c"))
-    return sample_windows(model, c, hist, hist_c, temperature, seed), c
+    return sample_windows(model, c, hist, hist_c, temperature, seed, precision), c
 
 
 def _main(argv):
@@ -153,9 +156,16 @@ def _main(argv):
     ap.add_argument("--temperature", type=cli.number(float, 0, 10), default=1.0)
     ap.add_argument("--seed", type=cli.number(int, 0), default=0)
     ap.add_argument("--device", default=None)
+    ap.add_argument(
+        "--precision",
+        choices=sorted(PRECISIONS),
+        default="float32",
+        help="MG's sampler: bfloat16 reads its big products in bfloat16, about 1.85x faster for many streams on a CPU "
+        "with AVX512-BF16 (default float32)",
+    )
     a = ap.parse_args(argv)
     model = load_model(a.checkpoint, a.device)
-    x, c = sample_split(model, a.data, a.split, a.n, a.temperature, a.seed)
+    x, c = sample_split(model, a.data, a.split, a.n, a.temperature, a.seed, a.precision)
     require_finite(x, a.checkpoint)
     from .features import to_world
 

@@ -84,6 +84,33 @@ def test_fast_sampler_matches_plain_lstm_and_inverts_forward(tiny_runs, test_spl
     assert torch.allclose(z_back, z, atol=1e-3), (z_back - z).abs().max()
 
 
+@pytest.mark.parametrize("layout", ["row", "col"])
+def test_bfloat16_sampler_follows_float32_and_repeats_its_bits(tiny_runs, test_split, layout):
+    """precision="bfloat16" reads the big products in bfloat16 and keeps the rest float32: near the float32
+    stream (not on its bits), and the same bits run after run."""
+    from generation.mg_stream import MGStream
+
+    model = load_model(last_ckpt(tiny_runs["mg"]))
+    s, dev = test_split, model.x_mean.device
+    hist = model.standardize_x(torch.from_numpy(s["hist"]).to(dev))
+    hist_c = model.standardize_c(torch.from_numpy(s["hist_c"]).to(dev))
+    c = model.standardize_c(torch.from_numpy(s["c"][:, :15]).to(dev))
+    z = torch.randn(4, 15, 63, generator=torch.Generator().manual_seed(0)).to(dev)
+
+    def frames(precision):
+        stream = MGStream(model, hist, hist_c, layout=layout, precision=precision)
+        return stream, torch.stack([stream.step(c[:, t], z=z[:, t]) for t in range(15)], dim=1)
+
+    (full, x32), (low, x16), (_, again) = frames("float32"), frames("bfloat16"), frames("bfloat16")
+    assert full.w["Whh"][0].dtype == torch.float32
+    assert low.w["Whh"][0].dtype == low.w["Wc"].dtype == torch.bfloat16 and low.h[0].dtype == torch.float32
+    assert x16.dtype == torch.float32 and torch.equal(x16, again)
+    gap = (x16 - x32).abs().max()
+    assert 1e-6 < gap < 0.05, gap  # standardised units: bfloat16's rounding, not another model
+    with pytest.raises(ValueError, match="precision"):
+        MGStream(model, hist, hist_c, precision="float16")
+
+
 def test_temperature_zero_is_deterministic(tiny_runs, test_split):
     s = test_split
     model = load_model(last_ckpt(tiny_runs["fl"]))
@@ -173,8 +200,8 @@ def test_layout_is_a_fixed_choice_never_a_timing(tiny_runs, monkeypatch):
         MGStream(model, hist, hist_c, layout="diagonal")
 
 
-@pytest.mark.parametrize("kind", ["mg", "fl"])
-def test_two_sampling_processes_give_identical_bits(tiny_runs, small_dataset, tmp_path, kind):
+@pytest.mark.parametrize("kind, precision", [("mg", "float32"), ("mg", "bfloat16"), ("fl", "float32")])
+def test_two_sampling_processes_give_identical_bits(tiny_runs, small_dataset, tmp_path, kind, precision):
     """The same checkpoint, seed and inputs in two fresh processes: the same clip files, byte for byte (on a GPU
     too: MG's products go through cuBLAS, FL's convolutions through cuDNN)."""
     outs = []
@@ -192,6 +219,8 @@ def test_two_sampling_processes_give_identical_bits(tiny_runs, small_dataset, tm
                 "3",
                 "--seed",
                 "4",
+                "--precision",
+                precision,
                 "--out",
                 str(tmp_path / run),
             ],
