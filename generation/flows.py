@@ -308,3 +308,6 @@ class MotionFlow(nn.Module):
 
     def unstandardize_x(self, x):
         return x * self.x_std + self.x_mean
+
+    def unstandardize_c(self, c):
+        return c * self.c_std + self.c_mean

@@ -156,7 +156,7 @@ class MGStream:
             y = torch.addmm(bn, *mm(winv, y_ab))
         y = y if fd else y.T.contiguous()
         if self.model.config["residual"]:
-            y = y + self.hist[:, -1]
+            y = y + self.model.step_base(self.hist[:, -1], ctrl[:, -1])
         self.hist = torch.cat([self.hist[:, 1:], y[:, None]], dim=1)
         self.hist_c = ctrl[:, 1:]
         return y

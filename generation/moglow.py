@@ -13,6 +13,10 @@ Sampling (mg_stream.MGStream) runs the same flow inverted, one frame at a time, 
 (standardised) instead of the pose itself. The shift depends on the history alone, so its Jacobian is 1 and the
 NLL is still that of the poses; but the coupling networks no longer have to reproduce the previous pose to within
 millimetres to keep the body still, and what they missed was MG's frame-to-frame jitter (bench/RESULTS.md).
+
+`carry_feet` (with `residual`; not in the paper): the feet's step is taken from where the root's step of frame t
+(its control) carries the previous frame's feet, so that a foot planted on the floor has a step of 0. The rest of
+the body steps from where it was. The shift still depends on the history and the control alone: Jacobian 1.
 """
 
 import torch
@@ -20,8 +24,10 @@ from torch import nn
 
 from .flows import Chain, FlowStep, MotionFlow, gaussian_logp
 from .mg_stream import MGStream
+from .skeleton import FEET
 
-DEFAULTS = dict(K=16, hidden=512, lstm_layers=2, tau=10, dropout=0.95, residual=False)
+DEFAULTS = dict(K=16, hidden=512, lstm_layers=2, tau=10, dropout=0.95, residual=False, carry_feet=False)
+_FEET = torch.tensor(FEET)
 
 
 class LSTMNet(nn.Module):
@@ -84,15 +90,28 @@ class MoGlow(MotionFlow):
             raise ValueError(f"MG needs windows longer than tau={self.tau} frames, got {x.shape[1]}")
         src = x if history is None else history
         cond = self.make_cond(src, c, keep).transpose(1, 2)
-        z, logdet = self.flow((x[:, self.tau :] - self.base(src)).transpose(1, 2), cond)
+        z, logdet = self.flow((x[:, self.tau :] - self.base(src, c)).transpose(1, 2), cond)
         return z.transpose(1, 2), logdet
 
-    def base(self, history):
-        """What the flow's output is added to, for frames tau..T-1 of a window: with `residual`, the previous
-        frame of `history` [B, T, 63], else 0."""
+    def base(self, history, c):
+        """What the flow's output is added to, for frames tau..T-1 of a window (history [B, T, 63], c [B, T, 3])."""
+        return self.step_base(history[:, self.tau - 1 : -1], c[:, self.tau :])
+
+    def step_base(self, previous, control):
+        """What frame t's flow output is added to: 0, or with `residual` the previous pose [..., 63], its feet
+        carried by the root's step `control` [..., 3] with `carry_feet` (all standardised)."""
         if not self.config["residual"]:
-            return history.new_zeros(())
-        return history[:, self.tau - 1 : -1]
+            return previous.new_zeros(())
+        if not self.config["carry_feet"]:
+            return previous
+        feet = self.unstandardize_x(previous).unflatten(-1, (-1, 3))[..., _FEET, :]  # [..., 4, 3], metres
+        forward, sideways, turn = (self.unstandardize_c(control)[..., None, i] for i in range(3))
+        # Into the root frame of t: minus the root's step (x = left, z = forward), then minus its turn about +Y.
+        px, pz = feet[..., 0] - sideways, feet[..., 2] - forward
+        cos, sin = torch.cos(-turn), torch.sin(-turn)
+        carried = torch.stack([cos * px + sin * pz, feet[..., 1], -sin * px + cos * pz], dim=-1)
+        out = self.unstandardize_x(previous).unflatten(-1, (-1, 3)).index_copy(-2, _FEET.to(previous.device), carried)
+        return self.standardize_x(out.flatten(-2))
 
     def nll(self, x, c, keep=None, history=None):
         """Negative log-likelihood of frames tau..T-1 in nats per dimension (standardised data), per element."""
@@ -106,7 +125,7 @@ class MoGlow(MotionFlow):
         src = x if history is None else history
         cond = self.make_cond(src, c, keep).transpose(1, 2)
         z = x.new_zeros(x.shape[0], x.shape[1] - self.tau, self.pose_dim) if z is None else z
-        return self.flow.inverse(z.transpose(1, 2), cond)[0].transpose(1, 2) + self.base(src)
+        return self.flow.inverse(z.transpose(1, 2), cond)[0].transpose(1, 2) + self.base(src, c)
 
     @torch.no_grad()
     def inverse(self, z, history, c, layout=None):

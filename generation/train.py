@@ -159,6 +159,8 @@ def _checked_values(cfg, where):
         for key in ("restart_lr", "restart_lr_min"):
             if cfg[key] is None:
                 raise TrainError(f"{where}: field 'restart_step' needs '{key}' too")
+    if cfg.get("carry_feet") and not cfg.get("residual"):
+        raise TrainError(f"{where}: field 'carry_feet' needs 'residual' true")
     for key in ("stance_weight", "stance_start", "stance_temperature", "category_balance"):
         if cfg[key] < 0:
             raise TrainError(f"{where}: field '{key}' must be at least 0, got {cfg[key]}")
@@ -171,8 +173,8 @@ def _checked_fields(cfg, model, where):
     for key, value in cfg.items():
         if key not in allowed:
             raise TrainError(f"{where}: unknown field '{key}'")
-        if key == "residual" and not isinstance(value, bool):
-            raise TrainError(f"{where}: field 'residual' must be true or false, got {value!r}")
+        if key in ("residual", "carry_feet") and not isinstance(value, bool):
+            raise TrainError(f"{where}: field '{key}' must be true or false, got {value!r}")
         if key == "precision":
             if value not in PRECISIONS:
                 raise TrainError(f"{where}: field 'precision' must be one of {sorted(PRECISIONS)}, got {value!r}")

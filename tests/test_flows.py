@@ -1,10 +1,13 @@
 """Flow layers and both models: invertibility and log-determinants (one generic test), ActNorm init,
 MG causality. All at small sizes."""
 
+import numpy as np
 import pytest
 import torch
+from conftest import BANDAI
 from reference.moglow_naive import inverse_naive
 
+from generation.features import load_take, root_trajectory, rotate_y, to_features
 from generation.fl import FL
 from generation.flows import (
     ActNorm,
@@ -18,6 +21,7 @@ from generation.flows import (
     set_net_precision,
 )
 from generation.moglow import LSTMNet, MoGlow
+from generation.skeleton import FEET
 
 C, CC, T, TAU = 6, 2, 4, 3
 
@@ -68,9 +72,17 @@ def fl_case(dtype):
     return fwd, inv, torch.randn(3, T, 63, dtype=dtype)
 
 
-def mg_case(dtype, residual=False):
+def mg_case(dtype, residual=False, carry_feet=False):
     """MG as a map from the frames after the history to their latents; its inverse is the streaming sampler."""
-    model = MoGlow(dict(K=2, hidden=8, tau=TAU, residual=residual)).to(dtype)
+    model = MoGlow(dict(K=2, hidden=8, tau=TAU, residual=residual, carry_feet=carry_feet)).to(dtype)
+    if carry_feet:  # data statistics away from 0 and 1, so that the feet's carry goes through them
+        g = torch.Generator().manual_seed(1)
+        model.set_stats(
+            torch.randn(63, generator=g),
+            0.5 + torch.rand(63, generator=g),
+            torch.randn(3, generator=g),
+            0.5 + torch.rand(3, generator=g),
+        )
     n = 3
     hist = torch.randn(3, TAU, 63, dtype=dtype)
     c = torch.randn(3, TAU + n, 3, dtype=dtype)
@@ -99,6 +111,7 @@ CASES = {
     "fl_model": fl_case,
     "mg_model": mg_case,
     "mg_model_residual": lambda dtype: mg_case(dtype, residual=True),
+    "mg_model_carry_feet": lambda dtype: mg_case(dtype, residual=True, carry_feet=True),
 }
 
 
@@ -223,6 +236,28 @@ def test_mg_residual_samples_steps_from_the_previous_pose(layout):
     first = plain.eval().inverse(z[:, :1], hist, c[:, : TAU + 1], layout=layout)
     assert torch.allclose(fast[:, 0] - hist[:, -1], first[:, 0], atol=1e-5)
     assert not torch.allclose(fast[:, 0], first[:, 0], atol=1e-2)
+
+
+def test_mg_carry_feet_sees_the_previous_feet_from_the_new_root():
+    """With `carry_feet` the feet's base is where the previous frame's feet are, seen from frame t's root (real
+    mocap, through features.to_features): a foot planted on the floor has a step of 0. The rest of the body's
+    base is the previous pose."""
+    joints = load_take(next(BANDAI.glob("dataset-2/data/*walk-turn-left*.bvh.gz")))[:40]
+    x, c = (torch.from_numpy(a) for a in to_features(joints))
+    root, yaw = root_trajectory(joints)
+    seen = np.array(joints[:-1], dtype=np.float64)  # frame t-1's joints in frame t's root frame
+    seen[..., 0] -= root[1:, None, 0]
+    seen[..., 2] -= root[1:, None, 1]
+    seen = rotate_y(seen, -yaw[1:, None])
+    model = MoGlow(dict(K=1, hidden=8, tau=TAU, residual=True, carry_feet=True))
+    g = torch.Generator().manual_seed(2)
+    model.set_stats(x.mean(0), x.std(0).clamp_min(0.01), c.mean(0) + 0.1 * torch.randn(3, generator=g), c.std(0))
+    base = model.unstandardize_x(model.step_base(model.standardize_x(x[:-1]), model.standardize_c(c[1:])))
+    base = base.unflatten(-1, (21, 3)).double().numpy()
+    np.testing.assert_allclose(base[:, FEET], seen[:, FEET], atol=2e-5)
+    others = [j for j in range(21) if j not in FEET]
+    np.testing.assert_allclose(base[:, others], x[:-1].unflatten(-1, (21, 3))[:, others].double(), atol=2e-5)
+    assert np.abs(base[:, FEET] - x[:-1].unflatten(-1, (21, 3))[:, FEET].double().numpy()).max() > 0.02  # it moved
 
 
 def test_mg_history_dropout_only_in_training():

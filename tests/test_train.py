@@ -245,6 +245,10 @@ def test_config_names_and_errors(tmp_path):
         load_config("mg", {"residual": "yes"})
     with pytest.raises(TrainError, match="unknown field 'residual'"):
         load_config("fl", {"residual": True})
+    with pytest.raises(TrainError, match="config: field 'carry_feet' must be true or false, got 1"):
+        load_config("mg", {"residual": True, "carry_feet": 1})
+    with pytest.raises(TrainError, match="config: field 'carry_feet' needs 'residual' true"):
+        load_config("mg", {"carry_feet": True})
     with pytest.raises(
         TrainError, match="config: field 'precision' must be one of \\['bfloat16', 'float32'\\], got 'half'"
     ):

@@ -28,7 +28,7 @@ def inverse_naive(model, z, history, c):
             y = torch.cat([y_a, y[:, coupling.c_a :] / scale - shift], dim=1)
             y = linear.inverse(y)[0]
             y = actnorm.inverse(y)[0]
-        x_t = y[:, :, 0] + (hist[:, -1] if model.config["residual"] else 0)
+        x_t = y[:, :, 0] + (model.step_base(hist[:, -1], c[:, t + tau]) if model.config["residual"] else 0)
         outs.append(x_t)
         hist = torch.cat([hist[:, 1:], x_t[:, None]], dim=1)
     return torch.stack(outs, dim=1)
