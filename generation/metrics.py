@@ -53,7 +53,8 @@ def foot_steps(joints, feet=tuple(skeleton.FEET)):
 
 
 def foot_skating(joints, fps, feet=tuple(skeleton.FEET), contact_height=CONTACT_HEIGHT, fallback=CONTACT_FALLBACK):
-    """Mean horizontal speed (m/s) of the feet while in contact (NaN only for clips under 2 frames).
+    """Mean horizontal speed (m/s) of the feet while in contact (NaN for clips under 2 frames, or whose feet are
+    not finite, as a diverged model's).
 
     `feet` lists (ankle, toe) joint pairs flattened, as skeleton.FEET. A foot is in contact between two
     frames when its ankle and its toe are, in both frames, within `contact_height` of the lowest height
@@ -73,7 +74,7 @@ def foot_skating(joints, fps, feet=tuple(skeleton.FEET), contact_height=CONTACT_
         )
         * fps
     )  # [n_feet, T-1]
-    return float(speed[contact].mean())
+    return float(speed[contact].mean()) if contact.any() else float("nan")  # none: non-finite feet
 
 
 def bone_length_std(joints, parents=skeleton.PARENTS):
