@@ -18,6 +18,10 @@ import scipy.linalg
 import torch
 from torch import nn
 
+# The arithmetic of the networks inside a flow (training's coupling networks, MGStream's big products): the name of
+# a config field or option -> the lower dtype, None for plain float32.
+PRECISIONS = {"float32": None, "bfloat16": torch.bfloat16}
+
 
 def _sum_over_ranks(total, count):
     """total / count, both added over the ranks of torch.distributed when it is running."""

@@ -9,7 +9,7 @@ import os
 
 import torch
 
-from .flows import SCALE_OFFSET
+from .flows import PRECISIONS, SCALE_OFFSET
 
 
 class MGStream:
@@ -163,7 +163,6 @@ class MGStream:
 
 
 LAYOUTS = ("row", "col")
-PRECISIONS = {"float32": None, "bfloat16": torch.bfloat16}
 LOW_PRECISION = ("Whh", "Wih", "Wc")  # the weights that `precision` stores in bfloat16 (98% of the bytes)
 BATCHED = 8  # streams from which a batch's products favour "col" on Intel CPUs (measured at 1 and 30)
 

@@ -104,14 +104,14 @@ class MoGlow(MotionFlow):
             return previous.new_zeros(())
         if not self.config["carry_feet"]:
             return previous
-        feet = self.unstandardize_x(previous).unflatten(-1, (-1, 3))[..., _FEET, :]  # [..., 4, 3], metres
+        pose = self.unstandardize_x(previous).unflatten(-1, (-1, 3))  # [..., 21, 3], metres
+        feet = pose[..., _FEET, :]
         forward, sideways, turn = (self.unstandardize_c(control)[..., None, i] for i in range(3))
         # Into the root frame of t: minus the root's step (x = left, z = forward), then minus its turn about +Y.
         px, pz = feet[..., 0] - sideways, feet[..., 2] - forward
         cos, sin = torch.cos(-turn), torch.sin(-turn)
         carried = torch.stack([cos * px + sin * pz, feet[..., 1], -sin * px + cos * pz], dim=-1)
-        out = self.unstandardize_x(previous).unflatten(-1, (-1, 3)).index_copy(-2, _FEET.to(previous.device), carried)
-        return self.standardize_x(out.flatten(-2))
+        return self.standardize_x(pose.index_copy(-2, _FEET.to(previous.device), carried).flatten(-2))
 
     def nll(self, x, c, keep=None, history=None):
         """Negative log-likelihood of frames tau..T-1 in nats per dimension (standardised data), per element."""

@@ -64,7 +64,7 @@ TRAIN_DEFAULTS = dict(
 # 'bfloat16': the coupling networks run under autocast (flows.set_net_precision); about 1.4x the steps/s of float32 on
 # a CPU with AVX512-BF16 at mg_cpu's size, at the same likelihood per step (bench/RESULTS.md). Slower where the CPU
 # lacks bfloat16 arithmetic; not yet measured on a GPU.
-PRECISIONS = {"float32": None, "bfloat16": torch.bfloat16}
+PRECISIONS = flows.PRECISIONS
 
 
 # train_stance: the stance-foot loss (m/s, stance.py) averaged like train_nll, 0 while it is off.
