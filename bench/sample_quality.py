@@ -3,7 +3,8 @@
     python bench/sample_quality.py --data runs/dataset.npz --model MG=runs/mg_cpu/checkpoints/step_0003000.pt \
         [--model FL=runs/fl_cpu/checkpoints/step_0003000.pt] [--temperature 1.0] [--figure out.png]
 
-Every window of the test split is sampled once per model (MG seeded with the tau real frames before the window).
+Every window of the test split (or --split valid) is sampled once per model (MG seeded with the tau real frames
+before the window).
 Per category it prints the median of three figures per clip:
 - late stepping (m): how far the feet swing about each other over the last 2 s: the standard deviation of
   the horizontal vector from the right foot to the left (root frame; forward and sideways, so side-steps
@@ -71,19 +72,21 @@ def main():
     ap.add_argument(
         "--precision", default="float32", choices=sorted(PRECISIONS), help="MG's sampler (mg_stream.MGStream)"
     )
+    ap.add_argument("--split", default="test", help="held-out split to score: test (default) or valid")
     ap.add_argument("--figure", default=None, help="write the feet figure to this PNG")
     ap.add_argument("--encoder", default=str(MOTION_ENCODER), help="motion encoder for the FMD")
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
-    d = read_arrays(a.data, ["test_x", "test_c", "test_labels", "fps"])
-    require(d, ["test_x", "test_c", "test_labels", "fps"], a.data)
-    x_nat, c, labels, fps = d["test_x"], d["test_c"], d["test_labels"], float(d["fps"])
+    keys = [f"{a.split}_{k}" for k in ("x", "c", "labels")]
+    d = read_arrays(a.data, [*keys, "fps"])
+    require(d, [*keys, "fps"], a.data)
+    (x_nat, c, labels), fps = (d[k] for k in keys), float(d["fps"])
     systems = {NAT: x_nat}
     finite = {NAT: np.arange(len(x_nat))}  # per system, the windows without NaN or inf
     for spec in a.model:
         name, _, ckpt = spec.partition("=")
         x, _ = sample_split(
-            load_model(ckpt), a.data, "test", temperature=a.temperature, seed=a.seed, precision=a.precision
+            load_model(ckpt), a.data, a.split, temperature=a.temperature, seed=a.seed, precision=a.precision
         )
         systems[name] = x
         finite[name] = np.setdiff1d(np.arange(len(x)), nonfinite_windows(x))
@@ -104,7 +107,7 @@ def main():
         + [f"{n} skating" for n in names]
         + [f"{n} following" for n in names]
     )
-    print(f"test split, temperature {a.temperature}, medians per category")
+    print(f"{a.split} split, temperature {a.temperature}, medians per category")
     print("| " + " | ".join(head) + " |")
     print("|" + "---|" * len(head))
     for cat in cats + ["all"]:
