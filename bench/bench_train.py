@@ -21,8 +21,8 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from generation.dataset import batch_indices, load_dataset  # noqa: E402
-from generation.flows import set_net_precision  # noqa: E402
-from generation.train import PRECISIONS, build_model, load_config, make_optimiser  # noqa: E402
+from generation.flows import PRECISIONS, set_net_precision  # noqa: E402
+from generation.train import build_model, load_config, make_optimiser  # noqa: E402
 
 
 def time_steps(kind, ds, steps, precision="float32"):

@@ -29,8 +29,8 @@ from core.study import NATURAL as NAT  # noqa: E402
 from generation import skeleton  # noqa: E402
 from generation.dataset import read_arrays, require  # noqa: E402
 from generation.features import to_world  # noqa: E402
+from generation.flows import PRECISIONS  # noqa: E402
 from generation.metrics import control_following, foot_skating, jerk  # noqa: E402
-from generation.mg_stream import PRECISIONS  # noqa: E402
 from generation.motion_encoder import MotionEncoder  # noqa: E402
 from generation.pretrained import MOTION_ENCODER  # noqa: E402
 from generation.sample import load_model, nonfinite_windows, sample_split  # noqa: E402

@@ -24,7 +24,8 @@ from core.clip import save_clip
 from . import skeleton
 from .dataset import read_arrays, require
 from .fl import FL
-from .mg_stream import PRECISIONS, MGStream
+from .flows import PRECISIONS
+from .mg_stream import MGStream
 from .moglow import MoGlow
 from .train import MODELS, pick_device
 

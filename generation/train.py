@@ -59,12 +59,11 @@ TRAIN_DEFAULTS = dict(
     stance_start=0,
     stance_temperature=0.0,
     category_balance=0.0,
+    # one of flows.PRECISIONS. 'bfloat16': the coupling networks run under autocast (flows.set_net_precision); about
+    # 1.4x the steps/s of float32 on a CPU with AVX512-BF16 at mg_cpu's size, at the same likelihood per step
+    # (bench/RESULTS.md). Slower where the CPU lacks bfloat16 arithmetic; not yet measured on a GPU.
     precision="float32",
 )
-# 'bfloat16': the coupling networks run under autocast (flows.set_net_precision); about 1.4x the steps/s of float32 on
-# a CPU with AVX512-BF16 at mg_cpu's size, at the same likelihood per step (bench/RESULTS.md). Slower where the CPU
-# lacks bfloat16 arithmetic; not yet measured on a GPU.
-PRECISIONS = flows.PRECISIONS
 
 
 # train_stance: the stance-foot loss (m/s, stance.py) averaged like train_nll, 0 while it is off.
@@ -176,8 +175,8 @@ def _checked_fields(cfg, model, where):
         if key in ("residual", "carry_feet") and not isinstance(value, bool):
             raise TrainError(f"{where}: field '{key}' must be true or false, got {value!r}")
         if key == "precision":
-            if value not in PRECISIONS:
-                raise TrainError(f"{where}: field 'precision' must be one of {sorted(PRECISIONS)}, got {value!r}")
+            if value not in flows.PRECISIONS:
+                raise TrainError(f"{where}: field 'precision' must be one of {sorted(flows.PRECISIONS)}, got {value!r}")
             continue
         unset = value is None and key in TRAIN_DEFAULTS and TRAIN_DEFAULTS[key] is None
         if key not in ("model", "name", "note", "early_ckpts") and not unset and not isinstance(value, (int, float)):
@@ -279,7 +278,7 @@ def _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, s
     net = build_model(model, cfg, ds.stats).to(device)
     if model == "fl":
         net.check_length(cfg["train_window"] or ds.window)
-    flows.set_net_precision(net, PRECISIONS[cfg["precision"]])
+    flows.set_net_precision(net, flows.PRECISIONS[cfg["precision"]])
     opt = make_optimiser(net, cfg)
     start, elapsed = _resume(out / "resume.pt", resume, net, opt, device)
     run = _Run(out, rank == 0, cfg, ds, net, opt, start, elapsed)
@@ -492,7 +491,7 @@ def _main(argv):
     )
     ap.add_argument(
         "--precision",
-        choices=sorted(PRECISIONS),
+        choices=sorted(flows.PRECISIONS),
         default=None,
         help="override the config's: bfloat16 runs the coupling networks in bfloat16 (faster on CPUs with AVX512-BF16)",
     )
