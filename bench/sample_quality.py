@@ -4,7 +4,9 @@
         [--model FL=runs/fl_cpu/checkpoints/step_0003000.pt] [--temperature 1.0] [--figure out.png]
 
 Every window of the test split (or --split valid) is sampled once per model (MG seeded with the tau real frames
-before the window).
+before the window), or --seeds N times with the seeds --seed .. --seed + N - 1: then each window's figures are
+their means over its samples (a category's late stepping rests on 9-25 windows, and one sample per window moves
+its median by about 0.05 from seed to seed), and the FMD pools every sample.
 Per category it prints the median of three figures per clip:
 - late stepping (m): how far the feet swing about each other over the last 2 s: the standard deviation of
   the horizontal vector from the right foot to the left (root frame; forward and sideways, so side-steps
@@ -62,12 +64,53 @@ def clip_figures(x, c, fps):
     )
 
 
+def mean_figures(per_sample):
+    """One window's figures (clip_figures dicts, one per sample) -> their means over the finite samples."""
+    return {key: _finite_mean([f[key] for f in per_sample]) for key in per_sample[0]}
+
+
+def _finite_mean(values):
+    values = np.array(values, dtype=np.float64)
+    return float(values[np.isfinite(values)].mean()) if np.isfinite(values).any() else float("nan")
+
+
+def pooled_fmd(encoder, xs, finite, labels):
+    """The FMD of every finite sampled window of every seed together, against training motion of its category."""
+    x = np.concatenate([x[f] for x, f in zip(xs, finite)])
+    return encoder.fmd(x, np.concatenate([labels[f] for f in finite])) if len(x) else float("nan")
+
+
+def sample_systems(a, x_nat, n):
+    """{name: [windows of each seed]} with NAT first, and {name: [finite window indices of each seed]}."""
+    if a.seeds < 1:
+        sys.exit(f"--seeds must be at least 1, got {a.seeds}")
+    systems = {NAT: [x_nat]}  # per system, one array of windows per seed
+    for spec in a.model:
+        name, _, ckpt = spec.partition("=")
+        model = load_model(ckpt)
+        systems[name] = [
+            sample_split(model, a.data, a.split, temperature=a.temperature, seed=seed, precision=a.precision)[0]
+            for seed in range(a.seed, a.seed + a.seeds)
+        ]
+    finite = {}  # per system and seed, the windows without NaN or inf
+    for name, xs in systems.items():
+        finite[name] = [np.setdiff1d(np.arange(len(x)), nonfinite_windows(x)) for x in xs]
+        bad = sum(len(x) - len(f) for x, f in zip(xs, finite[name]))
+        if bad:
+            print(
+                f"{name}: {bad} of {len(xs) * n} sampled windows are not finite (NaN or inf); "
+                "figures and FMD use the rest"
+            )
+    return systems, finite
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data", required=True, help="prepared dataset .npz")
     ap.add_argument("--model", action="append", required=True, metavar="NAME=CHECKPOINT")
     ap.add_argument("--temperature", type=float, default=1.0, help="(make_stimuli's default is 1.0)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seeds", type=int, default=1, help="samples per window (seeds --seed, --seed + 1, ...)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument(
         "--precision", default="float32", choices=sorted(PRECISIONS), help="MG's sampler (mg_stream.MGStream)"
@@ -81,21 +124,11 @@ def main():
     d = read_arrays(a.data, [*keys, "fps"])
     require(d, [*keys, "fps"], a.data)
     (x_nat, c, labels), fps = (d[k] for k in keys), float(d["fps"])
-    systems = {NAT: x_nat}
-    finite = {NAT: np.arange(len(x_nat))}  # per system, the windows without NaN or inf
-    for spec in a.model:
-        name, _, ckpt = spec.partition("=")
-        x, _ = sample_split(
-            load_model(ckpt), a.data, a.split, temperature=a.temperature, seed=a.seed, precision=a.precision
-        )
-        systems[name] = x
-        finite[name] = np.setdiff1d(np.arange(len(x)), nonfinite_windows(x))
-        if len(finite[name]) < len(x):
-            print(
-                f"{name}: {len(x) - len(finite[name])} of {len(x)} windows are not finite (NaN or inf); "
-                "figures and FMD use the rest"
-            )
-    figures = {name: [clip_figures(x[i], c[i], fps) for i in range(len(c))] for name, x in systems.items()}
+    systems, finite = sample_systems(a, x_nat, len(c))
+    figures = {
+        name: [mean_figures([clip_figures(x[i], c[i], fps) for x in xs]) for i in range(len(c))]
+        for name, xs in systems.items()
+    }
 
     cats = sorted(set(labels.tolist()))
     names = list(systems)
@@ -107,7 +140,7 @@ def main():
         + [f"{n} skating" for n in names]
         + [f"{n} following" for n in names]
     )
-    print(f"{a.split} split, temperature {a.temperature}, medians per category")
+    print(f"{a.split} split, temperature {a.temperature}, {a.seeds} sample(s) per window, medians per category")
     print("| " + " | ".join(head) + " |")
     print("|" + "---|" * len(head))
     for cat in cats + ["all"]:
@@ -127,10 +160,7 @@ def main():
         print("| " + " | ".join(row) + " |")
 
     encoder = MotionEncoder.load(a.encoder)
-    fmd = {
-        name: encoder.fmd(x[finite[name]], labels[finite[name]]) if len(finite[name]) else float("nan")
-        for name, x in systems.items()
-    }
+    fmd = {name: pooled_fmd(encoder, xs, finite[name], labels) for name, xs in systems.items()}
     overall = lambda name, key: median_finite(f[key] for f in figures[name])  # noqa: E731
     print("\nall windows: FMD to training motion of the same categories, and medians as ratios to NAT's")
     print(
@@ -172,7 +202,7 @@ def main():
         for col, cat in enumerate(shown):
             i = int(np.flatnonzero(labels == cat)[0])
             for row, name in enumerate(names):
-                j = systems[name][i].reshape(-1, skeleton.N_JOINTS, 3)
+                j = systems[name][0][i].reshape(-1, skeleton.N_JOINTS, 3)
                 ax = axes[row, col]
                 for foot, colour in ((FOOT_L, "tab:blue"), (FOOT_R, "tab:red")):
                     ax.plot(t, j[:, foot, 1], color=colour, lw=1)
