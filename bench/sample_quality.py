@@ -6,7 +6,7 @@
 Every window of the test split (or --split valid) is sampled once per model (MG seeded with the tau real frames
 before the window), or --seeds N times with the seeds --seed .. --seed + N - 1: then each window's figures are
 their means over its samples (a category's late stepping rests on 9-25 windows, and one sample per window moves
-its median by about 0.05 from seed to seed), and the FMD pools every sample.
+its worst category by up to 0.1 from seed to seed), and the FMD pools every sample.
 Per category it prints the median of three figures per clip:
 - late stepping (m): how far the feet swing about each other over the last 2 s: the standard deviation of
   the horizontal vector from the right foot to the left (root frame; forward and sideways, so side-steps
