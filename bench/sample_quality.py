@@ -32,20 +32,13 @@ from generation import skeleton  # noqa: E402
 from generation.dataset import read_arrays, require  # noqa: E402
 from generation.features import to_world  # noqa: E402
 from generation.flows import PRECISIONS  # noqa: E402
-from generation.metrics import control_following, foot_skating, jerk  # noqa: E402
+from generation.metrics import control_following, foot_skating, jerk, late_stepping  # noqa: E402
 from generation.motion_encoder import MotionEncoder  # noqa: E402
 from generation.pretrained import MOTION_ENCODER  # noqa: E402
 from generation.sample import load_model, nonfinite_windows, sample_split  # noqa: E402
 
 FOOT_L, FOOT_R = skeleton.INDEX["Foot_L"], skeleton.INDEX["Foot_R"]
 SHOWN = ("walk", "run", "walk_backward", "walk_turn_left", "sidestep_left")
-
-
-def late_stepping(x, fps):
-    """x [T, 63] root-frame features -> std (m) of the horizontal left-minus-right foot vector, last 2 s."""
-    joints = x.reshape(len(x), skeleton.N_JOINTS, 3)[-int(2 * fps) :]
-    sep = joints[:, FOOT_L, ::2] - joints[:, FOOT_R, ::2]  # (x, z)
-    return float(np.sqrt(np.var(sep, axis=0).sum()))
 
 
 def median_finite(values):

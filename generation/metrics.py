@@ -23,6 +23,11 @@
   (mean distance). Real motion follows its control to a few centimetres. A generator that moves its feet
   as if it walked elsewhere (ignoring a side-step, walking on the spot) drifts by metres, while zero-mean
   jitter, which foot_skating and jerk measure, largely cancels along the path.
+
+Not in metrics.csv, for the models' own output (root-frame poses, generation.features):
+- late_stepping (m): how far the feet swing about each other over a clip's last 2 s, the standard deviation of
+  the horizontal vector from the right foot to the left (forward and sideways, so side-steps count too). Stepping
+  swings it by tens of centimetres; a gait that dies out into a standing pose gives about 0.
 """
 
 import numpy as np
@@ -75,6 +80,14 @@ def foot_skating(joints, fps, feet=tuple(skeleton.FEET), contact_height=CONTACT_
         * fps
     )  # [n_feet, T-1]
     return float(speed[contact].mean()) if contact.any() else float("nan")  # none: non-finite feet
+
+
+def late_stepping(poses, fps, seconds=2.0):
+    """Root-frame poses [T, 63] or [T, 21, 3] (metres) -> std (m) of the horizontal left-minus-right foot vector
+    over the last `seconds` (see the module doc)."""
+    joints = np.asarray(poses, dtype=np.float64).reshape(len(poses), skeleton.N_JOINTS, 3)[-int(seconds * fps) :]
+    sep = joints[:, skeleton.INDEX["Foot_L"], ::2] - joints[:, skeleton.INDEX["Foot_R"], ::2]  # (x, z)
+    return float(np.sqrt(np.var(sep, axis=0).sum()))
 
 
 def bone_length_std(joints, parents=skeleton.PARENTS):

@@ -60,10 +60,11 @@ def export_heldout(dataset, dst):
 
 def quality(stride=QUALITY_STRIDE, seed=0):
     """Foot skating and jerk of the shipped MG and FL over NAT's, medians over every `stride`-th test window
-    of the shipped held-out set (temperature 1, as make_stimuli samples). Recorded in quality.json at export and
-    recomputed by the tests, which fail if the models fall back."""
+    of the shipped held-out set (temperature 1, as make_stimuli samples), and their late stepping: the median over
+    those windows of its ratio to NAT's on the same window (higher is better). Recorded in quality.json at export
+    and recomputed by the tests, which fail if the models fall back."""
     from .features import to_world
-    from .metrics import foot_skating, jerk
+    from .metrics import foot_skating, jerk, late_stepping
     from .sample import load_model, sample_windows
 
     d = read_arrays(HELDOUT, ["test_x", "test_c", "test_hist", "test_hist_c", "fps"])
@@ -81,7 +82,11 @@ def quality(stride=QUALITY_STRIDE, seed=0):
             "jerk": float(np.median([jerk(w, fps) for w in world])),
         }
     nat = out[study.NATURAL]
-    return {name: {k: v / nat[k] for k, v in m.items()} for name, m in out.items() if name != study.NATURAL}
+    ratios = {name: {k: v / nat[k] for k, v in m.items()} for name, m in out.items() if name != study.NATURAL}
+    steps = {name: np.array([late_stepping(x, fps) for x in xs]) for name, xs in samples.items()}
+    for name in ratios:
+        ratios[name]["late_stepping"] = float(np.median(steps[name] / np.maximum(steps[study.NATURAL], 1e-6)))
+    return ratios
 
 
 def _main(argv):

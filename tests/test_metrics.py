@@ -149,3 +149,20 @@ def test_shipped_motion_encoder_ranks_real_held_out_motion_first(small_dataset):
     # The reference follows the set's category mix: one category alone is scored against that category.
     walk = cats == "walk"
     assert enc.fmd(real[walk], cats[walk]) < enc.fmd(real[walk], ["run"] * int(walk.sum()))
+
+
+def test_late_stepping_sees_a_gait_that_dies_out(walks):
+    from generation.metrics import late_stepping
+
+    for j in walks:
+        x = to_features(j, 20.0)[0]
+        assert 0.1 < late_stepping(x, 20.0) < 0.8  # real walks swing their feet by tens of centimetres
+        # The same walk frozen in its pose at 2 s: the last 2 s stand still.
+        frozen = x.copy()
+        frozen[40:] = x[40]
+        assert late_stepping(frozen, 20.0) < 1e-6
+        assert late_stepping(frozen, 20.0, seconds=3.0) > 0.05  # a longer span still sees the steps before
+    # Side-steps count: the same steps turned a quarter turn, so that the feet swing sideways, score the same.
+    joints = x.reshape(80, skeleton.N_JOINTS, 3)
+    sideways = np.stack([joints[..., 2], joints[..., 1], -joints[..., 0]], axis=-1)
+    assert late_stepping(sideways, 20.0) == pytest.approx(late_stepping(x, 20.0), rel=1e-6)
