@@ -8,10 +8,9 @@ before the window), or --seeds N times with the seeds --seed .. --seed + N - 1: 
 their means over its samples (a category's late stepping rests on 9-25 windows, and one sample per window moves
 its worst category by up to 0.1 from seed to seed), and the FMD pools every sample.
 Per category it prints the median of three figures per clip:
-- late stepping (m): how far the feet swing about each other over the last 2 s: the standard deviation of
-  the horizontal vector from the right foot to the left (root frame; forward and sideways, so side-steps
-  count too). Stepping swings it by tens of centimetres; a gait that dies out into a standing pose gives ~0.
-  Given beside NAT's, and as the median ratio to NAT on the same window.
+- late stepping (m): how far the feet swing about each other over the last 2 s (generation.metrics.late_stepping;
+  a gait that dies out into a standing pose gives ~0). Given beside NAT's, and as the median ratio to NAT on the
+  same window.
 - jerk (m/s^3), foot skating (m/s) and control following (m): generation.metrics, on the clip in world
   coordinates.
 Over all windows it also prints each system's Fréchet motion distance to training motion of the same categories
