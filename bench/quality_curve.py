@@ -33,10 +33,9 @@ LABELS = {
 }
 
 
-def score(xs, nat, c, labels, fps):
-    """xs: the sampled windows of each seed."""
+def score(xs, ref, c, labels, fps):
+    """xs: the sampled windows of each seed; ref: NAT's clip_figures per window."""
     figs = [mean_figures([clip_figures(x[i], c[i], fps) for x in xs]) for i in range(len(c))]
-    ref = [clip_figures(nat[i], c[i], fps) for i in range(len(c))]
     med = lambda f, k: statistics.median(v[k] for v in f)  # noqa: E731
     worst = min(
         statistics.median(
@@ -65,6 +64,7 @@ def main():
     d = read_arrays(a.data, ["test_x", "test_c", "test_labels", "fps"])
     require(d, ["test_x", "test_c", "test_labels", "fps"], a.data)
     nat, c, labels, fps = d["test_x"], d["test_c"], d["test_labels"], float(d["fps"])
+    ref = [clip_figures(nat[i], c[i], fps) for i in range(len(c))]  # NAT's, once for every checkpoint
     curves = {}
     print(
         "| run | step | valid NLL | skating / NAT | jerk / NAT | following (m) | late stepping / NAT, worst category |"
@@ -77,7 +77,7 @@ def main():
             if model.step % a.every:
                 continue
             xs = [sample_split(model, a.data, "test", temperature=1.0, seed=seed)[0] for seed in range(a.seeds)]
-            s = score(xs, nat, c, labels, fps)
+            s = score(xs, ref, c, labels, fps)
             curves.setdefault(name, []).append((model.step, s))
             valid = torch.load(ckpt, map_location="cpu", weights_only=False)["valid_nll"]
             print(
