@@ -19,7 +19,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from sample_quality import clip_figures, mean_figures  # noqa: E402
+from sample_quality import window_figures  # noqa: E402
 
 from generation.dataset import read_arrays, require  # noqa: E402
 from generation.make_stimuli import checkpoints_in  # noqa: E402
@@ -35,7 +35,7 @@ LABELS = {
 
 def score(xs, ref, c, labels, fps):
     """xs: the sampled windows of each seed; ref: NAT's clip_figures per window."""
-    figs = [mean_figures([clip_figures(x[i], c[i], fps) for x in xs]) for i in range(len(c))]
+    figs = window_figures(xs, c, fps)
     med = lambda f, k: statistics.median(v[k] for v in f)  # noqa: E731
     worst = min(
         statistics.median(
@@ -64,7 +64,7 @@ def main():
     d = read_arrays(a.data, ["test_x", "test_c", "test_labels", "fps"])
     require(d, ["test_x", "test_c", "test_labels", "fps"], a.data)
     nat, c, labels, fps = d["test_x"], d["test_c"], d["test_labels"], float(d["fps"])
-    ref = [clip_figures(nat[i], c[i], fps) for i in range(len(c))]  # NAT's, once for every checkpoint
+    ref = window_figures([nat], c, fps)  # NAT's, once for every checkpoint
     curves = {}
     print(
         "| run | step | valid NLL | skating / NAT | jerk / NAT | following (m) | late stepping / NAT, worst category |"

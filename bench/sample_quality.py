@@ -61,6 +61,11 @@ def mean_figures(per_sample):
     return {key: _finite_mean([f[key] for f in per_sample]) for key in per_sample[0]}
 
 
+def window_figures(xs, c, fps):
+    """Per window, its figures averaged over its samples: xs holds the windows [N, T, 63] of each seed."""
+    return [mean_figures([clip_figures(x[i], c[i], fps) for x in xs]) for i in range(len(c))]
+
+
 def _finite_mean(values):
     values = np.array(values, dtype=np.float64)
     return float(values[np.isfinite(values)].mean()) if np.isfinite(values).any() else float("nan")
@@ -117,10 +122,7 @@ def main():
     require(d, [*keys, "fps"], a.data)
     (x_nat, c, labels), fps = (d[k] for k in keys), float(d["fps"])
     systems, finite = sample_systems(a, x_nat, len(c))
-    figures = {
-        name: [mean_figures([clip_figures(x[i], c[i], fps) for x in xs]) for i in range(len(c))]
-        for name, xs in systems.items()
-    }
+    figures = {name: window_figures(xs, c, fps) for name, xs in systems.items()}
 
     cats = sorted(set(labels.tolist()))
     names = list(systems)
