@@ -20,20 +20,24 @@ class MGStream:
 
     Where the time goes (paper size: 73M LSTM weights, all read once per frame) and how it is cut:
     (1) everything in the coupling LSTMs' gates that is known at the start of a frame is computed for all K
-    steps at once: layer 1's history+control part (one batched matmul; the input padded to a multiple of 16
-    columns, layer 1's bias folded into the padding) and the recurrent h_{t-1} products of every layer (one
-    batched matmul per layer); (2) per step only what depends on the previous step's output is
-    left: layer 1's lower-half product, layer 2's 2048x512 input product, the cells, the output layer and
-    the 63x63 inverse, all accumulated in place into preallocated buffers; (3) weights are fused once
+    steps at once, one batched matmul per layer: layer 1's recurrent and history/control products side by side
+    (weights [Whh | Wc | bias | 0] on the input [h_{t-1}; history, control; 1; 0]), layer 2's recurrent product with
+    its bias the same way ([Whh | bias | 0] on [h_{t-1}; 1; 0]), inputs padded to a multiple of 16 columns (one
+    1184-deep product runs ~7% faster at 30 streams on an Intel Xeon than two of 512 and 672, and no slower on AMD);
+    (2) per step only what depends on the previous step's output is left: layer 1's lower-half product, layer 2's
+    2048x512 input product, the cells, the output layer, the coupling and the 63x63 inverse, all in place on
+    preallocated buffers through views made once (the flow's value alternates between two buffers); (3) weights
+    are fused once
     (actnorm folded into the inverse linear map, the coupling's SCALE_OFFSET into the output bias, shift/scale rows
     contiguous, gates reordered to i, f, o, g so one sigmoid covers three); (4) no autograd.
     Starts with h = 0 (paper footnote 2).
 
     precision="bfloat16" reads the big products' weights (the LSTMs' recurrent, history/control and layer-2 input
     weights, 98% of the bytes) and their inputs in bfloat16; the products still add up in float32, and the gates,
-    cells, states, output layers and inverse maps stay float32. On a CPU with AVX512-BF16 that runs 30 streams
-    about 1.85x faster; it is the same model to within bfloat16's rounding of those weights (bench/RESULTS.md has its
-    motion figures), and it is slower on CPUs without bfloat16 arithmetic. The default is float32.
+    cells, states, output layers and inverse maps stay float32. On an AMD Zen 4 CPU that runs 30 streams about
+    1.85x faster; on an Intel Xeon with AVX512-BF16 but no AMX it ran 1.3x slower, and one stream gains nothing
+    anywhere (bench/RESULTS.md). It is the same model to within bfloat16's rounding of those weights (RESULTS has
+    its motion figures). The default is float32.
 
     Two memory layouts compute the same thing (they differ only in float rounding):
     "row": activations [B, features], weights stored [in, out], every product X @ W;
@@ -66,36 +70,43 @@ class MGStream:
         # Buffers are updated in place; created under inference mode they may only be changed under it.
         self._inference = torch.is_inference_mode_enabled()
         new = dict(dtype=self.dtype, device=self.device)
-        # (h, c) of every LSTM layer for all K steps: step k overwrites its own slice after the frame's
-        # batched products have read last frame's values.
-        self.h = [torch.zeros(k_steps, *shape(hid), **new) for _ in range(layers)]
+        self._fdim = fd = 1 if rows else 0  # the feature dimension of activations
+        # The inputs of each layer's batched product, for all K steps: [h; history, control; 1; 0] for layer 1,
+        # [h; 1; 0] for the others (the 1 meets the layer's bias; the zeros pad to a multiple of 16). h and c of
+        # every layer: step k overwrites its own slice after the frame's batched products have read last frame's
+        # values.
+        cond_dim = w["cond_dim"]
+        self._x = [torch.zeros(k_steps, *shape(n), **new) for n in w["in_cols"]]
+        for x, extra in zip(self._x, [cond_dim] + [0] * (layers - 1)):
+            x.narrow(fd + 1, hid + extra, 1).fill_(1.0)
+        self.h = [x.narrow(fd + 1, 0, hid) for x in self._x]
+        self._x1_cond = self._x[0].narrow(fd + 1, hid, cond_dim)  # refilled every frame from self.cond
         self.c = [torch.zeros(k_steps, *shape(hid), **new) for _ in range(layers)]
         self.gates = [torch.empty(k_steps, *shape(4 * hid), **new) for _ in range(layers)]
         self.out = torch.empty(*shape(w["n_out"]), **new)
-        self.y_ab = torch.empty(*shape(model.pose_dim), **new)
-        self.cond = torch.zeros(b, w["cond_cols"], **new)
-        self.cond[:, w["cond_dim"]] = 1.0
+        self.cond = torch.zeros(b, cond_dim, **new)  # this frame's history and control, flattened
         # (weight, x) -> the operands of torch.mm/addmm for "W x": (x, W) in rows, (W, x) in columns.
         self._mm = (lambda wt, x: (x, wt)) if rows else (lambda wt, x: (wt, x))
-        # The cond buffer as every step's input of the batched layer-1 product (a view: refilled in place).
-        self._expand_k = (lambda x: x.expand(k_steps, b, -1)) if rows else (lambda x: x.T.expand(k_steps, -1, b))
-        self._cond_k = self._expand_k(self.cond)
-        self._fdim = 1 if rows else 0  # the feature dimension of activations
-        # Per-step views made once: indexing [K, ...] tensors 16x per frame costs more than it looks.
-        self._steps = [
-            (
-                w["Wx"][k],
-                [w["Wih"][layer][k] if layer else None for layer in range(layers)],
-                w["Wo"][k],
-                w["bo"][k],
-                w["Winv"][k],
-                w["bn"][k],
-                [g[k] for g in self.gates],
-                [c[k] for c in self.c],
-                [h[k] for h in self.h],
+        # self.cond as every step's slice of layer 1's input (a view: refilled in place).
+        self._cond_k = self.cond.expand(k_steps, b, -1) if rows else self.cond.T.expand(k_steps, -1, b)
+        # Per-step views made once: making the same narrow views 16x per frame costs more than it looks (~0.5 ms).
+        # y, the flow's running value, alternates between two buffers: step k reads one and writes the other.
+        self._y = [torch.empty(*shape(model.pose_dim), **new) for _ in range(2)]
+        c_a, n_b = w["c_a"], w["n_out"] // 2
+        halves = [(y.narrow(fd, 0, c_a), y.narrow(fd, c_a, y.shape[fd] - c_a)) for y in self._y]
+        self._out_shift, self._out_scale = self.out.narrow(fd, 0, n_b), self.out.narrow(fd, n_b, n_b)
+        self._steps = []
+        for i, k in enumerate(reversed(range(k_steps))):  # sampling runs the flow's steps last to first
+            cells = [
+                _cell_views(self.gates[layer][k], self.c[layer][k], self.h[layer][k], fd, hid)
+                for layer in range(layers)
+            ]
+            y_in, y_out = self._y[i % 2], self._y[1 - i % 2]
+            wih = [w["Wih"][layer][k] if layer else None for layer in range(layers)]
+            self._steps.append(
+                (w["Wx"][k], wih, w["Wo"][k], w["bo"][k], w["Winv"][k], w["bn"][k], cells, y_in, *halves[i % 2], y_out)
             )
-            for k in range(k_steps)
-        ]
+        self._y_first, self._y_last = self._y[0], self._y[k_steps % 2]
 
     @torch.no_grad()
     def step(self, control, z=None):
@@ -104,18 +115,13 @@ class MGStream:
 
     def _frame_start(self):
         """Gate pre-activations from this frame's shared inputs and last frame's states, all K steps at once."""
-        w, gates, mm, low = self.w, self.gates, self._mm, self.low
-        for layer in range(len(gates)):
+        w, mm, low = self.w, self._mm, self.low
+        self._x1_cond.copy_(self._cond_k)
+        for wt, x, gates in zip(w["Whh"], self._x, self.gates):
             if low is None:
-                torch.bmm(*mm(w["Whh"][layer], self.h[layer]), out=gates[layer])
+                torch.bmm(*mm(wt, x), out=gates)
             else:
-                gates[layer].copy_(torch.bmm(*mm(w["Whh"][layer], self.h[layer].to(low))))
-            if layer > 0:
-                gates[layer].add_(w["b"][layer])
-        if low is None:
-            gates[0].baddbmm_(*mm(w["Wc"], self._cond_k))
-        else:
-            gates[0].add_(torch.bmm(*mm(w["Wc"], self._expand_k(self.cond.to(low)))))
+                gates.copy_(torch.bmm(*mm(wt, x.to(low))))
 
     def _add_product(self, gates, wt, x):
         """gates += the product of wt and x (in bfloat16 with `precision`, the sum in float32)."""
@@ -124,12 +130,11 @@ class MGStream:
         return gates.add_(torch.mm(*self._mm(wt, x.to(self.low))))
 
     def _step(self, control, z):
-        w, b, mm, fd = self.w, self.hist.shape[0], self._mm, self._fdim
-        c_a, n_b, hid = w["c_a"], w["n_out"] // 2, w["H"]
+        b, mm, fd = self.hist.shape[0], self._mm, self._fdim
         ctrl = torch.cat([self.hist_c, control.to(self.device, self.dtype)[:, None]], dim=1)
-        cond = self.cond  # [B, cond_dim + pad]: history, control, then 1 (layer 1's bias) and zeros
-        cond[:, : self.hist[0].numel()] = self.hist.flatten(1)
-        cond[:, self.hist[0].numel() : w["cond_dim"]] = ctrl.flatten(1)
+        n_hist = self.hist[0].numel()
+        self.cond[:, :n_hist] = self.hist.flatten(1)
+        self.cond[:, n_hist:] = ctrl.flatten(1)
         self._frame_start()
         if z is None:
             z = (
@@ -138,23 +143,24 @@ class MGStream:
                 )
                 * self.temperature
             )
-        y = z.to(self.device, self.dtype)
-        if fd == 0:
-            y = y.T  # [63, B]
-        out, y_ab = self.out, self.y_ab
-        out_shift, out_scale = out.narrow(fd, 0, n_b), out.narrow(fd, n_b, n_b)
-        ab_a, ab_b = y_ab.narrow(fd, 0, c_a), y_ab.narrow(fd, c_a, y_ab.shape[fd] - c_a)
-        for wx, wih, wo, bo, winv, bn, gates, cs, hs in reversed(self._steps):
-            y_a = y.narrow(fd, 0, c_a)
-            h = lstm_cell_(gates[0].addmm_(*mm(wx, y_a)), cs[0], hs[0], fd, hid)
-            for layer in range(1, len(gates)):
-                h = lstm_cell_(self._add_product(gates[layer], wih[layer], h), cs[layer], hs[layer], fd, hid)
+        self._y_first.copy_(z if fd else z.T)
+        out, shift, scale = self.out, self._out_shift, self._out_scale
+        for wx, wih, wo, bo, winv, bn, cells, y, y_a, y_b, y_next in self._steps:
+            gates, s, g, i, f, o, c, h = cells[0]
+            gates.addmm_(*mm(wx, y_a))
+            _cell(s, g, i, f, o, c, h)
+            for layer in range(1, len(cells)):
+                gates, s, g, i, f, o, c, h_next = cells[layer]
+                self._add_product(gates, wih[layer], h)
+                _cell(s, g, i, f, o, c, h_next)
+                h = h_next
             torch.addmm(bo, *mm(wo, h), out=out)
-            ab_a.copy_(y_a)
-            torch.div(y.narrow(fd, c_a, ab_b.shape[fd]), out_scale.sigmoid_(), out=ab_b).sub_(out_shift)
+            # The coupling inverted in place: y_b <- y_b / sigmoid(scale) - shift (y_a passes through).
+            y_b.div_(scale.sigmoid_()).sub_(shift)
             # Inverse LU linear map with the inverse actnorm folded in: x = diag(e^-logs) W^-1 y - bias.
-            y = torch.addmm(bn, *mm(winv, y_ab))
-        y = y if fd else y.T.contiguous()
+            torch.addmm(bn, *mm(winv, y), out=y_next)
+        # A copy, never a view of the buffer (with one stream, .T.contiguous() would return the view itself).
+        y = (self._y_last if fd else self._y_last.T).clone(memory_format=torch.contiguous_format)
         if self.model.config["residual"]:
             y = y + self.model.step_base(self.hist[:, -1], ctrl[:, -1])
         self.hist = torch.cat([self.hist[:, 1:], y[:, None]], dim=1)
@@ -163,7 +169,7 @@ class MGStream:
 
 
 LAYOUTS = ("row", "col")
-LOW_PRECISION = ("Whh", "Wih", "Wc")  # the weights that `precision` stores in bfloat16 (98% of the bytes)
+LOW_PRECISION = ("Whh", "Wih")  # the weights that `precision` stores in bfloat16 (98% of the bytes)
 BATCHED = 8  # streams from which a batch's products favour "col" on Intel CPUs (measured at 1 and 30)
 
 
@@ -196,13 +202,19 @@ def default_layout(device, batch=1):
     return "col"
 
 
-def lstm_cell_(gates, c, h, dim, hid):
-    """LSTM cell in place: gates in the order i, f, o, g along `dim` (overwritten), c updated, h written.
-    Returns h."""
-    s = gates.narrow(dim, 0, 3 * hid).sigmoid_()
-    g = gates.narrow(dim, 3 * hid, hid).tanh_()
-    c.mul_(s.narrow(dim, hid, hid)).addcmul_(s.narrow(dim, 0, hid), g)
-    return torch.tanh(c, out=h).mul_(s.narrow(dim, 2 * hid, hid))
+def _cell_views(gates, c, h, dim, hid):
+    """The views the LSTM cell works on, gates in the order i, f, o, g along `dim`: (gates, the three sigmoid
+    gates, g, i, f, o, c, h)."""
+    s = gates.narrow(dim, 0, 3 * hid)
+    return gates, s, gates.narrow(dim, 3 * hid, hid), *(s.narrow(dim, j * hid, hid) for j in range(3)), c, h
+
+
+def _cell(s, g, i, f, o, c, h):
+    """LSTM cell in place on views from _cell_views: the gates overwritten, c updated, h written."""
+    s.sigmoid_()
+    g.tanh_()
+    c.mul_(f).addcmul_(i, g)
+    torch.tanh(c, out=h).mul_(o)
 
 
 @torch.no_grad()
@@ -215,26 +227,24 @@ def fused_weights(model, layout="col", low=None):
     if cached is None or cached[0] != key:
         w = _fuse_columns(model)
         if layout == "row":
-            w = {
-                n: (
-                    [None if v is None else v.mT.contiguous() for v in x]
-                    if isinstance(x, list)
-                    else x.mT.contiguous()
-                    if torch.is_tensor(x)
-                    else x
-                )
-                for n, x in w.items()
-            }
+            w = {n: _map_tensors(x, lambda v: v.mT.contiguous()) for n, x in w.items()}
         for n in LOW_PRECISION if low is not None else ():
-            w[n] = [None if v is None else v.to(low) for v in w[n]] if isinstance(w[n], list) else w[n].to(low)
+            w[n] = _map_tensors(w[n], lambda v: v.to(low))
         cached = model._fused = (key, w)
     return cached[1]
 
 
-def _cond_columns(cond_dim):
-    """Columns of the fused history/control weights: cond_dim, then one for layer 1's bias, then zeros up to a
-    multiple of 16 (measured ~7% faster than 663 wide)."""
-    return cond_dim + 1 + -(cond_dim + 1) % 16
+def _map_tensors(x, fn):
+    """fn applied to a tensor, or to each tensor of a list; anything else as it is."""
+    if isinstance(x, list):
+        return [_map_tensors(v, fn) for v in x]
+    return fn(x) if torch.is_tensor(x) else x
+
+
+def _padded(n):
+    """n rounded up to a multiple of 16: the width of the batched products' inputs (measured ~7% faster than
+    an odd width such as 663)."""
+    return n + -n % 16
 
 
 def _fuse_columns(model):
@@ -260,13 +270,16 @@ def _fuse_columns(model):
         acc["bn"].append(-actnorm.bias[0])  # [63, 1]
     w = {n: torch.stack(v).contiguous() for n, v in acc.items()}
     k = len(model.flow.layers)
-    # History/control weights [K, 4H, _cond_columns]: layer 1's bias in the first padding column (the input
-    # there is 1), then zeros.
-    cond_dim = w["Wc"].shape[2]
-    pad = _cond_columns(cond_dim) - cond_dim
-    w["Wc"] = torch.cat([w["Wc"], torch.stack(bias[0])[:, :, None], w["Wc"].new_zeros(k, 4 * hid, pad - 1)], dim=2)
-    w["Whh"] = [torch.stack(v).contiguous() for v in whh]
+    # The batched weights of every layer [K, 4H, in_cols]: recurrent, history/control for layer 1, the bias (met by
+    # an input of 1), then zeros up to a multiple of 16.
+    wc = w.pop("Wc")
+    cond_dim = wc.shape[2]
+    w["Whh"], in_cols = [], []
+    for layer in range(layers):
+        parts = [torch.stack(whh[layer])] + ([wc] if layer == 0 else []) + [torch.stack(bias[layer])[:, :, None]]
+        n = sum(part.shape[2] for part in parts)
+        in_cols.append(_padded(n))
+        w["Whh"].append(torch.cat(parts + [wc.new_zeros(k, 4 * hid, in_cols[-1] - n)], dim=2))
     w["Wih"] = [None] + [torch.stack(v).contiguous() for v in wih[1:]]
-    w["b"] = [torch.stack(v)[:, :, None].contiguous() for v in bias]  # [K, 4H, 1]
-    w.update(K=k, H=hid, c_a=c_a, cond_dim=cond_dim, cond_cols=cond_dim + pad, n_out=w["Wo"].shape[1])
+    w.update(K=k, H=hid, c_a=c_a, cond_dim=cond_dim, in_cols=in_cols, n_out=w["Wo"].shape[1])
     return w

@@ -68,7 +68,7 @@ def _mg_stream(model, history, history_control, temperature, seed, precision="fl
 
 def mg_stream(model, history, history_control, temperature=1.0, seed=0, precision="float32"):
     """Real-time form of MG: returns f(control_t [B, 3]) -> pose [B, 63] (numpy, un-standardised).
-    `precision`: "bfloat16" for many streams on a CPU with AVX512-BF16 (mg_stream.MGStream)."""
+    `precision`: "bfloat16" for many streams on CPUs where it pays (mg_stream.MGStream says which)."""
     stream = _mg_stream(model, history, history_control, temperature, seed, precision)
 
     @torch.inference_mode()
@@ -161,8 +161,8 @@ def _main(argv):
         "--precision",
         choices=sorted(PRECISIONS),
         default="float32",
-        help="MG's sampler: bfloat16 reads its big products in bfloat16, about 1.85x faster for many streams on a CPU "
-        "with AVX512-BF16 (default float32)",
+        help="MG's sampler: bfloat16 reads its big products in bfloat16, 1.85x faster for many streams on an AMD "
+        "Zen 4 CPU but slower on Intel CPUs without AMX (bench/RESULTS.md; default float32)",
     )
     a = ap.parse_args(argv)
     model = load_model(a.checkpoint, a.device)

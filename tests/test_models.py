@@ -103,7 +103,7 @@ def test_bfloat16_sampler_follows_float32_and_repeats_its_bits(tiny_runs, test_s
 
     (full, x32), (low, x16), (_, again) = frames("float32"), frames("bfloat16"), frames("bfloat16")
     assert full.w["Whh"][0].dtype == torch.float32
-    assert low.w["Whh"][0].dtype == low.w["Wc"].dtype == torch.bfloat16 and low.h[0].dtype == torch.float32
+    assert low.w["Whh"][0].dtype == low.w["Wih"][1].dtype == torch.bfloat16 and low.h[0].dtype == torch.float32
     assert x16.dtype == torch.float32 and torch.equal(x16, again)
     gap = (x16 - x32).abs().max()
     assert 1e-6 < gap < 0.05, gap  # standardised units: bfloat16's rounding, not another model
