@@ -10,8 +10,10 @@ frame with its carried state, also without autograd), for 1 stream and a batch o
 floor measured beside them (the fastest of four matmul forms reading the same number of weights). The samplers
 and the floor forms take turns in blocks of frames (one untimed call, then `--block` timed ones), so a change in
 the machine's other traffic hits them alike while each still runs warm, as it does when sampling alone.
-Beside them: the chosen layout with precision="bfloat16" (the big products in bfloat16, accumulated in float32)
-and a bfloat16 floor (the same forms on bfloat16 weights).
+Beside them: the chosen layout's matrix products alone, in the order the model's dependencies force
+(`products_only`: what the model's structure costs above the floor, and the sampler's other work above it); the
+chosen layout with precision="bfloat16" (the big products in bfloat16, accumulated in float32) and a bfloat16
+floor (the same forms on bfloat16 weights).
 Targets: issue 3, <= 12 ms (1) and <= 25 ms (30); issue 15, 30 streams <= 45 ms and <= 1.15x the floor, 1 stream
 <= 1.3x the floor.
 """
@@ -98,9 +100,29 @@ def fastest(timed, prefix):
     return (*timed[name], name[len(prefix) :])
 
 
-BF16 = "bfloat16"  # the picked layout with precision="bfloat16"
+def products_only(stream):
+    """One frame of `stream`'s matrix products alone, in the order its dependencies force: the batched products
+    at the start of the frame, then per step layer 1's lower-half product, layer 2's input product, the output
+    layer and the inverse map; no cells, no coupling. What the sampler takes above this is its elementwise work and
+    per-call overhead; what this takes above the floor is the cost of the model's structure. It scribbles on the
+    stream's buffers, so give it a stream of its own."""
+    mm = stream._mm
+    y0 = torch.randn_like(stream._y_first)
+
+    def frame():
+        stream._y_first.copy_(y0)  # as the sampler starts from z: the values stay those of a real frame
+        stream._frame_start()
+        for wx, wih, wo, bo, winv, bn, cells, y, y_a, _, y_next in stream._steps:
+            cells[0][0].addmm_(*mm(wx, y_a))
+            for layer in range(1, len(cells)):
+                cells[layer][0].addmm_(*mm(wih[layer], cells[layer - 1][-1]))
+            torch.addmm(bo, *mm(wo, cells[-1][-1]), out=stream.out)
+            torch.addmm(bn, *mm(winv, y), out=y_next)
+
+    return frame
 
 
+BF16, PRODUCTS = "bfloat16", "products only"  # the picked layout with precision="bfloat16"; products_only of it
 FLOOR, BF16_FLOOR = "floor ", "bfloat16 floor "  # name prefixes of the floor forms in the timings
 
 
@@ -115,6 +137,7 @@ def bench(model, batch, frames, block):
         streams = {name: MGStream(model, hist, hist_c, 1.0, gen, layout=name) for name in LAYOUTS}
         streams[BF16] = MGStream(model, hist, hist_c, 1.0, gen, layout=picked, precision="bfloat16")
         fns = {name: (lambda st=st: st.step(ctrl)) for name, st in streams.items()}
+        fns[PRODUCTS] = products_only(MGStream(model, hist, hist_c, 1.0, gen, layout=picked))
         fns.update({FLOOR + n: f for n, f in floor_forms(n_all, batch).items()})
         fns.update({BF16_FLOOR + n: f for n, f in floor_forms(n_all, batch, torch.bfloat16).items()})
         timed = time_interleaved(fns, frames, block=block)
@@ -143,10 +166,11 @@ def main():
     print(
         "| streams | row ms/frame (wall, CPU) | col ms/frame (wall, CPU) | picked | plain nn.LSTM ms/frame (wall, CPU) "
         "| picked vs plain (wall, CPU) | floor ms/frame (wall, CPU; fastest matmul form reading the same weights) "
-        "| picked / floor (wall, CPU) | bfloat16 ms/frame (wall, CPU) | bfloat16 floor ms/frame (wall, CPU) "
-        "| bfloat16 / its floor (wall) | bfloat16 / float32 floor (wall) |"
+        "| picked / floor (wall, CPU) | picked's products only ms/frame (wall) | products / floor, picked / products "
+        "(wall) | bfloat16 ms/frame (wall, CPU) | bfloat16 floor ms/frame (wall, CPU) | bfloat16 / its floor (wall) "
+        "| bfloat16 / float32 floor (wall) |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for batch in (1, 30):
         frames = a.frames if batch == 1 else max(20, a.frames // 2)
         fast, (nm, nc), picked = bench(model, batch, frames, a.block)
@@ -154,8 +178,10 @@ def main():
         lm, lc, form = fastest(fast, FLOOR)
         bm, bc = fast[BF16]
         blm, blc, bform = fastest(fast, BF16_FLOOR)
+        pm = fast[PRODUCTS][0]
         rows[batch] = dict(
-            layouts={name: dict(ms=w, cpu_ms=c) for name, (w, c) in fast.items() if "floor" not in name},
+            layouts={name: dict(ms=w, cpu_ms=c) for name, (w, c) in fast.items() if name in (*LAYOUTS, BF16)},
+            products_only_ms=pm,
             picked=picked,
             naive_ms=nm,
             naive_cpu_ms=nc,
@@ -169,7 +195,8 @@ def main():
         print(
             f"| {batch} | {fast['row'][0]:.1f}, {fast['row'][1]:.1f} | {fast['col'][0]:.1f}, {fast['col'][1]:.1f} "
             f"| {picked} | {nm:.1f}, {nc:.1f} | {nm / fm:.2f}x, {nc / fc:.2f}x "
-            f"| {lm:.1f}, {lc:.1f} ({form}) | {fm / lm:.2f}, {fc / lc:.2f} | {bm:.1f}, {bc:.1f} "
+            f"| {lm:.1f}, {lc:.1f} ({form}) | {fm / lm:.2f}, {fc / lc:.2f} | {pm:.1f} | {pm / lm:.2f}, {fm / pm:.2f} "
+            f"| {bm:.1f}, {bc:.1f} "
             f"| {blm:.1f}, {blc:.1f} ({bform}) | {bm / blm:.2f} | {bm / lm:.2f} |",
             flush=True,
         )
