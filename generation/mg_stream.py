@@ -21,23 +21,22 @@ class MGStream:
     Where the time goes (paper size: 73M LSTM weights, all read once per frame) and how it is cut:
     (1) everything in the coupling LSTMs' gates that is known at the start of a frame is computed for all K
     steps at once, one batched matmul per layer: layer 1's recurrent and history/control products side by side
-    (weights [Whh | Wc | bias | 0] on the input [h_{t-1}; history, control; 1; 0]), layer 2's recurrent product with
-    its bias the same way ([Whh | bias | 0] on [h_{t-1}; 1; 0]), inputs padded to a multiple of 16 columns (one
-    1184-deep product runs ~7% faster at 30 streams on an Intel Xeon than two of 512 and 672, and no slower on AMD);
-    (2) per step only what depends on the previous step's output is left: layer 1's lower-half product, layer 2's
-    2048x512 input product, the cells, the output layer, the coupling and the 63x63 inverse, all in place on
-    preallocated buffers through views made once (the flow's value alternates between two buffers); (3) weights
-    are fused once
-    (actnorm folded into the inverse linear map, the coupling's SCALE_OFFSET into the output bias, shift/scale rows
-    contiguous, gates reordered to i, f, o, g so one sigmoid covers three); (4) no autograd.
-    Starts with h = 0 (paper footnote 2).
+    (weights [Whh | Wc | bias | 0] on the input [h_{t-1}; history, control; 1; 0]), layer 2's recurrent product
+    with its bias the same way ([Whh | bias | 0] on [h_{t-1}; 1; 0]), inputs padded to a multiple of 16 columns
+    (one 1184-deep product runs ~7% faster at 30 streams on an Intel Xeon than two of 512 and 672, and within 3%
+    either way on an AMD EPYC); (2) per step only what depends on the previous step's output is left: layer 1's
+    lower-half product, layer 2's 2048x512 input product, the cells, the output layer, the coupling and the 63x63
+    inverse, all in place on preallocated buffers through views made once (the flow's value alternates between
+    two buffers); (3) weights are fused once (actnorm folded into the inverse linear map, the coupling's
+    SCALE_OFFSET into the output bias, shift/scale rows contiguous, gates reordered to i, f, o, g so one sigmoid
+    covers three); (4) no autograd. Starts with h = 0 (paper footnote 2).
 
     precision="bfloat16" reads the big products' weights (the LSTMs' recurrent, history/control and layer-2 input
-    weights, 98% of the bytes) and their inputs in bfloat16; the products still add up in float32, and the gates,
-    cells, states, output layers and inverse maps stay float32. On an AMD Zen 4 CPU that runs 30 streams about
-    1.85x faster; on an Intel Xeon with AVX512-BF16 but no AMX it ran 1.3x slower, and one stream gains nothing
-    anywhere (bench/RESULTS.md). It is the same model to within bfloat16's rounding of those weights (RESULTS has
-    its motion figures). The default is float32.
+    weights, 98% of the bytes, with the LSTM biases that ride in them) and their inputs in bfloat16; the products
+    still add up in float32, and the gates, cells, states, output layers and inverse maps stay float32. On an AMD
+    Zen 4 CPU that runs 30 streams about 1.85x faster; on an Intel Xeon with AVX512-BF16 but no AMX it ran 1.3x
+    slower, and one stream gains nothing anywhere (bench/RESULTS.md). It is the same model to within bfloat16's
+    rounding of those weights (RESULTS has its motion figures). The default is float32.
 
     Two memory layouts compute the same thing (they differ only in float rounding):
     "row": activations [B, features], weights stored [in, out], every product X @ W;
