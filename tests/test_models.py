@@ -200,6 +200,28 @@ def test_layout_is_a_fixed_choice_never_a_timing(tiny_runs, monkeypatch):
         MGStream(model, hist, hist_c, layout="diagonal")
 
 
+@pytest.mark.parametrize("layout", ["row", "col"])
+@pytest.mark.parametrize("streams", [1, 3])
+def test_stream_frames_are_the_callers_own(tiny_runs, layout, streams):
+    """A frame returned by step() is a tensor of its own: the next step(), which reuses the stream's buffers,
+    leaves it as it was, and it matches the frame that a fresh stream gives for the same inputs."""
+    from generation.mg_stream import MGStream
+
+    model = load_model(last_ckpt(tiny_runs["mg"]))
+    g = torch.Generator().manual_seed(1)
+    hist, hist_c = torch.randn(streams, model.tau, 63, generator=g), torch.randn(streams, model.tau, 3, generator=g)
+    c, z = torch.randn(2, streams, 3, generator=g), torch.randn(2, streams, 63, generator=g)
+    dev = model.x_mean.device
+    hist, hist_c, c, z = hist.to(dev), hist_c.to(dev), c.to(dev), z.to(dev)
+    stream = MGStream(model, hist, hist_c, layout=layout)
+    first = stream.step(c[0], z=z[0])
+    kept = first.clone()
+    second = stream.step(c[1], z=z[1])
+    assert torch.equal(first, kept)
+    assert not torch.equal(first, second)
+    assert torch.equal(first, MGStream(model, hist, hist_c, layout=layout).step(c[0], z=z[0]))
+
+
 @pytest.mark.parametrize("kind, precision", [("mg", "float32"), ("mg", "bfloat16"), ("fl", "float32")])
 def test_two_sampling_processes_give_identical_bits(tiny_runs, small_dataset, tmp_path, kind, precision):
     """The same checkpoint, seed and inputs in two fresh processes: the same clip files, byte for byte (on a GPU
