@@ -345,7 +345,7 @@ def parse_args(argv):
     ap.add_argument(
         "--precision",
         help="override the config's for training: float32 | bfloat16 (the coupling networks in bfloat16, about 1.4x "
-        "faster on CPUs with AVX512-BF16; see generation.train)",
+        "faster on AMD Zen 4 CPUs and slower on Intel CPUs without AMX; see generation.train)",
     )
     ap.add_argument("--mg-checkpoint", help="MG checkpoint to sample from (skips MG training)")
     ap.add_argument("--fl-checkpoint", help="FL checkpoint to sample from (skips FL training)")

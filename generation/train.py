@@ -60,8 +60,8 @@ TRAIN_DEFAULTS = dict(
     stance_temperature=0.0,
     category_balance=0.0,
     # one of flows.PRECISIONS. 'bfloat16': the coupling networks run under autocast (flows.set_net_precision); about
-    # 1.4x the steps/s of float32 on a CPU with AVX512-BF16 at mg_cpu's size, at the same likelihood per step
-    # (bench/RESULTS.md). Slower where the CPU lacks bfloat16 arithmetic; not yet measured on a GPU.
+    # 1.4x the steps/s of float32 on an AMD Zen 4 CPU at mg_cpu's size, at the same likelihood per step, but 0.67x
+    # on an Intel Xeon with AVX512-BF16 and no AMX (bench/RESULTS.md); not yet measured on a GPU.
     precision="float32",
 )
 
@@ -493,7 +493,8 @@ def _main(argv):
         "--precision",
         choices=sorted(flows.PRECISIONS),
         default=None,
-        help="override the config's: bfloat16 runs the coupling networks in bfloat16 (faster on CPUs with AVX512-BF16)",
+        help="override the config's: bfloat16 runs the coupling networks in bfloat16 (faster on AMD Zen 4, slower on "
+        "Intel CPUs without AMX; bench/RESULTS.md)",
     )
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     a = ap.parse_args(argv)
