@@ -7,10 +7,13 @@ Every stage is a real process talking through the files and HTTP API of CONTRACT
 researcher would run them by hand. Everything started here is stopped at the end, also on Ctrl-C or error.
 
     python -m analysis.demo [--out demo/] [--db postgresql://127.0.0.1:5432/test] [--raters 60]
-                            [--design acr|pairwise|parallel]
+                            [--design acr|pairwise|parallel|appropriateness] [--sound]
 
-With --design pairwise or parallel the app runs that test design (CONTRACTS §8), the crowd answers it, the export is
-pairs.csv (pairwise) or the parallel ratings.csv, and the report is that design's.
+With --design pairwise, parallel or appropriateness the app runs that test design (CONTRACTS §8), the crowd answers
+it, the export is pairs.csv (pairwise, appropriateness) or the parallel ratings.csv, and the report is that
+design's. With --sound (implied by appropriateness) the stimuli are a study of your own motion with speech
+(generation.demo_study: real non-locomotion mocap, two made-up systems, speech synthesised by espeak-ng), the
+videos carry it, and every simulated rater passes the sound check first.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ import urllib.request
 from pathlib import Path
 
 from core import cli
-from core.study import DESIGNS
+from core.study import DESIGNS, PAIR_DESIGNS
 
 
 class DemoError(cli.UserError):
@@ -132,6 +135,7 @@ def run_demo(
     timeout_s: float = 1800.0,
     min_view: float = 0.01,
     design: str = "acr",
+    sound: bool = False,
 ) -> dict:
     """Run the study; returns paths and the crowd's summary. `stimuli` reuses an existing folder."""
     out = Path(out)
@@ -141,7 +145,21 @@ def run_demo(
     procs = Processes()
     t0 = time.monotonic()
     try:
-        if stimuli is None:
+        sound = sound or design == "appropriateness"
+        if stimuli is None and sound:
+            stimuli = out / "stimuli"
+            _stage(f"1/5 a study with sound (generation.demo_study) → {stimuli}")
+            procs.run(
+                [py, "-m", "generation.demo_study", "--out", str(out / "study"), "--seed", str(seed)]
+                + (["--appropriateness"] if design == "appropriateness" else []),
+                "generation.demo_study",
+            )
+            procs.run(
+                [py, "-m", "generation.make_stimuli", "--study", str(out / "study" / "study.toml"), "--out"]
+                + [str(stimuli), "--size", "320"],
+                "make_stimuli",
+            )
+        elif stimuli is None:
             stimuli = out / "stimuli"
             _stage(f"1/5 make stimuli (--quick) → {stimuli}")
             procs.run(
@@ -253,7 +271,7 @@ def run_demo(
                 f"the crowd of {raters} raters did not fill every clip's {ratings_per_clip} ratings; raise --raters"
             )
 
-        ratings = out / ("pairs.csv" if design == "pairwise" else "ratings.csv")
+        ratings = out / ("pairs.csv" if design in PAIR_DESIGNS else "ratings.csv")
         _stage(f"4/5 export {ratings.name}")
         _export(url, token, ratings)
         procs.stop_all()
@@ -307,8 +325,14 @@ def _main(argv) -> int:
         "--design",
         choices=DESIGNS,
         default="acr",
-        help="test design: acr (one clip, 1-5; default), pairwise (two clips, a preference) or parallel "
-        "(every condition of an item on one page, 0-100); targets count pairs or pages",
+        help="test design: acr (one clip, 1-5; default), pairwise (two clips, a preference), parallel "
+        "(every condition of an item on one page, 0-100) or appropriateness (a system's motion for the speech heard "
+        "against its motion for other speech); targets count pairs or pages",
+    )
+    p.add_argument(
+        "--sound",
+        action="store_true",
+        help="a study with speech in every video (implied by --design appropriateness): see above",
     )
     a = p.parse_args(argv)
     try:
@@ -324,6 +348,7 @@ def _main(argv) -> int:
             stimuli=Path(a.stimuli) if a.stimuli else None,
             min_view=a.min_view,
             design=a.design,
+            sound=a.sound,
         )
     except KeyboardInterrupt:
         print("interrupted: everything the demo started has been stopped", file=sys.stderr)

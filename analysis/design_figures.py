@@ -116,3 +116,32 @@ def parallel_boxplot(t, summary, path, title=None):
         if title:
             ax.set_title(text(title))
         return _save(fig, path)
+
+
+def mas_bars(table, path, title=None):
+    """Appropriateness: each system's MAS with its 95% interval (0 = chance), and beside it the shares of answers
+    preferring the matched motion, no preference and the mismatched one, as GENEA 2023 draws them."""
+    order = list(table["condition"])[::-1]
+    col = colours(order)
+    rows = table.set_index("condition")
+    with matplotlib.rc_context(STYLE):
+        fig, (ax, bx) = subplots(1, 2, figsize=(9.0, 0.45 * len(order) + 1.2), sharey=True)
+        for i, c in enumerate(order):
+            ax.plot([rows.at[c, "ci_low"], rows.at[c, "ci_high"]], [i, i], color=col[c], lw=2)
+            ax.plot(rows.at[c, "mas"], i, "o", color=col[c])
+            left = 0.0
+            for key, colour in zip(
+                ("matched", "tie", "mismatched"), (LEVEL_COLOURS[0], LEVEL_COLOURS[2], LEVEL_COLOURS[4])
+            ):
+                bx.barh(i, rows.at[c, key], left=left, color=colour, height=0.6)
+                left += rows.at[c, key]
+        ax.set_yticks(range(len(order)))
+        ax.set_yticklabels([text(c) for c in order])
+        ax.axvline(0, color="black", lw=0.6, ls=":")
+        ax.set_xlabel("mean appropriateness score (MAS), 95% interval; 0 = chance")
+        bx.set_xlim(0, 1)
+        bx.axvline(0.5, color="black", lw=0.6, ls=":")
+        bx.set_xlabel("share: matched preferred | no preference | mismatched preferred")
+        if title:
+            fig.suptitle(text(title))
+        return _save(fig, path)

@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from . import design_figures, pairwise, parallel
+from . import appropriateness, design_figures, pairwise, parallel
 from .load import AnalysisError
 
 
@@ -28,7 +28,9 @@ def detect_design(path) -> str:
     except (UnicodeDecodeError, csv.Error):
         return "acr"  # the acr loader names the problem
     cols = {c.strip() for c in header}
-    return "pairwise" if "preference" in cols else "parallel" if "page_id" in cols else "acr"
+    if "preference" in cols:
+        return "appropriateness" if appropriateness.MATCHED in cols else "pairwise"
+    return "parallel" if "page_id" in cols else "acr"
 
 
 def _exclude(df, failed):
@@ -62,6 +64,16 @@ def _pairwise_json(res):
     }
 
 
+def _appropriateness_json(res):
+    t = res["mas"].set_index("condition")
+    return {
+        "n_test_answers": res["n_test_answers"],
+        "n_raters": res["n_raters"],
+        "n_items": res["n_items"],
+        "mas": {c: {k: t.at[c, k] for k in t.columns} for c in t.index},
+    }
+
+
 def _parallel_json(res):
     s = res["summary"]
     return {
@@ -83,7 +95,15 @@ def _html(design, meta, counts, kept, everyone, figs):
 
     def section(res, title):
         parts = [f"<h2>{html.escape(title)}</h2>"]
-        if design == "pairwise":
+        if design == "appropriateness":
+            parts += [
+                f"<p>{res['n_test_answers']} test answers from {res['n_raters']} raters on {res['n_items']} "
+                "items.</p><h3>Mean appropriateness score (MAS: +2 = the matched motion clearly preferred, -2 = the "
+                "mismatched one; 0 = chance), 95% Student-t interval, shares of preferences, sign test against "
+                "chance (ties dropped), Holm</h3>",
+                acr._fmt_table(res["mas"], ("p", "p_holm")),
+            ]
+        elif design == "pairwise":
             bt = res["bradley_terry"]
             table = res["pairs"][
                 ["condition_a", "condition_b", "wins_a", "wins_b", "ties", "n", "p", "p_holm", "reject"]
@@ -138,7 +158,15 @@ def _console(design, counts, kept):
         f"{counts['n_raters_excluded']} excluded for a failed catch trial)",
         "",
     ]
-    if design == "pairwise":
+    if design == "appropriateness":
+        lines.append(f"{'system':<14}{'n':>6}{'MAS':>8}{'95% interval':>18}{'matched %':>11}{'p (Holm)':>10}")
+        for _, r in kept["mas"].iterrows():
+            ci = f"[{r['ci_low']:.2f}, {r['ci_high']:.2f}]"
+            lines.append(
+                f"{r['condition']:<14}{r['n']:>6}{r['mas']:>8.2f}{ci:>18}{r['percent_matched']:>11.1f}"
+                f"{r['p_holm']:>10.3g}"
+            )
+    elif design == "pairwise":
         lines.append(f"{'pair':<18}{'wins':>6}{'ties':>6}{'losses':>8}{'sign p (Holm)':>15}")
         for _, r in kept["pairs"].iterrows():
             p = "n/a" if r["p_holm"] != r["p_holm"] else f"{r['p_holm']:.3g}"
@@ -171,8 +199,10 @@ def build(path, out_dir="report", design=None, n_boot=2000, seed=0, alpha=0.05, 
 
     t0 = time.perf_counter()
     design = design or detect_design(path)
-    mod = pairwise if design == "pairwise" else parallel
-    df = pairwise.load_pairs(path) if design == "pairwise" else parallel.load_pages(path)
+    mod = {"pairwise": pairwise, "parallel": parallel, "appropriateness": appropriateness}[design]
+    df = {"pairwise": pairwise.load_pairs, "parallel": parallel.load_pages}.get(design, appropriateness.load_answers)(
+        path
+    )
     kept_rows, counts = _exclude(df, mod.failed_raters(df))
     if not (kept_rows["role"] == "test").any():
         raise AnalysisError(f"{path}: every rater failed the catch trials; no test answers are left")
@@ -181,12 +211,17 @@ def build(path, out_dir="report", design=None, n_boot=2000, seed=0, alpha=0.05, 
     opts = dict(n_boot=n_boot, seed=seed, alpha=alpha)
     if design == "parallel":
         opts["mixed"] = mixed
+    if design == "appropriateness":
+        opts = dict(alpha=alpha)
     try:
         kept, everyone = mod.analyse(kept_rows, **opts), mod.analyse(df, **opts)
     except AnalysisError as exc:
         raise AnalysisError(f"{path}: {exc}") from None
     fig_dir = out / "figures"
-    if design == "pairwise":
+    if design == "appropriateness":
+        figs = {"mas": design_figures.mas_bars(kept["mas"], fig_dir / "mas.png")}
+        section = _appropriateness_json
+    elif design == "pairwise":
         figs = {
             "preference_bars": design_figures.preference_bars(kept["pairs"], fig_dir / "preference_bars.png"),
             "bradley_terry": design_figures.bradley_terry(kept["bradley_terry"], fig_dir / "bradley_terry.png"),

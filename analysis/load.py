@@ -139,3 +139,8 @@ def load_ratings(path):
 def load_metrics(path):
     """metrics.csv -> DataFrame indexed by clip_id (core.tables.read_metrics), errors as AnalysisError."""
     return tables.read_metrics(path, AnalysisError)
+
+
+def load_c2st(path):
+    """c2st.csv -> DataFrame (core.tables.read_c2st), errors as AnalysisError."""
+    return tables.read_c2st(path, AnalysisError)

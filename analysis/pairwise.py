@@ -38,17 +38,7 @@ def load_pairs(path):
     """pairs.csv -> DataFrame (index = file line). Each problem is one AnalysisError naming the file and line:
     missing columns, empty fields, a preference that is not an integer -2..2, an unknown role, the same condition
     on both sides, the same clip twice, a repeated comparison by one rater, no test rows."""
-    path, df = read_export(path, REQUIRED, "answers", strip=True)
-    ok = df["preference"].isin([str(v) for v in LEVELS] + ["+1", "+2"])
-    if not ok.all():
-        line = (~ok).idxmax()
-        raise AnalysisError(f"{path}:{line}: preference {df.at[line, 'preference']!r} is not an integer -2..2")
-    df["preference"] = df["preference"].astype(int)
-    df["role"] = df["role"].str.lower()
-    bad_role = ~df["role"].isin(ROLES)
-    if bad_role.any():
-        line = bad_role.idxmax()
-        raise AnalysisError(f"{path}:{line}: unknown role {df.at[line, 'role']!r} (expected test or catch)")
+    path, df = read_preferences(path, REQUIRED)
     same = df["condition_a"] == df["condition_b"]
     if same.any():
         line = same.idxmax()
@@ -71,6 +61,23 @@ def load_pairs(path):
     if not (df["role"] == "test").any():
         raise AnalysisError(f"{path}: no test answers (every row is a catch trial)")
     return df
+
+
+def read_preferences(path, required):
+    """(path, DataFrame) of an export of preferences (pairwise, appropriateness): the `required` columns, the
+    preference an integer -2..2 and the role test or catch (lower-cased), or one AnalysisError naming the line."""
+    path, df = read_export(path, required, "answers", strip=True)
+    ok = df["preference"].isin([str(v) for v in LEVELS] + ["+1", "+2"])
+    if not ok.all():
+        line = (~ok).idxmax()
+        raise AnalysisError(f"{path}:{line}: preference {df.at[line, 'preference']!r} is not an integer -2..2")
+    df["preference"] = df["preference"].astype(int)
+    df["role"] = df["role"].str.lower()
+    bad_role = ~df["role"].isin(ROLES)
+    if bad_role.any():
+        line = bad_role.idxmax()
+        raise AnalysisError(f"{path}:{line}: unknown role {df.at[line, 'role']!r} (expected test or catch)")
+    return path, df
 
 
 # ---------------------------------------------------------------------------------------------- exclusion

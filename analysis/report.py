@@ -22,7 +22,7 @@ from core import cli
 
 from . import figures, stats
 from .filtering import DEFAULT_THRESHOLD, exclude_raters, only_test_rows
-from .load import AnalysisError, load_metrics, load_ratings
+from .load import AnalysisError, load_c2st, load_metrics, load_ratings
 
 # The REML fit costs ~150 Cholesky factorisations of a (smaller of raters, clips)-square matrix; beyond this
 # many levels it is skipped unless forced (1M ratings from 3,226 raters x 310 clips fit in ~10 s).
@@ -196,6 +196,8 @@ def section_json(res):
 
 def to_json(counts, kept, everyone, meta):
     doc = {**meta, **counts, **section_json(kept)}
+    if kept.get("c2st") is not None:
+        doc["c2st"] = _records(kept["c2st"])
     doc["without_exclusion"] = section_json(everyone)
     return _clean(doc)
 
@@ -433,6 +435,16 @@ def _section_html(res, title, figs=None, ordinal_fig=None):
             "<h3>Objective metrics vs per-clip mean rating</h3>",
             _fmt_table(res["metrics"], ("pearson_p", "spearman_p")),
         ]
+    if res.get("c2st") is not None:
+        parts += [
+            "<h3>Classifier two-sample test against the reference</h3>",
+            "<p class=note>Out-of-fold AUC of a logistic regression on per-clip motion statistics telling each "
+            "condition's clips from the reference's, folds grouped by item (Lopez-Paz &amp; Oquab 2017): 0.5 = "
+            "it cannot tell them apart, 1 = it always can. NAT:split is the reference against itself, the "
+            "test's floor. A low AUC is no proof of quality: only that these statistics on this many items show "
+            "no difference.</p>",
+            _fmt_table(res["c2st"], ()),
+        ]
     return "\n".join(parts)
 
 
@@ -527,6 +539,8 @@ def build_report(
     t0 = time.perf_counter()
     df = load_ratings(ratings_path)
     metrics = load_metrics(metrics_path) if metrics_path else None
+    c2st_path = Path(metrics_path).parent / "c2st.csv" if metrics_path else None
+    c2st = load_c2st(c2st_path) if c2st_path and c2st_path.is_file() else None
     kept_rows, counts = exclude_raters(df, threshold)
     kept_test, all_test = only_test_rows(kept_rows), only_test_rows(df)
     if len(kept_test) == 0:
@@ -551,6 +565,7 @@ def build_report(
     try:
         kept = analyse(kept_test, **opts)
         everyone = analyse(all_test, **opts)
+        kept["c2st"] = c2st
     except AnalysisError as exc:
         bar.close()  # leave=False: the bar disappears, the error line stands alone
         raise AnalysisError(f"{ratings_path}: {exc}") from None

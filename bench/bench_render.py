@@ -4,8 +4,9 @@
 
 Both render the same real 80-frame walk (4 s at 20 fps) at size x size to H.264 (libx264, one thread)
 with the process and its ffmpeg child pinned to one core. Reported per clip: wall time and CPU time
-(this process + ffmpeg), the best of `repeats`; ours with its default x264 settings (ultrafast, qp 17)
-against the baseline at ultrafast, and with the old default (superfast, crf 20) against it at superfast.
+(this process + ffmpeg), the best of `repeats`; ours with its default x264 settings (ultrafast, every frame one
+size: rendering.encode) and with the default before issue 37 (ultrafast, qp 17) against the baseline at ultrafast,
+and with the older default (superfast, crf 20) against it at superfast.
 The baseline is what one writes first: an mplot3d figure with a floor grid, one Line3D per bone updated
 in FuncAnimation, saved with FFMpegWriter.
 """
@@ -101,8 +102,9 @@ def main(argv=None):
     tmp = Path(tempfile.mkdtemp())
     # (label, our render_clip options, the baseline's x264 preset)
     configs = [
-        ("default: ultrafast qp 17", dict(preset="ultrafast"), "ultrafast"),
-        ("superfast crf 20 (old default)", dict(preset="superfast", crf=20), "superfast"),
+        ("default: ultrafast, one frame size", dict(preset="ultrafast"), "ultrafast"),
+        ("ultrafast qp 17 (until issue 37)", dict(preset="ultrafast", qp=17), "ultrafast"),
+        ("superfast crf 20 (older default)", dict(preset="superfast", crf=20), "superfast"),
     ]
     rows = []
     for label, kw, preset in configs:
@@ -123,6 +125,7 @@ def main(argv=None):
 
     draw = measure(draw_only, args.repeats)
     ours640 = measure(lambda: render_clip(clip, tmp / "o640.mp4", size=640, threads=1), args.repeats)
+    qp640 = measure(lambda: render_clip(clip, tmp / "q640.mp4", size=640, threads=1, qp=17), args.repeats)
     load = os.getloadavg()[0]
     print(
         f"80-frame clip, {args.size}x{args.size}, one core (#{args.core}), best of {args.repeats}; "
@@ -135,13 +138,17 @@ def main(argv=None):
     for label, (ow, oc), (bw, bc) in rows:
         print(f"{label:<32}{ow:>9.3f}s{oc:>9.3f}s{bw:>14.3f}s{bc:>13.3f}s{bw / ow:>14.1f}x{bc / oc:>13.1f}x")
     print(f"target: <= 0.3 s where the baseline takes ~2.1 s (a quiet machine), i.e. a speed-up >= {2.1 / 0.3:.1f}x")
+    (dw, dc), (qw, qc) = rows[0][1], rows[1][1]
+    print(f"default against ultrafast qp 17 (the default until issue 37): wall {dw / qw:.2f}x, cpu {dc / qc:.2f}x")
     print(f"first clip of a process (computes the floor maps): wall {first[0]:.3f} s, cpu {first[1]:.3f} s")
     print(
         f"of which drawing the 80 frames (no encoding): wall {draw[0]:.3f} s, cpu {draw[1]:.3f} s; the rest is "
         "the pipe and ffmpeg (libx264; the frames arrive as yuv420p)"
     )
     print(
-        f"ours at 640x640 (the stimulus size, default x264 settings): wall {ours640[0]:.3f} s, cpu {ours640[1]:.3f} s"
+        f"ours at 640x640 (the stimulus size, default x264 settings): wall {ours640[0]:.3f} s, cpu {ours640[1]:.3f} s; "
+        f"at qp 17 {qp640[0]:.3f} s, {qp640[1]:.3f} s (default / qp 17: wall {ours640[0] / qp640[0]:.2f}x, "
+        f"cpu {ours640[1] / qp640[1]:.2f}x)"
     )
 
 

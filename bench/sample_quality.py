@@ -14,7 +14,8 @@ Per category it prints the median of three figures per clip:
 - jerk (m/s^3), foot skating (m/s) and control following (m): generation.metrics, on the clip in world
   coordinates.
 Over all windows it also prints each system's Fréchet motion distance to training motion of the same categories
-(generation.motion_encoder; NAT's is the floor) and the medians as ratios to NAT's.
+(generation.motion_encoder; NAT's is the floor), the medians as ratios to NAT's, and each model's classifier
+two-sample test against NAT (generation.c2st), once per seed, with its spread over seeds.
 The figure shows the feet of the first window of five categories (rows: NAT, then each model).
 """
 
@@ -27,7 +28,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from core.study import NATURAL as NAT  # noqa: E402
-from generation import skeleton  # noqa: E402
+from generation import c2st, skeleton  # noqa: E402
 from generation.dataset import read_arrays, require  # noqa: E402
 from generation.features import to_world  # noqa: E402
 from generation.flows import PRECISIONS  # noqa: E402
@@ -99,6 +100,23 @@ def sample_systems(a, x_nat, n):
                 "figures and FMD use the rest"
             )
     return systems, finite
+
+
+def print_c2st(systems, finite, c, fps):
+    """Each model's classifier two-sample test against NAT (generation.c2st: per-window motion statistics, a
+    logistic regression, folds grouped by window), once per seed: the mean AUC and its spread over seeds."""
+
+    def feats(x, idx):
+        return {int(i): c2st.clip_features(to_world(x[i], c[i]), fps, skeleton.PARENTS) for i in idx}
+
+    nat = feats(systems[NAT][0], finite[NAT][0])
+    print("\nclassifier two-sample test against NAT (AUC: 0.5 = indistinguishable, 1 = always told apart)")
+    print("| system | AUC, mean over seeds | sd over seeds | seeds |")
+    print("|---|---|---|---|")
+    print(f"| NAT split in two | {c2st.c2st_self(nat)['auc']:.3f} | {c2st.c2st_self(nat)['auc_sd']:.3f} | 10 splits |")
+    for name, xs in list(systems.items())[1:]:
+        aucs = [c2st.c2st(nat, feats(x, f), seeds=1)["auc"] for x, f in zip(xs, finite[name])]
+        print(f"| {name} | {np.mean(aucs):.3f} | {np.std(aucs):.3f} | {len(aucs)} |")
 
 
 def main():
@@ -176,6 +194,8 @@ def main():
             f"{overall(name, 'skating') / overall('NAT', 'skating'):.1f} | "
             f"{overall(name, 'jerk') / overall('NAT', 'jerk'):.2f} | {overall(name, 'following'):.3f} | {worst:.2f} |"
         )
+
+    print_c2st(systems, finite, c, fps)
 
     if a.figure:
         import matplotlib

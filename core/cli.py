@@ -14,8 +14,18 @@ import argparse
 import logging
 import math
 import sys
+from importlib import metadata
 
 EXIT_USAGE = 2
+DIST = "moglow-eval"
+
+
+def version() -> str:
+    """The package's version, from its installed metadata (pyproject.toml is the one place it is written)."""
+    try:
+        return metadata.version(DIST)
+    except metadata.PackageNotFoundError:
+        return "unknown (not installed: pip install -e .)"
 
 
 class UserError(ValueError):
@@ -23,7 +33,12 @@ class UserError(ValueError):
 
 
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse, but a bad flag gives one line (``error: argument --fps: ...``), not usage plus message."""
+    """argparse, but a bad flag gives one line (``error: argument --fps: ...``), not usage plus message; every
+    command and subcommand answers ``--version``."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.add_argument("--version", action="version", version=f"moglow-eval {version()}")
 
     def error(self, message):
         self.exit(EXIT_USAGE, f"error: {self.prog}: {message} (see --help)\n")

@@ -19,7 +19,10 @@ RATED_ROLES = ("test", "catch")  # the roles that reach a ratings export
 # A rating of a BAD clip at or above this, on the paper's 1-5 scale, fails the catch trial (paper §5.2).
 CATCH_FAIL_AT = 3
 
-DESIGNS = ("acr", "pairwise", "parallel")  # CONTRACTS §8; "acr" is the paper's one-clip-at-a-time design
+DESIGNS = ("acr", "pairwise", "parallel", "appropriateness")  # CONTRACTS §8; "acr" is the paper's design
+# Designs whose trial is a pair of clips answered with a preference -2..2: pairwise (which condition looks more
+# natural) and appropriateness (GENEA 2023: which of a system's two motions fits the speech heard better).
+PAIR_DESIGNS = ("pairwise", "appropriateness")
 
 # Clip ids are random, so a file or URL name tells a rater nothing about the condition (CONTRACTS §4).
 CLIP_ID = re.compile(r"[a-z0-9]{12,64}")  # always fullmatch
@@ -27,7 +30,7 @@ CLIP_ID_LENGTH = 16  # what make_stimuli writes
 CLIP_ID_ALPHABET = "abcdefghijklmnopqrstuvwxyz0123456789"
 
 # Per-clip objective metrics in metrics.csv (CONTRACTS §4), in column order; generation.metrics computes them.
-METRIC_NAMES = ("foot_skating", "bone_length_std", "jerk", "control_error", "control_following")
+METRIC_NAMES = ("foot_skating", "bone_length_std", "jerk", "control_error", "control_following", "acceleration")
 METRIC_KEYS = ("clip_id", "condition", "role", "item")  # the columns of metrics.csv that are not metrics
 
 

@@ -77,12 +77,34 @@ def read_metrics(path, error=TableError):
         raise error(f"{path}: no metric columns besides {', '.join(study.METRIC_KEYS)}")
     out = pd.DataFrame(index=df["clip_id"].to_numpy())
     for col in metric_cols:
-        text = df[col].str.strip()
-        values = pd.to_numeric(text.replace("", np.nan).replace("nan", np.nan), errors="coerce")
-        bad = values.isna() & ~text.isin(["", "nan"])
-        if bad.any():
-            line = first_line(bad)
-            raise error(f"{path}:{line}: {col} {df.at[line, col]!r} is not a number")
-        out[col] = values.to_numpy(dtype=float)
+        out[col] = _numbers(path, df, col, error)
     out.index.name = "clip_id"
     return out
+
+
+def _numbers(path, df, col, error):
+    """Column `col` as floats: an empty cell or `nan` is NaN (not measured), anything else not a number is one
+    error naming the file and line."""
+    text = df[col].str.strip()
+    values = pd.to_numeric(text.replace("", np.nan).replace("nan", np.nan), errors="coerce")
+    bad = values.isna() & ~text.isin(["", "nan"])
+    if bad.any():
+        line = first_line(bad)
+        raise error(f"{path}:{line}: {col} {df.at[line, col]!r} is not a number")
+    return values.to_numpy(dtype=float)
+
+
+C2ST_COLUMNS = ("condition", "n_items", "auc", "auc_sd", "accuracy")  # c2st.csv (CONTRACTS §4)
+
+
+def read_c2st(path, error=TableError):
+    """c2st.csv (the classifier two-sample test of each condition against the reference) -> DataFrame with
+    C2ST_COLUMNS, numbers parsed; one line naming the file and row otherwise."""
+    path, df = read_csv(path, error)
+    missing = [c for c in C2ST_COLUMNS if c not in df.columns]
+    if missing:
+        raise error(f"{path}: missing required column {missing[0]} (header has: {', '.join(df.columns)})")
+    out = df[list(C2ST_COLUMNS)].copy()
+    for col in C2ST_COLUMNS[1:]:
+        out[col] = _numbers(path, df, col, error)
+    return out.reset_index(drop=True)

@@ -34,16 +34,27 @@ from tqdm import tqdm
 
 from core import cli, study
 from core.clip import save_clip
-from rendering.blinding import pad_to_common_size, same_mtime
+from core.tables import C2ST_COLUMNS
 from rendering.render import size_flag
 
-from . import pretrained, skeleton
+from . import c2st, pretrained, skeleton
+from .catch_kinds import KINDS as TOOL_CATCH_KINDS
+from .catch_kinds import make_catch
 from .dataset import read_heldout
 from .features import to_features, to_world
 from .items import CATCH, TEST, TRAINING, category_counts, item_arrays, positions, select_items
 from .metrics import clip_metrics
-from .render_pool import render_all
-from .stimuli_files import StimuliError, clip_files, manifest_row, prepare_out, write_items, write_tables
+from .render_pool import render_stimuli
+from .stimuli_files import (
+    StimuliError,
+    clip_files,
+    manifest_row,
+    prepare_out,
+    summary_text,
+    write_csv,
+    write_items,
+    write_tables,
+)
 from .systems import canonical_placement, find_system_files, load_system_motion, parse_system_spec
 
 # torch is never imported at module level here (training, sampling and the motion encoder import it inside the
@@ -52,6 +63,7 @@ from .systems import canonical_placement, find_system_files, load_system_motion,
 
 log = logging.getLogger(__name__)
 MG, FL = study.GENERATED
+MG_EARLY = "mg-early"  # the paper's catch clips: samples of the earliest MG checkpoint (--bad-checkpoint)
 # Sampling seeds are offsets of --seed, one per sampled condition, so each condition's noise is its own.
 SEED_OFFSET = {MG: 1, FL: 2, study.CATCH: 3}
 
@@ -174,8 +186,10 @@ def sample_clips(args, dataset, items, arrays):
             (MG, ("mg", mg_ckpt), gen_items + catch),
             (FL, ("fl", fl_ckpt), gen_items + catch),
         ]
-        if catch:
-            plan.append((study.CATCH, ("mg", bad_ckpt), catch))
+        kind = {k: args.catch_kinds[j % len(args.catch_kinds)] for j, k in enumerate(catch)}
+        sampled = [k for k in catch if kind[k] == MG_EARLY]
+        if sampled:
+            plan.append((study.CATCH, ("mg", bad_ckpt), sampled))
         clips = []
         for cond, model, idx in tqdm(plan, desc="sample", unit="condition", file=sys.stderr, disable=not args.progress):
             x, seed = arrays["x"][idx], ""
@@ -184,6 +198,12 @@ def sample_clips(args, dataset, items, arrays):
                 x = sample_condition(*model, arrays, idx, args.temperature, seed, args.device)
             joints = to_world(x, arrays["c"][idx])
             clips += [(cond, k, joints[j], seed) for j, k in enumerate(idx)]
+    # The other catch kinds break the catch item's real motion (generation.catch_kinds): a mix of kinds spreads
+    # the catch clips' look and coded size on both sides of the test clips' (issue 37).
+    natural = {k: j for cond, k, j, _ in clips if cond == study.NATURAL}
+    for n, k in enumerate(catch):
+        if kind[k] != MG_EARLY:
+            clips.append((study.CATCH, k, make_catch(natural[k], kind[k], args.seed * 1000 + n), kind[k]))
     return clips
 
 
@@ -194,7 +214,7 @@ def write_clips(out, clips, items, arrays, fps, args, forbidden):
     numbers) follows the condition; ids are random and never contain a condition name (`forbidden`)."""
     rng = np.random.default_rng(args.seed)
     clips = [clips[i] for i in rng.permutation(len(clips))]
-    taken, manifest, metrics_rows, jobs, poses = set(), [], [], [], {}
+    taken, manifest, metrics_rows, jobs, poses, feats = set(), [], [], [], {}, {}
     for cond, k, joints, seed in tqdm(clips, desc="clips", unit="clip", file=sys.stderr, disable=not args.progress):
         it = items[k]
         cid = study.new_clip_id(taken, forbidden)
@@ -208,17 +228,8 @@ def write_clips(out, clips, items, arrays, fps, args, forbidden):
         metrics_rows.append(dict(clip_id=cid, condition=cond, role=it["role"], item=it["id"], **m))
         if it["role"] == TEST:
             poses.setdefault(cond, []).append((to_features(joints, fps)[0], it["category"]))
-    return manifest, metrics_rows, jobs, poses
-
-
-def render_stage(jobs, args):
-    """Render every job, then pad the videos to one size and give every file one time (rendering.blinding)."""
-    workers = min(args.workers, len(jobs))
-    log.info(f"render: {len(jobs)} clips at {args.size}x{args.size} on {workers} processes")
-    render_all(jobs, workers, progress=args.progress)
-    size = pad_to_common_size([job[1] for job in jobs])
-    same_mtime([p for job in jobs for p in job[:3]], time.time())
-    log.info(f"render: done; every video padded to {size} bytes and stamped with the same time")
+        c2st.collect(feats, cond, it["role"], it["id"], joints, fps, skeleton.PARENTS)
+    return manifest, metrics_rows, jobs, poses, c2st.c2st_table(feats)
 
 
 def run(args):
@@ -248,41 +259,32 @@ def run(args):
     clips = sample_clips(args, dataset, items, arrays)
     for name, motions in imported.items():
         clips += [(name, k, joints, "") for k, joints in motions.items()]
-    manifest, metrics_rows, jobs, poses = write_clips(out, clips, items, arrays, fps, args, [*study.RESERVED, *systems])
-    render_stage(jobs, args)
+    manifest, metrics_rows, jobs, poses, c2st_rows = write_clips(
+        out, clips, items, arrays, fps, args, [*study.RESERVED, *systems]
+    )
+    render_stimuli(jobs, args.workers, args.progress)
     fmd = condition_fmd(poses)
+    write_csv(Path(out) / "c2st.csv", C2ST_COLUMNS, c2st_rows)
     write_tables(out, manifest, metrics_rows, fmd)
     write_items(out, items, arrays, fps)
-    print_summary(out, manifest, metrics_rows, fmd, time.perf_counter() - t0)
+    print_summary(out, manifest, metrics_rows, fmd, c2st_rows, time.perf_counter() - t0)
     return 0
 
 
 # ---------------------------------------------------------------- summary
-def summary_text(metrics_rows):
-    """Per-condition means (sd) of every metric over test and catch clips, as a printable table."""
-    import pandas as pd
-
-    df = pd.DataFrame(metrics_rows)
-    df = df[df.role != TRAINING]
-    g = df.groupby(["role", "condition"])
-    mean, sd = g[list(study.METRIC_NAMES)].mean(), g[list(study.METRIC_NAMES)].std()
-    table = mean.map(lambda v: f"{v:.3g}") + " (" + sd.map(lambda v: f"{v:.2g}") + ")"
-    table.insert(0, "n", g.size())
-    return table.to_string()
-
-
-def print_summary(out, manifest, metrics_rows, fmd, seconds):
+def print_summary(out, manifest, metrics_rows, fmd, c2st_rows, seconds):
     """The run's results on stdout: metrics per condition, the FMD, and what was written."""
     n = {r: sum(m["role"] == r for m in manifest) for r in study.ROLES}
     print(
         f"\nobjective metrics, mean (sd) per condition: foot_skating m/s, bone_length_std m, jerk m/s^3, "
-        f"control_error m, control_following m\n{summary_text(metrics_rows)}"
+        f"control_error m, control_following m, acceleration m/s^2\n{summary_text(metrics_rows)}"
     )
     if fmd:
         print(
             "\nFréchet motion distance of the test clips to training motion of their categories "
             "(NAT's is the floor): " + ", ".join(f"{r['condition']} {r['fmd']}" for r in fmd)
         )
+    print("\n" + c2st.c2st_text(c2st_rows))
     _warn_if_bad_not_bad(metrics_rows)
     print(
         f"\nwrote {Path(out) / 'manifest.csv'}: {len(manifest)} clips ({n['test']} test, {n['catch']} catch, "
@@ -326,6 +328,17 @@ def _warn_if_bad_not_bad(rows):
 def parse_args(argv):
     ap = cli.ArgumentParser(prog="python -m generation.make_stimuli", description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="stimuli", help="stimulus folder to write (default stimuli)")
+    ap.add_argument(
+        "--study",
+        metavar="STUDY.toml",
+        help="a study of your own motion: one folder of motion files per condition, named in a study file "
+        "(CONTRACTS §10); --seed, --n-training, --n-catch and --length-s override the file's keys",
+    )
+    ap.add_argument(
+        "--length-s",
+        type=cli.number(float, 0.5, 600),
+        help="with --study: keep the first LENGTH_S seconds of every clip (default: the study file's, else whole)",
+    )
     ap.add_argument("--quick", action="store_true", help="tiny models on a subset of takes: a few minutes in all")
     ap.add_argument(
         "--retrain",
@@ -351,6 +364,14 @@ def parse_args(argv):
     ap.add_argument("--fl-checkpoint", help="FL checkpoint to sample from (skips FL training)")
     ap.add_argument("--bad-checkpoint", help="checkpoint for the BAD catch clips (default: the earliest MG one)")
     ap.add_argument(
+        "--catch-kinds",
+        default=f"{MG_EARLY},freeze",
+        help=f"the kinds of BAD clip, dealt to the catch items in turn: {MG_EARLY} (the paper's: the earliest MG "
+        f"checkpoint's samples) and the tool's {', '.join(TOOL_CATCH_KINDS)} of the item's real motion (default "
+        f"{MG_EARLY},freeze: the mix keeps the catch clips' coded size among the test clips', issue 37; "
+        f"{MG_EARLY} alone is the paper's design)",
+    )
+    ap.add_argument(
         "--system",
         action="append",
         default=[],
@@ -368,11 +389,16 @@ def parse_args(argv):
         default=30,
         help="test items (each in NAT, MG, FL and every system; default 30)",
     )
-    ap.add_argument("--n-catch", type=cli.number(int, 0, 10_000), default=4, help="BAD catch clips (default 4)")
+    ap.add_argument(
+        "--n-catch",
+        type=cli.number(int, 0, 10_000),
+        help="catch items, each with a BAD clip (default 12, 4 with --quick: a pool from which each rater gets "
+        "CATCH_PER_RATER, 4 by default, so that a catch clip reaches about the share of raters a test clip does "
+        "at 30 of 90 test clips per rater; CONTRACTS §5)",
+    )
     ap.add_argument(
         "--n-training",
         type=cli.number(int, 0, 10_000),
-        default=1,
         help="familiarisation items, each shown in every condition but BAD (default 1)",
     )
     ap.add_argument(
@@ -381,16 +407,15 @@ def parse_args(argv):
         default=1.0,
         help="sampling temperature of MG and FL (default 1.0)",
     )
-    ap.add_argument(
-        "--seed", type=cli.number(int, 0), default=0, help="item selection, sampling and manifest order (default 0)"
-    )
+    ap.add_argument("--seed", type=cli.number(int, 0), help="item selection, sampling and manifest order (default 0)")
     ap.add_argument(
         "--size", type=size_flag, help="video width = height in pixels, even (default 640; 320 with --quick)"
     )
     ap.add_argument(
         "--preset",
         default="ultrafast",
-        help="x264 preset (default ultrafast at constant quantiser 17: fastest, no visible loss on stick figures)",
+        help="x264 preset (default ultrafast: fastest, no visible loss on stick figures; every preset gets the rate "
+        "control that makes every frame one size)",
     )
     ap.add_argument(
         "--workers",
@@ -413,6 +438,20 @@ def parse_args(argv):
     ap.add_argument("--force", action="store_true", help="replace an existing stimulus set in --out")
     ap.add_argument("--quiet", action="store_true", help="no progress bars or diagnostics; the summary only")
     args = ap.parse_args(argv)
+    if args.study:
+        return _study_args(args, argv)
+    if args.length_s is not None:
+        raise StimuliError("--length-s: only with --study (the built-in study's clips are 4-s windows)")
+    args.seed = 0 if args.seed is None else args.seed
+    args.n_catch = (4 if args.quick else 12) if args.n_catch is None else args.n_catch
+    args.catch_kinds = [k.strip() for k in args.catch_kinds.split(",") if k.strip()]
+    unknown = [k for k in args.catch_kinds if k not in (MG_EARLY, *TOOL_CATCH_KINDS)]
+    if unknown or not args.catch_kinds:
+        raise StimuliError(
+            f"--catch-kinds: {unknown[0] if unknown else 'none given'}; "
+            f"choose from {MG_EARLY}, {', '.join(TOOL_CATCH_KINDS)}"
+        )
+    args.n_training = 1 if args.n_training is None else args.n_training
     args.shipped = (
         not (args.retrain or args.quick or args.config or args.train_steps or args.precision or args.data)
         and pretrained.available()
@@ -429,6 +468,43 @@ def parse_args(argv):
     return args
 
 
+# Flags of the built-in study that a study from folders has no use for: given with --study, they are an error.
+_BUILTIN_ONLY = (
+    "--quick",
+    "--retrain",
+    "--data",
+    "--dataset",
+    "--config",
+    "--train-steps",
+    "--precision",
+    "--mg-checkpoint",
+    "--fl-checkpoint",
+    "--bad-checkpoint",
+    "--system",
+    "--export-items",
+    "--n-items",
+    "--temperature",
+    "--device",
+    "--threads",
+    "--runs",
+)
+
+
+def _study_args(args, argv):
+    """args for a study from folders: the study file read, with the flags given overriding its keys."""
+    from .study_file import read_study_file
+
+    given = [a for a in _BUILTIN_ONLY if any(x == a or x.startswith(a + "=") for x in argv or [])]
+    if given:
+        raise StimuliError(f"{given[0]}: not used by a study from folders (--study); set it in the study file")
+    spec = read_study_file(args.study)
+    for flag, key in (("seed", "seed"), ("n_training", "n_training"), ("n_catch", "catch_n"), ("length_s", "length_s")):
+        if getattr(args, flag) is not None:
+            setattr(spec, key, getattr(args, flag))
+    args.spec, args.size, args.progress = spec, args.size or 640, not args.quiet
+    return args
+
+
 class _Elapsed(logging.Formatter):
     """Diagnostics as '[  12 s] message': seconds since the start, for a job that runs minutes to an hour."""
 
@@ -439,6 +515,10 @@ class _Elapsed(logging.Formatter):
 def _main(argv):
     args = parse_args(argv)
     cli.log_to_stderr(args.quiet, _Elapsed())
+    if args.study:
+        from .folder_study import build_study
+
+        return build_study(args.spec, args.out, args.size, args.preset, args.workers, args.force, args.progress)
     return run(args)
 
 

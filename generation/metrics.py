@@ -10,6 +10,7 @@
 - bone_length_std (m): standard deviation over time of each bone's length, averaged over bones
   (0 for any rigid skeleton; generators that output joint positions need not keep bones rigid).
 - jerk (m/s^3): mean norm of the third time derivative of joint positions (finite differences).
+- acceleration (m/s^2): mean norm of the second time derivative of joint positions.
 - control_error (m): how far the root path implied by the body (the hips projected on the floor)
   strays from the path that the requested control integrates to. The two paths are first aligned by
   the rigid 2-D motion (rotation + translation on the floor) that fits them best, so a clip placed or
@@ -106,6 +107,14 @@ def jerk(joints, fps):
     return float(np.linalg.norm(np.diff(joints, n=3, axis=0), axis=-1).mean() * fps**3)
 
 
+def acceleration(joints, fps):
+    """Mean norm of the second derivative of joint positions (m/s^2); NaN for clips under 3 frames."""
+    joints = np.asarray(joints, dtype=np.float64)
+    if len(joints) < 3:
+        return float("nan")
+    return float(np.linalg.norm(np.diff(joints, n=2, axis=0), axis=-1).mean() * fps**2)
+
+
 def _rigid_align_error(a, b):
     """Mean distance between 2-D paths a and b [T, 2] after the best rotation + translation of b onto a; NaN
     where a path is not finite (a diverged model's clip), since SVD cannot align it."""
@@ -156,5 +165,49 @@ def clip_metrics(joints, fps, control=None):
         jerk=jerk(joints, fps),
         control_error=control_error(joints, control) if control is not None else no_control,
         control_following=control_following(joints, control) if control is not None and len(joints) > 1 else no_control,
+        acceleration=acceleration(joints, fps),
     )
     return {name: values[name] for name in METRIC_NAMES}  # metrics.csv's column order; a missing one is a KeyError
+
+
+# ---------------------------------------------------------------- any skeleton
+_ANKLE = ("ankle", "foot")
+_TOE = ("toe",)
+
+
+def find_feet(names):
+    """(ankle, toe) joint indices per side, [l_ankle, l_toe, r_ankle, r_toe], found from the joint names (a side
+    as core.skeleton_names.side tells it, and 'foot'/'ankle', 'toe' in the name); None when either foot is
+    missing. A foot with only an ankle or only a toe joint uses that joint twice."""
+    from core.skeleton_names import side
+
+    feet = []
+    for want in ("left", "right"):
+        found = {}
+        for j, name in enumerate(names):
+            low = name.lower()
+            if side(name) != want or low.endswith("_end"):
+                continue
+            for part, keys in (("ankle", _ANKLE), ("toe", _TOE)):
+                if part not in found and any(k in low for k in keys) and not (part == "ankle" and "toe" in low):
+                    found[part] = j
+        if not found:
+            return None
+        feet += [found.get("ankle", found.get("toe")), found.get("toe", found.get("ankle"))]
+    return feet
+
+
+def any_clip_metrics(joints, fps, parents, feet=None):
+    """metrics.csv's metrics of a clip of any skeleton (joints [T, J, 3], metres, Y up): jerk, acceleration and
+    bone-length variation always, foot skating where `feet` ([l_ankle, l_toe, r_ankle, r_toe]) are known, the
+    control metrics NaN (a study of your own motion has no control signal)."""
+    joints = np.asarray(joints, dtype=np.float64)
+    values = dict(
+        foot_skating=foot_skating(joints, fps, feet=tuple(feet)) if feet is not None and len(joints) > 1 else np.nan,
+        bone_length_std=bone_length_std(joints, parents),
+        jerk=jerk(joints, fps),
+        control_error=np.nan,
+        control_following=np.nan,
+        acceleration=acceleration(joints, fps),
+    )
+    return {name: float(values[name]) for name in METRIC_NAMES}

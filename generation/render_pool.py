@@ -6,22 +6,38 @@ rendering and nothing that loads torch; keep it so (seconds and hundreds of MB p
 tests/test_stimuli.py checks the workers' imports).
 """
 
+import logging
 import sys
+import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from multiprocessing import get_context
 
+import numpy as np
 from tqdm import tqdm
 
+from rendering.audio import mux_audio
+from rendering.blinding import check_one_size, same_mtime
 from rendering.render import render_clip
+
+log = logging.getLogger(__name__)
 
 
 def _render_job(job):
-    motion, video, sheet, size, preset = job
-    return render_clip(motion, video, size=size, sheet=sheet, preset=preset, threads=1)
+    """Render one clip; options: render_clip's keywords (camera, hide, thin), and `audio`: (normalised samples
+    .npy, start s, duration s) to mux into the video."""
+    motion, video, sheet, size, preset, *options = job
+    options = dict(options[0]) if options else {}
+    audio = options.pop("audio", None)
+    n = render_clip(motion, video, size=size, sheet=sheet, preset=preset, threads=1, **options)
+    if audio is not None:
+        samples, start, duration = audio
+        mux_audio(video, np.load(samples), start, duration)
+    return n
 
 
 def render_all(jobs, workers, progress=True):
-    """Render (motion, video, sheet, size, preset) jobs on `workers` processes, with a progress bar."""
+    """Render (motion, video, sheet, size, preset[, render_clip keywords]) jobs on `workers` processes, with a
+    progress bar."""
     with tqdm(total=len(jobs), desc="render", unit="clip", file=sys.stderr, disable=not progress) as bar:
         if workers <= 1:
             for job in jobs:
@@ -35,3 +51,20 @@ def render_all(jobs, workers, progress=True):
                 bar.update()
         finally:
             pool.shutdown(cancel_futures=True)
+
+
+def render_stimuli(jobs, workers, progress=True, groups=None):
+    """Render every job of a stimulus set, check that the videos are one size (rendering.blinding: by
+    construction, every frame one size) and give every file one time. `groups`: a key per job whose videos must
+    agree (a study of your own motion: the item, whose clips share a length and a sound); None: all of them."""
+    workers = min(workers, len(jobs))
+    size = jobs[0][3] if jobs else 0
+    log.info(f"render: {len(jobs)} clips at {size}x{size} on {workers} processes")
+    render_all(jobs, workers, progress=progress)
+    by_group = {}
+    for k, job in enumerate(jobs):
+        by_group.setdefault(None if groups is None else groups[k], []).append(job[1])
+    sizes = {check_one_size(videos) for videos in by_group.values()}
+    same_mtime([p for job in jobs for p in job[:3]], time.time())
+    what = f"{sizes.pop()} bytes" if len(sizes) == 1 else f"one size per item ({len(sizes)} sizes)"
+    log.info(f"render: done; every video is {what}, in frames of one size, stamped with the same time")

@@ -12,7 +12,7 @@ from core.cli import UserError
 
 from . import skeleton
 from .features import to_world
-from .items import CATCH
+from .items import CATCH, TRAINING
 from .systems import canonical_placement
 
 MANIFEST_COLUMNS = [
@@ -43,10 +43,10 @@ def prepare_out(out, force):
     out = Path(out)
     if (out / "manifest.csv").exists() and not force:
         raise StimuliError(f"{out}: already holds a stimulus set (manifest.csv); pass --force to replace it")
-    for sub in (*SUBFOLDERS, "items"):
+    for sub in (*SUBFOLDERS, "items", "audio_check"):
         if (out / sub).exists():
             shutil.rmtree(out / sub)
-    for name in ("manifest.csv", "metrics.csv", "items.csv"):
+    for name in ("manifest.csv", "metrics.csv", "items.csv", "c2st.csv", "audio_check.csv"):
         (out / name).unlink(missing_ok=True)
     for sub in SUBFOLDERS:
         (out / sub).mkdir(parents=True, exist_ok=True)
@@ -87,7 +87,10 @@ def write_tables(out, manifest, metrics_rows, fmd):
     """manifest.csv (rows in the given order), metrics.csv (6 significant digits, nan for undefined) and, when
     there are FMD rows, fmd.csv."""
     out = Path(out)
-    write_csv(out / "manifest.csv", MANIFEST_COLUMNS, manifest)
+    # A study of your own motion may also say which item's motion each clip shows (appropriateness) and that its
+    # videos carry sound (CONTRACTS §10).
+    extra = [c for c in ("motion_item", "audio") if any(c in row for row in manifest)]
+    write_csv(out / "manifest.csv", MANIFEST_COLUMNS + extra, manifest)
     write_csv(
         out / "metrics.csv",
         METRICS_COLUMNS,
@@ -95,6 +98,20 @@ def write_tables(out, manifest, metrics_rows, fmd):
     )
     if fmd:
         write_csv(out / "fmd.csv", FMD_COLUMNS, fmd)
+
+
+def summary_text(metrics_rows):
+    """Per-condition means (sd) of every metric over test and catch clips, as a printable table."""
+    import pandas as pd  # here: the render workers import this module's neighbours, not pandas
+
+    df = pd.DataFrame(metrics_rows)
+    df = df[df.role != TRAINING]
+    g = df.groupby(["role", "condition"])
+    names = [m for m in study.METRIC_NAMES if df[m].notna().any()]  # a study without control has no control metrics
+    mean, sd = g[names].mean(), g[names].std()
+    table = mean.map(lambda v: f"{v:.3g}") + " (" + sd.map(lambda v: f"{v:.2g}") + ")"
+    table.insert(0, "n", g.size())
+    return table.to_string()
 
 
 def write_items(folder, items, arrays, fps):

@@ -3,11 +3,14 @@
     app = create_app(manifest="stimuli/manifest.csv", db_url="postgresql://...", ratings_per_clip=20)
 
 Arguments left as None are read from the environment (ADMIN_TOKEN, DATABASE_URL, RATING_MANIFEST, STUDY_DESIGN,
-STUDY_QUESTION, RATINGS_PER_CLIP, CLIPS_PER_RATER, SLOT_TIMEOUT, MIN_VIEW, SESSIONS_PER_CLIENT, COMPLETION_CODE,
-COMPLETION_URL, SECRET_KEY), which is how `rating_app.wsgi:app` is configured under gunicorn. Also read:
-COOKIE_SECURE=1 (admin cookie over HTTPS only), PROXY_COUNT (trusted reverse proxies in front, whose X-Forwarded-For
-names the client; default 0) and DB_POOL_SIZE (connections per worker, default 10 + 10 overflow). Every setting is
-checked here, so a bad one stops the start with one line instead of failing on each request.
+STUDY_QUESTION, RATINGS_PER_CLIP, CLIPS_PER_RATER, CATCH_PER_RATER, SLOT_TIMEOUT, MIN_VIEW, SESSIONS_PER_CLIENT,
+COMPLETION_CODE, COMPLETION_URL, SECRET_KEY), which is how `rating_app.wsgi:app` is configured under gunicorn.
+Also read: COOKIE_SECURE=1 (admin cookie over HTTPS only), PROXY_COUNT (trusted reverse proxies in front, whose
+X-Forwarded-For names the client; default 0), VIDEO_ACCEL (nginx or caddy: that proxy sends the videos' bytes through an
+internal redirect, videos.py; default off) and DB_POOL_SIZE (connections per worker, default 10 + 10 overflow).
+Every setting is checked here, so a bad one stops the start with one line instead of failing on each request.
+`config` (or RATING_CONFIG): a study file holding these settings in lower case (study_config.py); an environment
+variable that is set overrides its key there.
 """
 
 from __future__ import annotations
@@ -19,7 +22,8 @@ from pathlib import Path
 
 from flask import Flask, jsonify, request
 from sqlalchemy.engine import make_url
-from sqlalchemy.exc import OperationalError, SQLAlchemyError
+from sqlalchemy.exc import DBAPIError, InterfaceError, OperationalError, SQLAlchemyError
+from sqlalchemy.exc import TimeoutError as PoolTimeout
 from werkzeug.exceptions import HTTPException
 
 from core.cli import number
@@ -32,6 +36,7 @@ __all__ = ["create_app", "AppError", "SETTINGS"]
 SETTINGS = {
     "RATINGS_PER_CLIP": (int, 20, 1, 1_000_000, False),
     "CLIPS_PER_RATER": (int, 0, 0, 1_000_000, False),  # 0: every clip still needing ratings
+    "CATCH_PER_RATER": (int, 4, 0, 1_000_000, False),  # catch trials per session from the pool; 0: every one
     "SLOT_TIMEOUT": (float, 3600.0, 0.0, 1e7, True),  # seconds without an answer before a session expires
     "MIN_VIEW": (float, 1.0, 0.0, 1.0, False),  # share of each clip that must have played
     "SESSIONS_PER_CLIENT": (int, 10, 0, 1_000_000, False),  # new sessions per client address per hour; 0: no limit
@@ -39,10 +44,11 @@ SETTINGS = {
 }
 
 
-def setting(name: str, given=None):
-    """`given`, else the environment variable `name`, else the default; checked against SETTINGS."""
+def setting(name: str, given=None, env=None):
+    """`given`, else the environment variable `name` (in `env`, default os.environ), else the default; checked
+    against SETTINGS."""
     kind, default, lo, hi, lo_open = SETTINGS[name]
-    raw = given if given is not None else os.environ.get(name) or None
+    raw = given if given is not None else (os.environ if env is None else env).get(name) or None
     if raw is None:
         return default
     try:
@@ -52,8 +58,8 @@ def setting(name: str, given=None):
         raise AppError(f"{where}: {e}") from None
 
 
-def _env(name):
-    return os.environ.get(name) or None
+def _env(name, env=None):
+    return (os.environ if env is None else env).get(name) or None
 
 
 def create_app(
@@ -61,6 +67,7 @@ def create_app(
     db_url=None,
     ratings_per_clip=None,
     clips_per_rater=None,
+    catch_per_rater=None,
     admin_token=None,
     slot_timeout_s=None,
     completion_code=None,
@@ -71,23 +78,34 @@ def create_app(
     sessions_per_client=None,
     design=None,
     question=None,
+    config=None,
 ) -> Flask:
     """`design`: acr (default), pairwise or parallel (designs.py); fixed for the life of the database.
     `ratings_per_clip` and `clips_per_rater` count the design's units: clips (acr), pairs of conditions of an
     item (pairwise) or pages (parallel)."""
+    from . import health
     from .admin import bp as admin_bp
     from .api import bp as api_bp
+    from .audio_check import bp as audio_check_bp
+    from .audio_check import load_audio_check
     from .db import make_read_engine
-    from .designs import build_units
+    from .designs import build_units, serving_clips
     from .pages import bp as pages_bp
-    from .videos import VideoStore
+    from .study_config import study_environment
+    from .videos import ACCEL, VideoStore
 
-    manifest = manifest or _env("RATING_MANIFEST")
+    env = study_environment(config or _env("RATING_CONFIG"), SETTINGS)
+    manifest = manifest or _env("RATING_MANIFEST", env)
     if not manifest:
-        raise AppError("no stimulus manifest: set RATING_MANIFEST (or --manifest) to stimuli/manifest.csv")
+        raise AppError(
+            "no stimulus manifest: set RATING_MANIFEST (or --manifest, or rating_manifest in the study file) to "
+            "stimuli/manifest.csv"
+        )
     config = _config(
+        env,
         ratings_per_clip=ratings_per_clip,
         clips_per_rater=clips_per_rater,
+        catch_per_rater=catch_per_rater,
         slot_timeout_s=slot_timeout_s,
         min_view=min_view,
         sessions_per_client=sessions_per_client,
@@ -97,32 +115,54 @@ def create_app(
         completion_code=completion_code,
         completion_url=completion_url,
     )
-    proxies = setting("PROXY_COUNT")
+    proxies = config["PROXY_COUNT"]
     app = Flask(__name__)
     if proxies:
         from werkzeug.middleware.proxy_fix import ProxyFix
 
         app.wsgi_app = ProxyFix(app.wsgi_app, x_for=proxies, x_proto=proxies, x_host=proxies)
+    accel = (_env("VIDEO_ACCEL", env) or "off").strip().lower()
+    if accel not in ACCEL:
+        raise AppError(f"VIDEO_ACCEL: {accel!r} must be one of {', '.join(ACCEL)}")
     app.config.update(
-        SECRET_KEY=secret_key or _env("SECRET_KEY") or _derived_secret(config["ADMIN_TOKEN"]),
+        VIDEO_ACCEL=accel,
+        SECRET_KEY=secret_key or _env("SECRET_KEY", env) or _derived_secret(config["ADMIN_TOKEN"]),
         SESSION_COOKIE_HTTPONLY=True,
         SESSION_COOKIE_SAMESITE="Strict",
-        SESSION_COOKIE_SECURE=os.environ.get("COOKIE_SECURE", "") == "1",  # set behind HTTPS
+        SESSION_COOKIE_SECURE=env.get("COOKIE_SECURE", "") == "1",  # set behind HTTPS
         MAX_CONTENT_LENGTH=16 * 1024,
         **config,
     )
-    clips = load_manifest(manifest, check_files=check_files)
+    clips = serving_clips(config["STUDY_DESIGN"], load_manifest(manifest, check_files=check_files))
     units = build_units(config["STUDY_DESIGN"], clips)
-    engine = _open_database(db_url, clips, config["STUDY_DESIGN"], _cover_keys(config["STUDY_DESIGN"], clips, units))
+    app.config["STUDY_SOUND"] = any(c.audio for c in clips)  # the page plays sound and checks the rater hears
+    db_url = db_url or _env("DATABASE_URL", env)
+    engine = _open_database(
+        db_url,
+        _env("DB_POOL_SIZE", env),
+        clips,
+        config["STUDY_DESIGN"],
+        _cover_keys(config["STUDY_DESIGN"], clips, units),
+    )
     app.extensions["rating_app"] = {
         "engine": engine,
         "read_engine": make_read_engine(engine),
         "clips": {c.clip_id: c for c in clips},
-        "videos": VideoStore(clips, Path(manifest).resolve().parent, preload=check_files),
+        # With VIDEO_ACCEL the proxy sends the bytes: no video is read into a worker's memory.
+        "videos": VideoStore(clips, Path(manifest).resolve().parent, preload=check_files and accel == "off"),
         "units": units,
+        "audio_check": load_audio_check(manifest) if app.config["STUDY_SOUND"] else {},
+        "warnings": health.Warnings(app.logger),
     }
+    pool = health.catch_pool_warning(
+        config["STUDY_DESIGN"], clips, units, config["CLIPS_PER_RATER"], config["CATCH_PER_RATER"]
+    )
+    if pool:
+        health.of_app(app).add("catch_pool", pool)
+    app.before_request(health.note_untrusted_proxy)
     app.register_blueprint(pages_bp)
     app.register_blueprint(api_bp)
+    app.register_blueprint(audio_check_bp)
     app.register_blueprint(admin_bp)
     _handle_errors(app)
     app.after_request(_headers)
@@ -130,8 +170,10 @@ def create_app(
 
 
 def _config(
+    env,
     ratings_per_clip,
     clips_per_rater,
+    catch_per_rater,
     slot_timeout_s,
     min_view,
     sessions_per_client,
@@ -145,23 +187,25 @@ def _config(
     from .designs import QUESTIONS, check_design
 
     numbers = {  # checked first, in the order the settings are documented
-        "RATINGS_PER_CLIP": setting("RATINGS_PER_CLIP", ratings_per_clip),
-        "CLIPS_PER_RATER": setting("CLIPS_PER_RATER", clips_per_rater) or None,  # 0 / None: all clips still short
-        "SLOT_TIMEOUT_S": float(setting("SLOT_TIMEOUT", slot_timeout_s)),
-        "MIN_VIEW": float(setting("MIN_VIEW", min_view)),
-        "SESSIONS_PER_CLIENT": setting("SESSIONS_PER_CLIENT", sessions_per_client),
+        "RATINGS_PER_CLIP": setting("RATINGS_PER_CLIP", ratings_per_clip, env),
+        "CLIPS_PER_RATER": setting("CLIPS_PER_RATER", clips_per_rater, env) or None,  # 0 / None: all clips still short
+        "CATCH_PER_RATER": setting("CATCH_PER_RATER", catch_per_rater, env) or None,  # 0 / None: every catch unit
+        "SLOT_TIMEOUT_S": float(setting("SLOT_TIMEOUT", slot_timeout_s, env)),
+        "MIN_VIEW": float(setting("MIN_VIEW", min_view, env)),
+        "SESSIONS_PER_CLIENT": setting("SESSIONS_PER_CLIENT", sessions_per_client, env),
+        "PROXY_COUNT": setting("PROXY_COUNT", env=env),
     }
-    design = check_design(design if design is not None else _env("STUDY_DESIGN"))
-    question = (question if question is not None else _env("STUDY_QUESTION")) or QUESTIONS[design]
+    design = check_design(design if design is not None else _env("STUDY_DESIGN", env))
+    question = (question if question is not None else _env("STUDY_QUESTION", env)) or QUESTIONS[design]
     if len(question) > 200 or not question.isprintable():
         raise AppError("question: at most 200 printable characters on one line")
-    completion_url = completion_url if completion_url is not None else _env("COMPLETION_URL")
+    completion_url = completion_url if completion_url is not None else _env("COMPLETION_URL", env)
     if completion_url and not completion_url.startswith(("https://", "http://")):
         raise AppError(f"completion URL must start with https:// or http://, got {completion_url!r}")
     return {
         **numbers,
-        "ADMIN_TOKEN": admin_token if admin_token is not None else _env("ADMIN_TOKEN"),
-        "COMPLETION_CODE": completion_code if completion_code is not None else _env("COMPLETION_CODE"),
+        "ADMIN_TOKEN": admin_token if admin_token is not None else _env("ADMIN_TOKEN", env),
+        "COMPLETION_CODE": completion_code if completion_code is not None else _env("COMPLETION_CODE", env),
         "COMPLETION_URL": completion_url,
         "STUDY_DESIGN": design,
         "STUDY_QUESTION": question,
@@ -174,18 +218,20 @@ def _derived_secret(admin_token):
 
 
 def _cover_keys(design, clips, units):
-    """What assignment balances: the test clips (acr) or the test units (pairwise, parallel)."""
+    """What assignment balances: the test and catch clips (acr) or units (pairwise, parallel)."""
+    from .designs import acr_catch
+
     if design == "acr":
-        return [c.clip_id for c in clips if c.role == "test"]
-    return [k for k, u in units.items() if u.role == "test"]
+        return [c.clip_id for c in clips if c.role == "test" or acr_catch(c)]
+    return list(units)
 
 
-def _open_database(db_url, clips, design, cover_keys):
+def _open_database(db_url, pool_size, clips, design, cover_keys):
     """The engine, with the schema created and the manifest's clips and the design stored; AppError, one line,
     when the database cannot be opened."""
     from . import db as dbm
 
-    engine = dbm.make_engine(db_url)
+    engine = dbm.make_engine(db_url, pool_size=pool_size)
     try:
         dbm.init_db(engine, clips, design, cover_keys)
     except SQLAlchemyError as e:
@@ -207,16 +253,51 @@ def _handle_errors(app: Flask) -> None:
             resp.headers["WWW-Authenticate"] = 'Bearer realm="admin"'
         return resp
 
-    @app.errorhandler(OperationalError)
-    def _db_down(e):
-        app.logger.error("database error on %s %s: %s", request.method, request.path, str(e).splitlines()[0])
-        return jsonify(error="database unavailable, please retry"), 503
+    @app.errorhandler(DBAPIError)
+    @app.errorhandler(PoolTimeout)
+    def _db_error(e):
+        if not _unavailable(e):
+            return _internal(e)
+        full = _disk_full(e)
+        app.logger.error(
+            "database %s on %s %s: %s",
+            "full" if full else "error",
+            request.method,
+            request.path,
+            (str(e).splitlines() or [e.__class__.__name__])[0],
+        )
+        msg = (
+            "the server cannot store anything now: its disk is full. What you answered before is saved; please "
+            "try again later"
+            if full
+            else "database unavailable, please retry"
+        )
+        resp = jsonify(error=msg, retryable=True)
+        resp.status_code, resp.headers["Retry-After"] = 503, "2"
+        return resp
 
     @app.errorhandler(Exception)
+    def _unhandled(e):
+        return _internal(e)
+
     def _internal(e):
         # Never a stack trace to the client; the full one goes to the server log.
         app.logger.exception("unhandled error on %s %s", request.method, request.path)
         return jsonify(error="internal server error"), 500
+
+
+def _disk_full(e) -> bool:
+    """SQLite's SQLITE_FULL (the disk, or the database's page limit) or PostgreSQL's disk_full (SQLSTATE 53100)."""
+    orig = getattr(e, "orig", None)
+    return getattr(orig, "sqlite_errorname", None) == "SQLITE_FULL" or getattr(orig, "sqlstate", None) == "53100"
+
+
+def _unavailable(e) -> bool:
+    """An error of the database server or its connection, which a retry may get past (503), not a bug (500): the
+    server is down or restarting, a connection was cut, the pool is exhausted, the disk is full."""
+    if isinstance(e, (OperationalError, InterfaceError, PoolTimeout)):
+        return True
+    return bool(getattr(e, "connection_invalidated", False)) or _disk_full(e)
 
 
 def _headers(resp):

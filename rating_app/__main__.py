@@ -1,4 +1,4 @@
-"""python -m rating_app serve | export | simulate  (see --help of each)."""
+"""python -m rating_app serve | export | backup | restore | simulate  (see --help of each)."""
 
 from __future__ import annotations
 
@@ -31,6 +31,7 @@ def _serve(a):
         db_url=a.db,
         ratings_per_clip=a.ratings_per_clip,
         clips_per_rater=a.clips_per_rater,
+        catch_per_rater=a.catch_per_rater,
         slot_timeout_s=a.slot_timeout,
         completion_code=a.completion_code,
         completion_url=a.completion_url,
@@ -38,12 +39,11 @@ def _serve(a):
         sessions_per_client=a.sessions_per_client,
         design=a.design,
         question=a.question,
+        config=a.config,
     )
-    from sqlalchemy.engine import make_url
+    from .db import app_engine
 
-    from .db import normalise_url
-
-    db = make_url(normalise_url(a.db)).render_as_string(hide_password=True)
+    db = app_engine(app).url.render_as_string(hide_password=True)
     log.info(
         "rating app on http://%s:%s/  (%s design; database %s; admin at /admin%s)",
         a.host,
@@ -91,8 +91,30 @@ def _export(a):
         raise AppError(f"cannot read the database: {first[0] if first else e.__class__.__name__}") from None
     finally:
         engine.dispose()
-    rows = {"acr": "ratings", "pairwise": "pairwise answers", "parallel": "clip ratings of parallel pages"}
+    rows = {
+        "acr": "ratings",
+        "pairwise": "pairwise answers",
+        "parallel": "clip ratings of parallel pages",
+        "appropriateness": "appropriateness answers",
+    }
     log.info("%s %s -> %s", n, rows.get(design, "rows"), a.out)
+    return 0
+
+
+def _backup(a):
+    from .backup import backup
+
+    kind = backup(a.db, a.out)
+    log.info("%s backup -> %s", kind, a.out)
+    print(a.out)
+    return 0
+
+
+def _restore(a):
+    from .backup import restore
+
+    kind = restore(a.backup, a.db)
+    log.info("%s backup %s restored", kind, a.backup)
     return 0
 
 
@@ -140,7 +162,13 @@ def build_parser():
     count = cli.number(int, 1, 1_000_000)
 
     s = sub.add_parser("serve", help="run the app (local use; production: gunicorn rating_app.wsgi:app)")
-    s.add_argument("--manifest", required=True, help="stimuli/manifest.csv")
+    s.add_argument(
+        "--config",
+        default=None,
+        help="study file (TOML): the settings below in lower case, e.g. ratings_per_clip = 20; flags and set "
+        "environment variables override it (default $RATING_CONFIG)",
+    )
+    s.add_argument("--manifest", default=None, help="stimuli/manifest.csv (default $RATING_MANIFEST or the study file)")
     s.add_argument("--db", default=None, help="database URL (default $DATABASE_URL or sqlite:///ratings.sqlite)")
     s.add_argument("--host", default="127.0.0.1")
     s.add_argument("--port", type=cli.number(int, 1, 65535), default=5000)
@@ -170,6 +198,13 @@ def build_parser():
         type=_flag("CLIPS_PER_RATER"),
         default=None,
         help="test units (clips, pairs or pages) per rater (default or 0: all that still need answers)",
+    )
+    s.add_argument(
+        "--catch-per-rater",
+        type=_flag("CATCH_PER_RATER"),
+        default=None,
+        help="catch units per rater, drawn least-covered first from the pool (4; 0: every one); size the pool so "
+        "that catch-per-rater / pool matches clips-per-rater / test units",
     )
     s.add_argument(
         "--slot-timeout",
@@ -204,6 +239,16 @@ def build_parser():
     e.add_argument("--db", default=None, help="database URL (default $DATABASE_URL or sqlite:///ratings.sqlite)")
     e.add_argument("--out", default="ratings.csv", help="output file, '-' for stdout")
     e.set_defaults(fn=_export)
+
+    b = sub.add_parser("backup", help="a consistent copy of a running study's database (SQLite backup API / pg_dump)")
+    b.add_argument("--db", default=None, help="database URL (default $DATABASE_URL or sqlite:///ratings.sqlite)")
+    b.add_argument("--out", required=True, help="the backup file (SQLite: a database file; PostgreSQL: pg_dump -Fc)")
+    b.set_defaults(fn=_backup)
+
+    r = sub.add_parser("restore", help="restore a backup into a new SQLite file or an empty PostgreSQL database")
+    r.add_argument("backup", help="the file `backup` wrote")
+    r.add_argument("--db", required=True, help="the new SQLite file or empty PostgreSQL database to restore into")
+    r.set_defaults(fn=_restore)
 
     m = sub.add_parser("simulate", help="a simulated crowd rating through the public API")
     m.add_argument("--url", required=True, help="base URL of the running app")

@@ -17,6 +17,7 @@ import secrets
 from flask import Blueprint, Response, abort, current_app, jsonify, redirect, render_template, request, session, url_for
 from sqlalchemy import delete, func, insert, select
 
+from . import health
 from .db import AdminLogin, LoginFailure, app_engine, utcnow
 from .export import export_csv, progress
 from .guard import client_key
@@ -82,7 +83,11 @@ def dashboard():
         return render_template("admin_login.html", error=None), 401
     data = _progress()
     return render_template(
-        "admin.html", p=data, min_view=current_app.config["MIN_VIEW"], design=current_app.config["STUDY_DESIGN"]
+        "admin.html",
+        p=data,
+        min_view=current_app.config["MIN_VIEW"],
+        design=current_app.config["STUDY_DESIGN"],
+        warnings=health.of_app().list(),
     )
 
 
@@ -129,6 +134,7 @@ def progress_json():
     data = _progress()
     data["min_view"] = current_app.config["MIN_VIEW"]
     data["design"] = current_app.config["STUDY_DESIGN"]
+    data["warnings"] = health.of_app().list()
     for r in data["raters"]:
         r["started"], r["last_seen"] = r["started"].isoformat() + "Z", r["last_seen"].isoformat() + "Z"
     for e in data["events"]:

@@ -5,8 +5,9 @@ The session token in the URL is the credential for a session's calls; creating a
 refuses cross-site browsers, and resuming one by participant id needs proof (the platform's session id, or the
 resume cookie set at creation), so a participant id alone never hands out a token.
 
-The server, not the page, decides whether a clip was watched: it records when it first served each trial and
-when its video was fetched, and refuses an answer that comes before the clip could have played to the end.
+The server, not the page, decides whether a clip was watched: it records when it first served each trial and which
+bytes of its video it sent (fetched.py), and refuses an answer that comes before the clip could have played to the
+end.
 
 Every design (designs.py) takes the same path: a pairwise or parallel trial is a slot like an acr one, served
 with a unit of several clips instead of one clip, and answered with a preference or a page of ratings.
@@ -29,6 +30,9 @@ from sqlalchemy import and_, bindparam, func, insert, or_, select, text, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import aliased
 
+from core import study
+
+from . import fetched
 from .assign import (
     StudyFull,
     answer,
@@ -187,7 +191,9 @@ def create_session():
             rng = random.Random(secrets.randbits(64))
             try:
                 if cfg["STUDY_DESIGN"] == "acr":
-                    plan = plan_session(conn, rng, cfg["RATINGS_PER_CLIP"], cfg["CLIPS_PER_RATER"])
+                    plan = plan_session(
+                        conn, rng, cfg["RATINGS_PER_CLIP"], cfg["CLIPS_PER_RATER"], cfg["CATCH_PER_RATER"]
+                    )
                 else:
                     ext = current_app.extensions["rating_app"]
                     plan = plan_units(
@@ -198,6 +204,7 @@ def create_session():
                         cfg["STUDY_DESIGN"],
                         ext["clips"].values(),
                         ext["units"],
+                        cfg["CATCH_PER_RATER"],
                     )
             except StudyFull as e:
                 return jsonify(error=str(e), full=True), 409
@@ -281,6 +288,7 @@ RATER_COLS = (
     Rater.completion_code,
     Rater.last_seen,
     Rater.last_progress,
+    Rater.audio_passed_at,
 )
 TRIAL_COLS = (
     Trial.id,
@@ -401,8 +409,7 @@ def _give(conn, rng, t, assigned, now):
             [{"trial_pk": t.id, "position": i, "label": r.label, "clip_id": r.clip_id} for i, r in enumerate(shown)],
         )
     conn.execute(update(Trial).where(Trial.id == t.id).values(served_at=now, **served))
-    if t.kind == "test":
-        hold(conn, key)
+    hold(conn, key)  # test and catch slots alike (catch units are balanced too)
     return SimpleNamespace(**{**t._asdict(), "served_at": now, **served, "shown": shown})
 
 
@@ -478,7 +485,7 @@ def _trial_reply(token, rater, trial, conn=None):
         for r in clips
     ]
     out["design"] = design
-    if design == "pairwise" and len(shown) == 2:
+    if design in study.PAIR_DESIGNS and len(shown) == 2:
         out.update(a=shown[0], b=shown[1])
     else:
         out["clips"] = shown
@@ -500,6 +507,8 @@ def next_trial(token):
             return _trial_reply(token, rater, trial)
     with app_engine().begin() as conn:
         rater = _rater(conn, token, now)
+        if current_app.config["STUDY_SOUND"] and rater.audio_passed_at is None and rater.expired_at is None:
+            return jsonify(error="the audio check comes first", audio_check=True), 403
         if rater.completed_at is None and _idle(rater, now):
             expire_idle(conn, current_app.config["SLOT_TIMEOUT_S"], now, rater.id)
             return _expired_reply()
@@ -524,12 +533,12 @@ def next_trial(token):
 # A video request reads the session, the trial and (pairwise, parallel) the clip in one statement: the page
 # fetches every clip of every trial, so these are the app's most frequent requests.
 _TRIAL_VIDEO = (
-    select(Trial.clip_id, Trial.video_at, Trial.released, Trial.served_at)
+    select(Trial.id, Trial.clip_id, Trial.video_ranges, Trial.released, Trial.served_at)
     .join(Rater, Rater.id == Trial.rater_pk)
     .where(Rater.token == bindparam("token"), Trial.id == bindparam("trial_id"))
 )
 _CLIP_VIDEO = (
-    select(TrialClip.id, TrialClip.clip_id, TrialClip.video_at, Trial.released, Trial.served_at)
+    select(TrialClip.id, TrialClip.clip_id, TrialClip.video_ranges, Trial.released, Trial.served_at)
     .join(Trial, Trial.id == TrialClip.trial_pk)
     .join(Rater, Rater.id == Trial.rater_pk)
     .where(Rater.token == bindparam("token"), Trial.id == bindparam("trial_id"), TrialClip.label == bindparam("label"))
@@ -546,31 +555,55 @@ def _video_row(stmt, token, **params):
     return row
 
 
+def _send_video(table, row):
+    """The video of `row` (a Trial or TrialClip), with the bytes this response carries added to the row's
+    `video_ranges` (fetched.py) unless those already cover the file. The ranges are swapped in only if the row
+    still holds the ones read, so two concurrent range requests never drop each other's bytes: the loser reads
+    again and retries."""
+    videos = current_app.extensions["rating_app"]["videos"]
+    size = videos.size(row.clip_id)
+    if current_app.config["VIDEO_ACCEL"] != "off":
+        resp, new = videos.accel(row.clip_id)  # the proxy sends the bytes: the range it was asked for
+    else:
+        resp = videos.response(row.clip_id)
+        new = fetched.served(resp, request.method, size or 0)
+    have = row.video_ranges
+    for _ in range(8):
+        if new is None or fetched.covers(have, size):
+            break
+        merged = fetched.dump(fetched.merge(fetched.parse(have), new))
+        if merged == have:
+            break
+        with app_engine().begin() as conn:
+            done = conn.execute(
+                update(table)
+                .where(table.id == row.id, table.video_ranges.is_not_distinct_from(have))
+                .values(video_ranges=merged, video_at=func.coalesce(table.video_at, utcnow()))
+            ).rowcount
+            if done:
+                break
+            have = conn.execute(select(table.video_ranges).where(table.id == row.id)).scalar()
+    return resp
+
+
 @bp.get("/sessions/<token>/trials/<int(max=2147483647):trial_id>/video.mp4")
 def trial_video(token, trial_id):
-    """The video of a served trial; the first request is recorded (an answer without it is flagged)."""
+    """The video of a served trial; the bytes sent are recorded (an answer before the whole file was sent is
+    flagged)."""
     t = _video_row(_TRIAL_VIDEO, token, trial_id=trial_id)
     if t is None or t.clip_id is None or t.served_at is None or t.released:
         abort(404, "unknown video")
-    if t.video_at is None:
-        with app_engine().begin() as conn:
-            conn.execute(update(Trial).where(Trial.id == trial_id, Trial.video_at.is_(None)).values(video_at=utcnow()))
-    return current_app.extensions["rating_app"]["videos"].response(t.clip_id)
+    return _send_video(Trial, t)
 
 
 @bp.get("/sessions/<token>/trials/<int(max=2147483647):trial_id>/clips/<any(A,B,C,D,E,F,G,H):label>.mp4")
 def clip_video(token, trial_id, label):
-    """One clip of a served pairwise or parallel trial, by the label the rater sees; the first request is
-    recorded per clip (an answer before every clip's video was fetched is flagged)."""
+    """One clip of a served pairwise or parallel trial, by the label the rater sees; the bytes sent are recorded
+    per clip (an answer before every clip's whole file was sent is flagged)."""
     t = _video_row(_CLIP_VIDEO, token, trial_id=trial_id, label=label)
     if t is None or t.served_at is None or t.released:
         abort(404, "unknown video")
-    if t.video_at is None:
-        with app_engine().begin() as conn:
-            conn.execute(
-                update(TrialClip).where(TrialClip.id == t.id, TrialClip.video_at.is_(None)).values(video_at=utcnow())
-            )
-    return current_app.extensions["rating_app"]["videos"].response(t.clip_id)
+    return _send_video(TrialClip, t)
 
 
 def required_ms(clip_id: str | None, clip_ids=None) -> int:
@@ -601,7 +634,7 @@ def _parse_answer(body, design, training, shown):
         abort(400, f"missing field '{name}'")
     if design == "acr":
         return _int_field(body, "rating", 1, 5)
-    if design == "pairwise":
+    if design in study.PAIR_DESIGNS:
         return _int_field(body, "preference", -2, 2)
     ratings = body.get("ratings")
     if not isinstance(ratings, dict):
@@ -624,6 +657,7 @@ _ANSWERED_TRIAL = select(
     Trial.released,
     Trial.served_at,
     Trial.video_at,
+    Trial.video_ranges,
     Trial.kind,
     Trial.unit,
     select(func.min(_open.position))
@@ -643,6 +677,7 @@ _ANSWERED_TRIAL_CLIPS = (
         TrialClip.label.label("clip_label"),
         TrialClip.clip_id.label("clip_clip_id"),
         TrialClip.video_at.label("clip_video_at"),
+        TrialClip.video_ranges.label("clip_video_ranges"),
     )
     .outerjoin(TrialClip, TrialClip.trial_pk == Trial.id)
     .order_by(TrialClip.position)
@@ -667,7 +702,9 @@ def post_rating(token):
         trial = rows[0]
         training = trial.phase == "training"
         shown = [
-            SimpleNamespace(label=r.clip_label, clip_id=r.clip_clip_id, video_at=r.clip_video_at)
+            SimpleNamespace(
+                label=r.clip_label, clip_id=r.clip_clip_id, video_at=r.clip_video_at, video_ranges=r.clip_video_ranges
+            )
             for r in rows
             if design != "acr" and r.clip_label is not None
         ]
@@ -703,7 +740,7 @@ def post_rating(token):
             return _duplicate(conn, trial.id, training)
         if not training:
             _store(conn, design, trial, rater.id, shown, rating, watched_ms, now)
-        if trial.kind == "test":
+        if trial.kind != "training":
             answer(conn, trial.clip_id or trial.unit)  # the trial's db.COVER_KEY
         return jsonify(stored=True), 201
 
@@ -719,12 +756,12 @@ def _store(conn, design, trial, rater_pk, shown, value, watched_ms, now):
                 rating=value,
                 watched_ms=watched_ms,
                 submitted_at=now,
-                flags="" if trial.video_at else "no_video",
+                flags=_video_flags([trial]),
             )
         )
         return
-    flags = "" if all(r.video_at for r in shown) else "no_video"
-    if design == "pairwise":
+    flags = _video_flags(shown)
+    if design in study.PAIR_DESIGNS:
         conn.execute(
             insert(Preference).values(
                 trial_pk=trial.id,
@@ -755,13 +792,20 @@ def _store(conn, design, trial, rater_pk, shown, value, watched_ms, now):
         )
 
 
+def _video_flags(parts) -> str:
+    """`no_video` and / or `partial_video` for the clips of an answered trial whose file was not sent in full."""
+    videos = current_app.extensions["rating_app"]["videos"]
+    found = {fetched.status(p.video_at, p.video_ranges, videos.size(p.clip_id)) for p in parts}
+    return ";".join(sorted(f for f in found if f))
+
+
 def _duplicate(conn, trial_pk, training):
     design = current_app.config["STUDY_DESIGN"]
     name = ANSWER_FIELD[design]
     stored = None
     if not training and design == "acr":
         stored = conn.execute(select(Rating.rating).where(Rating.trial_pk == trial_pk)).scalar()
-    elif not training and design == "pairwise":
+    elif not training and design in study.PAIR_DESIGNS:
         stored = conn.execute(select(Preference.preference).where(Preference.trial_pk == trial_pk)).scalar()
     elif not training:
         stored = (

@@ -1,13 +1,16 @@
 """Which clips a rater gets, and when a slot is held.
 
-Every rater sees all training clips (familiarisation) and all catch clips. A new session plans only its slots:
-the training clips, one slot per catch clip and up to `clips_per_rater` test slots, in a random order. A test or
-catch slot gets its clip when it is first served (GET next): the least-covered test clip still short of its
-target that this rater has not had, ties broken at random (a catch slot: a catch clip the rater has not had).
-A clip's cover = stored ratings + slots held, i.e. served and unanswered in a live session; db.Cover keeps both
-counts per clip, updated in the same transactions as the trials they count. So a session holds at
-most one slot, only once it has come that far, and only until it answers or expires: creating sessions, or
-polling GET next, holds nothing. A slot for which no test clip is left is dropped (the session gets shorter).
+Every rater sees all training clips (familiarisation). A new session plans only its slots: the training clips,
+`catch_per_rater` catch slots (at most the pool of catch clips) and up to `clips_per_rater` test slots, in a random
+order. A test or catch slot gets its clip when it is first served (GET next): the least-covered clip of its role
+that this rater has not had, ties broken at random, a test clip only while short of its target (catch clips have
+none). So each catch clip reaches about catch_per_rater / pool of the raters, as each test clip reaches about
+clips_per_rater / test clips: with a pool sized to match, a clip that two sessions share is no more likely a catch
+clip than any other (CONTRACTS §5). A clip's cover = answers + slots held, i.e. served and unanswered in a live
+session; db.Cover keeps both counts per test and catch clip, updated in the same transactions as the trials they
+count. So a session holds at most one slot, only once it has come that far, and only until it answers or expires:
+creating sessions, or polling GET next, holds nothing. A slot for which no test clip is left is dropped (the session
+gets shorter).
 
 Pairwise and parallel studies balance units instead of clips (designs.Unit: a pair of conditions of an item, or
 an item's page) by the same rules: a slot gets the least-covered unit still short of its target that the rater
@@ -22,11 +25,11 @@ from __future__ import annotations
 import datetime as dt
 import random
 
-from sqlalchemy import func, select, update
+from sqlalchemy import bindparam, func, or_, select, update
 
 from core import study
 
-from .db import COVER_KEY, Clip, Cover, Lock, Rater, Trial
+from .db import COVER_KEY, COVERED_KINDS, Clip, Cover, Lock, Rater, Trial
 from .designs import training_groups
 
 
@@ -38,6 +41,9 @@ def lock_assign(conn) -> None:
     """Serialise assignment between workers (SQLite already holds the write lock: BEGIN IMMEDIATE)."""
     if conn.dialect.name != "sqlite":
         conn.execute(select(Lock).where(Lock.name == "assign").with_for_update())
+
+
+NO_TARGET = 2**31 - 1  # catch clips and units are handed out least-covered first, without a target
 
 
 def expire_idle(conn, slot_timeout_s: float, now: dt.datetime, rater_pk: int | None = None) -> list[int]:
@@ -59,7 +65,7 @@ def expire_idle(conn, slot_timeout_s: float, now: dt.datetime, rater_pk: int | N
         open_slot = (Trial.rater_pk.in_(ids), Trial.answered_at.is_(None), Trial.released.is_(False))
         held = conn.execute(
             select(COVER_KEY, func.count())
-            .where(*open_slot, Trial.kind == "test", COVER_KEY.is_not(None))
+            .where(*open_slot, Trial.kind.in_(COVERED_KINDS), COVER_KEY.is_not(None))
             .group_by(COVER_KEY)
         ).all()
         conn.execute(update(Trial).where(*open_slot).values(released=True))
@@ -107,30 +113,48 @@ def _short_or_full(cov, target, unit, answers, answered):
     return short
 
 
-def plan_session(conn, rng: random.Random, target: int, clips_per_rater: int | None) -> list[tuple[str, str | None]]:
+def n_catch_slots(pool: int, catch_per_rater: int | None) -> int:
+    """Catch trials per session: `catch_per_rater` (None or 0: every one), at most the pool, so every rater gets
+    as many as every other."""
+    return pool if not catch_per_rater else min(catch_per_rater, pool)
+
+
+def _slots(rng, n_test: int, n_catch: int) -> list[tuple[str, None]]:
+    rating = [("test", None)] * n_test + [("catch", None)] * n_catch
+    rng.shuffle(rating)
+    return rating
+
+
+# The clips a slot of each kind draws from in an acr study: test clips, or the bad examples among the catch clips
+# (never a catch item's other clips, CONTRACTS §8). One statement for both kinds, so that their timing matches.
+_ROLE_CLIPS = select(Clip.clip_id).where(
+    Clip.role == bindparam("role"), or_(Clip.role != "catch", Clip.condition == study.CATCH)
+)
+
+
+def plan_session(
+    conn, rng: random.Random, target: int, clips_per_rater: int | None, catch_per_rater: int | None = None
+) -> list[tuple[str, str | None]]:
     """[(kind, clip_id or None)] in presentation order for a new session; raise StudyFull."""
     cov = coverage(conn)
     if not cov:
         raise StudyFull("the study has no test clips")
     short = _short_or_full(cov, target, "clip", "ratings", "rated")
     n_test = short if not clips_per_rater else min(clips_per_rater, short)
-    n_catch = conn.execute(
+    pool = conn.execute(
         select(func.count()).select_from(Clip).where(Clip.role == "catch", Clip.condition == study.CATCH)
     ).scalar()
     training = list(conn.execute(select(Clip.clip_id).where(Clip.role == "training").order_by(Clip.clip_id)).scalars())
     rng.shuffle(training)
-    rating = [("test", None)] * n_test + [("catch", None)] * n_catch
-    rng.shuffle(rating)
-    return [("training", c) for c in training] + rating
+    return [("training", c) for c in training] + _slots(rng, n_test, n_catch_slots(pool, catch_per_rater))
 
 
-def claim(conn, keys, had, target: int, wait: bool, lock: bool = True):
+def claim(conn, keys, had, target: int, wait: bool):
     """The least-covered key among `keys` still short of `target` and not in `had`, ties at random, with its
     Cover row locked for this transaction; None when there is none. Without `wait`, rows that other servers are
     claiming at this moment are skipped (PostgreSQL's SKIP LOCKED), so concurrent servers claim different rows
     instead of queueing on one lock. The row's counts are checked again once it is locked, so no key is ever
-    handed out beyond its target. Without `lock` the same query only looks (a catch slot runs it too, so that
-    its timing matches a test slot's, but must not hold a row it does not use)."""
+    handed out beyond its target."""
     cover = Cover.answered + Cover.held
     q = (
         select(Cover.key)
@@ -138,24 +162,16 @@ def claim(conn, keys, had, target: int, wait: bool, lock: bool = True):
         .order_by(cover, func.random())
         .limit(1)
     )
-    return conn.execute(q.with_for_update(skip_locked=not wait) if lock else q).scalar()
+    return conn.execute(q.with_for_update(skip_locked=not wait)).scalar()
 
 
 def assign_slot(conn, rng: random.Random, rater_pk: int, kind: str, target: int, wait=False) -> str | None:
     """The clip for a test or catch slot now being served, or None when none is left for this rater (None also
     when, without `wait`, the only ones left are being claimed by other servers: call again under
-    `lock_assign` with `wait`). Both kinds run the same queries, so their timing does not tell them apart."""
+    `lock_assign` with `wait`). Both kinds run the same statements, so their timing does not tell them apart."""
     had = select(Trial.clip_id).where(Trial.rater_pk == rater_pk, Trial.clip_id.is_not(None))
-    test = claim(conn, select(Clip.clip_id).where(Clip.role == "test"), had, target, wait, lock=kind == "test")
-    if kind == "catch":
-        catch = conn.execute(
-            select(Clip.clip_id)
-            .where(Clip.role == "catch", Clip.condition == study.CATCH, Clip.clip_id.not_in(had))
-            .order_by(Clip.clip_id)
-        ).scalars()
-        left = list(catch)
-        return rng.choice(left) if left else None
-    return test
+    keys = _ROLE_CLIPS.params(role=kind)
+    return claim(conn, keys, had, target if kind == "test" else NO_TARGET, wait)
 
 
 # ---------------------------------------------------------------------------------------- pairwise / parallel
@@ -170,24 +186,22 @@ def units_full(conn, units, target: int) -> bool:
     return bool(cov) and all(d >= target for d, _ in cov.values())
 
 
-def plan_units(conn, rng: random.Random, target: int, per_rater: int | None, design: str, clips, units):
+def plan_units(
+    conn, rng: random.Random, target: int, per_rater: int | None, design: str, clips, units, catch_per_rater=None
+):
     """[(kind, training clips or None)] in presentation order for a new pairwise or parallel session."""
     cov = unit_coverage(conn, units)
     short = _short_or_full(cov, target, "comparison", "answers", "answered")
     n_test = short if not per_rater else min(per_rater, short)
-    n_catch = sum(u.role == "catch" for u in units.values())
-    rating = [("test", None)] * n_test + [("catch", None)] * n_catch
-    rng.shuffle(rating)
-    return [("training", g) for g in training_groups(design, clips, rng)] + rating
+    pool = sum(u.role == "catch" for u in units.values())
+    training = [("training", g) for g in training_groups(design, clips, rng)]
+    return training + _slots(rng, n_test, n_catch_slots(pool, catch_per_rater))
 
 
 def assign_unit(conn, rng: random.Random, rater_pk: int, kind: str, target: int, units, wait=False):
     """The Unit for a test or catch slot now being served, or None when none is left for this rater (as
-    assign_slot, whose rules it follows); both kinds run the same queries."""
+    assign_slot, whose rules it follows); both kinds run the same statements."""
     had = select(Trial.unit).where(Trial.rater_pk == rater_pk, Trial.unit.is_not(None))
-    test = claim(conn, [k for k, u in units.items() if u.role == "test"], had, target, wait, lock=kind == "test")
-    if kind == "catch":
-        taken = set(conn.execute(had).scalars())
-        left = [u for k, u in sorted(units.items()) if u.role == "catch" and k not in taken]
-        return rng.choice(left) if left else None
-    return units[test] if test is not None else None
+    keys = sorted(k for k, u in units.items() if u.role == kind)
+    key = claim(conn, keys, had, target if kind == "test" else NO_TARGET, wait)
+    return units[key] if key is not None else None

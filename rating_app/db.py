@@ -60,6 +60,8 @@ class Clip(Base):
     item: Mapped[str] = mapped_column(String(128), default="")
     frames: Mapped[int | None] = mapped_column(Integer, nullable=True)
     fps: Mapped[float | None] = mapped_column(Float, nullable=True)
+    # appropriateness: the other item whose motion a mismatched clip shows (CONTRACTS §10); "" for the others
+    motion_item: Mapped[str | None] = mapped_column(String(128), nullable=True, default="")
 
 
 class Rater(Base):
@@ -84,6 +86,10 @@ class Rater(Base):
     client: Mapped[str] = mapped_column(String(32), index=True, default="")  # keyed hash of the address
     resume_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)  # sha256 of the resume cookie
     n_early: Mapped[int] = mapped_column(Integer, default=0)  # answers refused as too early
+    # The audio check of a study with sound (audio_check.py): the sample being played, failed tries, passed when.
+    audio_sample: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    audio_tries: Mapped[int | None] = mapped_column(Integer, nullable=True, default=0)
+    audio_passed_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
 
 
 class Trial(Base):
@@ -101,7 +107,8 @@ class Trial(Base):
     position: Mapped[int] = mapped_column(Integer)  # 0.. over the whole session
     index: Mapped[int] = mapped_column(Integer)  # 1.. within the phase
     served_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)  # first GET next
-    video_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)  # first video request
+    video_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)  # first bytes of the video sent
+    video_ranges: Mapped[str | None] = mapped_column(String(400), nullable=True)  # bytes sent (fetched.py)
     answered_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
     # An expired session's unanswered slots, and a slot no clip was left for, are released: never served
     # and never answerable again.
@@ -120,7 +127,8 @@ class TrialClip(Base):
     position: Mapped[int] = mapped_column(Integer)
     label: Mapped[str] = mapped_column(String(4))
     clip_id: Mapped[str] = mapped_column(ForeignKey("clips.clip_id"))
-    video_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)  # first video request
+    video_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)  # first bytes of the video sent
+    video_ranges: Mapped[str | None] = mapped_column(String(400), nullable=True)  # bytes sent (fetched.py)
 
 
 class Rating(Base):
@@ -133,7 +141,7 @@ class Rating(Base):
     rating: Mapped[int] = mapped_column(Integer)
     watched_ms: Mapped[int | None] = mapped_column(Integer, nullable=True)
     submitted_at: Mapped[dt.datetime] = mapped_column(DateTime)
-    flags: Mapped[str] = mapped_column(String(64), default="")  # e.g. no_video (see export.FLAGS)
+    flags: Mapped[str] = mapped_column(String(64), default="")  # e.g. no_video, partial_video (see export.FLAGS)
 
 
 class Preference(Base):
@@ -208,7 +216,7 @@ class LoginFailure(Base):
 
 
 class Cover(Base):
-    """How far each test clip (acr) or test unit (pairwise, parallel) is covered: its answered trials and the
+    """How far each test or catch clip (acr) or unit (pairwise, parallel) is covered: its answered trials and the
     slots held for it now (served, unanswered, not released). The transactions that assign, answer and release
     a slot update its row, so assignment reads one small row per clip or unit instead of counting every trial
     under the assignment lock; `trial_cover` is the count from the trials that these rows always equal."""
@@ -219,18 +227,19 @@ class Cover(Base):
     held: Mapped[int] = mapped_column(Integer, default=0)
 
 
-# A trial's Cover key: its clip (acr) or its unit (pairwise, parallel); a served test trial has exactly one.
+# A trial's Cover key: its clip (acr) or its unit (pairwise, parallel); a served test or catch trial has exactly one.
 COVER_KEY = func.coalesce(Trial.clip_id, Trial.unit)
+COVERED_KINDS = ("test", "catch")  # trials counted in Cover (training trials are shown to everyone)
 
 
 def trial_cover(conn):
-    """{Cover key: (answered trials, held slots)} over test trials, counted from the trials in ONE statement
+    """{Cover key: (answered trials, held slots)} over test and catch trials, counted from the trials in ONE statement
     (two statements would each see the data as of their own start under PostgreSQL's read committed, and an
     answer committed between them would be in neither count)."""
     held = case((and_(Trial.answered_at.is_(None), Trial.released.is_(False)), 1), else_=0)
     rows = conn.execute(
         select(COVER_KEY, func.count(Trial.answered_at), func.sum(held))
-        .where(Trial.kind == "test", COVER_KEY.is_not(None))
+        .where(Trial.kind.in_(COVERED_KINDS), COVER_KEY.is_not(None))
         .group_by(COVER_KEY)
     ).all()
     return {k: (int(done), int(h or 0)) for k, done, h in rows}
@@ -300,7 +309,7 @@ def make_read_engine(engine: Engine) -> Engine:
     return engine.execution_options(isolation_level="AUTOCOMMIT")
 
 
-def make_engine(url: str | None = None) -> Engine:
+def make_engine(url: str | None = None, pool_size=None) -> Engine:
     url = check_url(url)
     if url.startswith("sqlite"):
         engine = create_engine(url, connect_args={"timeout": 30, "check_same_thread": False})
@@ -325,7 +334,7 @@ def make_engine(url: str | None = None) -> Engine:
 
         return engine
     # Per process; keep workers x (pool_size + max_overflow) under the server's max_connections (100 by default).
-    pool = int(os.environ.get("DB_POOL_SIZE", "10"))
+    pool = int(pool_size or os.environ.get("DB_POOL_SIZE") or "10")
     return create_engine(url, pool_size=pool, max_overflow=pool, pool_recycle=1800)
 
 
@@ -353,13 +362,28 @@ def _init_lock(engine: Engine):
                 conn.commit()
 
 
+# Columns added since the first schema: (table, column, type); a database made before them gets them, NULL.
+ADDED_COLUMNS = (
+    ("trials", "unit", "VARCHAR(400)"),  # the designs: NULL, as for every acr trial
+    ("trials", "video_ranges", "VARCHAR(400)"),  # issue 37: bytes sent; NULL = none recorded
+    ("trial_clips", "video_ranges", "VARCHAR(400)"),
+    ("clips", "motion_item", "VARCHAR(128)"),  # appropriateness: NULL for every clip of an older study
+    ("raters", "audio_sample", "VARCHAR(64)"),  # the sound check
+    ("raters", "audio_tries", "INTEGER"),
+    ("raters", "audio_passed_at", "TIMESTAMP"),
+)
+
+
 def _add_missing_columns(engine: Engine) -> None:
-    """A database made before the designs existed lacks trials.unit: add it (NULL, as for every acr trial)."""
+    """Add the ADDED_COLUMNS a database made before them lacks."""
     from sqlalchemy import inspect
 
-    if "unit" not in {c["name"] for c in inspect(engine).get_columns("trials")}:
-        with engine.begin() as conn:
-            conn.execute(text("ALTER TABLE trials ADD COLUMN unit VARCHAR(400)"))
+    insp = inspect(engine)
+    have = {t: {c["name"] for c in insp.get_columns(t)} for t in {t for t, _, _ in ADDED_COLUMNS}}
+    for table, column, kind in ADDED_COLUMNS:
+        if column not in have[table]:
+            with engine.begin() as conn:
+                conn.execute(text(f"ALTER TABLE {table} ADD COLUMN {column} {kind}"))
 
 
 def study_design(conn) -> str | None:
@@ -416,10 +440,11 @@ def init_db(engine: Engine, clips=None, design: str | None = None, cover_keys=No
                                 item=c.item,
                                 frames=c.frames,
                                 fps=c.fps,
+                                motion_item=c.motion_item,
                             )
                         )
                     else:
                         row.condition, row.role, row.item = c.condition, c.role, c.item
-                        row.frames, row.fps = c.frames, c.fps
+                        row.frames, row.fps, row.motion_item = c.frames, c.fps, c.motion_item
             if cover_keys:
                 _add_cover_rows(s, cover_keys)

@@ -32,6 +32,9 @@ PAIR_COLUMNS = (
     "rater_completed",
     "flags",
 )
+# appropriateness: pairs.csv's columns, and which side shows the motion made for the speech heard (a or b; empty
+# on catch rows) and the item whose motion the other side shows (CONTRACTS §8).
+FIT_COLUMNS = (*PAIR_COLUMNS, "matched", "mismatched_item")
 PAGE_COLUMNS = (
     "rater_id",
     "page_id",
@@ -48,7 +51,7 @@ PAGE_COLUMNS = (
     "rater_completed",
     "flags",
 )
-FILENAMES = {"acr": "ratings.csv", "pairwise": "pairs.csv", "parallel": "ratings.csv"}
+FILENAMES = {"acr": "ratings.csv", "pairwise": "pairs.csv", "parallel": "ratings.csv", "appropriateness": "pairs.csv"}
 
 
 def _common(rater_id, idx, watched, at, ext, study, completed, flags, n_early):
@@ -67,6 +70,17 @@ def _common(rater_id, idx, watched, at, ext, study, completed, flags, n_early):
 
 
 RATER_EXTRA = (Rater.external_id, Rater.study_id, Rater.completed_at)
+
+
+def iter_fit_rows(s: Session):
+    """The appropriateness export: pairs.csv's rows, with the matched side and the mismatched clip's item."""
+    motion = dict(s.execute(select(Clip.clip_id, Clip.motion_item)).all())
+    for row in iter_pair_rows(s):
+        ma, mb = motion.get(row["clip_a"]) or "", motion.get(row["clip_b"]) or ""
+        test = row["role"] == "test"
+        row["matched"] = ("b" if ma else "a") if test else ""
+        row["mismatched_item"] = (ma or mb) if test else ""
+        yield row
 
 
 def iter_pair_rows(s: Session):
@@ -219,8 +233,8 @@ def progress_units(s: Session, design: str, units: dict, target: int) -> dict:
             .group_by(Trial.unit)
         ).all()
     )
-    rows = list(iter_pair_rows(s) if design == "pairwise" else iter_page_rows(s))
-    per_unit, per_cond = [], {}
+    rows = list(iter_page_rows(s) if design == "parallel" else iter_pair_rows(s))
+    per_unit = []
     for key, u in sorted(units.items(), key=lambda kv: (kv[1].role != "test", kv[0])):
         conds = [clips.get(c, "?") for c in u.clips]
         per_unit.append(
@@ -235,7 +249,42 @@ def progress_units(s: Session, design: str, units: dict, target: int) -> dict:
                 "mean": None,
             }
         )
-    if design == "pairwise":
+    if design == "appropriateness":
+        rows = list(iter_fit_rows(s))
+    per_cond = _per_condition(design, units, clips, rows, target)
+    for d in per_cond.values():
+        d["mean"] = round(d.pop("_sum") / d["ratings"], 2) if d["ratings"] else None
+    answers, fails, no_video, partial = {}, {}, {}, {}
+    failed_pages = page_failures(rows) if design == "parallel" else set()
+    seen_pages = set()
+    for r in rows:
+        rid = r["rater_id"]
+        if design == "parallel":
+            if r["page_id"] in seen_pages:
+                continue
+            seen_pages.add(r["page_id"])
+            failed = r["page_id"] in failed_pages
+        else:
+            failed = r["role"] == "catch" and pair_failed(r)
+        answers[rid] = answers.get(rid, 0) + 1
+        fails[rid] = fails.get(rid, 0) + failed
+        no_video[rid] = no_video.get(rid, 0) + ("no_video" in r["flags"])
+        partial[rid] = partial.get(rid, 0) + ("partial_video" in r["flags"])
+    return {
+        "per_clip": per_unit,
+        "per_condition": list(per_cond.values()),
+        "answers": answers,
+        "fails": fails,
+        "no_video": no_video,
+        "partial_video": partial,
+    }
+
+
+def _per_condition(design, units, clips, rows, target) -> dict:
+    """The dashboard's per-condition rows before their means: per condition pair (pairwise, appropriateness: the
+    MAS, seen from the matched clip) or per condition and role (parallel)."""
+    per_cond = {}
+    if design in ("pairwise", "appropriateness"):
         for key, u in units.items():
             name = " vs ".join(sorted(clips.get(c, "?") for c in u.clips))
             d = per_cond.setdefault(
@@ -247,7 +296,10 @@ def progress_units(s: Session, design: str, units: dict, target: int) -> dict:
             first = min(r["condition_a"], r["condition_b"])
             d = per_cond[" vs ".join(sorted((r["condition_a"], r["condition_b"])))]
             d["ratings"] += 1
-            d["_sum"] += r["preference"] if r["condition_a"] == first else -r["preference"]
+            if r.get("matched"):  # appropriateness: the mean is the MAS, seen from the matched clip
+                d["_sum"] += r["preference"] if r["matched"] == "a" else -r["preference"]
+            else:
+                d["_sum"] += r["preference"] if r["condition_a"] == first else -r["preference"]
     else:
         for u in units.values():
             for c in u.clips:
@@ -264,27 +316,4 @@ def progress_units(s: Session, design: str, units: dict, target: int) -> dict:
             )
             d["ratings"] += 1
             d["_sum"] += r["rating"]
-    for d in per_cond.values():
-        d["mean"] = round(d.pop("_sum") / d["ratings"], 2) if d["ratings"] else None
-    answers, fails, no_video = {}, {}, {}
-    failed_pages = page_failures(rows) if design == "parallel" else set()
-    seen_pages = set()
-    for r in rows:
-        rid = r["rater_id"]
-        if design == "parallel":
-            if r["page_id"] in seen_pages:
-                continue
-            seen_pages.add(r["page_id"])
-            failed = r["page_id"] in failed_pages
-        else:
-            failed = r["role"] == "catch" and pair_failed(r)
-        answers[rid] = answers.get(rid, 0) + 1
-        fails[rid] = fails.get(rid, 0) + failed
-        no_video[rid] = no_video.get(rid, 0) + ("no_video" in r["flags"])
-    return {
-        "per_clip": per_unit,
-        "per_condition": list(per_cond.values()),
-        "answers": answers,
-        "fails": fails,
-        "no_video": no_video,
-    }
+    return per_cond

@@ -36,6 +36,7 @@ COLUMNS = (
 )
 FLAGS = {
     "no_video": "the server never sent this trial's video before the answer",
+    "partial_video": "the server had sent only part of this trial's video before the answer (e.g. one byte)",
     "too_fast": "the session had answers refused as arriving before the clip could have played to the end",
 }
 FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
@@ -53,6 +54,12 @@ def row_flags(rating_flags: str, n_early: int) -> str:
     if n_early:
         flags.add("too_fast")
     return ";".join(sorted(flags))
+
+
+def rater_flags(n_early, n_no_video, n_partial) -> list[str]:
+    """What makes a rater suspicious on the dashboard: answers refused as too early, answers without the video
+    or with only part of it."""
+    return [f for f, bad in (("too_fast", n_early), ("no_video", n_no_video), ("partial_video", n_partial)) if bad]
 
 
 def iter_rows(s: Session):
@@ -114,7 +121,7 @@ def iter_rows(s: Session):
 def export_csv(engine: Engine, out=None) -> str | int:
     """Write the study's export (ratings.csv, or pairs.csv for pairwise) to the file object `out` (returns the row
     count) or return it as a string."""
-    from .design_export import PAGE_COLUMNS, PAIR_COLUMNS, iter_page_rows, iter_pair_rows
+    from .design_export import FIT_COLUMNS, PAGE_COLUMNS, PAIR_COLUMNS, iter_fit_rows, iter_page_rows, iter_pair_rows
 
     buf = out if out is not None else io.StringIO()
     n = 0
@@ -124,6 +131,7 @@ def export_csv(engine: Engine, out=None) -> str | int:
             "acr": (COLUMNS, iter_rows),
             "pairwise": (PAIR_COLUMNS, iter_pair_rows),
             "parallel": (PAGE_COLUMNS, iter_page_rows),
+            "appropriateness": (FIT_COLUMNS, iter_fit_rows),
         }[design]
         w = csv.DictWriter(buf, fieldnames=columns, lineterminator="\n")
         w.writeheader()
@@ -202,14 +210,17 @@ def progress(engine: Engine, target: int, design: str = "acr", units=None) -> di
                 .group_by(Trial.rater_pk)
             ).all()
         )
-        no_video = dict(
-            s.execute(
-                select(Rating.rater_pk, func.count()).where(Rating.flags.contains("no_video")).group_by(Rating.rater_pk)
-            ).all()
+        no_video, partial = (
+            dict(
+                s.execute(
+                    select(Rating.rater_pk, func.count()).where(Rating.flags.contains(flag)).group_by(Rating.rater_pk)
+                ).all()
+            )
+            for flag in ("no_video", "partial_video")
         )
         raters = []
         for r in s.scalars(select(Rater).order_by(Rater.id)):
-            flags = [f for f, bad in (("too_fast", r.n_early), ("no_video", no_video.get(r.id))) if bad]
+            flags = rater_flags(r.n_early, no_video.get(r.id), partial.get(r.id))
             raters.append(
                 {
                     "rater_id": r.rater_id,
@@ -223,6 +234,7 @@ def progress(engine: Engine, target: int, design: str = "acr", units=None) -> di
                     "catch_failures": fails.get(r.id, 0),
                     "early_answers": r.n_early,
                     "ratings_without_video": no_video.get(r.id, 0),
+                    "ratings_partial_video": partial.get(r.id, 0),
                     "flags": flags,
                 }
             )
@@ -268,8 +280,8 @@ def _progress_units(engine: Engine, target: int, design: str, units) -> dict:
         )
         raters = []
         for r in s.scalars(select(Rater).order_by(Rater.id)):
-            nv = p["no_video"].get(r.rater_id, 0)
-            flags = [f for f, bad in (("too_fast", r.n_early), ("no_video", nv)) if bad]
+            nv, pv = p["no_video"].get(r.rater_id, 0), p["partial_video"].get(r.rater_id, 0)
+            flags = rater_flags(r.n_early, nv, pv)
             raters.append(
                 {
                     "rater_id": r.rater_id,
@@ -283,6 +295,7 @@ def _progress_units(engine: Engine, target: int, design: str, units) -> dict:
                     "catch_failures": p["fails"].get(r.rater_id, 0),
                     "early_answers": r.n_early,
                     "ratings_without_video": nv,
+                    "ratings_partial_video": pv,
                     "flags": flags,
                 }
             )

@@ -26,6 +26,8 @@ class ManifestClip:
     video: Path  # absolute path of the MP4
     frames: int | None
     fps: float | None
+    motion_item: str = ""  # appropriateness: the other item whose motion this clip shows (CONTRACTS §10)
+    audio: bool = False  # the video carries sound (a study with [audio], CONTRACTS §10)
 
     @property
     def duration_ms(self) -> int | None:
@@ -99,4 +101,6 @@ def _clip(row: dict, where: str, base: Path, check_files: bool) -> ManifestClip:
         video=video,
         frames=_number(row.get("frames"), int, where, "frames"),
         fps=_number(row.get("fps"), float, where, "fps"),
+        motion_item=(row.get("motion_item") or "").strip()[:128],
+        audio=(row.get("audio") or "").strip() == "1",
     )

@@ -10,6 +10,7 @@ from sqlalchemy.orm import Session
 
 from core import study
 
+from . import health
 from .api import EXTERNAL
 from .assign import is_full, units_full
 from .db import app_engine
@@ -41,7 +42,14 @@ def index():
         full = (is_full(s, target) if cfg["STUDY_DESIGN"] == "acr" else units_full(s, ext["units"], target)) or not ext[
             "clips"
         ]
-    return render_template("study.html", ids=ids, full=full, design=cfg["STUDY_DESIGN"], question=cfg["STUDY_QUESTION"])
+    return render_template(
+        "study.html",
+        ids=ids,
+        full=full,
+        design=cfg["STUDY_DESIGN"],
+        question=cfg["STUDY_QUESTION"],
+        sound=cfg["STUDY_SOUND"],
+    )
 
 
 @bp.get("/videos/<name>")
@@ -51,9 +59,12 @@ def video(name):
     clip = current_app.extensions["rating_app"]["clips"].get(m.group(1)) if m else None
     if clip is None:
         abort(404, "unknown video")
-    return current_app.extensions["rating_app"]["videos"].response(clip.clip_id)
+    videos = current_app.extensions["rating_app"]["videos"]
+    if current_app.config["VIDEO_ACCEL"] != "off":
+        return videos.accel(clip.clip_id)[0]  # the proxy sends the bytes
+    return videos.response(clip.clip_id)
 
 
 @bp.get("/healthz")
 def healthz():
-    return jsonify(ok=True, design=current_app.config["STUDY_DESIGN"])
+    return jsonify(ok=True, design=current_app.config["STUDY_DESIGN"], warnings=health.of_app().list())

@@ -13,12 +13,16 @@ import io
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import quote
 
-from flask import abort, current_app, send_file
+from flask import abort, current_app, request, send_file
 
 from .manifest import AppError
 
 CACHE_BYTES = int(os.environ.get("VIDEO_CACHE_MB", "512")) * 2**20  # per worker; beyond it, read per request
+# VIDEO_ACCEL: the reverse proxy that sends the bytes itself (an internal redirect); off: the app sends them.
+ACCEL = ("off", "nginx", "caddy")
+ACCEL_PREFIX = "/_stimuli/"  # the proxy's internal location of the stimulus folder (deploy/, README)
 
 
 @dataclass
@@ -53,6 +57,35 @@ class VideoStore:
         v = Video(self.paths[cid], hashlib.sha256(data).hexdigest()[:32], data if keep else None)
         self.videos[cid] = v
         return v
+
+    def size(self, cid: str) -> int | None:
+        """The video's byte size, or None when it cannot be read."""
+        v = self.videos.get(cid)
+        if v is not None and v.data is not None:
+            return len(v.data)
+        try:
+            return os.stat(os.path.realpath(self.paths[cid])).st_size
+        except (OSError, KeyError):
+            return None
+
+    def accel(self, cid: str):
+        """(a response whose bytes the reverse proxy sends: an empty 200 with `X-Accel-Redirect` to the file under
+        ACCEL_PREFIX, which nginx's internal location, or Caddy's handle_response, serves and never shows the
+        client; the byte range that response will carry, from the request's Range header). No video is held in
+        memory."""
+        try:
+            path = Path(os.path.realpath(self.paths[cid]))
+            if not path.is_relative_to(self.root):
+                raise AppError(f"{self.paths[cid]}: leaves the stimulus folder {self.root}")
+            size = path.stat().st_size
+        except (OSError, AppError) as e:
+            current_app.logger.error("video not served: %s", e)
+            abort(404, "unknown video")
+        resp = current_app.response_class(status=200, mimetype="video/mp4")
+        resp.headers["X-Accel-Redirect"] = ACCEL_PREFIX + quote(path.relative_to(self.root).as_posix())
+        resp.headers["Cache-Control"] = "private, max-age=3600"
+        wanted = request.range.range_for_length(size) if request.range is not None else (0, size)
+        return resp, (wanted if request.method == "GET" and wanted else None)
 
     def response(self, cid: str):
         """The video as a conditional response (Range, If-None-Match), without any date."""

@@ -25,10 +25,10 @@ def _main(argv):
     p.add_argument(
         "--qp",
         type=cli.number(int, 0, 51),
-        default=17,
-        help="x264 constant quantiser, 0-51, lower is better (default 17)",
+        help="x264 constant quantiser, 0-51, lower is better, instead of the default constant bit rate (every "
+        "frame one coded size, as in a stimulus set)",
     )
-    p.add_argument("--crf", type=cli.number(int, 0, 51), help="x264 rate factor 0-51 instead of a constant quantiser")
+    p.add_argument("--crf", type=cli.number(int, 0, 51), help="x264 rate factor 0-51 instead of the constant bit rate")
     args = p.parse_args(argv)
     if not Path(args.clip).is_file():
         raise RenderError(f"{args.clip}: no such file")

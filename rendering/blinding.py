@@ -1,30 +1,56 @@
 """Stimulus files that tell a rater nothing outside their pixels.
 
-A hostile rater sees each video's byte size (Content-Length, download progress) and whatever time
-stamps the server sends. Both follow the condition unless we intervene: jittery motion compresses
-worse, and a pipeline that renders condition by condition stamps the files in condition order. So
-every video of a stimulus set is padded to the same size with a trailing ISO-BMFF `free` box (which
-every player skips; the `moov` box stays at the front, so +faststart streaming is unchanged), and
-every file gets the same modification time.
+A hostile rater sees each video's byte size (Content-Length, download progress), whatever a parser reads from
+its bytes (box sizes, the frame-size table every MP4 carries, the size of each NAL unit), and whatever time
+stamps the server sends. All of these follow the condition unless we intervene: jittery motion compresses
+worse, and a pipeline that renders condition by condition stamps the files in condition order.
+
+Padding after the fact does not help: a parser skips any padding it can recognise (a trailing `free` box
+states its own length, so file size minus box length is the encoded size again). So the sizes are equal by
+construction: the encoder's default rate control (`rendering.encode`) makes every frame of every video the
+same size, filler data included, and `check_one_size` checks that a set came out that way. Of the bytes a
+parser sees, only the split of each frame between coded picture and filler follows the content: the rate
+control sets the clip's total, and a random share of the rate per frame buries most of the frame-to-frame
+swing that jitter adds (bench/bench_blind_sizes.py measures what is left).
+Every file also gets the same modification time.
 """
 
 import os
-from pathlib import Path
 
-_FREE_HEADER = 8  # 32-bit box size + b"free"
+from .errors import RenderError
+from .mp4_layout import content_signal, read_layout, size_signals
 
 
-def pad_to_common_size(videos):
-    """Pad every MP4 in `videos` to one common size; returns that size."""
-    sizes = [Path(v).stat().st_size for v in videos]
-    if not sizes:
+def _shape(path):
+    """What must agree across a set: every size a parser reads but the coded ones (file, boxes, frames)."""
+    layout = read_layout(path)
+    signals = {name: v for name, v in size_signals(layout).items() if not content_signal(name)}
+    signals["frame sizes"] = layout.sample_sizes
+    return signals
+
+
+def check_one_size(videos):
+    """Check that the MP4s in `videos` agree on byte size, boxes and frame sizes; returns the byte size.
+
+    Raises RenderError naming a video and a size that differ: such a set was not encoded with the default rate
+    control (a constant quantiser or rate factor lets the sizes follow the content), and nothing added
+    afterwards could hide it.
+    """
+    videos = list(videos)
+    if not videos:
         return 0
-    target = max(sizes) + _FREE_HEADER  # every file gets a box, so even the largest is padded the same way
-    for path, size in zip(videos, sizes):
-        pad = target - size
-        with open(path, "ab") as f:
-            f.write(pad.to_bytes(4, "big") + b"free" + bytes(pad - _FREE_HEADER))
-    return target
+    first = _shape(videos[0])
+    for path in videos[1:]:
+        shape = _shape(path)
+        if shape != first:
+            name = next(k for k in {**first, **shape} if first.get(k) != shape.get(k))
+            value = "" if name == "frame sizes" else f" ({shape.get(name, 'none')} against {first.get(name, 'none')})"
+            raise RenderError(
+                f"{path}: its {name}{value} differs from {videos[0]}'s; every video of a "
+                "stimulus set must be encoded with the default rate control (rendering.encode), which makes them "
+                "one size"
+            )
+    return first["file size"]
 
 
 def same_mtime(paths, mtime):

@@ -1,16 +1,80 @@
 """The encoder: raw yuv420p frames piped into ffmpeg's libx264, out as an H.264 MP4 for browsers."""
 
+import random
 import subprocess
 
+# The default rate control gives every frame of every video the same size: bits per frame = this times the frame's
+# height, filler included (line drawings cost bits along their lines, so in proportion to the side, not the
+# area). At 640x640 that is 25.6 kB a frame, 2.05 MB a 4-s clip at 20 fps, about 1.8x what qp 17 spent: the
+# filler and the dither below cost bits that the picture does not get.
+FRAME_BITS_PER_ROW = 320
+# The share of that rate x264 aims to spend on the picture on average; the filler data pays for the rest.
+CODED_SHARE = 0.9
+# Each frame's share of the rate is drawn at random (log-normal, this spread, within DITHER_RANGE of the mean):
+# how much x264 spends on a frame otherwise swings with how much the picture changed, more in a jittery clip.
+DITHER_SD = 1.0
+DITHER_RANGE = (0.25, 4.0)
+MAX_ZONES = 100  # about 1.5 kB of x264 options in the first frame
 
-def ffmpeg_writer(out_mp4, size, fps, preset="ultrafast", qp=17, crf=None, threads=None):
+
+def frame_bits(size):
+    """The size of every frame at the default rate control, in bits (filler included), for a size x size video."""
+    return FRAME_BITS_PER_ROW * size
+
+
+def rate_dither(frames, seed=None):
+    """x264 zones giving each of `frames` frames a random multiple of the rate (seed None: fresh randomness).
+
+    Every multiple is written with the same number of characters, so that x264's options (written into the
+    first frame, and stripped from it by the caller) are as long for every clip; a long clip gets its multiples
+    in runs of frames, at most MAX_ZONES of them, so that they stay a small part of the first frame.
+    """
+    run = -(-frames // MAX_ZONES)
+    starts = range(0, frames, run)
+    rng = random.Random(seed)
+    m = [rng.lognormvariate(0.0, DITHER_SD) for _ in starts]
+    mean = sum(m) / len(m)
+    lo, hi = DITHER_RANGE
+    return "/".join(f"{a},{min(a + run, frames) - 1},b={min(max(x / mean, lo), hi):.3f}" for a, x in zip(starts, m))
+
+
+def _rate_control(size, fps, qp, crf, frames, seed):
+    """(ffmpeg options, x264 parameters) of the rate control."""
+    if crf is not None:
+        return ["-crf", str(crf)], []
+    if qp is not None:
+        return ["-qp", str(qp)], []
+    # x264 aims at CODED_SHARE of the rate on average over the clip (each frame at its random multiple), and its
+    # buffer (one frame, filled at the full rate) caps each frame; a frame that codes smaller is topped up with
+    # filler data inside the same sample, so every frame of every clip is one size, whatever it shows. The
+    # average rate, not a per-frame cap that each clip fills to its own degree, sets how many bytes the picture
+    # gets, so the total of the coded (non-filler) NAL units hardly varies with the content either. No scene-cut
+    # keyframes and no B-frames: where x264 puts them follows the content, and the boxes would show it. The SEI
+    # units (x264's options, the dither among them) are removed, so no parser reads the frames' multiples.
+    bits = frame_bits(size)
+    cap = round(bits * fps)
+    aim = round(CODED_SHARE * bits * fps)
+    x264 = ["filler=1", "qcomp=0", "scenecut=0", "bframes=0"]
+    if frames:
+        x264.append(f"zones={rate_dither(frames, seed)}")
+    rate = ["-b:v", str(aim), "-maxrate", str(cap), "-bufsize", str(bits), "-bsf:v", "filter_units=remove_types=6"]
+    return rate, x264
+
+
+def ffmpeg_writer(out_mp4, size, fps, preset="ultrafast", qp=None, crf=None, threads=None, frames=None, seed=None):
     """An ffmpeg process reading raw yuv420p frames on stdin and writing H.264 yuv420p +faststart MP4, no audio.
 
-    Quality: a constant quantiser `qp`, or x264's rate factor `crf` where given. A constant quantiser spares
-    x264 the per-frame complexity estimate that crf needs (~10% of the encoder's time with ultrafast); for our
-    line drawings ultrafast at qp 17 is as close to the frames as superfast at crf 20 (PSNR ~53 dB).
+    Rate control: by default every frame is `frame_bits(size)` bits, filler data included, so every video of one
+    size and frame rate has the same frame sizes and byte size: what a blinded stimulus set needs
+    (rendering.blinding, CONTRACTS §4). With `qp` (a constant quantiser) or `crf` (x264's rate factor) the
+    sizes follow the content instead. ultrafast at qp 17 was the default before; the default now is as close to
+    the frames (PSNR +0.8 dB on average, SSIM higher for every clip measured; bench/RESULTS.md "Blinded sizes").
+    frames, seed: the number of frames that will come, for the default's random share of the rate per frame
+    (`rate_dither`; no dither without `frames`), and its seed (None: fresh randomness).
     """
     import imageio_ffmpeg  # here, not at the top: loading and sampling the models must not need an encoder
+
+    rate, x264 = _rate_control(size, fps, qp, crf, frames, seed)
 
     cmd = [
         imageio_ffmpeg.get_ffmpeg_exe(),
@@ -32,12 +96,15 @@ def ffmpeg_writer(out_mp4, size, fps, preset="ultrafast", qp=17, crf=None, threa
         "libx264",
         "-preset",
         preset,
-        *(["-crf", str(crf)] if crf is not None else ["-qp", str(qp)]),
+        *rate,
         "-pix_fmt",
         "yuv420p",
         "-movflags",
         "+faststart",
     ]
     if threads is not None:
-        cmd += ["-threads", str(threads), "-x264-params", f"threads={threads}:lookahead-threads=1"]
+        cmd += ["-threads", str(threads)]
+        x264 += [f"threads={threads}", "lookahead-threads=1"]
+    if x264:
+        cmd += ["-x264-params", ":".join(x264)]
     return subprocess.Popen(cmd + [str(out_mp4)], stdin=subprocess.PIPE, stderr=subprocess.PIPE)

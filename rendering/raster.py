@@ -15,6 +15,8 @@ from matplotlib.backends.backend_agg import RendererAgg
 from matplotlib.path import Path
 from matplotlib.transforms import IdentityTransform
 
+from core import skeleton_names
+
 from .camera import DEFAULT_CAMERA, NEAR, Projector, clip_to_frustum
 from .errors import RenderError
 
@@ -33,6 +35,7 @@ class Style:
     grid_radius: float = 8.0  # metres of floor drawn around the look-at point (fading out)
     bone_width: float = 1 / 150  # line width as a fraction of the frame height
     head_radius: float = 0.08  # metres
+    thin: float = 0.45  # finger and face bones' line width, as a fraction of the others'
 
 
 DEFAULT_STYLE = Style()
@@ -110,9 +113,14 @@ class FrameDrawer:
     with Agg on a transparent buffer, and blend only the 2x2 pixel blocks the figure touched into the three
     planes (the figure covers a few percent of its bounding box). This saves ffmpeg the RGBA -> yuv420p
     conversion and the pipe 60% of the bytes.
+
+    Any skeleton: every bone of the hierarchy is drawn, coloured by its child joint's side as its name tells it
+    (core.skeleton_names; neutral where none can be told), finger and face bones (`thin`: joint names, or None
+    to tell them from the names) at `style.thin` of the line width. Bones of a joint in `hide` are not drawn,
+    nor those from a root joint named like a root (`joint_Root`, `b_root`: a floor marker, not a bone).
     """
 
-    def __init__(self, parents, joint_names, size, camera=DEFAULT_CAMERA, style=DEFAULT_STYLE):
+    def __init__(self, parents, joint_names, size, camera=DEFAULT_CAMERA, style=DEFAULT_STYLE, hide=(), thin=None):
         if size % 2:
             raise RenderError(f"size must be even for yuv420p, got {size}")
         self.size, self.camera, self.style = size, camera, style
@@ -130,37 +138,22 @@ class FrameDrawer:
         self.u_flat, self.v_flat = self.frame[n : n + n // 4], self.frame[n + n // 4 :]
         self.quad = np.array([0, 1, size, size + 1])  # a 2x2 block's pixels from its top left
         self.parents = np.asarray(parents)
-        child = np.nonzero(self.parents >= 0)[0]
-        # A bone's side is its child joint's side (arms, legs); CMU-style names (LeftArm) count too.
-        side = np.array([n.endswith("_L") or n.startswith("Left") for n in joint_names])
-        side_r = np.array([n.endswith("_R") or n.startswith("Right") for n in joint_names])
-        bone_side = np.where(side[child], -1, np.where(side_r[child], 1, 0))
-        # Bones ordered left, centre, right, so that each side's bones are one slice of the projected ends.
-        order = np.argsort(bone_side, kind="stable")
-        self.bone_ends = np.stack([child, self.parents[child]], 1)[order]
-        counts = [int((bone_side == s).sum()) for s in (-1, 0, 1)]
-        edges = np.cumsum([0] + counts)
-        self.codes = np.tile(np.array([Path.MOVETO, Path.LINETO], dtype=Path.code_type), len(child))
-        # side -> (its bones' slice, its path codes), for the sides that have bones
-        self.sides = {
-            key: (slice(edges[k], edges[k + 1]), self.codes[: 2 * counts[k]])
-            for k, key in enumerate(("left", "centre", "right"))
-            if counts[k]
-        }
-        names = [n.lower() for n in joint_names]
-        self.head = names.index("head") if "head" in names else None
+        self._bones(joint_names, hide, thin)
+        self.head = _head_joint(joint_names)
         self.circle = Path.unit_circle()
         self.width = style.bone_width * size
         self.gcs = {}
-        for key, colour in [
-            ("shadow", (style.shadow,) * 3),
-            ("centre", style.centre),
-            ("left", style.left),
-            ("right", style.right),
-        ]:
+        colours = {
+            "shadow": (style.shadow,) * 3,
+            "head": style.centre,
+            "centre": style.centre,
+            "left": style.left,
+            "right": style.right,
+        }
+        for key in ("shadow", "head", *self.sides):
             gc = self.renderer.new_gc()
-            gc.set_foreground(colour)
-            gc.set_linewidth(self.width)
+            gc.set_foreground(colours[key[0] if isinstance(key, tuple) else key])
+            gc.set_linewidth(self.width * (style.thin if isinstance(key, tuple) and key[1] else 1.0))
             gc.set_antialiased(True)
             gc.set_capstyle("round")
             gc.set_joinstyle("round")
@@ -175,6 +168,31 @@ class FrameDrawer:
             np.float64,
         )
         self.grid_y = grey_to_y(style.grid)
+
+    def _bones(self, joint_names, hide, thin):
+        """The bones to draw (child, parent) grouped by (side, thin), each group one slice of self.bone_ends."""
+        parents, names = self.parents, list(joint_names)
+        hidden = {j for j, n in enumerate(names) if n in set(hide)}
+        hidden |= {j for j, p in enumerate(parents) if p < 0 and "root" in skeleton_names.tokens(names[j])}
+        child = np.array([j for j in np.nonzero(parents >= 0)[0] if j not in hidden and parents[j] not in hidden])
+        child = child.astype(np.int64)
+        sides = [skeleton_names.side(names[j]) for j in child]
+        bone_side = np.array([{"left": -1, "right": 1}.get(s, 0) for s in sides], dtype=np.int64)
+        detail = set(thin) if thin is not None else {n for n in names if skeleton_names.is_detail(n)}
+        bone_thin = np.array([names[j] in detail for j in child], dtype=np.int64)
+        # Bones ordered left, centre, right (thick, then thin within a side), so that each group's bones are one
+        # slice of the projected ends.
+        group = 2 * (bone_side + 1) + bone_thin
+        order = np.argsort(group, kind="stable")
+        self.bone_ends = np.stack([child, parents[child]], 1).reshape(-1, 2)[order]
+        self.codes = np.tile(np.array([Path.MOVETO, Path.LINETO], dtype=Path.code_type), len(child))
+        keys = [(s, t) for s in ("left", "centre", "right") for t in (False, True)]
+        counts = [int((group == g).sum()) for g in range(6)]
+        edges = np.cumsum([0] + counts)
+        # (side, thin) -> (its bones' slice, its path codes), for the groups that have bones
+        self.sides = {
+            key: (slice(edges[g], edges[g + 1]), self.codes[: 2 * counts[g]]) for g, key in enumerate(keys) if counts[g]
+        }
 
     def _grid(self, target, eye):
         s, r = self.style.grid_spacing, self.style.grid_radius
@@ -209,9 +227,13 @@ class FrameDrawer:
             seg = self.proj.to_screen(cam[self.bone_ends])
             points.append(seg.reshape(-1, 2))
             depth = cam[self.bone_ends, 2]
-            d_left, d_right = (depth[self.sides[k][0]].mean() if k in self.sides else 0.0 for k in ("left", "right"))
+            d_side = {
+                side: np.mean([depth[b].mean() for (s, _), (b, _) in self.sides.items() if s == side] or [0.0])
+                for side in ("left", "right")
+            }
             # Painter's order: the farther limb side first, then the trunk, then the nearer side.
-            for key in ("left", "centre", "right") if d_left >= d_right else ("right", "centre", "left"):
+            order = ("left", "centre", "right") if d_side["left"] >= d_side["right"] else ("right", "centre", "left")
+            for key in [(side, thin) for side in order for thin in (False, True)]:
                 if key in self.sides:
                     bones, codes = self.sides[key]
                     r.draw_path(self.gcs[key], Path(seg[bones].reshape(-1, 2), codes), t)
@@ -224,7 +246,7 @@ class FrameDrawer:
                     radius = self.proj.focal * self.style.head_radius / hc[2]
                     centre = self.proj.to_screen(hc)
                     disc = Path(self.circle.vertices * radius + centre, self.circle.codes)
-                    r.draw_path(self.gcs["centre"], disc, t, rgbFace=self.style.centre)
+                    r.draw_path(self.gcs["head"], disc, t, rgbFace=self.style.centre)
                     points.append(centre[None])
         return (np.concatenate(points) if points else np.zeros((0, 2))), radius
 
@@ -273,6 +295,15 @@ class FrameDrawer:
     def rgb(self):
         """The current frame as RGB [size, size, 3] (for contact sheets and tests)."""
         return yuv_to_rgb(self.frame, self.size)
+
+
+def _head_joint(names):
+    """Index of the head joint (its last name token is 'head': Head, mixamorig:Head, b_head), or None."""
+    for j, name in enumerate(names):
+        words = skeleton_names.tokens(name)
+        if words and words[-1] == "head":
+            return j
+    return None
 
 
 @functools.lru_cache(maxsize=4)

@@ -1,9 +1,10 @@
 """Stick-figure videos of motion clips: one fixed camera, bones as lines, a floor grid, H.264 MP4.
 
 `render_clip` composes the three parts: the camera (`camera`: where it looks in each frame), the rasteriser
-(`raster`: each frame drawn as yuv420p) and the encoder (`encode`: ffmpeg, libx264 ultrafast at a constant
-quantiser, fed ready yuv420p frames through a pipe). bench/bench_render.py compares this with a matplotlib
-FuncAnimation + ffmpeg writer; at 1000x1000 a third of our time is drawing, two thirds the pipe and x264.
+(`raster`: each frame drawn as yuv420p) and the encoder (`encode`: ffmpeg, libx264 ultrafast with a rate control
+that makes every frame one size, fed ready yuv420p frames through a pipe). bench/bench_render.py compares this
+with a matplotlib FuncAnimation + ffmpeg writer; at 1000x1000 a third of our time is drawing, two thirds the
+pipe and x264.
 """
 
 import argparse
@@ -44,17 +45,27 @@ def render_clip(
     sheet=None,
     sheet_frames=8,
     preset="ultrafast",
-    qp=17,
+    qp=None,
     crf=None,
     threads=None,
+    hide=(),
+    thin=None,
+    rate_seed=None,
 ):
     """Render a clip (a path to a clip .npz, or a dict as from core.clip.load_clip) to an MP4.
 
     sheet: optional PNG path for a contact sheet of `sheet_frames` evenly spaced frames.
-    preset, qp, crf: x264 speed preset and quality (see ffmpeg_writer); ultrafast is the fastest and, for
-    these drawings, loses nothing visible (it skips deblocking and CABAC: bigger files, ~1.7 MB per
-    4-s walk at 1000x1000, ~1.1 MB at 640x640).
+    preset: x264 speed preset; ultrafast is the fastest and, for these drawings, loses nothing visible (it skips
+    deblocking and CABAC).
+    qp, crf: neither (the default) = every frame one size, filler data included (`encode.frame_bits`: 2.05 MB per
+    4-s clip at 640x640, 3.2 MB at 1000x1000), so that a set's videos are one size (rendering.blinding);
+    qp (a constant quantiser; 17 was the default before) or crf (x264's rate factor) = sizes that follow the
+    content, for a video that is not a stimulus.
     threads: ffmpeg/x264 threads (None = ffmpeg's choice; 1 for one-core rendering in a process pool).
+    hide, thin: joint names not drawn, and those drawn thinner (None: finger and face joints, by name); see
+    raster.FrameDrawer.
+    rate_seed: seed of the default rate control's random share of the rate per frame (None: fresh randomness,
+    so the bytes differ from one render to the next; the pixels hardly do).
     Returns the number of frames written.
     """
     clip = _as_clip(clip_or_path)
@@ -66,11 +77,11 @@ def render_clip(
         raise RenderError(f"{name}: joints must be [T >= 1, J, 3], got {joints.shape}")
     check_joints(joints, name)
     fps = check_fps(clip["fps"], name)
-    drawer = FrameDrawer(clip["parents"], list(clip["joint_names"]), size, camera, style)
+    drawer = FrameDrawer(clip["parents"], list(clip["joint_names"]), size, camera, style, hide, thin)
     targets = camera_targets(joints, fps, camera)
     keep = set(np.linspace(0, len(joints) - 1, sheet_frames).round().astype(int)) if sheet else set()
     kept = []
-    proc = ffmpeg_writer(out_mp4, size, fps, preset, qp, crf, threads)
+    proc = ffmpeg_writer(out_mp4, size, fps, preset, qp, crf, threads, frames=len(joints), seed=rate_seed)
     try:
         for t in range(len(joints)):
             proc.stdin.write(drawer.draw(joints[t], targets[t]))

@@ -1,7 +1,10 @@
 """Shared fixtures. Real data lives in ../shared beside the checkout (CONTRACTS.md, data/README.md)."""
 
+import os
+import secrets
 from pathlib import Path
 
+import psycopg
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -25,6 +28,20 @@ def pytest_configure(config):
     import torch
 
     torch.backends.cudnn.allow_tf32 = False
+    # The tests' PostgreSQL, before any test module reads its URL (fake_stimuli.PG_BASE): the server at
+    # 127.0.0.1:5432 when it answers, else a throwaway one of our own, stopped in pytest_unconfigure (pg_server.py).
+    from pg_server import ServerError, tests_server
+
+    try:
+        config._pg_cluster, _ = tests_server()
+    except ServerError as e:
+        raise pytest.UsageError(f"no PostgreSQL for the tests: {e}") from None
+
+
+def pytest_unconfigure(config):
+    cluster = getattr(config, "_pg_cluster", None)
+    if cluster is not None:
+        cluster.remove()
 
 
 def pytest_addoption(parser):
@@ -181,3 +198,45 @@ def torch_one_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(n)
+
+
+def pg_admin_url() -> str:
+    """A plain libpq URL of the tests' server's database `test` (where test databases are created): E2E_PG, which
+    pytest_configure sets to the server at 127.0.0.1:5432 or to the tests' own (pg_server.py)."""
+    from pg_server import DEFAULT_ADMIN
+
+    return os.environ.get("E2E_PG", DEFAULT_ADMIN)
+
+
+@pytest.fixture
+def pg_database():
+    """A fresh PostgreSQL database for one run, dropped afterwards."""
+    name = f"e2e_{secrets.token_hex(4)}"
+    admin = pg_admin_url()
+    with psycopg.connect(admin, autocommit=True) as conn:
+        conn.execute(f'CREATE DATABASE "{name}"')
+    try:
+        yield admin.rsplit("/", 1)[0] + f"/{name}"
+    finally:
+        with psycopg.connect(admin, autocommit=True) as conn:
+            conn.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
+
+
+@pytest.fixture
+def make(app_db_url):
+    """build(manifest, design, **settings): create_app on the test database with test defaults (admin token, no
+    viewing wait, no session limit); every app's engine is disposed afterwards."""
+    from rating_app import create_app
+    from rating_app.db import app_engine
+
+    made = []
+
+    def build(manifest, design, **kw):
+        kw = {"admin_token": "test-admin-token", "min_view": 0, "sessions_per_client": 0, **kw}
+        made.append(create_app(manifest=manifest, db_url=app_db_url, design=design, **kw))
+        made[-1].config["TESTING"] = True
+        return made[-1]
+
+    yield build
+    for a in made:
+        app_engine(a).dispose()

@@ -52,18 +52,21 @@ def write_fake_stimuli(
     metrics=True,
     seed=0,
     catch_nat=False,
+    mismatched=False,
 ) -> Path:
     """Write manifest.csv (+ metrics.csv) with one short MP4 per clip; return the manifest path.
 
     NAT/MG/FL share items; BAD clips are catch trials; training clips cover every condition. `catch_nat`: also a
     clip of every condition of each catch item (role catch), as make_stimuli writes them for pairwise and parallel
-    catch trials (NAT is the reference, the others fill a parallel catch page to a test page's size)."""
+    catch trials (NAT is the reference, the others fill a parallel catch page to a test page's size). `mismatched`:
+    also each condition's mismatched clip of every test item (the next item's motion, CONTRACTS §10), for the
+    appropriateness design; the other designs leave those out."""
     folder = Path(folder)
     (folder / "videos").mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     rows, taken = [], set()
 
-    def add(condition, role, item):
+    def add(condition, role, item, motion_item=""):
         cid = study.new_clip_id(taken)  # as make_stimuli names clips: no id spells a condition
         video = f"videos/{cid}.mp4"
         write_mp4(folder / video, n_frames=n_frames, fps=fps, shade=len(rows))
@@ -78,12 +81,15 @@ def write_fake_stimuli(
                 "seed": "" if condition == study.NATURAL else str(len(rows)),
                 "frames": n_frames,
                 "fps": fps,
+                "motion_item": motion_item,
             }
         )
 
     for i in range(n_items):
         for cond in conditions:
             add(cond, "test", f"item{i:02d}")
+            if mismatched:
+                add(cond, "test", f"item{i:02d}", motion_item=f"item{(i + 1) % n_items:02d}")
     for i in range(n_catch):
         add(study.CATCH, "catch", f"bad{i:02d}")
         if catch_nat:

@@ -43,8 +43,8 @@ def live_server(app_stimuli, app_db_url):
     app_engine(app).dispose()
 
 
-@pytest.fixture
-def browser(tmp_path):
+def chrome(tmp_path, window="390,844"):
+    """Debian's chromium, headless, through chromedriver, with a window of `window` (width,height)."""
     if not (shutil.which(CHROMIUM) and shutil.which(CHROMEDRIVER)):
         pytest.fail("Debian chromium and chromedriver are needed (apt-get install chromium chromium-driver)")
     from selenium import webdriver
@@ -63,12 +63,18 @@ def browser(tmp_path):
         "--disable-extensions",
         "--disable-dev-shm-usage",
         "--mute-audio",
-        "--window-size=390,844",
+        f"--window-size={window}",
         f"--user-data-dir={tmp_path / 'chrome-profile'}",
     ):
         opts.add_argument(arg)
     driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
     driver.set_page_load_timeout(30)
+    return driver
+
+
+@pytest.fixture
+def browser(tmp_path):
+    driver = chrome(tmp_path)
     yield driver
     driver.quit()
 
@@ -135,9 +141,11 @@ def test_rater_flow_in_a_real_browser(live_server, browser):
     else:
         raise AssertionError("never reached the completion page")
     code = browser.find_element(By.ID, "completion-code").text
-    roles = [c.role for c in load_manifest(live_server_manifest[0])]
+    clips = load_manifest(live_server_manifest[0])
+    roles = [c.role for c in clips]
+    n_catch = sum(c.role == "catch" and c.condition == "BAD" for c in clips)  # acr shows only the bad examples
     assert code and n_training == roles.count("training")
-    assert len(clicked) == min(3, roles.count("test")) + roles.count("catch")  # 3 test clips + every catch clip
+    assert len(clicked) == min(3, roles.count("test")) + n_catch  # 3 test clips + every catch clip
     assert seen_before_end >= 1
     errors = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
     assert not errors, errors

@@ -269,6 +269,8 @@ def test_bad_database_is_one_line(app_stimuli, tmp_path, db, needle):
         (("--min-view", "2"), {}, "--min-view"),
         ((), {"SLOT_TIMEOUT": "nan"}, "SLOT_TIMEOUT"),
         ((), {"RATINGS_PER_CLIP": "0"}, "RATINGS_PER_CLIP"),
+        (("--catch-per-rater", "-1"), {}, "--catch-per-rater"),
+        ((), {"CATCH_PER_RATER": "two"}, "CATCH_PER_RATER"),
     ],
 )
 def test_bad_settings_stop_the_start(app_stimuli, tmp_path, args, env, needle):

@@ -34,23 +34,14 @@ def stimuli(tmp_path_factory):
 def big_stimuli(tmp_path_factory):
     """3 conditions x 30 items, 4 catch items (BAD + NAT, MG, FL), 3 training clips."""
     return write_fake_stimuli(
-        tmp_path_factory.mktemp("big_stimuli"), n_items=30, n_catch=4, n_frames=4, metrics=False, catch_nat=True
+        tmp_path_factory.mktemp("big_stimuli"),
+        n_items=30,
+        n_catch=4,
+        n_frames=4,
+        metrics=False,
+        catch_nat=True,
+        mismatched=True,  # served only by the appropriateness design
     )
-
-
-@pytest.fixture
-def make(app_db_url):
-    made = []
-
-    def build(manifest, design, **kw):
-        kw = {"admin_token": "test-admin-token", "min_view": 0, "sessions_per_client": 0, **kw}
-        made.append(create_app(manifest=manifest, db_url=app_db_url, design=design, **kw))
-        made[-1].config["TESTING"] = True
-        return made[-1]
-
-    yield build
-    for a in made:
-        app_engine(a).dispose()
 
 
 def clips_of(manifest):
@@ -312,7 +303,10 @@ def test_parallel_bad_input(make, stimuli):
 
 
 # ------------------------------------------------------------------------------------------------- balance
-@pytest.mark.parametrize("design,units,per_rater", [("acr", 90, 30), ("pairwise", 90, 30), ("parallel", 30, 10)])
+@pytest.mark.parametrize(
+    "design,units,per_rater",
+    [("acr", 90, 30), ("pairwise", 90, 30), ("parallel", 30, 10), ("appropriateness", 90, 30)],
+)
 def test_targets_reached_exactly_with_fewest_raters(make, big_stimuli, design, units, per_rater):
     clips = clips_of(big_stimuli)
     target = 2
@@ -333,7 +327,7 @@ def test_targets_reached_exactly_with_fewest_raters(make, big_stimuli, design, u
 def unit_counts(rows, clips, design):
     if design == "acr":
         return collections.Counter(r["clip_id"] for r in rows if r["role"] == "test")
-    if design == "pairwise":
+    if design in ("pairwise", "appropriateness"):  # appropriateness: a unit is (item, condition, condition)
         return collections.Counter(
             (r["item"], *sorted((r["condition_a"], r["condition_b"]))) for r in rows if r["role"] == "test"
         )
@@ -350,7 +344,7 @@ def check_exact(c, clips, design, units, target):
     assert len(counts) == units and set(counts.values()) == {target}, collections.Counter(counts.values())
 
 
-@pytest.mark.parametrize("design,units", [("acr", 90), ("pairwise", 90), ("parallel", 30)])
+@pytest.mark.parametrize("design,units", [("acr", 90), ("pairwise", 90), ("parallel", 30), ("appropriateness", 90)])
 def test_targets_exact_under_concurrent_sessions(make, big_stimuli, design, units):
     clips = clips_of(big_stimuli)
     target = 3

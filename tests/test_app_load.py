@@ -17,7 +17,7 @@ from concurrent_raters import cover_mismatches
 from fake_stimuli import free_port, write_fake_stimuli
 
 from rating_app.db import make_engine
-from rating_app.design_export import iter_page_rows, iter_pair_rows
+from rating_app.design_export import iter_fit_rows, iter_page_rows, iter_pair_rows
 from rating_app.export import iter_rows
 from rating_app.simulate import run_simulation
 
@@ -73,6 +73,12 @@ DESIGNS = {
         4,
         lambda r: (r["item"], *sorted((r["condition_a"], r["condition_b"]))),
     ),
+    "appropriateness": (
+        ("rater_id", "clip_a", "clip_b", "preference"),
+        iter_fit_rows,
+        4,
+        lambda r: (r["item"], r["condition_a"]),
+    ),
     "parallel": (
         ("rater_id", "page_id", "clip_id", "rating"),
         iter_page_rows,
@@ -84,7 +90,7 @@ DESIGNS = {
 
 @pytest.fixture(scope="module")
 def design_stimuli(tmp_path_factory):
-    return write_fake_stimuli(tmp_path_factory.mktemp("load_stimuli"), catch_nat=True)
+    return write_fake_stimuli(tmp_path_factory.mktemp("load_stimuli"), catch_nat=True, mismatched=True)
 
 
 @pytest.mark.parametrize("raters", [pytest.param(N_RATERS, marks=pytest.mark.slow), 60])

@@ -4,28 +4,9 @@ export → report. The stimulus folder is the one `make_stimuli --quick` run of 
 import csv
 import json
 import os
-import secrets
 import subprocess
 import sys
 from pathlib import Path
-
-import psycopg
-import pytest
-
-PG_ADMIN = os.environ.get("E2E_PG", "postgresql://postgres@127.0.0.1:5432/test")
-
-
-@pytest.fixture
-def pg_database():
-    """A fresh PostgreSQL database for one run, dropped afterwards."""
-    name = f"e2e_{secrets.token_hex(4)}"
-    with psycopg.connect(PG_ADMIN, autocommit=True) as conn:
-        conn.execute(f'CREATE DATABASE "{name}"')
-    try:
-        yield PG_ADMIN.rsplit("/", 1)[0] + f"/{name}"
-    finally:
-        with psycopg.connect(PG_ADMIN, autocommit=True) as conn:
-            conn.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
 
 
 def _processes_mentioning(text: str) -> list[str]:

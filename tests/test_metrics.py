@@ -91,7 +91,7 @@ def test_metrics_control_error_compares_paths_up_to_placement(walks):
 
 def test_metrics_clip_metrics_keys_and_bad_shape(walks):
     m = clip_metrics(walks[0], 20.0)
-    assert set(m) == {"foot_skating", "bone_length_std", "jerk", "control_error", "control_following"}
+    assert set(m) == {"foot_skating", "bone_length_std", "jerk", "control_error", "control_following", "acceleration"}
     assert np.isnan(m["control_error"]) and np.isnan(m["control_following"])
     with pytest.raises(ValueError, match="21"):
         clip_metrics(np.zeros((10, 22, 3)), 20.0)

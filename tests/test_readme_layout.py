@@ -45,3 +45,14 @@ def test_layout_lists_every_tracked_folder():
     tracked = {"core", "generation", "rendering", "rating_app", "analysis", "bench", "docs", "tests"}
     assert all((ROOT / f).is_dir() for f in tracked)
     assert tracked <= set(layout_rows()), sorted(tracked - set(layout_rows()))
+
+
+def test_ci_runs_the_readmes_two_commands():
+    """A fresh machine needs the README's install and test commands only, and CI runs exactly those."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    block = text.split("## Set up a fresh machine", 1)[1].split("```bash\n", 1)[1].split("```", 1)[0]
+    commands = [line.split("  #")[0].strip() for line in block.splitlines() if line.strip()]
+    assert len(commands) == 2 and commands[1] == "python -m pytest -q"
+    ci = [line.strip() for line in (ROOT / ".ci/run").read_text().splitlines()]
+    assert [c for c in ci if c in commands] == commands
+    assert [c for c in ci if not c.startswith("#") and c][-3:] == ["ruff check .", "ruff format --check .", commands[1]]

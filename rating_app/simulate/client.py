@@ -66,8 +66,9 @@ def trial_parts(trial: dict) -> list[dict]:
 class Visit:
     """One rater's session on the server, driven as the page drives it."""
 
-    def __init__(self, client: Client, rater: Rater, clips: dict[str, ClipInfo], think_s: float = 0.0):
+    def __init__(self, client: Client, rater: Rater, clips: dict[str, ClipInfo], think_s: float = 0.0, heard=None):
         self.client, self.rater, self.clips, self.think_s = client, rater, clips, think_s
+        self.heard = heard or {}  # a study with sound: {sha256 of a sound-check sample: its digits}
         self.token = self.rater_id = None
         self.design, self.min_view, self.n_trials = "acr", 1.0, 0
 
@@ -89,6 +90,9 @@ class Visit:
     def next(self) -> tuple[str, object]:
         """("trial", the trial), ("done", the completion code) or ("full", None): every slot was dropped."""
         status, body = self.client.call("GET", f"/api/sessions/{self.token}/next")
+        if status == 403 and body.get("audio_check"):
+            self.sound_check()
+            status, body = self.client.call("GET", f"/api/sessions/{self.token}/next")
         if status == 409 and body.get("full"):
             return "full", None
         if status != 200:
@@ -96,6 +100,18 @@ class Visit:
         if body.get("done"):
             return "done", body["completion_code"]
         return "trial", body["trial"]
+
+    def sound_check(self) -> None:
+        """Pass the sound check as a rater who hears does: fetch the sample, type its digits."""
+        import hashlib
+
+        status, wav = self.client.call("GET", f"/api/sessions/{self.token}/audio-check.wav", raw=True)
+        if status != 200:
+            raise AppError(f"sound check sample: HTTP {status}")
+        digits = self.heard.get(hashlib.sha256(wav).hexdigest(), "")
+        status, body = self.client.call("POST", f"/api/sessions/{self.token}/audio-check", {"answer": digits})
+        if status != 200 or not body.get("passed"):
+            raise AppError(f"sound check: HTTP {status}: not passed")
 
     def shown(self, trial: dict) -> tuple[list[str], list[ClipInfo | None]]:
         """The clip ids of a trial and what the crowd knows of them (None: a clip not in its manifest)."""

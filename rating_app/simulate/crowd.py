@@ -17,7 +17,7 @@ from core import study
 
 from ..manifest import AppError
 from .client import Client, Visit, check_design
-from .raters import ClipInfo, Rater, duration_ms, load_clips, make_raters, set_qualities
+from .raters import ClipInfo, Rater, duration_ms, load_audio_answers, load_clips, make_raters, set_qualities
 
 MAX_RATERS = 100_000
 
@@ -51,6 +51,7 @@ def run_simulation(
     by_condition = set_qualities(clips, quality)
     raters = make_raters(n_raters, seed, careless, prefix or f"sim{seed}")
     crowd = _Crowd(url, clips, started + timeout_s, think_s, on_ack)
+    crowd.heard = load_audio_answers(manifest)
     if progress:
         from tqdm import tqdm
 
@@ -101,6 +102,7 @@ class _Crowd:
         self.errors: list[str] = []
         self.local = threading.local()  # one HTTP client (keep-alive connection) per thread
         self.bar = None  # a progress bar, counting raters as they finish
+        self.heard = {}  # a study with sound: the sound-check samples' digits by their bytes' hash
 
     def take_part(self, rater: Rater) -> None:
         res = self.results[rater.index] = _new_result(rater)
@@ -120,7 +122,7 @@ class _Crowd:
             return
         if not hasattr(self.local, "client"):
             self.local.client = Client(self.url, self.deadline)
-        visit = Visit(self.local.client, rater, self.clips, self.think_s)
+        visit = Visit(self.local.client, rater, self.clips, self.think_s, self.heard)
         if not visit.start():
             self.full.set()
             res["skipped"] = "study full"
@@ -198,7 +200,7 @@ def _catch_failed(design: str, ids: list[str], shown: list[ClipInfo | None], val
     conds = [c.condition if c else None for c in shown]
     if design == "acr":
         return bool(study.acr_catch_failed(value))
-    if design == "pairwise":
+    if design in study.PAIR_DESIGNS:
         return bool(study.pair_catch_failed(conds[0], conds[1], value))
     by = {c: value[i] for i, c in zip(ids, conds)}
     if study.CATCH not in by or study.NATURAL not in by:
@@ -230,7 +232,7 @@ def _records(design, rater_id, rater: Rater, trial, ids, shown, value, catch) ->
         "careless": rater.careless,
     }
     conds = [c.condition if c else None for c in shown]
-    if design == "pairwise":
+    if design in study.PAIR_DESIGNS:
         pair = {"clip_a": ids[0], "clip_b": ids[1], "condition_a": conds[0], "condition_b": conds[1]}
         return [{**base, **pair, "condition": " vs ".join(sorted(map(str, conds))), "preference": value}]
     return [

@@ -41,6 +41,7 @@ class ClipInfo:
     duration_ms: int = UNKNOWN_DURATION_MS
     quality: float | None = None
     metrics: dict = field(default_factory=dict)  # metric name -> value; nan where not measured
+    motion_item: str = ""  # appropriateness: a mismatched clip shows this other item's motion
 
 
 def duration_ms(clip: ClipInfo | None) -> int:
@@ -71,7 +72,9 @@ def parse_quality(text: str | None) -> dict[str, float]:
 def load_clips(manifest) -> dict[str, ClipInfo]:
     """The manifest's clips, with their metrics from metrics.csv beside it when there is one."""
     clips = {
-        c.clip_id: ClipInfo(c.clip_id, c.condition, c.role, c.duration_ms or UNKNOWN_DURATION_MS)
+        c.clip_id: ClipInfo(
+            c.clip_id, c.condition, c.role, c.duration_ms or UNKNOWN_DURATION_MS, motion_item=c.motion_item
+        )
         for c in load_manifest(manifest, check_files=False)
     }
     metrics_csv = Path(manifest).resolve().parent / "metrics.csv"
@@ -82,6 +85,20 @@ def load_clips(manifest) -> dict[str, ClipInfo]:
             if cid in clips:
                 clips[cid].metrics = {m: float(row[m]) for m in names}
     return clips
+
+
+def load_audio_answers(manifest) -> dict[str, str]:
+    """{sha256 of a sound-check sample: its digits} from audio_check.csv beside the manifest ({} without one): the
+    simulated raters 'hear' a sample by recognising its bytes."""
+    import csv
+    import hashlib
+
+    base = Path(manifest).resolve().parent
+    path = base / "audio_check.csv"
+    if not path.is_file():
+        return {}
+    with open(path, newline="", encoding="utf-8") as f:
+        return {hashlib.sha256((base / r["file"]).read_bytes()).hexdigest(): r["answer"] for r in csv.DictReader(f)}
 
 
 def quality_from_metrics(clips: dict[str, ClipInfo]) -> dict[str, float]:
@@ -140,6 +157,12 @@ def set_qualities(clips: dict[str, ClipInfo], override: dict[str, float] | None)
     return by_condition
 
 
+# How much better, on the 1-5 quality scale, the motion made for the speech fits it than another item's motion:
+# the simulated raters' appropriateness (real motion clearly, a system a little).
+FIT = {study.NATURAL: 1.2}
+FIT_SYSTEM = 0.4
+
+
 @dataclass
 class Rater:
     """One simulated rater: who it says it is to the server, and how it answers."""
@@ -163,6 +186,8 @@ class Rater:
         watched = int(sum(map(duration_ms, shown)) + self.rng.uniform(0, 300))
         if design == "pairwise":
             return self.prefer(shown[0], shown[1]), watched
+        if design == "appropriateness":
+            return self.prefer_fit(shown[0], shown[1]), watched
         return dict(zip(ids, self.page(shown))), watched
 
     def rate(self, clip: ClipInfo | None) -> tuple[int, int]:
@@ -186,6 +211,16 @@ class Rater:
             strength = abs(pref) or 1  # never the bad example, never a tie with it
             pref = strength if b.condition == study.CATCH else -strength
         return pref
+
+    def prefer_fit(self, a: ClipInfo | None, b: ClipInfo | None) -> int:
+        """An appropriateness answer: 2 = A fits the speech clearly better .. -2 = B. The motion made for the speech
+        fits by FIT[condition] (real motion best); a catch pair is answered as in pairwise."""
+        if a is None or b is None or study.CATCH in (a.condition, b.condition) or self.careless:
+            return self.prefer(a, b)
+        fit = FIT.get(a.condition, FIT_SYSTEM)
+        d = (0 if a.motion_item else fit) - (0 if b.motion_item else fit) + self.rng.normal(0, self.noise_sd)
+        level = 0 if abs(d) < PREFERENCE_TIE else 1 if abs(d) < PREFERENCE_CLEAR else 2
+        return level if d > 0 else -level
 
     def page(self, shown: list[ClipInfo | None]) -> list[int]:
         """Parallel ratings 0..100 of the clips of one page, in order (the 1..5 quality scaled)."""

@@ -7,6 +7,8 @@
   var $ = function (id) { return document.getElementById(id); };
   var app = $("app");
   var design = app.dataset.design || "acr";
+  var sound = app.dataset.sound === "1";  // the videos carry sound: unmuted, started by a tap, after a sound check
+  var PAIRED = { pairwise: true, appropriateness: true };
   var question = app.dataset.question || "How natural does this motion look?";
   var KEY = "rating_app_session";
   var token = null;
@@ -17,7 +19,8 @@
   var rateButtons = Array.prototype.slice.call(document.querySelectorAll("button.rate"));
 
   function show(id) {
-    ["welcome", "intro", "trial", "pair", "page", "rating-intro", "done", "full", "error"].forEach(function (s) {
+    ["welcome", "audio-check", "audio-failed", "intro", "trial", "pair", "page", "rating-intro", "done", "full",
+     "error"].forEach(function (s) {
       $(s).hidden = (s !== id);
     });
     window.scrollTo(0, 0);
@@ -28,24 +31,45 @@
     show("error");
   }
 
-  // fetch JSON with a few retries on network errors and 5xx (a blip must not lose the rater).
-  function api(method, path, body, tries) {
-    tries = tries === undefined ? 5 : tries;
+  // fetch JSON, retrying network errors and 5xx answers (a blip, a server or database restart must not lose the
+  // rater) for up to `patience` ms (default RETRY_MS), waiting longer each time and at least what Retry-After asks.
+  // Every call the page makes can be repeated safely (an answer is stored once per trial), so retrying one whose
+  // reply was lost stores nothing twice. The last 5xx answer, if the time runs out, goes to the caller.
+  var RETRY_MS = 120000;
+  function api(method, path, body, patience) {
+    var until = Date.now() + (patience === undefined ? RETRY_MS : patience);
+    var delay = 500;
     var opts = { method: method, headers: { "Accept": "application/json" } };
     if (body !== undefined) {
       opts.headers["Content-Type"] = "application/json";
       opts.body = JSON.stringify(body);
     }
-    return fetch(path, opts).then(function (r) {
-      if (r.status >= 500 && tries > 1) { throw new Error("server " + r.status); }
+    function reply(r) {
       return r.json().catch(function () { return {}; }).then(function (data) {
         return { status: r.status, data: data };
       });
-    }).catch(function (err) {
-      if (tries > 1) {
-        return new Promise(function (res) { setTimeout(res, 700 * (6 - tries)); })
-          .then(function () { return api(method, path, body, tries - 1); });
-      }
+    }
+    function attempt() {
+      return fetch(path, opts).then(function (r) {
+        if (r.status < 500) { return reply(r); }
+        var after = parseFloat(r.headers.get("Retry-After") || "0") * 1000;
+        return retry(after, function () { return reply(r); });
+      }, function (err) {
+        return retry(0, function () { throw err; });
+      });
+    }
+    function retry(after, giveUp) {
+      var wait = Math.max(delay, after || 0);
+      if (Date.now() + wait > until) { return giveUp(); }
+      delay = Math.min(delay * 2, 5000);
+      if (patience === undefined) { $("retrying").hidden = false; }
+      return new Promise(function (res) { setTimeout(res, wait); }).then(attempt);
+    }
+    return attempt().then(function (x) {
+      if (patience === undefined) { $("retrying").hidden = true; }
+      return x;
+    }, function (err) {
+      if (patience === undefined) { $("retrying").hidden = true; }
       throw err;
     });
   }
@@ -53,7 +77,7 @@
   function logEvent(kind, detail) {
     if (!token) { return; }
     api("POST", "/api/sessions/" + token + "/events",
-        { kind: kind, detail: String(detail).slice(0, 500), trial_id: trial ? trial.trial_id : null }, 2)
+        { kind: kind, detail: String(detail).slice(0, 500), trial_id: trial ? trial.trial_id : null }, 1500)
       .catch(function () {});
   }
 
@@ -74,7 +98,7 @@
       token = r.data.session;
       try { sessionStorage.setItem(KEY, token); } catch (e) { /* private mode: no resume */ }
       $("n-training").textContent = r.data.n_training;
-      next();
+      if (sound) { showAudioCheck(); } else { next(); }
     }).catch(function () { fail("The server cannot be reached. Please check your connection."); });
   }
 
@@ -91,6 +115,7 @@
         show("full");
         return;
       }
+      if (r.status === 403 && r.data.audio_check) { showAudioCheck(); return; }
       if (r.status !== 200) { fail(r.data.error || "unexpected answer " + r.status); return; }
       if (r.data.done) { finish(r.data); return; }
       trial = r.data.trial;
@@ -108,8 +133,55 @@
     }).catch(function () { fail("The server cannot be reached. Please check your connection."); });
   }
 
+  // ---------------------------------------------------------------- the sound check (a study with sound)
+  var sample = $("audio-sample");
+  function showAudioCheck() {
+    $("audio-answer").value = "";
+    $("audio-submit").disabled = true;
+    sample.src = "/api/sessions/" + token + "/audio-check.wav?t=" + Date.now();
+    show("audio-check");
+  }
+  $("audio-play").addEventListener("click", function () {
+    sample.currentTime = 0;
+    var p = sample.play();
+    if (p && p.catch) { p.catch(function () {}); }
+  });
+  $("audio-answer").addEventListener("input", function () {
+    $("audio-submit").disabled = !/\d/.test($("audio-answer").value);
+  });
+  $("audio-submit").addEventListener("click", function () {
+    $("audio-submit").disabled = true;
+    api("POST", "/api/sessions/" + token + "/audio-check", { answer: $("audio-answer").value }).then(function (r) {
+      if (r.data.passed) { $("audio-msg").hidden = true; next(); return; }
+      if (r.data.final) {
+        try { sessionStorage.removeItem(KEY); } catch (e) {}
+        $("audio-failed-msg").textContent = r.data.error;
+        show("audio-failed");
+        return;
+      }
+      $("audio-msg").textContent = "That did not match. Please listen to this new sample and try once more.";
+      $("audio-msg").hidden = false;
+      showAudioCheck();
+    }).catch(function () { fail("The server cannot be reached. Please check your connection."); });
+  });
+
+  // With sound, browsers let a page play only after a tap, so every trial starts from one.
+  function startPlaying(videos, msgId) {
+    videos.forEach(function (v) { v.muted = !sound; });
+    if (sound) {
+      $(msgId).textContent = "Tap the video" + (videos.length > 1 ? " A" : "") + " to play it with sound.";
+      $(msgId).hidden = false;
+      return;
+    }
+    videos.map(function (v) { return v.play(); }).forEach(function (p) {
+      if (p && p.catch) {
+        p.catch(function () { $(msgId).textContent = "Tap the video to play it."; $(msgId).hidden = false; });
+      }
+    });
+  }
+
   function present() {
-    if (design === "pairwise") { presentPair(); return; }
+    if (PAIRED[design]) { presentPair(); return; }
     if (design === "parallel") { presentPage(); return; }
     lastPhase = trial.phase;
     answered = false;
@@ -128,13 +200,7 @@
     show("trial");
     video.src = trial.video_url;
     video.load();
-    var p = video.play();
-    if (p && p.catch) {
-      p.catch(function () {
-        $("video-msg").textContent = "Tap the video to play it.";
-        $("video-msg").hidden = false;
-      });
-    }
+    startPlaying([video], "video-msg");
   }
 
   function stopClock() {
@@ -149,7 +215,7 @@
     if (trial.phase === "training") { $("continue").disabled = false; }
     else { rateButtons.forEach(function (b) { b.disabled = answered; }); }
   });
-  video.addEventListener("click", function () { if (video.paused) { video.play(); } });
+  video.addEventListener("click", function () { $("video-msg").hidden = true; if (video.paused) { video.play(); } });
   video.addEventListener("error", function () {
     var e = video.error;
     logEvent("video_error", "clip " + (trial && trial.clip_id) + ": code " + (e ? e.code : "?") + " " +
@@ -175,7 +241,7 @@
   // ---------------------------------------------------------------- pairwise and parallel: several clips
   // Each clip's playing time is added up; `ended` says which clips have played to the end at least once.
   var multi = { videos: [], ended: [], starts: [] };
-  var FIELD = { acr: "rating", pairwise: "preference", parallel: "ratings" };
+  var FIELD = { acr: "rating", pairwise: "preference", parallel: "ratings", appropriateness: "preference" };
 
   function stopMultiClock(i) {
     if (multi.starts[i] !== null && multi.starts[i] !== undefined) {
@@ -225,8 +291,9 @@
     $("pair-msg").hidden = true;
     prefButtons.forEach(function (b) { b.disabled = true; });
     show("pair");
-    // Side by side both play at once; one above the other (a phone) A plays, then B.
-    var oneAfterOther = window.matchMedia("(max-width: 700px)").matches;
+    // Side by side both play at once; one above the other (a phone) A plays, then B. With sound always one after
+    // the other: two voices at once could not be heard.
+    var oneAfterOther = sound || window.matchMedia("(max-width: 700px)").matches;
     multi = { videos: [$("video-a"), $("video-b")], ended: [false, false], starts: [null, null] };
     multi.videos.forEach(function (v, i) {
       watchVideo(v, i, i ? "B" : "A", function (j) {
@@ -237,16 +304,15 @@
           else { prefButtons.forEach(function (b) { b.disabled = answered; }); }
         }
       });
-      v.onclick = function () { if (v.paused) { if (oneAfterOther) { playOnly(i); } else { v.play(); } } };
+      v.onclick = function () {
+        $("pair-msg").hidden = true;
+        if (v.paused) { if (oneAfterOther) { playOnly(i); } else { v.play(); } }
+      };
       v.src = pair[i].video_url;
       v.load();
     });
-    var started = oneAfterOther ? [multi.videos[0].play()] : multi.videos.map(function (v) { return v.play(); });
-    started.forEach(function (p) {
-      if (p && p.catch) {
-        p.catch(function () { $("pair-msg").textContent = "Tap a video to play it."; $("pair-msg").hidden = false; });
-      }
-    });
+    startPlaying(oneAfterOther ? [multi.videos[0]] : multi.videos, "pair-msg");
+    multi.videos.forEach(function (v) { v.muted = !sound; });
   }
 
   function presentPage() {
@@ -271,7 +337,7 @@
       var player = document.createElement("div");
       player.className = "player";
       var v = document.createElement("video");
-      v.muted = true;
+      v.muted = !sound;
       v.setAttribute("playsinline", "");
       v.setAttribute("disablepictureinpicture", "");
       v.preload = "auto";
@@ -333,7 +399,7 @@
   });
   $("pair-continue").addEventListener("click", function () { answerMulti(null); });
   $("pair-replay").addEventListener("click", function () {
-    var oneAfterOther = window.matchMedia("(max-width: 700px)").matches;
+    var oneAfterOther = sound || window.matchMedia("(max-width: 700px)").matches;
     multi.videos.forEach(function (v) { v.currentTime = 0; });
     if (oneAfterOther) { playOnly(0); } else { multi.videos.forEach(function (v) { v.play(); }); }
   });

@@ -1,0 +1,52 @@
+"""How bad each tool-made catch kind is (issue 31): metrics.csv's metrics and the C2ST against the real clips.
+
+    python bench/catch_kinds.py [--fps 20]
+
+On every real take of ../shared/data/bandai-namco-actions (not locomotion: bows, waves, guides, punches, a dance)
+with the common 22-joint skeleton: each kind of generation/catch_kinds.py is applied to every take, and the
+median of each metric over takes is printed as a ratio to the real takes' median, with the C2ST AUC of the kind's
+clips against the real ones (folds grouped by take).
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from generation import c2st  # noqa: E402
+from generation.catch_kinds import KINDS, make_catch  # noqa: E402
+from generation.metrics import any_clip_metrics, find_feet  # noqa: E402
+from generation.motion_files import read_motion  # noqa: E402
+
+ACTIONS = ROOT.parent / "shared" / "data" / "bandai-namco-actions" / "dataset-1" / "data"
+SHOWN = ("jerk", "acceleration", "bone_length_std", "foot_skating")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--fps", type=float, default=20.0)
+    args = ap.parse_args()
+    takes = [read_motion(p, args.fps) for p in sorted(ACTIONS.glob("*.bvh.gz"))]
+    common = max({len(m.names) for m in takes}, key=[len(m.names) for m in takes].count)
+    takes = [m for m in takes if len(m.names) == common]
+    feet = find_feet(takes[0].names)
+    clips = {"real": [m.joints for m in takes]}
+    clips |= {k: [make_catch(m.joints, k, seed=i) for i, m in enumerate(takes)] for k in KINDS}
+    parents = takes[0].parents
+    rows = {k: [any_clip_metrics(j, args.fps, parents, feet) for j in js] for k, js in clips.items()}
+    med = {k: {m: float(np.median([r[m] for r in rs])) for m in SHOWN} for k, rs in rows.items()}
+    feats = {k: {i: c2st.clip_features(j, args.fps, parents) for i, j in enumerate(js)} for k, js in clips.items()}
+    print(f"{len(takes)} real action takes, {common} joints, {args.fps:g} fps; medians over takes as x real")
+    print(f"{'kind':8} " + " ".join(f"{m:>16}" for m in SHOWN) + "   C2ST AUC vs real")
+    for k in clips:
+        ratios = " ".join(f"{med[k][m] / med['real'][m]:>15.2f}x" for m in SHOWN)
+        auc = c2st.c2st_self(feats["real"])["auc"] if k == "real" else c2st.c2st(feats["real"], feats[k])["auc"]
+        print(f"{k:8} {ratios}   {auc:.3f}{' (real split in two: the floor)' if k == 'real' else ''}")
+
+
+if __name__ == "__main__":
+    main()

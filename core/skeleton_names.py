@@ -1,0 +1,53 @@
+"""What a joint's name says about it, for any skeleton: its side, and whether it is a finger or face joint.
+
+Skeletons name sides in many ways: `LeftArm` (CMU, Mixamo `mixamorig:LeftArm`), `UpperArm_L` (Bandai-Namco),
+`b_l_shoulder` (GENEA), `L_Wrist`, `lShldr` (DAZ/Poser), `Bip01 L Hand` (3ds Max). A name is cut into tokens at
+`_ . : - ` and spaces and at lower-to-upper case changes; a token `left`/`l` or `right`/`r` gives the side.
+The renderer colours limbs by side (a neutral colour where no side can be told) and draws finger and face
+bones thinner; the metrics find the feet by side.
+"""
+
+import re
+
+_TOKEN = re.compile(r"[A-Z]+(?![a-z])|[A-Z]?[a-z]+|[0-9]+")
+_LEFT, _RIGHT = {"left", "l"}, {"right", "r"}
+FINGER_WORDS = {"thumb", "index", "middle", "ring", "pinky", "pinkie", "little", "finger", "fingers", "carpal"}
+FACE_WORDS = {
+    "eye",
+    "eyes",
+    "jaw",
+    "brow",
+    "eyebrow",
+    "lip",
+    "lips",
+    "nose",
+    "cheek",
+    "ear",
+    "tongue",
+    "teeth",
+    "chin",
+    "mouth",
+    "lid",
+    "eyelid",
+    "face",
+}
+
+
+def tokens(name):
+    """Lower-case word tokens of a joint name, digits dropped: 'RightHandIndex1' -> ['right', 'hand', 'index']."""
+    return [t.lower() for part in re.split(r"[_.:\- ]+", name) for t in _TOKEN.findall(part) if not t.isdigit()]
+
+
+def side(name):
+    """'left', 'right' or None for a joint name."""
+    words = tokens(name)
+    if any(w in _LEFT for w in words):
+        return "left"
+    if any(w in _RIGHT for w in words):
+        return "right"
+    return None
+
+
+def is_detail(name):
+    """True for a finger or face joint (drawn thinner): a token of FINGER_WORDS or FACE_WORDS."""
+    return any(w in FINGER_WORDS or w in FACE_WORDS for w in tokens(name))

@@ -1,0 +1,58 @@
+"""Catch clips made by the tool: clearly broken versions of a real clip, for any skeleton (CONTRACTS §10).
+
+A catch trial only works if every attentive rater sees that the clip is broken, and (issue 37) if nothing but
+its pixels tells it from a test clip. The kinds break motion in different ways, so a mix of them spreads the catch
+clips' look and their encoded size on both sides of the test clips':
+
+- `jitter`: every joint shakes by independent noise of JITTER_SIGMA times the body's height, every frame;
+- `freeze`: the body stops dead a quarter of the way in and holds that pose to the end, its root still moving;
+- `swap`: the upper body plays half a clip out of step with the legs (and jumps where it wraps round), so the
+  trunk tears at the waist.
+
+How bad each is, on the metrics of metrics.csv, is in bench/RESULTS.md ("Catch clips made by the tool").
+"""
+
+import numpy as np
+
+JITTER_SIGMA = 0.03  # of the body's height per joint and frame: about 5 cm for an adult
+FREEZE_AT = 0.25  # of the clip's length
+
+
+def _height(joints):
+    return float(np.median(joints[..., 1].max(axis=1) - joints[..., 1].min(axis=1)))
+
+
+def jitter(joints, rng):
+    return joints + rng.normal(0.0, JITTER_SIGMA * _height(joints), joints.shape)
+
+
+def freeze(joints, rng):
+    out = joints.copy()
+    t0 = max(1, int(round(FREEZE_AT * len(joints))))
+    root = joints[:, :1]
+    out[t0:] = joints[t0 - 1] - root[t0 - 1] + root[t0:]  # the pose at t0-1, carried along by the root
+    return out
+
+
+def upper_body(joints):
+    """Joints whose mean height lies above the midpoint of all joints' mean heights: the trunk, arms and head."""
+    height = joints[..., 1].mean(axis=0)
+    return height > 0.5 * (height.min() + height.max())
+
+
+def swap(joints, rng):
+    out = joints.copy()
+    up = upper_body(joints)
+    root = joints[:, :1]
+    shifted = np.roll(joints - root, len(joints) // 2, axis=0)  # half a clip away, wrapping round
+    out[:, up] = shifted[:, up] + root
+    return out
+
+
+KINDS = {"jitter": jitter, "freeze": freeze, "swap": swap}
+
+
+def make_catch(joints, kind, seed):
+    """A broken copy of joints [T, J, 3] (metres, Y up) of catch kind `kind`, seeded."""
+    rng = np.random.default_rng(seed)
+    return KINDS[kind](np.asarray(joints, dtype=np.float64), rng).astype(np.float32)

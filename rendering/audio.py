@@ -1,0 +1,142 @@
+"""Sound for stimulus videos: read an item's audio, check it, normalise its loudness, and mux it into a video.
+
+- `read_audio`: a WAV or FLAC file (any sample rate, mono or stereo) as float32 samples at RATE, decoded by
+  ffmpeg after its header has been checked here (a sample rate of 0, or no audio at all, is one clear error).
+- `integrated_loudness`: ITU-R BS.1770-4 integrated loudness in LUFS (K-weighting, 400 ms blocks overlapping by
+  75%, the absolute gate at -70 LUFS and the relative gate 10 LU below), in numpy; `normalise` scales a signal
+  to a target (EBU R128: -23 LUFS). The tests check the result with ffmpeg's own ebur128 meter.
+- `mux_audio`: the span [start, start + duration) of a normalised signal as AAC in an existing MP4, the video
+  stream copied, audio and video starting together (ffmpeg writes the AAC encoder's priming as an edit list,
+  which players honour), so sound and motion stay in sync to well within a frame.
+"""
+
+import struct
+import subprocess
+from pathlib import Path
+
+import numpy as np
+
+from .errors import RenderError
+
+RATE = 48_000  # samples per second of every stimulus's audio
+AAC_BITRATE = "128k"
+SILENCE_DBFS = -60.0  # an RMS below this over a clip's span is silence
+MAX_SECONDS = 3600.0
+
+
+def _ffmpeg():
+    import imageio_ffmpeg  # here, as in encode: sampling the models needs no encoder
+
+    return imageio_ffmpeg.get_ffmpeg_exe()
+
+
+def _header(path):
+    """(channels, sample rate) from a WAV or FLAC header; RenderError naming the file otherwise."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(1 << 16)
+    except OSError as e:
+        raise RenderError(f"{path}: cannot read the audio file ({e.strerror or e})") from None
+    if head[:4] == b"RIFF" and head[8:12] == b"WAVE":
+        pos = 12
+        while pos + 8 <= len(head):
+            cid, size = head[pos : pos + 4], struct.unpack("<I", head[pos + 4 : pos + 8])[0]
+            if cid == b"fmt " and pos + 16 <= len(head):
+                channels, rate = struct.unpack("<HI", head[pos + 10 : pos + 16])
+                return channels, rate
+            pos += 8 + size + (size & 1)
+        raise RenderError(f"{path}: a WAV file without a 'fmt ' chunk")
+    if head[:4] == b"fLaC" and len(head) >= 8 + 18:
+        info = int.from_bytes(head[18:21], "big")  # STREAMINFO: 20 bits of rate, 3 of channels - 1, ...
+        return ((info >> 1) & 0x7) + 1, info >> 4
+    raise RenderError(f"{path}: not a WAV or FLAC file")
+
+
+def read_audio(path):
+    """Samples [N, channels] float32 at RATE Hz (mono or stereo kept as it is)."""
+    channels, rate = _header(path)
+    if rate <= 0:
+        raise RenderError(f"{path}: the sample rate is {rate}; an audio file needs a positive one")
+    if channels not in (1, 2):
+        raise RenderError(f"{path}: {channels} channels; give mono or stereo audio")
+    cmd = [_ffmpeg(), "-v", "error", "-i", str(path), "-t", str(MAX_SECONDS), "-f", "f32le", "-ac", str(channels)]
+    out = subprocess.run([*cmd, "-ar", str(RATE), "-"], capture_output=True)
+    if out.returncode != 0:
+        msg = out.stderr.decode(errors="replace").strip().splitlines()
+        raise RenderError(f"{path}: unreadable audio ({msg[-1] if msg else 'ffmpeg failed'})")
+    samples = np.frombuffer(out.stdout, dtype="<f4").reshape(-1, channels)
+    if not len(samples):
+        raise RenderError(f"{path}: no audio samples")
+    return samples
+
+
+def _biquad(x, b, a):
+    from scipy.signal import lfilter
+
+    return lfilter(b, a, x, axis=0)
+
+
+def _k_weighting_48k(x):
+    """BS.1770's pre-filter (a high shelf) and RLB high-pass, with the standard's coefficients at 48 kHz."""
+    shelf_b = [1.53512485958697, -2.69169618940638, 1.19839281085285]
+    shelf_a = [1.0, -1.69065929318241, 0.73248077421585]
+    hp_b = [1.0, -2.0, 1.0]
+    hp_a = [1.0, -1.99004745483398, 0.99007225036621]
+    return _biquad(_biquad(x, shelf_b, shelf_a), hp_b, hp_a)
+
+
+def integrated_loudness(samples, rate=RATE):
+    """BS.1770-4 integrated loudness (LUFS) of float samples [N, channels] at 48 kHz; -inf for silence."""
+    if rate != RATE:
+        raise ValueError(f"integrated_loudness: the K-weighting here is for {RATE} Hz, got {rate}")
+    y = _k_weighting_48k(np.asarray(samples, dtype=np.float64))
+    block, hop = int(0.4 * rate), int(0.1 * rate)
+    if len(y) < block:
+        return float("-inf")
+    power = np.cumsum(np.concatenate([np.zeros((1, y.shape[1])), y**2]), axis=0)
+    starts = np.arange(0, len(y) - block + 1, hop)
+    z = (power[starts + block] - power[starts]) / block  # mean square per block and channel
+    z = z.sum(axis=1)  # channel weights are 1 for left, right and mono
+    with np.errstate(divide="ignore"):
+        lk = -0.691 + 10 * np.log10(z)
+    z = z[lk > -70.0]
+    if not len(z):
+        return float("-inf")
+    relative = -0.691 + 10 * np.log10(z.mean()) - 10.0
+    with np.errstate(divide="ignore"):
+        z = z[-0.691 + 10 * np.log10(z) > relative]
+    return float(-0.691 + 10 * np.log10(z.mean()))
+
+
+def normalise(samples, target_lufs):
+    """Samples scaled to `target_lufs` integrated loudness (peaks limited to full scale)."""
+    level = integrated_loudness(samples)
+    if not np.isfinite(level):
+        return samples
+    gain = 10 ** ((target_lufs - level) / 20)
+    return np.clip(samples * gain, -1.0, 1.0).astype(np.float32)
+
+
+def rms_dbfs(samples):
+    with np.errstate(divide="ignore"):
+        return float(10 * np.log10(np.mean(np.asarray(samples, np.float64) ** 2) + 1e-20))
+
+
+def mux_audio(video, samples, start_s, duration_s):
+    """Put samples[start, start + duration) (float32 [N, channels] at RATE) into the MP4 `video` as AAC, in
+    place; a span past the end of the samples is an error (check lengths before rendering)."""
+    a, n = int(round(start_s * RATE)), int(round(duration_s * RATE))
+    if a + n > len(samples):
+        raise RenderError(f"{video}: the audio is {len(samples) / RATE:.2f} s, shorter than the clip's span")
+    span = np.ascontiguousarray(samples[a : a + n], dtype="<f4")
+    video = Path(video)
+    tmp = video.with_name(video.stem + ".sound.mp4")
+    cmd = [_ffmpeg(), "-y", "-v", "error", "-i", str(video), "-f", "f32le", "-ar", str(RATE)]
+    cmd += ["-ac", str(span.shape[1]), "-i", "-", "-map", "0:v", "-map", "1:a", "-c:v", "copy", "-c:a", "aac"]
+    cmd += ["-b:a", AAC_BITRATE, "-map_metadata", "-1", "-fflags", "+bitexact", "-flags:a", "+bitexact"]
+    cmd += ["-movflags", "+faststart", str(tmp)]
+    out = subprocess.run(cmd, input=span.tobytes(), capture_output=True)
+    if out.returncode != 0:
+        msg = out.stderr.decode(errors="replace").strip().splitlines()
+        raise RenderError(f"{video}: muxing the audio failed ({msg[-1] if msg else 'no message'})")
+    tmp.replace(video)

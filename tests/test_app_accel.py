@@ -1,0 +1,154 @@
+"""Videos through the proxy (issue 33 item 4): with VIDEO_ACCEL the app maps a trial's URL to its clip and answers
+with an internal redirect, and the reverse proxy (Debian's nginx, or Caddy) sends the bytes. Checked on what the
+client receives: the file's exact bytes and ranges, no redirect header, no date, no path naming a clip; and the
+viewing rule of issue 37 still flags a 1-byte fetch. No video is read into a worker's memory."""
+
+import contextlib
+import csv
+import io
+import os
+import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import requests
+from fake_stimuli import free_port, write_fake_stimuli
+from proxies import caddy_accel, nginx_accel, nginx_head, nginx_temp_paths
+from test_app_proxy import _wait_for
+
+ROOT = Path(__file__).resolve().parents[1]
+NGINX_ACCEL = """{head}
+http {{
+  access_log off;
+  {temp}
+  server {{
+    listen 127.0.0.1:{port};
+    {accel}
+    location / {{
+      proxy_pass http://127.0.0.1:{upstream};
+      proxy_set_header Host $http_host;
+      proxy_set_header X-Forwarded-For $proxy_add_x_forwarded_for;
+    }}
+  }}
+}}
+"""
+CADDY_ACCEL = """
+{{
+  admin off
+  auto_https off
+}}
+http://127.0.0.1:{port} {{
+  reverse_proxy 127.0.0.1:{upstream} {{
+    {accel}
+  }}
+}}
+"""
+
+
+@contextlib.contextmanager
+def behind(proxy, tmp_path, stimuli):
+    """(proxy URL, app URL) of gunicorn with VIDEO_ACCEL=proxy behind that proxy, on SQLite."""
+    exe = shutil.which(proxy) or f"/usr/sbin/{proxy}"
+    if not os.path.exists(exe):
+        pytest.fail(f"Debian's {proxy} is needed (scripts/install-system-deps.sh installs it)")
+    app_port, port = free_port(), free_port()
+    env = dict(
+        os.environ,
+        RATING_MANIFEST=str(stimuli),
+        DATABASE_URL=f"sqlite:///{tmp_path / 'r.sqlite'}",
+        ADMIN_TOKEN="accel-token",
+        VIDEO_ACCEL=proxy,
+        PROXY_COUNT="1",
+        MIN_VIEW="0",
+        SESSIONS_PER_CLIENT="0",
+    )
+    conf = tmp_path / f"{proxy}.conf"
+    text = NGINX_ACCEL if proxy == "nginx" else CADDY_ACCEL
+    folder = Path(stimuli).parent
+    accel = nginx_accel(folder) if proxy == "nginx" else caddy_accel(folder)
+    head, temp = nginx_head(tmp_path), nginx_temp_paths(tmp_path)
+    conf.write_text(text.format(head=head, temp=temp, port=port, upstream=app_port, accel=accel))
+    cmd = [exe, "-p", str(tmp_path), "-c", str(conf)] if proxy == "nginx" else [exe, "run", "--config", str(conf)]
+    if proxy == "caddy":
+        cmd += ["--adapter", "caddyfile"]
+    procs = []
+    with open(tmp_path / "log", "w") as log:
+        try:
+            gun = [sys.executable, "-m", "gunicorn", "-w", "2", "-k", "gthread", "--threads", "4"]
+            procs.append(
+                subprocess.Popen(
+                    [*gun, "-b", f"127.0.0.1:{app_port}", "rating_app.wsgi:app"],
+                    cwd=ROOT,
+                    env=env,
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                    start_new_session=True,
+                )
+            )
+            _wait_for(f"http://127.0.0.1:{app_port}/healthz", procs[-1], "gunicorn")
+            procs.append(
+                subprocess.Popen(
+                    cmd,
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                    start_new_session=True,
+                    env=dict(os.environ, HOME=str(tmp_path), XDG_DATA_HOME=str(tmp_path)),
+                )
+            )
+            _wait_for(f"http://127.0.0.1:{port}/healthz", procs[-1], proxy)
+            yield f"http://127.0.0.1:{port}", f"http://127.0.0.1:{app_port}"
+        finally:
+            for p in reversed(procs):
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(p.pid, signal.SIGTERM)
+                p.wait(15)
+
+
+@pytest.mark.parametrize("proxy", ["nginx", "caddy"])
+def test_the_proxy_sends_the_bytes_blind(proxy, tmp_path):
+    stimuli = write_fake_stimuli(tmp_path / "stimuli", n_items=2, n_catch=1, n_training=0, n_frames=40)
+    files = {r["clip_id"]: (stimuli.parent / r["video"]).read_bytes() for r in csv.DictReader(open(stimuli))}
+    with behind(proxy, tmp_path, stimuli) as (url, app_url):
+        http = requests.Session()
+        token = http.post(url + "/api/sessions", json={}).json()["session"]
+        trial = http.get(f"{url}/api/sessions/{token}/next").json()["trial"]
+        video = url + trial["video_url"]
+        r = http.get(video)
+        assert r.status_code == 200 and r.content == files[trial["clip_id"]]
+        leaked = {k.lower() for k in r.headers} & {"x-accel-redirect", "last-modified", "etag", "content-location"}
+        assert not leaked, r.headers
+        assert not any(cid in v for cid in files for v in r.headers.values())  # no header names a clip
+        part = http.get(video, headers={"Range": "bytes=10-109"})
+        assert part.status_code == 206 and part.content == files[trial["clip_id"]][10:110]
+        direct = requests.get(app_url + trial["video_url"])  # the app alone sends no bytes, only the redirect
+        assert direct.content == b"" and direct.headers["X-Accel-Redirect"].startswith("/_stimuli/videos/")
+        assert (
+            http.post(
+                f"{url}/api/sessions/{token}/ratings", json={"trial_id": trial["trial_id"], "rating": 4}
+            ).status_code
+            == 201
+        )
+
+        # A 1-byte fetch through the proxy is still only one byte: the answer is flagged (issue 37 item 3).
+        token = http.post(url + "/api/sessions", json={}).json()["session"]
+        trial = http.get(f"{url}/api/sessions/{token}/next").json()["trial"]
+        assert http.get(url + trial["video_url"], headers={"Range": "bytes=0-0"}).status_code == 206
+        http.post(f"{url}/api/sessions/{token}/ratings", json={"trial_id": trial["trial_id"], "rating": 2})
+        export = http.get(url + "/admin/export.csv", headers={"Authorization": "Bearer accel-token"}).text
+    flags = {row["rating"]: row["flags"] for row in csv.DictReader(io.StringIO(export))}
+    assert flags["4"] == "" and "partial_video" in flags["2"]
+
+
+def test_no_video_in_a_workers_memory(tmp_path, monkeypatch):
+    from rating_app import create_app
+
+    stimuli = write_fake_stimuli(tmp_path / "stimuli", n_items=2, n_catch=1)
+    monkeypatch.setenv("VIDEO_ACCEL", "nginx")
+    app = create_app(manifest=stimuli, db_url=f"sqlite:///{tmp_path / 'r.sqlite'}", admin_token="t")
+    assert app.extensions["rating_app"]["videos"].videos == {}  # nothing read at start-up
+    monkeypatch.setenv("VIDEO_ACCEL", "squid")
+    with pytest.raises(Exception, match="VIDEO_ACCEL: 'squid' must be one of off, nginx, caddy"):
+        create_app(manifest=stimuli, db_url=f"sqlite:///{tmp_path / 'r2.sqlite'}", admin_token="t")

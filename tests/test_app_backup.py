@@ -1,0 +1,151 @@
+"""Backing up a running study and restoring it (issue 33, item 6), on SQLite and PostgreSQL: a backup taken while a
+simulated crowd answers restores into a fresh database whose export holds only answers the live study holds; with
+the crowd stopped, the export from the restored database is the live export, byte for byte."""
+
+import contextlib
+import csv
+import secrets
+import subprocess
+import sys
+import threading
+
+import psycopg
+import pytest
+from conftest import ROOT, pg_admin_url
+from fake_stimuli import write_fake_stimuli
+from werkzeug.serving import make_server
+
+from rating_app import create_app
+from rating_app.db import app_engine
+from rating_app.simulate import run_simulation
+
+
+def cli(*args):
+    r = subprocess.run(
+        [sys.executable, "-m", "rating_app", *map(str, args)], cwd=ROOT, capture_output=True, text=True, timeout=300
+    )
+    return r
+
+
+@contextlib.contextmanager
+def pg_databases(n):
+    """`n` fresh PostgreSQL databases, dropped afterwards (a backup holds the whole database, so not a schema)."""
+    admin = pg_admin_url()
+    names = [f"bk_{secrets.token_hex(4)}" for _ in range(n)]
+    with psycopg.connect(admin, autocommit=True) as conn:
+        for name in names:
+            conn.execute(f'CREATE DATABASE "{name}"')
+    try:
+        yield [admin.rsplit("/", 1)[0] + f"/{name}" for name in names]
+    finally:
+        with psycopg.connect(admin, autocommit=True) as conn:
+            for name in names:
+                conn.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
+
+
+@pytest.fixture(params=["sqlite", "postgres"])
+def databases(request, tmp_path):
+    """(live, restored at mid-crowd, restored at the end): the live study's URL and two new ones to restore into."""
+    if request.param == "sqlite":
+        yield [f"sqlite:///{tmp_path}/{name}.sqlite" for name in ("live", "mid", "end")]
+    else:
+        with pg_databases(3) as urls:
+            yield urls
+
+
+def export(url, out):
+    r = cli("export", "--db", url, "--out", out)
+    assert r.returncode == 0, r.stderr
+    return out.read_bytes()
+
+
+def test_a_backup_of_a_running_study_restores_to_the_same_export(databases, tmp_path):
+    live, mid, end = databases
+    manifest = write_fake_stimuli(tmp_path / "stimuli", n_items=6)
+    app = create_app(manifest=manifest, db_url=live, ratings_per_clip=4, min_view=0.1, sessions_per_client=0)
+    server = make_server("127.0.0.1", 0, app, threaded=True)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    acked, halfway = [], threading.Event()
+
+    def on_ack(record):
+        acked.append(record)
+        if len(acked) >= 15:
+            halfway.set()
+
+    summary = {}
+    crowd = threading.Thread(
+        target=lambda: summary.update(
+            run_simulation(
+                f"http://127.0.0.1:{server.server_port}",
+                12,
+                manifest=manifest,
+                seed=3,
+                concurrency=3,
+                think_s=0.05,
+                progress=False,
+                on_ack=on_ack,
+            )
+        )
+    )
+    try:
+        crowd.start()
+        assert halfway.wait(120), "the crowd did not get going"
+        r = cli("backup", "--db", live, "--out", tmp_path / "mid.bak")  # while the crowd answers
+        assert r.returncode == 0, r.stderr
+        assert crowd.is_alive(), "the crowd finished before the backup: make it longer"
+        crowd.join(300)
+        assert not crowd.is_alive() and summary["errors"] == []
+
+        r = cli("restore", tmp_path / "mid.bak", "--db", mid)
+        assert r.returncode == 0, r.stderr
+        mid_rows = {answer(x) for x in csv.DictReader(_export_text(mid, tmp_path / "mid.csv"))}
+        live_rows = {answer(x) for x in csv.DictReader(_export_text(live, tmp_path / "live_now.csv"))}
+        assert {(r["rater_id"], r["clip_id"], str(r["rating"])) for r in acked[:15]} <= mid_rows  # acked = committed
+        assert mid_rows < live_rows  # a snapshot of the live study, without the answers that came later
+
+        # the crowd has stopped: back up, restore, and the two exports are the same bytes
+        r = cli("backup", "--db", live, "--out", tmp_path / "end.bak")
+        assert r.returncode == 0, r.stderr
+        r = cli("restore", tmp_path / "end.bak", "--db", end)
+        assert r.returncode == 0, r.stderr
+        want = export(live, tmp_path / "live.csv")
+        assert want.count(b"\n") == len(summary["ratings"]) + 1
+        assert export(end, tmp_path / "end.csv") == want
+    finally:
+        server.shutdown()
+        app_engine(app).dispose()
+
+
+def answer(row):
+    return row["rater_id"], row["clip_id"], row["rating"]
+
+
+def _export_text(url, out):
+    export(url, out)
+    return out.read_text().splitlines()
+
+
+def test_backup_and_restore_refuse_bad_input_with_one_line(tmp_path, app_stimuli):
+    live = f"sqlite:///{tmp_path}/live.sqlite"
+    app_engine(create_app(manifest=app_stimuli, db_url=live)).dispose()
+    (tmp_path / "not_a_backup").write_text("hello")
+    assert cli("backup", "--db", live, "--out", tmp_path / "ok.bak").returncode == 0
+    with pg_databases(1) as (pg,):
+        cases = [
+            (("backup", "--db", f"sqlite:///{tmp_path}/none.sqlite", "--out", tmp_path / "x"), "none.sqlite: no such"),
+            (("backup", "--db", live, "--out", tmp_path), "is a folder"),
+            (("backup", "--db", pg, "--out", tmp_path / "x"), "no ratings table (not a rating app database)"),
+            (("restore", tmp_path / "ok.bak", "--db", live), "exists already; restore into a new file"),
+            (("restore", tmp_path / "not_a_backup", "--db", f"sqlite:///{tmp_path}/n.sqlite"), "not an SQLite backup"),
+            (("restore", tmp_path / "ok.bak", "--db", pg), "not a pg_dump custom-format backup"),
+            (("restore", tmp_path / "missing.bak", "--db", pg), "missing.bak: No such file"),
+        ]
+        for args, message in cases:
+            r = cli(*args)
+            assert r.returncode == 2 and message in r.stderr and r.stderr.count("\n") == 1, (args, r.stderr)
+        # a non-empty PostgreSQL database is refused, never merged into
+        assert cli("restore", tmp_path / "ok.bak", "--db", f"sqlite:///{tmp_path}/copy.sqlite").returncode == 0
+        app_engine(create_app(manifest=app_stimuli, db_url=pg)).dispose()
+        assert cli("backup", "--db", pg, "--out", tmp_path / "pg.bak").returncode == 0
+        r = cli("restore", tmp_path / "pg.bak", "--db", pg)
+        assert r.returncode == 2 and "not empty; restore into a new, empty database" in r.stderr, r.stderr

@@ -1,0 +1,61 @@
+"""The console command (pyproject [project.scripts]) and --version on every command (issue 33, item 2)."""
+
+import importlib
+import subprocess
+import sys
+import tomllib
+from importlib import metadata
+
+import pytest
+from conftest import ROOT
+
+from moglow_eval import COMMANDS
+
+VERSION = metadata.version("moglow-eval")
+
+
+def entry_point(name):
+    """The function pyproject.toml names for console script `name`, imported as pip's wrapper imports it."""
+    spec = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"][name]
+    module, func = spec.split(":")
+    return getattr(importlib.import_module(module), func)
+
+
+def test_the_console_script_is_the_dispatcher():
+    from moglow_eval import main
+
+    assert entry_point("moglow-eval") is main
+
+
+def test_every_subcommand_reaches_its_part_and_answers_version(capsys):
+    main = entry_point("moglow-eval")
+    assert set(COMMANDS) >= {"stimuli", "serve", "simulate", "export", "report", "plan", "demo", "backup", "restore"}
+    for command in COMMANDS:
+        with pytest.raises(SystemExit) as e:
+            main([command, "--version"])
+        assert e.value.code == 0, command
+        assert capsys.readouterr().out.strip() == f"moglow-eval {VERSION}", command
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.strip() == f"moglow-eval {VERSION}"
+
+
+def test_a_subcommand_is_the_python_m_command(tmp_path, capsys):
+    """The same arguments give the same one-line error and exit code as `python -m`."""
+    missing = tmp_path / "none.sqlite"
+    args = ["export", "--db", f"sqlite:///{missing}", "--out", str(tmp_path / "r.csv")]
+    code = entry_point("moglow-eval")(args)
+    err = capsys.readouterr().err.strip()
+    r = subprocess.run([sys.executable, "-m", "rating_app", *args], capture_output=True, text=True, cwd=ROOT)
+    assert (code, err) == (r.returncode, r.stderr.strip()) == (2, f"error: {missing}: no such database file")
+
+
+def test_an_unknown_command_is_one_line(capsys):
+    assert entry_point("moglow-eval")(["bogus"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "unknown command 'bogus'" in err
+
+
+@pytest.mark.parametrize("module", ["rendering", "analysis.report", "analysis.plan", "generation.import_motion"])
+def test_python_m_keeps_working_and_answers_version(module):
+    r = subprocess.run([sys.executable, "-m", module, "--version"], capture_output=True, text=True, cwd=ROOT)
+    assert (r.returncode, r.stdout.strip()) == (0, f"moglow-eval {VERSION}")
