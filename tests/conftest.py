@@ -30,10 +30,10 @@ def pytest_configure(config):
     torch.backends.cudnn.allow_tf32 = False
     # The tests' PostgreSQL, before any test module reads its URL (fake_stimuli.PG_BASE): the server at
     # 127.0.0.1:5432 when it answers, else a throwaway one of our own, stopped in pytest_unconfigure (pg_server.py).
-    from pg_server import ServerError, tests_server
+    from pg_server import ServerError, suite_server
 
     try:
-        config._pg_cluster, _ = tests_server()
+        config._pg_cluster, _ = suite_server()
     except ServerError as e:
         raise pytest.UsageError(f"no PostgreSQL for the tests: {e}") from None
 

@@ -26,7 +26,7 @@ class ServerError(RuntimeError):
 
 
 def free_port() -> int:
-    # Not fake_stimuli's: importing it here would fix its PG_BASE before tests_server sets the environment.
+    # Not fake_stimuli's: importing it here would fix its PG_BASE before suite_server sets the environment.
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
@@ -86,7 +86,7 @@ def throwaway_server() -> tuple[Cluster, str]:
     return cluster, admin
 
 
-def tests_server(default: str = DEFAULT_ADMIN) -> tuple[Cluster | None, str]:
+def suite_server(default: str = DEFAULT_ADMIN) -> tuple[Cluster | None, str]:
     """(the throwaway cluster or None, the plain URL of the tests' database `test`), and the environment set so that
     every test and every process they start (the demo, gunicorn) uses it."""
     configured = os.environ.get("E2E_PG")

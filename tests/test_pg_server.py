@@ -5,7 +5,7 @@ import os
 
 import psycopg
 from fake_stimuli import free_port
-from pg_server import answers, tests_server
+from pg_server import answers, suite_server
 
 
 def test_the_suite_has_a_postgresql_and_every_url_points_at_it():
@@ -21,7 +21,7 @@ def test_without_a_server_a_throwaway_one_is_started_and_removed(monkeypatch):
     monkeypatch.delenv("E2E_PG")
     monkeypatch.delenv("RATING_TEST_PG")
     nobody = f"postgresql://postgres@127.0.0.1:{free_port()}/test"  # no server listens there
-    cluster, admin = tests_server(default=nobody)
+    cluster, admin = suite_server(default=nobody)
     try:
         assert cluster is not None and admin != nobody and os.environ["E2E_PG"] == admin
         with psycopg.connect(admin, autocommit=True) as conn:
