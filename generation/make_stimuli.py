@@ -37,7 +37,7 @@ from core.clip import save_clip
 from core.tables import C2ST_COLUMNS
 from rendering.render import size_flag
 
-from . import c2st, pretrained, skeleton
+from . import c2st, pretrained, rigid, skeleton
 from .catch_kinds import KINDS as TOOL_CATCH_KINDS
 from .catch_kinds import make_catch
 from .dataset import read_heldout
@@ -149,6 +149,12 @@ def sample_condition(kind, ckpt, arrays, idx, temperature, seed, device):
     return require_finite(x, ckpt)
 
 
+def rigid_conditions(args):
+    """The conditions whose poses are put onto the item's actor's bones (generation.rigid): the generated test
+    conditions, unless --free-bones; never NAT (already rigid) nor BAD (broken on purpose)."""
+    return () if args.free_bones else (MG, FL)
+
+
 # ---------------------------------------------------------------- the pipeline's stages
 def import_systems(systems, items, fps, window, progress):
     """{name: {item position: joints}} of every imported system; before any training, so that its errors come
@@ -196,6 +202,8 @@ def sample_clips(args, dataset, items, arrays):
             if model is not None:
                 seed = args.seed + SEED_OFFSET[cond]
                 x = sample_condition(*model, arrays, idx, args.temperature, seed, args.device)
+            if cond in rigid_conditions(args):  # the bones of the item's actor, from its real history
+                x = rigid.fit_to_history(x, arrays["hist"][idx])
             joints = to_world(x, arrays["c"][idx])
             clips += [(cond, k, joints[j], seed) for j, k in enumerate(idx)]
     # The other catch kinds break the catch item's real motion (generation.catch_kinds): a mix of kinds spreads
@@ -224,6 +232,7 @@ def write_clips(out, clips, items, arrays, fps, args, forbidden):
         save_clip(motion, joints, skeleton.PARENTS, skeleton.JOINT_NAMES, fps, control=control)
         jobs.append((str(motion), str(video), str(sheet), args.size, args.preset))
         manifest.append(manifest_row(cid, cond, it, seed, len(joints), fps, args.size))
+        manifest[-1]["postprocess"] = rigid.RIGID if cond in rigid_conditions(args) else ""
         m = clip_metrics(joints, fps, control)
         metrics_rows.append(dict(clip_id=cid, condition=cond, role=it["role"], item=it["id"], **m))
         if it["role"] == TEST:
@@ -407,6 +416,11 @@ def parse_args(argv):
         default=1.0,
         help="sampling temperature of MG and FL (default 1.0)",
     )
+    ap.add_argument(
+        "--free-bones",
+        action="store_true",
+        help="keep MG's and FL's bones as sampled (default: set to the item's actor's lengths, generation.rigid)",
+    )
     ap.add_argument("--seed", type=cli.number(int, 0), help="item selection, sampling and manifest order (default 0)")
     ap.add_argument(
         "--size", type=size_flag, help="video width = height in pixels, even (default 640; 320 with --quick)"
@@ -484,6 +498,7 @@ _BUILTIN_ONLY = (
     "--export-items",
     "--n-items",
     "--temperature",
+    "--free-bones",
     "--device",
     "--threads",
     "--runs",

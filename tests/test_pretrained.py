@@ -47,6 +47,18 @@ def test_shipped_models_keep_their_recorded_quality():
             assert now[model][metric] <= 1.1 * recorded[model][metric], (model, metric, now, recorded)
         # a gait that dies out before the clip ends: stepping falls, where skating and jerk may not rise
         assert now[model]["late_stepping"] >= recorded[model]["late_stepping"] / 1.1, (model, now, recorded)
+        # the worst joint's jerk (issue 34's target is 1.2x NAT's; MG's upper body is at 1.4-1.5x, RESULTS)
+        assert now[model]["joint_jerk_max"] <= 1.1 * recorded[model]["joint_jerk_max"], (model, now, recorded)
+
+
+def test_shipped_clips_have_the_actors_rigid_bones():
+    """Issue 34's rigidity targets, on what make_stimuli ships: every bone's length std within a window at most
+    1 mm, and its mean within 1% of the actor's (read from the window's real history). The models as sampled
+    fail both (MG's shins vary by about 24 mm); generation.rigid puts them onto the actor's bones."""
+    now = pretrained.quality()
+    for model in ("MG", "FL"):
+        assert now[model]["bone_std_mm_max"] <= 1.0, (model, now[model])
+        assert now[model]["bone_length_error_max"] <= 0.01, (model, now[model])
 
 
 def test_default_job_uses_the_shipped_models_and_nothing_beside_the_checkout(tmp_path, capsys):
