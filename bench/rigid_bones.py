@@ -5,14 +5,15 @@
 The shipped MG and FL sample every held-out window (valid + test, generation/pretrained/heldout.npz: 192 windows
 with their real 10-frame histories) on the same control; each sample is then taken three ways:
 - `free`: as sampled;
-- `directions` (the shipped rule, generation.rigid.fit_bones): every joint at the actor's bone length along the
-  direction the model sampled, from the hips out;
-- `legs kept`: the same, with each foot kept where the model put it and the knee bent to reach it (two-bone inverse
-  kinematics, generation.rigid.LEGS).
-The actor's bone lengths are the means over the window's history (real frames). Printed per model and variant:
-the largest bone-length std (mm) and mean-length error (%), each joint's mean jerk over NAT's (the worst joint
-named), foot skating over NAT's, the worst category's late stepping over NAT's (medians per window), and the
-classifier two-sample test against NAT (generation.c2st; mean and sd over seeds).
+- `directions`: every joint at the actor's bone length from its placed parent, along the direction from its parent
+  that the model sampled (so a bone's length error moves every joint below it);
+- `nearest` (the shipped rule, generation.rigid.fit_bones): every joint at the actor's bone length from its placed
+  parent, at the point nearest to where the model put it.
+The actor's bone lengths are the means over the window's history (real frames). With --seeds N every window is
+sampled N times and its figures are their means over the N samples. Printed per model and variant: the largest
+bone-length std (mm), the worst bone's median error of its mean length (%), each joint's mean jerk over NAT's (the
+worst joint named), foot skating over NAT's (median over windows), the worst category's median late stepping over
+NAT's, and the classifier two-sample test against NAT (generation.c2st; mean and sd over seeds).
 """
 
 import argparse
@@ -37,24 +38,47 @@ def joint_jerk(world, fps):
     return np.linalg.norm(np.diff(world, n=3, axis=1), axis=-1).mean(1) * fps**3
 
 
-def figures(x, c, nat, labels, lengths, fps):
+def along_directions(x, lengths):
+    """The variant not shipped: each joint along its sampled direction from its parent, at the actor's length."""
+    j = x.reshape(x.shape[:-1] + (skeleton.N_JOINTS, 3)).astype(np.float64)
+    out = j.copy()
+    for k in range(1, skeleton.N_JOINTS):  # parents come before their children in this skeleton
+        bone = j[..., k, :] - j[..., P[k], :]
+        out[..., k, :] = (
+            out[..., P[k], :] + bone / np.linalg.norm(bone, axis=-1, keepdims=True) * lengths[:, None, k - 1, None]
+        )
+    return out.reshape(x.shape).astype(x.dtype)
+
+
+def per_window(x, c, nat, lengths, fps):
+    """Per-window figures of samples x against NAT on the same windows: bone-length std and mean-length error
+    [B, bones], per-joint jerk [B, J], skating and late stepping over NAT's [B]."""
     j = x.reshape(x.shape[:-1] + (skeleton.N_JOINTS, 3))
     b = np.linalg.norm(j[..., 1:, :] - j[..., P[1:], :], axis=-1)
     world, nat_world = to_world(x, c), to_world(nat, c)
-    jerk = joint_jerk(world, fps).mean(0) / joint_jerk(nat_world, fps).mean(0)
-    skate = np.median([foot_skating(w, fps) / foot_skating(n, fps) for w, n in zip(world, nat_world)])
-    late = {}
-    for lab in np.unique(labels):
-        k = labels == lab
-        late[lab] = np.median([late_stepping(a, fps) / late_stepping(n, fps) for a, n in zip(x[k], nat[k])])
     return dict(
-        bone_std_mm=float(b.std(1).max(0).max() * 1000),
-        length_err=float(np.abs(b.mean(1) / lengths - 1).max() * 100),
+        bone_std=b.std(1),
+        length_err=np.abs(b.mean(1) / lengths - 1),
+        jerk=joint_jerk(world, fps),
+        skating=np.array([foot_skating(w, fps) / foot_skating(n, fps) for w, n in zip(world, nat_world)]),
+        late=np.array([late_stepping(a, fps) / late_stepping(n, fps) for a, n in zip(x, nat)]),
+    )
+
+
+def summary(runs, nat_jerk, labels):
+    """The figures over seeds: each window's figures are their means over its samples (as bench/sample_quality.py
+    does), then the worst bone, the worst joint's jerk over NAT's, the median skating and the worst category's
+    median late stepping."""
+    mean = {k: np.mean([r[k] for r in runs], axis=0) for k in runs[0]}
+    jerk = mean["jerk"].mean(0) / nat_jerk
+    return dict(
+        bone_std_mm=float(np.max([r["bone_std"].max() for r in runs]) * 1000),
+        length_err=float(np.median(mean["length_err"], axis=0).max() * 100),
         jerk_max=float(jerk.max()),
         jerk_worst=skeleton.JOINT_NAMES[int(jerk.argmax())],
         jerk=jerk,
-        skating=float(skate),
-        late_min=float(min(late.values())),
+        skating=float(np.median(mean["skating"])),
+        late_min=float(min(np.median(mean["late"][labels == lab]) for lab in np.unique(labels))),
     )
 
 
@@ -79,24 +103,25 @@ def main(argv=None):
     lengths = rigid.bone_lengths(h)
     variants = {
         "free": lambda s: s,
-        "directions": lambda s: rigid.fit_bones(s, lengths),
-        "legs kept": lambda s: rigid.fit_bones(s, lengths, chains=rigid.LEGS),
+        "directions": lambda s: along_directions(s, lengths),
+        "nearest": lambda s: rigid.fit_bones(s, lengths),
     }
+    nat_jerk = joint_jerk(to_world(x, c), fps).mean(0)
     for name, ckpt in (("MG", CHECKPOINTS["mg"]), ("FL", CHECKPOINTS["fl"])):
         model = load_model(ckpt, "cpu")
-        rows = {v: [] for v in variants}
+        runs, aucs = {v: [] for v in variants}, {v: [] for v in variants}
         for seed in range(args.seeds):
             s = sample_windows(model, c, h, hc, args.temperature, seed)
             for v, fit in variants.items():
                 y = fit(s)
-                rows[v].append((figures(y, c, x, labels, lengths, fps), auc(y, c, x, fps)))
-        for v, got in rows.items():
-            f = got[0][0]
-            aucs = np.array([a for _, a in got])
+                runs[v].append(per_window(y, c, x, lengths, fps))
+                aucs[v].append(auc(y, c, x, fps))
+        for v in variants:
+            f, a = summary(runs[v], nat_jerk, labels), np.array(aucs[v])
             print(
-                f"{name} {v:10s} bone std max {f['bone_std_mm']:6.2f} mm | length err max {f['length_err']:5.1f}% | "
-                f"jerk/NAT max {f['jerk_max']:.2f} ({f['jerk_worst']}) | skating/NAT {f['skating']:.2f} | "
-                f"late stepping min {f['late_min']:.2f} | C2ST AUC {aucs.mean():.3f} (sd {aucs.std():.3f})"
+                f"{name} {v:10s} bone std max {f['bone_std_mm']:6.2f} mm | length err max {f['length_err']:5.1f}%"
+                f" | jerk/NAT max {f['jerk_max']:.2f} ({f['jerk_worst']}) | skating/NAT {f['skating']:.2f} | "
+                f"late stepping min {f['late_min']:.2f} | C2ST AUC {a.mean():.3f} (sd {a.std():.3f})"
             )
             print("    jerk/NAT per joint:", " ".join(f"{n}:{r:.2f}" for n, r in zip(skeleton.JOINT_NAMES, f["jerk"])))
 

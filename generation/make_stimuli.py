@@ -201,7 +201,8 @@ def sample_clips(args, dataset, items, arrays):
             x, seed = arrays["x"][idx], ""
             if model is not None:
                 seed = args.seed + SEED_OFFSET[cond]
-                x = sample_condition(*model, arrays, idx, args.temperature, seed, args.device)
+                temperature = pretrained.TEMPERATURE[cond] if args.temperature is None else args.temperature
+                x = sample_condition(*model, arrays, idx, temperature, seed, args.device)
             if cond in rigid_conditions(args):  # the bones of the item's actor, from its real history
                 x = rigid.fit_to_history(x, arrays["hist"][idx])
             joints = to_world(x, arrays["c"][idx])
@@ -413,8 +414,8 @@ def parse_args(argv):
     ap.add_argument(
         "--temperature",
         type=cli.number(float, 0, 10),
-        default=1.0,
-        help="sampling temperature of MG and FL (default 1.0)",
+        help="sampling temperature of MG, FL and the bad examples (default: MG 0.5, FL 1.0, BAD 1.0: "
+        "generation.pretrained.TEMPERATURE)",
     )
     ap.add_argument(
         "--free-bones",

@@ -47,8 +47,8 @@ def test_shipped_models_keep_their_recorded_quality():
             assert now[model][metric] <= 1.1 * recorded[model][metric], (model, metric, now, recorded)
         # a gait that dies out before the clip ends: stepping falls, where skating and jerk may not rise
         assert now[model]["late_stepping"] >= recorded[model]["late_stepping"] / 1.1, (model, now, recorded)
-        # the worst joint's jerk (issue 34's target is 1.2x NAT's; MG's upper body is at 1.4-1.5x, RESULTS)
-        assert now[model]["joint_jerk_max"] <= 1.1 * recorded[model]["joint_jerk_max"], (model, now, recorded)
+        # issue 34: every joint's mean jerk within 1.2x NAT's (MG's head was at 1.54x at temperature 1)
+        assert now[model]["joint_jerk_max"] <= 1.2, (model, now[model])
 
 
 def test_shipped_clips_have_the_actors_rigid_bones():

@@ -25,7 +25,7 @@ def test_real_motion_is_left_as_it_is(heldout):
     assert np.abs(rigid.fit_to_history(x, hist) - x).max() < 1e-5
 
 
-def test_sampled_motion_gets_the_actors_bones_and_keeps_its_directions(heldout):
+def test_sampled_motion_gets_the_actors_bones_and_stays_near_it(heldout):
     d = {k: v[::12] for k, v in heldout.items()}
     mg = load_model(pretrained.CHECKPOINTS["mg"], "cpu")
     x = sample_windows(mg, d["test_c"], d["test_hist"], d["test_hist_c"], seed=0)
@@ -33,29 +33,26 @@ def test_sampled_motion_gets_the_actors_bones_and_keeps_its_directions(heldout):
     y = rigid.fit_to_history(x, d["test_hist"])
     actor = rigid.bone_lengths(d["test_hist"])[:, None]
     assert np.abs(lengths_of(y) / actor - 1).max() < 1e-5
-    # every bone points where the model pointed it, and the hips stay where the model put them
+    # the hips stay where the model put them, and no joint moves further than the model's bones were off
     jx, jy = (a.reshape(a.shape[:-1] + (skeleton.N_JOINTS, 3)) for a in (x, y))
-    bx = jx[..., 1:, :] - jx[..., skeleton.PARENTS[1:], :]
-    by = jy[..., 1:, :] - jy[..., skeleton.PARENTS[1:], :]
-    cos = (bx * by).sum(-1) / np.linalg.norm(bx, axis=-1) / np.linalg.norm(by, axis=-1)
-    assert cos.min() > 1 - 1e-5 and np.abs(jy[..., 0, :] - jx[..., 0, :]).max() == 0
+    assert np.abs(jy[..., 0, :] - jx[..., 0, :]).max() == 0
+    moved = np.linalg.norm(jy - jx, axis=-1).max()
+    assert moved <= np.abs(lengths_of(x) - actor).max() * 2
 
 
-def test_a_leg_chain_keeps_its_foot_where_the_leg_reaches_it():
-    """The two-bone variant (measured in bench/rigid_bones.py): a foot within reach stays put, the knee bends."""
-    rng = np.random.default_rng(0)
-    x = (rng.normal(size=(1, 5, skeleton.POSE_DIM)) * 0.05).astype(np.float32)
-    j = x.reshape(1, 5, skeleton.N_JOINTS, 3)
-    hip, knee, foot = rigid.LEGS[0]
-    j[..., hip, :] = j[..., 0, :] + [0.1, 0.0, 0.0]  # the pelvis bone as long as the actor's: the hip stays too
-    j[..., knee, :] = j[..., hip, :] + [0.05, -0.2, 0.0]
-    j[..., foot, :] = j[..., hip, :] + [0.0, -0.6, 0.0]  # 0.6 m below the hip: reachable with 0.4 + 0.4
-    lengths = np.full(skeleton.N_JOINTS - 1, 0.4)
-    lengths[hip - 1] = 0.1
-    y = rigid.fit_bones(x, lengths, chains=rigid.LEGS).reshape(j.shape)
-    assert np.abs(y[..., foot, :] - j[..., foot, :]).max() < 1e-5
-    assert np.abs(lengths_of(y.reshape(x.shape)) - lengths).max() < 1e-5
-    assert (y[..., knee, 0] - y[..., hip, 0]).min() > 0  # bent forward, as the model bent it
+def test_a_bone_length_error_does_not_carry_down_the_limb():
+    """Each joint goes to the nearest point at its bone's length from its placed parent: a thigh 2 cm too long moves
+    the knee, and the shin, aimed at where the model put the foot, brings the foot back to within its own error."""
+    j = np.zeros((1, 1, skeleton.N_JOINTS, 3))
+    hip, knee, foot = (skeleton.INDEX[n] for n in ("UpperLeg_L", "LowerLeg_L", "Foot_L"))
+    j[..., hip, :] = [0.1, 0.0, 0.0]
+    j[..., knee, :] = [0.1, -0.42, 0.0]  # the model's thigh: 0.42 m
+    j[..., foot, :] = [0.1, -0.82, 0.0]  # its shin 0.40 m, as the actor's
+    lengths = rigid.bone_lengths(j.reshape(1, 1, -1))[0]
+    lengths[knee - 1] = 0.40  # the actor's thigh
+    y = rigid.fit_bones(j, lengths).reshape(j.shape)
+    assert np.allclose(y[..., knee, :], [0.1, -0.40, 0.0]) and np.allclose(y[..., foot, :], [0.1, -0.80, 0.0])
+    assert np.abs(lengths_of(y.reshape(1, 1, -1)) - lengths).max() < 1e-9
 
 
 def test_the_default_job_records_the_fit_in_the_manifest(tmp_path):

@@ -1,0 +1,57 @@
+"""Does a generated window keep the style of its history? (issue 34, item 4)
+
+    python bench/style_retention.py [--seeds 3] [--temperature 1.0] [--start 40]
+
+Every held-out window of generation/pretrained/heldout.npz (valid + test: 192 windows of styled Bandai-Namco takes,
+proud, old, feminine, ... in the take names) is sampled by the shipped MG (from its 10 real history frames) and FL
+(control only), put onto the actor's bones as make_stimuli ships them. generation.metrics.style_retention compares
+each window's mean root-frame pose from frame --start on (default 40: the window's second half, from 2 s) with its
+own NAT window's and with the average of its category's NAT windows from the other takes. Printed per model: the
+share of windows closer to their own NAT (1 = every window keeps its style, 0.5 or below = an average walker), the
+median distance ratio (own / average), each as mean and sd over seeds; and the same for NAT's first half against
+its second (real motion's own drift: the ceiling) and for the category average itself (the floor).
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from generation import rigid  # noqa: E402
+from generation.metrics import style_retention  # noqa: E402
+from generation.pretrained import CHECKPOINTS, HELDOUT  # noqa: E402
+from generation.sample import load_model, sample_windows  # noqa: E402
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--temperature", type=float, default=1.0)
+    ap.add_argument("--start", type=int, default=40)
+    args = ap.parse_args(argv)
+    torch.set_num_threads(1)
+    d = np.load(HELDOUT)
+    keys = ("x", "c", "hist", "hist_c", "take", "labels")
+    x, c, h, hc, takes, cats = (np.concatenate([d[f"valid_{k}"], d[f"test_{k}"]]) for k in keys)
+    # NAT's ceiling: its first half stands in for a sample (the same take, an earlier stretch of it)
+    half = x.shape[1] // 2
+    ceiling = style_retention(x[:, :half], x, takes, cats, start=0)
+    print(f"NAT first half vs second: closer to own {ceiling[0]:.2f}, distance ratio {ceiling[1]:.2f}")
+    for name, ckpt in (("MG", CHECKPOINTS["mg"]), ("FL", CHECKPOINTS["fl"])):
+        model = load_model(ckpt, "cpu")
+        got = []
+        for seed in range(args.seeds):
+            y = rigid.fit_to_history(sample_windows(model, c, h, hc, args.temperature, seed), h)
+            got.append(style_retention(y, x, takes, cats, start=args.start))
+        got = np.array(got)
+        print(
+            f"{name} T={args.temperature}: closer to own {got[:, 0].mean():.2f} (sd {got[:, 0].std():.2f}), "
+            f"distance ratio {got[:, 1].mean():.2f} (sd {got[:, 1].std():.2f}) over {len(x)} windows"
+        )
+
+
+if __name__ == "__main__":
+    main()
