@@ -328,7 +328,8 @@ def summary_table(summary):
     )
 
 
-def _main(argv):
+def build_parser():
+    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.prepare_data", description=__doc__.split("\n")[0])
     ap.add_argument("--data", help="folder of BVH takes (default: ../shared/data/bandai-namco-locomotion)")
     ap.add_argument("--out", default="dataset.npz", help="output .npz (default: dataset.npz)")
@@ -346,7 +347,11 @@ def _main(argv):
     ap.add_argument("--seed", type=cli.number(int, 0), default=0)
     ap.add_argument("--workers", type=cli.number(int, 1, 1024), default=None, help="processes (default: all cores)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def _main(argv):
+    args = build_parser().parse_args(argv)
     data = args.data
     if data is None:
         data = default_data_dir()
