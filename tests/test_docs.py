@@ -262,3 +262,26 @@ def test_figures_quoted_beside_a_results_mention_link_to_an_entry():
         text = path.read_text(encoding="utf-8")
         bare = re.findall(r"(?<!\])\((?:bench/)?RESULTS(?:\.md)?[^)#]*\)", text)
         assert not bare, f"{path.name}: {bare}: link to the entry instead"
+
+
+# ---------------------------------------------------------------- release files
+
+
+def test_citation_cites_the_tool_and_the_moglow_paper():
+    yaml = pytest.importorskip("yaml", reason="pyyaml is not installed: pip install -e '.[dev]'")
+    import tomllib
+
+    cff = yaml.safe_load((ROOT / "CITATION.cff").read_text(encoding="utf-8"))
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert cff["type"] == "software" and cff["version"] == project["version"]
+    assert cff["license"] == "MIT" and "MIT" in (ROOT / "LICENSE").read_text().splitlines()[0]
+    assert "preferred-citation" not in cff  # it would replace the tool in "cite this repository"
+    paper = cff["references"][0]
+    assert paper["title"].startswith("MoGlow: Probabilistic and controllable motion synthesis")
+    assert [a["family-names"] for a in paper["authors"]] == ["Henter", "Alexanderson", "Beskow"]
+    assert (paper["journal"], paper["volume"], paper["issue"], paper["year"]) == (
+        "ACM Transactions on Graphics",
+        39,
+        6,
+        2020,
+    )
