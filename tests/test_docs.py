@@ -59,7 +59,7 @@ def bash_lines(path):
         if line.startswith("```"):
             block = line == "```bash" if not block else False
             continue
-        if not block or not line:
+        if not block or not line or line.startswith("#"):  # a comment line explains, it runs nothing
             continue
         start = start or n
         if line.endswith("\\"):
