@@ -5,6 +5,7 @@ Every line of every bash block in README.md and docs/*.md is checked:
   module's own argparse parser (`build_parser()`), so a renamed or removed flag fails here;
 - `python bench/SCRIPT.py ARGS`: the script exists and defines every flag given;
 - `python -m pytest ARGS`: every test file named exists;
+- `export NAME=value`: NAME is a setting the rating app reads;
 - a path such as `scripts/install-system-deps.sh`: it exists and is executable;
 - commands that are not ours are skipped, by name, in NOT_OURS below. Anything else fails.
 """
@@ -22,7 +23,6 @@ from conftest import ROOT
 NOT_OURS = {
     "cd",
     "curl",
-    "export",
     "git",
     "gunicorn",
     "ln",
@@ -70,10 +70,23 @@ def bash_lines(path):
     return out
 
 
+def without_substitutions(line):
+    """The line with each $(...) (balanced parentheses) replaced by the word SUBST: what it prints is a value."""
+    while "$(" in line:
+        start = line.index("$(")
+        depth, i = 0, start + 1
+        for i in range(start + 1, len(line)):
+            depth += {"(": 1, ")": -1}.get(line[i], 0)
+            if depth == 0:
+                break
+        line = line[:start] + "SUBST" + line[i + 1 :]
+    return line
+
+
 def commands(line):
     """The simple commands of a shell line: $(...) replaced by a placeholder, split at && ; |, without leading
     VAR=value assignments or redirections."""
-    line = re.sub(r"\$\((?:[^()]|\([^()]*\))*\)", "SUBST", line)
+    line = without_substitutions(line)
     tokens = shlex.split(line, comments=True)
     cmds, cur = [], []
     for tok in tokens + ["&&"]:
@@ -125,8 +138,25 @@ def check_python(args):
         assert f'"{flag}"' in source, f"{args[0]}: defines no {flag}"
 
 
+def app_settings():
+    """Every environment variable the rating app reads as a setting (rating_app.study_config, rating_app.SETTINGS)."""
+    from rating_app import SETTINGS
+    from rating_app import study_config as s
+
+    return {*s.TEXT_KEYS, *SETTINGS, *s.EXTRA_NUMBERS, *s.FLAG_KEYS, *s.SECRETS, "RATING_CONFIG", "VIDEO_CACHE_MB"}
+
+
+def check_settings(args):
+    """`export NAME=value ...` in the docs sets only variables the app reads (a misspelt one is silently ignored)."""
+    names = {a.partition("=")[0] for a in args}
+    unknown = sorted(names - app_settings())
+    assert not unknown, f"export {unknown}: the rating app reads no such setting"
+
+
 def check(cmd):
     name, args = cmd[0], cmd[1:]
+    if name == "export":
+        return check_settings(args)
     if name in NOT_OURS:
         return
     if name == "python":
@@ -171,9 +201,12 @@ def test_the_checker_catches_a_bad_flag_and_an_unknown_command():
         check(["moglow-eval", "report"])  # the ratings file is required
     with pytest.raises(AssertionError, match="defines no"):
         check(["python", "bench/bench_sampling.py", "--no-such-flag"])
+    with pytest.raises(AssertionError, match="reads no such setting"):
+        check(["export", "RATINGS_PER_CLIPS=20"])
     with pytest.raises(AssertionError, match="not ours"):
         check(["wget", "http://example.org"])
     assert commands("A=1 python -m x --out y > z && cd d") == [["python", "-m", "x", "--out", "y"], ["cd", "d"]]
+    assert commands("export T=$(python -c 'print(f(1))') C=1") == [["export", "T=SUBST", "C=1"]]
 
 
 # ---------------------------------------------------------------- the site
