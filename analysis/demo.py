@@ -289,7 +289,8 @@ def run_demo(
     return {"stimuli": Path(stimuli), "ratings": ratings, "report": out / "report", "summary": summary}
 
 
-def _main(argv) -> int:
+def build_parser():
+    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
     p = cli.ArgumentParser(
         prog="python -m analysis.demo", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -334,7 +335,11 @@ def _main(argv) -> int:
         action="store_true",
         help="a study with speech in every video (implied by --design appropriateness): see above",
     )
-    a = p.parse_args(argv)
+    return p
+
+
+def _main(argv) -> int:
+    a = build_parser().parse_args(argv)
     try:
         run_demo(
             Path(a.out),

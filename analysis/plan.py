@@ -184,7 +184,7 @@ def _pair(design, given):
     return x, y
 
 
-def _parser():
+def build_parser():
     ap = cli.ArgumentParser(
         prog="python -m analysis.plan",
         description=__doc__.splitlines()[0],
@@ -296,7 +296,7 @@ def _design_from_pilot(args):
 
 
 def _main(argv):
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     design, source, pair = (_design_from_flags if args.no_pilot else _design_from_pilot)(args)
     pilot_diff = design["means"][pair[1]] - design["means"][pair[0]]
     diff = args.difference if args.difference is not None else abs(pilot_diff)

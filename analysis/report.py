@@ -608,7 +608,8 @@ def build_report(
     return doc
 
 
-def _main(argv):
+def build_parser():
+    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m analysis.report", description=__doc__.splitlines()[0])
     ap.add_argument("ratings", help="ratings.csv exported by the rating app (CONTRACTS.md §6)")
     ap.add_argument("--out", default="report", help="report folder (default: report/)")
@@ -650,7 +651,11 @@ def _main(argv):
         help="family-wise error rate (0 < alpha <= 0.5; default 0.05)",
     )
     ap.add_argument("--quiet", action="store_true", help="no console summary or progress bar")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def _main(argv):
+    args = build_parser().parse_args(argv)
     build_report(
         args.ratings,
         args.out,

@@ -9,7 +9,8 @@ clips' look and their encoded size on both sides of the test clips':
 - `swap`: the upper body plays half a clip out of step with the legs (and jumps where it wraps round), so the
   trunk tears at the waist.
 
-How bad each is, on the metrics of metrics.csv, is in bench/RESULTS.md ("Catch clips made by the tool").
+How bad each is, on the metrics of metrics.csv, is in bench/notes/2026-11-25-history.md ("Catch clips made by the
+tool").
 """
 
 import numpy as np

@@ -130,13 +130,18 @@ loudness = -23
     return study
 
 
-def _main(argv):
+def build_parser():
+    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.demo_study", description=__doc__.split("\n")[0])
     ap.add_argument("--out", required=True, help="folder for the study file and its folders")
     ap.add_argument("--items", type=cli.number(int, 3, 60), default=12, help="items (default 12)")
     ap.add_argument("--appropriateness", action="store_true", help="also make the mismatched clips")
     ap.add_argument("--seed", type=cli.number(int, 0), default=0)
-    args = ap.parse_args(argv)
+    return ap
+
+
+def _main(argv):
+    args = build_parser().parse_args(argv)
     print(build(args.out, args.items, args.appropriateness, args.seed))
     return 0
 

@@ -44,7 +44,8 @@ def import_motion(in_path, out_path, scale=0.01, fps=None):
     return joints
 
 
-def _main(argv):
+def build_parser():
+    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.import_motion", description=__doc__.split("\n")[0])
     ap.add_argument("input", help="BVH file (.bvh or .bvh.gz)")
     ap.add_argument("output", help="clip .npz to write")
@@ -60,7 +61,11 @@ def _main(argv):
         default=None,
         help="resample to this frame rate (default: keep the file's)",
     )
-    args = ap.parse_args(argv)
+    return ap
+
+
+def _main(argv):
+    args = build_parser().parse_args(argv)
     cli.log_to_stderr()
     joints = import_motion(args.input, clip_path(args.output), args.scale, args.fps)
     print(f"{args.output}: {joints.shape[0]} frames, {joints.shape[1]} joints")

@@ -335,7 +335,8 @@ def _warn_if_bad_not_bad(rows):
 
 
 # ---------------------------------------------------------------- command line
-def parse_args(argv):
+def build_parser():
+    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.make_stimuli", description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="stimuli", help="stimulus folder to write (default stimuli)")
     ap.add_argument(
@@ -452,7 +453,11 @@ def parse_args(argv):
     )
     ap.add_argument("--force", action="store_true", help="replace an existing stimulus set in --out")
     ap.add_argument("--quiet", action="store_true", help="no progress bars or diagnostics; the summary only")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def parse_args(argv):
+    args = build_parser().parse_args(argv)
     if args.study:
         return _study_args(args, argv)
     if args.length_s is not None:

@@ -12,6 +12,7 @@ frames before them (`{split}_hist`, `{split}_hist_c`) so that MG can be seeded w
 """
 
 import os
+import re
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -62,12 +63,24 @@ def category_of(path):
     return parts[1] if len(parts) >= 3 else "unknown"
 
 
+def is_other_bandai_content(path):
+    """True for a Bandai-Namco take that is not locomotion (bow, bye, dance, wave...): the published repository
+    holds those beside the walks and runs, and the locomotion models must not train on them."""
+    parts = take_name(path).split("_")
+    bandai = len(parts) >= 3 and re.fullmatch(r"dataset-\d+", parts[0]) is not None
+    return bandai and parts[1] not in CATEGORY_OF_CONTENT
+
+
 def find_takes(data_dir):
+    """The .bvh and .bvh.gz takes at any depth under `data_dir`: the shared folder, or a clone of the
+    Bandai-Namco repository with its data.zip files unpacked (docs/data.md)."""
     data_dir = Path(data_dir)
     if not data_dir.is_dir():
         raise PrepareError(f"{data_dir}: data directory not found")
     files = sorted(
-        p for p in data_dir.rglob("*") if p.name.endswith((".bvh", ".bvh.gz")) and not p.name.startswith("rest.")
+        p
+        for p in data_dir.rglob("*")
+        if p.name.endswith((".bvh", ".bvh.gz")) and not p.name.startswith("rest.") and not is_other_bandai_content(p)
     )
     if not files:
         raise PrepareError(f"{data_dir}: no .bvh or .bvh.gz files found")
@@ -328,7 +341,8 @@ def summary_table(summary):
     )
 
 
-def _main(argv):
+def build_parser():
+    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.prepare_data", description=__doc__.split("\n")[0])
     ap.add_argument("--data", help="folder of BVH takes (default: ../shared/data/bandai-namco-locomotion)")
     ap.add_argument("--out", default="dataset.npz", help="output .npz (default: dataset.npz)")
@@ -346,7 +360,11 @@ def _main(argv):
     ap.add_argument("--seed", type=cli.number(int, 0), default=0)
     ap.add_argument("--workers", type=cli.number(int, 1, 1024), default=None, help="processes (default: all cores)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def _main(argv):
+    args = build_parser().parse_args(argv)
     data = args.data
     if data is None:
         data = default_data_dir()

@@ -108,12 +108,17 @@ def quality(stride=QUALITY_STRIDE, seed=0):
     return ratios
 
 
-def _main(argv):
+def build_parser():
+    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.pretrained", description=__doc__.split("\n")[0])
     for kind in CHECKPOINTS:
         ap.add_argument(f"--{kind}", required=True, help=f"checkpoint to ship as {CHECKPOINTS[kind].name}")
     ap.add_argument("--data", required=True, help="the prepared dataset the models were trained on")
-    a = ap.parse_args(argv)
+    return ap
+
+
+def _main(argv):
+    a = build_parser().parse_args(argv)
     FOLDER.mkdir(exist_ok=True)
     for kind, dst in CHECKPOINTS.items():
         export_checkpoint(getattr(a, kind), dst)

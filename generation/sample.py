@@ -147,7 +147,8 @@ def sample_split(model, data_path, split="test", n=None, temperature=1.0, seed=0
     return sample_windows(model, c, hist, hist_c, temperature, seed, precision), c
 
 
-def _main(argv):
+def build_parser():
+    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.sample", description="Sample clips from a checkpoint.")
     ap.add_argument("--checkpoint", required=True)
     ap.add_argument("--data", required=True, help="prepared dataset .npz whose control (and history) to use")
@@ -164,7 +165,11 @@ def _main(argv):
         help="MG's sampler: bfloat16 reads its big products in bfloat16, 1.85x faster for many streams on an AMD "
         "Zen 4 CPU but slower on Intel CPUs without AMX (bench/RESULTS.md; default float32)",
     )
-    a = ap.parse_args(argv)
+    return ap
+
+
+def _main(argv):
+    a = build_parser().parse_args(argv)
     model = load_model(a.checkpoint, a.device)
     x, c = sample_split(model, a.data, a.split, a.n, a.temperature, a.seed, a.precision)
     require_finite(x, a.checkpoint)

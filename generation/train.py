@@ -472,7 +472,8 @@ def _threads(text):
     return text if text == "auto" else cli.number(int, 1, 1024)(text)
 
 
-def _main(argv):
+def build_parser():
+    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.train", description=__doc__.split("\n")[0])
     ap.add_argument("--model", required=True, choices=sorted(MODELS))
     ap.add_argument("--config", default="cpu", help="tiny | cpu | paper | path to a JSON config")
@@ -497,7 +498,11 @@ def _main(argv):
         "Intel CPUs without AMX; bench/RESULTS.md)",
     )
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
-    a = ap.parse_args(argv)
+    return ap
+
+
+def _main(argv):
+    a = build_parser().parse_args(argv)
     out = train(
         a.model,
         a.config,

@@ -42,7 +42,7 @@ SECRETS = ("ADMIN_TOKEN", "SECRET_KEY", "PGPASSWORD", "DATABASE_PASSWORD")
 
 
 def known_keys(settings) -> list[str]:
-    """Every key a study file may hold, lower case, in the order of the README's settings table."""
+    """Every key a study file may hold, lower case, in the order of the settings in docs/hosting.md."""
     return [k.lower() for k in (*TEXT_KEYS, *settings, *EXTRA_NUMBERS, *FLAG_KEYS)]
 
 

@@ -22,7 +22,7 @@ from .manifest import AppError
 CACHE_BYTES = int(os.environ.get("VIDEO_CACHE_MB", "512")) * 2**20  # per worker; beyond it, read per request
 # VIDEO_ACCEL: the reverse proxy that sends the bytes itself (an internal redirect); off: the app sends them.
 ACCEL = ("off", "nginx", "caddy")
-ACCEL_PREFIX = "/_stimuli/"  # the proxy's internal location of the stimulus folder (deploy/, README)
+ACCEL_PREFIX = "/_stimuli/"  # the proxy's internal location of the stimulus folder (deploy/, docs/hosting.md)
 
 
 @dataclass

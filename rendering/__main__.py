@@ -10,7 +10,8 @@ from rendering.render import MAX_SIZE, MIN_SIZE, render_clip, size_flag
 PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower", "veryslow")
 
 
-def _main(argv):
+def build_parser():
+    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
     p = cli.ArgumentParser(prog="python -m rendering", description=__doc__)
     p.add_argument("clip", help="motion clip .npz (CONTRACTS.md §1)")
     p.add_argument("out", help="output .mp4")
@@ -29,7 +30,11 @@ def _main(argv):
         "frame one coded size, as in a stimulus set)",
     )
     p.add_argument("--crf", type=cli.number(int, 0, 51), help="x264 rate factor 0-51 instead of the constant bit rate")
-    args = p.parse_args(argv)
+    return p
+
+
+def _main(argv):
+    args = build_parser().parse_args(argv)
     if not Path(args.clip).is_file():
         raise RenderError(f"{args.clip}: no such file")
     for flag, path in (("OUT", args.out), ("--sheet", args.sheet)):

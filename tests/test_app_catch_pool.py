@@ -13,8 +13,9 @@ from rating_app.designs import build_units
 from rating_app.health import catch_pool_warning
 from rating_app.manifest import load_manifest
 
-# The README's production settings: 30 of 90 test units per rater (pairwise: 30 items x 3 pairs; parallel: 30 pages,
-# 10 per rater), 20 answers per unit; 12 catch items with 4 per rater give catch units the same third of raters.
+# The production settings of docs/hosting.md: 30 of 90 test units per rater (pairwise: 30 items x 3 pairs;
+# parallel: 30 pages, 10 per rater), 20 answers per unit; 12 catch items with 4 per rater give catch units the same
+# third of raters.
 PRODUCTION = {"acr": 30, "pairwise": 30, "parallel": 10}
 TARGET, CATCH_ITEMS, CATCH_PER_RATER = 20, 12, 4
 

@@ -1,4 +1,4 @@
-"""Behind a real reverse proxy (Debian's nginx) in front of gunicorn (issue 37, item 4): the README's production
+"""Behind a real reverse proxy (Debian's nginx) in front of gunicorn (issue 37, item 4): the docs' production
 recipe trusts the proxy, so 50 raters from 50 addresses all get sessions and one client's wrong admin tokens do not
 lock the admin out; a proxy the app does not trust (PROXY_COUNT 0) is noticed: one warning in the log, on the
 dashboard and in /healthz, and no error."""
@@ -119,8 +119,9 @@ def call(proxy_url, method, path, source, body=None, headers=None):
 
 
 def readme_recipe() -> dict[str, str]:
-    """The settings the README's production recipe exports (those not computed by the shell)."""
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    """The settings the production recipe of docs/hosting.md (once the README's) exports (those not computed by
+    the shell)."""
+    text = (ROOT / "docs" / "hosting.md").read_text(encoding="utf-8")
     block = text[text.index("# production:") :]
     block = block[: block.index("```")]
     out = {}

@@ -59,3 +59,30 @@ def test_an_unknown_command_is_one_line(capsys):
 def test_python_m_keeps_working_and_answers_version(module):
     r = subprocess.run([sys.executable, "-m", module, "--version"], capture_output=True, text=True, cwd=ROOT)
     assert (r.returncode, r.stdout.strip()) == (0, f"moglow-eval {VERSION}")
+
+
+COMMAND_MODULES = [
+    "generation.make_stimuli",
+    "generation.train",
+    "generation.prepare_data",
+    "generation.import_motion",
+    "generation.sample",
+    "generation.pretrained",
+    "generation.demo_study",
+    "rendering.__main__",
+    "rating_app.__main__",
+    "analysis.report",
+    "analysis.plan",
+    "analysis.demo",
+]
+
+
+@pytest.mark.parametrize("module", COMMAND_MODULES)
+def test_every_main_answers_version(module, capsys):
+    """Every `python -m` command answers --version with the one version pyproject.toml sets, through its main."""
+    main = importlib.import_module(module).main
+    with pytest.raises(SystemExit) as e:
+        main(["--version"])
+    assert e.value.code == 0
+    assert capsys.readouterr().out.strip() == f"moglow-eval {VERSION}"
+    assert VERSION == tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]

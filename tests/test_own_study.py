@@ -262,7 +262,7 @@ def test_empty_condition_folder(tmp_path, capsys):
 def test_builtin_study_output_unchanged(tmp_path):
     """The same manifest rows (but the random ids) and, for NAT, the same motion files as before the study from
     folders came (tests/data/builtin_stimuli_digest.json, written by the code before it). MG, FL and BAD are
-    sampled, whose bits depend on the CPU kind (README), so only their rows are compared."""
+    sampled, whose bits depend on the CPU kind (docs/models.md), so only their rows are compared."""
     out = tmp_path / "builtin"
     args = ["--out", str(out), "--n-items", "3", "--n-catch", "2", "--n-training", "1", "--seed", "5"]
     args += ["--catch-kinds", "mg-early"]  # the paper's catch clips, as before (issue 37 mixes in a freeze by default)

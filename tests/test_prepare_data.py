@@ -4,7 +4,7 @@ import gzip
 
 import numpy as np
 import pytest
-from conftest import BANDAI, small_take_names
+from conftest import BANDAI, DATA, small_take_names
 
 from generation import prepare_data, skeleton
 from generation.features import load_take, mirror, reverse, to_features
@@ -168,3 +168,41 @@ def test_full_prepare(tmp_path):
     for cat in ("run", "walk", "walk_backward", "walk_turn_left", "walk_turn_right"):
         assert held[(cat, "valid")] == held[(cat, "test")] == 4
     assert summary["n_windows"]["test"] >= 60
+
+
+# Four walks, long enough for a held-out window each, and one take that is not locomotion.
+UPSTREAM_TAKES = {
+    "bandai-namco-locomotion": [f"dataset-1_walk_{s}.bvh.gz" for s in ("sad_002", "sad_001", "proud_001", "proud_002")],
+    "bandai-namco-actions": ["dataset-1_bow_active_001.bvh.gz"],
+}
+
+
+def test_reads_the_published_repository_layout(tmp_path, capsys):
+    """A clone of BandaiNamcoResearchInc/Bandai-Namco-Research-Motiondataset with its data.zip unpacked:
+    uncompressed .bvh (and .json labels) under dataset/Bandai-Namco-Research-Motiondataset-N/data/ (docs/data.md).
+    prepare_data reads the walks and skips the takes that are not locomotion."""
+    data = tmp_path / "dataset" / "Bandai-Namco-Research-Motiondataset-1" / "data"
+    data.mkdir(parents=True)
+    for folder, names in UPSTREAM_TAKES.items():
+        for name in names:
+            src = DATA / folder / "dataset-1" / "data" / name
+            (data / name.removesuffix(".gz")).write_bytes(gzip.decompress(src.read_bytes()))
+            label = src.with_name(name.removesuffix(".bvh.gz") + ".json")
+            (data / label.name).write_bytes(label.read_bytes())
+    clone = tmp_path / "dataset"
+    assert [p.name for p in find_takes(clone)] == sorted(
+        n.removesuffix(".gz") for n in UPSTREAM_TAKES["bandai-namco-locomotion"]
+    )
+    out = tmp_path / "upstream.npz"
+    assert prepare_data.main(["--data", str(clone), "--out", str(out), "--quiet", "--workers", "1"]) == 0
+    assert "walk" in capsys.readouterr().out
+    with np.load(out) as ds:
+        assert {str(t) for s in SPLITS for t in ds[f"{s}_take"]} == {
+            n.removesuffix(".bvh.gz") for n in UPSTREAM_TAKES["bandai-namco-locomotion"]
+        }
+        assert set(ds["train_labels"]) == {"walk"} and len(ds["valid_x"]) > 0 and len(ds["test_x"]) > 0
+        # the uncompressed file gives the same features as the shared gzip copy
+        take = str(ds["test_take"][0])
+        x, _ = to_features(load_take(BANDAI / "dataset-1" / "data" / f"{take}.bvh.gz", 20.0), 20.0)
+        start = int(ds["test_start"][0])
+        np.testing.assert_array_equal(ds["test_x"][0], x[start : start + 80])
