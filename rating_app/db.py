@@ -38,6 +38,8 @@ from sqlalchemy.engine import Engine, make_url
 from sqlalchemy.exc import ArgumentError
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
+from core import study
+
 from .manifest import AppError
 
 DEFAULT_DB = "sqlite:///ratings.sqlite"
@@ -418,7 +420,7 @@ def init_db(engine: Engine, clips=None, design: str | None = None, cover_keys=No
             if design is not None:
                 have = study_design(s)
                 if have is None and s.scalar(select(Rater.id).limit(1)) is not None:
-                    have = "acr"  # sessions from before designs were stored
+                    have = study.DEFAULT_DESIGN  # sessions from before designs were stored (acr)
                 if have is not None and have != design:
                     where = make_url(str(engine.url)).render_as_string(hide_password=True)
                     raise AppError(
