@@ -88,6 +88,8 @@ def dashboard():
         p=data,
         min_view=current_app.config["MIN_VIEW"],
         design=current_app.config["STUDY_DESIGN"],
+        words=current_app.extensions["rating_app"]["design"].dashboard,
+        export_file=current_app.extensions["rating_app"]["design"].export_file,
         warnings=health.of_app().list(),
     )
 

@@ -39,11 +39,15 @@ def index():
     with Session(app_engine().execution_options(read_only=True)) as s:  # no write lock on SQLite
         target = cfg["RATINGS_PER_CLIP"]
         full = ext["design"].is_full(s, target, ext["units"]) or not ext["clips"]
+    design = ext["design"]
     return render_template(
         "study.html",
         ids=ids,
         full=full,
-        design=cfg["STUDY_DESIGN"],
+        design=design.name,
+        page_template=design.page_template,  # the design's parts of the page
+        page_kind=design.page,
+        answer_field=design.answer_field,
         question=cfg["STUDY_QUESTION"],
         sound=cfg["STUDY_SOUND"],
     )

@@ -37,6 +37,13 @@ class Acr(Design):
     export_noun = "ratings"
     columns = ("rater_id", "clip_id", "condition", "rating", "role", "item", *TAIL)
     several_clips = False
+    page = "one"
+    dashboard = {
+        **Design.dashboard,
+        "note": " (one clip at a time, 1-5)",
+        "answers": "ratings",
+        "unit_column": "clip",
+    }
 
     # -------------------------------------------------------------------------------- units and assignment
     def build_units(self, clips):

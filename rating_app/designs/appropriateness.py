@@ -25,6 +25,13 @@ class Appropriateness(Pairwise):
     question = "Which motion fits the speech better?"
     export_noun = "appropriateness answers"
     columns = COLUMNS
+    dashboard = {
+        **Pairwise.dashboard,
+        "note": " (a system's motion for the speech heard and for another item's, a preference; targets per item "
+        "and condition)",
+        "per_condition": "system",
+        "mean": "mean appropriateness score",
+    }
 
     def serving_clips(self, clips):
         return list(clips)  # the mismatched clips are this design's

@@ -40,6 +40,23 @@ class Design:
     export_noun = ""  # what one export row is, for the export command's log line
     columns: tuple[str, ...] = ()  # the export's columns, in order
     several_clips = True  # a trial shows TrialClip rows (labelled A, B, ...) rather than one Trial.clip_id
+    page = ""  # how the rater's page (static/study.js) shows a trial: "one" clip, a "pair" A/B, a "page" of clips
+    # The dashboard's words (templates/admin.html): what the design is, what its units and answers are called.
+    dashboard = {
+        "note": "",  # after the design's name
+        "units": "clips",  # test units, counted
+        "answers": "answers",
+        "per_condition": "condition",  # the per-condition table's heading: "Per ..."
+        "mean": "mean",  # that table's mean column
+        "per_unit": "clip",  # the per-unit table's heading: "Per ..."
+        "unit_column": "unit",
+    }
+
+    @property
+    def page_template(self) -> str:
+        """The design's parts of the rater's page (welcome, viewing rule, introductions): Jinja macros that
+        templates/study.html imports."""
+        return f"designs/{self.name}.html"
 
     # -------------------------------------------------------------------------------- units and assignment
     def serving_clips(self, clips) -> list:

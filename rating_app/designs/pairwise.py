@@ -29,6 +29,15 @@ class Pairwise(UnitDesign):
     export_file = "pairs.csv"
     export_noun = "pairwise answers"
     columns = COLUMNS
+    page = "pair"
+    dashboard = {
+        **UnitDesign.dashboard,
+        "note": " (two clips, a preference; targets per item and pair of conditions)",
+        "units": "comparisons",
+        "per_condition": "pair of conditions",
+        "mean": "mean preference for the first",
+        "per_unit": "comparison",
+    }
 
     # ------------------------------------------------------------------------------------------ the units
     def test_units(self, tests, clips):

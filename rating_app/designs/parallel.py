@@ -32,6 +32,13 @@ class Parallel(UnitDesign):
     export_noun = "clip ratings of parallel pages"
     columns = COLUMNS
     group_size = MAX_PAGE
+    page = "page"
+    dashboard = {
+        **UnitDesign.dashboard,
+        "note": " (every condition of an item on one page, 0-100; targets per page)",
+        "units": "pages",
+        "per_unit": "page",
+    }
 
     # ------------------------------------------------------------------------------------------ the units
     def test_units(self, tests, clips):
