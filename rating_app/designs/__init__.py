@@ -18,7 +18,7 @@ from .parallel import Parallel
 DESIGNS: dict[str, Design] = {d.name: d for d in (Acr(), Pairwise(), Parallel(), Appropriateness())}
 assert tuple(DESIGNS) == study.DESIGNS, "core.study.DESIGNS and the registry list the same designs"
 
-__all__ = ["DESIGNS", "LABELS", "MAX_PAGE", "Design", "Unit", "build_units", "check_design", "get", "of_app"]
+__all__ = ["DESIGNS", "LABELS", "MAX_PAGE", "Design", "Unit", "build_units", "get", "of_app"]
 
 
 def get(name: str | None) -> Design:
@@ -27,10 +27,6 @@ def get(name: str | None) -> Design:
     if name not in DESIGNS:
         raise AppError(f"design {name!r} must be one of {', '.join(DESIGNS)}")
     return DESIGNS[name]
-
-
-def check_design(name: str | None) -> str:
-    return get(name).name
 
 
 def build_units(name: str, clips) -> dict[str, Unit]:

@@ -1,4 +1,5 @@
-"""The simulated raters' model: how good each clip looks to them, and the answer each design's page would get.
+"""The simulated raters' model: how good each clip looks to them, and the answers they can give (a rating, a
+preference, a fit to the speech, a page of ratings); each design (rating_app/designs/) picks the one its page asks.
 
 An attentive rater answers round(quality(clip) + bias + noise), clipped to the scale, with a personal bias and
 noise level, and recognises the bad examples (catch clips) as such: it rates them below CATCH_FAIL_AT (acr),
