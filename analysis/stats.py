@@ -3,6 +3,10 @@
 Every function takes the long table of ratings (one row per response) and the names of its columns, so the
 same code serves ratings.csv, the NIST reference data and R's PlantGrowth in the tests. Plotting lives in
 figures.py; file handling in load.py and report.py.
+
+At about 600 lines it is longer than the house's 400: it is one concept (the tests of ratings on a scale, which
+acr's report (designs/acr.py) and the power planner run), each function short and standing alone; the two fitting
+engines it calls are already modules of their own (mixed.py, ordinal.py).
 """
 
 import functools

@@ -19,9 +19,13 @@ RATED_ROLES = ("test", "catch")  # the roles that reach a ratings export
 # A rating of a BAD clip at or above this, on the paper's 1-5 scale, fails the catch trial (paper §5.2).
 CATCH_FAIL_AT = 3
 
-DESIGNS = ("acr", "pairwise", "parallel", "appropriateness")  # CONTRACTS §8; "acr" is the paper's design
+# The test designs (CONTRACTS §8), as the database, the API and the files name them; each part implements them
+# behind its own interface and lists them in its registry (rating_app.designs, analysis.designs).
+DESIGNS = ("acr", "pairwise", "parallel", "appropriateness")
+DEFAULT_DESIGN = "acr"  # the paper's design: a study, a database or a file that names none
 # Designs whose trial is a pair of clips answered with a preference -2..2: pairwise (which condition looks more
-# natural) and appropriateness (GENEA 2023: which of a system's two motions fits the speech heard better).
+# natural) and appropriateness (GENEA 2023: which of a system's two motions fits the speech heard better). Their
+# export is pairs.csv.
 PAIR_DESIGNS = ("pairwise", "appropriateness")
 
 # Clip ids are random, so a file or URL name tells a rater nothing about the condition (CONTRACTS §4).

@@ -80,16 +80,15 @@ def create_app(
     question=None,
     config=None,
 ) -> Flask:
-    """`design`: acr (default), pairwise or parallel (designs.py); fixed for the life of the database.
-    `ratings_per_clip` and `clips_per_rater` count the design's units: clips (acr), pairs of conditions of an
-    item (pairwise) or pages (parallel)."""
-    from . import health
+    """`design`: one of core.study.DESIGNS (designs/; default acr); fixed for the life of the database.
+    `ratings_per_clip` and `clips_per_rater` count the design's units (clips, pairs of conditions of an item,
+    pages, ...)."""
+    from . import designs, health
     from .admin import bp as admin_bp
     from .api import bp as api_bp
     from .audio_check import bp as audio_check_bp
     from .audio_check import load_audio_check
     from .db import make_read_engine
-    from .designs import build_units, serving_clips
     from .pages import bp as pages_bp
     from .study_config import study_environment
     from .videos import ACCEL, VideoStore
@@ -133,16 +132,17 @@ def create_app(
         MAX_CONTENT_LENGTH=16 * 1024,
         **config,
     )
-    clips = serving_clips(config["STUDY_DESIGN"], load_manifest(manifest, check_files=check_files))
-    units = build_units(config["STUDY_DESIGN"], clips)
+    design = designs.get(config["STUDY_DESIGN"])
+    clips = design.serving_clips(load_manifest(manifest, check_files=check_files))
+    units = design.build_units(clips)
     app.config["STUDY_SOUND"] = any(c.audio for c in clips)  # the page plays sound and checks the rater hears
     db_url = db_url or _env("DATABASE_URL", env)
     engine = _open_database(
         db_url,
         _env("DB_POOL_SIZE", env),
         clips,
-        config["STUDY_DESIGN"],
-        _cover_keys(config["STUDY_DESIGN"], clips, units),
+        design.name,
+        design.cover_keys(clips, units),
     )
     app.extensions["rating_app"] = {
         "engine": engine,
@@ -150,6 +150,7 @@ def create_app(
         "clips": {c.clip_id: c for c in clips},
         # With VIDEO_ACCEL the proxy sends the bytes: no video is read into a worker's memory.
         "videos": VideoStore(clips, Path(manifest).resolve().parent, preload=check_files and accel == "off"),
+        "design": design,
         "units": units,
         "audio_check": load_audio_check(manifest) if app.config["STUDY_SOUND"] else {},
         "warnings": health.Warnings(app.logger),
@@ -184,7 +185,7 @@ def _config(
     completion_url,
 ) -> dict:
     """The study's settings as app.config entries: each given value, else its environment variable, checked."""
-    from .designs import QUESTIONS, check_design
+    from . import designs
 
     numbers = {  # checked first, in the order the settings are documented
         "RATINGS_PER_CLIP": setting("RATINGS_PER_CLIP", ratings_per_clip, env),
@@ -195,8 +196,8 @@ def _config(
         "SESSIONS_PER_CLIENT": setting("SESSIONS_PER_CLIENT", sessions_per_client, env),
         "PROXY_COUNT": setting("PROXY_COUNT", env=env),
     }
-    design = check_design(design if design is not None else _env("STUDY_DESIGN", env))
-    question = (question if question is not None else _env("STUDY_QUESTION", env)) or QUESTIONS[design]
+    design = designs.get(design if design is not None else _env("STUDY_DESIGN", env))
+    question = (question if question is not None else _env("STUDY_QUESTION", env)) or design.question
     if len(question) > 200 or not question.isprintable():
         raise AppError("question: at most 200 printable characters on one line")
     completion_url = completion_url if completion_url is not None else _env("COMPLETION_URL", env)
@@ -207,7 +208,7 @@ def _config(
         "ADMIN_TOKEN": admin_token if admin_token is not None else _env("ADMIN_TOKEN", env),
         "COMPLETION_CODE": completion_code if completion_code is not None else _env("COMPLETION_CODE", env),
         "COMPLETION_URL": completion_url,
-        "STUDY_DESIGN": design,
+        "STUDY_DESIGN": design.name,
         "STUDY_QUESTION": question,
     }
 
@@ -215,15 +216,6 @@ def _config(
 def _derived_secret(admin_token):
     # Workers must share the cookie key: derive it from the admin token unless one is given.
     return hashlib.sha256(b"rating-app:" + (admin_token or os.urandom(32).hex()).encode()).hexdigest()
-
-
-def _cover_keys(design, clips, units):
-    """What assignment balances: the test and catch clips (acr) or units (pairwise, parallel)."""
-    from .designs import acr_catch
-
-    if design == "acr":
-        return [c.clip_id for c in clips if c.role == "test" or acr_catch(c)]
-    return list(units)
 
 
 def _open_database(db_url, pool_size, clips, design, cover_keys):

@@ -67,6 +67,7 @@ def _export(a):
     from sqlalchemy.exc import SQLAlchemyError
 
     from .db import check_url, make_engine, study_design
+    from .designs import get
     from .export import export_csv
 
     url = check_url(a.db)
@@ -80,7 +81,7 @@ def _export(a):
                 f"{parsed.render_as_string(hide_password=True)}: no ratings table (not a rating app database)"
             )
         with engine.connect() as conn:
-            design = study_design(conn) or "acr"
+            design = study_design(conn)
         if a.out == "-":
             n = export_csv(engine, sys.stdout)
         else:
@@ -91,13 +92,7 @@ def _export(a):
         raise AppError(f"cannot read the database: {first[0] if first else e.__class__.__name__}") from None
     finally:
         engine.dispose()
-    rows = {
-        "acr": "ratings",
-        "pairwise": "pairwise answers",
-        "parallel": "clip ratings of parallel pages",
-        "appropriateness": "appropriateness answers",
-    }
-    log.info("%s %s -> %s", n, rows.get(design, "rows"), a.out)
+    log.info("%s %s -> %s", n, get(design).export_noun, a.out)
     return 0
 
 

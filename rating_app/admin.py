@@ -19,8 +19,9 @@ from sqlalchemy import delete, func, insert, select
 
 from . import health
 from .db import AdminLogin, LoginFailure, app_engine, utcnow
-from .export import export_csv, progress
+from .export import export_csv
 from .guard import client_key
+from .progress import progress
 
 bp = Blueprint("admin", __name__, url_prefix="/admin")
 
@@ -87,6 +88,8 @@ def dashboard():
         p=data,
         min_view=current_app.config["MIN_VIEW"],
         design=current_app.config["STUDY_DESIGN"],
+        words=current_app.extensions["rating_app"]["design"].dashboard,
+        export_file=current_app.extensions["rating_app"]["design"].export_file,
         warnings=health.of_app().list(),
     )
 
@@ -121,10 +124,8 @@ def logout():
 @bp.get("/export.csv")
 def export():
     require_admin()
-    from .design_export import FILENAMES
-
     body = export_csv(app_engine())
-    name = FILENAMES[current_app.config["STUDY_DESIGN"]]
+    name = current_app.extensions["rating_app"]["design"].export_file
     return Response(body, mimetype="text/csv", headers={"Content-Disposition": f"attachment; filename={name}"})
 
 

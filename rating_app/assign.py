@@ -12,9 +12,10 @@ count. So a session holds at most one slot, only once it has come that far, and 
 creating sessions, or polling GET next, holds nothing. A slot for which no test clip is left is dropped (the session
 gets shorter).
 
-Pairwise and parallel studies balance units instead of clips (designs.Unit: a pair of conditions of an item, or
-an item's page) by the same rules: a slot gets the least-covered unit still short of its target that the rater
-has not had, a unit's cover being its answered trials plus its held slots.
+The other designs balance units instead of clips (designs.Unit: a pair of conditions of an item, or an item's
+page) by the same rules: a slot gets the least-covered unit still short of its target that the rater has not had,
+a unit's cover being its answered trials plus its held slots. What a design draws from is its own (designs/);
+this module holds the rules they share.
 
 A session expires when it has not answered anything for `slot_timeout_s` (polling is not progress); its
 unanswered slots are released and can never be answered, so no clip ever exceeds its target.
@@ -23,14 +24,10 @@ unanswered slots are released and can never be answered, so no clip ever exceeds
 from __future__ import annotations
 
 import datetime as dt
-import random
 
-from sqlalchemy import bindparam, func, or_, select, update
+from sqlalchemy import func, select, update
 
-from core import study
-
-from .db import COVER_KEY, COVERED_KINDS, Clip, Cover, Lock, Rater, Trial
-from .designs import training_groups
+from .db import COVER_KEY, COVERED_KINDS, Cover, Lock, Rater, Trial
 
 
 class StudyFull(Exception):
@@ -74,7 +71,7 @@ def expire_idle(conn, slot_timeout_s: float, now: dt.datetime, rater_pk: int | N
     return ids
 
 
-def _cover(conn, *where) -> dict[str, tuple[int, int]]:
+def cover(conn, *where) -> dict[str, tuple[int, int]]:
     """{key: (answered, held)} from the Cover rows."""
     return {k: (a, h) for k, a, h in conn.execute(select(Cover.key, Cover.answered, Cover.held).where(*where))}
 
@@ -89,18 +86,7 @@ def answer(conn, key: str) -> None:
     conn.execute(update(Cover).where(Cover.key == key).values(held=Cover.held - 1, answered=Cover.answered + 1))
 
 
-def coverage(conn) -> dict[str, tuple[int, int]]:
-    """{clip_id: (stored ratings, held slots)} for every test clip (of this manifest: rows are never deleted)."""
-    return _cover(conn, Cover.key.in_(select(Clip.clip_id).where(Clip.role == "test")))
-
-
-def is_full(conn, target: int) -> bool:
-    """True when every test clip has its target of stored ratings (the study is over)."""
-    cov = coverage(conn)
-    return bool(cov) and all(d >= target for d, _ in cov.values())
-
-
-def _short_or_full(cov, target, unit, answers, answered):
+def short_or_full(cov, target, unit, answers, answered):
     """How many units are still short of their target, counting held slots; StudyFull when none is: for good
     when every unit has all its answers, for now when the rest are held by other sessions."""
     short = sum(d + h < target for d, h in cov.values())
@@ -119,34 +105,10 @@ def n_catch_slots(pool: int, catch_per_rater: int | None) -> int:
     return pool if not catch_per_rater else min(catch_per_rater, pool)
 
 
-def _slots(rng, n_test: int, n_catch: int) -> list[tuple[str, None]]:
+def slots(rng, n_test: int, n_catch: int) -> list[tuple[str, None]]:
     rating = [("test", None)] * n_test + [("catch", None)] * n_catch
     rng.shuffle(rating)
     return rating
-
-
-# The clips a slot of each kind draws from in an acr study: test clips, or the bad examples among the catch clips
-# (never a catch item's other clips, CONTRACTS §8). One statement for both kinds, so that their timing matches.
-_ROLE_CLIPS = select(Clip.clip_id).where(
-    Clip.role == bindparam("role"), or_(Clip.role != "catch", Clip.condition == study.CATCH)
-)
-
-
-def plan_session(
-    conn, rng: random.Random, target: int, clips_per_rater: int | None, catch_per_rater: int | None = None
-) -> list[tuple[str, str | None]]:
-    """[(kind, clip_id or None)] in presentation order for a new session; raise StudyFull."""
-    cov = coverage(conn)
-    if not cov:
-        raise StudyFull("the study has no test clips")
-    short = _short_or_full(cov, target, "clip", "ratings", "rated")
-    n_test = short if not clips_per_rater else min(clips_per_rater, short)
-    pool = conn.execute(
-        select(func.count()).select_from(Clip).where(Clip.role == "catch", Clip.condition == study.CATCH)
-    ).scalar()
-    training = list(conn.execute(select(Clip.clip_id).where(Clip.role == "training").order_by(Clip.clip_id)).scalars())
-    rng.shuffle(training)
-    return [("training", c) for c in training] + _slots(rng, n_test, n_catch_slots(pool, catch_per_rater))
 
 
 def claim(conn, keys, had, target: int, wait: bool):
@@ -163,45 +125,3 @@ def claim(conn, keys, had, target: int, wait: bool):
         .limit(1)
     )
     return conn.execute(q.with_for_update(skip_locked=not wait)).scalar()
-
-
-def assign_slot(conn, rng: random.Random, rater_pk: int, kind: str, target: int, wait=False) -> str | None:
-    """The clip for a test or catch slot now being served, or None when none is left for this rater (None also
-    when, without `wait`, the only ones left are being claimed by other servers: call again under
-    `lock_assign` with `wait`). Both kinds run the same statements, so their timing does not tell them apart."""
-    had = select(Trial.clip_id).where(Trial.rater_pk == rater_pk, Trial.clip_id.is_not(None))
-    keys = _ROLE_CLIPS.params(role=kind)
-    return claim(conn, keys, had, target if kind == "test" else NO_TARGET, wait)
-
-
-# ---------------------------------------------------------------------------------------- pairwise / parallel
-def unit_coverage(conn, units) -> dict[str, tuple[int, int]]:
-    """{unit key: (answered trials, held slots)} for every test unit of this manifest."""
-    cov = _cover(conn)
-    return {k: cov.get(k, (0, 0)) for k, u in units.items() if u.role == "test"}
-
-
-def units_full(conn, units, target: int) -> bool:
-    cov = unit_coverage(conn, units)
-    return bool(cov) and all(d >= target for d, _ in cov.values())
-
-
-def plan_units(
-    conn, rng: random.Random, target: int, per_rater: int | None, design: str, clips, units, catch_per_rater=None
-):
-    """[(kind, training clips or None)] in presentation order for a new pairwise or parallel session."""
-    cov = unit_coverage(conn, units)
-    short = _short_or_full(cov, target, "comparison", "answers", "answered")
-    n_test = short if not per_rater else min(per_rater, short)
-    pool = sum(u.role == "catch" for u in units.values())
-    training = [("training", g) for g in training_groups(design, clips, rng)]
-    return training + _slots(rng, n_test, n_catch_slots(pool, catch_per_rater))
-
-
-def assign_unit(conn, rng: random.Random, rater_pk: int, kind: str, target: int, units, wait=False):
-    """The Unit for a test or catch slot now being served, or None when none is left for this rater (as
-    assign_slot, whose rules it follows); both kinds run the same statements."""
-    had = select(Trial.unit).where(Trial.rater_pk == rater_pk, Trial.unit.is_not(None))
-    keys = sorted(k for k, u in units.items() if u.role == kind)
-    key = claim(conn, keys, had, target if kind == "test" else NO_TARGET, wait)
-    return units[key] if key is not None else None

@@ -19,6 +19,7 @@ from pathlib import Path
 from flask import Blueprint, abort, current_app, jsonify, send_file
 from sqlalchemy import update
 
+from .bodies import check_token, json_body
 from .db import Rater, app_engine, utcnow
 from .manifest import AppError
 
@@ -56,9 +57,7 @@ def _samples():
 
 
 def _session(conn, token):
-    from .api import _check_token
-
-    _check_token(token)
+    check_token(token)
     row = conn.execute(
         Rater.__table__.select().where(Rater.token == token).with_for_update()
         if conn.dialect.name != "sqlite"
@@ -95,8 +94,6 @@ def sample(token):
 
 @bp.post("/sessions/<token>/audio-check")
 def check(token):
-    from .api import json_body
-
     body = json_body(("answer",), required=("answer",))
     if not isinstance(body["answer"], str) or len(body["answer"]) > 64:
         abort(400, "field 'answer' must be the digits heard, as text")

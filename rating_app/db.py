@@ -6,6 +6,10 @@ clip table copied from the manifest (so an export needs only the database). Pair
 several clips (`TrialClip`) and store a `Preference` or one `PageRating` per clip; the study's design is a
 `StudySetting` row, so a restart can never mix designs in one database. The admin's logins and failed
 token guesses are rows too, so that every gunicorn worker sees a logout and a lockout at once.
+
+At about 450 lines it is longer than the house's 400: the models, the schema's additions for databases made by
+earlier versions, and the engine set-up are one concept (what the database is), kept together so that a change to
+a table and to its migration are made side by side.
 """
 
 from __future__ import annotations
@@ -37,6 +41,8 @@ from sqlalchemy import (
 from sqlalchemy.engine import Engine, make_url
 from sqlalchemy.exc import ArgumentError
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+from core import study
 
 from .manifest import AppError
 
@@ -418,7 +424,7 @@ def init_db(engine: Engine, clips=None, design: str | None = None, cover_keys=No
             if design is not None:
                 have = study_design(s)
                 if have is None and s.scalar(select(Rater.id).limit(1)) is not None:
-                    have = "acr"  # sessions from before designs were stored
+                    have = study.DEFAULT_DESIGN  # sessions from before designs were stored (acr)
                 if have is not None and have != design:
                     where = make_url(str(engine.url)).render_as_string(hide_password=True)
                     raise AppError(

@@ -16,7 +16,7 @@ import threading
 from flask import current_app, request
 
 from .assign import n_catch_slots
-from .designs import acr_catch
+from .designs import get
 
 FAIR_RATIO = 1.5  # a catch unit may reach at most this many times the share of raters a test unit reaches
 
@@ -44,11 +44,7 @@ def of_app(app=None) -> Warnings:
 
 def catch_pool_warning(design, clips, units, clips_per_rater, catch_per_rater) -> str | None:
     """A line when each catch unit would reach more than FAIR_RATIO times the share of raters a test unit does."""
-    if design == "acr":
-        n_test, pool = sum(c.role == "test" for c in clips), sum(acr_catch(c) for c in clips)
-    else:
-        n_test = sum(u.role == "test" for u in units.values())
-        pool = sum(u.role == "catch" for u in units.values())
+    n_test, pool = get(design).pool(clips, units)
     if not n_test or not pool:
         return None
     per_rater = min(clips_per_rater or n_test, n_test)

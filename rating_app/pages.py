@@ -11,8 +11,7 @@ from sqlalchemy.orm import Session
 from core import study
 
 from . import health
-from .api import EXTERNAL
-from .assign import is_full, units_full
+from .bodies import EXTERNAL
 from .db import app_engine
 
 bp = Blueprint("pages", __name__)
@@ -39,14 +38,16 @@ def index():
     cfg = current_app.config
     with Session(app_engine().execution_options(read_only=True)) as s:  # no write lock on SQLite
         target = cfg["RATINGS_PER_CLIP"]
-        full = (is_full(s, target) if cfg["STUDY_DESIGN"] == "acr" else units_full(s, ext["units"], target)) or not ext[
-            "clips"
-        ]
+        full = ext["design"].is_full(s, target, ext["units"]) or not ext["clips"]
+    design = ext["design"]
     return render_template(
         "study.html",
         ids=ids,
         full=full,
-        design=cfg["STUDY_DESIGN"],
+        design=design.name,
+        page_template=design.page_template,  # the design's parts of the page
+        page_kind=design.page,
+        answer_field=design.answer_field,
         question=cfg["STUDY_QUESTION"],
         sound=cfg["STUDY_SOUND"],
     )

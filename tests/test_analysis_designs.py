@@ -16,7 +16,7 @@ import pytest
 from scipy import stats as sps
 
 from analysis import pairwise, parallel
-from analysis.design_report import detect_design
+from analysis.designs import detect_design
 from analysis.load import AnalysisError
 from analysis.report import build_report
 

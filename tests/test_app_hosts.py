@@ -23,7 +23,7 @@ from proxies import caddy_accel, nginx_accel, nginx_head, nginx_temp_paths
 from test_app_load import kill9, start_gunicorn
 
 from rating_app.db import make_engine
-from rating_app.export import iter_rows
+from rating_app.designs.acr import iter_rows
 from rating_app.simulate import run_simulation
 
 NGINX = """{head}

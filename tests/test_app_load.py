@@ -17,8 +17,10 @@ from concurrent_raters import cover_mismatches
 from fake_stimuli import free_port, write_fake_stimuli
 
 from rating_app.db import make_engine
-from rating_app.design_export import iter_fit_rows, iter_page_rows, iter_pair_rows
-from rating_app.export import iter_rows
+from rating_app.designs.acr import iter_rows
+from rating_app.designs.appropriateness import iter_fit_rows
+from rating_app.designs.pairwise import iter_pair_rows
+from rating_app.designs.parallel import iter_page_rows
 from rating_app.simulate import run_simulation
 
 ROOT = Path(__file__).resolve().parents[1]

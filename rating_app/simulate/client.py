@@ -12,7 +12,9 @@ import time
 
 import requests
 
-from ..designs import ANSWER_FIELD, required_ms
+from core import study
+
+from ..designs import get
 from ..manifest import AppError
 from .raters import ClipInfo, Rater, duration_ms
 
@@ -21,7 +23,7 @@ def check_design(url: str, design: str, timeout=30.0) -> None:
     """AppError unless the server at `url` runs `design` (its /healthz names it)."""
     try:
         r = requests.get(url.rstrip("/") + "/healthz", timeout=timeout)
-        running = r.json().get("design", "acr")
+        running = r.json().get("design", study.DEFAULT_DESIGN)
     except (requests.RequestException, ValueError) as e:
         raise AppError(f"{url}: server not reachable ({e.__class__.__name__})") from None
     if running != design:
@@ -70,7 +72,7 @@ class Visit:
         self.client, self.rater, self.clips, self.think_s = client, rater, clips, think_s
         self.heard = heard or {}  # a study with sound: {sha256 of a sound-check sample: its digits}
         self.token = self.rater_id = None
-        self.design, self.min_view, self.n_trials = "acr", 1.0, 0
+        self.design, self.min_view, self.n_trials = get(None), 1.0, 0
 
     def start(self) -> bool:
         """Open (or resume) the session; False when the study is full."""
@@ -83,7 +85,7 @@ class Visit:
             raise AppError(f"POST /api/sessions: HTTP {status}: {body.get('error')}")
         self.token, self.rater_id = body["session"], body["rater_id"]
         self.min_view = float(body.get("min_view", 1.0))
-        self.design = body.get("design", "acr")
+        self.design = get(body.get("design"))  # the design the server runs (designs/)
         self.n_trials = int(body["n_trials"])
         return True
 
@@ -123,7 +125,7 @@ class Visit:
         status, ans = self._post_when_watched(trial, shown, value, watched)
         if status not in (200, 201):
             raise AppError(f"{what}: HTTP {status}: {ans.get('error')}")
-        stored = ans.get(ANSWER_FIELD[self.design]) if status == 200 else None
+        stored = ans.get(self.design.answer_field) if status == 200 else None
         return value if stored is None else stored
 
     def _post_when_watched(self, trial, shown, value, watched):
@@ -134,10 +136,10 @@ class Visit:
             status, _ = self.client.call("GET", part["video_url"], raw=True)
             if status != 200:
                 raise AppError(f"video of trial {trial['trial_id']}: HTTP {status}")
-        need = required_ms(self.design, [duration_ms(c) for c in shown])
+        need = self.design.required_ms([duration_ms(c) for c in shown])
         wait = self.min_view * need / 1000.0 + self.rater.think(self.think_s)
         time.sleep(max(0.0, started + wait - time.monotonic()))
-        body = {"trial_id": trial["trial_id"], ANSWER_FIELD[self.design]: value, "watched_ms": watched}
+        body = {"trial_id": trial["trial_id"], self.design.answer_field: value, "watched_ms": watched}
         for _ in range(5):
             status, ans = self.client.call("POST", f"/api/sessions/{self.token}/ratings", body)
             if status != 425:

@@ -13,8 +13,6 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from core import study
-
 from ..manifest import AppError
 from .client import Client, Visit, check_design
 from .raters import ClipInfo, Rater, duration_ms, load_audio_answers, load_clips, make_raters, set_qualities
@@ -145,13 +143,21 @@ class _Crowd:
             visit.submit(trial, shown, None, sum(map(duration_ms, shown)), "training ack")
             res["n_training"] += 1
             return
-        value, watched = rater.answer(visit.design, ids, shown)
-        value = visit.submit(trial, shown, value, watched, "rating" if visit.design == "acr" else "answer")
+        design = visit.design
+        value, watched = design.simulated_answer(rater, ids, shown)
+        value = visit.submit(trial, shown, value, watched, design.answer_noun)
         catch = any(c is not None and c.role == "catch" for c in shown)
+        conditions = [c.condition if c else None for c in shown]
         res["n_ratings"] += 1
         res["n_catch"] += catch
-        res["failed_catch"] = res["failed_catch"] or (catch and _catch_failed(visit.design, ids, shown, value))
-        records = _records(visit.design, res["rater_id"], rater, trial, ids, shown, value, catch)
+        res["failed_catch"] = res["failed_catch"] or (catch and design.catch_failed(ids, conditions, value))
+        head = {
+            "rater_id": res["rater_id"],
+            "external_id": rater.external_id,
+            "trial_id": trial["trial_id"],
+            "careless": rater.careless,
+        }
+        records = design.records(head, ids, shown, value, "catch" if catch else "test")
         with self.lock:
             self.ratings.extend(records)
         if self.on_ack:
@@ -193,49 +199,3 @@ def _new_result(rater: Rater) -> dict:
         "bias": round(rater.bias, 3),
         "noise_sd": round(rater.noise_sd, 3),
     }
-
-
-def _catch_failed(design: str, ids: list[str], shown: list[ClipInfo | None], value) -> bool:
-    """Whether an answer to a catch trial fails it, by the study's rule for the design (core.study)."""
-    conds = [c.condition if c else None for c in shown]
-    if design == "acr":
-        return bool(study.acr_catch_failed(value))
-    if design in study.PAIR_DESIGNS:
-        return bool(study.pair_catch_failed(conds[0], conds[1], value))
-    by = {c: value[i] for i, c in zip(ids, conds)}
-    if study.CATCH not in by or study.NATURAL not in by:
-        return False
-    return bool(study.page_catch_failed(by[study.CATCH], by[study.NATURAL]))
-
-
-def _records(design, rater_id, rater: Rater, trial, ids, shown, value, catch) -> list[dict]:
-    """The acknowledged answer as the summary lists it: one record per rating (acr), pair or clip of a page."""
-    if design == "acr":
-        clip = shown[0]
-        return [
-            {
-                "rater_id": rater_id,
-                "external_id": rater.external_id,
-                "trial_id": trial["trial_id"],
-                "clip_id": ids[0],
-                "condition": clip.condition if clip else None,
-                "role": clip.role if clip else None,
-                "rating": value,
-                "careless": rater.careless,
-            }
-        ]
-    base = {
-        "rater_id": rater_id,
-        "external_id": rater.external_id,
-        "trial_id": trial["trial_id"],
-        "role": "catch" if catch else "test",
-        "careless": rater.careless,
-    }
-    conds = [c.condition if c else None for c in shown]
-    if design in study.PAIR_DESIGNS:
-        pair = {"clip_a": ids[0], "clip_b": ids[1], "condition_a": conds[0], "condition_b": conds[1]}
-        return [{**base, **pair, "condition": " vs ".join(sorted(map(str, conds))), "preference": value}]
-    return [
-        {**base, "page_id": f"p{trial['trial_id']}", "clip_id": i, "condition": c, "rating": value[i]}
-        for i, c in zip(ids, conds)
-    ]

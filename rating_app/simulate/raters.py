@@ -1,4 +1,5 @@
-"""The simulated raters' model: how good each clip looks to them, and the answer each design's page would get.
+"""The simulated raters' model: how good each clip looks to them, and the answers they can give (a rating, a
+preference, a fit to the speech, a page of ratings); each design (rating_app/designs/) picks the one its page asks.
 
 An attentive rater answers round(quality(clip) + bias + noise), clipped to the scale, with a personal bias and
 noise level, and recognises the bad examples (catch clips) as such: it rates them below CATCH_FAIL_AT (acr),
@@ -178,17 +179,9 @@ class Rater:
     def __post_init__(self):
         self.rng = np.random.default_rng(self.seed)
 
-    def answer(self, design: str, ids: list[str], shown: list[ClipInfo | None]):
-        """(the answer to a rating trial of `design` showing the clips `ids`, the watched_ms it reports)."""
-        if design == "acr":
-            return self.rate(shown[0])
-        # Drawn before the answer, so that a crowd's answers stay what they were for a given seed.
-        watched = int(sum(map(duration_ms, shown)) + self.rng.uniform(0, 300))
-        if design == "pairwise":
-            return self.prefer(shown[0], shown[1]), watched
-        if design == "appropriateness":
-            return self.prefer_fit(shown[0], shown[1]), watched
-        return dict(zip(ids, self.page(shown))), watched
+    def watched(self, shown: list[ClipInfo | None]) -> int:
+        """The watched_ms a rater reports for a trial of several clips: all of them, and a little more."""
+        return int(sum(map(duration_ms, shown)) + self.rng.uniform(0, 300))
 
     def rate(self, clip: ClipInfo | None) -> tuple[int, int]:
         """An acr rating 1..5 and the watched_ms it reports (careless raters skip ahead)."""

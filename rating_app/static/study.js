@@ -1,14 +1,15 @@
 // The rater's page: consent -> familiarisation -> rating trials -> completion, all through the JSON API.
-// No build step; plain browser JavaScript. One page for every design (data-design): acr shows one clip and
+// No build step; plain browser JavaScript. One page for every design, which names how its trial is shown
+// (data-page, the design's `page` in rating_app/designs/) and its answer's field: acr shows one clip and
 // 5 rating buttons; pairwise two clips A and B and 5 preference buttons; parallel a page of clips with a 0-100
 // slider each. An answer can be given only once every clip of the trial has played to the end.
 (function () {
   "use strict";
   var $ = function (id) { return document.getElementById(id); };
   var app = $("app");
-  var design = app.dataset.design || "acr";
   var sound = app.dataset.sound === "1";  // the videos carry sound: unmuted, started by a tap, after a sound check
-  var PAIRED = { pairwise: true, appropriateness: true };
+  var page = app.dataset.page || "one";  // how a trial is shown: one clip, a pair A/B, or a page of clips
+  var answerField = app.dataset.answerField || "rating";  // the design's answer in the API (CONTRACTS §8)
   var question = app.dataset.question || "How natural does this motion look?";
   var KEY = "rating_app_session";
   var token = null;
@@ -181,8 +182,8 @@
   }
 
   function present() {
-    if (PAIRED[design]) { presentPair(); return; }
-    if (design === "parallel") { presentPage(); return; }
+    if (page === "pair") { presentPair(); return; }
+    if (page === "page") { presentPage(); return; }
     lastPhase = trial.phase;
     answered = false;
     watchedMs = 0;
@@ -241,7 +242,6 @@
   // ---------------------------------------------------------------- pairwise and parallel: several clips
   // Each clip's playing time is added up; `ended` says which clips have played to the end at least once.
   var multi = { videos: [], ended: [], starts: [] };
-  var FIELD = { acr: "rating", pairwise: "preference", parallel: "ratings", appropriateness: "preference" };
 
   function stopMultiClock(i) {
     if (multi.starts[i] !== null && multi.starts[i] !== undefined) {
@@ -413,7 +413,7 @@
   // 425: the server counts the clip as not yet played to the end (a slow start); wait as it says, then resend.
   function send(rating, early) {
     var body = { trial_id: trial.trial_id, watched_ms: Math.round(watchedMs) };
-    body[FIELD[design]] = rating;
+    body[answerField] = rating;
     api("POST", "/api/sessions/" + token + "/ratings", body)
       .then(function (r) {
         if (r.status === 201 || r.status === 200) { next(); }

@@ -1,0 +1,41 @@
+"""The test designs the analysis reads (CONTRACTS §8), one module each behind one interface (base.Design); this
+registry is the only place that lists them. A file's design is told by its columns: exactly one design claims
+them.
+"""
+
+import csv
+from pathlib import Path
+
+from core import study
+
+from ..load import AnalysisError
+from .acr import Acr
+from .appropriateness import Appropriateness
+from .base import Design, Options
+from .pairwise import Pairwise
+from .parallel import Parallel
+
+DESIGNS: dict[str, Design] = {d.name: d for d in (Acr(), Pairwise(), Parallel(), Appropriateness())}
+assert tuple(DESIGNS) == study.DESIGNS, "core.study.DESIGNS and the registry list the same designs"
+
+__all__ = ["DESIGNS", "Design", "Options", "design_of", "detect_design"]
+
+
+def design_of(path) -> Design:
+    """The design of the CSV file at `path`, from its header (AnalysisError if it cannot be opened). A file that
+    cannot be read as CSV goes to the default design (acr), whose loader names the problem."""
+    path = Path(path)
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            header = next(csv.reader(fh), [])
+    except FileNotFoundError:
+        raise AnalysisError(f"{path}: no such file") from None
+    except (UnicodeDecodeError, csv.Error):
+        return DESIGNS[study.DEFAULT_DESIGN]
+    columns = {c.strip() for c in header}
+    return next(d for d in DESIGNS.values() if d.detects(columns))
+
+
+def detect_design(path) -> str:
+    """The name of the design of the CSV file at `path`."""
+    return design_of(path).name

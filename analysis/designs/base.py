@@ -1,0 +1,159 @@
+"""What every test design (CONTRACTS §8) is to the analysis: one small interface, which each design implements.
+
+`python -m analysis.report FILE` (report.py) knows no design: it asks each one in the registry whether the file's
+columns are its own, then has that design prepare the rows, analyse them with and without the catch-trial
+exclusion, draw its figures, and write its stats.json keys, its report.html parts and its console summary. The
+statistics themselves are pure functions on the exported DataFrame (stats.py, pairwise.py, parallel.py,
+appropriateness.py); a design module adapts them to this interface.
+"""
+
+import html
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from .. import report_html
+from ..load import AnalysisError
+
+
+@dataclass
+class Options:
+    """The report's settings (analysis.report's flags); each design reads those it uses."""
+
+    metrics_path: str | None
+    threshold: int
+    mixed: bool
+    seed: int
+    n_boot: int
+    alpha: float
+    mixed_max_levels: int
+    ordinal: bool
+    ordinal_max_ratings: int
+
+
+@dataclass
+class Prepared:
+    """A file's rows, ready to analyse: all of them, those kept by the catch-trial exclusion, and the counts."""
+
+    rows: pd.DataFrame
+    kept: pd.DataFrame
+    counts: dict
+    extra: dict  # what else a design read beside the file (acr: metrics, the C2ST table)
+
+
+class Design:
+    name = ""  # as core.study.DESIGNS spells it
+    steps = 0  # progress-bar steps of one report (0: no bar)
+
+    def detects(self, columns: set[str]) -> bool:
+        """Whether a CSV file with these header columns is this design's export (exactly one design says so)."""
+        raise NotImplementedError
+
+    def prepare(self, path, options: Options) -> Prepared:
+        """Read and check the file, and apply the catch-trial exclusion; AnalysisError, one line, for bad input."""
+        raise NotImplementedError
+
+    def analyse(self, data: Prepared, options: Options, progress) -> tuple[dict, dict]:
+        """(the analysis of the kept rows, that of every row): the design's statistics, DataFrames in, dicts out."""
+        raise NotImplementedError
+
+    def figures(self, data: Prepared, kept: dict, everyone: dict, folder: Path) -> dict[str, Path]:
+        """{name: path} of the PNG figures drawn into `folder`."""
+        raise NotImplementedError
+
+    def stats_head(self) -> dict:
+        """stats.json's first keys: the design's name (acr: none, CONTRACTS §7)."""
+        return {"design": self.name}
+
+    def stats_json(self, kept: dict, everyone: dict) -> dict:
+        """stats.json's keys after the counts: the design's results, with "without_exclusion"."""
+        raise NotImplementedError
+
+    def html(self, meta: dict, counts: dict, kept: dict, everyone: dict, figs: dict) -> list[str]:
+        """report.html's parts (report_html.page wraps them)."""
+        raise NotImplementedError
+
+    def console(self, counts: dict, kept: dict, everyone: dict) -> str:
+        """The summary printed on stdout."""
+        raise NotImplementedError
+
+
+def exclude(df, failed) -> tuple[pd.DataFrame, dict]:
+    """(the rows of raters not in `failed`, the exclusion's counts) for a design whose raters are excluded when
+    they fail any catch trial."""
+    drop = df["rater_id"].isin(failed)
+    kept = df[~drop]
+    counts = {
+        "n_ratings_total": int(len(df)),
+        "n_ratings_removed": int(drop.sum()),
+        "n_ratings_kept": int(len(kept)),
+        "n_raters_total": int(df["rater_id"].nunique()),
+        "n_raters_excluded": len(failed),
+        "n_raters_kept": int(kept["rater_id"].nunique()),
+        "excluded_raters": failed,
+        "n_catch_ratings": int((df["role"] == "catch").sum()),
+    }
+    return kept, counts
+
+
+class FailedCatchDesign(Design):
+    """A design whose raters are excluded when they fail any catch trial (every design but acr); its statistics
+    are one `analyse(df, ...)` function, run on the kept rows and on every row."""
+
+    def load(self, path) -> pd.DataFrame:
+        """The file's rows, checked (AnalysisError names the file and line)."""
+        raise NotImplementedError
+
+    def failed_raters(self, df) -> list[str]:
+        raise NotImplementedError
+
+    def analyse_rows(self, df, options: Options) -> dict:
+        raise NotImplementedError
+
+    def section_json(self, res) -> dict:
+        raise NotImplementedError
+
+    def section_html(self, res) -> list[str]:
+        raise NotImplementedError
+
+    def console_lines(self, kept) -> list[str]:
+        raise NotImplementedError
+
+    def prepare(self, path, options):
+        df = self.load(path)
+        kept, counts = exclude(df, self.failed_raters(df))
+        if not (kept["role"] == "test").any():
+            raise AnalysisError(f"{path}: every rater failed the catch trials; no test answers are left")
+        return Prepared(df, kept, counts, {})
+
+    def analyse(self, data, options, progress):
+        return self.analyse_rows(data.kept, options), self.analyse_rows(data.rows, options)
+
+    def stats_json(self, kept, everyone):
+        return {**self.section_json(kept), "without_exclusion": self.section_json(everyone)}
+
+    def html(self, meta, counts, kept, everyone, figs):
+        def section(res, title):
+            return "\n".join([f"<h2>{html.escape(title)}</h2>", *self.section_html(res)])
+
+        return [
+            f"<h1>Perceptual test report ({self.name})</h1><p class=note>{html.escape(meta['input'])} · generated "
+            f"{html.escape(meta['generated_at'])} · bootstrap seed {meta['seed']}</p>",
+            f"<h2>Summary</h2><p>{counts['n_ratings_total']} rows from {counts['n_raters_total']} raters. "
+            f"{counts['n_raters_excluded']} raters failed a catch trial and were excluded, removing "
+            f"{counts['n_ratings_removed']} rows; {counts['n_ratings_kept']} were kept.</p>",
+            *[f"<p>{report_html.img(f)}</p>" for f in figs.values()],
+            section(kept, "With the rater exclusion (primary analysis)"),
+            section(everyone, "Without the exclusion (all raters)"),
+            "<h2>Excluded raters</h2><p>" + (html.escape(", ".join(counts["excluded_raters"])) or "none") + "</p>",
+        ]
+
+    def console(self, counts, kept, everyone):
+        lines = [
+            f"Design {self.name}: {counts['n_ratings_total']} rows, {counts['n_ratings_removed']} removed, "
+            f"{counts['n_ratings_kept']} kept (raters: {counts['n_raters_total']} total, "
+            f"{counts['n_raters_excluded']} excluded for a failed catch trial)",
+            "",
+        ]
+        return "\n".join(lines + self.console_lines(kept))
