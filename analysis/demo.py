@@ -32,7 +32,7 @@ import urllib.request
 from pathlib import Path
 
 from core import cli
-from core.study import DESIGNS, PAIR_DESIGNS
+from core.study import DESIGNS
 
 
 class DemoError(cli.UserError):
@@ -113,13 +113,18 @@ def _wait_until_up(url: str, server: subprocess.Popen, log: Path, timeout_s: flo
     raise DemoError(f"the rating app did not answer at {url} within {timeout_s:.0f} s; log: {log}")
 
 
-def _export(url: str, token: str, out: Path) -> None:
+def _export(url: str, token: str, folder: Path) -> Path:
+    """The app's export, saved in `folder` under the name the app gives it (ratings.csv or pairs.csv: the design
+    decides, CONTRACTS §8); returns its path."""
     req = urllib.request.Request(f"{url}/admin/export.csv", headers={"Authorization": f"Bearer {token}"})
     try:
         with urllib.request.urlopen(req, timeout=60) as r:
+            name = Path(r.headers.get_filename() or "ratings.csv").name
+            out = folder / name
             out.write_bytes(r.read())
     except urllib.error.URLError as e:
         raise DemoError(f"export from {url}/admin/export.csv failed: {e}") from None
+    return out
 
 
 def run_demo(
@@ -271,15 +276,15 @@ def run_demo(
                 f"the crowd of {raters} raters did not fill every clip's {ratings_per_clip} ratings; raise --raters"
             )
 
-        ratings = out / ("pairs.csv" if design in PAIR_DESIGNS else "ratings.csv")
-        _stage(f"4/5 export {ratings.name}")
-        _export(url, token, ratings)
+        _stage("4/5 export")
+        ratings = _export(url, token, out)
+        print(f"  {ratings}", flush=True)
         procs.stop_all()
 
         _stage(f"5/5 report → {out / 'report'}")
         metrics = Path(stimuli) / "metrics.csv"
         cmd = [py, "-m", "analysis.report", str(ratings), "--out", str(out / "report")]
-        if metrics.is_file() and design == "acr":
+        if metrics.is_file():  # a design whose statistics have no use for the metrics leaves them aside
             cmd += ["--metrics", str(metrics)]
         procs.run(cmd, "analysis.report")
     finally:

@@ -23,10 +23,6 @@ CATCH_FAIL_AT = 3
 # behind its own interface and lists them in its registry (rating_app.designs, analysis.designs).
 DESIGNS = ("acr", "pairwise", "parallel", "appropriateness")
 DEFAULT_DESIGN = "acr"  # the paper's design: a study, a database or a file that names none
-# Designs whose trial is a pair of clips answered with a preference -2..2: pairwise (which condition looks more
-# natural) and appropriateness (GENEA 2023: which of a system's two motions fits the speech heard better). Their
-# export is pairs.csv.
-PAIR_DESIGNS = ("pairwise", "appropriateness")
 
 # Clip ids are random, so a file or URL name tells a rater nothing about the condition (CONTRACTS §4).
 CLIP_ID = re.compile(r"[a-z0-9]{12,64}")  # always fullmatch

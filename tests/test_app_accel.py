@@ -10,14 +10,13 @@ import os
 import shutil
 import signal
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 import requests
 from fake_stimuli import free_port, write_fake_stimuli
 from proxies import caddy_accel, nginx_accel, nginx_head, nginx_temp_paths
-from test_app_proxy import _wait_for
+from servers import start_gunicorn, wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 NGINX_ACCEL = """{head}
@@ -77,18 +76,7 @@ def behind(proxy, tmp_path, stimuli):
     procs = []
     with open(tmp_path / "log", "w") as log:
         try:
-            gun = [sys.executable, "-m", "gunicorn", "-w", "2", "-k", "gthread", "--threads", "4"]
-            procs.append(
-                subprocess.Popen(
-                    [*gun, "-b", f"127.0.0.1:{app_port}", "rating_app.wsgi:app"],
-                    cwd=ROOT,
-                    env=env,
-                    stdout=log,
-                    stderr=subprocess.STDOUT,
-                    start_new_session=True,
-                )
-            )
-            _wait_for(f"http://127.0.0.1:{app_port}/healthz", procs[-1], "gunicorn")
+            procs.append(start_gunicorn(app_port, env, log, workers=2, threads=4))
             procs.append(
                 subprocess.Popen(
                     cmd,
@@ -98,7 +86,7 @@ def behind(proxy, tmp_path, stimuli):
                     env=dict(os.environ, HOME=str(tmp_path), XDG_DATA_HOME=str(tmp_path)),
                 )
             )
-            _wait_for(f"http://127.0.0.1:{port}/healthz", procs[-1], proxy)
+            wait_for(f"http://127.0.0.1:{port}/healthz", procs[-1], proxy)
             yield f"http://127.0.0.1:{port}", f"http://127.0.0.1:{app_port}"
         finally:
             for p in reversed(procs):

@@ -20,7 +20,7 @@ import requests
 from concurrent_raters import cover_mismatches
 from fake_stimuli import free_port, write_fake_stimuli
 from proxies import caddy_accel, nginx_accel, nginx_head, nginx_temp_paths
-from test_app_load import kill9, start_gunicorn
+from servers import crowd_env, kill9, start_gunicorn
 
 from rating_app.db import make_engine
 from rating_app.designs.acr import iter_rows
@@ -123,18 +123,7 @@ def proxy(kind, tmp_path, a, b, stimuli):
 def test_two_hosts_one_database_and_a_kill(kind, raters, tmp_path, request, monkeypatch):
     db = request.getfixturevalue("pg_database").replace("postgresql://", "postgresql+psycopg://", 1)
     stimuli = write_fake_stimuli(tmp_path / "stimuli", n_items=10, n_catch=2)
-    env = dict(
-        os.environ,
-        RATING_MANIFEST=str(stimuli),
-        DATABASE_URL=db,
-        ADMIN_TOKEN="hosts-token",
-        RATINGS_PER_CLIP="1000",
-        CLIPS_PER_RATER="2",
-        MIN_VIEW="0",
-        SESSIONS_PER_CLIENT="0",
-        PROXY_COUNT="1",
-        VIDEO_ACCEL=kind,
-    )
+    env = crowd_env(stimuli, db, "hosts-token", PROXY_COUNT="1", VIDEO_ACCEL=kind)
     a, b = free_port(), free_port()
     log = open(tmp_path / "gunicorn.log", "w")
     hosts = [start_gunicorn(a, env, log), start_gunicorn(b, env, log)]

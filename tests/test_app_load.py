@@ -3,18 +3,14 @@ is killed with SIGKILL mid-run and restarted; no acknowledged rating is missing 
 design (acr, pairwise, parallel), on SQLite and PostgreSQL."""
 
 import collections
-import os
-import signal
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
 
 import pytest
-import requests
 from concurrent_raters import cover_mismatches
 from fake_stimuli import free_port, write_fake_stimuli
+from servers import crowd_env, kill9, start_gunicorn
 
 from rating_app.db import make_engine
 from rating_app.designs.acr import iter_rows
@@ -25,42 +21,6 @@ from rating_app.simulate import run_simulation
 
 ROOT = Path(__file__).resolve().parents[1]
 N_RATERS = 200
-
-
-def start_gunicorn(port, env, log):
-    cmd = [
-        sys.executable,
-        "-m",
-        "gunicorn",
-        "-w",
-        "3",
-        "-k",
-        "gthread",
-        "--threads",
-        "16",
-        "--backlog",
-        "2048",
-        "-b",
-        f"127.0.0.1:{port}",
-        "rating_app.wsgi:app",
-    ]
-    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
-    deadline = time.monotonic() + 30
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise AssertionError(f"gunicorn exited with {proc.returncode}; see {log.name}")
-        try:
-            if requests.get(f"http://127.0.0.1:{port}/healthz", timeout=1).status_code == 200:
-                return proc
-        except requests.RequestException:
-            pass
-        time.sleep(0.1)
-    raise AssertionError("gunicorn did not come up")
-
-
-def kill9(proc):
-    os.killpg(proc.pid, signal.SIGKILL)  # master and workers at once, no clean shutdown
-    proc.wait(10)
 
 
 # Per design: the acknowledged record's identity, the export's rows, acknowledged records per rater (2 test and 2
@@ -102,17 +62,7 @@ def test_200_raters_with_a_server_crash(app_stimuli, design_stimuli, app_db_url,
     key, rows_of, per_rater, unit = DESIGNS[design]
     stimuli = app_stimuli if design == "acr" else design_stimuli
     port = free_port()
-    env = dict(
-        os.environ,
-        RATING_MANIFEST=str(stimuli),
-        DATABASE_URL=app_db_url,
-        ADMIN_TOKEN="load-token",
-        RATINGS_PER_CLIP="1000",
-        CLIPS_PER_RATER="2",
-        MIN_VIEW="0",
-        SESSIONS_PER_CLIENT="0",  # all on loopback
-        STUDY_DESIGN=design,
-    )
+    env = crowd_env(stimuli, app_db_url, "load-token", STUDY_DESIGN=design)
     log = open(tmp_path / "gunicorn.log", "w")
     acks, killed = [0], threading.Event()
     kill_at = raters * per_rater // 3  # a third of the way through

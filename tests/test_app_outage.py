@@ -10,7 +10,6 @@ import collections
 import contextlib
 import csv
 import io
-import os
 import re
 import threading
 import time
@@ -20,8 +19,9 @@ import requests
 from concurrent_raters import cover_mismatches
 from fake_stimuli import free_port, write_fake_stimuli
 from pg_server import Cluster, ServerError
+from servers import crowd_env, start_gunicorn
 from test_app_browser import browser  # noqa: F401  (the fixture)
-from test_app_load import DESIGNS, start_gunicorn
+from test_app_load import DESIGNS
 
 from rating_app.db import make_engine
 from rating_app.simulate import run_simulation
@@ -47,17 +47,7 @@ def test_postgres_restart_under_30_raters(cluster, app_stimuli, tmp_path, design
     key, rows_of, per_rater, _unit = DESIGNS[design]
     stimuli = app_stimuli if design == "acr" else write_fake_stimuli(tmp_path / "stimuli", catch_nat=True)
     raters, port = 30, free_port()
-    env = dict(
-        os.environ,
-        RATING_MANIFEST=str(stimuli),
-        DATABASE_URL=cluster.url,
-        ADMIN_TOKEN="outage-token",
-        RATINGS_PER_CLIP="1000",
-        CLIPS_PER_RATER="2",
-        MIN_VIEW="0",
-        SESSIONS_PER_CLIENT="0",
-        STUDY_DESIGN=design,
-    )
+    env = crowd_env(stimuli, cluster.url, "outage-token", STUDY_DESIGN=design)
     log = open(tmp_path / "gunicorn.log", "w")
     acks = [0]
     proc = start_gunicorn(port, env, log)

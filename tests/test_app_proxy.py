@@ -12,13 +12,12 @@ import shlex
 import shutil
 import signal
 import subprocess
-import sys
-import time
 from pathlib import Path
 
 import pytest
 import requests
 from fake_stimuli import free_port
+from servers import start_gunicorn, wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 NGINX = shutil.which("nginx") or "/usr/sbin/nginx"
@@ -48,17 +47,6 @@ http {{
 """
 
 
-def _wait_for(url, proc, what):
-    for _ in range(300):
-        if proc.poll() is not None:
-            raise AssertionError(f"{what} exited with {proc.returncode}")
-        with contextlib.suppress(requests.RequestException):
-            if requests.get(url, timeout=1).status_code == 200:
-                return
-        time.sleep(0.1)
-    raise AssertionError(f"{what} did not come up")
-
-
 @contextlib.contextmanager
 def gunicorn_behind_nginx(tmp_path, env, workers=2):
     """(the proxy's URL, the app's own URL, the gunicorn log path, /healthz before nginx started) for gunicorn
@@ -72,18 +60,7 @@ def gunicorn_behind_nginx(tmp_path, env, workers=2):
     procs = []
     with open(log_path, "w") as log:
         try:
-            cmd = [sys.executable, "-m", "gunicorn", "-w", str(workers), "-k", "gthread", "--threads", "4"]
-            procs.append(
-                subprocess.Popen(
-                    [*cmd, "-b", f"127.0.0.1:{app_port}", "rating_app.wsgi:app"],
-                    cwd=ROOT,
-                    env=env,
-                    stdout=log,
-                    stderr=subprocess.STDOUT,
-                    start_new_session=True,
-                )
-            )
-            _wait_for(f"http://127.0.0.1:{app_port}/healthz", procs[-1], "gunicorn")
+            procs.append(start_gunicorn(app_port, env, log, workers=workers, threads=4))
             before = requests.get(f"http://127.0.0.1:{app_port}/healthz", timeout=10).json()
             procs.append(
                 subprocess.Popen(
@@ -93,7 +70,7 @@ def gunicorn_behind_nginx(tmp_path, env, workers=2):
                     start_new_session=True,
                 )
             )
-            _wait_for(f"http://127.0.0.1:{proxy_port}/healthz", procs[-1], "nginx")
+            wait_for(f"http://127.0.0.1:{proxy_port}/healthz", procs[-1], "nginx")
             yield f"http://127.0.0.1:{proxy_port}", f"http://127.0.0.1:{app_port}", log_path, before
         finally:
             for p in reversed(procs):

@@ -1,0 +1,59 @@
+"""The app as a real server for the tests: gunicorn started and waited for, killed without a clean shutdown, and
+the settings of a crowd run (tests/test_app_load.py, test_app_hosts.py, test_app_outage.py, test_app_proxy.py,
+test_app_accel.py)."""
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import requests
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def wait_for(url, proc, what, timeout_s=30.0):
+    """Return once `url` answers 200; AssertionError (naming `what`) if `proc` exits or `timeout_s` passes first."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise AssertionError(f"{what} exited with {proc.returncode}")
+        with contextlib.suppress(requests.RequestException):
+            if requests.get(url, timeout=1).status_code == 200:
+                return
+        time.sleep(0.1)
+    raise AssertionError(f"{what} did not come up")
+
+
+def start_gunicorn(port, env, log, workers=3, threads=16):
+    """gunicorn serving rating_app.wsgi:app on 127.0.0.1:port in a process group of its own (see kill9), once its
+    /healthz answers; its output goes to the open file `log`."""
+    cmd = [sys.executable, "-m", "gunicorn", "-w", str(workers), "-k", "gthread", "--threads", str(threads)]
+    cmd += ["--backlog", "2048", "-b", f"127.0.0.1:{port}", "rating_app.wsgi:app"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    wait_for(f"http://127.0.0.1:{port}/healthz", proc, f"gunicorn (see {log.name})")
+    return proc
+
+
+def kill9(proc):
+    os.killpg(proc.pid, signal.SIGKILL)  # master and workers at once, no clean shutdown
+    proc.wait(10)
+
+
+def crowd_env(stimuli, database_url, token, **settings):
+    """The environment of an app under a simulated crowd: targets that never fill, two test trials a rater, no
+    viewing time, no per-client session limit (every rater is on loopback), and `settings` on top."""
+    return dict(
+        os.environ,
+        RATING_MANIFEST=str(stimuli),
+        DATABASE_URL=database_url,
+        ADMIN_TOKEN=token,
+        RATINGS_PER_CLIP="1000",
+        CLIPS_PER_RATER="2",
+        MIN_VIEW="0",
+        SESSIONS_PER_CLIENT="0",
+        **settings,
+    )
