@@ -43,6 +43,14 @@ def kill9(proc):
     proc.wait(10)
 
 
+def stop(procs):
+    """Stop the gunicorn processes of `procs` that still run (a killed one has been reaped already)."""
+    for p in procs:
+        if p.poll() is None:
+            p.terminate()
+            p.wait(10)
+
+
 def crowd_env(stimuli, database_url, token, **settings):
     """The environment of an app under a simulated crowd: targets that never fill, two test trials a rater, no
     viewing time, no per-client session limit (every rater is on loopback), and `settings` on top."""

@@ -20,7 +20,7 @@ import requests
 from concurrent_raters import cover_mismatches
 from fake_stimuli import free_port, write_fake_stimuli
 from proxies import caddy_accel, nginx_accel, nginx_head, nginx_temp_paths
-from servers import crowd_env, kill9, start_gunicorn
+from servers import crowd_env, kill9, start_gunicorn, stop
 
 from rating_app.db import make_engine
 from rating_app.designs.acr import iter_rows
@@ -155,10 +155,7 @@ def test_two_hosts_one_database_and_a_kill(kind, raters, tmp_path, request, monk
             sim.join(180)
             assert not sim.is_alive(), "the crowd did not finish"
     finally:
-        for h in hosts:
-            if h.poll() is None:
-                h.terminate()
-                h.wait(10)
+        stop(hosts)
         log.close()
     assert 0 < acked_before < summary["n_ratings"]
     assert summary["errors"] == [], summary["errors"][:3]

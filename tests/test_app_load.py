@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from concurrent_raters import cover_mismatches
 from fake_stimuli import free_port, write_fake_stimuli
-from servers import crowd_env, kill9, start_gunicorn
+from servers import crowd_env, kill9, start_gunicorn, stop
 
 from rating_app.db import make_engine
 from rating_app.designs.acr import iter_rows
@@ -99,10 +99,7 @@ def test_200_raters_with_a_server_crash(app_stimuli, design_stimuli, app_db_url,
         sim.join(180)
         assert not sim.is_alive(), "simulation did not finish in time"
     finally:
-        for p in procs:
-            if p.poll() is None:
-                p.terminate()
-                p.wait(10)
+        stop(procs)
         log.close()
 
     assert killed.is_set() and 0 < acked_before < summary["n_ratings"]
