@@ -341,7 +341,8 @@ def test_stimuli_full_default_run(tmp_path):
     )
     assert r.returncode == 0, r.stderr[-3000:]
     man = read_csv(out / "manifest.csv")
-    assert sum(m["role"] == "test" for m in man) == 90 and sum(m["role"] == "catch" for m in man) == 16
+    # 12 catch items (the pool of CONTRACTS §5), each with its BAD clip and its NAT, MG and FL clips
+    assert sum(m["role"] == "test" for m in man) == 90 and sum(m["role"] == "catch" for m in man) == 48
     for m in man[:10]:
         assert decode(out / m["video"])[:4] == (80, 640, 640, "yuv420p")
     rows = read_csv(out / "metrics.csv")
