@@ -26,16 +26,11 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from generation import c2st, rigid, skeleton  # noqa: E402
 from generation.features import to_world  # noqa: E402
-from generation.metrics import foot_skating, late_stepping  # noqa: E402
+from generation.metrics import foot_skating, joint_jerk, late_stepping  # noqa: E402
 from generation.pretrained import CHECKPOINTS, HELDOUT  # noqa: E402
 from generation.sample import load_model, sample_windows  # noqa: E402
 
 P = skeleton.PARENTS
-
-
-def joint_jerk(world, fps):
-    """Mean jerk norm per joint [B, J] of world joints [B, T, J, 3]."""
-    return np.linalg.norm(np.diff(world, n=3, axis=1), axis=-1).mean(1) * fps**3
 
 
 def along_directions(x, lengths):
@@ -53,8 +48,7 @@ def along_directions(x, lengths):
 def per_window(x, c, nat, lengths, fps):
     """Per-window figures of samples x against NAT on the same windows: bone-length std and mean-length error
     [B, bones], per-joint jerk [B, J], skating and late stepping over NAT's [B]."""
-    j = x.reshape(x.shape[:-1] + (skeleton.N_JOINTS, 3))
-    b = np.linalg.norm(j[..., 1:, :] - j[..., P[1:], :], axis=-1)
+    b = rigid.frame_bone_lengths(x)
     world, nat_world = to_world(x, c), to_world(nat, c)
     return dict(
         bone_std=b.std(1),

@@ -107,6 +107,13 @@ def jerk(joints, fps):
     return float(np.linalg.norm(np.diff(joints, n=3, axis=0), axis=-1).mean() * fps**3)
 
 
+def joint_jerk(joints, fps):
+    """Each joint's mean jerk (m/s^3): the mean norm of the third derivative of its position over the frames of
+    joints [..., T, J, 3] -> [..., J]."""
+    joints = np.asarray(joints, dtype=np.float64)
+    return np.linalg.norm(np.diff(joints, n=3, axis=-3), axis=-1).mean(axis=-2) * fps**3
+
+
 def acceleration(joints, fps):
     """Mean norm of the second derivative of joint positions (m/s^2); NaN for clips under 3 frames."""
     joints = np.asarray(joints, dtype=np.float64)
@@ -224,8 +231,7 @@ def style_retention(samples, own, takes, categories, start=0):
     to its own NAT's than to the category's average (0.5 or below: the style is lost to an average walker; real
     motion of another window of the same take scores near 1), and the median over windows of the distance to its
     own NAT over the distance to the category's average (below 1: closer to its own)."""
-    pose = lambda a: np.asarray(a, dtype=np.float64)[:, start:].mean(axis=1)  # noqa: E731
-    s, o = pose(samples), pose(own)
+    s, o = (np.asarray(a, dtype=np.float64)[:, start:].mean(axis=1) for a in (samples, own))
     takes, categories = np.asarray(takes), np.asarray(categories)
     closer, ratios = [], []
     for i in range(len(s)):

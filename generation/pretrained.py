@@ -72,9 +72,9 @@ def quality(stride=QUALITY_STRIDE, seed=0):
     mean jerk over NAT's, and the rigidity of their bones: the largest bone-length std within a window (mm) and
     the largest error of a bone's mean length against the actor's (a fraction). Recorded in quality.json at export
     and recomputed by the tests, which fail if the models fall back."""
-    from . import rigid, skeleton
+    from . import rigid
     from .features import to_world
-    from .metrics import foot_skating, jerk, late_stepping
+    from .metrics import foot_skating, jerk, joint_jerk, late_stepping
     from .sample import load_model, sample_windows
 
     d = read_arrays(HELDOUT, ["test_x", "test_c", "test_hist", "test_hist_c", "fps"])
@@ -86,23 +86,22 @@ def quality(stride=QUALITY_STRIDE, seed=0):
         model = load_model(CHECKPOINTS[name.lower()], "cpu")
         sampled = sample_windows(model, c, hist, hist_c, TEMPERATURE[name], seed=seed)
         samples[name] = rigid.fit_to_history(sampled, hist)  # as make_stimuli ships them
-    joint_jerk = {}
+    per_joint = {}
     for name, xs in samples.items():
         world = np.stack([to_world(xs[i], c[i]) for i in range(len(c))])
         out[name] = {
             "foot_skating": float(np.median([foot_skating(w, fps) for w in world])),
             "jerk": float(np.median([jerk(w, fps) for w in world])),
         }
-        joint_jerk[name] = np.linalg.norm(np.diff(world, n=3, axis=1), axis=-1).mean(axis=(0, 1))  # [J]
+        per_joint[name] = joint_jerk(world, fps).mean(axis=0)  # [J], over the windows
     nat = out[study.NATURAL]
     ratios = {name: {k: v / nat[k] for k, v in m.items()} for name, m in out.items() if name != study.NATURAL}
     steps = {name: np.array([late_stepping(x, fps) for x in xs]) for name, xs in samples.items()}
     actor = rigid.bone_lengths(hist)[:, None]  # [B, 1, bones]
     for name in ratios:
         ratios[name]["late_stepping"] = float(np.median(steps[name] / np.maximum(steps[study.NATURAL], 1e-6)))
-        ratios[name]["joint_jerk_max"] = float((joint_jerk[name] / joint_jerk[study.NATURAL]).max())
-        j = samples[name].reshape(samples[name].shape[:-1] + (-1, 3)).astype(np.float64)
-        bones = np.linalg.norm(j[..., 1:, :] - j[..., skeleton.PARENTS[1:], :], axis=-1)  # [B, T, bones]
+        ratios[name]["joint_jerk_max"] = float((per_joint[name] / per_joint[study.NATURAL]).max())
+        bones = rigid.frame_bone_lengths(samples[name].astype(np.float64))  # [B, T, bones]
         ratios[name]["bone_std_mm_max"] = float(bones.std(axis=1).max() * 1000)
         ratios[name]["bone_length_error_max"] = float(np.abs(bones.mean(axis=1, keepdims=True) / actor - 1).max())
     return ratios

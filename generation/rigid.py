@@ -20,11 +20,17 @@ from . import skeleton
 RIGID = "rigid_bones"  # the manifest's postprocess value for a projected clip
 
 
-def bone_lengths(poses, parents=skeleton.PARENTS):
-    """Each bone's length [..., J-1] (the bone ending at joint k >= 1), averaged over the frames of poses
-    [..., T, J*3] or [..., T, J, 3]: the actor's skeleton, read from real frames (an item's history)."""
+def frame_bone_lengths(poses, parents=skeleton.PARENTS):
+    """Each bone's length in every frame [..., T, J-1] (the bone ending at joint k >= 1) of poses [..., T, J*3] or
+    [..., T, J, 3]."""
     j = _joints(poses, len(parents))
-    return np.linalg.norm(j[..., 1:, :] - j[..., parents[1:], :], axis=-1).mean(-2)
+    return np.linalg.norm(j[..., 1:, :] - j[..., parents[1:], :], axis=-1)
+
+
+def bone_lengths(poses, parents=skeleton.PARENTS):
+    """Each bone's length [..., J-1] averaged over the frames of poses: the actor's skeleton, read from real frames
+    (an item's history)."""
+    return frame_bone_lengths(poses, parents).mean(-2)
 
 
 def fit_bones(poses, lengths, parents=skeleton.PARENTS):

@@ -9,8 +9,7 @@ from generation.sample import load_model, sample_windows
 
 
 def lengths_of(x):
-    j = x.reshape(x.shape[:-1] + (skeleton.N_JOINTS, 3)).astype(np.float64)
-    return np.linalg.norm(j[..., 1:, :] - j[..., skeleton.PARENTS[1:], :], axis=-1)
+    return rigid.frame_bone_lengths(np.asarray(x, dtype=np.float64))
 
 
 @pytest.fixture(scope="module")
