@@ -1,6 +1,6 @@
 """What putting MG's and FL's poses onto the actor's bones does to every figure (issue 34, item 1).
 
-    python bench/rigid_bones.py [--seeds 2] [--temperature 1.0]
+    python bench/rigid_bones.py [--seeds 2] [--temperature 1.0] [--mg CKPT] [--fl CKPT] [--only MG|FL]
 
 The shipped MG and FL sample every held-out window (valid + test, generation/pretrained/heldout.npz: 192 windows
 with their real 10-frame histories) on the same control; each sample is then taken three ways:
@@ -87,6 +87,9 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--temperature", type=float, default=1.0)
+    ap.add_argument("--mg", default=str(CHECKPOINTS["mg"]), help="MG checkpoint (default: the shipped one)")
+    ap.add_argument("--fl", default=str(CHECKPOINTS["fl"]), help="FL checkpoint (default: the shipped one)")
+    ap.add_argument("--only", choices=("MG", "FL"), default=None, help="one model only")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
     d = np.load(HELDOUT)
@@ -101,7 +104,9 @@ def main(argv=None):
         "nearest": lambda s: rigid.fit_bones(s, lengths),
     }
     nat_jerk = joint_jerk(to_world(x, c), fps).mean(0)
-    for name, ckpt in (("MG", CHECKPOINTS["mg"]), ("FL", CHECKPOINTS["fl"])):
+    for name, ckpt in (("MG", args.mg), ("FL", args.fl)):
+        if args.only not in (None, name):
+            continue
         model = load_model(ckpt, "cpu")
         runs, aucs = {v: [] for v in variants}, {v: [] for v in variants}
         for seed in range(args.seeds):

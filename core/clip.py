@@ -7,6 +7,7 @@ writing infinite coordinates.
 """
 
 import struct
+import tokenize
 import zipfile
 import zlib
 from pathlib import Path
@@ -22,7 +23,21 @@ MAX_COORD_M = 1e5  # |coordinate| in metres
 
 
 # What numpy and zipfile raise on a damaged archive: its own types do not cover deflate and header errors.
-_READ_ERRORS = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, struct.error, KeyError)
+# numpy parses an .npy header as Python: a corrupt one can end in tokenize.TokenError or SyntaxError, which are
+# not ValueErrors, and zipfile raises NotImplementedError for a version or compression byte it does not know
+# (each found by tests/test_bad_input.py's fuzzing).
+NPZ_READ_ERRORS = (
+    OSError,
+    ValueError,
+    EOFError,
+    zipfile.BadZipFile,
+    zlib.error,
+    struct.error,
+    KeyError,
+    tokenize.TokenError,
+    SyntaxError,
+    NotImplementedError,
+)
 
 
 class ClipError(UserError):
@@ -99,7 +114,8 @@ def save_clip(path, joints, parents, joint_names, fps, control=None, **extra):
     np.savez_compressed(path, **arrays)
 
 
-def _first_line(exc):
+def first_line(exc):
+    """The first line of an exception's message (its type's name where it has none), for one-line errors."""
     text = str(exc).strip()
     return text.splitlines()[0] if text else type(exc).__name__
 
@@ -108,15 +124,15 @@ def load_clip(path):
     """Read and check a clip .npz; returns a dict with at least joints, parents, joint_names, fps."""
     try:
         f = np.load(path, allow_pickle=False)
-    except _READ_ERRORS as e:
-        raise ClipError(f"{path}: not a readable .npz clip ({_first_line(e)})") from None
+    except NPZ_READ_ERRORS as e:
+        raise ClipError(f"{path}: not a readable .npz clip ({first_line(e)})") from None
     if not isinstance(f, np.lib.npyio.NpzFile):
         raise ClipError(f"{path}: a single .npy array, not an .npz clip")
     try:
         with f:
             d = {k: f[k] for k in f.files}
-    except _READ_ERRORS as e:
-        raise ClipError(f"{path}: corrupt .npz member ({_first_line(e)})") from None
+    except NPZ_READ_ERRORS as e:
+        raise ClipError(f"{path}: corrupt .npz member ({first_line(e)})") from None
     missing = [k for k in ("joints", "parents", "joint_names", "fps") if k not in d]
     if missing:
         raise ClipError(f"{path}: missing key '{missing[0]}'")

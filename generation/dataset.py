@@ -12,7 +12,6 @@ held-out windows through this module, and `import generation.make_stimuli` must 
 
 from __future__ import annotations
 
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -20,6 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from core.cli import UserError
+from core.clip import NPZ_READ_ERRORS, first_line
 
 if TYPE_CHECKING:
     import torch
@@ -45,8 +45,8 @@ def read_arrays(path, keys=None):
             raise ValueError("a single .npy array, not an .npz")
         with f:
             return {k: f[k] for k in (f.files if keys is None else keys) if k in f.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
-        raise DatasetError(f"{path}: not a readable prepared dataset .npz ({e})") from None
+    except NPZ_READ_ERRORS as e:
+        raise DatasetError(f"{path}: not a readable prepared dataset .npz ({first_line(e)})") from None
 
 
 def require(arrays, keys, path, why="see CONTRACTS.md §2"):

@@ -69,16 +69,20 @@ def quality(stride=QUALITY_STRIDE, seed=0):
     """Foot skating and jerk of the shipped MG and FL over NAT's, medians over every `stride`-th test window
     of the shipped held-out set (at TEMPERATURE and on the actor's bones, as make_stimuli samples), their late stepping:
     the median over those windows of its ratio to NAT's on the same window (higher is better), the worst joint's
-    mean jerk over NAT's, and the rigidity of their bones: the largest bone-length std within a window (mm) and
-    the largest error of a bone's mean length against the actor's (a fraction). Recorded in quality.json at export
-    and recomputed by the tests, which fail if the models fall back."""
+    mean jerk over NAT's, the rigidity of their bones: the largest bone-length std within a window (mm) and
+    the largest error of a bone's mean length against the actor's (a fraction), and their Fréchet motion distance
+    over NAT's on the same windows (FL's posture once drifted: hands 9 cm low, 2.8x NAT's FMD here; issue 34).
+    Recorded in quality.json at export and recomputed by the tests, which fail if the models fall back."""
     from . import rigid
     from .features import to_world
     from .metrics import foot_skating, jerk, joint_jerk, late_stepping
+    from .motion_encoder import MotionEncoder
     from .sample import load_model, sample_windows
 
-    d = read_arrays(HELDOUT, ["test_x", "test_c", "test_hist", "test_hist_c", "fps"])
-    x, c, hist, hist_c = (d[f"test_{k}"][::stride] for k in ("x", "c", "hist", "hist_c"))
+    d = read_arrays(HELDOUT, ["test_x", "test_c", "test_hist", "test_hist_c", "test_labels", "fps"])
+    x, c, hist, hist_c, labels = (d[f"test_{k}"][::stride] for k in ("x", "c", "hist", "hist_c", "labels"))
+    encoder = MotionEncoder.load(MOTION_ENCODER)
+    floor = encoder.fmd(x, labels)
     fps = float(d["fps"])
     out = {}
     samples = {study.NATURAL: x}
@@ -104,6 +108,7 @@ def quality(stride=QUALITY_STRIDE, seed=0):
         bones = rigid.frame_bone_lengths(samples[name].astype(np.float64))  # [B, T, bones]
         ratios[name]["bone_std_mm_max"] = float(bones.std(axis=1).max() * 1000)
         ratios[name]["bone_length_error_max"] = float(np.abs(bones.mean(axis=1, keepdims=True) / actor - 1).max())
+        ratios[name]["fmd_over_floor"] = float(encoder.fmd(samples[name], labels) / floor)
     return ratios
 
 

@@ -59,17 +59,32 @@ def stance_speed(prev, cur, ctrl, contact, fps):
     return (speed * mask).sum(dim=(1, 2)) / mask.sum(dim=(1, 2)).clamp_min(1.0)
 
 
-def stance_loss(net, x, c, fps, keep=None, history=None, z=None):
+def posture_offset(pred, real):
+    """Mean squared distance (m^2) over joints between the batch's mean root-frame pose in the prediction and in
+    the real windows [B, n, 63], one scalar. A first-moment match of the posture: it leaves each window free to
+    differ from its real one (FL has no history to follow), and holds the sampled posture where the data's is."""
+    offset = (pred - real).reshape(-1, skeleton.N_JOINTS, 3).mean(dim=0)
+    return offset.pow(2).sum(dim=-1).mean()
+
+
+def stance_loss(net, x, c, fps, keep=None, history=None, z=None, posture=0.0):
     """Stance-foot speed (m/s) of `net`'s prediction of training windows x [B, T, 63], c [B, T, 3] (standardised)
     from latents z [B, T, 63] (None: zeros, the most likely motion; MG reads frames tau..T-1 of it), over the real
     windows' contact frames, per batch element [B]. Both frames of each pair are predictions: FL predicts the
     whole window; MG predicts frames tau..T-1, each from the real frames before it (with its NLL's history dropout
     mask and history noise), so an offset that the model makes in every frame cancels, as it does in a sampled
-    clip, and the loss sees the foot's motion alone."""
+    clip, and the loss sees the foot's motion alone.
+
+    With `posture` > 0 the loss adds that weight times posture_offset of the same prediction: the plain loss, on
+    samples, bent FL's whole posture to still its feet (hands 9 cm low, feet 7 cm forward), which likelihood alone
+    did not (bench/RESULTS.md "fl-posture")."""
     real, ctrl = net.unstandardize_x(x), c * net.c_std + net.c_mean
     if net.kind == "mg":
         pred = net.predict_frames(x, c, None if z is None else z[:, net.tau :], keep, history)
         pred, first = net.unstandardize_x(pred), net.tau + 1
     else:
         pred, first = net.unstandardize_x(net.inverse((torch.zeros_like(x) if z is None else z).flatten(1), c)[0]), 1
-    return stance_speed(pred[:, :-1], pred[:, 1:], ctrl[:, first:], contacts(real, first), fps)
+    loss = stance_speed(pred[:, :-1], pred[:, 1:], ctrl[:, first:], contacts(real, first), fps)
+    if posture:
+        loss = loss + posture * posture_offset(pred, real[:, first - 1 :])
+    return loss

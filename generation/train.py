@@ -58,6 +58,7 @@ TRAIN_DEFAULTS = dict(
     stance_weight=0.0,
     stance_start=0,
     stance_temperature=0.0,
+    posture_weight=0.0,  # stance.posture_offset, added to the stance loss (m^2 per joint, times this weight)
     category_balance=0.0,
     # one of flows.PRECISIONS. 'bfloat16': the coupling networks run under autocast (flows.set_net_precision); about
     # 1.4x the steps/s of float32 on an AMD Zen 4 CPU at mg_cpu's size, at the same likelihood per step, but 0.67x
@@ -66,7 +67,7 @@ TRAIN_DEFAULTS = dict(
 )
 
 
-# train_stance: the stance-foot loss (m/s, stance.py) averaged like train_nll, 0 while it is off.
+# train_stance: the stance-foot loss (m/s, stance.py; with its posture term) averaged like train_nll, 0 while it is off.
 METRICS_COLUMNS = ["step", "train_nll", "valid_nll", "lr", "grad_norm", "elapsed_s", "steps_per_s", "train_stance"]
 
 
@@ -117,15 +118,15 @@ class _BatchLoss(nn.Module):
     """The model's NLL, and with `stance` its stance-foot loss (stance.py), per batch element, as a module's
     forward, so that DistributedDataParallel can wrap it."""
 
-    def __init__(self, net, fps):
+    def __init__(self, net, fps, posture_weight=0.0):
         super().__init__()
-        self.net, self.fps = net, fps
+        self.net, self.fps, self.posture_weight = net, fps, posture_weight
 
     def forward(self, x, c, keep, history, stance_z, stance):
         nll = self.net.nll(x, c, keep, history)
         if not stance:
             return nll, torch.zeros_like(nll)
-        return nll, stance_loss(self.net, x, c, self.fps, keep, history, stance_z)
+        return nll, stance_loss(self.net, x, c, self.fps, keep, history, stance_z, self.posture_weight)
 
 
 def load_config(model, config):
@@ -160,7 +161,7 @@ def _checked_values(cfg, where):
                 raise TrainError(f"{where}: field 'restart_step' needs '{key}' too")
     if cfg.get("carry_feet") and not cfg.get("residual"):
         raise TrainError(f"{where}: field 'carry_feet' needs 'residual' true")
-    for key in ("stance_weight", "stance_start", "stance_temperature", "category_balance"):
+    for key in ("stance_weight", "stance_start", "stance_temperature", "posture_weight", "category_balance"):
         if cfg[key] < 0:
             raise TrainError(f"{where}: field '{key}' must be at least 0, got {cfg[key]}")
     return cfg
@@ -288,7 +289,7 @@ def _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, s
     crop = cfg["train_window"] or tx.shape[1]
     weights = category_weights(ds.splits["train"].labels, cfg["category_balance"])
     rows = slice(rank * cfg["batch_size"] // world, (rank + 1) * cfg["batch_size"] // world)
-    step_loss = _wrap_ranks(net, ds.fps, world, device)
+    step_loss = _wrap_ranks(net, ds.fps, world, device, cfg["posture_weight"])
     net.train()
     share = CoreShare() if share_cores and device.type == "cpu" else None
     bar = tqdm(
@@ -348,9 +349,9 @@ def _optimise(loss, net, opt, cfg, world):
     return grad_norm
 
 
-def _wrap_ranks(net, fps, world, device):
+def _wrap_ranks(net, fps, world, device, posture_weight=0.0):
     """The model's loss as a module, wrapped for DistributedDataParallel under torchrun."""
-    step_loss = _BatchLoss(net, fps)
+    step_loss = _BatchLoss(net, fps, posture_weight)
     if world > 1:
         ids = [device] if device.type == "cuda" else None
         step_loss = nn.parallel.DistributedDataParallel(step_loss, device_ids=ids)

@@ -49,6 +49,8 @@ def test_shipped_models_keep_their_recorded_quality():
         assert now[model]["late_stepping"] >= recorded[model]["late_stepping"] / 1.1, (model, now, recorded)
         # issue 34: every joint's mean jerk within 1.2x NAT's (MG's head was at 1.54x at temperature 1)
         assert now[model]["joint_jerk_max"] <= 1.2, (model, now[model])
+        # issue 34: the posture stays the data's (FL trained without the posture term gives 2.8x NAT's FMD here)
+        assert now[model]["fmd_over_floor"] <= 1.1 * recorded[model]["fmd_over_floor"], (model, now, recorded)
 
 
 def test_shipped_clips_have_the_actors_rigid_bones():

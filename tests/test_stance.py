@@ -10,7 +10,7 @@ from generation.dataset import load_dataset
 from generation.features import load_take, rotate_y, to_features, to_world
 from generation.metrics import foot_skating
 from generation.sample import load_model
-from generation.stance import contacts, foot_world_steps, stance_loss, stance_speed
+from generation.stance import contacts, foot_world_steps, posture_offset, stance_loss, stance_speed
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
@@ -79,3 +79,38 @@ def test_stance_loss_trains_the_stance_feet_still(tiny_runs, small_dataset, kind
         opt.step()
     after = float(loss().detach())
     assert after < 0.7 * before, (before, after)
+
+
+def test_posture_offset_is_the_mean_pose_shift_and_ignores_per_window_differences():
+    """0 for the real windows themselves and for windows that only trade postures among themselves; a whole-batch
+    shift of one joint by d metres gives d^2 / 21."""
+    g = torch.Generator().manual_seed(0)
+    real = torch.randn(6, 10, 63, generator=g, dtype=torch.float64)
+    assert float(posture_offset(real, real)) == 0.0
+    assert float(posture_offset(real.flip(0), real)) == pytest.approx(0.0, abs=1e-12)  # the same set, reordered
+    shifted = real.clone()
+    shifted[..., 3 * skeleton.INDEX["Hand_L"] + 1] -= 0.09  # FL's hands once hung 9 cm low
+    assert float(posture_offset(shifted, real)) == pytest.approx(0.09**2 / skeleton.N_JOINTS)
+
+
+def test_posture_term_pulls_a_shifted_fl_back(tiny_runs, small_dataset):
+    """Trained on the posture term alone against windows whose left hand is raised by 9 cm, a tiny FL's samples
+    move their mean pose towards them."""
+    model = load_model(sorted((tiny_runs["fl"] / "checkpoints").glob("step_*.pt"))[-1]).train()
+    split = load_dataset(small_dataset).splits["train"]
+    x, c = split.x[:8, :32].to(model.x_mean.device).clone(), split.c[:8, :32].to(model.x_mean.device)
+    hand_y = 3 * skeleton.INDEX["Hand_L"] + 1
+    x[..., hand_y] += 0.09 / model.x_std[hand_y]  # standardised units
+    z = torch.randn(8, 32, 63, generator=torch.Generator().manual_seed(1)).to(x.device)
+
+    def term():
+        return stance_loss(model, x, c, 20.0, z=z, posture=1.0).mean() - stance_loss(model, x, c, 20.0, z=z).mean()
+
+    before = float(term().detach())
+    opt = torch.optim.Adam(model.parameters(), lr=3e-3)
+    for _ in range(15):
+        opt.zero_grad()
+        term().backward()
+        opt.step()
+    after = float(term().detach())
+    assert before > 0.09**2 / skeleton.N_JOINTS / 2 and after < before / 2, (before, after)

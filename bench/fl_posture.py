@@ -1,0 +1,99 @@
+"""FL's posture against the mocap's (issue 34, item 3): what an FL checkpoint samples on every held-out window.
+
+    python bench/fl_posture.py [--fl CKPT ...] [--temperature 1.0 ...] [--data runs/dataset.npz]
+
+Each checkpoint samples the 192 held-out windows (valid + test, generation/pretrained/heldout.npz) once per
+temperature; the samples go onto the actor's bones as make_stimuli ships them (generation.rigid). Printed per
+checkpoint and temperature:
+- FMD over the floor: the Fréchet motion distance to training motion of the same categories, over NAT's of the same
+  windows (generation.motion_encoder);
+- pose error: the largest distance of a joint's mean root-frame position from NAT's on the same windows (cm);
+- hand height: the left hand's height over all frames, 5th, 50th and 95th percentile (cm), beside NAT's;
+- the worst joint's mean jerk, the median foot skating and the worst category's late stepping, over NAT's.
+With --data (the prepared dataset the model was trained on) it also prints the largest variance of the latents of
+192 real training windows along any one direction. A model whose latents of real motion are standard normal gives
+about 1; where real motion sits far out along a few directions, standard-normal samples never reach its postures.
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from generation import rigid, skeleton  # noqa: E402
+from generation.dataset import load_dataset  # noqa: E402
+from generation.features import to_world  # noqa: E402
+from generation.metrics import foot_skating, joint_jerk, late_stepping  # noqa: E402
+from generation.motion_encoder import MotionEncoder  # noqa: E402
+from generation.pretrained import CHECKPOINTS, HELDOUT, MOTION_ENCODER  # noqa: E402
+from generation.sample import load_model, sample_windows  # noqa: E402
+
+HAND = skeleton.INDEX["Hand_L"]
+
+
+def figures(s, x, c, labels, fps, encoder, floor):
+    """The printed figures of samples s [N, T, 63] against NAT x on the same windows."""
+    world, nat = to_world(s, c), to_world(x, c)
+    jerk = joint_jerk(world, fps).mean(0) / joint_jerk(nat, fps).mean(0)
+    skating = np.median([foot_skating(a, fps) / foot_skating(b, fps) for a, b in zip(world, nat)])
+    late = np.array([late_stepping(a, fps) / max(late_stepping(b, fps), 1e-6) for a, b in zip(s, x)])
+    offset = (s - x).reshape(-1, skeleton.N_JOINTS, 3).mean(0)
+    hand = lambda p: np.percentile(p.reshape(-1, skeleton.N_JOINTS, 3)[:, HAND, 1] * 100, [5, 50, 95])  # noqa: E731
+    return dict(
+        fmd=encoder.fmd(s, labels) / floor,
+        pose_cm=float(np.linalg.norm(offset, axis=1).max() * 100),
+        hand=hand(s),
+        nat_hand=hand(x),
+        jerk=float(jerk.max()),
+        jerk_joint=skeleton.JOINT_NAMES[int(jerk.argmax())],
+        skating=float(skating),
+        late=float(min(np.median(late[labels == lab]) for lab in np.unique(labels))),
+    )
+
+
+@torch.no_grad()
+def latent_spread(model, data, n=192):
+    """Largest variance along one direction of the latents of n real training windows (not augmented)."""
+    ds = load_dataset(data)
+    aug = np.load(data)["train_aug"]
+    rows = np.flatnonzero(aug == 0)[:: max(1, int((aug == 0).sum()) // n)][:n]
+    split = ds.splits["train"]
+    z, _ = model(split.x[rows], split.c[rows])
+    z = z.double().numpy()
+    s = np.linalg.svd(z - z.mean(0), compute_uv=False)
+    return float(s[0] ** 2 / len(z))
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--fl", action="append", help="FL checkpoint (repeatable; default: the shipped one)")
+    ap.add_argument("--temperature", type=float, action="append", help="repeatable; default 1.0")
+    ap.add_argument("--data", help="the prepared dataset, for the latent spread of real training windows")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    torch.set_num_threads(1)
+    d = np.load(HELDOUT)
+    x, c, hist, labels = (np.concatenate([d[f"valid_{k}"], d[f"test_{k}"]]) for k in ("x", "c", "hist", "labels"))
+    fps, lengths = float(d["fps"]), rigid.bone_lengths(hist)
+    encoder = MotionEncoder.load(MOTION_ENCODER)
+    floor = encoder.fmd(x, labels)
+    for ckpt in args.fl or [str(CHECKPOINTS["fl"])]:
+        model = load_model(ckpt, "cpu")
+        spread = f" | latent spread {latent_spread(model, args.data):.1f}" if args.data else ""
+        print(f"{ckpt}{spread}")
+        for t in args.temperature or [1.0]:
+            s = rigid.fit_bones(sample_windows(model, c, temperature=t, seed=args.seed), lengths)
+            f = figures(s, x, c, labels, fps, encoder, floor)
+            print(
+                f"  temperature {t}: FMD/floor {f['fmd']:.2f} | pose error {f['pose_cm']:.1f} cm | hand height "
+                f"{'/'.join(f'{v:.0f}' for v in f['hand'])} cm (NAT {'/'.join(f'{v:.0f}' for v in f['nat_hand'])})"
+                f" | jerk max {f['jerk']:.2f} ({f['jerk_joint']}) | skating {f['skating']:.2f} | late stepping min"
+                f" {f['late']:.2f}"
+            )
+
+
+if __name__ == "__main__":
+    sys.exit(main())
