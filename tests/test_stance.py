@@ -60,6 +60,17 @@ def test_mg_predicted_frames_are_its_stream(tiny_runs, small_dataset, temperatur
     assert not torch.allclose(other, made, atol=1e-2)  # a different history predicts differently
 
 
+def descend(model, loss, steps=15):
+    """(loss before, loss after) `steps` Adam steps on `loss()` over the model's parameters."""
+    before = float(loss().detach())
+    opt = torch.optim.Adam(model.parameters(), lr=3e-3)
+    for _ in range(steps):
+        opt.zero_grad()
+        loss().backward()
+        opt.step()
+    return before, float(loss().detach())
+
+
 @pytest.mark.parametrize("kind", ["mg", "fl"])
 def test_stance_loss_trains_the_stance_feet_still(tiny_runs, small_dataset, kind):
     model = load_model(sorted((tiny_runs[kind] / "checkpoints").glob("step_*.pt"))[-1]).train()
@@ -68,16 +79,7 @@ def test_stance_loss_trains_the_stance_feet_still(tiny_runs, small_dataset, kind
     split = load_dataset(small_dataset).splits["train"]
     x, c = split.x[:8, :32].to(model.x_mean.device), split.c[:8, :32].to(model.x_mean.device)
 
-    def loss():
-        return stance_loss(model, x, c, 20.0).mean()
-
-    before = float(loss().detach())
-    opt = torch.optim.Adam(model.parameters(), lr=3e-3)
-    for _ in range(15):
-        opt.zero_grad()
-        loss().backward()
-        opt.step()
-    after = float(loss().detach())
+    before, after = descend(model, lambda: stance_loss(model, x, c, 20.0).mean())
     assert after < 0.7 * before, (before, after)
 
 
@@ -106,11 +108,5 @@ def test_posture_term_pulls_a_shifted_fl_back(tiny_runs, small_dataset):
     def term():
         return stance_loss(model, x, c, 20.0, z=z, posture=1.0).mean() - stance_loss(model, x, c, 20.0, z=z).mean()
 
-    before = float(term().detach())
-    opt = torch.optim.Adam(model.parameters(), lr=3e-3)
-    for _ in range(15):
-        opt.zero_grad()
-        term().backward()
-        opt.step()
-    after = float(term().detach())
+    before, after = descend(model, term)
     assert before > 0.09**2 / skeleton.N_JOINTS / 2 and after < before / 2, (before, after)
