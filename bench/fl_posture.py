@@ -23,10 +23,12 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from rigid_bones import per_window, summary  # noqa: E402  (bench/, beside this file)
+
 from generation import rigid, skeleton  # noqa: E402
-from generation.dataset import load_dataset  # noqa: E402
+from generation.dataset import heldout_windows, load_dataset, read_arrays  # noqa: E402
 from generation.features import to_world  # noqa: E402
-from generation.metrics import foot_skating, joint_jerk, late_stepping  # noqa: E402
+from generation.metrics import joint_jerk  # noqa: E402
 from generation.motion_encoder import MotionEncoder  # noqa: E402
 from generation.pretrained import CHECKPOINTS, HELDOUT, MOTION_ENCODER  # noqa: E402
 from generation.sample import load_model, sample_windows  # noqa: E402
@@ -34,12 +36,11 @@ from generation.sample import load_model, sample_windows  # noqa: E402
 HAND = skeleton.INDEX["Hand_L"]
 
 
-def figures(s, x, c, labels, fps, encoder, floor):
-    """The printed figures of samples s [N, T, 63] against NAT x on the same windows."""
-    world, nat = to_world(s, c), to_world(x, c)
-    jerk = joint_jerk(world, fps).mean(0) / joint_jerk(nat, fps).mean(0)
-    skating = np.median([foot_skating(a, fps) / foot_skating(b, fps) for a, b in zip(world, nat)])
-    late = np.array([late_stepping(a, fps) / max(late_stepping(b, fps), 1e-6) for a, b in zip(s, x)])
+def figures(s, x, c, labels, lengths, fps, encoder, floor):
+    """The printed figures of samples s [N, T, 63] against NAT x on the same windows (jerk, skating and late
+    stepping as bench/rigid_bones.py computes them)."""
+    nat_jerk = joint_jerk(to_world(x, c), fps).mean(0)
+    motion = summary([per_window(s, c, x, lengths, fps)], nat_jerk, labels)
     offset = (s - x).reshape(-1, skeleton.N_JOINTS, 3).mean(0)
     hand = lambda p: np.percentile(p.reshape(-1, skeleton.N_JOINTS, 3)[:, HAND, 1] * 100, [5, 50, 95])  # noqa: E731
     return dict(
@@ -47,10 +48,10 @@ def figures(s, x, c, labels, fps, encoder, floor):
         pose_cm=float(np.linalg.norm(offset, axis=1).max() * 100),
         hand=hand(s),
         nat_hand=hand(x),
-        jerk=float(jerk.max()),
-        jerk_joint=skeleton.JOINT_NAMES[int(jerk.argmax())],
-        skating=float(skating),
-        late=float(min(np.median(late[labels == lab]) for lab in np.unique(labels))),
+        jerk=motion["jerk_max"],
+        jerk_joint=motion["jerk_worst"],
+        skating=motion["skating"],
+        late=motion["late_min"],
     )
 
 
@@ -75,9 +76,8 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
-    d = np.load(HELDOUT)
-    x, c, hist, labels = (np.concatenate([d[f"valid_{k}"], d[f"test_{k}"]]) for k in ("x", "c", "hist", "labels"))
-    fps, lengths = float(d["fps"]), rigid.bone_lengths(hist)
+    x, c, hist, labels = heldout_windows(HELDOUT, ("x", "c", "hist", "labels"))
+    fps, lengths = float(read_arrays(HELDOUT, ["fps"])["fps"]), rigid.bone_lengths(hist)
     encoder = MotionEncoder.load(MOTION_ENCODER)
     floor = encoder.fmd(x, labels)
     for ckpt in args.fl or [str(CHECKPOINTS["fl"])]:
@@ -86,7 +86,7 @@ def main(argv=None):
         print(f"{ckpt}{spread}")
         for t in args.temperature or [1.0]:
             s = rigid.fit_bones(sample_windows(model, c, temperature=t, seed=args.seed), lengths)
-            f = figures(s, x, c, labels, fps, encoder, floor)
+            f = figures(s, x, c, labels, lengths, fps, encoder, floor)
             print(
                 f"  temperature {t}: FMD/floor {f['fmd']:.2f} | pose error {f['pose_cm']:.1f} cm | hand height "
                 f"{'/'.join(f'{v:.0f}' for v in f['hand'])} cm (NAT {'/'.join(f'{v:.0f}' for v in f['nat_hand'])})"

@@ -25,6 +25,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from generation import c2st, rigid, skeleton  # noqa: E402
+from generation.dataset import heldout_windows, read_arrays  # noqa: E402
 from generation.features import to_world  # noqa: E402
 from generation.metrics import foot_skating, joint_jerk, late_stepping  # noqa: E402
 from generation.pretrained import CHECKPOINTS, HELDOUT  # noqa: E402
@@ -92,11 +93,8 @@ def main(argv=None):
     ap.add_argument("--only", choices=("MG", "FL"), default=None, help="one model only")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
-    d = np.load(HELDOUT)
-    x, c, h, hc, labels = (
-        np.concatenate([d[f"valid_{k}"], d[f"test_{k}"]]) for k in ("x", "c", "hist", "hist_c", "labels")
-    )
-    fps = float(d["fps"])
+    x, c, h, hc, labels = heldout_windows(HELDOUT, ("x", "c", "hist", "hist_c", "labels"))
+    fps = float(read_arrays(HELDOUT, ["fps"])["fps"])
     lengths = rigid.bone_lengths(h)
     variants = {
         "free": lambda s: s,

@@ -21,6 +21,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from generation import rigid  # noqa: E402
+from generation.dataset import heldout_windows  # noqa: E402
 from generation.metrics import style_retention  # noqa: E402
 from generation.pretrained import CHECKPOINTS, HELDOUT  # noqa: E402
 from generation.sample import load_model, sample_windows  # noqa: E402
@@ -33,9 +34,7 @@ def main(argv=None):
     ap.add_argument("--start", type=int, default=40)
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
-    d = np.load(HELDOUT)
-    keys = ("x", "c", "hist", "hist_c", "take", "labels")
-    x, c, h, hc, takes, cats = (np.concatenate([d[f"valid_{k}"], d[f"test_{k}"]]) for k in keys)
+    x, c, h, hc, takes, cats = heldout_windows(HELDOUT, ("x", "c", "hist", "hist_c", "take", "labels"))
     # NAT's ceiling: its first half stands in for a sample (the same take, an earlier stretch of it)
     half = x.shape[1] // 2
     ceiling = style_retention(x[:, :half], x, takes, cats, start=0)

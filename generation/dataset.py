@@ -68,6 +68,15 @@ def read_heldout(path):
     return splits, float(d["fps"]), int(d["window"])
 
 
+def heldout_windows(path, keys):
+    """One array per key, every held-out split's windows joined (valid, then test): the 192 windows the
+    benchmarks of the shipped models sample (bench/rigid_bones.py, bench/fl_posture.py, bench/style_retention.py)."""
+    names = [f"{s}_{k}" for s in HELD_OUT for k in keys]
+    d = read_arrays(path, names)
+    require(d, names, path)
+    return tuple(np.concatenate([d[f"{s}_{k}"] for s in HELD_OUT]) for k in keys)
+
+
 @dataclass
 class Split:
     x: torch.Tensor  # [N, T, 63] standardised

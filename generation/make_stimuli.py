@@ -232,8 +232,8 @@ def write_clips(out, clips, items, arrays, fps, args, forbidden):
         motion, video, sheet = clip_files(out, cid)
         save_clip(motion, joints, skeleton.PARENTS, skeleton.JOINT_NAMES, fps, control=control)
         jobs.append((str(motion), str(video), str(sheet), args.size, args.preset))
-        manifest.append(manifest_row(cid, cond, it, seed, len(joints), fps, args.size))
-        manifest[-1]["postprocess"] = rigid.RIGID if cond in rigid_conditions(args) else ""
+        postprocess = rigid.RIGID if cond in rigid_conditions(args) else ""
+        manifest.append({**manifest_row(cid, cond, it, seed, len(joints), fps, args.size), "postprocess": postprocess})
         m = clip_metrics(joints, fps, control)
         metrics_rows.append(dict(clip_id=cid, condition=cond, role=it["role"], item=it["id"], **m))
         if it["role"] == TEST:

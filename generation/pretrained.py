@@ -92,7 +92,7 @@ def quality(stride=QUALITY_STRIDE, seed=0):
         samples[name] = rigid.fit_to_history(sampled, hist)  # as make_stimuli ships them
     per_joint = {}
     for name, xs in samples.items():
-        world = np.stack([to_world(xs[i], c[i]) for i in range(len(c))])
+        world = to_world(xs, c)  # [B, T, J, 3]
         out[name] = {
             "foot_skating": float(np.median([foot_skating(w, fps) for w in world])),
             "jerk": float(np.median([jerk(w, fps) for w in world])),

@@ -165,8 +165,12 @@ class UnitDesign(Design):
         out = {"per_clip": per_unit, "per_condition": list(per_cond.values())}
         out.update(answers={}, fails={}, no_video={}, partial_video={})
         for rid, failed, flags in self.answers(rows):
-            counts = {"answers": 1, "fails": failed, "no_video": "no_video" in flags}
-            counts["partial_video"] = "partial_video" in flags
+            counts = {
+                "answers": 1,
+                "fails": failed,
+                "no_video": "no_video" in flags,
+                "partial_video": "partial_video" in flags,
+            }
             for key, add in counts.items():
                 out[key][rid] = out[key].get(rid, 0) + add
         return out
