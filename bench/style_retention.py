@@ -1,6 +1,6 @@
 """Does a generated window keep the style of its history? (issue 34, item 4)
 
-    python bench/style_retention.py [--seeds 3] [--temperature 1.0] [--start 40]
+    python bench/style_retention.py [--seeds 3] [--temperature 1.0] [--start 40] [--mg CKPT] [--fl CKPT] [--only MG]
 
 Every held-out window of generation/pretrained/heldout.npz (valid + test: 192 windows of styled Bandai-Namco takes,
 proud, old, feminine, ... in the take names) is sampled by the shipped MG (from its 10 real history frames) and FL
@@ -32,6 +32,9 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--temperature", type=float, default=1.0)
     ap.add_argument("--start", type=int, default=40)
+    ap.add_argument("--mg", default=str(CHECKPOINTS["mg"]), help="MG checkpoint (default: the shipped one)")
+    ap.add_argument("--fl", default=str(CHECKPOINTS["fl"]), help="FL checkpoint (default: the shipped one)")
+    ap.add_argument("--only", choices=("MG", "FL"), default=None, help="one model only")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
     x, c, h, hc, takes, cats = heldout_windows(HELDOUT, ("x", "c", "hist", "hist_c", "take", "labels"))
@@ -39,7 +42,9 @@ def main(argv=None):
     half = x.shape[1] // 2
     ceiling = style_retention(x[:, :half], x, takes, cats, start=0)
     print(f"NAT first half vs second: closer to own {ceiling[0]:.2f}, distance ratio {ceiling[1]:.2f}")
-    for name, ckpt in (("MG", CHECKPOINTS["mg"]), ("FL", CHECKPOINTS["fl"])):
+    for name, ckpt in (("MG", args.mg), ("FL", args.fl)):
+        if args.only not in (None, name):
+            continue
         model = load_model(ckpt, "cpu")
         got = []
         for seed in range(args.seeds):

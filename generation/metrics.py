@@ -220,26 +220,32 @@ def any_clip_metrics(joints, fps, parents, feet=None):
     return {name: float(values[name]) for name in METRIC_NAMES}
 
 
-def style_retention(samples, own, takes, categories, start=0):
+def style_retention(samples, own, takes, categories, start=0, reference=None):
     """How much of its history's style a generated window keeps (issue 34, item 4), over many held-out windows.
 
     samples, own: root-frame poses [B, T, 63] of the generated windows and of the real windows they continue
     (NAT, the same control and history); takes, categories: each window's take name and locomotion category [B].
     A window's style is its mean pose (posture: a hanging head, raised shoulders, a stoop) from frame `start` on.
     Each generated window is compared with its own NAT and with the average NAT window of its category, taken over
-    the other takes (its own take left out). Returns (share, ratio): the share of windows whose style is closer
+    the other takes (its own take left out) of `reference` (real windows [R, T', 63], their takes and categories;
+    default: `own`, `takes` and `categories`). Returns (share, ratio): the share of windows whose style is closer
     to its own NAT's than to the category's average (0.5 or below: the style is lost to an average walker; real
     motion of another window of the same take scores near 1), and the median over windows of the distance to its
     own NAT over the distance to the category's average (below 1: closer to its own)."""
     s, o = (np.asarray(a, dtype=np.float64)[:, start:].mean(axis=1) for a in (samples, own))
     takes, categories = np.asarray(takes), np.asarray(categories)
+    if reference is None:
+        ref, ref_takes, ref_categories = o, takes, categories
+    else:
+        ref = np.asarray(reference[0], dtype=np.float64)[:, start:].mean(axis=1)
+        ref_takes, ref_categories = np.asarray(reference[1]), np.asarray(reference[2])
     closer, ratios = [], []
     for i in range(len(s)):
-        others = (categories == categories[i]) & (takes != takes[i])
+        others = (ref_categories == categories[i]) & (ref_takes != takes[i])
         if not others.any():
             continue
         d_own = np.linalg.norm(s[i] - o[i])
-        d_avg = np.linalg.norm(s[i] - o[others].mean(axis=0))
+        d_avg = np.linalg.norm(s[i] - ref[others].mean(axis=0))
         closer.append(d_own < d_avg)
         ratios.append(d_own / max(d_avg, 1e-12))
     return float(np.mean(closer)), float(np.median(ratios))

@@ -41,7 +41,7 @@ class MGStream:
     Two memory layouts compute the same thing (they differ only in float rounding):
     "row": activations [B, features], weights stored [in, out], every product X @ W;
     "col": activations [features, B], weights stored [out, in] as nn.LSTM keeps them, every product W @ X.
-    Which is faster depends on the CPU and its BLAS, by up to 2.8x either way (bench/RESULTS.md), so
+    Which is faster depends on the CPU and its BLAS, by up to 2.8x either way (bench/notes/2026-11-25-history.md), so
     layout=None takes `default_layout`, a fixed choice per device type, CPU vendor and batch size (never a timing,
     so the same inputs give the same bits run after run); pass a layout to fix it.
     """
@@ -84,6 +84,8 @@ class MGStream:
         self.gates = [torch.empty(k_steps, *shape(4 * hid), **new) for _ in range(layers)]
         self.out = torch.empty(*shape(w["n_out"]), **new)
         self.cond = torch.zeros(b, cond_dim, **new)  # this frame's history and control, flattened
+        if model.config.get("history_style"):  # the seed history's mean pose: the same for every frame
+            self.cond[:, cond_dim - model.pose_dim :] = model.style_of(self.hist)
         # (weight, x) -> the operands of torch.mm/addmm for "W x": (x, W) in rows, (W, x) in columns.
         self._mm = (lambda wt, x: (x, wt)) if rows else (lambda wt, x: (wt, x))
         # self.cond as every step's slice of layer 1's input (a view: refilled in place).
@@ -131,9 +133,9 @@ class MGStream:
     def _step(self, control, z):
         b, mm, fd = self.hist.shape[0], self._mm, self._fdim
         ctrl = torch.cat([self.hist_c, control.to(self.device, self.dtype)[:, None]], dim=1)
-        n_hist = self.hist[0].numel()
+        n_hist, n_ctrl = self.hist[0].numel(), ctrl[0].numel()
         self.cond[:, :n_hist] = self.hist.flatten(1)
-        self.cond[:, n_hist:] = ctrl.flatten(1)
+        self.cond[:, n_hist : n_hist + n_ctrl] = ctrl.flatten(1)
         self._frame_start()
         if z is None:
             z = (
@@ -188,9 +190,9 @@ def default_layout(device, batch=1):
     """The layout for a device and batch size, fixed per device type, CPU vendor and batch so that sampling never
     depends on a timing race (the two layouts round differently). MOGLOW_LAYOUT=row|col overrides it.
 
-    Measured at the paper's size (bench/RESULTS.md): on AMD Zen 3 with MKL "row" is faster for 1 and 30 streams
-    (2.8x and 1.2-1.4x); on this project's Intel Xeon host "row" is 1.9x faster for one stream and "col" 1.2x
-    faster for 30. cuBLAS takes either: "row"."""
+    Measured at the paper's size (bench/notes/2026-11-25-history.md): on AMD Zen 3 with MKL "row" is faster for 1
+    and 30 streams (2.8x and 1.2-1.4x); on this project's Intel Xeon host "row" is 1.9x faster for one stream and
+    "col" 1.2x faster for 30. cuBLAS takes either: "row"."""
     chosen = os.environ.get("MOGLOW_LAYOUT")
     if chosen:
         if chosen not in LAYOUTS:

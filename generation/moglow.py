@@ -12,11 +12,19 @@ Sampling (mg_stream.MGStream) runs the same flow inverted, one frame at a time, 
 `residual` (not in the paper; off in mg_paper): the flow models the step x_t - x_{t-1} from the previous pose
 (standardised) instead of the pose itself. The shift depends on the history alone, so its Jacobian is 1 and the
 NLL is still that of the poses; but the coupling networks no longer have to reproduce the previous pose to within
-millimetres to keep the body still, and what they missed was MG's frame-to-frame jitter (bench/RESULTS.md).
+millimetres to keep the body still, and what they missed was MG's frame-to-frame jitter
+(bench/notes/2026-11-25-history.md).
 
 `carry_feet` (with `residual`; not in the paper): the feet's step is taken from where the root's step of frame t
 (its control) carries the previous frame's feet, so that a foot planted on the floor has a step of 0. The rest of
 the body steps from where it was. The shift still depends on the history and the control alone: Jacobian 1.
+
+`history_style` (not in the paper; off in mg_paper): every frame's coupling networks also read the mean pose of the
+window's first tau frames, the real history MG is seeded with. Once that history has slid out of the tau-frame
+window, MG otherwise sees only its own frames, and drifts to an average walker within half a second (issue 34: a
+sad walker's hanging head straightens). The mean pose is a style input in the sense of StyleGestures (Alexanderson
+et al. 2020), taken from the motion itself rather than a label, so it works for any skeleton and any data. It is
+a function of the history, so the flows and the exact likelihood are unchanged.
 """
 
 import torch
@@ -26,7 +34,9 @@ from .flows import Chain, FlowStep, MotionFlow, gaussian_logp
 from .mg_stream import MGStream
 from .skeleton import FEET
 
-DEFAULTS = dict(K=16, hidden=512, lstm_layers=2, tau=10, dropout=0.95, residual=False, carry_feet=False)
+DEFAULTS = dict(
+    K=16, hidden=512, lstm_layers=2, tau=10, dropout=0.95, residual=False, carry_feet=False, history_style=False
+)
 _FEET = torch.tensor(FEET)
 
 
@@ -55,7 +65,7 @@ class MoGlow(MotionFlow):
         super().__init__({**DEFAULTS, **config}, pose_dim, control_dim)
         cfg = self.config
         self.tau = cfg["tau"]
-        self.cond_dim = self.tau * pose_dim + (self.tau + 1) * control_dim
+        self.cond_dim = self.tau * pose_dim + (self.tau + 1) * control_dim + (pose_dim if cfg["history_style"] else 0)
         c_a = pose_dim // 2
         self.flow = Chain(
             *[
@@ -71,16 +81,25 @@ class MoGlow(MotionFlow):
         return torch.rand(batch, n, self.tau, 1, device=device) >= self.config["dropout"]
 
     def make_cond(self, x, c, keep=None):
-        """Conditioning of frames tau..T-1 of a window: [poses t-tau..t-1, control t-tau..t] -> [B, n, cond_dim].
-        While training, each history pose frame is dropped (zeroed: the mean pose) with probability `dropout`,
-        as `keep` says (default: drawn here)."""
+        """Conditioning of frames tau..T-1 of a window: [poses t-tau..t-1, control t-tau..t] (and with
+        `history_style` the mean of poses 0..tau-1) -> [B, n, cond_dim]. While training, each history pose frame
+        is dropped (zeroed: the mean pose) with probability `dropout`, as `keep` says (default: drawn here); the
+        style input is never dropped: it stands for the whole seed history, which sampling always has."""
         tau, n = self.tau, x.shape[1] - self.tau
         hist = x.unfold(1, tau, 1)[:, :n].transpose(2, 3)  # [B, n, tau, 63], oldest first
         if self.training and self.config["dropout"] > 0:
             keep = self.history_keep(x.shape[0], x.shape[1], x.device) if keep is None else keep
             hist = hist * keep.to(hist.dtype)
         ctrl = c.unfold(1, tau + 1, 1).transpose(2, 3)  # [B, n, tau + 1, 3]
-        return torch.cat([hist.flatten(2), ctrl.flatten(2)], dim=2)
+        parts = [hist.flatten(2), ctrl.flatten(2)]
+        if self.config["history_style"]:
+            parts.append(self.style_of(x[:, :tau])[:, None].expand(-1, n, -1))
+        return torch.cat(parts, dim=2)
+
+    @staticmethod
+    def style_of(history):
+        """The style input of `history_style`: the mean pose [B, 63] of the seed history [B, tau, 63]."""
+        return history.mean(dim=1)
 
     def forward(self, x, c, keep=None, history=None):
         """Window x [B, T, 63], c [B, T, 3] (standardised) -> (z [B, T - tau, 63] for frames tau..T-1, logdet [B]).

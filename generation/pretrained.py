@@ -19,7 +19,7 @@ import numpy as np
 
 from core import cli, study
 
-from .dataset import HELD_OUT, WINDOW_KEYS, read_arrays, require
+from .dataset import HELD_OUT, WINDOW_KEYS, heldout_windows, read_arrays, require
 
 FOLDER = Path(__file__).resolve().parent / "pretrained"
 CHECKPOINTS = {"mg": FOLDER / "mg.pt", "fl": FOLDER / "fl.pt", "bad": FOLDER / "bad.pt"}
@@ -71,16 +71,20 @@ def quality(stride=QUALITY_STRIDE, seed=0):
     the median over those windows of its ratio to NAT's on the same window (higher is better), the worst joint's
     mean jerk over NAT's, the rigidity of their bones: the largest bone-length std within a window (mm) and
     the largest error of a bone's mean length against the actor's (a fraction), and their Fréchet motion distance
-    over NAT's on the same windows (FL's posture once drifted: hands 9 cm low, 2.8x NAT's FMD here; issue 34).
-    Recorded in quality.json at export and recomputed by the tests, which fail if the models fall back."""
+    over NAT's on the same windows (FL's posture once drifted: hands 9 cm low, 2.8x NAT's FMD here; issue 34), and
+    the share of windows whose posture over their second half keeps their own take's style (metrics.style_retention,
+    against the category averages of every held-out take). Recorded in quality.json at export and recomputed by the
+    tests, which fail if the models fall back."""
     from . import rigid
     from .features import to_world
-    from .metrics import foot_skating, jerk, joint_jerk, late_stepping
+    from .metrics import foot_skating, jerk, joint_jerk, late_stepping, style_retention
     from .motion_encoder import MotionEncoder
     from .sample import load_model, sample_windows
 
-    d = read_arrays(HELDOUT, ["test_x", "test_c", "test_hist", "test_hist_c", "test_labels", "fps"])
-    x, c, hist, hist_c, labels = (d[f"test_{k}"][::stride] for k in ("x", "c", "hist", "hist_c", "labels"))
+    d = read_arrays(HELDOUT, ["test_x", "test_c", "test_hist", "test_hist_c", "test_labels", "test_take", "fps"])
+    keys = ("x", "c", "hist", "hist_c", "labels", "take")
+    x, c, hist, hist_c, labels, takes = (d[f"test_{k}"][::stride] for k in keys)
+    styles = heldout_windows(HELDOUT, ("x", "take", "labels"))  # every held-out take: the category averages
     encoder = MotionEncoder.load(MOTION_ENCODER)
     floor = encoder.fmd(x, labels)
     fps = float(d["fps"])
@@ -109,6 +113,8 @@ def quality(stride=QUALITY_STRIDE, seed=0):
         ratios[name]["bone_std_mm_max"] = float(bones.std(axis=1).max() * 1000)
         ratios[name]["bone_length_error_max"] = float(np.abs(bones.mean(axis=1, keepdims=True) / actor - 1).max())
         ratios[name]["fmd_over_floor"] = float(encoder.fmd(samples[name], labels) / floor)
+        kept = style_retention(samples[name], x, takes, labels, start=x.shape[1] // 2, reference=styles)
+        ratios[name]["style_retention"] = kept[0]
     return ratios
 
 

@@ -173,7 +173,7 @@ def _checked_fields(cfg, model, where):
     for key, value in cfg.items():
         if key not in allowed:
             raise TrainError(f"{where}: unknown field '{key}'")
-        if key in ("residual", "carry_feet") and not isinstance(value, bool):
+        if key in ("residual", "carry_feet", "history_style") and not isinstance(value, bool):
             raise TrainError(f"{where}: field '{key}' must be true or false, got {value!r}")
         if key == "precision":
             if value not in flows.PRECISIONS:

@@ -68,7 +68,7 @@ def ffmpeg_writer(out_mp4, size, fps, preset="ultrafast", qp=None, crf=None, thr
     size and frame rate has the same frame sizes and byte size: what a blinded stimulus set needs
     (rendering.blinding, CONTRACTS §4). With `qp` (a constant quantiser) or `crf` (x264's rate factor) the
     sizes follow the content instead. ultrafast at qp 17 was the default before; the default now is as close to
-    the frames (PSNR +0.8 dB on average, SSIM higher for every clip measured; bench/RESULTS.md "Blinded sizes").
+    the frames (PSNR +0.8 dB on average, SSIM higher for every clip measured; bench/notes/2026-11-25-history.md).
     frames, seed: the number of frames that will come, for the default's random share of the rate per frame
     (`rate_dither`; no dither without `frames`), and its seed (None: fresh randomness).
     """

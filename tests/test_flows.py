@@ -72,9 +72,10 @@ def fl_case(dtype):
     return fwd, inv, torch.randn(3, T, 63, dtype=dtype)
 
 
-def mg_case(dtype, residual=False, carry_feet=False):
+def mg_case(dtype, residual=False, carry_feet=False, history_style=False):
     """MG as a map from the frames after the history to their latents; its inverse is the streaming sampler."""
-    model = MoGlow(dict(K=2, hidden=8, tau=TAU, residual=residual, carry_feet=carry_feet)).to(dtype)
+    config = dict(K=2, hidden=8, tau=TAU, residual=residual, carry_feet=carry_feet, history_style=history_style)
+    model = MoGlow(config).to(dtype)
     if carry_feet:  # data statistics away from 0 and 1, so that the feet's carry goes through them
         g = torch.Generator().manual_seed(1)
         model.set_stats(
@@ -112,6 +113,7 @@ CASES = {
     "mg_model": mg_case,
     "mg_model_residual": lambda dtype: mg_case(dtype, residual=True),
     "mg_model_carry_feet": lambda dtype: mg_case(dtype, residual=True, carry_feet=True),
+    "mg_model_history_style": lambda dtype: mg_case(dtype, residual=True, carry_feet=True, history_style=True),
 }
 
 
@@ -258,6 +260,35 @@ def test_mg_carry_feet_sees_the_previous_feet_from_the_new_root():
     others = [j for j in range(21) if j not in FEET]
     np.testing.assert_allclose(base[:, others], x[:-1].unflatten(-1, (21, 3))[:, others].double(), atol=2e-5)
     assert np.abs(base[:, FEET] - x[:-1].unflatten(-1, (21, 3))[:, FEET].double().numpy()).max() > 0.02  # it moved
+
+
+@pytest.mark.parametrize("layout", ["row", "col"])
+def test_mg_history_style_reads_the_seed_history_for_every_frame(layout):
+    """With `history_style` every frame's couplings read the mean of the window's first tau poses: the streaming
+    sampler (either layout) equals the plain inverse and predict_frames, and the output follows the style input
+    after the history has slid out of the tau-frame window (here frame TAU + 1 on), where nothing else of it is
+    left."""
+    torch.manual_seed(6)
+    model = MoGlow(dict(K=2, hidden=8, tau=TAU, residual=True, history_style=True))
+    assert model.cond_dim == TAU * 63 + (TAU + 1) * 3 + 63
+    n = TAU + 3
+    hist, c = torch.randn(2, TAU, 63), torch.randn(2, TAU + n, 3)
+    model(torch.randn(2, TAU + n, 63), c)
+    perturb(model, 0.05).eval()
+    z = torch.randn(2, n, 63)
+    fast = model.inverse(z, hist, c, layout=layout)
+    assert torch.allclose(fast, inverse_naive(model, z, hist, c), atol=1e-5)
+    with torch.no_grad():
+        pred = model.predict_frames(torch.cat([hist, fast], dim=1), c, z)
+        assert torch.allclose(pred, fast, atol=1e-4)
+        cond = model.make_cond(torch.cat([hist, fast], dim=1), c)
+    assert torch.equal(cond[:, :, -63:], hist.mean(dim=1, keepdim=True).expand(-1, n, -1))
+    # The same last tau frames before frame TAU + 1, another seed history's mean before them: another frame.
+    other = hist + torch.randn(2, 1, 63)
+    other[:, 1:] = hist[:, 1:]
+    a = model.inverse(z, hist, c, layout=layout)
+    b = model.inverse(z, other, c, layout=layout)
+    assert not torch.allclose(a[:, -1], b[:, -1], atol=1e-4)
 
 
 def test_mg_history_dropout_only_in_training():

@@ -9,7 +9,15 @@ from conftest import DATA
 
 from generation import skeleton
 from generation.features import load_take, to_features
-from generation.metrics import CONTACT_HEIGHT, bone_length_std, clip_metrics, control_error, foot_skating, jerk
+from generation.metrics import (
+    CONTACT_HEIGHT,
+    bone_length_std,
+    clip_metrics,
+    control_error,
+    foot_skating,
+    jerk,
+    style_retention,
+)
 
 
 def takes(category, n, min_seconds=5.0):
@@ -166,3 +174,29 @@ def test_late_stepping_sees_a_gait_that_dies_out(walks):
     joints = x.reshape(80, skeleton.N_JOINTS, 3)
     sideways = np.stack([joints[..., 2], joints[..., 1], -joints[..., 0]], axis=-1)
     assert late_stepping(sideways, 20.0) == pytest.approx(late_stepping(x, 20.0), rel=1e-6)
+
+
+def test_style_retention_tells_a_take_kept_from_an_average_walker():
+    """generation.metrics.style_retention on the shipped held-out windows (styled takes): a take's own earlier
+    stretch keeps its style (NAT's first half against its second), another take of the same category does not,
+    and neither does the category's average; a reference pool gives the same answer as the windows themselves
+    when it holds the same windows."""
+    from generation.dataset import heldout_windows
+    from generation.pretrained import HELDOUT
+
+    x, takes, cats = heldout_windows(HELDOUT, ("x", "take", "labels"))
+    half = x.shape[1] // 2
+    share, ratio = style_retention(x[:, :half], x, takes, cats)
+    assert share >= 0.9 and ratio < 0.7, (share, ratio)
+    # Each window replaced by a window of another take in its category: an average walker of that category.
+    swapped = x.copy()
+    for i in range(len(x)):
+        others = np.flatnonzero((cats == cats[i]) & (takes != takes[i]))
+        swapped[i] = x[others[i % len(others)]]
+    share_swapped, ratio_swapped = style_retention(swapped, x, takes, cats, start=half)
+    assert share_swapped <= 0.4 and ratio_swapped > 1, (share_swapped, ratio_swapped)
+    every = style_retention(x[:, :half], x, takes, cats, reference=(x, takes, cats))
+    assert every == (share, ratio)
+    # Half the windows scored against all of them as the pool: the same as scoring each against the same pool.
+    part = style_retention(x[::2, :half], x[::2], takes[::2], cats[::2], reference=(x, takes, cats))
+    assert 0.8 <= part[0] <= 1

@@ -51,6 +51,8 @@ def test_shipped_models_keep_their_recorded_quality():
         assert now[model]["joint_jerk_max"] <= 1.2, (model, now[model])
         # issue 34: the posture stays the data's (FL trained without the posture term gives 2.8x NAT's FMD here)
         assert now[model]["fmd_over_floor"] <= 1.1 * recorded[model]["fmd_over_floor"], (model, now, recorded)
+    # issue 34, item 4: MG keeps the style of the history it continues (FL has none to keep)
+    assert now["MG"]["style_retention"] >= recorded["MG"]["style_retention"] / 1.1, (now["MG"], recorded["MG"])
 
 
 def test_shipped_clips_have_the_actors_rigid_bones():

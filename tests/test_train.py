@@ -247,6 +247,10 @@ def test_config_names_and_errors(tmp_path):
         load_config("fl", {"residual": True})
     with pytest.raises(TrainError, match="config: field 'carry_feet' must be true or false, got 1"):
         load_config("mg", {"residual": True, "carry_feet": 1})
+    with pytest.raises(TrainError, match="config: field 'history_style' must be true or false, got 'on'"):
+        load_config("mg", {"history_style": "on"})
+    with pytest.raises(TrainError, match="unknown field 'history_style'"):
+        load_config("fl", {"history_style": True})
     with pytest.raises(TrainError, match="config: field 'carry_feet' needs 'residual' true"):
         load_config("mg", {"carry_feet": True})
     with pytest.raises(

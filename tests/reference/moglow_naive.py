@@ -14,9 +14,10 @@ def inverse_naive(model, z, history, c):
     steps = list(model.flow.layers)
     states = [None] * len(steps)
     hist, outs = history, []
+    style = [model.style_of(history)] if model.config["history_style"] else []  # fixed: the seed history's
     for t in range(z.shape[1]):
         ctrl = c[:, t : t + tau + 1]
-        cond = torch.cat([hist.flatten(1), ctrl.flatten(1)], dim=1)[:, :, None]  # [B, cond_dim, 1]
+        cond = torch.cat([hist.flatten(1), ctrl.flatten(1), *style], dim=1)[:, :, None]  # [B, cond_dim, 1]
         y = z[:, t][:, :, None]
         for k in reversed(range(len(steps))):
             actnorm, linear, coupling = steps[k].layers
