@@ -13,7 +13,9 @@ The actor's bone lengths are the means over the window's history (real frames). 
 sampled N times and its figures are their means over the N samples. Printed per model and variant: the largest
 bone-length std (mm), the worst bone's median error of its mean length (%), each joint's mean jerk over NAT's (the
 worst joint named), foot skating over NAT's (median over windows), the worst category's median late stepping over
-NAT's, and the classifier two-sample test against NAT (generation.c2st; mean and sd over seeds).
+NAT's, the classifier two-sample test against NAT (generation.c2st; mean and sd over seeds), and the Fréchet motion
+distance over the floor (NAT's FMD to training motion of the same categories, generation.motion_encoder), one
+sample per window, as the range over seeds.
 """
 
 import argparse
@@ -28,7 +30,8 @@ from generation import c2st, rigid, skeleton  # noqa: E402
 from generation.dataset import heldout_windows, read_arrays  # noqa: E402
 from generation.features import to_world  # noqa: E402
 from generation.metrics import foot_skating, joint_jerk, late_stepping  # noqa: E402
-from generation.pretrained import CHECKPOINTS, HELDOUT  # noqa: E402
+from generation.motion_encoder import MotionEncoder  # noqa: E402
+from generation.pretrained import CHECKPOINTS, HELDOUT, MOTION_ENCODER  # noqa: E402
 from generation.sample import load_model, sample_windows  # noqa: E402
 
 P = skeleton.PARENTS
@@ -102,23 +105,27 @@ def main(argv=None):
         "nearest": lambda s: rigid.fit_bones(s, lengths),
     }
     nat_jerk = joint_jerk(to_world(x, c), fps).mean(0)
+    encoder = MotionEncoder.load(MOTION_ENCODER)
+    floor = encoder.fmd(x, labels)
     for name, ckpt in (("MG", args.mg), ("FL", args.fl)):
         if args.only not in (None, name):
             continue
         model = load_model(ckpt, "cpu")
-        runs, aucs = {v: [] for v in variants}, {v: [] for v in variants}
+        runs, aucs, fmds = ({v: [] for v in variants} for _ in range(3))
         for seed in range(args.seeds):
             s = sample_windows(model, c, h, hc, args.temperature, seed)
             for v, fit in variants.items():
                 y = fit(s)
                 runs[v].append(per_window(y, c, x, lengths, fps))
                 aucs[v].append(auc(y, c, x, fps))
+                fmds[v].append(encoder.fmd(y, labels) / floor)
         for v in variants:
             f, a = summary(runs[v], nat_jerk, labels), np.array(aucs[v])
             print(
                 f"{name} {v:10s} bone std max {f['bone_std_mm']:6.2f} mm | length err max {f['length_err']:5.1f}%"
                 f" | jerk/NAT max {f['jerk_max']:.2f} ({f['jerk_worst']}) | skating/NAT {f['skating']:.2f} | "
-                f"late stepping min {f['late_min']:.2f} | C2ST AUC {a.mean():.3f} (sd {a.std():.3f})"
+                f"late stepping min {f['late_min']:.2f} | C2ST AUC {a.mean():.3f} (sd {a.std():.3f}) | "
+                f"FMD/floor {min(fmds[v]):.2f}-{max(fmds[v]):.2f}"
             )
             print("    jerk/NAT per joint:", " ".join(f"{n}:{r:.2f}" for n, r in zip(skeleton.JOINT_NAMES, f["jerk"])))
 
