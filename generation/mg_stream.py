@@ -47,7 +47,15 @@ class MGStream:
     """
 
     def __init__(
-        self, model, history, history_control, temperature=1.0, generator=None, layout=None, precision="float32"
+        self,
+        model,
+        history,
+        history_control,
+        temperature=1.0,
+        generator=None,
+        layout=None,
+        precision="float32",
+        style=None,
     ):
         self.model, self.tau = model, model.tau
         self.temperature, self.generator = temperature, generator
@@ -85,7 +93,8 @@ class MGStream:
         self.out = torch.empty(*shape(w["n_out"]), **new)
         self.cond = torch.zeros(b, cond_dim, **new)  # this frame's history and control, flattened
         if model.config.get("history_style"):  # the seed history's mean pose: the same for every frame
-            self.cond[:, cond_dim - model.pose_dim :] = model.style_of(self.hist)
+            # `style` [B, 63] (standardised) replaces it, e.g. the mean of a longer real seed than tau frames
+            self.cond[:, cond_dim - model.pose_dim :] = model.style_of(self.hist) if style is None else style
         # (weight, x) -> the operands of torch.mm/addmm for "W x": (x, W) in rows, (W, x) in columns.
         self._mm = (lambda wt, x: (x, wt)) if rows else (lambda wt, x: (wt, x))
         # self.cond as every step's slice of layer 1's input (a view: refilled in place).

@@ -59,11 +59,12 @@ def _generator(seed):
     return torch.Generator().manual_seed(int(seed))  # CPU generator: the same samples on any device
 
 
-def _mg_stream(model, history, history_control, temperature, seed, precision="float32"):
-    """MGStream seeded with the last tau frames of un-standardised history."""
+def _mg_stream(model, history, history_control, temperature, seed, precision="float32", style=None):
+    """MGStream seeded with the last tau frames of un-standardised history (and `style`, un-standardised)."""
     hist = model.standardize_x(_tensor(history, model)[:, -model.tau :])
     hist_c = model.standardize_c(_tensor(history_control, model)[:, -model.tau :])
-    return MGStream(model, hist, hist_c, temperature, _generator(seed), precision=precision)
+    style = None if style is None else model.standardize_x(_tensor(style, model))
+    return MGStream(model, hist, hist_c, temperature, _generator(seed), precision=precision, style=style)
 
 
 def mg_stream(model, history, history_control, temperature=1.0, seed=0, precision="float32"):
@@ -81,16 +82,17 @@ def mg_stream(model, history, history_control, temperature=1.0, seed=0, precisio
 
 
 @torch.inference_mode()
-def sample_mg(model, control, history, history_control, temperature=1.0, seed=0, precision="float32"):
+def sample_mg(model, control, history, history_control, temperature=1.0, seed=0, precision="float32", style=None):
     """MG batch sampling: control [B, T, 3] of the frames to generate, the real frames just before them
     (history [B, >=tau, 63], history_control [B, >=tau, 3]) -> poses [B, T, 63]. LSTM state starts at 0.
-    `precision`: the streaming sampler's (mg_stream.MGStream)."""
+    `precision`: the streaming sampler's (mg_stream.MGStream). `style` [B, 63]: with `history_style`, the style
+    input in place of the mean of the last tau history frames (e.g. a longer real seed's mean pose)."""
     if not isinstance(model, MoGlow):
         raise SampleError("sample_mg needs an MG model")
     control = _tensor(control, model)
     if control.ndim != 3 or history.shape[1] < model.tau or np.shape(history_control)[1] < model.tau:
         raise SampleError(f"sample_mg: need control [B,T,3] and >= tau={model.tau} history frames")
-    stream = _mg_stream(model, history, history_control, temperature, seed, precision)
+    stream = _mg_stream(model, history, history_control, temperature, seed, precision, style)
     c = model.standardize_c(control)
     out = torch.stack([stream.step(c[:, t]) for t in range(c.shape[1])], dim=1)
     return model.unstandardize_x(out).cpu().numpy().astype(np.float32)

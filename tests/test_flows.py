@@ -20,6 +20,7 @@ from generation.flows import (
     SqueezeTime,
     set_net_precision,
 )
+from generation.mg_stream import MGStream
 from generation.moglow import LSTMNet, MoGlow
 from generation.skeleton import FEET
 
@@ -289,6 +290,16 @@ def test_mg_history_style_reads_the_seed_history_for_every_frame(layout):
     a = model.inverse(z, hist, c, layout=layout)
     b = model.inverse(z, other, c, layout=layout)
     assert not torch.allclose(a[:, -1], b[:, -1], atol=1e-4)
+
+    # The sampler's `style` replaces the seed history's mean: given that mean it changes nothing; given another
+    # mean, the frames change.
+    def last(style):
+        stream = MGStream(model, hist, c[:, :TAU], layout=layout, style=style)
+        with torch.no_grad():
+            return [stream.step(c[:, TAU + t], z=z[:, t]) for t in range(n)][-1]
+
+    assert torch.allclose(last(hist.mean(dim=1)), a[:, -1], atol=1e-6)
+    assert not torch.allclose(last(other.mean(dim=1)), a[:, -1], atol=1e-4)
 
 
 def test_mg_history_dropout_only_in_training():
