@@ -36,10 +36,9 @@ from generation.sample import load_model, sample_windows  # noqa: E402
 HAND = skeleton.INDEX["Hand_L"]
 
 
-def figures(s, x, c, labels, lengths, fps, encoder, floor):
+def figures(s, x, c, labels, lengths, fps, encoder, floor, nat_jerk):
     """The printed figures of samples s [N, T, 63] against NAT x on the same windows (jerk, skating and late
-    stepping as bench/rigid_bones.py computes them)."""
-    nat_jerk = joint_jerk(to_world(x, c), fps).mean(0)
+    stepping as bench/rigid_bones.py computes them; nat_jerk: NAT's mean jerk per joint)."""
     motion = summary([per_window(s, c, x, lengths, fps)], nat_jerk, labels)
     offset = (s - x).reshape(-1, skeleton.N_JOINTS, 3).mean(0)
     hand = lambda p: np.percentile(p.reshape(-1, skeleton.N_JOINTS, 3)[:, HAND, 1] * 100, [5, 50, 95])  # noqa: E731
@@ -59,7 +58,7 @@ def figures(s, x, c, labels, lengths, fps, encoder, floor):
 def latent_spread(model, data, n=192):
     """Largest variance along one direction of the latents of n real training windows (not augmented)."""
     ds = load_dataset(data)
-    aug = np.load(data)["train_aug"]
+    aug = read_arrays(data, ["train_aug"])["train_aug"]
     rows = np.flatnonzero(aug == 0)[:: max(1, int((aug == 0).sum()) // n)][:n]
     split = ds.splits["train"]
     z, _ = model(split.x[rows], split.c[rows])
@@ -80,13 +79,14 @@ def main(argv=None):
     fps, lengths = float(read_arrays(HELDOUT, ["fps"])["fps"]), rigid.bone_lengths(hist)
     encoder = MotionEncoder.load(MOTION_ENCODER)
     floor = encoder.fmd(x, labels)
+    nat_jerk = joint_jerk(to_world(x, c), fps).mean(0)
     for ckpt in args.fl or [str(CHECKPOINTS["fl"])]:
         model = load_model(ckpt, "cpu")
         spread = f" | latent spread {latent_spread(model, args.data):.1f}" if args.data else ""
         print(f"{ckpt}{spread}")
         for t in args.temperature or [1.0]:
             s = rigid.fit_bones(sample_windows(model, c, temperature=t, seed=args.seed), lengths)
-            f = figures(s, x, c, labels, lengths, fps, encoder, floor)
+            f = figures(s, x, c, labels, lengths, fps, encoder, floor, nat_jerk)
             print(
                 f"  temperature {t}: FMD/floor {f['fmd']:.2f} | pose error {f['pose_cm']:.1f} cm | hand height "
                 f"{'/'.join(f'{v:.0f}' for v in f['hand'])} cm (NAT {'/'.join(f'{v:.0f}' for v in f['nat_hand'])})"

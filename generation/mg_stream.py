@@ -92,7 +92,7 @@ class MGStream:
         self.gates = [torch.empty(k_steps, *shape(4 * hid), **new) for _ in range(layers)]
         self.out = torch.empty(*shape(w["n_out"]), **new)
         self.cond = torch.zeros(b, cond_dim, **new)  # this frame's history and control, flattened
-        if model.config.get("history_style"):  # the seed history's mean pose: the same for every frame
+        if model.config["history_style"]:  # the seed history's mean pose: the same for every frame
             # `style` [B, 63] (standardised) replaces it, e.g. the mean of a longer real seed than tau frames
             self.cond[:, cond_dim - model.pose_dim :] = model.style_of(self.hist) if style is None else style
         # (weight, x) -> the operands of torch.mm/addmm for "W x": (x, W) in rows, (W, x) in columns.
