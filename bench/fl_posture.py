@@ -9,6 +9,8 @@ checkpoint and temperature:
   windows (generation.motion_encoder);
 - pose error: the largest distance of a joint's mean root-frame position from NAT's on the same windows (cm);
 - hand height: the left hand's height over all frames, 5th, 50th and 95th percentile (cm), beside NAT's;
+- posture spread: how far the windows' mean poses spread (summed standard deviation over the windows, per
+  coordinate) over NAT's: below 1, FL gives every window more of one posture than the mocap does;
 - the worst joint's mean jerk, the median foot skating and the worst category's late stepping, over NAT's.
 With --data (the prepared dataset the model was trained on) it also prints the largest variance of the latents of
 192 real training windows along any one direction. A model whose latents of real motion are standard normal gives
@@ -45,6 +47,7 @@ def figures(s, x, c, labels, lengths, fps, encoder, floor, nat_jerk):
     return dict(
         fmd=encoder.fmd(s, labels) / floor,
         pose_cm=float(np.linalg.norm(offset, axis=1).max() * 100),
+        spread=float(s.mean(axis=1).std(axis=0).sum() / x.mean(axis=1).std(axis=0).sum()),
         hand=hand(s),
         nat_hand=hand(x),
         jerk=motion["jerk_max"],
@@ -90,8 +93,8 @@ def main(argv=None):
             print(
                 f"  temperature {t}: FMD/floor {f['fmd']:.2f} | pose error {f['pose_cm']:.1f} cm | hand height "
                 f"{'/'.join(f'{v:.0f}' for v in f['hand'])} cm (NAT {'/'.join(f'{v:.0f}' for v in f['nat_hand'])})"
-                f" | jerk max {f['jerk']:.2f} ({f['jerk_joint']}) | skating {f['skating']:.2f} | late stepping min"
-                f" {f['late']:.2f}"
+                f" | posture spread {f['spread']:.2f} | jerk max {f['jerk']:.2f} ({f['jerk_joint']}) | skating"
+                f" {f['skating']:.2f} | late stepping min {f['late']:.2f}"
             )
 
 

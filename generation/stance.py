@@ -67,7 +67,19 @@ def posture_offset(pred, real):
     return offset.pow(2).sum(dim=-1).mean()
 
 
-def stance_loss(net, x, c, fps, keep=None, history=None, z=None, posture=0.0):
+def posture_spread(pred, real):
+    """Mean squared difference (m^2) over joints between how far the windows' mean poses spread over the batch
+    in the prediction and in the real windows [B, n, 63] (their standard deviation per coordinate), one scalar.
+    The second moment beside posture_offset's first: on samples, the stance loss left every FL window with the
+    same posture (its windows' mean poses spread a third as far as NAT's), the average walker whatever the
+    latent; this holds the spread of postures over windows where the data's is."""
+    if len(pred) < 2:
+        return pred.new_zeros(())
+    gap = pred.mean(dim=1).std(dim=0) - real.mean(dim=1).std(dim=0)
+    return gap.reshape(skeleton.N_JOINTS, 3).pow(2).sum(dim=-1).mean()
+
+
+def stance_loss(net, x, c, fps, keep=None, history=None, z=None, posture=0.0, spread=0.0):
     """Stance-foot speed (m/s) of `net`'s prediction of training windows x [B, T, 63], c [B, T, 3] (standardised)
     from latents z [B, T, 63] (None: zeros, the most likely motion; MG reads frames tau..T-1 of it), over the real
     windows' contact frames, per batch element [B]. Both frames of each pair are predictions: FL predicts the
@@ -77,7 +89,8 @@ def stance_loss(net, x, c, fps, keep=None, history=None, z=None, posture=0.0):
 
     With `posture` > 0 the loss adds that weight times posture_offset of the same prediction: the plain loss, on
     samples, bent FL's whole posture to still its feet (hands 9 cm low, feet 7 cm forward), which likelihood alone
-    did not (bench/RESULTS.md "fl-posture")."""
+    did not (bench/RESULTS.md "fl-posture"). With `spread` > 0 it adds that weight times posture_spread, which
+    keeps the samples' postures as varied over windows as the data's."""
     real, ctrl = net.unstandardize_x(x), c * net.c_std + net.c_mean
     if net.kind == "mg":
         pred = net.predict_frames(x, c, None if z is None else z[:, net.tau :], keep, history)
@@ -87,4 +100,6 @@ def stance_loss(net, x, c, fps, keep=None, history=None, z=None, posture=0.0):
     loss = stance_speed(pred[:, :-1], pred[:, 1:], ctrl[:, first:], contacts(real, first), fps)
     if posture:
         loss = loss + posture * posture_offset(pred, real[:, first - 1 :])
+    if spread:
+        loss = loss + spread * posture_spread(pred, real[:, first - 1 :])
     return loss

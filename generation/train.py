@@ -59,6 +59,7 @@ TRAIN_DEFAULTS = dict(
     stance_start=0,
     stance_temperature=0.0,
     posture_weight=0.0,  # stance.posture_offset, added to the stance loss (m^2 per joint, times this weight)
+    spread_weight=0.0,  # stance.posture_spread, added to the stance loss likewise
     category_balance=0.0,
     # one of flows.PRECISIONS. 'bfloat16': the coupling networks run under autocast (flows.set_net_precision); about
     # 1.4x the steps/s of float32 on an AMD Zen 4 CPU at mg_cpu's size, at the same likelihood per step, but 0.67x
@@ -118,15 +119,17 @@ class _BatchLoss(nn.Module):
     """The model's NLL, and with `stance` its stance-foot loss (stance.py), per batch element, as a module's
     forward, so that DistributedDataParallel can wrap it."""
 
-    def __init__(self, net, fps, posture_weight=0.0):
+    def __init__(self, net, fps, posture_weight=0.0, spread_weight=0.0):
         super().__init__()
-        self.net, self.fps, self.posture_weight = net, fps, posture_weight
+        self.net, self.fps, self.posture_weight, self.spread_weight = net, fps, posture_weight, spread_weight
 
     def forward(self, x, c, keep, history, stance_z, stance):
         nll = self.net.nll(x, c, keep, history)
         if not stance:
             return nll, torch.zeros_like(nll)
-        return nll, stance_loss(self.net, x, c, self.fps, keep, history, stance_z, self.posture_weight)
+        return nll, stance_loss(
+            self.net, x, c, self.fps, keep, history, stance_z, self.posture_weight, self.spread_weight
+        )
 
 
 def load_config(model, config):
@@ -161,7 +164,19 @@ def _checked_values(cfg, where):
                 raise TrainError(f"{where}: field 'restart_step' needs '{key}' too")
     if cfg.get("carry_feet") and not cfg.get("residual"):
         raise TrainError(f"{where}: field 'carry_feet' needs 'residual' true")
-    for key in ("stance_weight", "stance_start", "stance_temperature", "posture_weight", "category_balance"):
+    if cfg.get("style_span"):
+        if not cfg.get("history_style"):
+            raise TrainError(f"{where}: field 'style_span' needs 'history_style' true")
+        if cfg["style_span"] < 0 or cfg["style_span"] != int(cfg["style_span"]):
+            raise TrainError(f"{where}: field 'style_span' must be a whole number of frames, got {cfg['style_span']}")
+    for key in (
+        "stance_weight",
+        "stance_start",
+        "stance_temperature",
+        "posture_weight",
+        "spread_weight",
+        "category_balance",
+    ):
         if cfg[key] < 0:
             raise TrainError(f"{where}: field '{key}' must be at least 0, got {cfg[key]}")
     return cfg
@@ -289,7 +304,7 @@ def _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, s
     crop = cfg["train_window"] or tx.shape[1]
     weights = category_weights(ds.splits["train"].labels, cfg["category_balance"])
     rows = slice(rank * cfg["batch_size"] // world, (rank + 1) * cfg["batch_size"] // world)
-    step_loss = _wrap_ranks(net, ds.fps, world, device, cfg["posture_weight"])
+    step_loss = _wrap_ranks(net, ds.fps, world, device, cfg["posture_weight"], cfg["spread_weight"])
     net.train()
     share = CoreShare() if share_cores and device.type == "cpu" else None
     bar = tqdm(
@@ -349,9 +364,9 @@ def _optimise(loss, net, opt, cfg, world):
     return grad_norm
 
 
-def _wrap_ranks(net, fps, world, device, posture_weight=0.0):
+def _wrap_ranks(net, fps, world, device, posture_weight=0.0, spread_weight=0.0):
     """The model's loss as a module, wrapped for DistributedDataParallel under torchrun."""
-    step_loss = _BatchLoss(net, fps, posture_weight)
+    step_loss = _BatchLoss(net, fps, posture_weight, spread_weight)
     if world > 1:
         ids = [device] if device.type == "cuda" else None
         step_loss = nn.parallel.DistributedDataParallel(step_loss, device_ids=ids)

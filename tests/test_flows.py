@@ -302,6 +302,28 @@ def test_mg_history_style_reads_the_seed_history_for_every_frame(layout):
     assert not torch.allclose(last(other.mean(dim=1)), a[:, -1], atol=1e-4)
 
 
+def test_mg_style_span_averages_more_real_frames_only_in_training():
+    """With `style_span` N, a training batch's style input is the mean of the window's first k frames, k drawn
+    from tau..N per batch (over many batches every k turns up, and no other); in eval mode (validation, sampling,
+    the likelihood reported) it is the history's mean, as without the field."""
+    torch.manual_seed(7)
+    model = MoGlow(dict(K=1, hidden=8, tau=TAU, dropout=0.0, history_style=True, style_span=TAU + 4))
+    x, c = torch.randn(3, TAU + 6, 63), torch.randn(3, TAU + 6, 3)
+    means = [x[:, :k].mean(dim=1) for k in range(TAU + 7)]
+
+    def frames_used():
+        style = model.make_cond(x, c)[:, 0, -63:]
+        return [k for k in range(TAU + 7) if torch.allclose(style, means[k], atol=1e-6)]
+
+    model.eval()
+    assert frames_used() == [TAU]
+    model.train()
+    seen = {k for _ in range(60) for k in frames_used()}
+    assert seen == set(range(TAU, TAU + 5))
+    short = MoGlow(dict(K=1, hidden=8, tau=TAU, dropout=0.0, history_style=True, style_span=TAU + 40)).train()
+    assert max(short.style_frames(TAU + 6) for _ in range(60)) == TAU + 6  # never past the window's end
+
+
 def test_mg_history_dropout_only_in_training():
     torch.manual_seed(4)
     model = MoGlow(dict(K=1, hidden=8, tau=TAU, dropout=0.95))

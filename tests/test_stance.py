@@ -10,7 +10,7 @@ from generation.dataset import load_dataset
 from generation.features import load_take, rotate_y, to_features, to_world
 from generation.metrics import foot_skating
 from generation.sample import load_model
-from generation.stance import contacts, foot_world_steps, posture_offset, stance_loss, stance_speed
+from generation.stance import contacts, foot_world_steps, posture_offset, posture_spread, stance_loss, stance_speed
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
@@ -110,3 +110,39 @@ def test_posture_term_pulls_a_shifted_fl_back(tiny_runs, small_dataset):
 
     before, after = descend(model, term)
     assert before > 0.09**2 / skeleton.N_JOINTS / 2 and after < before / 2, (before, after)
+
+
+def test_posture_spread_is_the_gap_in_how_far_postures_spread_over_windows():
+    """0 for the real windows, reordered or shifted as a whole (the mean is posture_offset's); windows that all
+    share one posture, as FL's did, pay for the real windows' spread; a joint whose windows spread wider
+    gives that gap squared over 21."""
+    g = torch.Generator().manual_seed(0)
+    real = torch.randn(8, 10, 63, generator=g, dtype=torch.float64) * 0.05
+    assert float(posture_spread(real, real)) == 0.0
+    assert float(posture_spread(real.flip(0) + 0.2, real)) == pytest.approx(0.0, abs=1e-12)
+    same = real - real.mean(dim=1, keepdim=True) + real.mean(dim=(0, 1))  # one posture, the same motion
+    spread = real.mean(dim=1).std(dim=0).reshape(skeleton.N_JOINTS, 3).pow(2).sum(-1).mean()
+    assert float(posture_spread(same, real)) == pytest.approx(float(spread))
+    wider = real.clone()
+    k = 3 * skeleton.INDEX["Head"]
+    wider[..., k] += torch.linspace(-0.05, 0.05, 8, dtype=torch.float64)[:, None]  # one joint, a per-window offset
+    gap = wider[..., k].mean(1).std() - real[..., k].mean(1).std()
+    assert float(gap) > 0.01
+    assert float(posture_spread(wider, real)) == pytest.approx(float(gap) ** 2 / skeleton.N_JOINTS)
+    assert float(posture_spread(real[:1], real[:1])) == 0.0  # one window has no spread to match
+
+
+def test_spread_term_spreads_a_collapsed_fl(tiny_runs, small_dataset):
+    """Trained on the spread term alone, a tiny FL whose samples' postures spread less over windows than the real
+    windows' moves towards their spread."""
+    model = load_model(sorted((tiny_runs["fl"] / "checkpoints").glob("step_*.pt"))[-1]).train()
+    split = load_dataset(small_dataset).splits["train"]
+    x, c = split.x[:8, :32].to(model.x_mean.device).clone(), split.c[:8, :32].to(model.x_mean.device)
+    x = x + (torch.arange(8, dtype=x.dtype, device=x.device) - 3.5)[:, None, None] * 0.5  # postures spread wide
+    z = torch.randn(8, 32, 63, generator=torch.Generator().manual_seed(1)).to(x.device)
+
+    def term():
+        return stance_loss(model, x, c, 20.0, z=z, spread=1.0).mean() - stance_loss(model, x, c, 20.0, z=z).mean()
+
+    before, after = descend(model, term)
+    assert before > 0 and after < before / 2, (before, after)

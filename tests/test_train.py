@@ -251,6 +251,12 @@ def test_config_names_and_errors(tmp_path):
         load_config("mg", {"history_style": "on"})
     with pytest.raises(TrainError, match="unknown field 'history_style'"):
         load_config("fl", {"history_style": True})
+    with pytest.raises(TrainError, match="config: field 'style_span' needs 'history_style' true"):
+        load_config("mg", {"style_span": 40})
+    with pytest.raises(TrainError, match="config: field 'style_span' must be a whole number of frames, got 20.5"):
+        load_config("mg", {"history_style": True, "style_span": 20.5})
+    with pytest.raises(TrainError, match="config: field 'spread_weight' must be at least 0, got -1"):
+        load_config("fl", {"spread_weight": -1})
     with pytest.raises(TrainError, match="config: field 'carry_feet' needs 'residual' true"):
         load_config("mg", {"carry_feet": True})
     with pytest.raises(
