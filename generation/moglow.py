@@ -43,17 +43,8 @@ from .flows import Chain, FlowStep, MotionFlow, gaussian_logp
 from .mg_stream import MGStream
 from .skeleton import FEET
 
-DEFAULTS = dict(
-    K=16,
-    hidden=512,
-    lstm_layers=2,
-    tau=10,
-    dropout=0.95,
-    residual=False,
-    carry_feet=False,
-    history_style=False,
-    style_span=0,
-)
+DEFAULTS = dict(K=16, hidden=512, lstm_layers=2, tau=10, dropout=0.95)  # the paper's
+DEFAULTS |= dict(residual=False, carry_feet=False, history_style=False, style_span=0)  # ours, off by default
 _FEET = torch.tensor(FEET)
 
 
