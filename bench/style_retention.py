@@ -87,6 +87,8 @@ def lean(poses, top="Head", bottom="Neck"):
     return np.degrees(np.arctan2(bone[..., 2], bone[..., 1]))
 
 
+SAD = "_sad_"  # the take names of the case issue 34 names: the sad side-steps, head hanging
+
 STYLE_FEATURES = {  # per window, over its second half: what a styled take does to the posture
     "head pitch (deg)": lambda p: lean(p),
     "trunk lean (deg)": lambda p: lean(p, "Neck", "Hips"),
@@ -96,6 +98,12 @@ STYLE_FEATURES = {  # per window, over its second half: what a styled take does 
 }
 
 
+def second_half(f, ys, half):
+    """A style feature `f` per window, averaged over the windows' second halves and over the samples `ys` (a list
+    of [B, T, 63] arrays, one per seed): [B]."""
+    return np.mean([f(y[:, half:]).mean(axis=1) for y in ys], axis=0)
+
+
 def followed(x, ys, half, train=None):
     """{feature: (slope, slope within the training range)}: the least-squares slope of the model's per-window
     feature (mean over seeds) on NAT's, over the windows' second halves (1 follows each take's style, 0 gives
@@ -103,8 +111,7 @@ def followed(x, ys, half, train=None):
     training windows' (`train` [N, T, 63]; NaN without it): a style no training take has, a model cannot know."""
     out = {}
     for name, f in STYLE_FEATURES.items():
-        nat = f(x[:, half:]).mean(axis=1)
-        model = np.mean([f(y[:, half:]).mean(axis=1) for y in ys], axis=0)
+        nat, model = second_half(f, [x], half), second_half(f, ys, half)
         inside = np.nan
         if train is not None:
             seen = f(train).mean(axis=1)
@@ -142,7 +149,7 @@ def profile(args, x, c, h, hc, takes, cats):
             " within the training windows' range: "
             + ", ".join(f"{k} {a:.2f} / {b:.2f}" for k, (a, b) in followed(x, ys, half, train).items())
         )
-    sad = np.array(["_sad_" in t for t in takes])
+    sad = np.char.find(takes.astype(str), SAD) >= 0
     others = (cats[:, None] == cats[sad][None]).any(axis=1) & ~sad
     pitch = {"NAT": lean(x[sad]), "category average": lean(x[others])}
     pitch.update({n: np.concatenate([lean(y[sad]) for y in v]) for n, v in samples.items()})
@@ -161,13 +168,13 @@ def style_figure(path, x, samples, takes, cats, temperature, fps):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    sad = [t for t in np.unique(takes) if "_sad_" in t]
+    sad = [t for t in np.unique(takes) if SAD in t]
     fig, axes = plt.subplots(1, len(sad) + 1, figsize=(5 * (len(sad) + 1), 3.8), squeeze=False)
     half = x.shape[1] // 2
     ax = axes[0][-1]
-    nat = lean(x[:, half:]).mean(axis=1)
+    nat = second_half(lean, [x], half)
     for name, colour in (("MG", "tab:blue"), ("FL", "tab:orange")):
-        got = np.mean([lean(y[:, half:]).mean(axis=1) for y in samples[name]], axis=0)
+        got = second_half(lean, samples[name], half)
         ax.scatter(nat, got, s=8, c=colour, alpha=0.7, label=f"{name} (slope {np.polyfit(nat, got, 1)[0]:.2f})")
     lim = [min(nat.min(), -20), max(nat.max(), 90)]
     ax.plot(lim, lim, "k:", lw=1, label="follows its take exactly")

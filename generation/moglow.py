@@ -106,8 +106,8 @@ class MoGlow(MotionFlow):
 
     def style_frames(self, length):
         """How many of a window's first frames the style input averages: tau, or while training with `style_span`
-        a number drawn from tau..style_span (one per batch, from torch's generator, which train.py seeds per step,
-        so every rank of a run draws the same)."""
+        a number drawn from tau..style_span (one per call, so one per pass over a batch, from torch's generator,
+        which train.py seeds per step, so every rank of a run draws the same)."""
         span = min(self.config["style_span"], length)
         if not self.training or span <= self.tau:
             return self.tau

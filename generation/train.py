@@ -165,10 +165,10 @@ def _checked_values(cfg, where):
     if cfg.get("carry_feet") and not cfg.get("residual"):
         raise TrainError(f"{where}: field 'carry_feet' needs 'residual' true")
     if cfg.get("style_span"):
-        if not cfg.get("history_style"):
-            raise TrainError(f"{where}: field 'style_span' needs 'history_style' true")
         if cfg["style_span"] < 0 or cfg["style_span"] != int(cfg["style_span"]):
             raise TrainError(f"{where}: field 'style_span' must be a whole number of frames, got {cfg['style_span']}")
+        if not cfg.get("history_style"):
+            raise TrainError(f"{where}: field 'style_span' needs 'history_style' true")
     for key in (
         "stance_weight",
         "stance_start",
