@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats as sps
 
-from core import study
+from moglow_eval.core import study
 
 from .load import AnalysisError
 from .pairwise import read_preferences

@@ -12,7 +12,7 @@ researcher would run them by hand. Everything started here is stopped at the end
 With --design pairwise, parallel or appropriateness the app runs that test design (CONTRACTS §8), the crowd answers
 it, the export is pairs.csv (pairwise, appropriateness) or the parallel ratings.csv, and the report is that
 design's. With --sound (implied by appropriateness) the stimuli are a study of your own motion with speech
-(generation.demo_study: real non-locomotion mocap, two made-up systems, speech synthesised by espeak-ng), the
+(generation.own_study.demo_study: real non-locomotion mocap, two made-up systems, speech synthesised by espeak-ng), the
 videos carry it, and every simulated rater passes the sound check first.
 """
 
@@ -31,8 +31,8 @@ import urllib.error
 import urllib.request
 from pathlib import Path
 
-from core import cli
-from core.study import DESIGNS
+from moglow_eval.core import cli
+from moglow_eval.core.study import DESIGNS
 
 
 class DemoError(cli.UserError):
@@ -153,11 +153,11 @@ def run_demo(
         sound = sound or design == "appropriateness"
         if stimuli is None and sound:
             stimuli = out / "stimuli"
-            _stage(f"1/5 a study with sound (generation.demo_study) → {stimuli}")
+            _stage(f"1/5 a study with sound (generation.own_study.demo_study) → {stimuli}")
             procs.run(
-                [py, "-m", "generation.demo_study", "--out", str(out / "study"), "--seed", str(seed)]
+                [py, "-m", "generation.own_study.demo_study", "--out", str(out / "study"), "--seed", str(seed)]
                 + (["--appropriateness"] if design == "appropriateness" else []),
-                "generation.demo_study",
+                "generation.own_study.demo_study",
             )
             procs.run(
                 [py, "-m", "generation.make_stimuli", "--study", str(out / "study" / "study.toml"), "--out"]

@@ -12,7 +12,7 @@ import matplotlib
 import numpy as np
 from matplotlib.figure import Figure
 
-from core import study
+from moglow_eval.core import study
 
 # Okabe-Ito colour-blind-safe palette; the paper's three conditions keep fixed colours across figures.
 FIXED = dict(zip(study.RESERVED, ("#009E73", "#0072B2", "#D55E00", "#7F7F7F")))  # NAT, MG, FL, BAD

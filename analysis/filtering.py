@@ -6,7 +6,7 @@ their responses were discarded (1880 responses, 152 removed, 1728 kept).
 
 import pandas as pd
 
-from core import study
+from moglow_eval.core import study
 
 DEFAULT_THRESHOLD = study.CATCH_FAIL_AT
 

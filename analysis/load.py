@@ -7,8 +7,8 @@ frame's index is the file line number of each row (header = line 1), so later me
 import numpy as np
 import pandas as pd
 
-from core import study, tables
-from core.cli import UserError
+from moglow_eval.core import study, tables
+from moglow_eval.core.cli import UserError
 
 REQUIRED = ("rater_id", "clip_id", "condition", "rating")
 ROLES = study.RATED_ROLES
@@ -137,10 +137,10 @@ def load_ratings(path):
 
 
 def load_metrics(path):
-    """metrics.csv -> DataFrame indexed by clip_id (core.tables.read_metrics), errors as AnalysisError."""
+    """metrics.csv -> DataFrame indexed by clip_id (moglow_eval.core.tables.read_metrics), errors as AnalysisError."""
     return tables.read_metrics(path, AnalysisError)
 
 
 def load_c2st(path):
-    """c2st.csv -> DataFrame (core.tables.read_c2st), errors as AnalysisError."""
+    """c2st.csv -> DataFrame (moglow_eval.core.tables.read_c2st), errors as AnalysisError."""
     return tables.read_c2st(path, AnalysisError)

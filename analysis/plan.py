@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from core import cli
+from moglow_eval.core import cli
 
 from . import figures, stats
 from .filtering import DEFAULT_THRESHOLD, exclude_raters, only_test_rows

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from core import cli
+from moglow_eval.core import cli
 
 from . import report_html
 from .designs import Options, design_of

@@ -18,8 +18,8 @@ import pandas as pd
 from scipy import sparse
 from scipy import stats as sps
 
-from core import study
-from core.study import condition_order
+from moglow_eval.core import study
+from moglow_eval.core.study import condition_order
 
 NO_VARIANCE = "no variance (every rating is the same): test undefined"
 NO_WITHIN_VARIANCE = "no variance within conditions (every condition's ratings are all the same): test undefined"

@@ -30,8 +30,8 @@ from bench_app import answer, trial_clips  # noqa: E402
 from fake_stimuli import pg_schema, write_fake_stimuli  # noqa: E402
 from sqlalchemy import event  # noqa: E402
 
-from core import cli  # noqa: E402
-from core.study import DESIGNS  # noqa: E402
+from moglow_eval.core import cli  # noqa: E402
+from moglow_eval.core.study import DESIGNS  # noqa: E402
 from rating_app import create_app  # noqa: E402
 from rating_app.db import app_engine  # noqa: E402
 

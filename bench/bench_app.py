@@ -52,8 +52,8 @@ sys.path.insert(0, str(ROOT / "tests"))  # the fake stimulus folder the app's te
 from fake_stimuli import free_port, pg_schema, write_fake_stimuli  # noqa: E402
 from proxies import caddy_accel  # noqa: E402
 
-from core import cli  # noqa: E402
-from core.study import DESIGNS  # noqa: E402
+from moglow_eval.core import cli  # noqa: E402
+from moglow_eval.core.study import DESIGNS  # noqa: E402
 
 
 def start_server(port, env, workers, threads, log):

@@ -28,8 +28,8 @@ import imageio_ffmpeg  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.stats import mannwhitneyu  # noqa: E402
 
-from core import study  # noqa: E402
-from core.clip import load_clip  # noqa: E402
+from moglow_eval.core import study  # noqa: E402
+from moglow_eval.core.clip import load_clip  # noqa: E402
 from rendering.camera import camera_targets  # noqa: E402
 from rendering.encode import ffmpeg_writer  # noqa: E402
 from rendering.mp4_layout import content_signal, read_layout, size_signals  # noqa: E402

@@ -4,7 +4,7 @@
 
 1. prepare_data over every take in DIR (default: the 1067 Bandai-Namco takes), with a process pool
    of --workers, against the same run with one process (baseline, same run). Target: < 60 s on 2 cores.
-2. Parsing a ~10 MB BVH file (real frames repeated) with generation.bvh.read_bvh, against a plain
+2. Parsing a ~10 MB BVH file (real frames repeated) with generation.motion.bvh.read_bvh, against a plain
    line-by-line Python parser of the same MOTION block (baseline). Target: < 1 s.
 """
 
@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from generation.bvh import read_bvh  # noqa: E402
-from generation.prepare_data import default_data_dir, find_takes, prepare  # noqa: E402
+from generation.data.prepare import default_data_dir, find_takes, prepare  # noqa: E402
+from generation.motion.bvh import read_bvh  # noqa: E402
 
 
 def bench_prepare(data, workers, out_dir, baseline=True):

@@ -48,9 +48,9 @@ def _inputs(tmp):
     sys.path.insert(0, str(ROOT / "tests"))
     from own_study_data import make_study
 
-    from generation import skeleton
-    from generation.features import load_take
-    from generation.motion_files import read_motion
+    from generation.data.motion_files import read_motion
+    from generation.motion import skeleton
+    from generation.motion.features import load_take
 
     walk = load_take(WALK, 20.0)[:80]
     np.savez(tmp / "walk21.npz", joints=walk, parents=skeleton.PARENTS, names=np.array(skeleton.JOINT_NAMES))

@@ -29,8 +29,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.animation import FFMpegWriter, FuncAnimation  # noqa: E402
 
-from generation import skeleton  # noqa: E402
-from generation.features import load_take  # noqa: E402
+from generation.motion import skeleton  # noqa: E402
+from generation.motion.features import load_take  # noqa: E402
 from rendering.camera import camera_targets  # noqa: E402
 from rendering.raster import FrameDrawer, _background  # noqa: E402
 from rendering.render import render_clip  # noqa: E402

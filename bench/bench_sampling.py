@@ -2,7 +2,7 @@
 
     python bench/bench_sampling.py [--frames 60] [--threads 2] [--block 4]
 
-Compares the streaming sampler (generation.mg_stream.MGStream: fused weights, every product known at the start
+Compares the streaming sampler (generation.models.mg_stream.MGStream: fused weights, every product known at the start
 of a frame done for all K steps in batched matmuls, no autograd) in both of its memory layouts ("row" and
 "col", timed frame by frame in turn so that both see the same machine) and the one `default_layout` chooses,
 with a plain baseline measured in the same run (tests/reference/moglow_naive.py: each coupling's nn.LSTM called per
@@ -32,9 +32,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the plain reference sampler
 from reference.moglow_naive import inverse_naive  # noqa: E402
 
-from generation.mg_stream import LAYOUTS, MGStream, default_layout  # noqa: E402
-from generation.moglow import MoGlow  # noqa: E402
-from generation.train import load_config, model_config  # noqa: E402
+from generation.models.mg_stream import LAYOUTS, MGStream, default_layout  # noqa: E402
+from generation.models.moglow import MoGlow  # noqa: E402
+from generation.training.train import load_config, model_config  # noqa: E402
 
 
 def paper_model():

@@ -4,8 +4,8 @@
                                 [--runs RUN_DIR ...]
 
 Times `--steps` optimiser steps of mg_cpu and fl_cpu on the real training set (after 2 warm-up steps), as
-generation.train takes them (its optimiser, the networks in `--precision`);
-for every run folder given with --runs (written by generation.train) it also reports the steps, wall
+generation.training.train takes them (its optimiser, the networks in `--precision`);
+for every run folder given with --runs (written by generation.training.train) it also reports the steps, wall
 time, overall steps/s and the last valid NLL from its metrics.csv.
 """
 
@@ -20,9 +20,9 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from generation.dataset import batch_indices, load_dataset  # noqa: E402
-from generation.flows import PRECISIONS, set_net_precision  # noqa: E402
-from generation.train import build_model, load_config, make_optimiser  # noqa: E402
+from generation.data.dataset import batch_indices, load_dataset  # noqa: E402
+from generation.models.flows import PRECISIONS, set_net_precision  # noqa: E402
+from generation.training.train import build_model, load_config, make_optimiser  # noqa: E402
 
 
 def time_steps(kind, ds, steps, precision="float32"):

@@ -6,7 +6,7 @@ Each setting runs in a fresh process (OpenMP reads its environment when torch lo
 training steps at mg_cpu's size on the real training set, first alone, then beside a process that keeps one
 core busy (a Python busy loop). Settings: torch's defaults (all cores, OpenMP's default spin-waiting), all cores
 with OpenMP's waiting threads sleeping at once (OMP_WAIT_POLICY=PASSIVE) or after a bounded spin (GOMP_SPINCOUNT,
-libgomp's), one thread, and the CLI's default, the cores other processes leave free (generation/core_share.py).
+libgomp's), one thread, and the CLI's default, the cores other processes leave free (generation/training/threads.py).
 Prints steps/s and each setting's slowdown beside the busy core; run it with nothing else on the machine.
 """
 
@@ -33,12 +33,12 @@ import sys, time, torch
 sys.path.insert(0, {root!r})
 share = None
 if {threads!r} == "auto":
-    from generation.core_share import CoreShare
+    from generation.training.threads import CoreShare
     share = CoreShare()
 elif {threads!r}:
     torch.set_num_threads(int({threads!r}))
-from generation.dataset import load_dataset
-from generation.train import build_model, draw_batch, load_config
+from generation.data.dataset import load_dataset
+from generation.training.train import build_model, draw_batch, load_config
 ds = load_dataset({data!r})
 cfg = load_config({kind!r}, "cpu")
 torch.manual_seed(0)

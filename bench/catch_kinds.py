@@ -3,7 +3,7 @@
     python bench/catch_kinds.py [--fps 20]
 
 On every real take of ../shared/data/bandai-namco-actions (not locomotion: bows, waves, guides, punches, a dance)
-with the common 22-joint skeleton: each kind of generation/catch_kinds.py is applied to every take, and the
+with the common 22-joint skeleton: each kind of generation/stimuli/catch_kinds.py is applied to every take, and the
 median of each metric over takes is printed as a ratio to the real takes' median, with the C2ST AUC of the kind's
 clips against the real ones (folds grouped by take).
 """
@@ -17,10 +17,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from generation import c2st  # noqa: E402
-from generation.catch_kinds import KINDS, make_catch  # noqa: E402
-from generation.metrics import any_clip_metrics, find_feet  # noqa: E402
-from generation.motion_files import read_motion  # noqa: E402
+from generation.data.motion_files import read_motion  # noqa: E402
+from generation.metrics import c2st  # noqa: E402
+from generation.metrics.objective import (  # noqa: E402
+    any_clip_metrics,
+    find_feet,
+)
+from generation.stimuli.catch_kinds import KINDS, make_catch  # noqa: E402
 
 ACTIONS = ROOT.parent / "shared" / "data" / "bandai-namco-actions" / "dataset-1" / "data"
 SHOWN = ("jerk", "acceleration", "bone_length_std", "foot_skating")

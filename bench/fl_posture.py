@@ -3,10 +3,10 @@
     python bench/fl_posture.py [--fl CKPT ...] [--temperature 1.0 ...] [--data runs/dataset.npz]
 
 Each checkpoint samples the 192 held-out windows (valid + test, generation/pretrained/heldout.npz) once per
-temperature; the samples go onto the actor's bones as make_stimuli ships them (generation.rigid). Printed per
+temperature; the samples go onto the actor's bones as make_stimuli ships them (generation.motion.rigid). Printed per
 checkpoint and temperature:
 - FMD over the floor: the Fréchet motion distance to training motion of the same categories, over NAT's of the same
-  windows (generation.motion_encoder);
+  windows (generation.metrics.fmd);
 - pose error: the largest distance of a joint's mean root-frame position from NAT's on the same windows (cm);
 - hand height: the left hand's height over all frames, 5th, 50th and 95th percentile (cm), beside NAT's;
 - posture spread: how far the windows' mean poses spread (summed standard deviation over the windows, per
@@ -27,13 +27,13 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from rigid_bones import per_window, summary  # noqa: E402  (bench/, beside this file)
 
-from generation import rigid, skeleton  # noqa: E402
-from generation.dataset import heldout_windows, load_dataset, read_arrays  # noqa: E402
-from generation.features import to_world  # noqa: E402
-from generation.metrics import joint_jerk  # noqa: E402
-from generation.motion_encoder import MotionEncoder  # noqa: E402
-from generation.pretrained import CHECKPOINTS, HELDOUT, MOTION_ENCODER  # noqa: E402
-from generation.sample import load_model, sample_windows  # noqa: E402
+from generation.data.dataset import heldout_windows, load_dataset, read_arrays  # noqa: E402
+from generation.metrics.fmd import MotionEncoder  # noqa: E402
+from generation.metrics.objective import joint_jerk  # noqa: E402
+from generation.motion import rigid, skeleton  # noqa: E402
+from generation.motion.features import to_world  # noqa: E402
+from generation.sampling.pretrained import CHECKPOINTS, HELDOUT, MOTION_ENCODER  # noqa: E402
+from generation.sampling.sample import load_model, sample_windows  # noqa: E402
 
 HAND = skeleton.INDEX["Hand_L"]
 

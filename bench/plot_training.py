@@ -17,7 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 
 def read_metrics(path):
-    """{column: list of floats} of a run's metrics.csv (generation.train.METRICS_COLUMNS)."""
+    """{column: list of floats} of a run's metrics.csv (generation.training.train.METRICS_COLUMNS)."""
     try:
         with open(path, newline="") as f:
             rows = list(csv.DictReader(f))

@@ -7,14 +7,14 @@ with their real 10-frame histories) on the same control; each sample is then tak
 - `free`: as sampled;
 - `directions`: every joint at the actor's bone length from its placed parent, along the direction from its parent
   that the model sampled (so a bone's length error moves every joint below it);
-- `nearest` (the shipped rule, generation.rigid.fit_bones): every joint at the actor's bone length from its placed
+- `nearest` (the shipped rule, rigid.fit_bones): every joint at the actor's bone length from its placed
   parent, at the point nearest to where the model put it.
 The actor's bone lengths are the means over the window's history (real frames). With --seeds N every window is
 sampled N times and its figures are their means over the N samples. Printed per model and variant: the largest
 bone-length std (mm), the worst bone's median error of its mean length (%), each joint's mean jerk over NAT's (the
 worst joint named), foot skating over NAT's (median over windows), the worst category's median late stepping over
-NAT's, the classifier two-sample test against NAT (generation.c2st; mean and sd over seeds), and the Fréchet motion
-distance over the floor (NAT's FMD to training motion of the same categories, generation.motion_encoder), one
+NAT's, the classifier two-sample test against NAT (metrics.c2st; mean and sd over seeds), and the Fréchet motion
+distance over the floor (NAT's FMD to training motion of the same categories, generation.metrics.fmd), one
 sample per window, as the range over seeds.
 """
 
@@ -26,13 +26,18 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from generation import c2st, rigid, skeleton  # noqa: E402
-from generation.dataset import heldout_windows, read_arrays  # noqa: E402
-from generation.features import to_world  # noqa: E402
-from generation.metrics import foot_skating, joint_jerk, late_stepping  # noqa: E402
-from generation.motion_encoder import MotionEncoder  # noqa: E402
-from generation.pretrained import CHECKPOINTS, HELDOUT, MOTION_ENCODER  # noqa: E402
-from generation.sample import load_model, sample_windows  # noqa: E402
+from generation.data.dataset import heldout_windows, read_arrays  # noqa: E402
+from generation.metrics import c2st  # noqa: E402
+from generation.metrics.fmd import MotionEncoder  # noqa: E402
+from generation.metrics.objective import (  # noqa: E402
+    foot_skating,
+    joint_jerk,
+    late_stepping,
+)
+from generation.motion import rigid, skeleton
+from generation.motion.features import to_world  # noqa: E402
+from generation.sampling.pretrained import CHECKPOINTS, HELDOUT, MOTION_ENCODER  # noqa: E402
+from generation.sampling.sample import load_model, sample_windows  # noqa: E402
 
 P = skeleton.PARENTS
 

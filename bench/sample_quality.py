@@ -8,14 +8,14 @@ before the window), or --seeds N times with the seeds --seed .. --seed + N - 1: 
 their means over its samples (a category's late stepping rests on 9-25 windows, and one sample per window moves
 its worst category by up to 0.1 from seed to seed), and the FMD pools every sample.
 Per category it prints the median of three figures per clip:
-- late stepping (m): how far the feet swing about each other over the last 2 s (generation.metrics.late_stepping;
+- late stepping (m): how far the feet swing about each other over the last 2 s (objective.late_stepping;
   a gait that dies out into a standing pose gives ~0). Given beside NAT's, and as the median ratio to NAT on the
   same window.
-- jerk (m/s^3), foot skating (m/s) and control following (m): generation.metrics, on the clip in world
+- jerk (m/s^3), foot skating (m/s) and control following (m): generation.metrics.objective, on the clip in world
   coordinates.
 Over all windows it also prints each system's Fréchet motion distance to training motion of the same categories
-(generation.motion_encoder; NAT's is the floor), the medians as ratios to NAT's, and each model's classifier
-two-sample test against NAT (generation.c2st), once per seed, with its spread over seeds.
+(generation.metrics.fmd; NAT's is the floor), the medians as ratios to NAT's, and each model's classifier
+two-sample test against NAT (generation.metrics.c2st), once per seed, with its spread over seeds.
 The figure shows the feet of the first window of five categories (rows: NAT, then each model).
 """
 
@@ -27,15 +27,21 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from core.study import NATURAL as NAT  # noqa: E402
-from generation import c2st, skeleton  # noqa: E402
-from generation.dataset import read_arrays, require  # noqa: E402
-from generation.features import to_world  # noqa: E402
-from generation.flows import PRECISIONS  # noqa: E402
-from generation.metrics import control_following, foot_skating, jerk, late_stepping  # noqa: E402
-from generation.motion_encoder import MotionEncoder  # noqa: E402
-from generation.pretrained import MOTION_ENCODER  # noqa: E402
-from generation.sample import load_model, nonfinite_windows, sample_split  # noqa: E402
+from generation.data.dataset import read_arrays, require  # noqa: E402
+from generation.metrics import c2st  # noqa: E402
+from generation.metrics.fmd import MotionEncoder  # noqa: E402
+from generation.metrics.objective import (  # noqa: E402
+    control_following,
+    foot_skating,
+    jerk,
+    late_stepping,
+)
+from generation.models.flows import PRECISIONS  # noqa: E402
+from generation.motion import skeleton
+from generation.motion.features import to_world  # noqa: E402
+from generation.sampling.pretrained import MOTION_ENCODER  # noqa: E402
+from generation.sampling.sample import load_model, nonfinite_windows, sample_split  # noqa: E402
+from moglow_eval.core.study import NATURAL as NAT  # noqa: E402
 
 FOOT_L, FOOT_R = skeleton.INDEX["Foot_L"], skeleton.INDEX["Foot_R"]
 SHOWN = ("walk", "run", "walk_backward", "walk_turn_left", "sidestep_left")
@@ -103,7 +109,7 @@ def sample_systems(a, x_nat, n):
 
 
 def print_c2st(systems, finite, c, fps):
-    """Each model's classifier two-sample test against NAT (generation.c2st: per-window motion statistics, a
+    """Each model's classifier two-sample test against NAT (generation.metrics.c2st: per-window motion statistics, a
     logistic regression, folds grouped by window), once per seed: the mean AUC and its spread over seeds."""
 
     def feats(x, idx):

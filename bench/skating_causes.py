@@ -5,14 +5,14 @@
 
 Every test window is sampled once per model (seed 0; temperature 1, as make_stimuli samples, unless
 --temperature). Each clip, NAT's included, is then low-passed along time (zero-phase 4th-order Butterworth on the
-root-frame pose features) at each --cutoff in Hz, and foot skating and jerk (generation.metrics, in world
+root-frame pose features) at each --cutoff in Hz, and foot skating and jerk (generation.metrics.objective, in world
 coordinates) are measured again. The table gives medians over the windows as ratios to NAT's at the same cutoff.
 
 How to read it: if a model's skating ratio falls to NAT's level once the high frequencies are gone, its feet
 slide because each frame is sampled with independent noise (a density too wide around the next pose). If the
 ratio stays high, the feet slide slowly and steadily: the stance foot is not tied to the floor at all.
 
-A second table looks at the frames where a foot is in contact (generation.metrics.foot_contacts) while the root
+A second table looks at the frames where a foot is in contact (objective.foot_contacts) while the root
 moves at over 0.3 m/s. It gives the foot's world velocity along the root's direction of travel (signed: positive
 means carried forward with the body, i.e. the leg sweeps back more slowly than the control moves the root) and
 across it (unsigned), as medians, and their share of the root's speed. A third gives that share per 1-s stretch
@@ -29,13 +29,13 @@ import torch
 from scipy import signal
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from core.study import NATURAL as NAT  # noqa: E402
-from generation import skeleton  # noqa: E402
-from generation.dataset import read_arrays, require  # noqa: E402
-from generation.features import to_world  # noqa: E402
-from generation.metrics import foot_contacts, foot_skating, jerk  # noqa: E402
-from generation.pretrained import CHECKPOINTS  # noqa: E402
-from generation.sample import load_model, sample_split  # noqa: E402
+from generation.data.dataset import read_arrays, require  # noqa: E402
+from generation.metrics.objective import foot_contacts, foot_skating, jerk  # noqa: E402
+from generation.motion import skeleton  # noqa: E402
+from generation.motion.features import to_world  # noqa: E402
+from generation.sampling.pretrained import CHECKPOINTS  # noqa: E402
+from generation.sampling.sample import load_model, sample_split  # noqa: E402
+from moglow_eval.core.study import NATURAL as NAT  # noqa: E402
 
 
 def low_pass(x, cutoff, fps):

@@ -6,7 +6,7 @@
 
 Every held-out window of generation/pretrained/heldout.npz (valid + test: 192 windows of styled Bandai-Namco takes,
 proud, old, feminine, ... in the take names) is sampled by the shipped MG (from its 10 real history frames) and FL
-(control only), put onto the actor's bones as make_stimuli ships them. generation.metrics.style_retention compares
+(control only), put onto the actor's bones as make_stimuli ships them. objective.style_retention compares
 each window's mean root-frame pose from frame --start on (default 40: the window's second half, from 2 s) with its
 own NAT window's and with the average of its category's NAT windows from the other takes. Printed per model: the
 share of windows closer to their own NAT (1 = every window keeps its style, 0.5 or below = an average walker), the
@@ -37,11 +37,11 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from generation import rigid, skeleton  # noqa: E402
-from generation.dataset import heldout_windows, read_arrays  # noqa: E402
-from generation.metrics import style_retention  # noqa: E402
-from generation.pretrained import CHECKPOINTS, HELDOUT  # noqa: E402
-from generation.sample import load_model, sample_mg, sample_windows  # noqa: E402
+from generation.data.dataset import heldout_windows, read_arrays  # noqa: E402
+from generation.metrics.objective import style_retention  # noqa: E402
+from generation.motion import rigid, skeleton  # noqa: E402
+from generation.sampling.pretrained import CHECKPOINTS, HELDOUT  # noqa: E402
+from generation.sampling.sample import load_model, sample_mg, sample_windows  # noqa: E402
 
 
 def seed_frames(x, h, takes, start):

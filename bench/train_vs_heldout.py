@@ -22,8 +22,8 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from sample_quality import clip_figures, median_finite  # noqa: E402  (bench/, this script's folder)
 
-from generation.dataset import read_arrays, require  # noqa: E402
-from generation.sample import load_model, sample_windows  # noqa: E402
+from generation.data.dataset import read_arrays, require  # noqa: E402
+from generation.sampling.sample import load_model, sample_windows  # noqa: E402
 
 SPLITS = ("train", "test")
 

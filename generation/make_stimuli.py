@@ -32,20 +32,21 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from core import cli, study
-from core.clip import save_clip
-from core.tables import C2ST_COLUMNS
+from moglow_eval.core import cli, study
+from moglow_eval.core.clip import save_clip
+from moglow_eval.core.tables import C2ST_COLUMNS
 from rendering.render import size_flag
 
-from . import c2st, pretrained, rigid, skeleton
-from .catch_kinds import KINDS as TOOL_CATCH_KINDS
-from .catch_kinds import make_catch
-from .dataset import read_heldout
-from .features import to_features, to_world
-from .items import CATCH, TEST, TRAINING, category_counts, item_arrays, positions, select_items
-from .metrics import clip_metrics
-from .render_pool import render_stimuli
-from .stimuli_files import (
+from .data.dataset import read_heldout
+from .data.systems import canonical_placement, find_system_files, load_system_motion, parse_system_spec
+from .metrics import c2st
+from .metrics.objective import clip_metrics
+from .motion import rigid, skeleton
+from .motion.features import to_features, to_world
+from .sampling import pretrained
+from .stimuli.catch_kinds import KINDS as TOOL_CATCH_KINDS
+from .stimuli.catch_kinds import make_catch
+from .stimuli.files import (
     StimuliError,
     clip_files,
     manifest_row,
@@ -55,7 +56,8 @@ from .stimuli_files import (
     write_items,
     write_tables,
 )
-from .systems import canonical_placement, find_system_files, load_system_motion, parse_system_spec
+from .stimuli.items import CATCH, TEST, TRAINING, category_counts, item_arrays, positions, select_items
+from .stimuli.render_pool import render_stimuli
 
 # torch is never imported at module level here (training, sampling and the motion encoder import it inside the
 # functions that run them): --help, --export-items and the checks of imported systems need no models, and
@@ -71,7 +73,7 @@ SEED_OFFSET = {MG: 1, FL: 2, study.CATCH: 3}
 # ---------------------------------------------------------------- data
 def ensure_dataset(args):
     """The prepared dataset path: --dataset if it exists, else prepared there from --data."""
-    from .prepare_data import default_data_dir, longest_takes, prepare, summary_table
+    from .data.prepare import default_data_dir, longest_takes, prepare, summary_table
 
     path = Path(args.dataset)
     if path.is_file():
@@ -102,7 +104,7 @@ def checkpoints_in(folder):
 
 def ensure_model(kind, args, dataset):
     """(final, earliest) checkpoint of `kind`: from --{kind}-checkpoint, else trained into runs/."""
-    from .train import train
+    from .training.train import train
 
     given = getattr(args, f"{kind}_checkpoint")
     if given:
@@ -137,7 +139,7 @@ def ensure_model(kind, args, dataset):
 
 def sample_condition(kind, ckpt, arrays, idx, temperature, seed, device):
     """Features x [B, T, 63] sampled by the `kind` model in `ckpt` for the items at `idx`."""
-    from .sample import load_model, require_finite, sample_windows
+    from .sampling.sample import load_model, require_finite, sample_windows
 
     model = load_model(ckpt, device=device)
     if model.kind != kind:
@@ -150,7 +152,7 @@ def sample_condition(kind, ckpt, arrays, idx, temperature, seed, device):
 
 
 def rigid_conditions(args):
-    """The conditions whose poses are put onto the item's actor's bones (generation.rigid): the generated test
+    """The conditions whose poses are put onto the item's actor's bones (generation.motion.rigid): the generated test
     conditions, unless --free-bones; never NAT (already rigid) nor BAD (broken on purpose)."""
     return () if args.free_bones else (MG, FL)
 
@@ -173,7 +175,7 @@ def import_systems(systems, items, fps, window, progress):
 def sample_clips(args, dataset, items, arrays):
     """(condition, item position, joints, seed) of NAT and of every sampled condition, models trained first
     where needed."""
-    from .core_share import torch_threads  # torch (see above)
+    from .training.threads import torch_threads  # torch (see above)
 
     with torch_threads(args.threads):
         mg_ckpt, mg_early = ensure_model("mg", args, dataset)
@@ -207,7 +209,7 @@ def sample_clips(args, dataset, items, arrays):
                 x = rigid.fit_to_history(x, arrays["hist"][idx])
             joints = to_world(x, arrays["c"][idx])
             clips += [(cond, k, joints[j], seed) for j, k in enumerate(idx)]
-    # The other catch kinds break the catch item's real motion (generation.catch_kinds): a mix of kinds spreads
+    # The other catch kinds break the catch item's real motion (generation.stimuli.catch_kinds): a mix of kinds spreads
     # the catch clips' look and coded size on both sides of the test clips' (issue 37).
     natural = {k: j for cond, k, j, _ in clips if cond == study.NATURAL}
     for n, k in enumerate(catch):
@@ -308,7 +310,7 @@ def condition_fmd(poses, encoder=pretrained.MOTION_ENCODER):
     if not Path(encoder).is_file():
         log.warning(f"note: no motion encoder at {encoder}; skipping the Fréchet motion distance")
         return []
-    from .motion_encoder import MotionEncoder  # torch (see above)
+    from .metrics.fmd import MotionEncoder  # torch (see above)
 
     enc = MotionEncoder.load(encoder)
     return [
@@ -369,7 +371,7 @@ def build_parser():
     ap.add_argument(
         "--precision",
         help="override the config's for training: float32 | bfloat16 (the coupling networks in bfloat16, about 1.4x "
-        "faster on AMD Zen 4 CPUs and slower on Intel CPUs without AMX; see generation.train)",
+        "faster on AMD Zen 4 CPUs and slower on Intel CPUs without AMX; see generation.training.train)",
     )
     ap.add_argument("--mg-checkpoint", help="MG checkpoint to sample from (skips MG training)")
     ap.add_argument("--fl-checkpoint", help="FL checkpoint to sample from (skips FL training)")
@@ -416,12 +418,12 @@ def build_parser():
         "--temperature",
         type=cli.number(float, 0, 10),
         help="sampling temperature of MG, FL and the bad examples (default: MG 0.5, FL 1.0, BAD 1.0: "
-        "generation.pretrained.TEMPERATURE)",
+        "generation.sampling.pretrained.TEMPERATURE)",
     )
     ap.add_argument(
         "--free-bones",
         action="store_true",
-        help="keep MG's and FL's bones as sampled (default: set to the item's actor's lengths, generation.rigid)",
+        help="keep MG's and FL's bones as sampled (default: set to the item's actor's lengths, motion.rigid)",
     )
     ap.add_argument("--seed", type=cli.number(int, 0), help="item selection, sampling and manifest order (default 0)")
     ap.add_argument(
@@ -513,7 +515,7 @@ _BUILTIN_ONLY = (
 
 def _study_args(args, argv):
     """args for a study from folders: the study file read, with the flags given overriding its keys."""
-    from .study_file import read_study_file
+    from .own_study.study_file import read_study_file
 
     given = [a for a in _BUILTIN_ONLY if any(x == a or x.startswith(a + "=") for x in argv or [])]
     if given:
@@ -537,7 +539,7 @@ def _main(argv):
     args = parse_args(argv)
     cli.log_to_stderr(args.quiet, _Elapsed())
     if args.study:
-        from .folder_study import build_study
+        from .own_study.builder import build_study
 
         return build_study(args.spec, args.out, args.size, args.preset, args.workers, args.force, args.progress)
     return run(args)

@@ -1,8 +1,8 @@
-"""python -m moglow_eval COMMAND [ARGS] (see moglow_eval)."""
+"""python -m moglow_eval COMMAND [ARGS] (see moglow_eval.console)."""
 
 import sys
 
-from . import main
+from .console import main
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -26,7 +26,7 @@ from sqlalchemy.exc import DBAPIError, InterfaceError, OperationalError, SQLAlch
 from sqlalchemy.exc import TimeoutError as PoolTimeout
 from werkzeug.exceptions import HTTPException
 
-from core.cli import number
+from moglow_eval.core.cli import number
 
 from .manifest import AppError, load_manifest
 
@@ -80,7 +80,7 @@ def create_app(
     question=None,
     config=None,
 ) -> Flask:
-    """`design`: one of core.study.DESIGNS (designs/; default acr); fixed for the life of the database.
+    """`design`: one of moglow_eval.core.study.DESIGNS (designs/; default acr); fixed for the life of the database.
     `ratings_per_clip` and `clips_per_rater` count the design's units (clips, pairs of conditions of an item,
     pages, ...)."""
     from . import designs, health

@@ -7,8 +7,8 @@ import logging
 import os
 import sys
 
-from core import cli
-from core.study import DESIGNS
+from moglow_eval.core import cli
+from moglow_eval.core.study import DESIGNS
 
 from . import SETTINGS
 from .manifest import AppError

@@ -1,4 +1,5 @@
-"""Reading the stimulus manifest (CONTRACTS §4); metrics.csv beside it is read by core.tables.read_metrics."""
+"""Reading the stimulus manifest (CONTRACTS §4); metrics.csv beside it is read by
+core.tables.read_metrics."""
 
 from __future__ import annotations
 
@@ -7,8 +8,8 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from core import study
-from core.cli import UserError
+from moglow_eval.core import study
+from moglow_eval.core.cli import UserError
 
 REQUIRED = ("clip_id", "condition", "role", "item", "video")
 

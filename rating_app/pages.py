@@ -8,7 +8,7 @@ import re
 from flask import Blueprint, abort, current_app, jsonify, render_template, request
 from sqlalchemy.orm import Session
 
-from core import study
+from moglow_eval.core import study
 
 from . import health
 from .bodies import EXTERNAL

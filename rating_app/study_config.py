@@ -22,7 +22,7 @@ from pathlib import Path
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError
 
-from core.cli import number
+from moglow_eval.core.cli import number
 
 from .manifest import AppError
 

@@ -3,7 +3,7 @@
 import sys
 from pathlib import Path
 
-from core import cli
+from moglow_eval.core import cli
 from rendering.errors import RenderError
 from rendering.render import MAX_SIZE, MIN_SIZE, render_clip, size_flag
 

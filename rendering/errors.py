@@ -1,6 +1,6 @@
 """The one error type of rendering."""
 
-from core.cli import UserError
+from moglow_eval.core.cli import UserError
 
 
 class RenderError(UserError):

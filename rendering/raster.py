@@ -15,7 +15,7 @@ from matplotlib.backends.backend_agg import RendererAgg
 from matplotlib.path import Path
 from matplotlib.transforms import IdentityTransform
 
-from core import skeleton_names
+from moglow_eval.core import skeleton_names
 
 from .camera import DEFAULT_CAMERA, NEAR, Projector, clip_to_frustum
 from .errors import RenderError

@@ -11,8 +11,8 @@ import argparse
 
 import numpy as np
 
-from core import cli
-from core.clip import check_fps, check_joints, load_clip
+from moglow_eval.core import cli
+from moglow_eval.core.clip import check_fps, check_joints, load_clip
 
 from .camera import DEFAULT_CAMERA, camera_targets
 from .encode import ffmpeg_writer
@@ -52,7 +52,7 @@ def render_clip(
     thin=None,
     rate_seed=None,
 ):
-    """Render a clip (a path to a clip .npz, or a dict as from core.clip.load_clip) to an MP4.
+    """Render a clip (a path to a clip .npz, or a dict as from moglow_eval.core.clip.load_clip) to an MP4.
 
     sheet: optional PNG path for a contact sheet of `sheet_frames` evenly spaced frames.
     preset: x264 speed preset; ultrafast is the fastest and, for these drawings, loses nothing visible (it skips

@@ -62,7 +62,7 @@ def pytest_collection_modifyitems(config, items):
 # --- data (issue 2) ---
 def small_take_names(per_category=4):
     """The `per_category` longest Bandai-Namco takes of every locomotion category."""
-    from generation.prepare_data import longest_takes
+    from generation.data.prepare import longest_takes
 
     return longest_takes(BANDAI, per_category)
 
@@ -70,7 +70,7 @@ def small_take_names(per_category=4):
 @pytest.fixture(scope="session")
 def small_dataset(tmp_path_factory):
     """Path of a dataset.npz prepared from 4 real takes of every Bandai-Namco category (about a second)."""
-    from generation.prepare_data import prepare
+    from generation.data.prepare import prepare
 
     out = tmp_path_factory.mktemp("small_dataset") / "dataset.npz"
     prepare(BANDAI, out, takes=small_take_names(), workers=1, progress=False)
@@ -83,7 +83,7 @@ def tiny_runs(small_dataset, tmp_path_factory):
     """{'mg': run_dir, 'fl': run_dir}: mg_tiny and fl_tiny trained 150 steps on `small_dataset` (seconds)."""
     import torch
 
-    from generation.train import train
+    from generation.training.train import train
 
     threads = torch.get_num_threads()
     root = tmp_path_factory.mktemp("tiny_runs")

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from core import study
+from moglow_eval.core import study
 
 PG_BASE = os.environ.get("RATING_TEST_PG", "postgresql+psycopg://postgres@127.0.0.1:5432/test")
 

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from generation.bvh import read_bvh
-from generation.motion_files import read_motion
+from generation.data.motion_files import read_motion
+from generation.motion.bvh import read_bvh
 
 ACTIONS = Path(__file__).resolve().parents[2] / "shared" / "data" / "bandai-namco-actions" / "dataset-1" / "data"
 FINGERS = ("Thumb", "Index", "Middle", "Ring", "Pinky")

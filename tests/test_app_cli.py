@@ -15,7 +15,7 @@ import pytest
 import requests
 from fake_stimuli import free_port
 
-from core.tables import read_metrics
+from moglow_eval.core.tables import read_metrics
 from rating_app import create_app
 from rating_app.db import app_engine
 from rating_app.manifest import AppError, load_manifest

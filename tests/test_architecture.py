@@ -14,35 +14,52 @@ ROOT = Path(__file__).resolve().parents[1]
 # Each part may import only the parts listed: core is the floor, rendering draws clips, generation makes them
 # (and renders its stimuli), the app and the analysis read only files and core's contracts.
 ALLOWED = {
-    "core": set(),
-    "rendering": {"core"},
-    "generation": {"core", "rendering"},
-    "rating_app": {"core"},
-    "analysis": {"core"},
+    "moglow_eval.core": set(),
+    "rendering": {"moglow_eval.core"},
+    "generation": {"moglow_eval.core", "rendering"},
+    "rating_app": {"moglow_eval.core"},
+    "analysis": {"moglow_eval.core"},
     # the console command `moglow-eval` (pyproject [project.scripts]) dispatches to every part; none imports it
-    "moglow_eval": {"core", "rendering", "generation", "rating_app", "analysis"},
+    "moglow_eval": {"moglow_eval.core", "rendering", "generation", "rating_app", "analysis"},
 }
 PARTS = tuple(ALLOWED)
+# generation's subpackages, lowest first: each may import those before it, never one after it. Its top-level
+# modules (the main job, make_stimuli) may import every subpackage.
+GENERATION = ("motion", "data", "metrics", "models", "training", "sampling", "stimuli", "own_study")
+
+
+def part_of(module):
+    """The part a dotted module name belongs to (the longest part name it starts with), or None."""
+    hits = [p for p in PARTS if module == p or module.startswith(p + ".")]
+    return max(hits, key=len) if hits else None
+
+
+def part_files(part):
+    """The .py files of a part (moglow_eval's own files leave out moglow_eval/core, a part of its own)."""
+    folder = ROOT / part.replace(".", "/")
+    inner = [ROOT / p.replace(".", "/") for p in PARTS if p.startswith(part + ".")]
+    return [p for p in sorted(folder.rglob("*.py")) if not any(p.is_relative_to(i) for i in inner)]
 
 
 def imports_of(path):
-    """(line, top-level module) for every import statement in a file; relative imports stay in the part."""
+    """(line, dotted module) for every absolute import statement in a file; relative imports stay in the part."""
     tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             for alias in node.names:
-                yield node.lineno, alias.name.split(".")[0]
+                yield node.lineno, alias.name
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            yield node.lineno, node.module.split(".")[0]
+            yield node.lineno, node.module
 
 
 def part_edges():
     """{(importer part, imported part): first 'file:line' that makes the edge}."""
     edges = {}
     for part in PARTS:
-        for path in sorted((ROOT / part).rglob("*.py")):
-            for line, top in imports_of(path):
-                if top in PARTS and top != part:
+        for path in part_files(part):
+            for line, module in imports_of(path):
+                top = part_of(module)
+                if top is not None and top != part:
                     edges.setdefault((part, top), f"{path.relative_to(ROOT)}:{line}")
     return edges
 
@@ -83,9 +100,9 @@ def test_the_product_never_imports_test_code():
     bad = [
         f"{path.relative_to(ROOT)}:{line}"
         for part in PARTS
-        for path in (ROOT / part).rglob("*.py")
-        for line, top in imports_of(path)
-        if top in ("tests", "conftest", "pytest", "hypothesis", "selenium")
+        for path in part_files(part)
+        for line, module in imports_of(path)
+        if module.split(".")[0] in ("tests", "conftest", "pytest", "hypothesis", "selenium")
     ]
     assert not bad, bad
 
@@ -94,7 +111,7 @@ def test_the_product_never_imports_test_code():
     "edges, cycle",
     [
         ({("generation", "rendering"), ("rendering", "generation")}, {"generation", "rendering"}),
-        ({("analysis", "rating_app"), ("rating_app", "core")}, None),
+        ({("analysis", "rating_app"), ("rating_app", "moglow_eval.core")}, None),
         ({("a", "b"), ("b", "c"), ("c", "a")}, None),  # not parts: ignored
     ],
 )
@@ -140,7 +157,7 @@ def module_imports(path, known):
 
 def module_edges(part):
     """{(importer module, imported module): first 'file:line'} within one part."""
-    files = {module_name(p): p for p in sorted((ROOT / part).rglob("*.py"))}
+    files = {module_name(p): p for p in part_files(part)}
     edges = {}
     for name, path in files.items():
         for line, target in module_imports(path, files):
@@ -198,3 +215,48 @@ def test_the_module_cycle_finder_sees_lazy_and_relative_imports(tmp_path, monkey
     (pkg / "other.py").write_text("x = 1\n")
     assert find_module_cycle(module_edges("demo_part")) is None
     assert ("demo_part.kinds.a", "demo_part.kinds.base") in module_edges("demo_part")
+
+
+# ------------------------------------------------------------------------------ generation's subpackages
+def subpackage_of(module):
+    """`generation.models.fl` -> `models`; a top-level module of generation (the main job) -> None."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 2 else None
+
+
+def wrong_way_subpackage_imports(edges):
+    """'file:line: a imports b' for every edge from a generation subpackage to one above it (or not in the order)."""
+    rank = {name: i for i, name in enumerate(GENERATION)}
+    wrong = []
+    for (a, b), where in sorted(edges.items()):
+        sa, sb = subpackage_of(a), subpackage_of(b)
+        if sb is None and b != "generation" and sa is not None:
+            wrong.append(f"{where}: {a} imports the top-level {b}")
+        elif sa is not None and sb is not None and sa != sb and not rank.get(sb, 99) < rank.get(sa, -1):
+            wrong.append(f"{where}: {a} imports {b} ({sa} may import only {list(GENERATION[: rank.get(sa, 0)])})")
+    return wrong
+
+
+def test_generation_is_its_subpackages_in_order():
+    """Every module of generation but the main job lives in a subpackage of GENERATION, and the subpackages
+    import only downwards: motion at the floor, a study of your own motion at the top."""
+    folder = ROOT / "generation"
+    subs = {p.name for p in folder.iterdir() if (p / "__init__.py").is_file()}
+    assert subs == set(GENERATION), f"generation's subpackages {sorted(subs)} vs the order {GENERATION}"
+    top = sorted(p.stem for p in folder.glob("*.py") if p.stem not in ("__init__", "__main__"))
+    assert top == ["make_stimuli"], f"generation/ holds modules outside a subpackage: {top}"
+    wrong = wrong_way_subpackage_imports(module_edges("generation"))
+    assert not wrong, "\n".join(wrong)
+
+
+def test_the_subpackage_guard_sees_an_upward_import():
+    """The guard itself can fail: the shape the move removed (sampling reaching into training is fine, a model
+    reaching into the stimuli is not, and neither is a subpackage reaching the main job)."""
+    edges = {
+        ("generation.sampling.sample", "generation.training.train"): "x:1",
+        ("generation.models.fl", "generation.stimuli.items"): "y:2",
+        ("generation.motion.bvh", "generation.make_stimuli"): "z:3",
+        ("generation.make_stimuli", "generation.own_study.builder"): "w:4",
+    }
+    wrong = wrong_way_subpackage_imports(edges)
+    assert [w.split(":")[0] for w in wrong] == ["y", "z"], wrong

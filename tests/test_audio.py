@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from own_study_data import action_takes, make_study, speech
 
+from generation.data.motion_files import read_motion
 from generation.make_stimuli import main as make_stimuli
-from generation.motion_files import read_motion
 from rendering.audio import RATE, integrated_loudness, mux_audio, read_audio
 from rendering.render import render_clip
 
@@ -151,7 +151,7 @@ def test_sample_rate_of_zero(tmp_path, capsys):
 
 
 def test_demo_runs_the_appropriateness_design_with_sound(tmp_path):
-    """`python -m analysis.demo --design appropriateness`: a study with synthesised speech (generation.demo_study)
+    """`python -m analysis.demo --design appropriateness`: a study with synthesised speech (own_study.demo_study)
     -> stimuli with sound and mismatched clips -> the app with its sound check -> the simulated crowd -> pairs.csv
     -> the MAS report."""
     import json

@@ -11,10 +11,10 @@ from conftest import BANDAI, ROOT
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from core.cli import UserError
-from core.clip import ClipError, load_clip, save_clip
-from generation import import_motion
-from generation.bvh import read_bvh
+from generation.data import import_motion
+from generation.motion.bvh import read_bvh
+from moglow_eval.core.cli import UserError
+from moglow_eval.core.clip import ClipError, load_clip, save_clip
 from rendering import __main__ as render_cli
 
 TAKE = BANDAI / "dataset-1" / "data" / "dataset-1_dash_normal_001.bvh.gz"  # the smallest real take (85 frames)

@@ -13,8 +13,8 @@ import pytest
 from conftest import BANDAI
 from scipy.stats import mannwhitneyu
 
-from generation import skeleton
-from generation.features import load_take
+from generation.motion import skeleton
+from generation.motion.features import load_take
 from rendering import RenderError, render_clip
 from rendering.blinding import check_one_size
 from rendering.mp4_layout import FILLER, content_signal, non_filler_sizes, read_layout, size_signals

@@ -10,8 +10,8 @@ from conftest import BANDAI, PFNN, ROOT
 from reference.bvh_fk import fk_positions
 from scipy.spatial.transform import Rotation
 
-from generation import import_motion
-from generation.bvh import BvhError, read_bvh
+from generation.data import import_motion
+from generation.motion.bvh import BvhError, read_bvh
 
 # Mixed channel counts and rotation orders, interleaved position/rotation channels, a proper-Euler
 # order (X Z X), End Sites, tabs; written with CRLF line ends below.
@@ -272,7 +272,7 @@ def test_cli_subprocess_no_traceback(tmp_path):
     bad = tmp_path / "bad.bvh.gz"
     bad.write_bytes(gzip.compress(text.encode()))
     r = subprocess.run(
-        [sys.executable, "-m", "generation.import_motion", str(bad), str(tmp_path / "o.npz")],
+        [sys.executable, "-m", "generation.data.import_motion", str(bad), str(tmp_path / "o.npz")],
         cwd=ROOT,
         capture_output=True,
         text=True,
@@ -289,7 +289,7 @@ def test_cli_subprocess_no_traceback(tmp_path):
 
 
 def test_import_motion_writes_clip(tmp_path, handwritten):
-    from core.clip import load_clip
+    from moglow_eval.core.clip import load_clip
 
     path, motion = handwritten
     out = tmp_path / "clip.npz"
@@ -301,7 +301,7 @@ def test_import_motion_writes_clip(tmp_path, handwritten):
 
 
 def test_import_motion_real_take_resampled(tmp_path):
-    from core.clip import load_clip
+    from moglow_eval.core.clip import load_clip
 
     out = tmp_path / "walk.npz"
     take = next(BANDAI.glob("dataset-2/data/dataset-2_walk_*.bvh.gz"))

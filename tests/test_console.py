@@ -9,7 +9,7 @@ from importlib import metadata
 import pytest
 from conftest import ROOT
 
-from moglow_eval import COMMANDS
+from moglow_eval.console import COMMANDS
 
 VERSION = metadata.version("moglow-eval")
 
@@ -22,7 +22,7 @@ def entry_point(name):
 
 
 def test_the_console_script_is_the_dispatcher():
-    from moglow_eval import main
+    from moglow_eval.console import main
 
     assert entry_point("moglow-eval") is main
 
@@ -55,7 +55,7 @@ def test_an_unknown_command_is_one_line(capsys):
     assert err.count("\n") == 1 and "unknown command 'bogus'" in err
 
 
-@pytest.mark.parametrize("module", ["rendering", "analysis.report", "analysis.plan", "generation.import_motion"])
+@pytest.mark.parametrize("module", ["rendering", "analysis.report", "analysis.plan", "generation.data.import_motion"])
 def test_python_m_keeps_working_and_answers_version(module):
     r = subprocess.run([sys.executable, "-m", module, "--version"], capture_output=True, text=True, cwd=ROOT)
     assert (r.returncode, r.stdout.strip()) == (0, f"moglow-eval {VERSION}")
@@ -63,12 +63,12 @@ def test_python_m_keeps_working_and_answers_version(module):
 
 COMMAND_MODULES = [
     "generation.make_stimuli",
-    "generation.train",
-    "generation.prepare_data",
-    "generation.import_motion",
-    "generation.sample",
-    "generation.pretrained",
-    "generation.demo_study",
+    "generation.training.train",
+    "generation.data.prepare",
+    "generation.data.import_motion",
+    "generation.sampling.sample",
+    "generation.sampling.pretrained",
+    "generation.own_study.demo_study",
     "rendering.__main__",
     "rating_app.__main__",
     "analysis.report",

@@ -166,7 +166,7 @@ def check(cmd):
         return parse_with(args[i + 1], args[i + 2 :])
     if name == "moglow-eval":
         if args == ["--version"]:
-            from moglow_eval import main
+            from moglow_eval.console import main
 
             assert main(["--version"]) == 0
             return

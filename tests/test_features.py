@@ -8,10 +8,10 @@ import pytest
 from conftest import BANDAI, PFNN
 from reference.bvh_fk import fk_positions
 
-from generation import skeleton
-from generation.bvh import BvhError, read_bvh
-from generation.features import SKELETON_MAPS, load_take, mirror, reverse, root_trajectory, to_features, to_world
-from generation.prepare_data import category_of, find_takes
+from generation.data.prepare import category_of, find_takes
+from generation.motion import skeleton
+from generation.motion.bvh import BvhError, read_bvh
+from generation.motion.features import SKELETON_MAPS, load_take, mirror, reverse, root_trajectory, to_features, to_world
 
 FPS = 20.0
 PFNN_TAKES = sorted((PFNN / "animations").glob("Locomotion*.bvh.gz")) + sorted(

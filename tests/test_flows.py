@@ -7,9 +7,8 @@ import torch
 from conftest import BANDAI
 from reference.moglow_naive import inverse_naive
 
-from generation.features import load_take, root_trajectory, rotate_y, to_features
-from generation.fl import FL
-from generation.flows import (
+from generation.models.fl import FL
+from generation.models.flows import (
     ActNorm,
     AffineCoupling,
     Chain,
@@ -20,9 +19,10 @@ from generation.flows import (
     SqueezeTime,
     set_net_precision,
 )
-from generation.mg_stream import MGStream
-from generation.moglow import LSTMNet, MoGlow
-from generation.skeleton import FEET
+from generation.models.mg_stream import MGStream
+from generation.models.moglow import LSTMNet, MoGlow
+from generation.motion.features import load_take, root_trajectory, rotate_y, to_features
+from generation.motion.skeleton import FEET
 
 C, CC, T, TAU = 6, 2, 4, 3
 

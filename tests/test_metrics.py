@@ -7,9 +7,7 @@ import numpy as np
 import pytest
 from conftest import DATA
 
-from generation import skeleton
-from generation.features import load_take, to_features
-from generation.metrics import (
+from generation.metrics.objective import (
     CONTACT_HEIGHT,
     bone_length_std,
     clip_metrics,
@@ -18,6 +16,8 @@ from generation.metrics import (
     jerk,
     style_retention,
 )
+from generation.motion import skeleton
+from generation.motion.features import load_take, to_features
 
 
 def takes(category, n, min_seconds=5.0):
@@ -106,8 +106,8 @@ def test_metrics_clip_metrics_keys_and_bad_shape(walks):
 
 
 def test_control_following_real_walks_follow_and_a_body_on_the_wrong_control_does_not(walks):
-    from generation.features import to_world
-    from generation.metrics import control_following
+    from generation.metrics.objective import control_following
+    from generation.motion.features import to_world
 
     windows = [to_features(j, 20.0) for j in walks]
     for x, c in windows:
@@ -131,7 +131,7 @@ def test_control_following_real_walks_follow_and_a_body_on_the_wrong_control_doe
 
 
 def test_frechet_distance_matches_the_closed_form_for_diagonal_gaussians():
-    from generation.motion_encoder import frechet_distance
+    from generation.metrics.fmd import frechet_distance
 
     mu_a, mu_b = np.array([0.0, 1.0, 2.0]), np.array([1.0, 1.0, 0.0])
     var_a, var_b = np.array([1.0, 4.0, 0.25]), np.array([9.0, 1.0, 0.25])
@@ -143,8 +143,8 @@ def test_frechet_distance_matches_the_closed_form_for_diagonal_gaussians():
 def test_shipped_motion_encoder_ranks_real_held_out_motion_first(small_dataset):
     """The FMD floor (held-out real motion) lies well below the same motion spoiled: frames shuffled in time,
     held still (a standing pose), or shaken by 2 cm of noise per frame."""
-    from generation.motion_encoder import MotionEncoder
-    from generation.pretrained import MOTION_ENCODER
+    from generation.metrics.fmd import MotionEncoder
+    from generation.sampling.pretrained import MOTION_ENCODER
 
     enc = MotionEncoder.load(MOTION_ENCODER)
     with np.load(small_dataset) as d:
@@ -160,7 +160,7 @@ def test_shipped_motion_encoder_ranks_real_held_out_motion_first(small_dataset):
 
 
 def test_late_stepping_sees_a_gait_that_dies_out(walks):
-    from generation.metrics import late_stepping
+    from generation.metrics.objective import late_stepping
 
     for j in walks:
         x = to_features(j, 20.0)[0]
@@ -177,12 +177,12 @@ def test_late_stepping_sees_a_gait_that_dies_out(walks):
 
 
 def test_style_retention_tells_a_take_kept_from_an_average_walker():
-    """generation.metrics.style_retention on the shipped held-out windows (styled takes): a take's own earlier
+    """generation.metrics.objective.style_retention on the shipped held-out windows (styled takes): a take's own earlier
     stretch keeps its style (NAT's first half against its second), another take of the same category does not,
     and neither does the category's average; a reference pool gives the same answer as the windows themselves
     when it holds the same windows."""
-    from generation.dataset import heldout_windows
-    from generation.pretrained import HELDOUT
+    from generation.data.dataset import heldout_windows
+    from generation.sampling.pretrained import HELDOUT
 
     x, takes, cats = heldout_windows(HELDOUT, ("x", "take", "labels"))
     half = x.shape[1] // 2

@@ -8,11 +8,11 @@ import pytest
 import torch
 from reference.moglow_naive import inverse_naive
 
-from core.clip import load_clip
-from generation.moglow import MoGlow
-from generation.sample import SampleError, load_model, mg_stream, sample_fl, sample_mg
-from generation.sample import main as sample_main
-from generation.train import load_config
+from generation.models.moglow import MoGlow
+from generation.sampling.sample import SampleError, load_model, mg_stream, sample_fl, sample_mg
+from generation.sampling.sample import main as sample_main
+from generation.training.train import load_config
+from moglow_eval.core.clip import load_clip
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
@@ -88,7 +88,7 @@ def test_fast_sampler_matches_plain_lstm_and_inverts_forward(tiny_runs, test_spl
 def test_bfloat16_sampler_follows_float32_and_repeats_its_bits(tiny_runs, test_split, layout):
     """precision="bfloat16" reads the big products in bfloat16 and keeps the rest float32: near the float32
     stream (not on its bits), and the same bits run after run."""
-    from generation.mg_stream import MGStream
+    from generation.models.mg_stream import MGStream
 
     model = load_model(last_ckpt(tiny_runs["mg"]))
     s, dev = test_split, model.x_mean.device
@@ -145,7 +145,9 @@ def test_sample_cli_writes_clips(tiny_runs, small_dataset, tmp_path, capsys):
             str(out),
         ]
         if kind == "mg":  # the real command line once; in-process for the rest (saves a torch start-up)
-            r = subprocess.run([sys.executable, "-m", "generation.sample", *args], capture_output=True, text=True)
+            r = subprocess.run(
+                [sys.executable, "-m", "generation.sampling.sample", *args], capture_output=True, text=True
+            )
             assert r.returncode == 0, r.stderr
         else:
             assert sample_main(args) == 0
@@ -180,7 +182,7 @@ def test_paper_configs_build_models_of_the_papers_size():
 
 def test_layout_is_a_fixed_choice_never_a_timing(tiny_runs, monkeypatch):
     """The two layouts round differently, so the choice must not depend on a timing (issue 15, item 5)."""
-    from generation.mg_stream import LAYOUTS, MGStream, cpu_vendor, default_layout
+    from generation.models.mg_stream import LAYOUTS, MGStream, cpu_vendor, default_layout
 
     model = load_model(last_ckpt(tiny_runs["mg"]))
     hist, hist_c = torch.zeros(3, model.tau, 63), torch.zeros(3, model.tau, 3)
@@ -205,7 +207,7 @@ def test_layout_is_a_fixed_choice_never_a_timing(tiny_runs, monkeypatch):
 def test_stream_frames_are_the_callers_own(tiny_runs, layout, streams):
     """A frame returned by step() is a tensor of its own: the next step(), which reuses the stream's buffers,
     leaves it as it was, and it matches the frame that a fresh stream gives for the same inputs."""
-    from generation.mg_stream import MGStream
+    from generation.models.mg_stream import MGStream
 
     model = load_model(last_ckpt(tiny_runs["mg"]))
     g = torch.Generator().manual_seed(1)
@@ -232,7 +234,7 @@ def test_two_sampling_processes_give_identical_bits(tiny_runs, small_dataset, tm
             [
                 sys.executable,
                 "-m",
-                "generation.sample",
+                "generation.sampling.sample",
                 "--checkpoint",
                 str(last_ckpt(tiny_runs[kind])),
                 "--data",

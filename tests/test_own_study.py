@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 from own_study_data import action_takes, make_study
 
-from core.clip import load_clip
-from generation import c2st
-from generation.catch_kinds import make_catch
+from generation.data.motion_files import read_motion
 from generation.make_stimuli import main as make_stimuli
-from generation.motion_files import read_motion
+from generation.metrics import c2st
+from generation.stimuli.catch_kinds import make_catch
+from moglow_eval.core.clip import load_clip
 from rendering.camera import framing_camera
 from rendering.raster import FrameDrawer
 
@@ -51,7 +51,7 @@ def test_bvh_with_fingers_and_npy_give_the_same_motion(tmp_path):
     # The same motion as a Z-up centimetre array with its skeleton in JSON reads back to the same positions.
     zup_cm = np.stack([bvh.joints[..., 0], -bvh.joints[..., 2], bvh.joints[..., 1]], -1) * 100
     np.save(tmp_path / "same.npy", zup_cm)
-    from generation.motion_files import Skeleton
+    from generation.data.motion_files import Skeleton
 
     skel = Skeleton.load(tmp_path / "skeleton.json")
     arr = read_motion(tmp_path / "same.npy", fps=20.0, skeleton=skel, source_fps=20.0)
@@ -133,7 +133,7 @@ def test_c2st_near_one_for_catch_clips(action_features, kind):
 
 
 def test_catch_kinds_are_clearly_broken(action_features):
-    from generation.metrics import acceleration, bone_length_std, jerk
+    from generation.metrics.objective import acceleration, bone_length_std, jerk
 
     joints, _, parents = next(iter(action_features.values()))
     jit, frz, swp = (make_catch(joints, k, seed=0) for k in ("jitter", "freeze", "swap"))
@@ -216,7 +216,7 @@ def test_skeleton_mismatch_names_both_files(tmp_path, capsys):
     root = study.parent
     from own_study_data import write_bvh
 
-    from generation.bvh import read_bvh
+    from generation.motion.bvh import read_bvh
 
     b = read_bvh(root / "sys_b" / "item01.bvh")
     keep = [j for j, n in enumerate(b.names) if n != "Lid_L"]
@@ -328,7 +328,7 @@ def test_users_own_catch_folder(tmp_path):
 
 
 def test_a_skeleton_whose_first_joint_is_not_the_root(tmp_path):
-    from generation.motion_files import MotionError, Skeleton
+    from generation.data.motion_files import MotionError, Skeleton
 
     (tmp_path / "s.json").write_text('{"names": ["Spine", "Hips"], "parents": ["Hips", null]}')
     np.save(tmp_path / "a.npy", np.tile(np.array([[0, 1.2, 0], [0, 0.9, 0]], np.float32), (30, 1, 1)) * [1, 1.5, 1])

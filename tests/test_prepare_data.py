@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 from conftest import BANDAI, DATA, small_take_names
 
-from generation import prepare_data, skeleton
-from generation.features import load_take, mirror, reverse, to_features
-from generation.prepare_data import find_takes, prepare, window_starts
+from generation.data import prepare as prepare_data
+from generation.data.prepare import find_takes, prepare, window_starts
+from generation.motion import skeleton
+from generation.motion.features import load_take, mirror, reverse, to_features
 
 SPLITS = ("train", "valid", "test")
 

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 import torch
 
-from generation import make_stimuli, pretrained
-from generation.sample import load_model, sample_fl, sample_mg
+from generation import make_stimuli
+from generation.sampling import pretrained
+from generation.sampling.sample import load_model, sample_fl, sample_mg
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
@@ -58,7 +59,7 @@ def test_shipped_models_keep_their_recorded_quality():
 def test_shipped_clips_have_the_actors_rigid_bones():
     """Issue 34's rigidity targets, on what make_stimuli ships: every bone's length std within a window at most
     1 mm, and its mean within 1% of the actor's (read from the window's real history). The models as sampled
-    fail both (MG's shins vary by about 24 mm); generation.rigid puts them onto the actor's bones."""
+    fail both (MG's shins vary by about 24 mm); generation.motion.rigid puts them onto the actor's bones."""
     now = pretrained.quality()
     for model in ("MG", "FL"):
         assert now[model]["bone_std_mm_max"] <= 1.0, (model, now[model])

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("core", "generation", "rendering", "rating_app", "analysis")
+PACKAGES = ("moglow_eval/core", "rendering", "rating_app", "analysis")
 
 
 def layout_rows():
@@ -40,9 +40,22 @@ def test_layout_names_only_what_exists(package):
     assert not gone, f"README Layout, {package}/: {gone} not in the tree"
 
 
+def test_layout_gives_generation_a_row_per_subpackage():
+    """generation/ is read by concept: a row of its own for each subpackage (what it holds, not its 30 modules),
+    and the generation/ row names what sits outside them."""
+    rows = layout_rows()
+    folder = ROOT / "generation"
+    subs = sorted(p.name for p in folder.iterdir() if (p / "__init__.py").is_file())
+    assert subs and all(f"generation/{s}" in rows for s in subs), [s for s in subs if f"generation/{s}" not in rows]
+    named = {r.removeprefix("generation/") for r in rows if r.startswith("generation/")}
+    assert named <= set(subs), sorted(named - set(subs))
+    top = [p.stem for p in folder.glob("*.py") if p.stem != "__init__"] + ["configs", "pretrained"]
+    assert all(f"`{m}" in rows["generation"] for m in top), top
+
+
 def test_layout_lists_every_tracked_folder():
     """Every top-level folder of the repository has its row (local outputs such as runs/ are not tracked)."""
-    tracked = {"core", "generation", "rendering", "rating_app", "analysis", "bench", "docs", "tests"}
+    tracked = {"moglow_eval/core", "generation", "rendering", "rating_app", "analysis", "bench", "docs", "tests"}
     assert all((ROOT / f).is_dir() for f in tracked)
     assert tracked <= set(layout_rows()), sorted(tracked - set(layout_rows()))
 

@@ -10,9 +10,9 @@ import pytest
 from conftest import BANDAI, ROOT
 from PIL import Image
 
-from core.clip import ClipError, save_clip
-from generation import skeleton
-from generation.features import load_take
+from generation.motion import skeleton
+from generation.motion.features import load_take
+from moglow_eval.core.clip import ClipError, save_clip
 from rendering import Camera, RenderError, render_clip
 from rendering.camera import camera_targets
 from rendering.raster import FrameDrawer, yuv_to_rgb

@@ -1,11 +1,12 @@
-"""generation.rigid: generated poses put onto the actor's bones (issue 34, item 1)."""
+"""generation.motion.rigid: generated poses put onto the actor's bones (issue 34, item 1)."""
 
 import numpy as np
 import pytest
 
-from generation import pretrained, rigid, skeleton
-from generation.dataset import read_arrays
-from generation.sample import load_model, sample_windows
+from generation.data.dataset import read_arrays
+from generation.motion import rigid, skeleton
+from generation.sampling import pretrained
+from generation.sampling.sample import load_model, sample_windows
 
 
 def lengths_of(x):

@@ -1,16 +1,23 @@
-"""The stance-foot loss (generation/stance.py): its geometry, its contacts, the mode it reads, and its gradient."""
+"""The stance-foot loss (training/stance.py): its geometry, its contacts, the mode it reads, and its gradient."""
 
 import numpy as np
 import pytest
 import torch
 from test_metrics import takes
 
-from generation import skeleton
-from generation.dataset import load_dataset
-from generation.features import load_take, rotate_y, to_features, to_world
-from generation.metrics import foot_skating
-from generation.sample import load_model
-from generation.stance import contacts, foot_world_steps, posture_offset, posture_spread, stance_loss, stance_speed
+from generation.data.dataset import load_dataset
+from generation.metrics.objective import foot_skating
+from generation.motion import skeleton
+from generation.motion.features import load_take, rotate_y, to_features, to_world
+from generation.sampling.sample import load_model
+from generation.training.stance import (
+    contacts,
+    foot_world_steps,
+    posture_offset,
+    posture_spread,
+    stance_loss,
+    stance_speed,
+)
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from conftest import BANDAI, DATA, ROOT
 
-from core.clip import load_clip
 from generation import make_stimuli
-from generation.features import root_trajectory
+from generation.motion.features import root_trajectory
+from moglow_eval.core.clip import load_clip
 
 CONDITION_NAMES = ("nat", "mg", "fl", "bad")
 
@@ -350,9 +350,9 @@ def test_stimuli_full_default_run(tmp_path):
     assert np.median(nat) < 0.1
 
 
-@pytest.mark.parametrize("module", ["generation.render_pool", "generation.make_stimuli"])
+@pytest.mark.parametrize("module", ["generation.stimuli.render_pool", "generation.make_stimuli"])
 def test_render_workers_load_no_torch(module):
-    """make_stimuli's render workers are spawned and import generation.render_pool: that import must not load
+    """make_stimuli's render workers are spawned and import generation.stimuli.render_pool: that import must not load
     torch (seconds and hundreds of MB per worker); nor must make_stimuli's own (--help, --export-items).
     Sampling and training import it where they run."""
     r = subprocess.run(

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from generation.dataset import DatasetError, batch_indices, category_weights
-from generation.train import (
+from generation.data.dataset import DatasetError, batch_indices, category_weights
+from generation.training.train import (
     TrainError,
     build_model,
     draw_batch,
@@ -270,7 +270,7 @@ def test_cli_errors_are_one_line(tmp_path, small_dataset, capsys):
         [
             sys.executable,
             "-m",
-            "generation.train",
+            "generation.training.train",
             "--model",
             "mg",
             "--config",
@@ -302,7 +302,7 @@ def test_ddp_two_cpu_processes_match_one(small_dataset, tmp_path):
 
     import torch
 
-    from generation.train import train
+    from generation.training.train import train
 
     steps = 12
     config = tmp_path / "mg_stance.json"
@@ -321,7 +321,7 @@ def test_ddp_two_cpu_processes_match_one(small_dataset, tmp_path):
             "--nproc_per_node",
             "2",
             "-m",
-            "generation.train",
+            "generation.training.train",
             "--model",
             "mg",
             "--config",
@@ -361,7 +361,7 @@ def test_core_share_leaves_a_busy_neighbour_its_core():
     the neighbour stops (issue 15, item 6)."""
     import time
 
-    from generation.core_share import CoreShare
+    from generation.training.threads import CoreShare
 
     quiet = CoreShare(interval=0.5, cores=2)
     time.sleep(1.0)
@@ -393,7 +393,7 @@ def test_core_share_leaves_a_busy_neighbour_its_core():
 
 def test_torch_threads_are_restored():
     """Library code sets torch's thread count only inside a block that restores it (CoreShare may change it)."""
-    from generation.core_share import torch_threads
+    from generation.training.threads import torch_threads
 
     before = torch.get_num_threads()
     with torch_threads(1):

@@ -43,7 +43,7 @@ class Prepared:
 
 
 class Design:
-    name = ""  # as core.study.DESIGNS spells it
+    name = ""  # as moglow_eval.core.study.DESIGNS spells it
     steps = 0  # progress-bar steps of one report (0: no bar)
 
     def detects(self, columns: set[str]) -> bool:

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from flask import current_app
 
-from core import study
+from moglow_eval.core import study
 
 from ..manifest import AppError
 from .acr import Acr
@@ -16,7 +16,7 @@ from .pairwise import Pairwise
 from .parallel import Parallel
 
 DESIGNS: dict[str, Design] = {d.name: d for d in (Acr(), Pairwise(), Parallel(), Appropriateness())}
-assert tuple(DESIGNS) == study.DESIGNS, "core.study.DESIGNS and the registry list the same designs"
+assert tuple(DESIGNS) == study.DESIGNS, "moglow_eval.core.study.DESIGNS and the registry list the same designs"
 
 __all__ = ["DESIGNS", "LABELS", "MAX_PAGE", "Design", "Unit", "build_units", "get", "of_app"]
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from sqlalchemy import bindparam, func, insert, or_, select
 
-from core import study
+from moglow_eval.core import study
 
 from ..assign import NO_TARGET, StudyFull, claim, cover, n_catch_slots, short_or_full, slots
 from ..bodies import int_field

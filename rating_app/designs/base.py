@@ -32,7 +32,7 @@ class Unit:
 class Design:
     """One test design. Class attributes name its facts; methods are its behaviour in each part of the app."""
 
-    name = ""  # as core.study.DESIGNS spells it: in the database, the API's "design" and the files
+    name = ""  # as moglow_eval.core.study.DESIGNS spells it: in the database, the API's "design" and the files
     answer_field = ""  # the JSON field that carries an answer (API, simulated crowd)
     answer_noun = "answer"  # what one answer is called in messages
     question = ""  # the page's default question
@@ -128,7 +128,7 @@ class Design:
         raise NotImplementedError
 
     def catch_failed(self, ids: list[str], conditions: list, value) -> bool:
-        """Whether an answer to a catch trial fails it, by the design's rule in core.study."""
+        """Whether an answer to a catch trial fails it, by the design's rule in moglow_eval.core.study."""
         raise NotImplementedError
 
     def records(self, head: dict, ids: list[str], shown, value, role: str) -> list[dict]:

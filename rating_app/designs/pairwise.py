@@ -11,7 +11,7 @@ from __future__ import annotations
 from sqlalchemy import insert, select
 from sqlalchemy.orm import aliased
 
-from core import study
+from moglow_eval.core import study
 
 from ..bodies import int_field
 from ..db import Clip, Preference, Rater, Trial

@@ -12,7 +12,7 @@ from __future__ import annotations
 from flask import abort
 from sqlalchemy import insert, select
 
-from core import study
+from moglow_eval.core import study
 
 from ..bodies import int_field
 from ..db import Clip, PageRating, Rater, Trial, TrialClip

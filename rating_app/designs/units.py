@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from sqlalchemy import func, select
 
-from core import study
+from moglow_eval.core import study
 
 from ..assign import NO_TARGET, claim, cover, n_catch_slots, short_or_full, slots
 from ..db import Clip, Trial

@@ -12,7 +12,7 @@ import time
 
 import requests
 
-from core import study
+from moglow_eval.core import study
 
 from ..designs import get
 from ..manifest import AppError

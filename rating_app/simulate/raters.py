@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from core import study
-from core.tables import read_metrics
+from moglow_eval.core import study
+from moglow_eval.core.tables import read_metrics
 
 from ..manifest import AppError, load_manifest
 

@@ -1,9 +1,9 @@
 """BVH forward kinematics the plain way (rotation matrices straight from the Euler channels): the reference for
-the product's quaternion path (generation.resample.local_quaternions + bvh.forward_kinematics)."""
+the product's quaternion path (generation.motion.resample.local_quaternions + bvh.forward_kinematics)."""
 
 import numpy as np
 
-from generation.bvh import AXIS, forward_kinematics
+from generation.motion.bvh import AXIS, forward_kinematics
 
 
 def _axis_rotations(axis, degrees):

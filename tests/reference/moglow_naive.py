@@ -1,8 +1,8 @@
-"""MoGlow's inverse computed the plain way: the reference for generation.mg_stream.MGStream."""
+"""MoGlow's inverse computed the plain way: the reference for generation.models.mg_stream.MGStream."""
 
 import torch
 
-from generation.flows import coupling_scale
+from generation.models.flows import coupling_scale
 
 
 @torch.no_grad()

@@ -1,4 +1,0 @@
-"""What every part shares and nothing else: the command-line error convention (`core.cli`).
-
-`core` imports nothing from the four parts (generation, rendering, rating_app, analysis); they import it.
-"""

@@ -1,0 +1,247 @@
+"""Any motion file as a clip of any skeleton: BVH of any hierarchy, joint-position arrays, or the project's clips.
+
+A study of your own motion (generation.own_study.builder) reads every condition's files through `read_motion`, which
+returns a `Motion`: world joint positions [T, J, 3] in metres with Y up, the skeleton (names, parents) and the
+frame rate, resampled to the study's rate. Three formats:
+
+- `ITEM.bvh` / `ITEM.bvh.gz`: every joint of the hierarchy by forward kinematics (rotations slerped when
+  resampled, so bones stay rigid), plus each End Site that sits away from its joint (a head top, a finger tip),
+  named `PARENT_end`. Fingers and face joints come along.
+- `ITEM.npy`: joint positions [T, J, 3], as GENEA 2022 and HumanML3D exchange them, with the skeleton given once
+  in a small JSON (`Skeleton.load`: names, and parents by index or by name); positions are resampled linearly.
+- `ITEM.npz`: a clip file (CONTRACTS §1).
+
+Units and the up axis are read from the study file or detected (`detect_units`, `detect_up`): the body's extent
+along the up axis is a person's height, 0.5-3 m, in whichever unit makes it so. Every problem is a MotionError
+naming the file.
+"""
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from moglow_eval.core.cli import UserError
+from moglow_eval.core.clip import MAX_JOINTS, ClipError, check_skeleton, load_clip
+
+from ..motion.bvh import BvhError, forward_kinematics, read_bvh
+from ..motion.features import SKELETON_MAPS, detect_skeleton
+from ..motion.resample import clean_fps, local_quaternions, quat_to_matrix, resample_local, resample_times
+from .systems import resample_positions
+
+EXTENSIONS = (".bvh.gz", ".bvh", ".npy", ".npz")
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}  # metres per unit
+UPS = ("y", "z")
+BODY_HEIGHT_M = (0.5, 3.0)  # what a body's extent along the up axis may be, in metres (a child sitting .. a giant)
+END_SITE_MIN = 1e-6  # End Sites closer than this to their joint (in file units) are not joints of their own
+
+
+class MotionError(UserError):
+    """An unreadable or implausible motion file; the message names the file."""
+
+
+@dataclass
+class Motion:
+    joints: np.ndarray  # [T, J, 3] float32, metres, Y up
+    names: list  # [J]
+    parents: np.ndarray  # [J] int64, -1 for roots
+    fps: float
+    path: str = ""
+
+    @property
+    def seconds(self):
+        return len(self.joints) / self.fps
+
+
+@dataclass
+class Skeleton:
+    """Joint names and parents for joint-position arrays (.npy), read once from the study's skeleton JSON."""
+
+    names: list
+    parents: np.ndarray
+
+    @classmethod
+    def load(cls, path):
+        """{"names": [...], "parents": [...]} with parents as indices (-1 for the root) or names (null for the
+        root); MotionError naming the file and key otherwise."""
+        path = Path(path)
+        try:
+            spec = json.loads(path.read_text(encoding="utf-8"))
+        except OSError as e:
+            raise MotionError(f"{path}: cannot read the skeleton file ({e.strerror or e})") from None
+        except (ValueError, UnicodeDecodeError) as e:
+            raise MotionError(f"{path}: not valid JSON ({e})") from None
+        if not isinstance(spec, dict) or not isinstance(spec.get("names"), list) or "parents" not in spec:
+            raise MotionError(f'{path}: expected {{"names": [...], "parents": [...]}}')
+        names = spec["names"]
+        if not names or not all(isinstance(n, str) and n for n in names) or len(set(names)) != len(names):
+            raise MotionError(f"{path}: 'names' must be distinct, non-empty strings")
+        if len(names) > MAX_JOINTS:
+            raise MotionError(f"{path}: {len(names)} joints is more than the limit of {MAX_JOINTS}")
+        raw = spec["parents"]
+        if not isinstance(raw, list) or len(raw) != len(names):
+            raise MotionError(f"{path}: 'parents' must be a list of {len(names)} entries, one per name")
+        index = {n: i for i, n in enumerate(names)}
+        parents = []
+        for name, p in zip(names, raw):
+            if p is None or (isinstance(p, int) and not isinstance(p, bool)):
+                parents.append(-1 if p is None else p)
+            elif isinstance(p, str) and p in index:
+                parents.append(index[p])
+            else:
+                raise MotionError(f"{path}: parent of {name!r} is {p!r}, not a joint name, an index or null")
+        try:
+            parents = check_skeleton(np.array(parents, dtype=np.int64), len(names), path)
+        except ClipError as e:
+            raise MotionError(str(e)) from None
+        return cls(list(names), parents)
+
+
+def motion_stem(path):
+    """The item a file stands for (its name without a motion extension), or None for other files."""
+    name = Path(path).name
+    for ext in EXTENSIONS:
+        if name.endswith(ext) and len(name) > len(ext):
+            return name[: -len(ext)]
+    return None
+
+
+# ---------------------------------------------------------------- units and axes
+def detect_up(joints):
+    """'y' or 'z': the axis along which the body is tallest, in the median frame (a standing, walking or
+    dancing body is taller than it is deep; arms spread wide tie at worst with a T-pose, decided by y)."""
+    extent = np.median(joints.max(axis=1) - joints.min(axis=1), axis=0)  # [3]
+    return "z" if extent[2] > 1.2 * extent[1] else "y"
+
+
+def to_y_up(joints, up):
+    """Z-up (x right, y forward, z up; right-handed) -> Y-up (x, z, -y): a rotation, so nothing is mirrored."""
+    if up == "y":
+        return joints
+    return np.stack([joints[..., 0], joints[..., 2], -joints[..., 1]], axis=-1)
+
+
+def body_height(joints):
+    """The body's height along Y in file units: the median over frames of its top minus its bottom."""
+    return float(np.median(joints[..., 1].max(axis=1) - joints[..., 1].min(axis=1)))
+
+
+def detect_units(height, where):
+    """Metres per unit such that `height` (file units) is a body's height; MotionError when none does."""
+    lo, hi = BODY_HEIGHT_M
+    for unit, scale in UNITS.items():
+        if lo <= height * scale <= hi:
+            return scale
+    raise MotionError(
+        f"{where}: the body is {height:.3g} units tall, which is no person's height in m, cm or mm; "
+        "set [skeleton] units in the study file"
+    )
+
+
+def check_height(joints_m, where):
+    """MotionError when a clip, in metres, is not the height of a body (absurd units)."""
+    h = body_height(joints_m)
+    lo, hi = BODY_HEIGHT_M
+    if not lo <= h <= hi:
+        raise MotionError(
+            f"{where}: the body is {h:.3g} m tall after unit conversion (expected {lo:g}-{hi:g} m); "
+            "check [skeleton] units"
+        )
+
+
+# ---------------------------------------------------------------- readers
+def _bvh_positions(path, fps):
+    """All joints (and End Sites away from their joint) of a BVH file [T, J, 3] in file units at `fps`."""
+    bvh = read_bvh(path)
+    if bvh.n_frames < 2:
+        raise MotionError(f"{path}: {bvh.n_frames} frame(s); a clip needs at least 2")
+    q, trans = local_quaternions(bvh)
+    q, trans = resample_local(q, trans, clean_fps(bvh.fps), fps)
+    pos, rot = forward_kinematics(bvh.parents, quat_to_matrix(q), trans)
+    names, parents = list(bvh.names), list(bvh.parents)
+    ends = [(p, off) for p, off in bvh.end_sites if np.linalg.norm(off) > END_SITE_MIN]
+    if ends:
+        tips = np.stack([pos[:, p] + np.einsum("tab,b->ta", rot[:, p], off) for p, off in ends], axis=1)
+        pos = np.concatenate([pos, tips], axis=1)
+        names += [f"{bvh.names[p]}_end" for p, _ in ends]
+        parents += [p for p, _ in ends]
+    known = _known_scale(names)
+    return pos, names, np.array(parents, dtype=np.int64), known
+
+
+def _known_scale(names):
+    """Metres per unit of a skeleton the project knows (Bandai-Namco: cm; CMU: 1/0.45 inch), else None."""
+    try:
+        return SKELETON_MAPS[detect_skeleton(names, "")]["scale"]
+    except BvhError:
+        return None
+
+
+def _npy_positions(path, skeleton, source_fps, fps):
+    if skeleton is None:
+        raise MotionError(f"{path}: a .npy file needs its skeleton: set [skeleton] file in the study file")
+    try:
+        arr = np.load(path, allow_pickle=False, mmap_mode="r")
+    except (OSError, ValueError) as e:
+        raise MotionError(f"{path}: not a readable .npy array ({e})") from None
+    if not isinstance(arr, np.ndarray) or arr.ndim != 3 or arr.shape[2] != 3:
+        raise MotionError(f"{path}: expected joint positions [T, J, 3], got shape {getattr(arr, 'shape', '?')}")
+    if arr.shape[1] != len(skeleton.names):
+        raise MotionError(f"{path}: {arr.shape[1]} joints, but the skeleton file names {len(skeleton.names)}")
+    if arr.dtype.kind not in "fiu":
+        raise MotionError(f"{path}: positions must be numbers, got {arr.dtype}")
+    if len(arr) < 2:
+        raise MotionError(f"{path}: {len(arr)} frame(s); a clip needs at least 2")
+    len(resample_times(len(arr), source_fps, fps))  # bounded before any allocation (MAX_FRAMES)
+    joints = np.asarray(arr, dtype=np.float64)
+    if not np.isfinite(joints).all():
+        raise MotionError(f"{path}: positions contain NaN or infinite values")
+    return resample_positions(joints, source_fps, fps), list(skeleton.names), skeleton.parents.copy(), None
+
+
+def _npz_positions(path, fps):
+    try:
+        clip = load_clip(path)
+    except ClipError as e:
+        raise MotionError(str(e)) from None
+    if len(clip["joints"]) < 2:
+        raise MotionError(f"{path}: {len(clip['joints'])} frame(s); a clip needs at least 2")
+    joints = resample_positions(np.asarray(clip["joints"], np.float64), float(clip["fps"]), fps)
+    return joints, list(clip["joint_names"]), np.asarray(clip["parents"], np.int64), 1.0  # clips are in metres
+
+
+def read_motion(path, fps, units="auto", up="auto", skeleton=None, source_fps=None):
+    """One motion file as a Motion at `fps` in metres, Y up.
+
+    units: "auto", a key of UNITS or metres per unit (a number); a clip .npz is always metres and Y up.
+    up: "auto", "y" or "z". skeleton: a Skeleton, needed for .npy. source_fps: the frame rate of .npy arrays.
+    """
+    path = Path(path)
+    try:
+        if path.name.endswith(".npz"):
+            joints, names, parents, scale = _npz_positions(path, fps)
+            up_axis = "y"
+        else:
+            if path.name.endswith(".npy"):
+                if source_fps is None:
+                    raise MotionError(f"{path}: a .npy file needs its frame rate: set [skeleton] fps in the study file")
+                joints, names, parents, scale = _npy_positions(path, skeleton, source_fps, fps)
+            else:
+                joints, names, parents, scale = _bvh_positions(path, fps)
+            up_axis = detect_up(joints) if up == "auto" else up
+    except (BvhError, ClipError) as e:
+        raise MotionError(str(e)) from None
+    if parents[0] != -1:
+        raise MotionError(f"{path}: the first joint ({names[0]}) must be the root (parent -1): the camera follows it")
+    joints = to_y_up(joints, up_axis)
+    if not np.isfinite(joints).all():
+        raise MotionError(f"{path}: positions contain NaN or infinite values")
+    if not path.name.endswith(".npz"):
+        if units != "auto":
+            scale = UNITS.get(units, units)
+        elif scale is None:
+            scale = detect_units(body_height(joints), path)
+    joints = joints * float(scale)
+    check_height(joints, path)
+    return Motion(joints.astype(np.float32), names, np.asarray(parents, np.int64), float(fps), str(path))

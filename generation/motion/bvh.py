@@ -1,0 +1,346 @@
+"""BVH motion-capture files: a reader for any hierarchy, and forward kinematics.
+
+Reads `.bvh` and `.bvh.gz`; any number of joints, 3 or 6 (or any subset of the six) channels per joint,
+any rotation order per joint, End Sites, tabs and CRLF line ends. The MOTION block is parsed in one
+numpy call over the whole text (fast path); only when that finds something wrong is the block walked
+line by line to name the offending line. Errors are `BvhError("FILE:LINE: message")`.
+
+Conventions (the usual BVH ones): rotation channels are intrinsic rotations applied in the listed
+order, so `Zrotation Xrotation Yrotation` gives R = Rz @ Rx @ Ry, angles in degrees; a joint's
+position channels give its local translation and replace its OFFSET (CONTRACTS.md §1).
+The product turns channels into rotations as quaternions (resample.local_quaternions, which resamples them);
+tests/reference/bvh_fk.py does it with matrices, the plain way, as the reference.
+"""
+
+import gzip
+import io
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from moglow_eval.core.cli import UserError
+from moglow_eval.core.clip import MAX_FPS, MIN_FPS
+
+CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
+AXIS = {"X": 0, "Y": 1, "Z": 2}  # a channel name's first letter -> coordinate axis
+# Beyond any real channel value (1e9 cm is 10,000 km); larger ones overflow forward kinematics.
+MAX_VALUE = 1e9
+
+
+class BvhError(UserError):
+    """A malformed BVH file; the message reads `FILE:LINE: what is wrong`."""
+
+
+@dataclass
+class Bvh:
+    names: list  # joint names [J] (End Sites are not joints)
+    parents: np.ndarray  # int [J], -1 for the root; parents come before their children
+    offsets: np.ndarray  # float [J, 3] OFFSET of each joint, file units
+    channels: list  # per joint, its channel names in file order
+    motion: np.ndarray  # float [T, C] the MOTION block, C = total channel count
+    frame_time: float  # seconds per frame
+    end_sites: list = field(default_factory=list)  # (parent joint index, offset [3]) per End Site
+    path: str = ""
+
+    @property
+    def n_frames(self):
+        return self.motion.shape[0]
+
+    @property
+    def fps(self):
+        return 1.0 / self.frame_time
+
+    def channel_columns(self):
+        """First motion column of each joint (its channels follow consecutively)."""
+        counts = [len(c) for c in self.channels]
+        return np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+
+
+def _read_bytes(path):
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as e:
+        raise BvhError(f"{path}:0: cannot read file ({e.strerror or e})") from None
+    if raw[:2] == b"\x1f\x8b":
+        try:
+            raw = gzip.decompress(raw)
+        except (OSError, EOFError) as e:
+            raise BvhError(f"{path}:0: corrupt gzip data ({e})") from None
+    if raw[:3] == b"\xef\xbb\xbf":  # UTF-8 byte-order mark
+        raw = raw[3:]
+    return raw
+
+
+_MOTION = re.compile(rb"^[ \t]*MOTION(?![^\s])", re.M)
+
+
+def _number(tok, where):
+    try:
+        value = float(tok)
+    except ValueError:
+        raise BvhError(f"{where}: expected a number, got {tok!r}") from None
+    if not abs(value) <= MAX_VALUE:
+        raise BvhError(f"{where}: number out of range (non-finite or beyond ±{MAX_VALUE:g}), got {tok!r}")
+    return value
+
+
+def read_bvh(path):
+    """Read a BVH file (plain or gzip) into a `Bvh`; raise `BvhError` naming file and line."""
+    raw = _read_bytes(path)
+    name = str(path)
+    # Only the header is split into lines; the MOTION block stays one buffer for the numeric parse.
+    m = _MOTION.search(raw)
+    if m is None:
+        _no_motion(raw, name)
+    lines = raw[: m.start()].decode("utf-8", errors="replace").split("\n")
+    motion_line = len(lines) - 1  # 0-based index of the MOTION line
+    h = _Hierarchy(lines[:motion_line], motion_line, name)
+    n_channels = sum(len(c) for c in h.channels)
+    cursor, line_no, n_frames, frames_line, dt = _motion_header(raw, m.end(), motion_line + 1, name)
+    block = raw[cursor + 1 :] if cursor >= 0 else b""
+    motion = _parse_motion(block, line_no + 1, n_frames, n_channels, frames_line, name)
+    return Bvh(
+        names=h.names,
+        parents=np.array(h.parents, dtype=np.int64),
+        offsets=np.array(h.offsets),
+        channels=h.channels,
+        motion=motion,
+        frame_time=dt,
+        end_sites=h.end_sites,
+        path=name,
+    )
+
+
+def _no_motion(raw, name):
+    """The error for a file without a MOTION line: empty, not BVH at all, or truncated."""
+    lines = raw.decode("utf-8", errors="replace").split("\n")
+    last = len(lines) - (1 if lines[-1].strip() == "" else 0)
+    if not "".join(lines).strip():
+        raise BvhError(f"{name}:1: empty file")
+    if lines[0].split()[:1] != ["HIERARCHY"]:
+        raise BvhError(f"{name}:1: expected 'HIERARCHY' at the start of the file")
+    raise BvhError(f"{name}:{last}: no MOTION section (file truncated?)")
+
+
+class _Hierarchy:
+    """The HIERARCHY section parsed from its lines: names, parents, offsets, channels and end sites.
+
+    The header is read as a token stream with line numbers, so layout (braces on their own line or not) is
+    free; each keyword has its own method.
+    """
+
+    def __init__(self, lines, motion_line, name):
+        self.name, self.motion_line = name, motion_line
+        self.tokens = [(t, i + 1) for i, line in enumerate(lines) for t in line.split()]
+        if not self.tokens or self.tokens[0][0] != "HIERARCHY":
+            at = self.tokens[0][1] if self.tokens else 1
+            raise BvhError(f"{name}:{at}: expected 'HIERARCHY' at the start of the file")
+        self.names, self.parents, self.offsets, self.channels, self.end_sites = [], [], [], [], []
+        self.stack = []  # indices of open joints; None for an open End Site
+        self.pos = 1
+        keywords = {
+            "ROOT": self._joint,
+            "JOINT": self._joint,
+            "End": self._end_site,
+            "OFFSET": self._offset,
+            "CHANNELS": self._channels,
+            "}": self._close,
+        }
+        while self.pos < len(self.tokens):
+            tok, ln = self._take("a joint")
+            where = f"{name}:{ln}"
+            if tok not in keywords:
+                raise BvhError(f"{where}: unexpected {tok!r} in HIERARCHY")
+            keywords[tok](tok, where)
+        self._check_complete()
+
+    def _take(self, what):
+        if self.pos >= len(self.tokens):
+            raise BvhError(f"{self.name}:{self.motion_line + 1}: hierarchy ends early, expected {what}")
+        self.pos += 1
+        return self.tokens[self.pos - 1]
+
+    def _open_brace(self, after):
+        brace, bl = self._take("'{'")
+        if brace != "{":
+            raise BvhError(f"{self.name}:{bl}: expected '{{' after {after}, got {brace!r}")
+
+    def _joint(self, tok, where):
+        if tok == "ROOT" and self.stack:
+            raise BvhError(f"{where}: ROOT inside another joint")
+        if tok == "JOINT" and (not self.stack or self.stack[-1] is None):
+            raise BvhError(f"{where}: JOINT outside a joint")
+        jname, _ = self._take("a joint name")
+        self._open_brace(f"{tok} {jname}")
+        self.parents.append(self.stack[-1] if self.stack else -1)
+        self.names.append(jname)
+        self.offsets.append(None)
+        self.channels.append([])
+        self.stack.append(len(self.names) - 1)
+
+    def _end_site(self, tok, where):
+        site, sl = self._take("'Site'")
+        if site != "Site" or not self.stack or self.stack[-1] is None:
+            raise BvhError(f"{self.name}:{sl}: misplaced End Site")
+        self._open_brace("End Site")
+        self.end_sites.append([self.stack[-1], None])
+        self.stack.append(None)
+
+    def _offset(self, tok, where):
+        if not self.stack:
+            raise BvhError(f"{where}: OFFSET outside a joint")
+        vals = np.array([_number(self._take("three OFFSET values")[0], where) for _ in range(3)])
+        if self.stack[-1] is None:
+            self.end_sites[-1][1] = vals
+        else:
+            self.offsets[self.stack[-1]] = vals
+
+    def _channels(self, tok, where):
+        if not self.stack or self.stack[-1] is None:
+            raise BvhError(f"{where}: CHANNELS outside a joint")
+        n_str, _ = self._take("a channel count")
+        if not n_str.isdigit():
+            raise BvhError(f"{where}: channel count must be an integer, got {n_str!r}")
+        chans = []
+        for _ in range(int(n_str)):
+            ch, cl = self._take("a channel name")
+            if ch not in CHANNEL_NAMES:
+                raise BvhError(
+                    f"{self.name}:{cl}: unknown channel name {ch!r} (expected one of {', '.join(CHANNEL_NAMES)})"
+                )
+            chans.append(ch)
+        self.channels[self.stack[-1]] = chans
+
+    def _close(self, tok, where):
+        if not self.stack:
+            raise BvhError(f"{where}: unmatched '}}'")
+        self.stack.pop()
+
+    def _check_complete(self):
+        at = f"{self.name}:{self.motion_line + 1}"
+        if self.stack:
+            raise BvhError(f"{at}: hierarchy not closed ({len(self.stack)} '{{' left open)")
+        if not self.names:
+            raise BvhError(f"{at}: hierarchy has no joints")
+        for j, off in enumerate(self.offsets):
+            if off is None:
+                raise BvhError(f"{self.name}: joint {self.names[j]!r} has no OFFSET")
+        self.end_sites = [(p, off if off is not None else np.zeros(3)) for p, off in self.end_sites]
+
+
+def _motion_header(raw, start, line_no, name):
+    """The "Frames: N" and "Frame Time: dt" lines after the MOTION keyword (ending at byte `start`, line
+    `line_no`) -> (cursor: the newline before the first frame, or -1; its line number; N; the Frames line; dt)."""
+    cursor = raw.find(b"\n", start)
+    header = {}
+    while len(header) < 2:
+        if cursor < 0:
+            raise BvhError(
+                f"{name}:{line_no}: MOTION block truncated before "
+                f"{'Frames' if 'frames' not in header else 'Frame Time'}"
+            )
+        end = raw.find(b"\n", cursor + 1)
+        text = raw[cursor + 1 : end if end >= 0 else len(raw)].decode("utf-8", errors="replace")
+        cursor, line_no = end, line_no + 1
+        parts = text.split()
+        if parts:
+            _motion_header_line(parts, text, header, f"{name}:{line_no}", line_no)
+    n_frames, frames_line = header["frames"]
+    return cursor, line_no, n_frames, frames_line, header["dt"]
+
+
+def _motion_header_line(parts, text, header, where, line_no):
+    """One non-blank MOTION header line into `header` ("frames": (N, line), then "dt")."""
+    if parts[0] == "Frames:" and len(parts) == 2 and "frames" not in header:
+        if not parts[1].isdigit():
+            raise BvhError(f"{where}: Frames must be a non-negative integer, got {parts[1]!r}")
+        header["frames"] = (int(parts[1]), line_no)
+    elif parts[:2] == ["Frame", "Time:"] and len(parts) == 3 and "frames" in header:
+        dt = _number(parts[2], where)
+        if not 1 / MAX_FPS <= dt <= 1 / MIN_FPS:  # also false for nan and inf
+            raise BvhError(
+                f"{where}: Frame Time must be between {1 / MAX_FPS:g} and "
+                f"{1 / MIN_FPS:g} s ({MIN_FPS:g}-{MAX_FPS:g} fps), got {parts[2]!r}"
+            )
+        header["dt"] = dt
+    else:
+        want = "'Frames: N'" if "frames" not in header else "'Frame Time: SECONDS'"
+        raise BvhError(f"{where}: expected {want}, got {text.strip()[:60]!r}")
+
+
+def _parse_motion(block, first, n_frames, n_channels, frames_line, name):
+    """Parse the bytes `block` (starting at line `first`) as n_frames rows of n_channels numbers.
+
+    Vectorised: token counts per line from byte classes, then one np.loadtxt over the block;
+    a line-by-line walk happens only to name the line of a non-numeric value.
+    """
+    b = np.frombuffer(block, dtype=np.uint8)
+    # A token starts at a non-space byte after a space byte (all bytes <= 32 count as space).
+    space = b <= 32
+    starts = np.empty(len(b), dtype=np.uint8)
+    if len(b):
+        starts[0] = not space[0]
+        np.greater(space[:-1], space[1:], out=starts[1:].view(bool))
+    line_begin = np.concatenate([[0], np.flatnonzero(b == 10) + 1])
+    line_begin = line_begin[line_begin < len(b)]
+    per_line = np.add.reduceat(starts, line_begin, dtype=np.int64) if len(b) else np.zeros(0, np.int64)
+    nonempty = np.flatnonzero(per_line)
+    bad = nonempty[per_line[nonempty] != n_channels]
+    if len(bad):
+        k = bad[0]
+        got = per_line[k]
+        what = "truncated frame" if k == nonempty[-1] and got < n_channels else "wrong number of values"
+        raise BvhError(f"{name}:{first + k}: {what}: expected {n_channels} values, got {got}")
+    if len(nonempty) != n_frames:
+        if len(nonempty) < n_frames:
+            raise BvhError(
+                f"{name}:{frames_line}: MOTION block truncated: Frames says {n_frames}, "
+                f"the file has {len(nonempty)} frame lines"
+            )
+        raise BvhError(
+            f"{name}:{first + nonempty[n_frames]}: more frame lines than Frames: {n_frames} says "
+            f"({len(nonempty)} lines)"
+        )
+    if n_frames == 0 or n_channels == 0:
+        return np.zeros((n_frames, n_channels))
+    try:
+        # numpy's C text reader: bit-identical to float() and faster than np.fromstring
+        values = np.loadtxt(io.BytesIO(block), dtype=np.float64, comments=None, ndmin=2).ravel()
+    except ValueError:
+        values = None
+    if values is None or values.size != n_frames * n_channels:
+        _find_bad_number(block.decode("utf-8", errors="replace").split("\n"), first, name)
+        raise BvhError(f"{name}:{first}: MOTION block could not be parsed as numbers")
+    if not np.all(np.abs(values) <= MAX_VALUE):  # also catches nan and inf
+        k = int(np.flatnonzero(~(np.abs(values) <= MAX_VALUE))[0]) // n_channels
+        raise BvhError(
+            f"{name}:{first + nonempty[k]}: value out of range (non-finite or beyond ±{MAX_VALUE:g}) in frame {k}"
+        )
+    return values.reshape(n_frames, n_channels)
+
+
+def _find_bad_number(lines, first, name):
+    for k, line in enumerate(lines):
+        for tok in line.split():
+            try:
+                float(tok)
+            except ValueError:
+                raise BvhError(f"{name}:{first + k}: non-numeric value {tok[:40]!r}") from None
+
+
+def forward_kinematics(parents, rot, trans):
+    """Global positions [T, J, 3] and rotations [T, J, 3, 3] from local ones (parents before children)."""
+    T, J = trans.shape[:2]
+    g_rot = np.empty_like(rot)
+    g_pos = np.empty_like(trans)
+    for j, p in enumerate(parents):
+        if p < 0:
+            g_rot[:, j] = rot[:, j]
+            g_pos[:, j] = trans[:, j]
+        else:
+            g_pos[:, j] = g_pos[:, p] + np.einsum("tab,tb->ta", g_rot[:, p], trans[:, j])
+            g_rot[:, j] = g_rot[:, p] @ rot[:, j]
+    return g_pos, g_rot

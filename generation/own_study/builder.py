@@ -1,0 +1,441 @@
+"""A study of your own motion: a stimulus folder (CONTRACTS §4) from one folder of motion files per condition.
+
+    python -m generation.make_stimuli --study STUDY.toml --out DIR
+
+The study file (generation.own_study.study_file, CONTRACTS §10) names the conditions' folders and the reference, the
+condition that holds the real motion. Items are the reference folder's file stems; every other condition must
+hold a file of the same stem (BVH of any skeleton, a .npy joint-position array, or a clip .npz:
+generation.data.motion_files). The pipeline:
+
+1. Read and check every file before anything is written: the same skeleton across an item's conditions, no NaN,
+   plausible units, long enough. Each problem is one line naming the file (exit 2) and leaves no manifest.
+2. Cut each item's clips to the study's length_s, or else to the item's shortest clip; place each clip with its
+   root at the origin (and facing +Z, where the joint names tell left from right).
+3. Items: n_training familiarisation items taken out of the test items; n catch items drawn from the items (a
+   broken clip is its own stimulus, so a catch item may be a test item too). Each catch item gets a catch clip,
+   condition BAD: the user's own (`[catch] folder`) or one the tool makes (`[catch] make`,
+   generation.stimuli.catch_kinds, the kinds dealt in turn), plus copies of the item's clips in every condition with
+   role catch (the pairwise and parallel designs show BAD beside the reference). The reference condition is
+   written as NAT, the role it plays in the app and the analysis.
+4. Render with one camera per item that frames all its clips (rendering.camera.framing_camera), every bone of
+   the skeleton drawn, finger and face bones thinner; pad and stamp every video alike.
+5. metrics.csv (jerk, acceleration, bone-length variation, foot skating where feet are found), c2st.csv (the
+   classifier two-sample test of each condition against the reference, generation.metrics.c2st), items.csv, and
+   manifest.csv last.
+"""
+
+import logging
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from moglow_eval.core import study
+from moglow_eval.core.clip import save_clip
+from moglow_eval.core.tables import C2ST_COLUMNS
+from rendering.camera import framing_camera
+
+from ..data.motion_files import Skeleton, motion_stem, read_motion
+from ..metrics import c2st
+from ..metrics.objective import any_clip_metrics, find_feet
+from ..motion.features import rotate_y
+from ..stimuli.catch_kinds import make_catch
+from ..stimuli.files import StimuliError, clip_files, manifest_row, prepare_out, summary_text, write_csv, write_tables
+from ..stimuli.render_pool import render_stimuli
+from .study_file import check_joint_names
+
+log = logging.getLogger(__name__)
+TEST, CATCH, TRAINING = study.ROLES
+MIN_SECONDS = 1.0  # a clip shorter than this shows nothing a rater can judge
+ITEM_COLUMNS = ["item", "role", "frames", "fps", "catch"]
+
+
+# ---------------------------------------------------------------- finding the files
+def folder_files(name, folder):
+    """{stem: path} of the motion files in a condition's folder; StimuliError for an empty folder or a stem
+    given twice."""
+    found = {}
+    for p in sorted(Path(folder).iterdir()):
+        stem = motion_stem(p)
+        if stem is None or not p.is_file():
+            continue
+        if stem in found:
+            raise StimuliError(f"{folder}: two files for item {stem}: {found[stem].name} and {p.name}")
+        found[stem] = p
+    if not found:
+        raise StimuliError(f"{folder}: condition {name} has no motion files (.bvh, .bvh.gz, .npy or .npz)")
+    return found
+
+
+def match_items(spec):
+    """{condition: {item: path}} with every condition holding exactly the reference's items."""
+    files = {name: folder_files(name, folder) for name, folder in spec.conditions.items()}
+    items = files[spec.reference]
+    for name, found in files.items():
+        missing = [i for i in items if i not in found]
+        if missing:
+            raise StimuliError(
+                f"{spec.conditions[name]}: no file for item {missing[0]} of the reference "
+                f"({items[missing[0]].name}) in condition {name}"
+            )
+        extra = [i for i in found if i not in items]
+        if extra:
+            raise StimuliError(
+                f"{found[extra[0]]}: item {extra[0]} is not in the reference folder {spec.conditions[spec.reference]}"
+            )
+    return files
+
+
+# ---------------------------------------------------------------- reading and checking
+def read_all(spec, files, progress):
+    """{condition: {item: Motion}}, every file read and checked, skeletons matched across each item."""
+    skeleton = Skeleton.load(spec.skeleton_file) if spec.skeleton_file else None
+    read = dict(fps=spec.fps, units=spec.units, up=spec.up, skeleton=skeleton, source_fps=spec.source_fps)
+    jobs = [(name, item, path) for name, found in files.items() for item, path in found.items()]
+    motions = {name: {} for name in files}
+    with tqdm(jobs, desc="read", unit="file", file=sys.stderr, disable=not progress) as bar:
+        for k, (name, item, path) in enumerate(bar):
+            m = read_motion(path, **read)
+            if k == 0:
+                check_joint_names(spec, m.names, path)
+            if m.seconds < MIN_SECONDS:
+                raise StimuliError(f"{path}: {m.seconds:.2f} s long; a clip needs at least {MIN_SECONDS:g} s")
+            if spec.length_s and m.seconds + 0.5 / spec.fps < spec.length_s:
+                raise StimuliError(
+                    f"{path}: {m.seconds:.2f} s long, shorter than the study's length_s {spec.length_s:g}"
+                )
+            motions[name][item] = m
+    ref = motions[spec.reference]
+    for name, by_item in motions.items():
+        for item, m in by_item.items():
+            r = ref[item]
+            if m.names != r.names or not np.array_equal(m.parents, r.parents):
+                raise StimuliError(
+                    f"{m.path}: skeleton ({_skeleton_text(m)}) differs from {r.path} ({_skeleton_text(r)})"
+                )
+    return motions
+
+
+def _skeleton_text(m):
+    return f"{len(m.names)} joints: {', '.join(m.names[:3])}, ..."
+
+
+def cut_items(motions, spec):
+    """Every clip of an item cut to length_s, or to the item's shortest clip."""
+    for item in motions[study.NATURAL]:
+        clips = [by_item[item] for by_item in motions.values()]
+        n = int(round(spec.length_s * spec.fps)) if spec.length_s else min(len(m.joints) for m in clips)
+        for m in clips:
+            m.joints = m.joints[:n]
+
+
+def place(joints, names):
+    """A clip with its root at the origin on the floor at frame 0, turned to face +Z where the names tell the
+    left joints from the right (else only moved): no start position or heading tells a condition."""
+    from moglow_eval.core.skeleton_names import side
+
+    out = np.asarray(joints, dtype=np.float64).copy()
+    out[..., [0, 2]] -= out[0, 0, [0, 2]]
+    left = [j for j, n in enumerate(names) if side(n) == "left"]
+    right = [j for j, n in enumerate(names) if side(n) == "right"]
+    if left and right:
+        across = out[0, left].mean(0) - out[0, right].mean(0)
+        yaw = np.arctan2(-across[2], across[0])  # facing = across x up, as features.root_trajectory
+        out = rotate_y(out, -yaw)
+    return out.astype(np.float32)
+
+
+# ---------------------------------------------------------------- sound
+AUDIO_EXTENSIONS = (".wav", ".flac")
+
+
+def prepare_audio(spec, motions, folder):
+    """{item: path of its normalised samples (.npy, float32 at rendering.audio.RATE)} for a study with [audio]:
+    one ITEM.wav or ITEM.flac per item, at least as long as the item's clips and not silent over them, the whole
+    set normalised to the study's loudness over what is played. StimuliError naming the file otherwise."""
+    from rendering import audio
+    from rendering.errors import RenderError
+
+    if spec.audio_folder is None:
+        return {}
+    files = {}
+    for p in sorted(spec.audio_folder.iterdir()):
+        if p.suffix.lower() in AUDIO_EXTENSIONS and p.is_file():
+            files[p.stem] = p
+    out = {}
+    for item, m in motions[study.NATURAL].items():
+        path = files.get(item)
+        if path is None:
+            raise StimuliError(f"{spec.audio_folder}: no audio for item {item} (expected {item}.wav or {item}.flac)")
+        try:
+            samples = audio.read_audio(path)
+        except RenderError as e:
+            raise StimuliError(str(e)) from None
+        need = len(m.joints) / spec.fps
+        have = len(samples) / audio.RATE
+        if have + 0.5 / spec.fps < need:
+            raise StimuliError(f"{path}: the audio is {have:.2f} s, shorter than the item's clips ({need:.2f} s)")
+        span = samples[: int(round(need * audio.RATE))].astype(np.float32)
+        if audio.rms_dbfs(span) < audio.SILENCE_DBFS:
+            raise StimuliError(f"{path}: silent over the clip's {need:.2f} s, where the study needs speech or music")
+        out[item] = folder / f"{item}.npy"
+        np.save(out[item], audio.normalise(span, spec.loudness))
+    return out
+
+
+AUDIO_CHECK_SAMPLES = 6  # spoken digit sequences for the raters' audio check (ITU-T P.808 style)
+AUDIO_CHECK_DIGITS = 3
+AUDIO_CHECK_COLUMNS = ["file", "answer"]
+_DIGIT_WORDS = ("zero", "one", "two", "three", "four", "five", "six", "seven", "eight", "nine")
+
+
+def write_audio_check(out, spec):
+    """audio_check.csv and audio_check/*.wav: AUDIO_CHECK_SAMPLES sequences of AUDIO_CHECK_DIGITS spoken digits,
+    synthesised with Debian's espeak-ng and normalised to the study's loudness. The app plays one to each rater
+    with sound, who types the digits (CONTRACTS §5); the file names are random, and only the app reads the
+    answers."""
+    import shutil
+    import subprocess
+    import wave
+
+    from rendering import audio
+
+    if shutil.which("espeak-ng") is None:
+        raise StimuliError("the raters' audio check is spoken by espeak-ng: install it (apt-get install espeak-ng)")
+    rng = np.random.default_rng(spec.seed + 104729)
+    folder = Path(out) / "audio_check"
+    folder.mkdir(exist_ok=True)
+    rows, taken = [], set()
+    for _ in range(AUDIO_CHECK_SAMPLES):
+        digits = "".join(str(d) for d in rng.integers(0, 10, AUDIO_CHECK_DIGITS))
+        words = ", ".join(_DIGIT_WORDS[int(d)] for d in digits)
+        raw = subprocess.run(["espeak-ng", "--stdout", "-s", "140", words], capture_output=True, check=True).stdout
+        tmp = folder / "tmp.wav"
+        tmp.write_bytes(raw)
+        samples = audio.normalise(audio.read_audio(tmp), spec.loudness)
+        tmp.unlink()
+        name = f"{study.new_clip_id(taken)}.wav"
+        with wave.open(str(folder / name), "wb") as w:
+            w.setnchannels(samples.shape[1])
+            w.setsampwidth(2)
+            w.setframerate(audio.RATE)
+            w.writeframes((np.clip(samples, -1, 1) * 32767).astype("<i2").tobytes())
+        rows.append(dict(file=f"audio_check/{name}", answer=digits))
+    write_csv(Path(out) / "audio_check.csv", AUDIO_CHECK_COLUMNS, rows)
+
+
+# ---------------------------------------------------------------- items and clips
+def assign_roles(items, spec, n_catch):
+    """({item: role}, catch items in order): n_training items for familiarisation, the rest test items; catch
+    items drawn from all items (the user's catch folder's stems, when given)."""
+    rng = np.random.default_rng(spec.seed)
+    order = [items[i] for i in rng.permutation(len(items))]
+    if spec.n_training >= len(items):
+        raise StimuliError(f"{spec.path}: n_training {spec.n_training} leaves no test item of {len(items)}")
+    roles = {i: (TRAINING if k < spec.n_training else TEST) for k, i in enumerate(order)}
+    if n_catch > len(items):
+        raise StimuliError(f"{spec.path}: [catch] n {n_catch} is more than the {len(items)} items")
+    catch = [i for i in order[spec.n_training :] + order[: spec.n_training]][:n_catch]
+    return roles, sorted(catch, key=order.index)
+
+
+def catch_clips(spec, motions, catch_items, progress):
+    """{item: (joints, kind)} of the BAD clip of each catch item: the user's own file, or one the tool makes."""
+    ref = motions[study.NATURAL]
+    out = {}
+    if spec.catch_folder:
+        files = folder_files(study.CATCH, spec.catch_folder)
+        for item in catch_items:
+            m = read_motion(
+                files[item],
+                spec.fps,
+                spec.units,
+                spec.up,
+                source_fps=spec.source_fps,
+                skeleton=Skeleton.load(spec.skeleton_file) if spec.skeleton_file else None,
+            )
+            if m.names != ref[item].names:
+                raise StimuliError(f"{m.path}: skeleton differs from {ref[item].path}")
+            n = len(ref[item].joints)
+            if len(m.joints) < n:
+                raise StimuliError(f"{m.path}: {m.seconds:.2f} s long, shorter than the item's other clips")
+            out[item] = (m.joints[:n], "own")
+        return out
+    for k, item in enumerate(catch_items):
+        kind = spec.catch_make[k % len(spec.catch_make)]
+        out[item] = (make_catch(ref[item].joints, kind, spec.seed * 1000 + k), kind)
+    return out
+
+
+def _catch_items(spec, items):
+    """The catch items: the stems of the user's catch folder that are items (all of them), else [catch] n."""
+    if not spec.catch_folder:
+        return spec.catch_n, None
+    files = folder_files(study.CATCH, spec.catch_folder)
+    unknown = [s for s in files if s not in items]
+    if unknown:
+        raise StimuliError(
+            f"{files[unknown[0]]}: catch clip of item {unknown[0]}, which is not in the reference folder"
+        )
+    return len(files), sorted(files)
+
+
+@dataclass
+class StudyClip:
+    condition: str
+    item: str  # the item it stands for (whose sound it carries)
+    role: str
+    joints: np.ndarray
+    note: str = ""  # the manifest's seed column: the catch kind of a BAD clip
+    motion_item: str = ""  # appropriateness: the other item whose motion a mismatched clip shows
+
+
+def mismatch_partners(motions, items, seed):
+    """{item: partner}: for each item, another item whose motion is shown with its speech in the appropriateness
+    design. Seeded; never the item itself; a partner at least as long as the item where one exists (its motion is
+    cut to the item's length), else the longest other item (its last pose held to the item's length)."""
+    rng = np.random.default_rng(seed + 7919)
+    length = {i: len(motions[study.NATURAL][i].joints) for i in items}
+    out = {}
+    for i in items:
+        longer = [j for j in items if j != i and length[j] >= length[i]]
+        out[i] = str(rng.choice(longer)) if longer else max((j for j in items if j != i), key=length.get)
+    return out
+
+
+def _fit(joints, n):
+    """joints cut, or held at their last frame, to n frames."""
+    return joints[:n] if len(joints) >= n else np.concatenate([joints, np.repeat(joints[-1:], n - len(joints), 0)])
+
+
+def build_clips(spec, motions, roles, catch_items, bad):
+    """Every clip: each item in every condition with its role; per catch item its BAD clip and copies of its clips
+    in every condition with role catch; and, for the appropriateness design, each condition's mismatched clip of
+    every item (the motion it made for the partner item, with this item's sound). A catch copy starts one frame
+    later (its last frame held), so that no two videos of the set are the same bytes (a repeated content hash
+    would point at the catch trial)."""
+    clips = []
+    for item, role in roles.items():
+        for name, by_item in motions.items():
+            clips.append(StudyClip(name, item, role, by_item[item].joints))
+    if spec.design == "appropriateness":
+        partners = mismatch_partners(motions, sorted(roles), spec.seed)
+        for item, role in roles.items():
+            n = len(motions[study.NATURAL][item].joints)
+            for name, by_item in motions.items():
+                clips.append(
+                    StudyClip(name, item, role, _fit(by_item[partners[item]].joints, n), motion_item=partners[item])
+                )
+    for item in catch_items:
+        for name, by_item in motions.items():
+            joints = by_item[item].joints
+            clips.append(StudyClip(name, item, CATCH, np.concatenate([joints[1:], joints[-1:]])))
+        clips.append(StudyClip(study.CATCH, item, CATCH, bad[item][0], bad[item][1]))
+    return clips
+
+
+def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=None):
+    """Clip files (random order and ids), manifest and metrics rows, render jobs, and C2ST features."""
+    rng = np.random.default_rng(spec.seed)
+    any_ref = next(iter(motions[study.NATURAL].values()))
+    names, parents = any_ref.names, any_ref.parents
+    feet = find_feet(names) if spec.feet == "auto" else [names.index(n) for n in spec.feet]
+    if feet is not None and len(feet) == 2:  # one joint per foot: it is both the foot's ankle and its toe
+        feet = [feet[0], feet[0], feet[1], feet[1]]
+    for c in clips:
+        c.joints = place(c.joints, names)
+    by_item = {}
+    for c in clips:
+        by_item.setdefault(c.item, []).append(c.joints)
+    cameras = {item: framing_camera(js) for item, js in by_item.items()}
+    taken, manifest, metrics_rows, jobs, groups, feats = set(), [], [], [], [], {}
+    forbidden = [*study.RESERVED, *spec.conditions]
+    options = dict(hide=tuple(spec.hide), thin=None if spec.thin == "auto" else tuple(spec.thin))
+    for k in tqdm(rng.permutation(len(clips)), desc="clips", unit="clip", file=sys.stderr, disable=not progress):
+        c = clips[k]
+        cond, item, role, joints = c.condition, c.item, c.role, c.joints
+        cid = study.new_clip_id(taken, forbidden)
+        motion, video, sheet = clip_files(out, cid)
+        save_clip(motion, joints, parents, names, spec.fps)
+        job = dict(camera=cameras[item], **options)
+        if sound:
+            # Every clip of an item carries the same sound bytes, a catch copy (one frame late) too: an audio track
+            # of its own would tell a catch copy from the item's test clip.
+            job["audio"] = (str(sound[item]), 0.0, len(joints) / spec.fps)
+        jobs.append((str(motion), str(video), str(sheet), size, preset, job))
+        groups.append(item)  # an item's videos share a length and a sound, so they must be one size
+        row = manifest_row(cid, cond, dict(id=item, role=role), c.note, len(joints), spec.fps, size)
+        if spec.design:
+            row["motion_item"] = c.motion_item
+        if sound:
+            row["audio"] = "1"
+        manifest.append(row)
+        m = any_clip_metrics(joints, spec.fps, parents, feet)
+        metrics_rows.append(dict(clip_id=cid, condition=cond, role=role, item=item, **m))
+        if c.motion_item:
+            continue  # the figures are of each condition's own motion
+        c2st.collect(feats, cond, role, item, joints, spec.fps, parents)
+    return manifest, metrics_rows, jobs, groups, feats
+
+
+# ---------------------------------------------------------------- the job
+def build_study(spec, out, size, preset, workers, force, progress):
+    t0 = time.perf_counter()
+    files = match_items(spec)
+    n_catch, own_catch = _catch_items(spec, files[spec.reference])
+    motions = read_all(spec, files, progress)
+    motions = {(study.NATURAL if n == spec.reference else n): m for n, m in motions.items()}
+    cut_items(motions, spec)
+    items = sorted(motions[study.NATURAL])
+    roles, catch_items = assign_roles(items, spec, n_catch)
+    if own_catch is not None:
+        catch_items = own_catch
+    bad = catch_clips(spec, motions, catch_items, progress)
+    if spec.reference != study.NATURAL:
+        log.info(f"study: the reference condition {spec.reference} is written as {study.NATURAL} in the manifest")
+    with tempfile.TemporaryDirectory() as tmp:
+        sound = prepare_audio(spec, motions, Path(tmp))  # checked before anything is written
+        out = prepare_out(out, force)
+        clips = build_clips(spec, motions, roles, catch_items, bad)
+        manifest, metrics_rows, jobs, groups, feats = write_study_clips(
+            out, clips, motions, spec, size, preset, progress, sound
+        )
+        render_stimuli(jobs, workers, progress, groups)
+        if sound:
+            write_audio_check(out, spec)
+    c2st_table = c2st.c2st_table(feats)
+    write_csv(out / "c2st.csv", C2ST_COLUMNS, c2st_table)
+    write_csv(
+        out / "items.csv",
+        ITEM_COLUMNS,
+        [
+            dict(
+                item=i,
+                role=roles[i],
+                frames=len(motions[study.NATURAL][i].joints),
+                fps=f"{spec.fps:g}",
+                catch=bad[i][1] if i in bad else "",
+            )
+            for i in items
+        ],
+    )
+    write_tables(out, manifest, metrics_rows, [])  # manifest.csv last: a folder without one is no stimulus set
+    print_study_summary(out, manifest, metrics_rows, c2st_table, time.perf_counter() - t0)
+    return 0
+
+
+def print_study_summary(out, manifest, metrics_rows, c2st_table, seconds):
+    n = {r: sum(m["role"] == r for m in manifest) for r in study.ROLES}
+    print(
+        "\nobjective metrics, mean (sd) per condition: foot_skating m/s, bone_length_std m, jerk m/s^3, "
+        f"acceleration m/s^2\n{summary_text(metrics_rows)}"
+    )
+    print("\n" + c2st.c2st_text(c2st_table))
+    print(
+        f"\nwrote {Path(out) / 'manifest.csv'}: {len(manifest)} clips ({n['test']} test, {n['catch']} catch, "
+        f"{n['training']} training) in {seconds:.0f} s"
+    )

@@ -1,0 +1,250 @@
+"""The study file of a study of your own motion (CONTRACTS §10): TOML, read with the standard library.
+
+    reference = "NAT"            # the condition that holds the real motion
+    length_s = 8                 # optional: keep the first length_s seconds of every clip
+    seed = 1
+    n_training = 3               # familiarisation items, taken out of the test items
+    design = "appropriateness"   # optional: also make each system's mismatched clips (GENEA 2023's design)
+    [conditions]                 # name = folder; files matched by stem across folders
+    NAT = "real"
+    SYS_A = "system_a"
+    [catch]
+    make = ["jitter", "freeze"]  # broken versions of reference clips made by the tool ...
+    n = 4                        # ... on this many items
+    # folder = "bad"             # ... or the user's own bad clips
+    [skeleton]                   # optional
+    file = "skeleton.json"       # names + parents, for .npy inputs
+    units = "auto"               # "m", "cm", "mm", "auto" or metres per unit
+    up = "auto"                  # "y", "z" or "auto"
+    hide = []                    # joint names not drawn
+    [audio]                      # optional: one ITEM.wav or ITEM.flac per item, in every condition's video
+    folder = "audio"
+    loudness = -23               # LUFS (EBU R128), the whole set normalised to it
+    thin = "auto"                # finger and face joints drawn thinner ("auto"), or a list of names, or []
+    feet = "auto"                # foot joints for foot skating: "auto" (from names) or a list of names
+    fps = 30                     # the frame rate of .npy arrays (BVH and .npz files carry their own)
+
+Relative paths are relative to the file. Command-line flags override the top-level keys. Every problem is one
+StudyFileError naming the file and key.
+"""
+
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from moglow_eval.core import study
+from moglow_eval.core.cli import UserError
+
+from ..data.motion_files import UNITS, UPS
+from ..stimuli.catch_kinds import KINDS as CATCH_KINDS
+
+NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,31}$")
+TOP_KEYS = {"reference", "length_s", "seed", "n_training", "fps", "design", "conditions", "catch", "skeleton", "audio"}
+STIMULUS_DESIGNS = ("appropriateness",)  # designs that need stimuli of their own (mismatched clips)
+AUDIO_KEYS = {"folder", "loudness"}
+CATCH_KEYS = {"make", "n", "folder"}
+SKELETON_KEYS = {"file", "units", "up", "hide", "thin", "feet", "fps"}
+MAX_LENGTH_S = 600.0
+DEFAULT_FPS = 20.0  # the frame rate every clip is resampled to, as the built-in study's
+
+
+class StudyFileError(UserError):
+    """A bad study file; the message names the file and the key."""
+
+
+@dataclass
+class StudySpec:
+    path: Path
+    reference: str
+    conditions: dict  # name -> folder (Path), the reference first
+    seed: int = 0
+    n_training: int = 1
+    length_s: float | None = None
+    fps: float = DEFAULT_FPS
+    catch_make: list = field(default_factory=lambda: ["jitter", "freeze"])
+    catch_n: int = 4
+    catch_folder: Path | None = None
+    skeleton_file: Path | None = None
+    units: object = "auto"
+    up: str = "auto"
+    hide: list = field(default_factory=list)
+    thin: object = "auto"
+    feet: object = "auto"
+    source_fps: float | None = None
+    design: str | None = None
+    audio_folder: Path | None = None
+    loudness: float = -23.0
+
+
+def _err(path, key, message):
+    return StudyFileError(f"{path}: {key}: {message}")
+
+
+def _unknown(path, table, keys, allowed):
+    extra = sorted(set(keys) - allowed)
+    if extra:
+        where = f"[{table}] " if table else ""
+        raise _err(path, f"{where}{extra[0]}", f"unknown key (known: {', '.join(sorted(allowed))})")
+
+
+def _number(path, key, value, lo, hi, kind=float):
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if kind is int:
+        ok = ok and isinstance(value, int)
+    if not ok or not lo <= value <= hi:
+        raise _err(
+            path, key, f"must be {'an integer' if kind is int else 'a number'} from {lo:g} to {hi:g}, got {value!r}"
+        )
+    return kind(value)
+
+
+def _folder(path, key, value):
+    if not isinstance(value, str) or not value:
+        raise _err(path, key, f"must be a folder name, got {value!r}")
+    folder = (path.parent / value).resolve()
+    if not folder.is_dir():
+        raise _err(path, key, f"folder {folder} not found")
+    return folder
+
+
+def _names(path, key, value):
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise _err(path, key, f"must be a list of joint names, got {value!r}")
+    return list(value)
+
+
+def read_study_file(path):
+    """The StudySpec of a study file; StudyFileError naming the file and key."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise StudyFileError(f"{path}: cannot read the study file ({e.strerror or e})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise StudyFileError(f"{path}: not valid TOML ({e})") from None
+    _unknown(path, "", data, TOP_KEYS)
+    conditions = _conditions(path, data.get("conditions"))
+    reference = data.get("reference")
+    if reference not in conditions:
+        raise _err(path, "reference", f"{reference!r} is not one of [conditions] ({', '.join(conditions)})")
+    if study.NATURAL in conditions and reference != study.NATURAL:
+        raise _err(
+            path,
+            f"[conditions] {study.NATURAL}",
+            f"{study.NATURAL} is the reference's name in the stimuli; rename this condition or make it the reference",
+        )
+    spec = StudySpec(path, reference, {reference: conditions.pop(reference), **conditions})
+    if "seed" in data:
+        spec.seed = _number(path, "seed", data["seed"], 0, 2**31 - 1, int)
+    if "n_training" in data:
+        spec.n_training = _number(path, "n_training", data["n_training"], 0, 10_000, int)
+    if "length_s" in data:
+        spec.length_s = _number(path, "length_s", data["length_s"], 0.5, MAX_LENGTH_S)
+    if "fps" in data:
+        spec.fps = _number(path, "fps", data["fps"], 5, 120)
+    if "design" in data:
+        if data["design"] not in STIMULUS_DESIGNS:
+            raise _err(
+                path,
+                "design",
+                f"must be {' or '.join(STIMULUS_DESIGNS)} (other designs need no stimuli of "
+                f"their own), got {data['design']!r}",
+            )
+        spec.design = data["design"]
+    _catch(path, data.get("catch", {}), spec)
+    _skeleton(path, data.get("skeleton", {}), spec)
+    _audio(path, data.get("audio"), spec)
+    if spec.design == "appropriateness" and spec.audio_folder is None:
+        raise _err(path, "design", "appropriateness asks whether motion fits its speech: give the [audio] table")
+    return spec
+
+
+def _conditions(path, table):
+    if not isinstance(table, dict) or not table:
+        raise _err(path, "[conditions]", 'must name at least two conditions, as NAME = "folder"')
+    if len(table) < 2:
+        raise _err(path, "[conditions]", "a study compares at least two conditions: the reference and a system")
+    out = {}
+    for name, folder in table.items():
+        if not NAME_RE.match(name):
+            raise _err(path, f"[conditions] {name}", "a name is a letter, then letters, digits, _ or - (at most 32)")
+        if name.upper() == study.CATCH:
+            raise _err(path, f"[conditions] {name}", f"{study.CATCH} is the name of the catch clips")
+        out[name] = _folder(path, f"[conditions] {name}", folder)
+    return out
+
+
+def _catch(path, table, spec):
+    if not isinstance(table, dict):
+        raise _err(path, "[catch]", "must be a table")
+    _unknown(path, "catch", table, CATCH_KEYS)
+    if "folder" in table and "make" in table:
+        raise _err(path, "[catch] folder", "give either folder (your own bad clips) or make, not both")
+    if "folder" in table:
+        spec.catch_folder, spec.catch_make = _folder(path, "[catch] folder", table["folder"]), []
+    if "make" in table:
+        make = table["make"]
+        if not isinstance(make, list) or not make or not all(k in CATCH_KINDS for k in make):
+            raise _err(path, "[catch] make", f"must be a list of {', '.join(CATCH_KINDS)}, got {make!r}")
+        spec.catch_make = list(dict.fromkeys(make))
+    if "n" in table:
+        spec.catch_n = _number(path, "[catch] n", table["n"], 0, 10_000, int)
+
+
+def _skeleton(path, table, spec):
+    if not isinstance(table, dict):
+        raise _err(path, "[skeleton]", "must be a table")
+    _unknown(path, "skeleton", table, SKELETON_KEYS)
+    if "file" in table:
+        f = table["file"]
+        if not isinstance(f, str) or not (path.parent / f).is_file():
+            raise _err(path, "[skeleton] file", f"file {path.parent / str(f)} not found")
+        spec.skeleton_file = path.parent / f
+    units = table.get("units", "auto")
+    if isinstance(units, (int, float)) and not isinstance(units, bool):
+        spec.units = _number(path, "[skeleton] units", units, 1e-6, 1e3)
+    elif units in ("auto", *UNITS):
+        spec.units = units
+    else:
+        raise _err(path, "[skeleton] units", f"must be auto, {', '.join(UNITS)} or metres per unit, got {units!r}")
+    up = table.get("up", "auto")
+    if up not in ("auto", *UPS):
+        raise _err(path, "[skeleton] up", f"must be auto, {' or '.join(UPS)}, got {up!r}")
+    spec.up = up
+    spec.hide = _names(path, "[skeleton] hide", table.get("hide", []))
+    for key in ("thin", "feet"):
+        value = table.get(key, "auto")
+        setattr(spec, key, value if value == "auto" else _names(path, f"[skeleton] {key}", value))
+    if spec.feet != "auto" and len(spec.feet) not in (2, 4):
+        raise _err(
+            path,
+            "[skeleton] feet",
+            "name 2 joints (left foot, right foot) or 4 (left ankle, left toe, "
+            f"right ankle, right toe), got {len(spec.feet)}",
+        )
+    if "fps" in table:
+        spec.source_fps = _number(path, "[skeleton] fps", table["fps"], 1, 1000)
+
+
+def _audio(path, table, spec):
+    if table is None:
+        return
+    if not isinstance(table, dict):
+        raise _err(path, "[audio]", "must be a table")
+    _unknown(path, "audio", table, AUDIO_KEYS)
+    if "folder" not in table:
+        raise _err(path, "[audio] folder", "missing: the folder of ITEM.wav / ITEM.flac files")
+    spec.audio_folder = _folder(path, "[audio] folder", table["folder"])
+    if "loudness" in table:
+        spec.loudness = _number(path, "[audio] loudness", table["loudness"], -70, -5)
+
+
+def check_joint_names(spec, names, where):
+    """StudyFileError when a joint name in the study file (hide, thin, feet) is not one of the skeleton's."""
+    known = set(names)
+    for key in ("hide", "thin", "feet"):
+        value = getattr(spec, key)
+        for name in [] if value == "auto" else value:
+            if name not in known:
+                raise _err(spec.path, f"[skeleton] {key}", f"unknown joint name {name!r} (not in {where})")

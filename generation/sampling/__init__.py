@@ -1,0 +1,1 @@
+"""Sampling trained models, and the shipped models with their quality guard."""

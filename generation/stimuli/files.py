@@ -1,0 +1,150 @@
+"""The files of a stimulus folder (CONTRACTS.md §4): the folder itself, manifest.csv, metrics.csv, fmd.csv,
+items.csv and items/ITEM.npz. What goes into them is decided by make_stimuli; their layout is decided here."""
+
+import csv
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from moglow_eval.core import study
+from moglow_eval.core.cli import UserError
+
+from ..data.systems import canonical_placement
+from ..motion import skeleton
+from ..motion.features import to_world
+from .items import CATCH, TRAINING
+
+MANIFEST_COLUMNS = [
+    "clip_id",
+    "condition",
+    "role",
+    "item",
+    "video",
+    "motion",
+    "seed",
+    "frames",
+    "fps",
+    "width",
+    "height",
+]
+METRICS_COLUMNS = [*study.METRIC_KEYS, *study.METRIC_NAMES]
+ITEMS_COLUMNS = ["item", "role", "category", "take", "start_frame", "frames", "fps", "control"]
+FMD_COLUMNS = ["condition", "n_windows", "fmd"]
+SUBFOLDERS = ("videos", "motion", "sheets")  # one file per clip in each, named by its clip id
+
+
+class StimuliError(UserError):
+    """Bad input to make_stimuli; one line naming the file or option."""
+
+
+def prepare_out(out, force):
+    """An empty stimulus folder at `out` with its clip subfolders; an existing set is replaced only with `force`."""
+    out = Path(out)
+    if (out / "manifest.csv").exists() and not force:
+        raise StimuliError(f"{out}: already holds a stimulus set (manifest.csv); pass --force to replace it")
+    for sub in (*SUBFOLDERS, "items", "audio_check"):
+        if (out / sub).exists():
+            shutil.rmtree(out / sub)
+    for name in ("manifest.csv", "metrics.csv", "items.csv", "c2st.csv", "audio_check.csv"):
+        (out / name).unlink(missing_ok=True)
+    for sub in SUBFOLDERS:
+        (out / sub).mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def clip_files(out, cid):
+    """(motion .npz, video .mp4, contact sheet .png) paths of clip `cid` in stimulus folder `out`."""
+    out = Path(out)
+    return out / "motion" / f"{cid}.npz", out / "videos" / f"{cid}.mp4", out / "sheets" / f"{cid}.png"
+
+
+def manifest_row(cid, condition, item, seed, frames, fps, size):
+    """One manifest.csv row (paths relative to the stimulus folder)."""
+    return dict(
+        clip_id=cid,
+        condition=condition,
+        role=item["role"],
+        item=item["id"],
+        video=f"videos/{cid}.mp4",
+        motion=f"motion/{cid}.npz",
+        seed=seed,
+        frames=frames,
+        fps=f"{fps:g}",
+        width=size,
+        height=size,
+    )
+
+
+def write_csv(path, columns, rows):
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        w = csv.DictWriter(f, fieldnames=columns)
+        w.writeheader()
+        w.writerows(rows)
+
+
+def write_tables(out, manifest, metrics_rows, fmd):
+    """manifest.csv (rows in the given order), metrics.csv (6 significant digits, nan for undefined) and, when
+    there are FMD rows, fmd.csv."""
+    out = Path(out)
+    # A study of your own motion may also say which item's motion each clip shows (appropriateness) and that its
+    # videos carry sound (CONTRACTS §10).
+    # The built-in study says which clips' bones were set to the actor's (generation.motion.rigid).
+    extra = [c for c in ("motion_item", "audio", "postprocess") if any(c in row for row in manifest)]
+    write_csv(out / "manifest.csv", MANIFEST_COLUMNS + extra, manifest)
+    write_csv(
+        out / "metrics.csv",
+        METRICS_COLUMNS,
+        [{k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()} for row in metrics_rows],
+    )
+    if fmd:
+        write_csv(out / "fmd.csv", FMD_COLUMNS, fmd)
+
+
+def summary_text(metrics_rows):
+    """Per-condition means (sd) of every metric over test and catch clips, as a printable table."""
+    import pandas as pd  # here: the render workers import this module's neighbours, not pandas
+
+    df = pd.DataFrame(metrics_rows)
+    df = df[df.role != TRAINING]
+    g = df.groupby(["role", "condition"])
+    names = [m for m in study.METRIC_NAMES if df[m].notna().any()]  # a study without control has no control metrics
+    mean, sd = g[names].mean(), g[names].std()
+    table = mean.map(lambda v: f"{v:.3g}") + " (" + sd.map(lambda v: f"{v:.2g}") + ")"
+    table.insert(0, "n", g.size())
+    return table.to_string()
+
+
+def write_items(folder, items, arrays, fps):
+    """items.csv plus items/ITEM.npz (control, real history) for the items another system must generate."""
+    folder = Path(folder)
+    (folder / "items").mkdir(parents=True, exist_ok=True)
+    with open(folder / "items.csv", "w", newline="", encoding="utf-8") as f:
+        w = csv.writer(f)
+        w.writerow(ITEMS_COLUMNS)
+        for k, it in enumerate(items):
+            if it["role"] == CATCH:
+                continue
+            rel = f"items/{it['id']}.npz"
+            _write_item(folder / rel, arrays, k, fps)
+            frames = arrays["c"][k].shape[0]
+            w.writerow([it["id"], it["role"], it["category"], it["take"], it["start"], frames, f"{fps:g}", rel])
+
+
+def _write_item(path, arrays, k, fps):
+    # The real frames just before the window, placed so that the window starts at the origin
+    # facing +Z: a system can continue them, as MG does.
+    hist_x = np.concatenate([arrays["hist"][k], arrays["x"][k][:1]])
+    hist_c = np.concatenate([arrays["hist_c"][k], arrays["c"][k][:1]])
+    hist = canonical_placement(to_world(hist_x, hist_c), fps, frame=-1)[:-1]
+    np.savez_compressed(
+        path,
+        control=arrays["c"][k],
+        history=arrays["hist"][k],
+        history_control=arrays["hist_c"][k],
+        history_joints=hist,
+        fps=np.float64(fps),
+        frames=np.int64(arrays["c"][k].shape[0]),
+        joint_names=np.array(skeleton.JOINT_NAMES),
+        parents=skeleton.PARENTS,
+    )

@@ -1,0 +1,70 @@
+"""The facts every part of a study agrees on (CONTRACTS.md §4, §6, §8), each defined once here.
+
+The parts exchange files, not code, so these names are also what the files hold: a condition column reads
+"NAT", a role column "catch", a clip id matches CLIP_ID.
+"""
+
+import re
+import secrets
+
+NATURAL = "NAT"  # the motion-capture condition: the reference every design compares against
+GENERATED = ("MG", "FL")  # the paper's two generators, trained and sampled by `generation`
+BUILTIN = (NATURAL, *GENERATED)  # what make_stimuli makes without --system
+CATCH = "BAD"  # the early-training catch condition (paper §5)
+RESERVED = (*BUILTIN, CATCH)  # names an imported system may not take
+
+ROLES = ("test", "catch", "training")  # a clip's role in manifest.csv; "training" = familiarisation
+RATED_ROLES = ("test", "catch")  # the roles that reach a ratings export
+
+# A rating of a BAD clip at or above this, on the paper's 1-5 scale, fails the catch trial (paper §5.2).
+CATCH_FAIL_AT = 3
+
+# The test designs (CONTRACTS §8), as the database, the API and the files name them; each part implements them
+# behind its own interface and lists them in its registry (rating_app.designs, analysis.designs).
+DESIGNS = ("acr", "pairwise", "parallel", "appropriateness")
+DEFAULT_DESIGN = "acr"  # the paper's design: a study, a database or a file that names none
+
+# Clip ids are random, so a file or URL name tells a rater nothing about the condition (CONTRACTS §4).
+CLIP_ID = re.compile(r"[a-z0-9]{12,64}")  # always fullmatch
+CLIP_ID_LENGTH = 16  # what make_stimuli writes
+CLIP_ID_ALPHABET = "abcdefghijklmnopqrstuvwxyz0123456789"
+
+# Per-clip objective metrics in metrics.csv (CONTRACTS §4), in column order; generation.metrics.objective computes them.
+METRIC_NAMES = ("foot_skating", "bone_length_std", "jerk", "control_error", "control_following", "acceleration")
+METRIC_KEYS = ("clip_id", "condition", "role", "item")  # the columns of metrics.csv that are not metrics
+
+
+def condition_order(conditions):
+    """The paper's order for tables and figures: NAT, MG, FL, then other systems in name order, BAD last."""
+    conditions = list(dict.fromkeys(conditions))
+    head = [c for c in BUILTIN if c in conditions]
+    tail = sorted(c for c in conditions if c not in BUILTIN and c != CATCH)
+    return head + tail + ([CATCH] if CATCH in conditions else [])
+
+
+def new_clip_id(taken, forbidden=RESERVED):
+    """A random CLIP_ID_LENGTH-character id, not in `taken` (which it joins), containing no name in `forbidden`
+    (case-insensitively), so that no id spells out a condition."""
+    forbidden = [f.lower() for f in forbidden]
+    while True:
+        cid = "".join(secrets.choice(CLIP_ID_ALPHABET) for _ in range(CLIP_ID_LENGTH))
+        if cid not in taken and not any(f in cid for f in forbidden):
+            taken.add(cid)
+            return cid
+
+
+# The catch rules of the three designs (CONTRACTS §6, §8). Written with & and |, they take scalars or whole
+# pandas columns alike, so the app's export and the analysis apply literally the same rule.
+def acr_catch_failed(rating):
+    """An acr rating of a BAD clip fails the catch trial at CATCH_FAIL_AT or above."""
+    return rating >= CATCH_FAIL_AT
+
+
+def pair_catch_failed(condition_a, condition_b, preference):
+    """A pairwise answer prefers the BAD clip at either level (preference > 0 favours A, < 0 favours B)."""
+    return ((condition_a == CATCH) & (preference > 0)) | ((condition_b == CATCH) & (preference < 0))
+
+
+def page_catch_failed(bad_rating, natural_rating):
+    """A parallel page rates its BAD clip at or above its NAT clip."""
+    return bad_rating >= natural_rating

@@ -1,0 +1,110 @@
+"""Reading the project's CSV files: every problem is one line naming the file and the line (CONTRACTS §4, §6).
+
+metrics.csv is read here and nowhere else, by the analysis and by the simulated raters alike, so an empty
+cell and "nan" mean the same everywhere: not measured.
+"""
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from moglow_eval.core import study
+from moglow_eval.core.cli import UserError
+
+
+class TableError(UserError):
+    """A CSV file that breaks its contract; the message is one line naming the file and the line or column."""
+
+
+def read_csv(path, error=TableError):
+    """A CSV file as all-text columns, indexed by file line number (header = line 1); `error` names it."""
+    path = Path(path)
+    if not path.is_file():
+        raise error(f"{path}: no such file")
+    with open(path, "rb") as f:
+        head = f.read(4096)  # not read_bytes(): the whole file is read once, by pandas, below
+    if not head.strip():
+        raise error(f"{path}: file is empty (expected a CSV header and rows)")
+    try:
+        # All text, no NA guessing: "NA" or "" stay visible so we can name the line that holds them.
+        df = pd.read_csv(
+            path, dtype=str, keep_default_na=False, na_filter=False, skip_blank_lines=False, encoding="utf-8-sig"
+        )
+    except pd.errors.ParserError as exc:
+        raise error(f"{path}: malformed CSV: {str(exc).strip().splitlines()[-1]}") from None
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except pd.errors.EmptyDataError:
+        raise error(f"{path}: file is empty (expected a CSV header and rows)") from None
+    df.columns = [str(c).strip() for c in df.columns]
+    df.index = np.arange(2, len(df) + 2)  # file line numbers (header is line 1)
+    # Wholly blank lines are layout, not data (a trailing newline or two); anything else is kept and checked.
+    if len(df.columns):
+        maybe = df[df.columns[0]] == ""
+        if maybe.any():
+            blank = maybe & (df == "").all(axis=1)
+            df = df[~blank]
+    return path, df
+
+
+def first_line(mask):
+    """The file line of the first true row of a boolean column indexed as read_csv indexes."""
+    return int(mask.index[np.flatnonzero(np.asarray(mask))[0]])
+
+
+def read_metrics(path, error=TableError):
+    """metrics.csv (clip_id, condition, role, item, metric columns...) -> DataFrame indexed by clip_id.
+
+    Every column other than the four keys is an objective metric and must be numeric (empty = missing,
+    reported as such, never guessed).
+    """
+    path, df = read_csv(path, error)
+    if "clip_id" not in df.columns:
+        raise error(f"{path}: missing required column clip_id (header has: {', '.join(df.columns)})")
+    if len(df) == 0:
+        raise error(f"{path}: no rows (header only)")
+    df["clip_id"] = df["clip_id"].str.strip()
+    empty = df["clip_id"] == ""
+    if empty.any():
+        raise error(f"{path}:{first_line(empty)}: empty clip_id")
+    dup = df["clip_id"].duplicated()
+    if dup.any():
+        line = first_line(dup)
+        raise error(f"{path}:{line}: duplicate clip_id {df.at[line, 'clip_id']}")
+    metric_cols = [c for c in df.columns if c not in study.METRIC_KEYS]
+    if not metric_cols:
+        raise error(f"{path}: no metric columns besides {', '.join(study.METRIC_KEYS)}")
+    out = pd.DataFrame(index=df["clip_id"].to_numpy())
+    for col in metric_cols:
+        out[col] = _numbers(path, df, col, error)
+    out.index.name = "clip_id"
+    return out
+
+
+def _numbers(path, df, col, error):
+    """Column `col` as floats: an empty cell or `nan` is NaN (not measured), anything else not a number is one
+    error naming the file and line."""
+    text = df[col].str.strip()
+    values = pd.to_numeric(text.replace("", np.nan).replace("nan", np.nan), errors="coerce")
+    bad = values.isna() & ~text.isin(["", "nan"])
+    if bad.any():
+        line = first_line(bad)
+        raise error(f"{path}:{line}: {col} {df.at[line, col]!r} is not a number")
+    return values.to_numpy(dtype=float)
+
+
+C2ST_COLUMNS = ("condition", "n_items", "auc", "auc_sd", "accuracy")  # c2st.csv (CONTRACTS §4)
+
+
+def read_c2st(path, error=TableError):
+    """c2st.csv (the classifier two-sample test of each condition against the reference) -> DataFrame with
+    C2ST_COLUMNS, numbers parsed; one line naming the file and row otherwise."""
+    path, df = read_csv(path, error)
+    missing = [c for c in C2ST_COLUMNS if c not in df.columns]
+    if missing:
+        raise error(f"{path}: missing required column {missing[0]} (header has: {', '.join(df.columns)})")
+    out = df[list(C2ST_COLUMNS)].copy()
+    for col in C2ST_COLUMNS[1:]:
+        out[col] = _numbers(path, df, col, error)
+    return out.reset_index(drop=True)
