@@ -215,7 +215,7 @@ def metric_scatter(clips, metrics, corr, path):
 
 
 def ordinal_fit(model, path):
-    """model: stats.ordinal_model() dict. One panel per condition: observed share of each rating (bars) and the
+    """model: rating_models.ordinal_model() dict. One panel per condition: observed share of each rating (bars) and the
     fitted population-averaged distribution (dots), so a misfit of the cumulative-logit model shows at a glance."""
     conds = list(model["observed_distribution"])
     col = colours(conds)

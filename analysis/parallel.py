@@ -160,7 +160,7 @@ def wilcoxon_pairs(t, alpha=0.05):
 
 def analyse(df, n_boot=1000, seed=0, alpha=0.05, mixed=True):
     """All parallel statistics of the test rows of `df` (catch pages never enter them)."""
-    from . import stats
+    from . import rating_models
 
     t = df[df["role"] == "test"]
     if t["condition"].nunique() < 2:
@@ -177,8 +177,8 @@ def analyse(df, n_boot=1000, seed=0, alpha=0.05, mixed=True):
         out["mixed"] = {"skipped": "--no-mixed", "fixed_effects": {}}
         return out
     try:
-        out["mixed"] = stats.mixed_model(t, clip="item")
-    except stats.ModelUndefined as exc:
+        out["mixed"] = rating_models.mixed_model(t, clip="item")
+    except rating_models.ModelUndefined as exc:
         out["mixed"] = {"undefined": str(exc), "fixed_effects": {}}
     except (np.linalg.LinAlgError, ValueError) as exc:
         out["mixed"] = {"error": f"{type(exc).__name__}: {exc}".splitlines()[0], "fixed_effects": {}}

@@ -29,7 +29,7 @@ from tqdm import tqdm
 
 from moglow_eval.core import cli
 
-from . import figures, stats
+from . import figures, rating_models, stats
 from .filtering import DEFAULT_THRESHOLD, exclude_raters, only_test_rows
 from .load import AnalysisError, load_ratings
 
@@ -39,7 +39,7 @@ MAX_RATERS = 5000
 def pilot_design(test):
     """Design and fitted model of the pilot's test rows -> dict(conditions, means, sd_rater, sd_clip,
     sd_residual, clips_per_condition, clips_per_rater, n_raters)."""
-    m = stats.mixed_model(test)
+    m = rating_models.mixed_model(test)
     vc = m["variance_components"]
     conds = list(m["condition_means"])
     return {
@@ -282,7 +282,7 @@ def _design_from_pilot(args):
     test = only_test_rows(exclude_raters(df, args.threshold)[0])
     if test["condition"].nunique() < 2:
         raise AnalysisError(f"{args.pilot}: the pilot's kept test rows hold fewer than 2 conditions")
-    problem = stats.random_effects_problem(test)
+    problem = rating_models.random_effects_problem(test)
     if problem:
         raise AnalysisError(f"{args.pilot}: the pilot cannot be fitted: {problem}")
     design = pilot_design(test)

@@ -25,7 +25,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from analysis import stats  # noqa: E402
+from analysis import bootstrap, rating_models  # noqa: E402
 from analysis.filtering import exclude_raters, only_test_rows  # noqa: E402
 from analysis.load import load_ratings  # noqa: E402
 from analysis.report import build_report  # noqa: E402
@@ -81,7 +81,7 @@ def main():
 
     t = only_test_rows(exclude_raters(load_ratings(small))[0])
     t0 = time.perf_counter()
-    stats.cluster_bootstrap(t, n_boot=2000)
+    bootstrap.cluster_bootstrap(t, n_boot=2000)
     vec = time.perf_counter() - t0
     t0 = time.perf_counter()
     loop_bootstrap(t, 200)
@@ -91,7 +91,7 @@ def main():
         f"per-replicate loop {loop:.1f} s (extrapolated from 200) -> {loop / vec:.0f}x"
     )
     t0 = time.perf_counter()
-    stats.mixed_model(t)
+    rating_models.mixed_model(t)
     print(f"mixed model (REML, 16 raters x 90 clips): {time.perf_counter() - t0:.2f} s")
 
     scale = 10 if args.quick else 1

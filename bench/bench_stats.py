@@ -24,7 +24,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from analysis import stats  # noqa: E402
+from analysis import rating_models  # noqa: E402
 from analysis.filtering import exclude_raters, only_test_rows  # noqa: E402
 from analysis.load import load_ratings  # noqa: E402
 from analysis.report import build_report  # noqa: E402
@@ -87,8 +87,8 @@ def main():
     args = ap.parse_args()
     print(f"load average at start: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     rows = only_test_rows(exclude_raters(load_ratings(REF_CSV))[0])
-    stats.ordinal_model(rows)  # warm-up: imports and first-call costs are not the fit's
-    ours, cpu, fit = best_of(lambda: stats.ordinal_model(rows), args.repeat)
+    rating_models.ordinal_model(rows)  # warm-up: imports and first-call costs are not the fit's
+    ours, cpu, fit = best_of(lambda: rating_models.ordinal_model(rows), args.repeat)
     print(
         f"ordinal fit, {len(rows):,} ratings ({rows['rater_id'].nunique()} raters x {rows['clip_id'].nunique()} "
         f"clips): best {ours:.3f} s wall, {cpu:.3f} s CPU, {fit['n_evaluations']} Laplace evaluations "
@@ -104,7 +104,7 @@ def main():
         )
     elif not args.no_r:
         print("R ordinal::clmm: Rscript not found; no ratio")
-    lmm, cpu, m = best_of(lambda: stats.mixed_model(rows), args.repeat)
+    lmm, cpu, m = best_of(lambda: rating_models.mixed_model(rows), args.repeat)
     print(f"linear mixed model with Satterthwaite df, same rows: best {lmm:.3f} s wall, {cpu:.3f} s CPU")
     tmp = Path(tempfile.mkdtemp(prefix="bench_stats_"))
     try:

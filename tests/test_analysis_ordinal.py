@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis import ordinal, stats
+from analysis import ordinal, rating_models
 from analysis.filtering import exclude_raters, only_test_rows
 from analysis.load import load_ratings
 
@@ -29,7 +29,7 @@ def rows():
 
 @pytest.fixture(scope="module")
 def fit(rows):
-    return stats.ordinal_model(rows)
+    return rating_models.ordinal_model(rows)
 
 
 def test_ordinal_model_matches_clmm(fit):
@@ -88,7 +88,7 @@ def test_ordinal_recovers_a_known_model():
     cond = np.array(["NAT", "MG", "FL"])[c % 3]
     eta = np.array([0.0, -0.7, -1.5])[c % 3] + rng.normal(0, 0.9, R_)[r] + rng.normal(0, 0.3, C)[c]
     y = 1 + (eta[:, None] + rng.logistic(size=len(r))[:, None] > np.array([-2, -0.7, 0.6, 2.0])).sum(1)
-    m = stats.ordinal_model(pd.DataFrame({"rating": y, "condition": cond, "rater_id": r, "clip_id": c}))
+    m = rating_models.ordinal_model(pd.DataFrame({"rating": y, "condition": cond, "rater_id": r, "clip_id": c}))
     for k, truth in (("condition[T.MG]", -0.7), ("condition[T.FL]", -1.5)):
         assert abs(m["fixed_effects"][k] - truth) < 3 * m["std_errors"][k], k
     for k, truth in zip(["1|2", "2|3", "3|4", "4|5"], [-2, -0.7, 0.6, 2.0]):
@@ -99,13 +99,13 @@ def test_ordinal_recovers_a_known_model():
 def test_unused_rating_level_has_no_threshold(rows):
     """As clmm: the thresholds are between adjacent observed levels."""
     t = rows.assign(rating=rows["rating"].replace({5: 4}))
-    m = stats.ordinal_model(t)
+    m = rating_models.ordinal_model(t)
     assert list(m["thresholds"]) == ["1|2", "2|3", "3|4"]
 
 
 def test_satterthwaite_matches_lmertest(rows):
     ref = R["lmer"]
-    m = stats.mixed_model(rows)
+    m = rating_models.mixed_model(rows)
     assert set(m["df"]) == set(ref["df"])
     for k in ref["df"]:
         assert m["df"][k] == pytest.approx(ref["df"][k], abs=1e-2), k
@@ -126,5 +126,5 @@ def test_satterthwaite_matches_lmertest(rows):
 def test_satterthwaite_df_near_the_number_of_clips(rows):
     """Conditions are between clips, so a condition effect has about (clips - conditions) df, not ratings - 3:
     the reason a z test was anti-conservative."""
-    m = stats.mixed_model(rows)
+    m = rating_models.mixed_model(rows)
     assert 80 < m["df"]["condition[T.FL]"] < 95

@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 from reference.anova_exact import one_way_anova_exact
 
-from analysis import stats
+from analysis import bootstrap, rating_models, stats
 from analysis.filtering import exclude_raters, only_test_rows
 from analysis.load import load_ratings
 
@@ -164,20 +164,20 @@ def test_cluster_bootstrap_equals_explicit_weighted_means(small_test_rows):
     draws, and dense and sparse paths agree exactly."""
     t = small_test_rows
     B, seed = 7, 3
-    fast = stats.cluster_bootstrap(t, n_boot=B, seed=seed)
-    sparse = stats.cluster_bootstrap(t, n_boot=B, seed=seed, dense_limit=0)
+    fast = bootstrap.cluster_bootstrap(t, n_boot=B, seed=seed)
+    sparse = bootstrap.cluster_bootstrap(t, n_boot=B, seed=seed, dense_limit=0)
     pd.testing.assert_frame_equal(fast["means"], sparse["means"], rtol=0, atol=1e-12)
     rng = np.random.default_rng(seed)
     rc, raters = pd.factorize(t["rater_id"])
     cc, clips = pd.factorize(t["clip_id"])
     cond, conds = pd.factorize(t["condition"], sort=True)
-    wr = stats._resample_counts(rng, B, len(raters))
+    wr = bootstrap._resample_counts(rng, B, len(raters))
     wc = np.zeros((B, len(clips)))
     clip_cond = np.zeros(len(clips), int)
     clip_cond[cc] = cond
     for k in range(len(conds)):
         members = np.flatnonzero(clip_cond == k)
-        wc[:, members] = stats._resample_counts(rng, B, len(members))
+        wc[:, members] = bootstrap._resample_counts(rng, B, len(members))
     y = t["rating"].to_numpy(float)
     reps = np.array(
         [
@@ -198,7 +198,7 @@ def test_cluster_bootstrap_is_wider_than_t_when_clips_and_raters_vary(small_test
     """Ratings are correlated within raters and clips, so the cluster bootstrap must not be narrower than the
     naive t interval that treats 480 ratings as independent (the reason to report it)."""
     t = small_test_rows
-    boot = stats.cluster_bootstrap(t, n_boot=400, seed=1)["means"]
+    boot = bootstrap.cluster_bootstrap(t, n_boot=400, seed=1)["means"]
     summ = stats.group_summary(t)
     assert ((boot.boot_high - boot.boot_low) > 1.5 * (summ.t_high - summ.t_low)).all()
     assert ((boot.boot_low < summ["mean"]) & (summ["mean"] < boot.boot_high)).all()
@@ -209,7 +209,7 @@ def test_mixed_model_matches_statsmodels_reml(small_test_rows):
     import statsmodels.formula.api as smf
 
     t = small_test_rows[small_test_rows["rater_id"].isin(sorted(small_test_rows["rater_id"].unique())[:8])]
-    ours = stats.mixed_model(t, reference="FL")
+    ours = rating_models.mixed_model(t, reference="FL")
     data = pd.DataFrame(
         {
             "y": t["rating"].astype(float).to_numpy(),
@@ -247,7 +247,7 @@ def test_mixed_model_recovers_simulated_variances():
         + rng.normal(0, np.sqrt(0.5), len(r))
     )
     df = pd.DataFrame({"rating": y, "condition": cond, "rater_id": r, "clip_id": c})
-    m = stats.mixed_model(df)
+    m = rating_models.mixed_model(df)
     assert m["reference"] == "NAT" and m["converged"]
     vc = m["variance_components"]
     assert vc["rater"] == pytest.approx(0.2, rel=0.3)

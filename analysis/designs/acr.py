@@ -3,14 +3,14 @@
 Every statistic is computed on the kept test rows (after the catch-trial rater exclusion: a rater who rated a
 bad example at or above the threshold) and again on all test rows ("without_exclusion"): ANOVA, Tukey HSD,
 Kruskal-Wallis and Mann-Whitney, a cluster bootstrap over raters and clips, a linear and an ordinal mixed
-model (stats.py), and the objective metrics' correlations. Its report parts are in acr_report.py.
+model (bootstrap.py, rating_models.py), and the objective metrics' correlations. Its report parts are in acr_report.py.
 """
 
 from pathlib import Path
 
 import numpy as np
 
-from .. import figures, stats
+from .. import bootstrap, figures, rating_models, stats
 from ..filtering import exclude_raters, only_test_rows
 from ..load import AnalysisError, load_c2st, load_metrics, load_ratings
 from ..report_html import records
@@ -25,7 +25,7 @@ ORDINAL_MAX_RATINGS = 50_000
 
 def _fit_model(fit, test, enabled, flag, n_raters, n_clips, max_levels, max_ratings=None):
     """One random-effects model, or why it is not there: skipped by a flag or by size, undefined for the data
-    (stats.ModelUndefined), or a numerical failure -- always a dict with 'fixed_effects', never an exception."""
+    (rating_models.ModelUndefined), or a numerical failure -- always a dict with 'fixed_effects', never an exception."""
     if not enabled:
         return {"skipped": flag, "fixed_effects": {}}
     if min(n_raters, n_clips) > max_levels:
@@ -37,7 +37,7 @@ def _fit_model(fit, test, enabled, flag, n_raters, n_clips, max_levels, max_rati
         return {"skipped": f"{len(test)} ratings: above --ordinal-max-ratings {max_ratings}", "fixed_effects": {}}
     try:
         return fit(test)
-    except stats.ModelUndefined as exc:
+    except rating_models.ModelUndefined as exc:
         return {"undefined": str(exc), "fixed_effects": {}}
     except (np.linalg.LinAlgError, ValueError) as exc:  # a degenerate design is reported, not fatal
         return {
@@ -108,15 +108,15 @@ def analyse(
     out["anova"] = stats.one_way_anova(test)
     out["tukey"] = stats.tukey_hsd(test, alpha=alpha)
     step()
-    out["bootstrap"] = stats.cluster_bootstrap(test, n_boot=n_boot, seed=seed)
+    out["bootstrap"] = bootstrap.cluster_bootstrap(test, n_boot=n_boot, seed=seed)
     out["summary"] = summary.join(out["bootstrap"]["means"][["boot_low", "boot_high", "boot_se"]])
     step()
     out["kruskal"] = stats.kruskal_wallis(test)
     out["mannwhitney"] = stats.pairwise_mannwhitney(test, alpha=alpha)
     step()
     sizes = (out["n_raters"], out["n_clips"], mixed_max_levels)
-    out["mixed"] = _fit_model(stats.mixed_model, test, mixed, "--no-mixed", *sizes)
-    out["ordinal"] = _fit_model(stats.ordinal_model, test, ordinal, "--no-ordinal", *sizes, ordinal_max_ratings)
+    out["mixed"] = _fit_model(rating_models.mixed_model, test, mixed, "--no-mixed", *sizes)
+    out["ordinal"] = _fit_model(rating_models.ordinal_model, test, ordinal, "--no-ordinal", *sizes, ordinal_max_ratings)
     step()
     if metrics is not None:
         out["metrics"] = stats.metric_correlations(out["clips"], metrics)
