@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT / "bench"))  # bench_app: the page's answers, as the
 sys.path.insert(0, str(ROOT / "tests"))  # the fake stimulus folder the app's tests use (tests/fake_stimuli.py)
 
 from bench_app import answer, trial_clips  # noqa: E402
-from fake_stimuli import pg_schema, write_fake_stimuli  # noqa: E402
+from helpers.fake_stimuli import pg_schema, write_fake_stimuli  # noqa: E402
 from sqlalchemy import event  # noqa: E402
 
 from moglow_eval.core import cli  # noqa: E402

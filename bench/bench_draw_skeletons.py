@@ -46,7 +46,7 @@ def _inputs(tmp):
 
     sys.path.insert(0, str(ROOT))
     sys.path.insert(0, str(ROOT / "tests"))
-    from own_study_data import make_study
+    from helpers.own_study_data import make_study
 
     from generation.data.motion_files import read_motion
     from generation.motion import skeleton

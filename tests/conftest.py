@@ -1,17 +1,22 @@
-"""Shared fixtures. Real data lives in ../shared beside the checkout (CONTRACTS.md, data/README.md)."""
+"""Shared fixtures, and the two tiers of the suite.
 
-import os
+The fast tier, `python -m pytest -m "not full"`, needs nothing beside the checkout: no ../shared, no PostgreSQL,
+no browser. The full tier (`python -m pytest`, what CI runs) adds every test that reads the real data in ../shared
+(CONTRACTS.md, data/README.md), talks to PostgreSQL, drives a browser or makes a full-size run; those are marked
+`full` here, from their markers and the fixtures they use, so a new test lands in the right tier by itself.
+Torch and PostgreSQL start only in the fixtures and tests that need them. Shared helpers: tests/helpers/.
+"""
+
 import secrets
-from pathlib import Path
+import sys
 
 import psycopg
 import pytest
+from helpers.paths import BANDAI, ROOT, SHARED, small_take_names
 
-ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared"
-DATA = SHARED / "data"
-BANDAI = DATA / "bandai-namco-locomotion"
-PFNN = DATA / "pfnn-holden"
+# Fixtures that need the full machine: ../shared, PostgreSQL, or a real run of the pipeline.
+FULL_FIXTURES = {"shared_dir", "small_dataset", "tiny_runs", "quick_stimuli", "pg_server", "pg_database"}
+FULL_MARKERS = ("full", "slow", "postgres", "browser")
 
 
 @pytest.fixture(scope="session")
@@ -21,25 +26,29 @@ def shared_dir():
     return SHARED
 
 
-def pytest_configure(config):
+@pytest.fixture(autouse=True)
+def _float32_on_gpus():
     # On a GPU, cuDNN runs nn.LSTM and the convolutions in TF32 by default (10-bit mantissa), which moves the
     # models' outputs by ~5e-4: the tests compare float32 maths (MGStream against nn.LSTM, a stream against
-    # its own predictions), so they run in full float32. Training keeps the default. No effect on a CPU.
-    import torch
+    # its own predictions), so they run in full float32. Training keeps the default. No effect on a CPU, and
+    # torch is not imported for it: a test that never loads torch never pays for it.
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        torch.backends.cudnn.allow_tf32 = False
 
-    torch.backends.cudnn.allow_tf32 = False
-    # The tests' PostgreSQL, before any test module reads its URL (fake_stimuli.PG_BASE): the server at
-    # 127.0.0.1:5432 when it answers, else a throwaway one of our own, stopped in pytest_unconfigure (pg_server.py).
-    from pg_server import ServerError, suite_server
+
+@pytest.fixture(scope="session")
+def pg_server():
+    """The plain URL of the tests' PostgreSQL database `test`: the server at 127.0.0.1:5432 when it answers, else
+    a throwaway one of the tests' own, removed at the end of the session (helpers/pg_server.py). Its URLs are
+    also set in the environment (E2E_PG, RATING_TEST_PG) for the processes the tests start."""
+    from helpers.pg_server import ServerError, suite_server
 
     try:
-        config._pg_cluster, _ = suite_server()
+        cluster, admin = suite_server()
     except ServerError as e:
-        raise pytest.UsageError(f"no PostgreSQL for the tests: {e}") from None
-
-
-def pytest_unconfigure(config):
-    cluster = getattr(config, "_pg_cluster", None)
+        pytest.fail(f"no PostgreSQL for the tests: {e}")
+    yield admin
     if cluster is not None:
         cluster.remove()
 
@@ -48,9 +57,20 @@ def pytest_addoption(parser):
     parser.addoption("--run-slow", action="store_true", help="also run tests marked slow (full-size end-to-end runs)")
 
 
+def needs_full(item):
+    """Whether a collected test belongs to the full tier (see the module's docstring)."""
+    if any(m in item.keywords for m in FULL_MARKERS) or FULL_FIXTURES & set(item.fixturenames):
+        return True
+    params = getattr(getattr(item, "callspec", None), "params", {})
+    return "postgres" in params.values()
+
+
 def pytest_collection_modifyitems(config, items):
     import os
 
+    for item in items:
+        if needs_full(item):
+            item.add_marker(pytest.mark.full)
     if config.getoption("--run-slow") or os.environ.get("RUN_SLOW") == "1":
         return
     skip = pytest.mark.skip(reason="slow: run with --run-slow (CI runs the short variant)")
@@ -59,14 +79,7 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
-# --- data (issue 2) ---
-def small_take_names(per_category=4):
-    """The `per_category` longest Bandai-Namco takes of every locomotion category."""
-    from generation.data.prepare import longest_takes
-
-    return longest_takes(BANDAI, per_category)
-
-
+# --- data ---
 @pytest.fixture(scope="session")
 def small_dataset(tmp_path_factory):
     """Path of a dataset.npz prepared from 4 real takes of every Bandai-Namco category (about a second)."""
@@ -77,7 +90,7 @@ def small_dataset(tmp_path_factory):
     return out
 
 
-# --- models (issue 3) ---
+# --- models ---
 @pytest.fixture(scope="session")
 def tiny_runs(small_dataset, tmp_path_factory):
     """{'mg': run_dir, 'fl': run_dir}: mg_tiny and fl_tiny trained 150 steps on `small_dataset` (seconds)."""
@@ -97,13 +110,13 @@ def tiny_runs(small_dataset, tmp_path_factory):
     return runs
 
 
-# --- rating app (issue 5): one small real stimulus folder; every app test runs on SQLite and PostgreSQL ---
+# --- rating app: one small real stimulus folder; every app test runs on SQLite and PostgreSQL ---
 APP_ADMIN_TOKEN = "test-admin-token"
 
 
 @pytest.fixture(scope="session")
 def app_stimuli(tmp_path_factory):
-    from fake_stimuli import write_fake_stimuli
+    from helpers.fake_stimuli import write_fake_stimuli
 
     return write_fake_stimuli(tmp_path_factory.mktemp("app_stimuli"))
 
@@ -113,8 +126,9 @@ def app_db_url(request, tmp_path):
     if request.param == "sqlite":
         yield f"sqlite:///{tmp_path}/ratings.sqlite"
     else:
-        from fake_stimuli import pg_schema
+        from helpers.fake_stimuli import pg_schema
 
+        request.getfixturevalue("pg_server")
         with pg_schema() as url:  # a fresh schema per test, dropped afterwards (never skipped)
             yield url
 
@@ -157,7 +171,7 @@ def make_app(app_stimuli, app_db_url):
         app_engine(a).dispose()
 
 
-# --- stimuli (issue 4): one real `make_stimuli --quick` run per session ---
+# --- stimuli: one real `make_stimuli --quick` run per session ---
 @pytest.fixture(scope="session")
 def quick_stimuli(tmp_path_factory):
     """Path of the stimulus folder written by one `python -m generation.make_stimuli --quick` run (prepared
@@ -200,19 +214,11 @@ def torch_one_thread():
     torch.set_num_threads(n)
 
 
-def pg_admin_url() -> str:
-    """A plain libpq URL of the tests' server's database `test` (where test databases are created): E2E_PG, which
-    pytest_configure sets to the server at 127.0.0.1:5432 or to the tests' own (pg_server.py)."""
-    from pg_server import DEFAULT_ADMIN
-
-    return os.environ.get("E2E_PG", DEFAULT_ADMIN)
-
-
 @pytest.fixture
-def pg_database():
+def pg_database(pg_server):
     """A fresh PostgreSQL database for one run, dropped afterwards."""
     name = f"e2e_{secrets.token_hex(4)}"
-    admin = pg_admin_url()
+    admin = pg_server
     with psycopg.connect(admin, autocommit=True) as conn:
         conn.execute(f'CREATE DATABASE "{name}"')
     try:

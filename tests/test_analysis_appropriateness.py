@@ -36,6 +36,7 @@ def _as_export(tmp_path):
     return path, scores
 
 
+@pytest.mark.full  # the real votes in ../shared
 def test_mas_on_real_genea_votes_matches_a_hand_computation(tmp_path):
     path, scores = _as_export(tmp_path)
     table = analyse(load_answers(path))["mas"].set_index("condition")

@@ -14,9 +14,11 @@ from pathlib import Path
 
 import pytest
 import requests
-from fake_stimuli import free_port, write_fake_stimuli
-from proxies import caddy_accel, nginx_accel, nginx_head, nginx_temp_paths
-from servers import start_gunicorn, wait_for
+from helpers.fake_stimuli import free_port, write_fake_stimuli
+from helpers.proxies import caddy_accel, nginx_accel, nginx_head, nginx_temp_paths
+from helpers.servers import start_gunicorn, wait_for
+
+pytestmark = pytest.mark.full  # the full tier: real proxies (nginx, caddy)
 
 ROOT = Path(__file__).resolve().parents[1]
 NGINX_ACCEL = """{head}

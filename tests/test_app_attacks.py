@@ -9,8 +9,8 @@ import io
 import os
 
 import pytest
-from concurrent_raters import run_raters
-from fake_stimuli import write_fake_stimuli
+from helpers.concurrent_raters import run_raters
+from helpers.fake_stimuli import write_fake_stimuli
 from sqlalchemy import update
 from test_app_api import TOKEN_HDR, answer, clips_by_role, complete, export_rows, idle, nxt, start
 

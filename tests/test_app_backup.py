@@ -11,8 +11,9 @@ import threading
 
 import psycopg
 import pytest
-from conftest import ROOT, pg_admin_url
-from fake_stimuli import write_fake_stimuli
+from helpers.fake_stimuli import write_fake_stimuli
+from helpers.paths import ROOT
+from helpers.pg_server import pg_admin_url
 from werkzeug.serving import make_server
 
 from rating_app import create_app
@@ -49,6 +50,7 @@ def databases(request, tmp_path):
     if request.param == "sqlite":
         yield [f"sqlite:///{tmp_path}/{name}.sqlite" for name in ("live", "mid", "end")]
     else:
+        request.getfixturevalue("pg_server")
         with pg_databases(3) as urls:
             yield urls
 
@@ -125,7 +127,7 @@ def _export_text(url, out):
     return out.read_text().splitlines()
 
 
-def test_backup_and_restore_refuse_bad_input_with_one_line(tmp_path, app_stimuli):
+def test_backup_and_restore_refuse_bad_input_with_one_line(tmp_path, app_stimuli, pg_server):
     live = f"sqlite:///{tmp_path}/live.sqlite"
     app_engine(create_app(manifest=app_stimuli, db_url=live)).dispose()
     (tmp_path / "not_a_backup").write_text("hello")

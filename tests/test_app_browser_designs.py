@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 import requests
-from fake_stimuli import write_fake_stimuli
+from helpers.fake_stimuli import write_fake_stimuli
 from sqlalchemy import select
 from test_app_browser import browser  # noqa: F401  (the fixture)
 

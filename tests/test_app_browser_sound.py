@@ -8,7 +8,7 @@ import threading
 from pathlib import Path
 
 import pytest
-from own_study_data import make_study
+from helpers.own_study_data import make_study
 from sqlalchemy import select
 from test_app_browser import chrome
 

@@ -6,7 +6,7 @@ import collections
 import itertools
 
 import pytest
-from fake_stimuli import write_fake_stimuli
+from helpers.fake_stimuli import write_fake_stimuli
 from test_app_designs import shown, value_for
 
 from rating_app.designs import build_units

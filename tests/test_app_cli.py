@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import requests
-from fake_stimuli import free_port
+from helpers.fake_stimuli import free_port
 
 from moglow_eval.core.tables import read_metrics
 from rating_app import create_app

@@ -13,8 +13,8 @@ import threading
 from pathlib import Path
 
 import pytest
-from concurrent_raters import cover_mismatches, run_raters
-from fake_stimuli import write_fake_stimuli
+from helpers.concurrent_raters import cover_mismatches, run_raters
+from helpers.fake_stimuli import write_fake_stimuli
 from sqlalchemy import update
 from test_app_api import TOKEN_HDR, idle
 

@@ -17,14 +17,16 @@ from pathlib import Path
 
 import pytest
 import requests
-from concurrent_raters import cover_mismatches
-from fake_stimuli import free_port, write_fake_stimuli
-from proxies import caddy_accel, nginx_accel, nginx_head, nginx_temp_paths
-from servers import crowd_env, kill9, start_gunicorn, stop
+from helpers.concurrent_raters import cover_mismatches
+from helpers.fake_stimuli import free_port, write_fake_stimuli
+from helpers.proxies import caddy_accel, nginx_accel, nginx_head, nginx_temp_paths
+from helpers.servers import crowd_env, kill9, start_gunicorn, stop
 
 from rating_app.db import make_engine
 from rating_app.designs.acr import iter_rows
 from rating_app.simulate import run_simulation
+
+pytestmark = pytest.mark.full  # the full tier: two hosts, proxies and PostgreSQL
 
 NGINX = """{head}
 http {{
@@ -120,8 +122,8 @@ def proxy(kind, tmp_path, a, b, stimuli):
 
 @pytest.mark.parametrize("raters", [pytest.param(150, marks=pytest.mark.slow), 40])
 @pytest.mark.parametrize("kind", ["nginx", "caddy"])
-def test_two_hosts_one_database_and_a_kill(kind, raters, tmp_path, request, monkeypatch):
-    db = request.getfixturevalue("pg_database").replace("postgresql://", "postgresql+psycopg://", 1)
+def test_two_hosts_one_database_and_a_kill(kind, raters, tmp_path, pg_database, monkeypatch):
+    db = pg_database.replace("postgresql://", "postgresql+psycopg://", 1)
     stimuli = write_fake_stimuli(tmp_path / "stimuli", n_items=10, n_catch=2)
     env = crowd_env(stimuli, db, "hosts-token", PROXY_COUNT="1", VIDEO_ACCEL=kind)
     a, b = free_port(), free_port()

@@ -8,9 +8,9 @@ import time
 from pathlib import Path
 
 import pytest
-from concurrent_raters import cover_mismatches
-from fake_stimuli import free_port, write_fake_stimuli
-from servers import crowd_env, kill9, start_gunicorn, stop
+from helpers.concurrent_raters import cover_mismatches
+from helpers.fake_stimuli import free_port, write_fake_stimuli
+from helpers.servers import crowd_env, kill9, start_gunicorn, stop
 
 from rating_app.db import make_engine
 from rating_app.designs.acr import iter_rows
@@ -18,6 +18,8 @@ from rating_app.designs.appropriateness import iter_fit_rows
 from rating_app.designs.pairwise import iter_pair_rows
 from rating_app.designs.parallel import iter_page_rows
 from rating_app.simulate import run_simulation
+
+pytestmark = pytest.mark.full  # the full tier: hundreds of raters against real servers
 
 ROOT = Path(__file__).resolve().parents[1]
 N_RATERS = 200

@@ -16,15 +16,17 @@ import time
 
 import pytest
 import requests
-from concurrent_raters import cover_mismatches
-from fake_stimuli import free_port, write_fake_stimuli
-from pg_server import Cluster, ServerError
-from servers import crowd_env, start_gunicorn
+from helpers.concurrent_raters import cover_mismatches
+from helpers.fake_stimuli import free_port, write_fake_stimuli
+from helpers.pg_server import Cluster, ServerError
+from helpers.servers import crowd_env, start_gunicorn
 from test_app_browser import browser  # noqa: F401  (the fixture)
 from test_app_load import DESIGNS
 
 from rating_app.db import make_engine
 from rating_app.simulate import run_simulation
+
+pytestmark = pytest.mark.full  # the full tier: a PostgreSQL of its own, killed and restarted
 
 
 @pytest.fixture

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 import requests
-from fake_stimuli import free_port
-from servers import start_gunicorn, wait_for
+from helpers.fake_stimuli import free_port
+from helpers.servers import start_gunicorn, wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 NGINX = shutil.which("nginx") or "/usr/sbin/nginx"

@@ -8,7 +8,7 @@ import wave
 
 import numpy as np
 import pytest
-from fake_stimuli import write_fake_stimuli
+from helpers.fake_stimuli import write_fake_stimuli
 from sqlalchemy import select
 from test_app_designs import complete, post, shown
 

@@ -6,8 +6,8 @@ import subprocess
 import sys
 
 import pytest
-from conftest import ROOT
-from fake_stimuli import write_fake_stimuli
+from helpers.fake_stimuli import write_fake_stimuli
+from helpers.paths import ROOT
 
 from rating_app import SETTINGS, create_app
 from rating_app.db import app_engine

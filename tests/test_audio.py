@@ -9,12 +9,14 @@ import wave
 import imageio_ffmpeg
 import numpy as np
 import pytest
-from own_study_data import action_takes, make_study, speech
+from helpers.own_study_data import action_takes, make_study, speech
 
 from generation.data.motion_files import read_motion
 from generation.make_stimuli import main as make_stimuli
 from rendering.audio import RATE, integrated_loudness, mux_audio, read_audio
 from rendering.render import render_clip
+
+pytestmark = pytest.mark.full  # the full tier: studies built from the real actions in ../shared
 
 FFMPEG = imageio_ffmpeg.get_ffmpeg_exe()
 

@@ -7,7 +7,7 @@ import zipfile
 
 import numpy as np
 import pytest
-from conftest import BANDAI, ROOT
+from helpers.paths import ROOT, TEST_DATA
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -17,7 +17,7 @@ from moglow_eval.core.cli import UserError
 from moglow_eval.core.clip import ClipError, load_clip, save_clip
 from rendering import __main__ as render_cli
 
-TAKE = BANDAI / "dataset-1" / "data" / "dataset-1_dash_normal_001.bvh.gz"  # the smallest real take (85 frames)
+TAKE = TEST_DATA / "bvh" / "bandai_dash_normal_001.bvh.gz"  # the smallest real take (85 frames)
 
 
 @pytest.fixture(scope="module")

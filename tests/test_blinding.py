@@ -10,7 +10,7 @@ import subprocess
 import imageio_ffmpeg
 import numpy as np
 import pytest
-from conftest import BANDAI
+from helpers.paths import BANDAI
 from scipy.stats import mannwhitneyu
 
 from generation.motion import skeleton
@@ -18,6 +18,8 @@ from generation.motion.features import load_take
 from rendering import RenderError, render_clip
 from rendering.blinding import check_one_size
 from rendering.mp4_layout import FILLER, content_signal, non_filler_sizes, read_layout, size_signals
+
+pytestmark = pytest.mark.full  # the full tier: real takes from ../shared
 
 TAKES = ["dataset-1_walk_angry_002", "dataset-1_walk_normal_001", "dataset-1_run_happy_001", "dataset-1_walk_old_002"]
 SIZE, FRAMES = 128, 40

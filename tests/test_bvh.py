@@ -6,7 +6,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import BANDAI, PFNN, ROOT
+from helpers.paths import ROOT, TEST_DATA
 from reference.bvh_fk import fk_positions
 from scipy.spatial.transform import Rotation
 
@@ -158,13 +158,13 @@ def test_gzip_lf_and_bom_give_the_same(tmp_path, handwritten):
 
 
 def test_real_bandai_and_pfnn_files():
-    b = read_bvh(next(BANDAI.glob("dataset-1/data/dataset-1_walk_*.bvh.gz")))
+    b = read_bvh(TEST_DATA / "bvh" / "bandai_walk_angry_002.bvh.gz")
     assert len(b.names) == 22 and b.names[0] == "joint_Root" and b.motion.shape[1] == 22 * 6
     assert round(b.fps) == 30
-    p = read_bvh(PFNN / "animations" / "LocomotionFlat04_000.bvh.gz")
-    assert len(p.names) == 31 and p.motion.shape == (2428, 6 + 30 * 3) and round(p.fps) == 120
+    p = read_bvh(TEST_DATA / "bvh" / "pfnn_locomotion_flat04_head.bvh.gz")
+    assert len(p.names) == 31 and p.motion.shape == (240, 6 + 30 * 3) and round(p.fps) == 120
     pos = fk_positions(p)
-    assert np.isfinite(pos).all() and pos.shape == (2428, 31, 3)
+    assert np.isfinite(pos).all() and pos.shape == (240, 31, 3)
 
 
 # ---- malformed files: (name, edit of the valid text, expected line, words in the message) ----
@@ -304,7 +304,7 @@ def test_import_motion_real_take_resampled(tmp_path):
     from moglow_eval.core.clip import load_clip
 
     out = tmp_path / "walk.npz"
-    take = next(BANDAI.glob("dataset-2/data/dataset-2_walk_*.bvh.gz"))
+    take = TEST_DATA / "bvh" / "bandai_walk_angry_002.bvh.gz"
     assert import_motion.main([str(take), str(out), "--fps", "20"]) == 0
     clip = load_clip(out)
     b = read_bvh(take)

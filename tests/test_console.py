@@ -7,7 +7,7 @@ import tomllib
 from importlib import metadata
 
 import pytest
-from conftest import ROOT
+from helpers.paths import ROOT
 
 from moglow_eval.console import COMMANDS
 

@@ -13,6 +13,8 @@ import yaml
 from rating_app import SETTINGS
 from rating_app.study_config import load_study_file
 
+pytestmark = pytest.mark.full  # the full tier: containers and system services
+
 DEPLOY = Path(__file__).resolve().parents[1] / "deploy"
 
 
@@ -71,7 +73,7 @@ def test_image_builds_and_serves(tmp_path):
     import time
 
     import requests
-    from fake_stimuli import free_port, write_fake_stimuli
+    from helpers.fake_stimuli import free_port, write_fake_stimuli
 
     for tool in ("podman", "debootstrap", "runc"):
         if not shutil.which(tool):

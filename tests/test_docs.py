@@ -17,7 +17,7 @@ import subprocess
 import sys
 
 import pytest
-from conftest import ROOT
+from helpers.paths import ROOT
 
 # Other people's tools and shell built-ins: shown in the docs, not ours to check.
 NOT_OURS = {

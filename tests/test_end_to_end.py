@@ -8,6 +8,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+pytestmark = pytest.mark.full  # the full tier: whole studies on PostgreSQL
+
 
 def _processes_mentioning(text: str) -> list[str]:
     found = []

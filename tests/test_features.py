@@ -5,13 +5,15 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
-from conftest import BANDAI, PFNN
+from helpers.paths import BANDAI, PFNN
 from reference.bvh_fk import fk_positions
 
 from generation.data.prepare import category_of, find_takes
 from generation.motion import skeleton
 from generation.motion.bvh import BvhError, read_bvh
 from generation.motion.features import SKELETON_MAPS, load_take, mirror, reverse, root_trajectory, to_features, to_world
+
+pytestmark = pytest.mark.full  # the full tier: every take of ../shared
 
 FPS = 20.0
 PFNN_TAKES = sorted((PFNN / "animations").glob("Locomotion*.bvh.gz")) + sorted(

@@ -4,7 +4,7 @@ MG causality. All at small sizes."""
 import numpy as np
 import pytest
 import torch
-from conftest import BANDAI
+from helpers.paths import BANDAI
 from reference.moglow_naive import inverse_naive
 
 from generation.models.fl import FL
@@ -241,6 +241,7 @@ def test_mg_residual_samples_steps_from_the_previous_pose(layout):
     assert not torch.allclose(fast[:, 0], first[:, 0], atol=1e-2)
 
 
+@pytest.mark.full  # a real turning walk from ../shared
 def test_mg_carry_feet_sees_the_previous_feet_from_the_new_root():
     """With `carry_feet` the feet's base is where the previous frame's feet are, seen from frame t's root (real
     mocap, through features.to_features): a foot planted on the floor has a step of 0. The rest of the body's

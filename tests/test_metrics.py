@@ -5,7 +5,7 @@ import warnings
 
 import numpy as np
 import pytest
-from conftest import DATA
+from helpers.paths import DATA
 
 from generation.metrics.objective import (
     CONTACT_HEIGHT,
@@ -18,6 +18,8 @@ from generation.metrics.objective import (
 )
 from generation.motion import skeleton
 from generation.motion.features import load_take, to_features
+
+pytestmark = pytest.mark.full  # the full tier: real walks from ../shared
 
 
 def takes(category, n, min_seconds=5.0):

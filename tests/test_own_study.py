@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from own_study_data import action_takes, make_study
+from helpers.own_study_data import action_takes, make_study
 
 from generation.data.motion_files import read_motion
 from generation.make_stimuli import main as make_stimuli
@@ -22,6 +22,8 @@ from generation.stimuli.catch_kinds import make_catch
 from moglow_eval.core.clip import load_clip
 from rendering.camera import framing_camera
 from rendering.raster import FrameDrawer
+
+pytestmark = pytest.mark.full  # the full tier: the real actions in ../shared
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -214,7 +216,7 @@ def test_bad_study_input_is_one_line_and_leaves_no_manifest(tmp_path, capsys):
 def test_skeleton_mismatch_names_both_files(tmp_path, capsys):
     study = make_study(tmp_path / "s", n_items=2, n_catch=0)
     root = study.parent
-    from own_study_data import write_bvh
+    from helpers.own_study_data import write_bvh
 
     from generation.motion.bvh import read_bvh
 

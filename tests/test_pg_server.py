@@ -1,23 +1,23 @@
-"""The tests' own PostgreSQL (issue 33, item 0): where none answers at 127.0.0.1:5432, the suite starts a throwaway
+"""The tests' own PostgreSQL: where none answers at 127.0.0.1:5432, the suite starts a throwaway
 server from the installed binaries, points every test's URL at it, and removes it at the end."""
 
 import os
 
 import psycopg
-from fake_stimuli import free_port
-from pg_server import answers, suite_server
+from helpers.fake_stimuli import free_port
+from helpers.pg_server import answers, suite_server
 
 
-def test_the_suite_has_a_postgresql_and_every_url_points_at_it():
-    import fake_stimuli
-    from conftest import pg_admin_url
+def test_the_suite_has_a_postgresql_and_every_url_points_at_it(pg_server):
+    from helpers import fake_stimuli
+    from helpers.pg_server import pg_admin_url
 
-    assert answers(pg_admin_url())
-    assert fake_stimuli.PG_BASE == pg_admin_url().replace("postgresql://", "postgresql+psycopg://", 1)
+    assert answers(pg_admin_url()) and pg_admin_url() == pg_server
+    assert fake_stimuli.pg_base() == pg_admin_url().replace("postgresql://", "postgresql+psycopg://", 1)
     assert os.environ["E2E_PG"] == pg_admin_url()  # what the demo and gunicorn, started by tests, are given
 
 
-def test_without_a_server_a_throwaway_one_is_started_and_removed(monkeypatch):
+def test_without_a_server_a_throwaway_one_is_started_and_removed(pg_server, monkeypatch):
     monkeypatch.delenv("E2E_PG")
     monkeypatch.delenv("RATING_TEST_PG")
     nobody = f"postgresql://postgres@127.0.0.1:{free_port()}/test"  # no server listens there

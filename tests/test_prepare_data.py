@@ -4,12 +4,14 @@ import gzip
 
 import numpy as np
 import pytest
-from conftest import BANDAI, DATA, small_take_names
+from helpers.paths import BANDAI, DATA, small_take_names
 
 from generation.data import prepare as prepare_data
 from generation.data.prepare import find_takes, prepare, window_starts
 from generation.motion import skeleton
 from generation.motion.features import load_take, mirror, reverse, to_features
+
+pytestmark = pytest.mark.full  # the full tier: the data set in ../shared
 
 SPLITS = ("train", "valid", "test")
 

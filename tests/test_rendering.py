@@ -7,7 +7,7 @@ import sys
 import imageio_ffmpeg
 import numpy as np
 import pytest
-from conftest import BANDAI, ROOT
+from helpers.paths import ROOT, TEST_DATA
 from PIL import Image
 
 from generation.motion import skeleton
@@ -17,7 +17,7 @@ from rendering import Camera, RenderError, render_clip
 from rendering.camera import camera_targets
 from rendering.raster import FrameDrawer, yuv_to_rgb
 
-WALK = BANDAI / "dataset-1" / "data" / "dataset-1_walk_angry_002.bvh.gz"
+WALK = TEST_DATA / "bvh" / "bandai_walk_angry_002.bvh.gz"
 
 
 def probe(path):

@@ -35,6 +35,7 @@ def test_foot_steps_are_world_steps_seen_from_the_previous_root():
     np.testing.assert_allclose(got.numpy(), expected[:, feet], atol=1e-5)
 
 
+@pytest.mark.full  # real walks from ../shared
 @pytest.mark.parametrize("category", ["walk", "walk-turn-left"])
 def test_stance_speed_of_real_motion_is_the_foot_skating_metric(category):
     for path in takes(category, 3):

@@ -8,7 +8,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import BANDAI, DATA, ROOT
+from helpers.paths import DATA, ROOT, TEST_DATA
 
 from generation import make_stimuli
 from generation.motion.features import root_trajectory
@@ -268,7 +268,7 @@ def test_stimuli_bad_input_one_line_errors(quick_stimuli, tmp_path, capsys):
     assert code == 2 and "no motion file for item" in err
     make_stimuli.main(base[:-2] + ["--export-items", str(tmp_path / "ask")])
     items = [r["item"] for r in read_csv(tmp_path / "ask" / "items.csv")]
-    good = BANDAI / "dataset-1" / "data" / "dataset-1_walk_angry_002.bvh.gz"
+    good = TEST_DATA / "bvh" / "bandai_walk_angry_002.bvh.gz"
     for it in items[1:]:
         shutil.copy(good, sysdir / f"{it}.bvh.gz")
     (sysdir / f"{items[0]}.bvh").write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 zero\n")
@@ -313,7 +313,7 @@ def test_stimuli_hostile_system_file_one_line(quick_stimuli, tmp_path, capsys, h
     items = [r["item"] for r in read_csv(tmp_path / "ask" / "items.csv")]
     sysdir = tmp_path / "sys"
     sysdir.mkdir()
-    take = BANDAI / "dataset-1" / "data" / "dataset-1_walk_angry_002.bvh.gz"
+    take = TEST_DATA / "bvh" / "bandai_walk_angry_002.bvh.gz"
     import gzip
 
     text = gzip.decompress(take.read_bytes()).decode()

@@ -15,7 +15,11 @@ import numpy as np
 
 from moglow_eval.core import study
 
-PG_BASE = os.environ.get("RATING_TEST_PG", "postgresql+psycopg://postgres@127.0.0.1:5432/test")
+
+def pg_base() -> str:
+    """The SQLAlchemy URL of the tests' PostgreSQL database `test`, read when asked: the `pg_server` fixture sets
+    RATING_TEST_PG when it starts a server of the tests' own."""
+    return os.environ.get("RATING_TEST_PG", "postgresql+psycopg://postgres@127.0.0.1:5432/test")
 
 
 def write_mp4(path, n_frames=6, size=64, fps=20, shade=0):
@@ -128,11 +132,12 @@ def _write_fake_metrics(path, rows, rng):
 
 
 @contextlib.contextmanager
-def pg_schema(base_url: str = PG_BASE):
+def pg_schema(base_url: str | None = None):
     """A fresh PostgreSQL schema for one test (run), dropped afterwards; yields a URL that uses it."""
     import psycopg
 
     name = "ra_" + secrets.token_hex(6)
+    base_url = base_url or pg_base()
     plain = base_url.replace("postgresql+psycopg://", "postgresql://")
     with psycopg.connect(plain, autocommit=True) as conn:
         conn.execute(f'CREATE SCHEMA "{name}"')

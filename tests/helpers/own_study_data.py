@@ -17,7 +17,9 @@ import numpy as np
 from generation.data.motion_files import read_motion
 from generation.motion.bvh import read_bvh
 
-ACTIONS = Path(__file__).resolve().parents[2] / "shared" / "data" / "bandai-namco-actions" / "dataset-1" / "data"
+from . import paths
+
+ACTIONS = paths.ACTIONS / "dataset-1" / "data"
 FINGERS = ("Thumb", "Index", "Middle", "Ring", "Pinky")
 FACE = ("Jaw", "Chin", "Nose", "Eye_L", "Eye_R", "Brow_L", "Brow_R", "Lid_L")  # 22 + 40 + 8 = 70 joints
 

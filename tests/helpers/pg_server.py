@@ -26,7 +26,7 @@ class ServerError(RuntimeError):
 
 
 def free_port() -> int:
-    # Not fake_stimuli's: importing it here would fix its PG_BASE before suite_server sets the environment.
+    # Not fake_stimuli's: that module is the app's tests', and this one must stand alone.
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
@@ -96,3 +96,9 @@ def suite_server(default: str = DEFAULT_ADMIN) -> tuple[Cluster | None, str]:
     os.environ["E2E_PG"] = admin
     os.environ["RATING_TEST_PG"] = admin.replace("postgresql://", "postgresql+psycopg://", 1)
     return cluster, admin
+
+
+def pg_admin_url() -> str:
+    """A plain libpq URL of the tests' server's database `test` (where test databases are created): E2E_PG, which
+    the `pg_server` fixture sets to the server at 127.0.0.1:5432 or to the tests' own."""
+    return os.environ.get("E2E_PG", DEFAULT_ADMIN)
