@@ -263,7 +263,7 @@ def test_non_finite_samples_never_become_clips(tiny_runs, test_split, small_data
     line each, instead of writing clips that would render as broken videos."""
     from generation.make_stimuli import sample_condition
 
-    ck = torch.load(last_ckpt(tiny_runs["mg"]), weights_only=False)
+    ck = torch.load(last_ckpt(tiny_runs["mg"]), weights_only=True)
     name = next(k for k, v in ck["state"].items() if k.endswith("weight") and v.is_floating_point())
     ck["state"][name].view(-1)[0] = float("nan")
     poisoned = tmp_path / "poisoned.pt"

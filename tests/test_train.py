@@ -46,14 +46,14 @@ def test_run_folder_follows_contract(tiny_runs, kind):
     assert cfg["model"] == kind and cfg["seed"] == 0
     steps = sorted(int(p.stem.split("_")[1]) for p in (run / "checkpoints").glob("step_*.pt"))
     assert steps == [5, 10, 50, 100, 150]  # early checkpoints kept for the bad examples
-    ck = torch.load(run / "checkpoints" / "step_0000005.pt", weights_only=False)
+    ck = torch.load(run / "checkpoints" / "step_0000005.pt", weights_only=True)
     for key in ("kind", "config", "state", "stats", "tau", "fps", "window", "step"):
         assert key in ck
     assert ck["kind"] == kind and ck["fps"] == 20.0 and ck["window"] == 80 and ck["step"] == 5
 
 
 def state(run):
-    ck = torch.load(sorted((run / "checkpoints").glob("step_*.pt"))[-1], weights_only=False)
+    ck = torch.load(sorted((run / "checkpoints").glob("step_*.pt"))[-1], weights_only=True)
     return ck["state"]
 
 
@@ -164,7 +164,7 @@ def test_warm_restart_resets_adam_and_resumes_exactly(small_dataset, tmp_path):
     b = train("mg", cfg, small_dataset, tmp_path / "b", steps=10, seed=1, progress=False, resume=True)
     sa, sb = state(a), state(b)
     assert all(torch.equal(sa[k], sb[k]) for k in sa)
-    opt = torch.load(a / "resume.pt", weights_only=False)["opt"]["state"]
+    opt = torch.load(a / "resume.pt", weights_only=True)["opt"]["state"]
     assert {int(v["step"]) for v in opt.values()} == {4}  # Adam counted afresh from step 6
     short = train("mg", cfg, small_dataset, tmp_path / "short", steps=5, seed=1, progress=False)
     assert json.loads((short / "config.json").read_text())["restart_step"] is None  # too short to restart
@@ -345,8 +345,8 @@ def test_ddp_two_cpu_processes_match_one(small_dataset, tmp_path):
     )
     assert r.returncode == 0, r.stderr[-3000:]
     name = f"checkpoints/step_{steps:07d}.pt"
-    one = torch.load(tmp_path / "one" / name, weights_only=False)["state"]
-    two = torch.load(tmp_path / "two" / name, weights_only=False)["state"]
+    one = torch.load(tmp_path / "one" / name, weights_only=True)["state"]
+    two = torch.load(tmp_path / "two" / name, weights_only=True)["state"]
     assert one.keys() == two.keys()
     diff = torch.cat([(one[k].float() - two[k].float()).abs().flatten() for k in one])
     # Float rounding only: Adam turns the rounding of near-zero gradients into steps of up to lr (3e-3), so a

@@ -31,6 +31,7 @@ from moglow_eval.core import cli
 from moglow_eval.core.cli import UserError
 
 from ..data.dataset import batch_indices, category_weights, eval_batches, load_dataset
+from ..data.torch_files import load_torch_file
 from ..models import fl, flows, moglow
 from .stance import stance_loss
 from .threads import CoreShare, torch_threads
@@ -379,7 +380,7 @@ def _resume(path, resume, net, opt, device):
         return 0, 0.0
     if not path.exists():
         raise TrainError(f"{path}: nothing to resume")
-    state = torch.load(path, map_location=device, weights_only=False)
+    state = load_torch_file(path, device, TrainError)
     net.load_state_dict(state["state"])
     opt.load_state_dict(state["opt"])
     return state["step"], state.get("elapsed", 0.0)
