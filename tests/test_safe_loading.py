@@ -80,6 +80,16 @@ def test_export_and_the_motion_encoder_refuse_a_pickled_object(evil, tmp_path):
     assert not marker.exists() and not (tmp_path / "out.pt").exists()
 
 
+def test_a_resume_state_of_another_model_is_one_line(small_dataset, tmp_path, capsys):
+    out = tmp_path / "run"
+    out.mkdir()
+    torch.save({"state": {"weight": torch.zeros(2)}, "opt": {}, "step": 3}, out / "resume.pt")
+    argv = ["--model", "fl", "--config", "tiny", "--data", str(small_dataset), "--out", str(out), "--resume"]
+    assert train.main([*argv, "--threads", "1", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {out / 'resume.pt'}: not a resume state of this run's model")
+
+
 def test_a_file_that_is_no_checkpoint_is_one_line(tmp_path, capsys):
     junk = tmp_path / "junk.pt"
     junk.write_text("not a checkpoint")

@@ -40,9 +40,9 @@ ALL = "*"  # the moments of the whole training split
 # What an encoder file of the older format (numpy arrays) needs beyond tensors: numpy's rebuilding of an array of
 # float32 or float64 from its bytes, under the module name of numpy 2 and of numpy 1. An array of any other dtype
 # (an object array could hold a pickled callable) is still refused.
-_reconstruct = np._core.multiarray._reconstruct
+_reconstruct = (np._core if hasattr(np, "_core") else np.core).multiarray._reconstruct
 NUMPY_FLOAT_ARRAYS = (
-    _reconstruct,
+    (_reconstruct, "numpy._core.multiarray._reconstruct"),
     (_reconstruct, "numpy.core.multiarray._reconstruct"),
     np.ndarray,
     np.dtype,

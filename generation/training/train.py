@@ -273,9 +273,13 @@ def _resume(path, resume, net, opt, device):
     if not path.exists():
         raise TrainError(f"{path}: nothing to resume")
     state = load_torch_file(path, device, TrainError)
-    net.load_state_dict(state["state"])
-    opt.load_state_dict(state["opt"])
-    return state["step"], state.get("elapsed", 0.0)
+    try:
+        net.load_state_dict(state["state"])
+        opt.load_state_dict(state["opt"])
+        return int(state["step"]), float(state.get("elapsed", 0.0))
+    except Exception as e:  # another model's or another tool's file: one line, not a traceback
+        first = (str(e).strip().splitlines() or [""])[0]
+        raise TrainError(f"{path}: not a resume state of this run's model ({type(e).__name__}: {first})") from None
 
 
 class _Run:
