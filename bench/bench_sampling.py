@@ -34,12 +34,12 @@ from reference.moglow_naive import inverse_naive  # noqa: E402
 
 from generation.models.mg_stream import LAYOUTS, MGStream, default_layout  # noqa: E402
 from generation.models.moglow import MoGlow  # noqa: E402
-from generation.training.train import load_config, model_config  # noqa: E402
+from generation.training.config import load_config, model_config  # noqa: E402
 
 
 def paper_model():
     torch.manual_seed(0)
-    model = MoGlow(model_config("mg", load_config("mg", "paper")))
+    model = MoGlow(model_config(load_config("mg", "paper")))
     tau = model.tau
     model(torch.randn(8, tau + 4, 63), torch.randn(8, tau + 4, 3))  # actnorm init
     with torch.no_grad():  # trained-like output layers (zero-initialised ones would be a special case)

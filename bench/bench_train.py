@@ -15,6 +15,7 @@ import os
 import statistics
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import torch
@@ -26,22 +27,22 @@ from generation.training.train import build_model, load_config, make_optimiser  
 
 
 def time_steps(kind, ds, steps, precision="float32"):
-    cfg = {**load_config(kind, "cpu"), "precision": precision}
+    cfg = replace(load_config(kind, "cpu"), precision=precision)
     torch.manual_seed(0)
     net = build_model(kind, cfg, ds.stats).train()
     set_net_precision(net, PRECISIONS[precision])
     opt = make_optimiser(net, cfg)
     tr = ds.splits["train"]
-    crop = cfg["train_window"] or tr.x.shape[1]
+    crop = cfg.train_window or tr.x.shape[1]
     times, cpu = [], []
     for step in range(steps + 2):
-        idx = batch_indices(len(tr), cfg["batch_size"], 0, step)
+        idx = batch_indices(len(tr), cfg.batch_size, 0, step)
         x, c = tr.x[idx, :crop], tr.c[idx, :crop]
         t, t_cpu = time.perf_counter(), time.process_time()
         loss = net.nll(x, c).mean()
         opt.zero_grad()
         loss.backward()
-        torch.nn.utils.clip_grad_norm_(net.parameters(), cfg["clip_grad"], foreach=True)
+        torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.clip_grad, foreach=True)
         opt.step()
         times.append(time.perf_counter() - t)
         cpu.append(time.process_time() - t_cpu)
@@ -66,7 +67,7 @@ def main():
     for kind in a.models:
         sps, sps_cpu, cfg = time_steps(kind, ds, a.steps, a.precision)
         print(
-            f"| {kind}_cpu | {sps:.2f} | {sps_cpu:.2f} | {cfg['batch_size']} x {cfg['train_window'] or ds.window} |",
+            f"| {kind}_cpu | {sps:.2f} | {sps_cpu:.2f} | {cfg.batch_size} x {cfg.train_window or ds.window} |",
             flush=True,
         )
     if a.runs:

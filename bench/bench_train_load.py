@@ -43,9 +43,9 @@ ds = load_dataset({data!r})
 cfg = load_config({kind!r}, "cpu")
 torch.manual_seed(0)
 net = build_model({kind!r}, cfg, ds.stats).train()
-opt = torch.optim.Adam(net.parameters(), lr=cfg["lr"])
+opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
 tr = ds.splits["train"]
-crop = cfg["train_window"] or tr.x.shape[1]
+crop = cfg.train_window or tr.x.shape[1]
 step, start = 0, None
 while True:
     if step == 3:
@@ -56,7 +56,7 @@ while True:
     loss = net.nll(x, c, keep, history).mean()
     opt.zero_grad(set_to_none=True)
     loss.backward()
-    torch.nn.utils.clip_grad_norm_(net.parameters(), cfg["clip_grad"])
+    torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.clip_grad)
     opt.step()
     step += 1
     if start is not None and time.perf_counter() - start > {seconds}:

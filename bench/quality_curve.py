@@ -22,6 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from sample_quality import window_figures  # noqa: E402
 
 from generation.data.dataset import read_arrays, require  # noqa: E402
+from generation.data.torch_files import load_torch_file  # noqa: E402
 from generation.make_stimuli import checkpoints_in  # noqa: E402
 from generation.sampling.sample import load_model, sample_split  # noqa: E402
 
@@ -79,7 +80,7 @@ def main():
             xs = [sample_split(model, a.data, "test", temperature=1.0, seed=seed)[0] for seed in range(a.seeds)]
             s = score(xs, ref, c, labels, fps)
             curves.setdefault(name, []).append((model.step, s))
-            valid = torch.load(ckpt, map_location="cpu", weights_only=False)["valid_nll"]
+            valid = load_torch_file(ckpt)["valid_nll"]
             print(
                 f"| {name} | {model.step} | {valid:.3f} | {s['skating']:.1f} | {s['jerk']:.2f} | "
                 f"{s['following']:.3f} | {s['stepping']:.2f} |",

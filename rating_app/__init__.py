@@ -2,20 +2,15 @@
 
     app = create_app(manifest="stimuli/manifest.csv", db_url="postgresql://...", ratings_per_clip=20)
 
-Arguments left as None are read from the environment (ADMIN_TOKEN, DATABASE_URL, RATING_MANIFEST, STUDY_DESIGN,
-STUDY_QUESTION, RATINGS_PER_CLIP, CLIPS_PER_RATER, CATCH_PER_RATER, SLOT_TIMEOUT, MIN_VIEW, SESSIONS_PER_CLIENT,
-COMPLETION_CODE, COMPLETION_URL, SECRET_KEY), which is how `rating_app.wsgi:app` is configured under gunicorn.
-Also read: COOKIE_SECURE=1 (admin cookie over HTTPS only), PROXY_COUNT (trusted reverse proxies in front, whose
-X-Forwarded-For names the client; default 0), VIDEO_ACCEL (nginx or caddy: that proxy sends the videos' bytes through an
-internal redirect, videos.py; default off) and DB_POOL_SIZE (connections per worker, default 10 + 10 overflow).
-Every setting is checked here, so a bad one stops the start with one line instead of failing on each request.
-`config` (or RATING_CONFIG): a study file holding these settings in lower case (study_config.py); an environment
-variable that is set overrides its key there.
+The settings are one table (settings.py): each is a keyword argument here, an environment variable (how
+`rating_app.wsgi:app` is configured under gunicorn), a key of the study file (`config`, or RATING_CONFIG;
+study_config.py) and, most of them, a flag of `serve`. An argument left as None is read from the environment,
+then the study file, then the default. Every setting is checked here, so a bad one stops the start with one line
+instead of failing on each request.
 """
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import os
 from pathlib import Path
@@ -26,140 +21,121 @@ from sqlalchemy.exc import DBAPIError, InterfaceError, OperationalError, SQLAlch
 from sqlalchemy.exc import TimeoutError as PoolTimeout
 from werkzeug.exceptions import HTTPException
 
-from moglow_eval.core.cli import number
-
 from .manifest import AppError, load_manifest
+from .settings import ARGS, SETTINGS, resolve
 
 __all__ = ["create_app", "AppError", "SETTINGS"]
 
-# name: (kind, default, lo, hi, lo_open); the CLI flags use the same bounds.
-SETTINGS = {
-    "RATINGS_PER_CLIP": (int, 20, 1, 1_000_000, False),
-    "CLIPS_PER_RATER": (int, 0, 0, 1_000_000, False),  # 0: every clip still needing ratings
-    "CATCH_PER_RATER": (int, 4, 0, 1_000_000, False),  # catch trials per session from the pool; 0: every one
-    "SLOT_TIMEOUT": (float, 3600.0, 0.0, 1e7, True),  # seconds without an answer before a session expires
-    "MIN_VIEW": (float, 1.0, 0.0, 1.0, False),  # share of each clip that must have played
-    "SESSIONS_PER_CLIENT": (int, 10, 0, 1_000_000, False),  # new sessions per client address per hour; 0: no limit
-    "PROXY_COUNT": (int, 0, 0, 10, False),
-}
 
-
-def setting(name: str, given=None, env=None):
-    """`given`, else the environment variable `name` (in `env`, default os.environ), else the default; checked
-    against SETTINGS."""
-    kind, default, lo, hi, lo_open = SETTINGS[name]
-    raw = given if given is not None else (os.environ if env is None else env).get(name) or None
-    if raw is None:
-        return default
-    try:
-        return number(kind, lo, hi, lo_open)(str(raw))
-    except argparse.ArgumentTypeError as e:
-        where = name if given is None else name.lower()
-        raise AppError(f"{where}: {e}") from None
-
-
-def _env(name, env=None):
-    return (os.environ if env is None else env).get(name) or None
-
-
-def create_app(
-    manifest=None,
-    db_url=None,
-    ratings_per_clip=None,
-    clips_per_rater=None,
-    catch_per_rater=None,
-    admin_token=None,
-    slot_timeout_s=None,
-    completion_code=None,
-    completion_url=None,
-    secret_key=None,
-    check_files=True,
-    min_view=None,
-    sessions_per_client=None,
-    design=None,
-    question=None,
-    config=None,
-) -> Flask:
-    """`design`: one of moglow_eval.core.study.DESIGNS (designs/; default acr); fixed for the life of the database.
-    `ratings_per_clip` and `clips_per_rater` count the design's units (clips, pairs of conditions of an item,
-    pages, ...)."""
-    from . import designs, health
-    from .admin import bp as admin_bp
-    from .api import bp as api_bp
-    from .audio_check import bp as audio_check_bp
-    from .audio_check import load_audio_check
-    from .db import make_read_engine
-    from .pages import bp as pages_bp
+def create_app(*, config=None, check_files=True, **given) -> Flask:
+    """The app with the settings `given` (settings.ARGS: manifest, db_url, design, ratings_per_clip, ...; design
+    is one of moglow_eval.core.study.DESIGNS, fixed for the life of the database; ratings_per_clip and
+    clips_per_rater count the design's units: clips, pairs of conditions of an item, pages, ...), the others from
+    the environment, the study file `config` and the defaults. `check_files`: read every video at the start."""
     from .study_config import study_environment
-    from .videos import ACCEL, VideoStore
 
-    env = study_environment(config or _env("RATING_CONFIG"), SETTINGS)
-    manifest = manifest or _env("RATING_MANIFEST", env)
-    if not manifest:
+    unknown = sorted(set(given) - set(ARGS))
+    if unknown:
+        raise TypeError(f"create_app() got an unexpected keyword argument {unknown[0]!r}")
+    env = study_environment(config or os.environ.get("RATING_CONFIG") or None, SETTINGS)
+    values = resolve(given, env)
+    if not values["RATING_MANIFEST"]:
         raise AppError(
             "no stimulus manifest: set RATING_MANIFEST (or --manifest, or rating_manifest in the study file) to "
             "stimuli/manifest.csv"
         )
-    config = _config(
-        env,
-        ratings_per_clip=ratings_per_clip,
-        clips_per_rater=clips_per_rater,
-        catch_per_rater=catch_per_rater,
-        slot_timeout_s=slot_timeout_s,
-        min_view=min_view,
-        sessions_per_client=sessions_per_client,
-        design=design,
-        question=question,
-        admin_token=admin_token,
-        completion_code=completion_code,
-        completion_url=completion_url,
-    )
-    proxies = config["PROXY_COUNT"]
     app = Flask(__name__)
-    if proxies:
+    if values["PROXY_COUNT"]:
         from werkzeug.middleware.proxy_fix import ProxyFix
 
-        app.wsgi_app = ProxyFix(app.wsgi_app, x_for=proxies, x_proto=proxies, x_host=proxies)
-    accel = (_env("VIDEO_ACCEL", env) or "off").strip().lower()
-    if accel not in ACCEL:
-        raise AppError(f"VIDEO_ACCEL: {accel!r} must be one of {', '.join(ACCEL)}")
+        n = values["PROXY_COUNT"]
+        app.wsgi_app = ProxyFix(app.wsgi_app, x_for=n, x_proto=n, x_host=n)
+    config = _app_config(values)
     app.config.update(
-        VIDEO_ACCEL=accel,
-        SECRET_KEY=secret_key or _env("SECRET_KEY", env) or _derived_secret(config["ADMIN_TOKEN"]),
+        VIDEO_ACCEL=values["VIDEO_ACCEL"],
+        SECRET_KEY=values["SECRET_KEY"] or _derived_secret(config["ADMIN_TOKEN"]),
         SESSION_COOKIE_HTTPONLY=True,
         SESSION_COOKIE_SAMESITE="Strict",
-        SESSION_COOKIE_SECURE=env.get("COOKIE_SECURE", "") == "1",  # set behind HTTPS
+        SESSION_COOKIE_SECURE=values["COOKIE_SECURE"],  # set behind HTTPS
         MAX_CONTENT_LENGTH=16 * 1024,
         **config,
     )
-    design = designs.get(config["STUDY_DESIGN"])
+    _open_study(app, values, check_files)
+    _register(app)
+    return app
+
+
+def _app_config(values) -> dict:
+    """The study's settings as app.config entries, once the design, its question and the completion URL are
+    checked."""
+    from . import designs
+
+    design = designs.get(values["STUDY_DESIGN"])
+    question = values["STUDY_QUESTION"] or design.question
+    if len(question) > 200 or not question.isprintable():
+        raise AppError("question: at most 200 printable characters on one line")
+    completion_url = values["COMPLETION_URL"]
+    if completion_url and not completion_url.startswith(("https://", "http://")):
+        raise AppError(f"completion URL must start with https:// or http://, got {completion_url!r}")
+    return {
+        "RATINGS_PER_CLIP": values["RATINGS_PER_CLIP"],
+        "CLIPS_PER_RATER": values["CLIPS_PER_RATER"] or None,  # 0: all clips still short of their target
+        "CATCH_PER_RATER": values["CATCH_PER_RATER"] or None,  # 0: every catch unit
+        "SLOT_TIMEOUT_S": float(values["SLOT_TIMEOUT"]),
+        "MIN_VIEW": float(values["MIN_VIEW"]),
+        "SESSIONS_PER_CLIENT": values["SESSIONS_PER_CLIENT"],
+        "PROXY_COUNT": values["PROXY_COUNT"],
+        "ADMIN_TOKEN": values["ADMIN_TOKEN"],
+        "COMPLETION_CODE": values["COMPLETION_CODE"],
+        "COMPLETION_URL": completion_url,
+        "STUDY_DESIGN": design.name,
+        "STUDY_QUESTION": question,
+    }
+
+
+def _open_study(app: Flask, values: dict, check_files: bool) -> None:
+    """The manifest's clips, the design's units, the database and the videos, in the app's extension state."""
+    from . import designs, health
+    from .audio_check import load_audio_check
+    from .db import make_read_engine
+    from .videos import VideoStore
+
+    manifest = values["RATING_MANIFEST"]
+    design = designs.get(app.config["STUDY_DESIGN"])
     clips = design.serving_clips(load_manifest(manifest, check_files=check_files))
     units = design.build_units(clips)
     app.config["STUDY_SOUND"] = any(c.audio for c in clips)  # the page plays sound and checks the rater hears
-    db_url = db_url or _env("DATABASE_URL", env)
     engine = _open_database(
-        db_url,
-        _env("DB_POOL_SIZE", env),
-        clips,
-        design.name,
-        design.cover_keys(clips, units),
+        values["DATABASE_URL"], values["DB_POOL_SIZE"], clips, design.name, design.cover_keys(clips, units)
     )
     app.extensions["rating_app"] = {
         "engine": engine,
         "read_engine": make_read_engine(engine),
         "clips": {c.clip_id: c for c in clips},
         # With VIDEO_ACCEL the proxy sends the bytes: no video is read into a worker's memory.
-        "videos": VideoStore(clips, Path(manifest).resolve().parent, preload=check_files and accel == "off"),
+        "videos": VideoStore(
+            clips, Path(manifest).resolve().parent, preload=check_files and values["VIDEO_ACCEL"] == "off"
+        ),
         "design": design,
         "units": units,
         "audio_check": load_audio_check(manifest) if app.config["STUDY_SOUND"] else {},
         "warnings": health.Warnings(app.logger),
     }
     pool = health.catch_pool_warning(
-        config["STUDY_DESIGN"], clips, units, config["CLIPS_PER_RATER"], config["CATCH_PER_RATER"]
+        design.name, clips, units, app.config["CLIPS_PER_RATER"], app.config["CATCH_PER_RATER"]
     )
     if pool:
         health.of_app(app).add("catch_pool", pool)
+
+
+def _register(app: Flask) -> None:
+    """The blueprints, the error handlers and the response headers."""
+    from . import health
+    from .admin import bp as admin_bp
+    from .api import bp as api_bp
+    from .audio_check import bp as audio_check_bp
+    from .pages import bp as pages_bp
+
     app.before_request(health.note_untrusted_proxy)
     app.register_blueprint(pages_bp)
     app.register_blueprint(api_bp)
@@ -167,50 +143,6 @@ def create_app(
     app.register_blueprint(admin_bp)
     _handle_errors(app)
     app.after_request(_headers)
-    return app
-
-
-def _config(
-    env,
-    ratings_per_clip,
-    clips_per_rater,
-    catch_per_rater,
-    slot_timeout_s,
-    min_view,
-    sessions_per_client,
-    design,
-    question,
-    admin_token,
-    completion_code,
-    completion_url,
-) -> dict:
-    """The study's settings as app.config entries: each given value, else its environment variable, checked."""
-    from . import designs
-
-    numbers = {  # checked first, in the order the settings are documented
-        "RATINGS_PER_CLIP": setting("RATINGS_PER_CLIP", ratings_per_clip, env),
-        "CLIPS_PER_RATER": setting("CLIPS_PER_RATER", clips_per_rater, env) or None,  # 0 / None: all clips still short
-        "CATCH_PER_RATER": setting("CATCH_PER_RATER", catch_per_rater, env) or None,  # 0 / None: every catch unit
-        "SLOT_TIMEOUT_S": float(setting("SLOT_TIMEOUT", slot_timeout_s, env)),
-        "MIN_VIEW": float(setting("MIN_VIEW", min_view, env)),
-        "SESSIONS_PER_CLIENT": setting("SESSIONS_PER_CLIENT", sessions_per_client, env),
-        "PROXY_COUNT": setting("PROXY_COUNT", env=env),
-    }
-    design = designs.get(design if design is not None else _env("STUDY_DESIGN", env))
-    question = (question if question is not None else _env("STUDY_QUESTION", env)) or design.question
-    if len(question) > 200 or not question.isprintable():
-        raise AppError("question: at most 200 printable characters on one line")
-    completion_url = completion_url if completion_url is not None else _env("COMPLETION_URL", env)
-    if completion_url and not completion_url.startswith(("https://", "http://")):
-        raise AppError(f"completion URL must start with https:// or http://, got {completion_url!r}")
-    return {
-        **numbers,
-        "ADMIN_TOKEN": admin_token if admin_token is not None else _env("ADMIN_TOKEN", env),
-        "COMPLETION_CODE": completion_code if completion_code is not None else _env("COMPLETION_CODE", env),
-        "COMPLETION_URL": completion_url,
-        "STUDY_DESIGN": design.name,
-        "STUDY_QUESTION": question,
-    }
 
 
 def _derived_secret(admin_token):

@@ -10,37 +10,17 @@ import sys
 from moglow_eval.core import cli
 from moglow_eval.core.study import DESIGNS
 
-from . import SETTINGS
 from .manifest import AppError
+from .settings import add_flags
 
 # Diagnostics (where the app runs, how many rows were exported) go to the log, on stderr; results to stdout.
 log = logging.getLogger("rating_app")
 
 
-def _flag(name):
-    """The argparse type for the setting `name`: the same bounds as the environment variable."""
-    kind, _, lo, hi, lo_open = SETTINGS[name]
-    return cli.number(kind, lo, hi, lo_open)
-
-
 def _serve(a):
     from . import create_app
 
-    app = create_app(
-        manifest=a.manifest,
-        db_url=a.db,
-        ratings_per_clip=a.ratings_per_clip,
-        clips_per_rater=a.clips_per_rater,
-        catch_per_rater=a.catch_per_rater,
-        slot_timeout_s=a.slot_timeout,
-        completion_code=a.completion_code,
-        completion_url=a.completion_url,
-        min_view=a.min_view,
-        sessions_per_client=a.sessions_per_client,
-        design=a.design,
-        question=a.question,
-        config=a.config,
-    )
+    app = create_app(**a.given)  # the settings given as flags; the rest from the environment and study file
     from .db import app_engine
 
     db = app_engine(app).url.render_as_string(hide_password=True)
@@ -152,102 +132,45 @@ def _simulate(a):
 
 
 def build_parser():
+    """The command's parser (also read by tests/test_docs.py to check the docs' commands)."""
     p = cli.ArgumentParser(prog="python -m rating_app", description=__doc__)
     sub = p.add_subparsers(dest="cmd", required=True, parser_class=cli.ArgumentParser)
-    count = cli.number(int, 1, 1_000_000)
-
-    s = sub.add_parser("serve", help="run the app (local use; production: gunicorn rating_app.wsgi:app)")
-    s.add_argument(
-        "--config",
-        default=None,
-        help="study file (TOML): the settings below in lower case, e.g. ratings_per_clip = 20; flags and set "
-        "environment variables override it (default $RATING_CONFIG)",
-    )
-    s.add_argument("--manifest", default=None, help="stimuli/manifest.csv (default $RATING_MANIFEST or the study file)")
-    s.add_argument("--db", default=None, help="database URL (default $DATABASE_URL or sqlite:///ratings.sqlite)")
-    s.add_argument("--host", default="127.0.0.1")
-    s.add_argument("--port", type=cli.number(int, 1, 65535), default=5000)
-    s.add_argument(
-        "--design",
-        choices=DESIGNS,
-        default=None,
-        help="acr (one clip, 1-5; the default), pairwise (two clips, a preference) or parallel (every "
-        "condition of an item on one page, 0-100); default $STUDY_DESIGN or acr. Stored with the "
-        "study: a database holds one design",
-    )
-    s.add_argument(
-        "--question",
-        default=None,
-        help="the question on the rating page (default per design, e.g. "
-        "'Which motion looks more natural?' for pairwise)",
-    )
-    s.add_argument(
-        "--ratings-per-clip",
-        type=_flag("RATINGS_PER_CLIP"),
-        default=None,
-        help="target answers per test unit: clip (acr), item and pair of conditions (pairwise), item "
-        "page (parallel) (20)",
-    )
-    s.add_argument(
-        "--clips-per-rater",
-        type=_flag("CLIPS_PER_RATER"),
-        default=None,
-        help="test units (clips, pairs or pages) per rater (default or 0: all that still need answers)",
-    )
-    s.add_argument(
-        "--catch-per-rater",
-        type=_flag("CATCH_PER_RATER"),
-        default=None,
-        help="catch units per rater, drawn least-covered first from the pool (4; 0: every one); size the pool so "
-        "that catch-per-rater / pool matches clips-per-rater / test units",
-    )
-    s.add_argument(
-        "--slot-timeout",
-        type=_flag("SLOT_TIMEOUT"),
-        default=None,
-        help="seconds without an answer before a session expires and its slot is freed (3600)",
-    )
-    s.add_argument(
-        "--min-view",
-        type=_flag("MIN_VIEW"),
-        default=None,
-        help="share of each clip that must have played before an answer is accepted (1 = the whole "
-        "clip, the default; lower only for tests and simulated crowds)",
-    )
-    s.add_argument(
-        "--sessions-per-client",
-        type=_flag("SESSIONS_PER_CLIENT"),
-        default=None,
-        help="new sessions per client address and hour (10; 0: no limit)",
-    )
-    s.add_argument(
-        "--completion-code", default=None, help="one code for everybody (e.g. Prolific's); default: random per rater"
-    )
-    s.add_argument(
-        "--completion-url",
-        default=None,
-        help="redirect after the last trial; {code} is replaced, e.g. https://app.prolific.com/submissions/complete?cc={code}",
-    )
-    s.set_defaults(fn=_serve)
-
+    _serve_parser(sub)
+    db = "database URL (default $DATABASE_URL or sqlite:///ratings.sqlite)"
     e = sub.add_parser("export", help="write ratings.csv from the database")
-    e.add_argument("--db", default=None, help="database URL (default $DATABASE_URL or sqlite:///ratings.sqlite)")
+    e.add_argument("--db", default=None, help=db)
     e.add_argument("--out", default="ratings.csv", help="output file, '-' for stdout")
     e.set_defaults(fn=_export)
-
     b = sub.add_parser("backup", help="a consistent copy of a running study's database (SQLite backup API / pg_dump)")
-    b.add_argument("--db", default=None, help="database URL (default $DATABASE_URL or sqlite:///ratings.sqlite)")
+    b.add_argument("--db", default=None, help=db)
     b.add_argument("--out", required=True, help="the backup file (SQLite: a database file; PostgreSQL: pg_dump -Fc)")
     b.set_defaults(fn=_backup)
-
     r = sub.add_parser("restore", help="restore a backup into a new SQLite file or an empty PostgreSQL database")
     r.add_argument("backup", help="the file `backup` wrote")
     r.add_argument("--db", required=True, help="the new SQLite file or empty PostgreSQL database to restore into")
     r.set_defaults(fn=_restore)
+    _simulate_parser(sub)
+    return p
 
+
+def _serve_parser(sub):
+    """serve: a flag per setting of the settings table (settings.TABLE), and where to listen."""
+    s = sub.add_parser("serve", help="run the app (local use; production: gunicorn rating_app.wsgi:app)")
+    add_flags(s)
+    s.add_argument("--host", default="127.0.0.1")
+    s.add_argument("--port", type=cli.number(int, 1, 65535), default=5000)
+    s.set_defaults(fn=_serve)
+
+
+def _simulate_parser(sub):
     m = sub.add_parser("simulate", help="a simulated crowd rating through the public API")
     m.add_argument("--url", required=True, help="base URL of the running app")
-    m.add_argument("--raters", type=count, required=True, help="number of raters (stops early when the study is full)")
+    m.add_argument(
+        "--raters",
+        type=cli.number(int, 1, 1_000_000),
+        required=True,
+        help="number of raters (stops early when the study is full)",
+    )
     m.add_argument("--seed", type=cli.number(int, 0, 2**31 - 1), default=0)
     m.add_argument(
         "--careless", type=cli.number(float, 0, 1), default=0.1, help="share of careless raters answering at random"
@@ -276,7 +199,6 @@ def build_parser():
     m.add_argument("--summary", default=None, help="write the full summary (raters, ratings) as JSON here")
     m.add_argument("--quiet", action="store_true", help="no progress bar")
     m.set_defaults(fn=_simulate)
-    return p
 
 
 def _main(argv):

@@ -14,7 +14,6 @@ the admin token and the cookie key are given in the environment, the database pa
 
 from __future__ import annotations
 
-import argparse
 import os
 import tomllib
 from pathlib import Path
@@ -22,33 +21,24 @@ from pathlib import Path
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError
 
-from moglow_eval.core.cli import number
-
 from .manifest import AppError
+from .settings import SETTINGS
 
-# The numbers' bounds are rating_app.SETTINGS'; these are the other keys, as the environment variables they stand for.
-TEXT_KEYS = (
-    "RATING_MANIFEST",
-    "DATABASE_URL",
-    "STUDY_DESIGN",
-    "STUDY_QUESTION",
-    "COMPLETION_CODE",
-    "COMPLETION_URL",
-    "VIDEO_ACCEL",
-)
-FLAG_KEYS = ("COOKIE_SECURE",)
-EXTRA_NUMBERS = {"DB_POOL_SIZE": (int, 10, 1, 1000, False)}
-SECRETS = ("ADMIN_TOKEN", "SECRET_KEY", "PGPASSWORD", "DATABASE_PASSWORD")
+# The study file's keys, by kind, as the environment variables they stand for (settings.TABLE holds them all).
+TEXT_KEYS = tuple(s.env for s in SETTINGS.values() if s.kind is str and s.in_file and not s.secret)
+FLAG_KEYS = tuple(s.env for s in SETTINGS.values() if s.kind is bool)
+# Never in the file: the app's secrets, and the database password libpq would read (PGPASSWORD or ~/.pgpass).
+SECRETS = (*(s.env for s in SETTINGS.values() if s.secret), "PGPASSWORD", "DATABASE_PASSWORD")
 
 
-def known_keys(settings) -> list[str]:
+def known_keys(settings=SETTINGS) -> list[str]:
     """Every key a study file may hold, lower case, in the order of the settings in docs/hosting.md."""
-    return [k.lower() for k in (*TEXT_KEYS, *settings, *EXTRA_NUMBERS, *FLAG_KEYS)]
+    return [s.key for s in settings.values() if s.in_file and not s.secret]
 
 
-def load_study_file(path, settings) -> dict[str, str]:
+def load_study_file(path, settings=SETTINGS) -> dict[str, str]:
     """{ENVIRONMENT_NAME: value as the environment would hold it} from the study file at `path`; AppError, one line
-    naming the file and the key, for anything wrong in it. `settings`: rating_app.SETTINGS (the numbers' bounds)."""
+    naming the file and the key, for anything wrong in it. `settings`: rating_app.SETTINGS (the settings table)."""
     path = Path(path)
     try:
         with open(path, "rb") as fh:
@@ -59,37 +49,34 @@ def load_study_file(path, settings) -> dict[str, str]:
         raise AppError(f"{path}: is a folder, not a study file") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
         raise AppError(f"{path}: not a TOML file: {e}") from None
-    numbers = {**settings, **EXTRA_NUMBERS}
     values = {}
     for key, value in table.items():
         name = key.upper()
         where = f"{path}: {key}"
         if name in SECRETS:
             raise AppError(f"{where}: a secret stays out of the study file; set {name} in the environment instead")
-        if key != key.lower() or name not in (*TEXT_KEYS, *numbers, *FLAG_KEYS):
+        if key != key.lower() or key not in known_keys(settings):
             raise AppError(f"{where}: unknown key (known: {', '.join(known_keys(settings))})")
-        if name in FLAG_KEYS:
-            if not isinstance(value, bool):
-                raise AppError(f"{where}: expected true or false, got {value!r}")
-            values[name] = "1" if value else "0"
-        elif name in numbers:
-            values[name] = _number(where, value, numbers[name])
-        elif not isinstance(value, str):
-            raise AppError(f"{where}: expected a string, got {value!r}")
-        else:
-            values[name] = value
+        values[name] = _as_environment(where, value, settings[name])
     return _resolve_paths(path, values)
 
 
-def _number(where, value, bounds) -> str:
-    kind, _default, lo, hi, lo_open = bounds
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or (kind is int and isinstance(value, float)):
-        raise AppError(f"{where}: expected {'an integer' if kind is int else 'a number'}, got {value!r}")
-    try:
-        number(kind, lo, hi, lo_open)(str(value))
-    except argparse.ArgumentTypeError as e:
-        raise AppError(f"{where}: {e}") from None
-    return str(value)
+def _as_environment(where, value, setting) -> str:
+    """A study file's value as its environment variable would hold it, once it is of the setting's type and
+    within its bounds."""
+    if setting.kind is bool:
+        if not isinstance(value, bool):
+            raise AppError(f"{where}: expected true or false, got {value!r}")
+        return "1" if value else "0"
+    if setting.kind in (int, float):
+        number = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if not number or (setting.kind is int and isinstance(value, float)):
+            raise AppError(f"{where}: expected {'an integer' if setting.kind is int else 'a number'}, got {value!r}")
+        setting.parse(str(value), where)
+        return str(value)
+    if not isinstance(value, str):
+        raise AppError(f"{where}: expected a string, got {value!r}")
+    return value
 
 
 def _resolve_paths(path: Path, values: dict) -> dict:
@@ -113,7 +100,7 @@ def _resolve_paths(path: Path, values: dict) -> dict:
     return values
 
 
-def study_environment(config_path, settings) -> dict[str, str]:
+def study_environment(config_path, settings=SETTINGS) -> dict[str, str]:
     """The settings as the app reads them: the study file's (if any), overridden by the environment variables that
     are set (an empty variable counts as unset, as everywhere in the app)."""
     values = load_study_file(config_path, settings) if config_path else {}

@@ -406,7 +406,7 @@ def test_a_database_holds_one_design(make, stimuli, app_db_url, tmp_path):
 
 
 def test_design_setting_and_manifest_errors(tmp_path, app_db_url, stimuli):
-    with pytest.raises(AppError, match="design 'mushra' must be one of acr, pairwise, parallel"):
+    with pytest.raises(AppError, match="study_design: 'mushra' must be one of acr, pairwise, parallel"):
         create_app(manifest=stimuli, db_url=app_db_url, design="mushra")
     # no NAT on catch items
     old = write_fake_stimuli(tmp_path / "old", n_items=2, n_catch=1, n_training=1, metrics=False)

@@ -139,11 +139,11 @@ def check_python(args):
 
 
 def app_settings():
-    """Every environment variable the rating app reads as a setting (rating_app.study_config, rating_app.SETTINGS)."""
+    """Every environment variable the rating app reads as a setting (rating_app.SETTINGS, rating_app.study_config)."""
     from rating_app import SETTINGS
     from rating_app import study_config as s
 
-    return {*s.TEXT_KEYS, *SETTINGS, *s.EXTRA_NUMBERS, *s.FLAG_KEYS, *s.SECRETS, "RATING_CONFIG", "VIDEO_CACHE_MB"}
+    return {*SETTINGS, *s.SECRETS, "VIDEO_CACHE_MB"}
 
 
 def check_settings(args):

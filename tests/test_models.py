@@ -11,7 +11,7 @@ from reference.moglow_naive import inverse_naive
 from generation.models.moglow import MoGlow
 from generation.sampling.sample import SampleError, load_model, mg_stream, sample_fl, sample_mg
 from generation.sampling.sample import main as sample_main
-from generation.training.train import load_config
+from generation.training.config import load_config, model_config
 from moglow_eval.core.clip import load_clip
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
@@ -169,7 +169,7 @@ def test_sample_cli_writes_clips(tiny_runs, small_dataset, tmp_path, capsys):
 
 
 def test_paper_configs_build_models_of_the_papers_size():
-    mg = MoGlow({k: v for k, v in load_config("mg", "paper").items() if k in ("K", "hidden", "lstm_layers", "tau")})
+    mg = MoGlow(model_config(load_config("mg", "paper")))
     assert len(mg.flow.layers) == 16
     lstm = mg.flow.layers[0].layers[2].net.lstm
     assert (lstm.hidden_size, lstm.num_layers) == (512, 2)
@@ -177,7 +177,7 @@ def test_paper_configs_build_models_of_the_papers_size():
     n_lstm = sum(p.numel() for s in mg.flow.layers for p in s.layers[2].net.lstm.parameters())
     assert 280e6 < 4 * n_lstm < 300e6  # ~292 MB of LSTM weights read per generated frame
     fl_cfg = load_config("fl", "paper")
-    assert (fl_cfg["L"], fl_cfg["K"]) == (4, 32)
+    assert (fl_cfg.L, fl_cfg.K) == (4, 32)
 
 
 def test_layout_is_a_fixed_choice_never_a_timing(tiny_runs, monkeypatch):
@@ -263,7 +263,7 @@ def test_non_finite_samples_never_become_clips(tiny_runs, test_split, small_data
     line each, instead of writing clips that would render as broken videos."""
     from generation.make_stimuli import sample_condition
 
-    ck = torch.load(last_ckpt(tiny_runs["mg"]), weights_only=False)
+    ck = torch.load(last_ckpt(tiny_runs["mg"]), weights_only=True)
     name = next(k for k, v in ck["state"].items() if k.endswith("weight") and v.is_floating_point())
     ck["state"][name].view(-1)[0] = float("nan")
     poisoned = tmp_path / "poisoned.pt"

@@ -29,7 +29,7 @@ def test_shipped_checkpoints_load_and_sample():
     with np.load(pretrained.HELDOUT) as d:
         c, hist, hist_c = d["test_c"][:3], d["test_hist"][:3], d["test_hist_c"][:3]
     for name, kind in (("mg", "mg"), ("bad", "mg"), ("fl", "fl")):
-        ck = torch.load(pretrained.CHECKPOINTS[name], weights_only=False)
+        ck = torch.load(pretrained.CHECKPOINTS[name], weights_only=True)
         assert {v.dtype for v in ck["state"].values() if v.is_floating_point()} == {torch.float16}  # half the size
         model = load_model(pretrained.CHECKPOINTS[name], "cpu")
         assert model.kind == kind and next(model.parameters()).dtype == torch.float32

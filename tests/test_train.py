@@ -4,12 +4,14 @@ import csv
 import json
 import subprocess
 import sys
+from dataclasses import FrozenInstanceError, replace
 
 import numpy as np
 import pytest
 import torch
 
 from generation.data.dataset import DatasetError, batch_indices, category_weights
+from generation.training.config import as_dict
 from generation.training.train import (
     TrainError,
     build_model,
@@ -46,14 +48,14 @@ def test_run_folder_follows_contract(tiny_runs, kind):
     assert cfg["model"] == kind and cfg["seed"] == 0
     steps = sorted(int(p.stem.split("_")[1]) for p in (run / "checkpoints").glob("step_*.pt"))
     assert steps == [5, 10, 50, 100, 150]  # early checkpoints kept for the bad examples
-    ck = torch.load(run / "checkpoints" / "step_0000005.pt", weights_only=False)
+    ck = torch.load(run / "checkpoints" / "step_0000005.pt", weights_only=True)
     for key in ("kind", "config", "state", "stats", "tau", "fps", "window", "step"):
         assert key in ck
     assert ck["kind"] == kind and ck["fps"] == 20.0 and ck["window"] == 80 and ck["step"] == 5
 
 
 def state(run):
-    ck = torch.load(sorted((run / "checkpoints").glob("step_*.pt"))[-1], weights_only=False)
+    ck = torch.load(sorted((run / "checkpoints").glob("step_*.pt"))[-1], weights_only=True)
     return ck["state"]
 
 
@@ -86,7 +88,7 @@ def test_float32_optimiser_keeps_the_bits_of_the_shipped_recipe():
     cfg = load_config("mg", "tiny")
     x, c = torch.randn(4, 14, 63), torch.randn(4, 14, 3)
     states = []
-    for make in (lambda net: make_optimiser(net, cfg), lambda net: torch.optim.Adam(net.parameters(), cfg["lr"])):
+    for make in (lambda net: make_optimiser(net, cfg), lambda net: torch.optim.Adam(net.parameters(), cfg.lr)):
         torch.manual_seed(0)
         net = build_model("mg", cfg)
         opt = make(net)
@@ -96,7 +98,7 @@ def test_float32_optimiser_keeps_the_bits_of_the_shipped_recipe():
             opt.step()
         states.append(net.state_dict())
     assert all(torch.equal(states[0][k], states[1][k]) for k in states[0])
-    assert make_optimiser(net, {**cfg, "precision": "bfloat16"}).defaults["fused"]
+    assert make_optimiser(net, replace(cfg, precision="bfloat16")).defaults["fused"]
 
 
 def test_history_noise_reaches_the_history_only():
@@ -104,10 +106,10 @@ def test_history_noise_reaches_the_history_only():
     batch is drawn exactly as before (the shipped recipe's random stream), and FL never gets a history."""
     torch.manual_seed(0)
     tx, tc = torch.randn(20, 40, 63), torch.randn(20, 40, 3)
-    cfg = {**load_config("mg", "tiny"), "train_window": 30}
+    cfg = replace(load_config("mg", "tiny"), train_window=30)
     net = build_model("mg", cfg)
     x0, c0, keep0, hist0, _ = draw_batch(net, tx, tc, cfg, 0, 3, 30)
-    x1, c1, keep1, hist1, _ = draw_batch(net, tx, tc, {**cfg, "history_noise": 0.05}, 0, 3, 30)
+    x1, c1, keep1, hist1, _ = draw_batch(net, tx, tc, replace(cfg, history_noise=0.05), 0, 3, 30)
     assert hist0 is None
     assert torch.equal(x0, x1) and torch.equal(c0, c1) and torch.equal(keep0, keep1)
     assert 0.04 < (hist1 - x1).std().item() < 0.06
@@ -117,7 +119,7 @@ def test_history_noise_reaches_the_history_only():
     net.train()
     assert not torch.equal(net.nll(x1, c1, keep1), net.nll(x1, c1, keep1, hist1))
     assert torch.equal(net.nll(x1, c1, keep1), net.nll(x1, c1, keep1, x1))
-    fl_cfg = {**load_config("fl", "tiny"), "history_noise": 0.05}
+    fl_cfg = replace(load_config("fl", "tiny"), history_noise=0.05)
     assert draw_batch(build_model("fl", fl_cfg), tx, tc, fl_cfg, 0, 3, 32)[3] is None
 
 
@@ -126,10 +128,10 @@ def test_stance_latents_are_drawn_last_and_only_when_used():
     its rows, as for the rest); without it, or before stance_start, the batch is drawn exactly as before."""
     torch.manual_seed(0)
     tx, tc = torch.randn(20, 40, 63), torch.randn(20, 40, 3)
-    cfg = {**load_config("mg", "tiny"), "stance_weight": 1.0, "stance_start": 2, "stance_temperature": 0.5}
+    cfg = replace(load_config("mg", "tiny"), stance_weight=1.0, stance_start=2, stance_temperature=0.5)
     net = build_model("mg", cfg)
     drawn = draw_batch(net, tx, tc, cfg, 0, 3, 30)
-    plain = draw_batch(net, tx, tc, {**cfg, "stance_temperature": 0.0}, 0, 3, 30)
+    plain = draw_batch(net, tx, tc, replace(cfg, stance_temperature=0.0), 0, 3, 30)
     assert plain[4] is None and all(torch.equal(a, b) for a, b in zip(drawn[:3], plain[:3]))
     assert drawn[4].shape == drawn[0].shape and 0.45 < drawn[4].std().item() < 0.55
     assert draw_batch(net, tx, tc, cfg, 0, 1, 30)[4] is None  # before stance_start
@@ -141,7 +143,7 @@ def test_learning_rate_warms_up_then_holds_or_decays_to_lr_min():
     assert lrs[0] == pytest.approx(1e-4) and lrs[9] == pytest.approx(1e-3)
     assert all(a < b for a, b in zip(lrs[:10], lrs[1:10]))
     assert set(lrs[10:]) == {1e-3}  # no lr_min: constant after the warm-up
-    cfg["lr_min"] = 1e-5
+    cfg = replace(cfg, lr_min=1e-5)
     lrs = [learning_rate(cfg, s) for s in range(110)]
     assert lrs[10] == pytest.approx(1e-3) and lrs[-1] == pytest.approx(1e-5)
     assert all(a >= b for a, b in zip(lrs[10:], lrs[11:]))  # cosine: never rises
@@ -150,7 +152,7 @@ def test_learning_rate_warms_up_then_holds_or_decays_to_lr_min():
 
 def test_warm_restart_keeps_the_first_phase_and_starts_a_second():
     plain = load_config("mg", {"lr": 1e-3, "lr_min": 1e-4, "warmup": 10, "steps": 60})
-    cfg = {**plain, "steps": 100, "restart_step": 60, "restart_lr": 3e-4, "restart_lr_min": 3e-5}
+    cfg = replace(plain, steps=100, restart_step=60, restart_lr=3e-4, restart_lr_min=3e-5)
     assert [learning_rate(cfg, s) for s in range(60)] == [learning_rate(plain, s) for s in range(60)]
     second = [learning_rate(cfg, s) for s in range(60, 100)]
     assert second[0] == pytest.approx(3e-5) and second[9] == pytest.approx(3e-4)  # warm-up again
@@ -158,13 +160,13 @@ def test_warm_restart_keeps_the_first_phase_and_starts_a_second():
 
 
 def test_warm_restart_resets_adam_and_resumes_exactly(small_dataset, tmp_path):
-    cfg = {**load_config("mg", "tiny"), "steps": 10, "restart_step": 6, "restart_lr": 3e-4, "restart_lr_min": 3e-5}
+    cfg = replace(load_config("mg", "tiny"), steps=10, restart_step=6, restart_lr=3e-4, restart_lr_min=3e-5)
     a = train("mg", cfg, small_dataset, tmp_path / "a", steps=10, seed=1, progress=False)
     b = train("mg", cfg, small_dataset, tmp_path / "b", steps=6, seed=1, progress=False)
     b = train("mg", cfg, small_dataset, tmp_path / "b", steps=10, seed=1, progress=False, resume=True)
     sa, sb = state(a), state(b)
     assert all(torch.equal(sa[k], sb[k]) for k in sa)
-    opt = torch.load(a / "resume.pt", weights_only=False)["opt"]["state"]
+    opt = torch.load(a / "resume.pt", weights_only=True)["opt"]["state"]
     assert {int(v["step"]) for v in opt.values()} == {4}  # Adam counted afresh from step 6
     short = train("mg", cfg, small_dataset, tmp_path / "short", steps=5, seed=1, progress=False)
     assert json.loads((short / "config.json").read_text())["restart_step"] is None  # too short to restart
@@ -178,11 +180,11 @@ def test_warm_restart_config_errors():
 
 
 def test_stance_loss_starts_at_its_step_and_is_booked(small_dataset, tmp_path):
-    cfg = {**load_config("mg", "tiny"), "steps": 6, "valid_every": 1, "stance_weight": 1.0, "stance_start": 3}
+    cfg = replace(load_config("mg", "tiny"), steps=6, valid_every=1, stance_weight=1.0, stance_start=3)
     run = train("mg", cfg, small_dataset, tmp_path / "a", seed=1, progress=False)
     stance = [float(r["train_stance"]) for r in rows(run)]
     assert stance[:3] == [0.0, 0.0, 0.0] and all(s > 0 for s in stance[3:])
-    plain = {**cfg, "steps": 3, "stance_weight": 0.0}
+    plain = replace(cfg, steps=3, stance_weight=0.0)
     plain = train("mg", plain, small_dataset, tmp_path / "b", seed=1, progress=False)
     assert [r["train_nll"] for r in rows(plain)] == [r["train_nll"] for r in rows(run)[:3]]
     with pytest.raises(TrainError, match="field 'stance_weight' must be at least 0"):
@@ -204,9 +206,9 @@ def test_category_weights_balance_the_categories():
 def test_category_balance_draws_rare_categories_more_often(small_dataset, tmp_path):
     """A balanced run trains on other batches than a uniform one, reproducibly; a dataset without labels, or a
     negative balance, is a one-line config error."""
-    cfg = {**load_config("mg", "tiny"), "steps": 3, "valid_every": 1}
+    cfg = replace(load_config("mg", "tiny"), steps=3, valid_every=1)
     plain = train("mg", cfg, small_dataset, tmp_path / "a", seed=1, progress=False)
-    bal = {**cfg, "category_balance": 1.0}
+    bal = replace(cfg, category_balance=1.0)
     b1 = train("mg", bal, small_dataset, tmp_path / "b", seed=1, progress=False)
     b2 = train("mg", bal, small_dataset, tmp_path / "c", seed=1, progress=False)
     assert [r["train_nll"] for r in rows(b1)] == [r["train_nll"] for r in rows(b2)]
@@ -227,8 +229,8 @@ def test_category_balance_draws_rare_categories_more_often(small_dataset, tmp_pa
 
 
 def test_config_names_and_errors(tmp_path):
-    assert load_config("mg", "tiny")["K"] == 2
-    assert load_config("fl", "cpu")["model"] == "fl"
+    assert load_config("mg", "tiny").K == 2
+    assert load_config("fl", "cpu").model == "fl"
     for kind in ("fl", "mg"):
         for name in ("paper", "cpu", "tiny"):
             load_config(kind, name)
@@ -253,7 +255,7 @@ def test_config_names_and_errors(tmp_path):
         load_config("fl", {"history_style": True})
     with pytest.raises(TrainError, match="config: field 'style_span' needs 'history_style' true"):
         load_config("mg", {"style_span": 40})
-    with pytest.raises(TrainError, match="config: field 'style_span' must be a whole number of frames, got 20.5"):
+    with pytest.raises(TrainError, match="config: field 'style_span' must be a whole number, got 20.5"):
         load_config("mg", {"history_style": True, "style_span": 20.5})
     with pytest.raises(TrainError, match="config: field 'spread_weight' must be at least 0, got -1"):
         load_config("fl", {"spread_weight": -1})
@@ -263,6 +265,32 @@ def test_config_names_and_errors(tmp_path):
         TrainError, match="config: field 'precision' must be one of \\['bfloat16', 'float32'\\], got 'half'"
     ):
         load_config("fl", {"precision": "half"})
+
+
+def test_config_fields_are_checked_by_their_types(tmp_path):
+    """The checks come from the dataclass fields: each type and bound gives one line naming the file and field,
+    a whole float is taken as the whole number it is, and the config a run stores is plain data."""
+    bad = tmp_path / "typed.json"
+    cases = [
+        ({"steps": 100.5}, "field 'steps' must be a whole number, got 100.5"),
+        ({"lr": True}, "field 'lr' must be a number, got True"),
+        ({"lr": "fast"}, "field 'lr' must be a number, got 'fast'"),
+        ({"batch_size": 0}, "field 'batch_size' must be at least 1, got 0"),
+        ({"dropout": 1.5}, "field 'dropout' must be at most 1, got 1.5"),
+        ({"early_ckpts": [25, "x"]}, "field 'early_ckpts' must be a list of whole numbers, got \\[25, 'x'\\]"),
+        ({"note": 3}, "field 'note' must be a string, got 3"),
+        ({"lr_min": None, "steps": None}, "field 'steps' must be a whole number, got None"),
+    ]
+    for fields, message in cases:
+        bad.write_text(json.dumps({"model": "mg", **fields}))
+        with pytest.raises(TrainError, match=f"typed.json: {message}$"):
+            load_config("mg", str(bad))
+    bad.write_text(json.dumps({"model": "fl", "steps": 300.0, "early_ckpts": [5, 10], "lr_min": None}))
+    cfg = load_config("fl", str(bad))
+    assert cfg.steps == 300 and type(cfg.steps) is int and cfg.early_ckpts == (5, 10) and cfg.lr_min is None
+    with pytest.raises(FrozenInstanceError):  # a run cannot change its config under the loop
+        cfg.steps = 5
+    assert as_dict(cfg)["early_ckpts"] == [5, 10] and as_dict(cfg)["K"] == 32  # FL's paper value, by default
 
 
 def test_cli_errors_are_one_line(tmp_path, small_dataset, capsys):
@@ -307,7 +335,9 @@ def test_ddp_two_cpu_processes_match_one(small_dataset, tmp_path):
     steps = 12
     config = tmp_path / "mg_stance.json"
     config.write_text(
-        json.dumps({**load_config("mg", "tiny"), "stance_weight": 1.0, "stance_start": 8, "stance_temperature": 1.0})
+        json.dumps(
+            as_dict(replace(load_config("mg", "tiny"), stance_weight=1.0, stance_start=8, stance_temperature=1.0))
+        )
     )
     # On the CPU on any machine (gloo), a GPU machine included: two ranks cannot share one GPU under nccl.
     train("mg", str(config), small_dataset, tmp_path / "one", steps=steps, progress=False, threads=1, device="cpu")
@@ -345,8 +375,8 @@ def test_ddp_two_cpu_processes_match_one(small_dataset, tmp_path):
     )
     assert r.returncode == 0, r.stderr[-3000:]
     name = f"checkpoints/step_{steps:07d}.pt"
-    one = torch.load(tmp_path / "one" / name, weights_only=False)["state"]
-    two = torch.load(tmp_path / "two" / name, weights_only=False)["state"]
+    one = torch.load(tmp_path / "one" / name, weights_only=True)["state"]
+    two = torch.load(tmp_path / "two" / name, weights_only=True)["state"]
     assert one.keys() == two.keys()
     diff = torch.cat([(one[k].float() - two[k].float()).abs().flatten() for k in one])
     # Float rounding only: Adam turns the rounding of near-zero gradients into steps of up to lr (3e-3), so a

@@ -8,7 +8,9 @@ Gaussians fitted to their features,
     FMD = |mu_a - mu_b|^2 + tr(S_a + S_b - 2 (S_a S_b)^(1/2)).
 
 The encoder file holds the weights, the standardisation and the features' first and second moments per
-locomotion category of the training split, so a set can be scored without the data set. The reference is the
+locomotion category of the training split, so a set can be scored without the data set. They are saved as
+tensors, so the file loads with torch's weights-only reader (data.torch_files); files written before that held
+numpy arrays, which are read too, admitting float arrays alone. The reference is the
 training motion of the same categories in the same proportions as the set scored: held-out takes are balanced
 over categories while the training split is mostly turns, and against the whole split a generator that
 drifts towards typical training motion would score better than real held-out motion. The estimate is biased
@@ -30,10 +32,23 @@ from tqdm import tqdm
 from moglow_eval.core import cli
 
 from ..data.dataset import batch_indices, load_dataset, read_arrays, require
+from ..data.torch_files import load_torch_file
 
 CHUNK, STRIDE = 34, 8  # frames per chunk (GENEA's FGD uses 34) and between chunk starts within a window
 FEATURES = 32
 ALL = "*"  # the moments of the whole training split
+# What an encoder file of the older format (numpy arrays) needs beyond tensors: numpy's rebuilding of an array of
+# float32 or float64 from its bytes, under the module name of numpy 2 and of numpy 1. An array of any other dtype
+# (an object array could hold a pickled callable) is still refused.
+_reconstruct = (np._core if hasattr(np, "_core") else np.core).multiarray._reconstruct
+NUMPY_FLOAT_ARRAYS = (
+    (_reconstruct, "numpy._core.multiarray._reconstruct"),
+    (_reconstruct, "numpy.core.multiarray._reconstruct"),
+    np.ndarray,
+    np.dtype,
+    type(np.dtype(np.float32)),
+    type(np.dtype(np.float64)),
+)
 
 
 class MotionAutoencoder(nn.Module):
@@ -90,14 +105,12 @@ class MotionEncoder:
         self.net = MotionAutoencoder()
         self.net.load_state_dict(state["state"])
         self.net.eval()
-        self.x_mean, self.x_std = (np.asarray(state[k], np.float32) for k in ("x_mean", "x_std"))
-        self.moments = {
-            k: (np.asarray(m1, np.float64), np.asarray(m2, np.float64)) for k, (m1, m2) in state["moments"].items()
-        }
+        self.x_mean, self.x_std = (_array(state[k], np.float32) for k in ("x_mean", "x_std"))
+        self.moments = {k: (_array(m1, np.float64), _array(m2, np.float64)) for k, (m1, m2) in state["moments"].items()}
 
     @classmethod
     def load(cls, path):
-        return cls(torch.load(path, map_location="cpu", weights_only=False))
+        return cls(load_torch_file(path, allow=NUMPY_FLOAT_ARRAYS))
 
     def features(self, poses):
         """Root-frame poses [N, T, 63] in metres -> chunk features [N * n_chunks, FEATURES] (float64)."""
@@ -122,6 +135,18 @@ class MotionEncoder:
         f = self.features(poses)
         mu, cov = self.reference(categories)
         return frechet_distance(f.mean(0), np.cov(f, rowvar=False), mu, cov)
+
+
+def _array(value, dtype):
+    """A tensor (today's files) or a numpy array (older ones) as a numpy array of `dtype`."""
+    return np.asarray(value.numpy() if torch.is_tensor(value) else value, dtype)
+
+
+def as_tensors(state):
+    """An encoder state with its arrays as tensors of the same dtype and values, as train_encoder writes it."""
+    tensor = torch.as_tensor
+    moments = {k: (tensor(m1), tensor(m2)) for k, (m1, m2) in state["moments"].items()}
+    return {**state, "x_mean": tensor(state["x_mean"]), "x_std": tensor(state["x_std"]), "moments": moments}
 
 
 @torch.no_grad()
@@ -153,7 +178,7 @@ def train_encoder(data_path, steps=3000, batch_size=128, lr=1e-3, seed=0, progre
     d = read_arrays(data_path, ["train_labels"])
     require(d, ["train_labels"], data_path)
     labels = np.repeat(d["train_labels"].astype(str), len(feats) // n)  # chunks come window by window
-    return dict(
+    state = dict(
         state=net.state_dict(),
         x_mean=ds.stats["x_mean"],
         x_std=ds.stats["x_std"],
@@ -162,6 +187,7 @@ def train_encoder(data_path, steps=3000, batch_size=128, lr=1e-3, seed=0, progre
         seed=seed,
         recon_mse=loss.item(),
     )
+    return as_tensors(state)  # tensors, not numpy arrays: the file then loads weights-only
 
 
 def _moments(feats, labels):

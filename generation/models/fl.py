@@ -6,19 +6,32 @@ one with twice the channels), the control squeezed with it but never split; afte
 half the channels leave for the latent. Exact log-likelihood.
 """
 
+from dataclasses import asdict, dataclass, field
+
 import torch
 from torch import nn
 
 from .flows import Chain, ConvNet, FlowStep, MotionFlow, Split, gaussian_logp, squeeze_time, unsqueeze_time
 
-DEFAULTS = dict(L=4, K=32, hidden=512, kernel=3)  # the paper's names: L levels of K steps
+_ONE_UP = {"min": 1}  # field metadata: the bounds the training config checks (training.config)
+
+
+@dataclass(frozen=True)
+class FLConfig:
+    """FL's size, in the paper's names (L levels of K steps) and at the paper's values."""
+
+    L: int = field(default=4, metadata=_ONE_UP)
+    K: int = field(default=32, metadata=_ONE_UP)
+    hidden: int = field(default=512, metadata=_ONE_UP)
+    kernel: int = field(default=3, metadata=_ONE_UP)
 
 
 class FL(MotionFlow):
     kind = "fl"
 
     def __init__(self, config, pose_dim=63, control_dim=3):
-        super().__init__({**DEFAULTS, **config}, pose_dim, control_dim)
+        # A checkpoint's model_config is a plain dict; the dataclass fills its defaults and refuses unknown keys.
+        super().__init__(asdict(FLConfig(**config)), pose_dim, control_dim)
         cfg = self.config
         self.levels = nn.ModuleList()
         self.splits = nn.ModuleList()

@@ -36,6 +36,8 @@ mean as before, so its NLL is the same quantity; a caller with a longer real see
 (sample.sample_mg's `style`).
 """
 
+from dataclasses import asdict, dataclass, field
+
 import torch
 from torch import nn
 
@@ -43,8 +45,24 @@ from ..motion.skeleton import FEET
 from .flows import Chain, FlowStep, MotionFlow, gaussian_logp
 from .mg_stream import MGStream
 
-DEFAULTS = dict(K=16, hidden=512, lstm_layers=2, tau=10, dropout=0.95)  # the paper's
-DEFAULTS |= dict(residual=False, carry_feet=False, history_style=False, style_span=0)  # ours, off by default
+_ONE_UP, _ZERO_UP = {"min": 1}, {"min": 0}  # field metadata: the bounds the training config checks (training.config)
+
+
+@dataclass(frozen=True)
+class MGConfig:
+    """MG's size and options: the paper's five fields at its values, then ours, off by default (module doc)."""
+
+    K: int = field(default=16, metadata=_ONE_UP)
+    hidden: int = field(default=512, metadata=_ONE_UP)
+    lstm_layers: int = field(default=2, metadata=_ONE_UP)
+    tau: int = field(default=10, metadata=_ONE_UP)
+    dropout: float = field(default=0.95, metadata={"min": 0, "max": 1})
+    residual: bool = False
+    carry_feet: bool = False
+    history_style: bool = False
+    style_span: int = field(default=0, metadata=_ZERO_UP)  # frames
+
+
 _FEET = torch.tensor(FEET)
 
 
@@ -70,7 +88,8 @@ class MoGlow(MotionFlow):
     kind = "mg"
 
     def __init__(self, config, pose_dim=63, control_dim=3):
-        super().__init__({**DEFAULTS, **config}, pose_dim, control_dim)
+        # A checkpoint's model_config is a plain dict; the dataclass fills its defaults and refuses unknown keys.
+        super().__init__(asdict(MGConfig(**config)), pose_dim, control_dim)
         cfg = self.config
         self.tau = cfg["tau"]
         self.cond_dim = self.tau * pose_dim + (self.tau + 1) * control_dim + (pose_dim if cfg["history_style"] else 0)

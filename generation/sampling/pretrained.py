@@ -20,6 +20,7 @@ import numpy as np
 from moglow_eval.core import cli, study
 
 from ..data.dataset import HELD_OUT, WINDOW_KEYS, heldout_windows, read_arrays, require
+from ..data.torch_files import load_torch_file
 
 FOLDER = Path(__file__).resolve().parents[1] / "pretrained"
 CHECKPOINTS = {"mg": FOLDER / "mg.pt", "fl": FOLDER / "fl.pt", "bad": FOLDER / "bad.pt"}
@@ -51,7 +52,7 @@ def export_checkpoint(src, dst):
     """A training checkpoint with float16 weights (integer buffers and flags unchanged)."""
     import torch  # here, not at module level: make_stimuli imports this module, and its render workers need no torch
 
-    ck = torch.load(src, map_location="cpu", weights_only=False)
+    ck = load_torch_file(src)
     ck["state"] = {k: v.half() if v.is_floating_point() else v for k, v in ck["state"].items()}
     ck.setdefault("source", Path(src).as_posix())  # re-exporting a shipped file keeps the run it came from
     torch.save(ck, dst)

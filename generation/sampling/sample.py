@@ -23,6 +23,7 @@ from moglow_eval.core.cli import UserError
 from moglow_eval.core.clip import save_clip
 
 from ..data.dataset import read_arrays, require
+from ..data.torch_files import load_torch_file
 from ..models.fl import FL
 from ..models.flows import PRECISIONS
 from ..models.mg_stream import MGStream
@@ -39,8 +40,8 @@ def load_model(ckpt_path, device=None):
     """A checkpoint written by generation.training.train -> model in eval mode, with .kind, .config, .step, .fps,
     .window and its data statistics (buffers x_mean/x_std/c_mean/c_std)."""
     device = pick_device(device)
+    ck = load_torch_file(ckpt_path, device, SampleError)
     try:
-        ck = torch.load(ckpt_path, map_location=device, weights_only=False)
         model = MODELS[ck["kind"]](ck["model_config"])
         model.load_state_dict(ck["state"])
     except Exception as e:  # any unreadable or foreign file: one clear line, not a traceback

@@ -28,52 +28,19 @@ from torch import nn
 from tqdm import tqdm
 
 from moglow_eval.core import cli
-from moglow_eval.core.cli import UserError
 
 from ..data.dataset import batch_indices, category_weights, eval_batches, load_dataset
+from ..data.torch_files import load_torch_file
 from ..models import fl, flows, moglow
+from .config import TrainError, as_dict, load_config, model_config, shortened, with_changes
 from .stance import stance_loss
 from .threads import CoreShare, torch_threads
 
-CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
 MODELS = {"fl": fl.FL, "mg": moglow.MoGlow}
-MODEL_DEFAULTS = {"fl": fl.DEFAULTS, "mg": moglow.DEFAULTS}
-TRAIN_DEFAULTS = dict(
-    batch_size=32,
-    lr=1e-3,
-    lr_min=None,
-    warmup=200,
-    clip_grad=5.0,
-    steps=10000,
-    valid_every=500,
-    valid_windows=256,
-    ckpt_every=2000,
-    early_ckpts=[50, 100, 200, 500],
-    train_window=None,
-    noise=0.01,
-    history_noise=0.0,
-    restart_step=None,
-    restart_lr=None,
-    restart_lr_min=None,
-    stance_weight=0.0,
-    stance_start=0,
-    stance_temperature=0.0,
-    posture_weight=0.0,  # stance.posture_offset, added to the stance loss (m^2 per joint, times this weight)
-    spread_weight=0.0,  # stance.posture_spread, added to the stance loss likewise
-    category_balance=0.0,
-    # one of flows.PRECISIONS. 'bfloat16': the coupling networks run under autocast (flows.set_net_precision); about
-    # 1.4x the steps/s of float32 on an AMD Zen 4 CPU at mg_cpu's size, at the same likelihood per step, but 0.67x
-    # on an Intel Xeon with AVX512-BF16 and no AMX (bench/RESULTS.md); not yet measured on a GPU.
-    precision="float32",
-)
 
 
 # train_stance: the stance-foot loss (m/s, stance.py; with its posture term) averaged like train_nll, 0 while it is off.
 METRICS_COLUMNS = ["step", "train_nll", "valid_nll", "lr", "grad_norm", "elapsed_s", "steps_per_s", "train_stance"]
-
-
-class TrainError(UserError):
-    """Bad training input (config, model name, diverged run); one-line message."""
 
 
 def learning_rate(cfg, step):
@@ -81,18 +48,18 @@ def learning_rate(cfg, step):
     reaches lr_min at the last step (a function of the step alone, so a resumed run follows the same curve).
     With `restart_step` set, the first phase ends there and a second one, warm-up and cosine from `restart_lr`
     to `restart_lr_min`, runs to `steps` (a warm restart; the training loop also resets Adam's moments there)."""
-    start, end, lr, lr_min = 0, cfg["steps"], cfg["lr"], cfg["lr_min"]
-    if cfg["restart_step"] is not None:
-        if step >= cfg["restart_step"]:
-            start, lr, lr_min = cfg["restart_step"], cfg["restart_lr"], cfg["restart_lr_min"]
+    start, end, lr, lr_min = 0, cfg.steps, cfg.lr, cfg.lr_min
+    if cfg.restart_step is not None:
+        if step >= cfg.restart_step:
+            start, lr, lr_min = cfg.restart_step, cfg.restart_lr, cfg.restart_lr_min
         else:
-            end = cfg["restart_step"]
+            end = cfg.restart_step
     step -= start
-    if step < cfg["warmup"]:
-        return lr * (step + 1) / cfg["warmup"]
+    if step < cfg.warmup:
+        return lr * (step + 1) / cfg.warmup
     if lr_min is None:
         return lr
-    progress = (step - cfg["warmup"]) / max(1, end - start - 1 - cfg["warmup"])
+    progress = (step - cfg.warmup) / max(1, end - start - 1 - cfg.warmup)
     return lr_min + (lr - lr_min) * 0.5 * (1 + math.cos(math.pi * min(1.0, progress)))
 
 
@@ -132,80 +99,8 @@ class _BatchLoss(nn.Module):
         )
 
 
-def load_config(model, config):
-    """`config`: a dict, 'tiny'/'cpu'/'paper' (meaning configs/{model}_{name}.json) or a JSON file path."""
-    if model not in MODELS:
-        raise TrainError(f"--model must be one of {sorted(MODELS)}, got '{model}'")
-    if isinstance(config, dict):
-        cfg, where = dict(config), "config"
-    else:
-        path = Path(config)
-        if not path.suffix and not path.exists():
-            path = CONFIG_DIR / f"{model}_{config}.json"
-        if not path.is_file():
-            raise TrainError(f"config '{config}' not found (tried {path})")
-        try:
-            cfg = json.loads(path.read_text())
-        except json.JSONDecodeError as e:
-            raise TrainError(f"{path}:{e.lineno}: invalid JSON ({e.msg})") from None
-        where = str(path)
-    if cfg.get("model", model) != model:
-        raise TrainError(f"{where}: field 'model' is '{cfg['model']}' but --model is '{model}'")
-    return _checked_values({**TRAIN_DEFAULTS, **_checked_fields(cfg, model, where), "model": model}, where)
-
-
-def _checked_values(cfg, where):
-    """`cfg` itself, once its restart and stance-loss fields agree with the rest."""
-    if cfg["restart_step"] is not None:
-        if not 0 < cfg["restart_step"] < cfg["steps"]:
-            raise TrainError(f"{where}: field 'restart_step' must lie between 0 and 'steps' ({cfg['steps']})")
-        for key in ("restart_lr", "restart_lr_min"):
-            if cfg[key] is None:
-                raise TrainError(f"{where}: field 'restart_step' needs '{key}' too")
-    if cfg.get("carry_feet") and not cfg.get("residual"):
-        raise TrainError(f"{where}: field 'carry_feet' needs 'residual' true")
-    if cfg.get("style_span"):
-        if cfg["style_span"] < 0 or cfg["style_span"] != int(cfg["style_span"]):
-            raise TrainError(f"{where}: field 'style_span' must be a whole number of frames, got {cfg['style_span']}")
-        if not cfg.get("history_style"):
-            raise TrainError(f"{where}: field 'style_span' needs 'history_style' true")
-    for key in (
-        "stance_weight",
-        "stance_start",
-        "stance_temperature",
-        "posture_weight",
-        "spread_weight",
-        "category_balance",
-    ):
-        if cfg[key] < 0:
-            raise TrainError(f"{where}: field '{key}' must be at least 0, got {cfg[key]}")
-    return cfg
-
-
-def _checked_fields(cfg, model, where):
-    """`cfg` itself, once every field is known and a number (or unset, where the default is unset)."""
-    allowed = set(TRAIN_DEFAULTS) | set(MODEL_DEFAULTS[model]) | {"model", "name", "note"}
-    for key, value in cfg.items():
-        if key not in allowed:
-            raise TrainError(f"{where}: unknown field '{key}'")
-        if key in ("residual", "carry_feet", "history_style") and not isinstance(value, bool):
-            raise TrainError(f"{where}: field '{key}' must be true or false, got {value!r}")
-        if key == "precision":
-            if value not in flows.PRECISIONS:
-                raise TrainError(f"{where}: field 'precision' must be one of {sorted(flows.PRECISIONS)}, got {value!r}")
-            continue
-        unset = value is None and key in TRAIN_DEFAULTS and TRAIN_DEFAULTS[key] is None
-        if key not in ("model", "name", "note", "early_ckpts") and not unset and not isinstance(value, (int, float)):
-            raise TrainError(f"{where}: field '{key}' must be a number, got {value!r}")
-    return cfg
-
-
-def model_config(kind, cfg):
-    return {k: cfg[k] for k in MODEL_DEFAULTS[kind] if k in cfg}
-
-
 def build_model(kind, cfg, stats=None):
-    net = MODELS[kind](model_config(kind, cfg))
+    net = MODELS[kind](model_config(cfg))
     if stats is not None:
         net.set_stats(stats["x_mean"], stats["x_std"], stats["c_mean"], stats["c_std"])
     return net
@@ -216,7 +111,7 @@ def save_checkpoint(path, net, cfg, ds, step, valid_nll):
     torch.save(
         dict(
             kind=net.kind,
-            config=cfg,
+            config=as_dict(cfg),  # plain data, so the checkpoint loads weights-only
             model_config=net.config,
             state=net.state_dict(),
             step=step,
@@ -236,7 +131,7 @@ def evaluate(net, split, cfg, device):
     was = net.training
     net.eval()
     total, n = 0.0, 0
-    for x, c in eval_batches(split, cfg["batch_size"], cfg["valid_windows"]):
+    for x, c in eval_batches(split, cfg.batch_size, cfg.valid_windows):
         nll = net.nll(x.to(device), c.to(device))
         total += nll.sum().item()
         n += len(nll)
@@ -270,15 +165,13 @@ def train(
 def _config_and_data(model, config, steps, data_path, precision=None):
     cfg = load_config(model, config)
     if precision is not None:
-        cfg = _checked_fields({**cfg, "precision": precision}, model, "--precision")
+        cfg = with_changes(cfg, "--precision", precision=precision)
     if steps is not None:
-        cfg["steps"] = int(steps)
-        if cfg["restart_step"] is not None and cfg["restart_step"] >= cfg["steps"]:
-            cfg["restart_step"] = None  # a run too short for the restart: one cosine phase to `steps`, as before
+        cfg = shortened(cfg, steps)
     ds = load_dataset(data_path)
     if "valid" not in ds.splits or "train" not in ds.splits:
         raise TrainError(f"{data_path}: needs 'train' and 'valid' splits")
-    if cfg["category_balance"] > 0 and ds.splits["train"].labels is None:
+    if cfg.category_balance > 0 and ds.splits["train"].labels is None:
         raise TrainError(f"{data_path}: config field 'category_balance' needs 'train_labels' (re-run prepare_data)")
     return cfg, ds
 
@@ -286,31 +179,31 @@ def _config_and_data(model, config, steps, data_path, precision=None):
 def _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, share_cores):
     device = pick_device(device)
     rank, world = join_ranks(device)
-    if cfg["batch_size"] % world:
-        raise TrainError(f"batch_size {cfg['batch_size']} does not split evenly over {world} ranks")
+    if cfg.batch_size % world:
+        raise TrainError(f"batch_size {cfg.batch_size} does not split evenly over {world} ranks")
     out = Path(out_dir)
     (out / "checkpoints").mkdir(parents=True, exist_ok=True)
     torch.manual_seed(seed)
     net = build_model(model, cfg, ds.stats).to(device)
     if model == "fl":
-        net.check_length(cfg["train_window"] or ds.window)
-    flows.set_net_precision(net, flows.PRECISIONS[cfg["precision"]])
+        net.check_length(cfg.train_window or ds.window)
+    flows.set_net_precision(net, flows.PRECISIONS[cfg.precision])
     opt = make_optimiser(net, cfg)
     start, elapsed = _resume(out / "resume.pt", resume, net, opt, device)
     run = _Run(out, rank == 0, cfg, ds, net, opt, start, elapsed)
     if run.writes:
         run.write_config(data_path, seed, device, world)
     tx, tc = ds.splits["train"].x.to(device), ds.splits["train"].c.to(device)
-    crop = cfg["train_window"] or tx.shape[1]
-    weights = category_weights(ds.splits["train"].labels, cfg["category_balance"])
-    rows = slice(rank * cfg["batch_size"] // world, (rank + 1) * cfg["batch_size"] // world)
-    step_loss = _wrap_ranks(net, ds.fps, world, device, cfg["posture_weight"], cfg["spread_weight"])
+    crop = cfg.train_window or tx.shape[1]
+    weights = category_weights(ds.splits["train"].labels, cfg.category_balance)
+    rows = slice(rank * cfg.batch_size // world, (rank + 1) * cfg.batch_size // world)
+    step_loss = _wrap_ranks(net, ds.fps, world, device, cfg.posture_weight, cfg.spread_weight)
     net.train()
     share = CoreShare() if share_cores and device.type == "cpu" else None
     bar = tqdm(
-        range(start, cfg["steps"]),
+        range(start, cfg.steps),
         initial=start,
-        total=cfg["steps"],
+        total=cfg.steps,
         disable=not (progress and run.writes),
         desc=f"train {model}",
         unit="step",
@@ -321,7 +214,7 @@ def _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, s
         lr = learning_rate(cfg, step)
         for group in opt.param_groups:
             group["lr"] = lr
-        if step == cfg["restart_step"]:
+        if step == cfg.restart_step:
             opt.state.clear()  # a warm restart starts Adam afresh: its moments belong to the finished phase
         if share is not None:
             share.step()
@@ -329,7 +222,7 @@ def _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, s
         stance = stance_on(cfg, step)
         nll, foot = step_loss(*(None if v is None else v[rows] for v in (x, c, keep, history, stance_z)), stance)
         nll, foot = nll.mean(), foot.mean()
-        grad_norm = _optimise(nll + cfg["stance_weight"] * foot if stance else nll, net, opt, cfg, world)
+        grad_norm = _optimise(nll + cfg.stance_weight * foot if stance else nll, net, opt, cfg, world)
         if grad_norm is None:
             bad += 1
             if bad > 20:
@@ -348,8 +241,8 @@ def make_optimiser(net, cfg):
     """Adam over all weights at once. In float32 the foreach form, which gives the same bits as the
     one-tensor-at-a-time form that trained the shipped models; the fused kernel rounds differently. With bfloat16
     networks the bits differ anyway, so there the fused kernel, which is faster beside bfloat16's shorter steps."""
-    fused = cfg["precision"] != "float32"
-    return torch.optim.Adam(net.parameters(), lr=cfg["lr"], foreach=not fused, fused=fused or None)
+    fused = cfg.precision != "float32"
+    return torch.optim.Adam(net.parameters(), lr=cfg.lr, foreach=not fused, fused=fused or None)
 
 
 def _optimise(loss, net, opt, cfg, world):
@@ -359,7 +252,7 @@ def _optimise(loss, net, opt, cfg, world):
     if not _finite_on_every_rank(loss, world):
         return None
     loss.backward()
-    grad_norm = float(torch.nn.utils.clip_grad_norm_(net.parameters(), cfg["clip_grad"], foreach=True))
+    grad_norm = float(torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.clip_grad, foreach=True))
     opt.step()
     return grad_norm
 
@@ -379,10 +272,14 @@ def _resume(path, resume, net, opt, device):
         return 0, 0.0
     if not path.exists():
         raise TrainError(f"{path}: nothing to resume")
-    state = torch.load(path, map_location=device, weights_only=False)
-    net.load_state_dict(state["state"])
-    opt.load_state_dict(state["opt"])
-    return state["step"], state.get("elapsed", 0.0)
+    state = load_torch_file(path, device, TrainError)
+    try:
+        net.load_state_dict(state["state"])
+        opt.load_state_dict(state["opt"])
+        return int(state["step"]), float(state.get("elapsed", 0.0))
+    except Exception as e:  # another model's or another tool's file: one line, not a traceback
+        first = (str(e).strip().splitlines() or [""])[0]
+        raise TrainError(f"{path}: not a resume state of this run's model ({type(e).__name__}: {first})") from None
 
 
 class _Run:
@@ -391,13 +288,13 @@ class _Run:
     def __init__(self, out, writes, cfg, ds, net, opt, start, elapsed):
         self.out, self.writes, self.cfg, self.ds, self.net, self.opt = out, writes, cfg, ds, net, opt
         self.start, self.elapsed, self.metrics = start, elapsed, out / "metrics.csv"
-        self.early = set(cfg["early_ckpts"])
+        self.early = set(cfg.early_ckpts)
         self.run_nll, self.run_stance, self.run_n, self.valid_nll = 0.0, 0.0, 0, float("nan")
         self.t0 = self.t_row = time.perf_counter()
         self.s_row = start
 
     def write_config(self, data_path, seed, device, world):
-        info = {**self.cfg, "data": str(data_path), "seed": seed, "device": str(device), "ranks": world}
+        info = {**as_dict(self.cfg), "data": str(data_path), "seed": seed, "device": str(device), "ranks": world}
         (self.out / "config.json").write_text(json.dumps(info, indent=2))
         if self.start == 0 or not self.metrics.exists():
             with open(self.metrics, "w", newline="") as f:
@@ -408,10 +305,10 @@ class _Run:
         self.run_nll += nll
         self.run_stance += stance
         self.run_n += 1
-        last = done == self.cfg["steps"]
-        if done % self.cfg["valid_every"] == 0 or last or done == 1:
+        last = done == self.cfg.steps
+        if done % self.cfg.valid_every == 0 or last or done == 1:
             self._metrics_row(done, lr, grad_norm, device)
-        if done in self.early or done % self.cfg["ckpt_every"] == 0 or last:
+        if done in self.early or done % self.cfg.ckpt_every == 0 or last:
             self._checkpoint(done)
 
     def _metrics_row(self, done, lr, grad_norm, device):
@@ -443,7 +340,7 @@ class _Run:
 
 def stance_on(cfg, step):
     """Whether the stance-foot loss joins the NLL at `step`."""
-    return cfg["stance_weight"] > 0 and step >= cfg["stance_start"]
+    return cfg.stance_weight > 0 and step >= cfg.stance_start
 
 
 def draw_batch(net, tx, tc, cfg, seed, step, crop, weights=None):
@@ -451,28 +348,28 @@ def draw_batch(net, tx, tc, cfg, seed, step, crop, weights=None):
     `weights`, None: uniform), their random crop, the dequantisation noise, for MG the history dropout mask and
     the history the conditioning reads, and the latents of the stance loss's prediction (None where unused), all
     functions of (seed, step)."""
-    idx = batch_indices(len(tx), cfg["batch_size"], seed, step, weights).to(tx.device)
+    idx = batch_indices(len(tx), cfg.batch_size, seed, step, weights).to(tx.device)
     x, c = tx[idx], tc[idx]
     torch.manual_seed(seed * 1_000_003 + step)
     if crop < x.shape[1]:
         s = int(torch.randint(0, x.shape[1] - crop + 1, (1,)))
         x, c = x[:, s : s + crop], c[:, s : s + crop]
-    if cfg["noise"] > 0:
+    if cfg.noise > 0:
         # Small Gaussian noise (standardised units) bounds the density on (near-)deterministic dimensions,
         # e.g. the root's own x/z in the root frame, which are exactly 0 (dequantisation, as in Glow).
-        x = x + cfg["noise"] * torch.randn_like(x)
+        x = x + cfg.noise * torch.randn_like(x)
     keep = None
     if net.kind == "mg" and net.config["dropout"] > 0:
         keep = net.history_keep(x.shape[0], x.shape[1], x.device)
     history = None
-    if net.kind == "mg" and cfg["history_noise"] > 0:
+    if net.kind == "mg" and cfg.history_noise > 0:
         # The history with noise of its own, the target clean: at sampling time the history is the model's own
         # output, slightly off, and a model trained only on clean histories lets such errors add up frame after
         # frame (exposure bias). Drawn after the mask, so that runs without it draw as before.
-        history = x + cfg["history_noise"] * torch.randn_like(x)
+        history = x + cfg.history_noise * torch.randn_like(x)
     stance_z = None
-    if stance_on(cfg, step) and cfg["stance_temperature"] > 0:
-        stance_z = cfg["stance_temperature"] * torch.randn_like(x)  # drawn last: other runs draw as before
+    if stance_on(cfg, step) and cfg.stance_temperature > 0:
+        stance_z = cfg.stance_temperature * torch.randn_like(x)  # drawn last: other runs draw as before
     return x, c, keep, history, stance_z
 
 

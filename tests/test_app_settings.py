@@ -1,0 +1,101 @@
+"""The app's settings table (rating_app/settings.py): the flags, the environment variables, the study file's keys,
+create_app's arguments and docs/hosting.md's table all come from it, and a flag that is not given leaves the
+variable its say."""
+
+import re
+
+import pytest
+from conftest import ROOT
+
+from rating_app import SETTINGS, create_app
+from rating_app.__main__ import build_parser
+from rating_app.db import app_engine
+from rating_app.settings import ARGS, TABLE
+from rating_app.study_config import known_keys
+
+# What the app answered to before the table: every name and default must keep working.
+FLAGS = {
+    "--config": "RATING_CONFIG",
+    "--manifest": "RATING_MANIFEST",
+    "--db": "DATABASE_URL",
+    "--design": "STUDY_DESIGN",
+    "--question": "STUDY_QUESTION",
+    "--completion-code": "COMPLETION_CODE",
+    "--completion-url": "COMPLETION_URL",
+    "--ratings-per-clip": "RATINGS_PER_CLIP",
+    "--clips-per-rater": "CLIPS_PER_RATER",
+    "--catch-per-rater": "CATCH_PER_RATER",
+    "--slot-timeout": "SLOT_TIMEOUT",
+    "--min-view": "MIN_VIEW",
+    "--sessions-per-client": "SESSIONS_PER_CLIENT",
+}
+DEFAULTS = {
+    "RATINGS_PER_CLIP": 20,
+    "CLIPS_PER_RATER": 0,
+    "CATCH_PER_RATER": 4,
+    "SLOT_TIMEOUT": 3600.0,
+    "MIN_VIEW": 1.0,
+    "SESSIONS_PER_CLIENT": 10,
+    "PROXY_COUNT": 0,
+    "DB_POOL_SIZE": 10,
+    "VIDEO_ACCEL": "off",
+    "STUDY_DESIGN": "acr",
+}
+ARGUMENTS = {  # create_app's keyword arguments before the table
+    "manifest", "db_url", "ratings_per_clip", "clips_per_rater", "catch_per_rater", "admin_token", "slot_timeout_s",
+    "completion_code", "completion_url", "secret_key", "min_view", "sessions_per_client", "design", "question",
+    "config",
+}  # fmt: skip
+
+
+def serve_parser():
+    sub = next(a for a in build_parser()._actions if a.dest == "cmd")
+    return sub.choices["serve"]
+
+
+def test_every_name_and_default_is_kept():
+    assert {s.flag: s.env for s in TABLE if s.flag} == FLAGS
+    assert {env: SETTINGS[env].default for env in DEFAULTS} == DEFAULTS
+    assert set(ARGS) == ARGUMENTS
+    assert len({s.env for s in TABLE}) == len(TABLE) and len(set(known_keys())) == len(known_keys())
+
+
+def test_the_help_shows_each_flags_variable_and_default():
+    text = re.sub(r"\s+", " ", serve_parser().format_help())
+    for s in TABLE:
+        if s.flag:
+            shown = f"default {s.default}; ${s.env})" if s.default is not None else f"(${s.env})"
+            assert shown in text, (s.flag, shown)
+
+
+def test_a_flag_not_given_leaves_the_variable_its_say(app_stimuli, app_db_url, monkeypatch):
+    """The parser's defaults are the table's (for the help), but only the flags given reach create_app: the
+    environment still overrides the default, and a flag overrides the environment."""
+    monkeypatch.setenv("RATINGS_PER_CLIP", "7")
+    monkeypatch.setenv("SLOT_TIMEOUT", "60")
+    base = ["serve", "--manifest", str(app_stimuli), "--db", app_db_url]
+    plain = build_parser().parse_args(base)
+    assert plain.ratings_per_clip == 20 and set(plain.given) == {"manifest", "db_url"}
+    flagged = build_parser().parse_args([*base, "--ratings-per-clip", "9"])
+    assert flagged.given["ratings_per_clip"] == 9
+    apps = [create_app(**a.given) for a in (plain, flagged)]
+    try:
+        assert [a.config["RATINGS_PER_CLIP"] for a in apps] == [7, 9]
+        assert [a.config["SLOT_TIMEOUT_S"] for a in apps] == [60.0, 60.0]
+        assert apps[0].config["CATCH_PER_RATER"] == 4 and apps[0].config["STUDY_DESIGN"] == "acr"  # defaults
+    finally:
+        for a in apps:
+            app_engine(a).dispose()
+
+
+def test_an_unknown_argument_is_refused():
+    with pytest.raises(TypeError, match="unexpected keyword argument 'ratings_per_klip'"):
+        create_app(manifest="x.csv", ratings_per_klip=3)
+
+
+def test_the_docs_table_is_the_settings_table():
+    text = (ROOT / "docs" / "hosting.md").read_text(encoding="utf-8")
+    rows = re.findall(r"^\| `([A-Z_]+)` \| (?:`(--[a-z-]+)`)? \| (?:`([^`]*)`)? \|", text, flags=re.M)
+    documented = {env: (flag or None, default or None) for env, flag, default in rows}
+    expected = {s.env: (s.flag, None if s.default is None else str(s.default)) for s in TABLE}
+    assert documented == expected
