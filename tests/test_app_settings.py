@@ -5,7 +5,7 @@ variable its say."""
 import re
 
 import pytest
-from conftest import ROOT
+from helpers.paths import ROOT
 
 from rating_app import SETTINGS, create_app
 from rating_app.__main__ import build_parser
