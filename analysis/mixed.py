@@ -181,7 +181,7 @@ def fit_crossed(y, X, rater, clip, names):
     variance_components {rater, clip, residual}, reml_log_likelihood, converged.
     """
     # One BLAS thread: the criterion is a chain of small factorisations, where thread hand-offs cost more than
-    # they save (40x slower on a busy 2-core machine), and the rounding is then identical from run to run.
+    # they save (far slower on a busy 2-core machine), and the rounding is then identical from run to run.
     with threadpool_limits(limits=1, user_api="blas"):
         return _fit(np.asarray(y, float), np.asarray(X, float), np.asarray(rater), np.asarray(clip), names)
 

@@ -34,8 +34,8 @@ class OrdinalError(ValueError):
 def _link(theta_ext, y, eta, third=True):
     """Log-probability of each rating and its derivatives in the two cut points a = theta_y - eta (upper) and
     b = theta_{y-1} - eta (lower), to second order (the Newton solve) or third (the gradient of log|H|).
-    Infinite cut points (y = 1, y = K) give zero terms. Products, not powers: numpy's float power is ~200x
-    slower than two multiplications, and this runs on every rating in every Newton step."""
+    Infinite cut points (y = 1, y = K) give zero terms. Products, not powers: numpy's float power is two orders
+    of magnitude slower than two multiplications, and this runs on every rating in every Newton step."""
     a = theta_ext[y + 1] - eta
     b = theta_ext[y] - eta
     Fa, Fb = expit(a), expit(b)

@@ -210,7 +210,7 @@ def sample_clips(args, dataset, items, arrays):
             joints = to_world(x, arrays["c"][idx])
             clips += [(cond, k, joints[j], seed) for j, k in enumerate(idx)]
     # The other catch kinds break the catch item's real motion (generation.stimuli.catch_kinds): a mix of kinds spreads
-    # the catch clips' look and coded size on both sides of the test clips' (issue 37).
+    # the catch clips' look and coded size on both sides of the test clips' (CONTRACTS §4).
     natural = {k: j for cond, k, j, _ in clips if cond == study.NATURAL}
     for n, k in enumerate(catch):
         if kind[k] != MG_EARLY:
@@ -370,8 +370,8 @@ def build_parser():
     ap.add_argument("--train-steps", type=cli.number(int, 1), help="override the config's training steps")
     ap.add_argument(
         "--precision",
-        help="override the config's for training: float32 | bfloat16 (the coupling networks in bfloat16, about 1.4x "
-        "faster on AMD Zen 4 CPUs and slower on Intel CPUs without AMX; see generation.training.train)",
+        help="override the config's for training: float32 | bfloat16 (the coupling networks in bfloat16: faster on "
+        "some CPU kinds, slower on others; docs/models.md, Mixed precision)",
     )
     ap.add_argument("--mg-checkpoint", help="MG checkpoint to sample from (skips MG training)")
     ap.add_argument("--fl-checkpoint", help="FL checkpoint to sample from (skips FL training)")
@@ -381,7 +381,7 @@ def build_parser():
         default=f"{MG_EARLY},freeze",
         help=f"the kinds of BAD clip, dealt to the catch items in turn: {MG_EARLY} (the paper's: the earliest MG "
         f"checkpoint's samples) and the tool's {', '.join(TOOL_CATCH_KINDS)} of the item's real motion (default "
-        f"{MG_EARLY},freeze: the mix keeps the catch clips' coded size among the test clips', issue 37; "
+        f"{MG_EARLY},freeze: the mix keeps the catch clips' coded size among the test clips', CONTRACTS §4; "
         f"{MG_EARLY} alone is the paper's design)",
     )
     ap.add_argument(

@@ -371,7 +371,7 @@ def _init_lock(engine: Engine):
 # Columns added since the first schema: (table, column, type); a database made before them gets them, NULL.
 ADDED_COLUMNS = (
     ("trials", "unit", "VARCHAR(400)"),  # the designs: NULL, as for every acr trial
-    ("trials", "video_ranges", "VARCHAR(400)"),  # issue 37: bytes sent; NULL = none recorded
+    ("trials", "video_ranges", "VARCHAR(400)"),  # bytes sent (CONTRACTS §5); NULL = none recorded
     ("trial_clips", "video_ranges", "VARCHAR(400)"),
     ("clips", "motion_item", "VARCHAR(128)"),  # appropriateness: NULL for every clip of an older study
     ("raters", "audio_sample", "VARCHAR(64)"),  # the sound check

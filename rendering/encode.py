@@ -5,8 +5,8 @@ import subprocess
 
 # The default rate control gives every frame of every video the same size: bits per frame = this times the frame's
 # height, filler included (line drawings cost bits along their lines, so in proportion to the side, not the
-# area). At 640x640 that is 25.6 kB a frame, 2.05 MB a 4-s clip at 20 fps, about 1.8x what qp 17 spent: the
-# filler and the dither below cost bits that the picture does not get.
+# area). At 640x640 that is 25.6 kB a frame, 2.05 MB a 4-s clip at 20 fps, more than qp 17 spent: the filler and
+# the dither below cost bits that the picture does not get (bench/RESULTS.md#blinded-sizes).
 FRAME_BITS_PER_ROW = 320
 # The share of that rate x264 aims to spend on the picture on average; the filler data pays for the rest.
 CODED_SHARE = 0.9

@@ -280,6 +280,9 @@ def test_config_fields_are_checked_by_their_types(tmp_path):
         ({"early_ckpts": [25, "x"]}, "field 'early_ckpts' must be a list of whole numbers, got \\[25, 'x'\\]"),
         ({"note": 3}, "field 'note' must be a string, got 3"),
         ({"lr_min": None, "steps": None}, "field 'steps' must be a whole number, got None"),
+        ({"comments": {"lr": 3}}, "field 'comments' must map field names to short strings"),
+        ({"comments": {"speed": "fast"}}, "field 'comments' names an unknown field 'speed'"),
+        ({"comments": {"lr": "x" * 101}}, "field 'comments': the comment on 'lr' is over 100 characters .*"),
     ]
     for fields, message in cases:
         bad.write_text(json.dumps({"model": "mg", **fields}))

@@ -221,7 +221,7 @@ def any_clip_metrics(joints, fps, parents, feet=None):
 
 
 def style_retention(samples, own, takes, categories, start=0, reference=None):
-    """How much of its history's style a generated window keeps (issue 34, item 4), over many held-out windows.
+    """How much of its history's style a generated window keeps, over many held-out windows.
 
     samples, own: root-frame poses [B, T, 63] of the generated windows and of the real windows they continue
     (NAT, the same control and history); takes, categories: each window's take name and locomotion category [B].

@@ -76,7 +76,7 @@ class ActNorm(nn.Module):
     def initialize(self, x):
         """Per-channel mean and std of the first batch. Under torch.distributed every rank sees only its shard,
         so the sums are added over ranks: every rank gets the statistics of the whole batch, the same as one
-        process would (unsynchronised ranks would start from different flows; StyleGestures issue #30)."""
+        process would (unsynchronised ranks would start from different flows, as reported of StyleGestures' code)."""
         count = x.shape[0] * x.shape[2]
         mean = _sum_over_ranks(x.sum(dim=(0, 2), keepdim=True), count)
         std = _sum_over_ranks((x - mean).pow(2).sum(dim=(0, 2), keepdim=True), count).sqrt()  # two passes: exact

@@ -21,8 +21,8 @@ the body steps from where it was. The shift still depends on the history and the
 
 `history_style` (not in the paper; off in mg_paper): every frame's coupling networks also read the mean pose of the
 window's first tau frames, the real history MG is seeded with. Once that history has slid out of the tau-frame
-window, MG otherwise sees only its own frames, and drifts to an average walker within half a second (issue 34: a
-sad walker's hanging head straightens). The mean pose is a style input in the sense of StyleGestures (Alexanderson
+window, MG otherwise sees only its own frames, and drifts to an average walker within half a second (a sad
+walker's hanging head straightens). The mean pose is a style input in the sense of StyleGestures (Alexanderson
 et al. 2020), taken from the motion itself rather than a label, so it works for any skeleton and any data. It is
 a function of the history, so the flows and the exact likelihood are unchanged.
 

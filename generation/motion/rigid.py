@@ -1,16 +1,16 @@
-"""Rigid bones: generated poses put back onto the skeleton of the item's actor (issue 34, item 1).
+"""Rigid bones: generated poses put back onto the skeleton of the item's actor.
 
-MG and FL model free joint positions (MoGlow §5.1: 21 joints x xyz), so nothing in the flow keeps a bone's
-length: the shipped MG's shins vary by 24 mm within a window and FL's forearms come out 10-15% long, while
-real bones are rigid. A projection after sampling keeps the models as the paper has them (the same flows, the
-same exact likelihood) and gives every generated clip the actor's bones. From the hips outwards, each joint goes
-to the point nearest to where the model put it at the actor's bone length from its (already placed) parent, so
-an error of one bone's length does not carry down the limb: a foot the model planted stays within its shin's
-length error of where it was, and the hips (with them the path and the control) stay where the model put them.
-`make_stimuli` applies it to every generated test condition alike (MG and FL; the bad examples stay as they are,
-broken on purpose) and records it in the manifest's `postprocess` column (CONTRACTS §4). bench/rigid_bones.py
-measures what it does to every figure, beside keeping each bone's sampled direction instead (the foot then
-carries every length error of its leg: MG's skating 2.1x -> 3.0x NAT's, late stepping 0.90 -> 0.82).
+MG and FL model free joint positions (MoGlow §5.1: 21 joints x xyz), so nothing in the flow keeps a bone's length:
+the shipped MG's shins and FL's forearms change length within a window, while real bones are rigid. A projection
+after sampling keeps the models as the paper has them (the same flows, the same exact likelihood) and gives every
+generated clip the actor's bones. From the hips outwards, each joint goes to the point nearest to where the model
+put it at the actor's bone length from its (already placed) parent, so an error of one bone's length does not carry
+down the limb: a foot the model planted stays within its shin's length error of where it was, and the hips (with
+them the path and the control) stay where the model put them. `make_stimuli` applies it to every generated test
+condition alike (MG and FL; the bad examples stay as they are, broken on purpose) and records it in the manifest's
+`postprocess` column (CONTRACTS §4). bench/rigid_bones.py measures what it does to every figure, beside keeping each
+bone's sampled direction instead (the foot then carries every length error of its leg, and skates more:
+bench/RESULTS.md#model-realism).
 """
 
 import numpy as np

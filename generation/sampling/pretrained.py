@@ -26,11 +26,10 @@ FOLDER = Path(__file__).resolve().parents[1] / "pretrained"
 CHECKPOINTS = {"mg": FOLDER / "mg.pt", "fl": FOLDER / "fl.pt", "bad": FOLDER / "bad.pt"}
 HELDOUT = FOLDER / "heldout.npz"
 # The sampling temperature of each model in the stimuli (make_stimuli's default, and the quality guard's). MG's
-# excess jerk is the spread its flow puts on each frame's step: at temperature 0 its upper body jerks at 1.07x
-# NAT's, at 1 at 1.41x (the head; bench/rigid_bones.py); at 0.5 every joint is within 1.2x, its foot skating
-# falls from 2.6x to 1.7x NAT's and its FMD stays at 1.05x the floor (bench/RESULTS.md "model-realism"). FL's
-# worst joint, the head, jerks 1.21x NAT's at 0.5, 0.7 and 1.0 alike, so FL keeps 1. The bad examples (the
-# earliest MG checkpoint) keep the paper's temperature 1 too: they are meant to look broken.
+# excess jerk is the spread its flow puts on each frame's step: at 0.5 every joint's jerk and its foot skating come
+# close to real motion's while its FMD holds; FL's jerk does not change with the temperature, so FL keeps 1
+# (bench/RESULTS.md#model-realism). The bad examples (the earliest MG checkpoint) keep the paper's temperature 1
+# too: they are meant to look broken.
 TEMPERATURE = {"MG": 0.5, "FL": 1.0, "BAD": 1.0}
 MOTION_ENCODER = FOLDER / "motion_encoder.pt"  # generation.metrics.fmd, for the FMD
 QUALITY = FOLDER / "quality.json"
@@ -72,7 +71,7 @@ def quality(stride=QUALITY_STRIDE, seed=0):
     the median over those windows of its ratio to NAT's on the same window (higher is better), the worst joint's
     mean jerk over NAT's, the rigidity of their bones: the largest bone-length std within a window (mm) and
     the largest error of a bone's mean length against the actor's (a fraction), and their Fréchet motion distance
-    over NAT's on the same windows (FL's posture once drifted: hands 9 cm low, 2.8x NAT's FMD here; issue 34), and
+    over NAT's on the same windows (a drifted posture shows there: bench/RESULTS.md#fl-posture), and
     the share of windows whose posture over their second half keeps their own take's style (metrics.style_retention,
     against the category averages of every held-out take). Recorded in quality.json at export and recomputed by the
     tests, which fail if the models fall back."""

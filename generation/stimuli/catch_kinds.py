@@ -1,6 +1,6 @@
 """Catch clips made by the tool: clearly broken versions of a real clip, for any skeleton (CONTRACTS §10).
 
-A catch trial only works if every attentive rater sees that the clip is broken, and (issue 37) if nothing but
+A catch trial only works if every attentive rater sees that the clip is broken, and (CONTRACTS §4) if nothing but
 its pixels tells it from a test clip. The kinds break motion in different ways, so a mix of them spreads the catch
 clips' look and their encoded size on both sides of the test clips':
 

@@ -36,7 +36,8 @@ class TrainConfig:
 
     model: str = ""  # 'fl' or 'mg': the kind's class sets it
     name: str | None = None
-    note: str | None = None  # why the config is as it is, for the reader of the JSON file
+    note: str | None = None  # what the config is for, one line; why its values: docs/models.md
+    comments: dict[str, str] | None = None  # one short comment per value, for the reader of the JSON file
     batch_size: int = field(default=32, metadata=_ONE_UP)
     lr: float = field(default=1e-3, metadata=_ZERO_UP)
     lr_min: float | None = field(default=None, metadata=_ZERO_UP)
@@ -60,9 +61,8 @@ class TrainConfig:
     posture_weight: float = field(default=0.0, metadata=_ZERO_UP)
     spread_weight: float = field(default=0.0, metadata=_ZERO_UP)
     category_balance: float = field(default=0.0, metadata=_ZERO_UP)
-    # 'bfloat16': the coupling networks run under autocast (flows.set_net_precision); about 1.4x the steps/s of
-    # float32 on an AMD Zen 4 CPU at mg_cpu's size, at the same likelihood per step, but 0.67x on an Intel Xeon
-    # with AVX512-BF16 and no AMX (bench/RESULTS.md); not yet measured on a GPU.
+    # 'bfloat16': the coupling networks run under autocast (flows.set_net_precision); faster than float32 on some
+    # CPU kinds and slower on others (bench/RESULTS.md#train-speed); not yet measured on a GPU.
     precision: str = field(default="float32", metadata={"choices": sorted(flows.PRECISIONS)})
 
 
@@ -116,6 +116,9 @@ def checked(model, values, where):
     for key, value in values.items():
         if key not in known:
             raise TrainError(f"{where}: unknown field '{key}'")
+        if key == "comments":
+            out[key] = _comments(where, value, known)
+            continue
         out[key] = _field_value(where, key, value, hints[key], known[key].metadata)
     return _agreeing(kind(**{**out, "model": model}), where)
 
@@ -158,6 +161,26 @@ def _field_value(where, key, value, hint, meta):
     if "max" in meta and value > meta["max"]:
         raise TrainError(f"{where}: field '{key}' must be at most {meta['max']}, got {value!r}")
     return int(value) if base is int else value
+
+
+COMMENT_LIMIT = 100  # characters: a comment says what a value is; why it is so goes into docs/models.md
+
+
+def _comments(where, value, known):
+    """The config's comments {field: text}, once every key is a field and every text a short string."""
+    if value is None:
+        return None
+    if not isinstance(value, dict) or not all(isinstance(v, str) for v in value.values()):
+        raise TrainError(f"{where}: field 'comments' must map field names to short strings")
+    for key, text in value.items():
+        if key not in known:
+            raise TrainError(f"{where}: field 'comments' names an unknown field '{key}'")
+        if len(text) > COMMENT_LIMIT:
+            raise TrainError(
+                f"{where}: field 'comments': the comment on '{key}' is over {COMMENT_LIMIT} characters "
+                "(say why in docs/models.md)"
+            )
+    return dict(value)
 
 
 def _of_kind(value, base):

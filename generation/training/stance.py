@@ -1,5 +1,5 @@
 """A training loss on the stance foot: how fast a model's predicted motion moves a foot that the real motion
-keeps planted (bench/notes/2026-11-25-history.md, issue 15).
+keeps planted (bench/notes/2026-11-25-history.md).
 
 Maximum likelihood alone left both flows sliding their stance feet, and their most likely motion (every latent
 zero: the mode path) carrying the stance foot along with the body, where real motion keeps it still. This loss
