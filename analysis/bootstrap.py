@@ -33,19 +33,46 @@ def cluster_bootstrap(
     level=0.95,
     dense_limit=30_000_000,
 ):
-    """Two-way cluster bootstrap of the group means: raters resampled with replacement, and clips resampled
-    with replacement within their condition (clips are nested in conditions, raters are crossed with them).
+    """Two-way cluster bootstrap of the group means: raters resampled with replacement, and clips resampled with
+    replacement within their condition (clips are nested in conditions, raters are crossed with them).
 
-    A replicate weights each rating by (times its rater was drawn) x (times its clip was drawn); a group
-    mean is sum(w y) / sum(w). Vectorised: with the rater x clip table S of ratings, the weighted sums of all
-    replicates are ((W_rater @ S) * W_clip) @ onehot(condition) — one matrix product per chunk of
-    replicates (dense for tables up to `dense_limit` cells, sparse beyond), 100 replicates at a time so memory
-    stays bounded. Integer weights and ratings keep every sum exact, so results are bit-reproducible for a
-    seed and identical on both paths.
+    Parameters
+    ----------
+    df : DataFrame
+        One row per rating.
+    dv : str
+        The column of the ratings.
+    between : str
+        The column of the groups (conditions).
+    rater : str
+        The column of the rater ids.
+    clip : str
+        The column of the clip ids.
+    n_boot : int
+        The number of replicates.
+    seed : int
+        The seed of the resampling: a seed gives the same result bit for bit.
+    level : float
+        The coverage of the percentile intervals.
+    dense_limit : int
+        The largest rater x clip table, in cells, held as a dense matrix; beyond it the table is sparse. Both
+        paths give the same numbers.
 
-    -> {"means": DataFrame per group (mean, boot_low, boot_high, boot_se), "differences": DataFrame per pair
-        (group1 < group2, meandiff = group2 - group1, boot_low, boot_high, boot_p = two-sided bootstrap
-        p-value, add-one), "n_boot", "seed", "level", "n_degenerate"}.
+    Returns
+    -------
+    dict
+        "means": a DataFrame per group (mean, boot_low, boot_high, boot_se); "differences": a DataFrame per pair
+        (group1 < group2, meandiff = group2 - group1, boot_low, boot_high, and boot_p, the two-sided bootstrap
+        p-value, add-one); "n_boot", "seed", "level"; "n_degenerate", the replicates in which some group drew no
+        rating; "method", in words.
+
+    Notes
+    -----
+    A replicate weights each rating by (times its rater was drawn) x (times its clip was drawn); a group mean is
+    sum(w y) / sum(w). Vectorised: with the rater x clip table S of ratings, the weighted sums of all replicates
+    are ((W_rater @ S) * W_clip) @ onehot(condition), one matrix product per chunk of 100 replicates, so memory
+    stays bounded. Integer weights and ratings keep every sum exact, so results are bit-reproducible for a seed
+    and identical on the dense and sparse paths.
     """
     rc, raters = pd.factorize(df[rater])
     cc, clips = pd.factorize(df[clip])

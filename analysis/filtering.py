@@ -18,11 +18,42 @@ def failed_raters(df, threshold=DEFAULT_THRESHOLD):
 
 
 def exclude_raters(df, threshold=DEFAULT_THRESHOLD):
-    """-> (kept rows of every role, counts dict).
+    """The paper's rater filter: drop every rater who gave any catch clip a rating of `threshold` or more.
 
-    Counts are over all rows (test and catch), as in the paper: n_ratings_total, n_ratings_removed,
-    n_ratings_kept, n_raters_total, n_raters_excluded, n_raters_kept; plus the test-only counts that the
-    statistics use and the number of raters who saw no catch trial at all (they cannot fail the check).
+    Parameters
+    ----------
+    df : DataFrame
+        Ratings as `load_ratings` returns them (columns rater_id, role and rating at least).
+    threshold : int
+        A catch rating at or above this fails its rater; the default is the paper's 3 (study.CATCH_FAIL_AT).
+
+    Returns
+    -------
+    kept : DataFrame
+        The rows, of every role, of the raters who pass.
+    counts : dict
+        Counts over all rows (test and catch), as in the paper: n_ratings_total, n_ratings_removed,
+        n_ratings_kept, n_raters_total, n_raters_excluded, n_raters_kept; the counts that the statistics use
+        (n_catch_ratings, n_test_ratings_total, n_test_ratings_kept); n_raters_without_catch, the raters who saw
+        no catch trial at all (they cannot fail the check); the threshold; and excluded_raters, the sorted ids of
+        the raters dropped.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from analysis.filtering import exclude_raters
+    >>> df = pd.DataFrame(
+    ...     {
+    ...         "rater_id": ["r1", "r1", "r2", "r2", "r3"],
+    ...         "role": ["test", "catch", "test", "catch", "test"],
+    ...         "rating": [4, 1, 5, 4, 2],
+    ...     }
+    ... )
+    >>> kept, counts = exclude_raters(df)
+    >>> counts["excluded_raters"], counts["n_ratings_kept"], counts["n_raters_without_catch"]
+    (['r2'], 3, 1)
+    >>> sorted(kept["rater_id"])
+    ['r1', 'r1', 'r3']
     """
     bad = failed_raters(df, threshold)
     drop = df["rater_id"].isin(bad)
@@ -46,6 +77,25 @@ def exclude_raters(df, threshold=DEFAULT_THRESHOLD):
 
 
 def only_test_rows(df):
-    """Only test rows enter the statistics; catch rows never do."""
+    """The test rows of `df`: only they enter the statistics; catch rows never do.
+
+    Parameters
+    ----------
+    df : DataFrame
+        Rows with a role column.
+
+    Returns
+    -------
+    DataFrame
+        A new frame of the rows whose role is "test", in their order and with their index.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from analysis.filtering import only_test_rows
+    >>> df = pd.DataFrame({"role": ["test", "catch", "test"], "rating": [4, 1, 3]})
+    >>> only_test_rows(df)["rating"].tolist()
+    [4, 3]
+    """
     out = df[df["role"] == "test"]
     return pd.DataFrame(out)

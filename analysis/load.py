@@ -98,12 +98,29 @@ def read_export(path, required, noun, strip=False):
 
 
 def load_ratings(path):
-    """ratings.csv -> DataFrame (rater_id, clip_id categorical; condition; rating int8; role 'test'/'catch';
-    extra columns as text).
+    """Read and check a ratings.csv export (CONTRACTS §6).
 
-    Index = file line number. Raises AnalysisError for: missing file, empty file, header only, missing
-    required columns, empty required fields, non-integer or out-of-range ratings, unknown roles, duplicate
-    (rater, clip) pairs, a clip listed under two conditions or roles, no test rows.
+    Nothing is dropped silently: a bad row stops the reading with the line that holds it.
+
+    Parameters
+    ----------
+    path : str or Path
+        The export: columns rater_id, clip_id, condition and rating, optionally role, and any others.
+
+    Returns
+    -------
+    DataFrame
+        One row per rating, indexed by its line number in the file (the header is line 1), so that later
+        messages can name lines too. rater_id and clip_id are categorical, condition is text, rating an integer
+        (int8), role "test" or "catch" (without a role column, the rows of the catch condition are catch and the
+        others test); extra columns are kept as text.
+
+    Raises
+    ------
+    AnalysisError
+        One line naming the file (and the line where there is one) for: a missing file, an empty file, a header
+        only, missing required columns, empty required fields, non-integer or out-of-range ratings, unknown
+        roles, duplicate (rater, clip) pairs, a clip listed under two conditions or roles, no test rows.
     """
     path, df = read_export(path, REQUIRED, "ratings")
     rater_codes = _clean_column(path, df, "rater_id", categorical=True)

@@ -35,9 +35,26 @@ RIDGE = 1e-6  # on the log strengths: a condition that never wins stays finite (
 
 # ---------------------------------------------------------------------------------------------- file
 def load_pairs(path):
-    """pairs.csv -> DataFrame (index = file line). Each problem is one AnalysisError naming the file and line:
-    missing columns, empty fields, a preference that is not an integer -2..2, an unknown role, the same condition
-    on both sides, the same clip twice, a repeated comparison by one rater, no test rows."""
+    """Read and check a pairs.csv export of a pairwise preference test (CONTRACTS §8).
+
+    Parameters
+    ----------
+    path : str or Path
+        The export: columns rater_id, item, clip_a, clip_b, condition_a, condition_b, preference and role.
+
+    Returns
+    -------
+    DataFrame
+        One row per answer, indexed by its line number in the file; preference an integer -2..2 (2 = A clearly,
+        -2 = B clearly), role "test" or "catch" (lower-cased).
+
+    Raises
+    ------
+    AnalysisError
+        One line naming the file and line for each problem: missing columns, empty fields, a preference that is
+        not an integer -2..2, an unknown role, the same condition on both sides, the same clip twice, a repeated
+        comparison by one rater, no test rows.
+    """
     path, df = read_preferences(path, REQUIRED)
     same = df["condition_a"] == df["condition_b"]
     if same.any():
@@ -248,7 +265,31 @@ def fit_bradley_terry(counts, pairs, conds, reference=None, ties=None, x0=None):
 
 def bradley_terry(o, n_boot=1000, seed=0, level=0.95):
     """The Davidson-Bradley-Terry fit on the oriented test rows, with percentile intervals from a bootstrap over
-    raters. -> dict strengths, ci {cond: [low, high]}, nu, reference, log_likelihood, converged, n_boot."""
+    raters.
+
+    Parameters
+    ----------
+    o : DataFrame
+        The oriented test rows (`oriented`): rater_id, item, first, second, pref (positive = first preferred).
+    n_boot : int
+        The number of bootstrap resamples of the raters.
+    seed : int
+        The seed of the resampling.
+    level : float
+        The coverage of the intervals.
+
+    Returns
+    -------
+    dict
+        strengths {cond: log strength relative to the reference}, ci {cond: [low, high]}, nu (the tie
+        parameter, 0 without ties in the data), reference (NAT, or else the first condition), log_likelihood,
+        converged, n_boot, seed, level and method.
+
+    Notes
+    -----
+    A rater's answers are not independent, so the bootstrap resamples raters with all their answers; every
+    resample is fitted at once.
+    """
     conds = sorted(set(o["first"]) | set(o["second"]))
     reference = REFERENCE if REFERENCE in conds else conds[0]
     tables, pairs = _tables(o, conds)
@@ -281,7 +322,31 @@ def bradley_terry(o, n_boot=1000, seed=0, level=0.95):
 
 
 def analyse(df, n_boot=1000, seed=0, alpha=0.05):
-    """All pairwise statistics of the test rows of `df` (catch rows never enter them)."""
+    """All pairwise statistics of the test rows of `df` (catch rows never enter them).
+
+    Parameters
+    ----------
+    df : DataFrame
+        Answers as `load_pairs` returns them.
+    n_boot : int
+        The number of bootstrap resamples behind the Bradley-Terry intervals.
+    seed : int
+        The seed of that bootstrap.
+    alpha : float
+        The level at which the Holm-corrected sign tests reject.
+
+    Returns
+    -------
+    dict
+        n_test_answers, n_raters, n_items; pairs, a DataFrame with one row per pair of conditions (wins, ties,
+        the share of each answer level, the sign test p and its Holm correction); bradley_terry, as from
+        `bradley_terry`.
+
+    Raises
+    ------
+    AnalysisError
+        The test rows compare fewer than 2 conditions.
+    """
     o = oriented(df)
     conds = sorted(set(o["first"]) | set(o["second"]))
     if len(conds) < 2:

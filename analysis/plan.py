@@ -37,8 +37,24 @@ MAX_RATERS = 5000
 
 
 def pilot_design(test):
-    """Design and fitted model of the pilot's test rows -> dict(conditions, means, sd_rater, sd_clip,
-    sd_residual, clips_per_condition, clips_per_rater, n_raters)."""
+    """The design and fitted model of a pilot's test rows: what `simulate_power` and `plan` draw new studies from.
+
+    Parameters
+    ----------
+    test : DataFrame
+        The pilot's test ratings (columns rater_id, clip_id, condition, rating), raters already excluded.
+
+    Returns
+    -------
+    dict
+        conditions; means (model-based, per condition); sd_rater, sd_clip and sd_residual from the linear
+        mixed model; clips_per_condition; clips_per_rater (the median ratings per rater); n_raters.
+
+    Raises
+    ------
+    ModelUndefined
+        The pilot cannot identify the mixed model (see `mixed_model`).
+    """
     m = rating_models.mixed_model(test)
     vc = m["variance_components"]
     conds = list(m["condition_means"])
@@ -55,12 +71,41 @@ def pilot_design(test):
 
 
 def simulate_power(design, pair, n_raters, n_sim=1000, alpha=0.05, seed=0, chunk=100, progress=None):
-    """Share of simulated studies with n_raters raters in which Tukey HSD separates the two conditions of
-    `pair`, and its 95% Monte Carlo (Wilson) interval -> (power, low, high).
+    """The share of simulated studies with `n_raters` raters in which Tukey's HSD separates the two conditions of
+    `pair`.
 
+    Parameters
+    ----------
+    design : dict
+        As from `pilot_design`.
+    pair : tuple of str
+        The two conditions compared.
+    n_raters : int
+        The raters of each simulated study.
+    n_sim : int
+        The number of studies simulated.
+    alpha : float
+        The family-wise error rate of the test.
+    seed : int
+        The seed of the simulation.
+    chunk : int
+        The studies simulated at once.
+    progress : tqdm or None
+        A progress bar updated by the studies simulated.
+
+    Returns
+    -------
+    power : float
+        The share of studies in which the pair differs.
+    low, high : float
+        Its 95% Monte Carlo (Wilson) interval.
+
+    Notes
+    -----
     Tukey's decision for a pair (p_adj < alpha) is q > the studentized-range quantile at 1 - alpha, with
-    q = |mean difference| / sqrt(MSE / 2 (1/n_i + 1/n_j)) and MSE the pooled within-condition variance --
-    computed here from group sums for a whole chunk of studies at once."""
+    q = |mean difference| / sqrt(MSE / 2 (1/n_i + 1/n_j)) and MSE the pooled within-condition variance,
+    computed here from group sums for a whole chunk of studies at once.
+    """
     conds = design["conditions"]
     K, C, m = len(conds), design["clips_per_condition"], design["clips_per_rater"]
     n_clips = K * C
@@ -118,11 +163,42 @@ def with_difference(design, pair, difference):
 
 
 def plan(design, pair, target=0.8, n_sim=1000, alpha=0.05, seed=0, raters=None, max_raters=MAX_RATERS, progress=True):
-    """Power curve over the number of raters and the smallest number reaching `target`.
+    """The power curve over the number of raters, and the smallest number that reaches `target`.
 
+    Parameters
+    ----------
+    design : dict
+        As from `pilot_design` (its means may be changed to plan for another difference).
+    pair : tuple of str
+        The two conditions compared.
+    target : float
+        The power wanted.
+    n_sim : int
+        The studies simulated at each size.
+    alpha : float
+        The family-wise error rate of the test.
+    seed : int
+        The seed of the simulations.
+    raters : int or None
+        A number of raters whose power is also wanted.
+    max_raters : int
+        The search stops here.
+    progress : bool
+        Show a progress bar on stderr.
+
+    Returns
+    -------
+    dict
+        curve, a DataFrame (raters, ratings_per_clip, power, low, high) with a row per size evaluated;
+        planned_raters (None when `max_raters` does not reach the target) and planned_power; power_at
+        {raters: power} for `raters`; false_positive_rate, the power with a difference of 0 at the planned size
+        (or at `raters`).
+
+    Notes
+    -----
     The search doubles the number of raters until the target is reached, then bisects between the last two
-    sizes; every size evaluated is a row of the curve. -> dict(curve DataFrame, planned_raters or None,
-    planned_power, false_positive_rate (difference 0 at the planned size), power_at (for `raters`))."""
+    sizes; every size evaluated is a row of the curve.
+    """
     per_clip_per_rater = design["clips_per_rater"] / (len(design["conditions"]) * design["clips_per_condition"])
     rows = {}
     bar = tqdm(desc="simulated studies", unit="study", disable=not progress, file=sys.stderr, leave=False)

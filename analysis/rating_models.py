@@ -34,14 +34,42 @@ def random_effects_problem(df, dv="rating", between="condition", rater="rater_id
 
 
 def mixed_model(df, dv="rating", between="condition", rater="rater_id", clip="clip_id", reference=None):
-    """Linear mixed model  dv ~ between + (1|rater) + (1|clip)  with crossed random intercepts, REML
-    (analysis/mixed.py: lme4's profiled criterion from sufficient statistics; checked against statsmodels
-    MixedLM in the tests). Treatment coding; the reference level is NAT when present (effects read as "vs
-    natural motion"), else the first level alphabetically. Wald z tests and 95% intervals for fixed effects.
+    """Linear mixed model  dv ~ between + (1|rater) + (1|clip)  with crossed random intercepts, fitted by REML.
 
-    -> dict: formula, method, reference, fixed_effects {Intercept, condition[T.X]: estimate}, std_errors,
-    z, p_values, ci_low, ci_high, variance_components {rater, clip, residual}, condition_means (model-based),
-    reml_log_likelihood, converged, n, n_raters, n_clips.
+    Parameters
+    ----------
+    df : DataFrame
+        One row per test rating.
+    dv : str
+        The column of the ratings.
+    between : str
+        The column of the conditions.
+    rater : str
+        The column of the rater ids.
+    clip : str
+        The column of the clip ids.
+    reference : str or None
+        The condition the effects are measured against; None: NAT when present (effects read as "vs natural
+        motion"), else the first condition alphabetically.
+
+    Returns
+    -------
+    dict
+        formula, method, reference; fixed_effects {Intercept, condition[T.X]: estimate} (treatment coding),
+        std_errors, df (Satterthwaite), t, p_values, ci_low and ci_high (95%) per fixed effect;
+        variance_components {rater, clip, residual}; condition_means (model-based); reml_log_likelihood,
+        converged, n, n_raters, n_clips and warnings.
+
+    Raises
+    ------
+    ModelUndefined
+        The rows cannot identify the model: no variance, a single rater, or one clip per condition.
+
+    Notes
+    -----
+    The engine (analysis/mixed.py) minimises lme4's profiled criterion from sufficient statistics; the tests
+    check it against statsmodels' MixedLM. The fixed effects are tested with t tests on Satterthwaite degrees of
+    freedom.
     """
     from .mixed import fit_crossed
 
@@ -76,16 +104,47 @@ def mixed_model(df, dv="rating", between="condition", rater="rater_id", clip="cl
 
 # ---------------------------------------------------------------------------------------------- ordinal model
 def ordinal_model(df, dv="rating", between="condition", rater="rater_id", clip="clip_id", reference=None, level=0.95):
-    """Cumulative-link (logit) mixed model  factor(dv) ~ between + (1|rater) + (1|clip), ML with the Laplace
-    approximation as R's ordinal::clmm (analysis/ordinal.py; matched to clmm in the tests).
+    """Cumulative-link (logit) mixed model  factor(dv) ~ between + (1|rater) + (1|clip), fitted by ML with the
+    Laplace approximation, as R's ordinal::clmm.
 
-    Effects are log-odds of a higher rating against the reference (NAT when present), so exp(effect) is an
-    odds ratio: 0.5 means half the odds of a rating above any cut point. Thresholds are named by adjacent
-    observed levels ("1|2" ... "4|5" when every level occurs; an unused level has no cut point, as in clmm).
+    Parameters
+    ----------
+    df : DataFrame
+        One row per test rating.
+    dv : str
+        The column of the ratings.
+    between : str
+        The column of the conditions.
+    rater : str
+        The column of the rater ids.
+    clip : str
+        The column of the clip ids.
+    reference : str or None
+        The condition the effects are measured against; None: NAT when present (effects read as "vs natural
+        motion"), else the first condition alphabetically.
+    level : float
+        The coverage of the odds ratios' intervals.
 
-    -> dict: formula, method, reference, fixed_effects, std_errors, z, p_values (Wald), odds_ratios,
-    or_ci_low, or_ci_high, thresholds, threshold_std_errors, sd_rater, sd_clip, log_likelihood, converged,
-    fitted_distribution and observed_distribution {COND: {level: proportion}}, n, n_raters, n_clips, warnings.
+    Returns
+    -------
+    dict
+        formula, method, reference, fixed_effects, std_errors, z, p_values (Wald), odds_ratios, or_ci_low,
+        or_ci_high, thresholds, threshold_std_errors, sd_rater, sd_clip, log_likelihood, converged,
+        fitted_distribution and observed_distribution {COND: {level: proportion}}, n, n_raters, n_clips and
+        warnings.
+
+    Raises
+    ------
+    ModelUndefined
+        The rows cannot identify the model (as for `mixed_model`), a condition's ratings all sit in the top or
+        bottom category (separation), or the estimates run off to infinity (quasi-separation).
+
+    Notes
+    -----
+    Effects are log-odds of a higher rating against the reference, so exp(effect) is an odds ratio: 0.5 means
+    half the odds of a rating above any cut point. Thresholds are named by adjacent observed levels ("1|2" ...
+    "4|5" when every level occurs; an unused level has no cut point, as in clmm). The engine is
+    analysis/ordinal.py; the tests match it to clmm.
     """
     from .ordinal import fit_clmm, marginal_probabilities
 

@@ -49,7 +49,52 @@ def build_report(
     ordinal=True,
     ordinal_max_ratings=ORDINAL_MAX_RATINGS,
 ):
-    """Run the whole analysis of the file's design; returns the stats.json document."""
+    """Run the whole analysis of a ratings file, of whichever design it holds, and write the report.
+
+    Writes report.html, stats.json and the figures to `out_dir` (as `python -m analysis.report`), and prints
+    the console summary unless `quiet`.
+
+    Parameters
+    ----------
+    ratings_path : str or Path
+        The export of the rating app (ratings.csv, or the answers of another test design).
+    out_dir : str or Path
+        The report folder.
+    metrics_path : str or Path or None
+        metrics.csv of the stimuli: each metric is correlated with the clips' mean ratings (and the c2st.csv
+        beside it is read where there is one); None: no metrics.
+    threshold : int
+        The catch rating at or above which a rater is excluded (`exclude_raters`).
+    mixed : bool
+        Fit the linear mixed model.
+    seed : int
+        The seed of the bootstraps.
+    n_boot : int
+        The number of bootstrap replicates.
+    alpha : float
+        The family-wise error rate of the tests.
+    mixed_max_levels : int
+        The mixed models are skipped when the raters and the clips both outnumber this (their cost grows with
+        them).
+    progress : bool
+        Show a progress bar on stderr.
+    quiet : bool
+        Print nothing to stdout.
+    ordinal : bool
+        Fit the ordinal mixed model.
+    ordinal_max_ratings : int
+        The ordinal model is skipped above this many test ratings (it works on every rating).
+
+    Returns
+    -------
+    dict
+        The stats.json document.
+
+    Raises
+    ------
+    AnalysisError
+        Bad input: one line naming the file and the line or column.
+    """
     t0 = time.perf_counter()
     options = Options(
         metrics_path, threshold, mixed, seed, n_boot, alpha, mixed_max_levels, ordinal, ordinal_max_ratings

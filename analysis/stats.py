@@ -44,11 +44,42 @@ def _group_moments(y, codes, k):
 
 
 def one_way_anova(df, dv="rating", between="condition"):
-    """One-way ANOVA -> dict(F, df_between, df_within, p, ss_between, ss_within, ms_between, ms_within,
-    eta_squared, n, k).
+    """One-way ANOVA of `dv` across the groups of `between`.
 
+    Parameters
+    ----------
+    df : DataFrame
+        One row per rating (or other observation).
+    dv : str
+        The column of the dependent variable.
+    between : str
+        The column naming each row's group (condition).
+
+    Returns
+    -------
+    dict
+        F, df_between, df_within, p, ss_between, ss_within, ms_between, ms_within, eta_squared, n and k (the
+        number of groups). Where there is no variance within the groups, F and p are NaN and "undefined" says
+        why (an x / 0 is no evidence of anything).
+
+    Raises
+    ------
+    ValueError
+        Fewer than 2 groups, or no more observations than groups.
+
+    Notes
+    -----
     A shifted, corrected two-pass algorithm keeps >= 9 significant digits on every NIST StRD ANOVA set that
     float64 can hold (tests/test_analysis_stats.py).
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from analysis.stats import one_way_anova
+    >>> df = pd.DataFrame({"condition": ["A"] * 3 + ["B"] * 3, "rating": [1, 2, 3, 3, 4, 5]})
+    >>> r = one_way_anova(df)
+    >>> r["F"], r["df_between"], r["df_within"], round(r["p"], 4)
+    (6.0, 1, 4, 0.0705)
     """
     codes, levels = pd.factorize(df[between], sort=True)
     k = len(levels)
@@ -134,11 +165,45 @@ def per_clip_means(df, dv="rating", between="condition", clip="clip_id", level=0
 
 # ---------------------------------------------------------------------------------------------- Tukey HSD
 def tukey_hsd(df, dv="rating", between="condition", alpha=0.05):
-    """Tukey HSD (Tukey-Kramer for unequal n) over all pairs at family-wise error alpha.
+    """Tukey's HSD over all pairs of groups at family-wise error `alpha` (Tukey-Kramer for unequal group sizes).
 
-    statsmodels convention: group1 < group2 alphabetically, meandiff = mean(group2) - mean(group1).
-    Columns: group1, group2, meandiff, lower, upper, p_adj, reject, se, q. Pooled MSE from the one-way ANOVA;
-    studentized range quantile and tail from scipy (the same distribution as R's qtukey/ptukey).
+    Parameters
+    ----------
+    df : DataFrame
+        One row per rating (or other observation).
+    dv : str
+        The column of the dependent variable.
+    between : str
+        The column naming each row's group (condition).
+    alpha : float
+        The family-wise error rate: the intervals cover 1 - alpha, and a pair is rejected where p_adj < alpha.
+
+    Returns
+    -------
+    DataFrame
+        One row per pair, in statsmodels' convention: group1 < group2 alphabetically, meandiff = mean(group2) -
+        mean(group1). Columns group1, group2, meandiff, lower, upper, p_adj, p_adj_bound, reject, se, q.
+        p_adj_bound is True where the tail is below what scipy resolves (1e-9) and p_adj is an upper bound
+        instead. Without error variance a pair has no test (NaN, never rejected) and attrs["undefined"] says why.
+
+    Raises
+    ------
+    ValueError
+        Fewer than 2 groups, or no more observations than groups.
+
+    Notes
+    -----
+    The pooled MSE is the one-way ANOVA's; the studentized range quantile and tail come from scipy (the same
+    distribution as R's qtukey/ptukey).
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from analysis.stats import tukey_hsd
+    >>> df = pd.DataFrame({"condition": ["A"] * 3 + ["B"] * 3, "rating": [1, 2, 3, 3, 4, 5]})
+    >>> row = tukey_hsd(df).iloc[0]
+    >>> row["group1"], row["group2"], float(row["meandiff"]), round(float(row["p_adj"]), 4), bool(row["reject"])
+    ('A', 'B', 2.0, 0.0705, False)
     """
     codes, levels = pd.factorize(df[between], sort=True)
     k = len(levels)
@@ -230,7 +295,32 @@ def holm(pvalues):
 
 
 def kruskal_wallis(df, dv="rating", between="condition"):
-    """Kruskal-Wallis H test (tie-corrected) -> dict(H, df, p, epsilon_squared)."""
+    """Kruskal-Wallis H test (tie-corrected) of `dv` across the groups of `between`.
+
+    Parameters
+    ----------
+    df : DataFrame
+        One row per rating (or other observation).
+    dv : str
+        The column of the dependent variable.
+    between : str
+        The column naming each row's group (condition).
+
+    Returns
+    -------
+    dict
+        H, df, p and epsilon_squared (H / (n - 1)). Where every value is tied, H, p and epsilon_squared are NaN
+        and "undefined" says why.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from analysis.stats import kruskal_wallis
+    >>> df = pd.DataFrame({"condition": ["A"] * 3 + ["B"] * 3, "rating": [1, 2, 3, 3, 4, 5]})
+    >>> r = kruskal_wallis(df)
+    >>> r["df"], round(r["H"], 2), round(r["p"], 3)
+    (1, 3.14, 0.077)
+    """
     groups = [g.to_numpy() for _, g in df.groupby(between, sort=True)[dv]]
     n = sum(len(g) for g in groups)
     if np.ptp(np.concatenate(groups)) == 0:  # every rank tied: H is 0 / 0

@@ -52,21 +52,53 @@ def render_clip(
     thin=None,
     rate_seed=None,
 ):
-    """Render a clip (a path to a clip .npz, or a dict as from moglow_eval.core.clip.load_clip) to an MP4.
+    """Render a clip to an MP4 of a stick figure.
 
-    sheet: optional PNG path for a contact sheet of `sheet_frames` evenly spaced frames.
-    preset: x264 speed preset; ultrafast is the fastest and, for these drawings, loses nothing visible (it skips
-    deblocking and CABAC).
-    qp, crf: neither (the default) = every frame one size, filler data included (`encode.frame_bits`: 2.05 MB per
-    4-s clip at 640x640, 3.2 MB at 1000x1000), so that a set's videos are one size (rendering.blinding);
-    qp (a constant quantiser; 17 was the default before) or crf (x264's rate factor) = sizes that follow the
-    content, for a video that is not a stimulus.
-    threads: ffmpeg/x264 threads (None = ffmpeg's choice; 1 for one-core rendering in a process pool).
-    hide, thin: joint names not drawn, and those drawn thinner (None: finger and face joints, by name); see
-    raster.FrameDrawer.
-    rate_seed: seed of the default rate control's random share of the rate per frame (None: fresh randomness,
-    so the bytes differ from one render to the next; the pixels hardly do).
-    Returns the number of frames written.
+    Parameters
+    ----------
+    clip_or_path : str or Path or dict
+        A clip .npz, or a clip dict as `moglow_eval.core.clip.load_clip` returns it.
+    out_mp4 : str or Path
+        The video to write.
+    size : int
+        Width = height in pixels: even, 32-4096 (H.264 yuv420p).
+    camera : Camera
+        The camera (rendering.camera); it follows the root.
+    style : Style
+        Colours and line widths (rendering.raster).
+    sheet : str or Path or None
+        A PNG to write a contact sheet of `sheet_frames` evenly spaced frames to; None: no sheet.
+    sheet_frames : int
+        The frames on the contact sheet.
+    preset : str
+        The x264 speed preset. ultrafast is the fastest and, for these drawings, loses nothing visible (it
+        skips deblocking and CABAC).
+    qp, crf : int or None
+        Neither (the default): every frame one size, filler data included (`encode.frame_bits`: 2.05 MB per
+        4-s clip at 640x640, 3.2 MB at 1000x1000), so that a set's videos are one size (rendering.blinding).
+        qp (a constant quantiser; 17 was the default before) or crf (x264's rate factor): sizes that follow the
+        content, for a video that is not a stimulus.
+    threads : int or None
+        ffmpeg/x264 threads (None: ffmpeg's choice; 1 for one-core rendering in a process pool).
+    hide : sequence of str
+        Joint names not drawn.
+    thin : sequence of str or None
+        Joint names drawn thinner (None: finger and face joints, by name); see raster.FrameDrawer.
+    rate_seed : int or None
+        The seed of the default rate control's random share of the rate per frame (None: fresh randomness, so
+        the bytes differ from one render to the next; the pixels hardly do).
+
+    Returns
+    -------
+    int
+        The number of frames written.
+
+    Raises
+    ------
+    RenderError
+        One line naming the file: a bad size, joints that are not [T >= 1, J, 3], or ffmpeg failing.
+    ClipError
+        An unreadable clip file, or implausible joints or frame rate.
     """
     clip = _as_clip(clip_or_path)
     name = str(clip_or_path) if not isinstance(clip_or_path, dict) else str(out_mp4)
@@ -99,7 +131,26 @@ def render_clip(
 
 
 def contact_sheet(frames, fps, out_png, columns=4, thumb=240):
-    """Tile (frame_index, RGB [H, W, 3]) pairs into one PNG with each frame's time written under it."""
+    """Tile frames into one PNG, each frame's time written under it.
+
+    Parameters
+    ----------
+    frames : sequence of (int, ndarray)
+        (frame index, RGB [H, W, 3] uint8) pairs, in the order they are tiled.
+    fps : float
+        The clip's frame rate, for the times.
+    out_png : str or Path
+        The PNG to write.
+    columns : int
+        Frames per row.
+    thumb : int
+        The side of each tile in pixels.
+
+    Returns
+    -------
+    None
+        The sheet is written to `out_png`.
+    """
     from PIL import Image, ImageDraw
 
     rows = -(-len(frames) // columns)

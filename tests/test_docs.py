@@ -233,6 +233,7 @@ def test_every_image_exists():
 def test_mkdocs_build_strict(tmp_path):
     pytest.importorskip("mkdocs", reason="mkdocs is not installed: pip install -e '.[dev]'")
     pytest.importorskip("material", reason="mkdocs-material is not installed: pip install -e '.[dev]'")
+    pytest.importorskip("mkdocstrings", reason="mkdocstrings is not installed: pip install -e '.[dev]'")
     r = subprocess.run(
         [sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
         cwd=ROOT,
@@ -244,6 +245,9 @@ def test_mkdocs_build_strict(tmp_path):
     assert 'src="../img/sheet_nat.png"' in page and (tmp_path / "site" / "img" / "sheet_nat.png").is_file()
     results = (tmp_path / "site" / "results" / "index.html").read_text(encoding="utf-8")
     assert all(f'id="{e}"' in results for e in results_entries())
+    api = (tmp_path / "site" / "api" / "index.html").read_text(encoding="utf-8")
+    names = re.findall(r"^::: ([\w.]+)\s*$", (ROOT / "docs" / "api.md").read_text(encoding="utf-8"), re.M)
+    assert names and all(f'id="{n}"' in api for n in names)  # mkdocstrings rendered each function named
 
 
 # ---------------------------------------------------------------- figures and their RESULTS entries

@@ -24,7 +24,34 @@ log = logging.getLogger(__name__)
 
 
 def import_motion(in_path, out_path, scale=0.01, fps=None):
-    """Convert one BVH file to a clip .npz; returns the joints array written [T, J, 3]."""
+    """Convert one BVH file to a clip .npz (CONTRACTS §1), as `python -m generation.data.import_motion` does.
+
+    All joints of the file, world positions by forward kinematics, times `scale`. When the skeleton is one the
+    project knows (Bandai-Namco, CMU/PFNN), the clip also gets the root control of its 21-joint body, in the
+    clip's units; any other skeleton imports without it.
+
+    Parameters
+    ----------
+    in_path : str or Path
+        The BVH file (.bvh or .bvh.gz).
+    out_path : str or Path
+        The clip .npz to write.
+    scale : float
+        File units to metres (0.01 for centimetre files).
+    fps : float or None
+        The frame rate of the clip: the motion is resampled to it (rotations are slerped, so bones keep their
+        lengths); None: the file's own rate.
+
+    Returns
+    -------
+    ndarray
+        The joint positions written, [T, J, 3] float32.
+
+    Raises
+    ------
+    BvhError
+        One line naming the file and line: an unreadable BVH, or one with no frames.
+    """
     bvh = read_bvh(in_path)
     if bvh.n_frames < 1:
         raise BvhError(f"{in_path}:1: no frames")

@@ -212,10 +212,37 @@ def _npz_positions(path, fps):
 
 
 def read_motion(path, fps, units="auto", up="auto", skeleton=None, source_fps=None):
-    """One motion file as a Motion at `fps` in metres, Y up.
+    """One motion file as a Motion at `fps`, in metres, Y up.
 
-    units: "auto", a key of UNITS or metres per unit (a number); a clip .npz is always metres and Y up.
-    up: "auto", "y" or "z". skeleton: a Skeleton, needed for .npy. source_fps: the frame rate of .npy arrays.
+    Reads BVH of any skeleton (.bvh, .bvh.gz), joint-position arrays (.npy [T, J, 3]) and clip .npz files.
+
+    Parameters
+    ----------
+    path : str or Path
+        The motion file.
+    fps : float
+        The frame rate wanted; the motion is resampled to it.
+    units : str or float
+        "auto" (from the body's height), a key of UNITS ("m", "cm", "mm") or metres per unit (a number). A clip
+        .npz is always metres and Y up.
+    up : str
+        "auto" (detected from the motion), "y" or "z".
+    skeleton : Skeleton or None
+        Joint names and parents; needed for .npy.
+    source_fps : float or None
+        The frame rate of .npy arrays (a .npy file stores none).
+
+    Returns
+    -------
+    Motion
+        joints [T, J, 3] float32 in metres, Y up; names [J]; parents [J] (-1 for the root, the first joint);
+        fps; path.
+
+    Raises
+    ------
+    MotionError
+        One line naming the file: unreadable, a .npy without its frame rate, a first joint that is not the root,
+        NaN or infinite positions, or a body that is not a body's height after unit conversion.
     """
     path = Path(path)
     try:

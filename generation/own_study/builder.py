@@ -384,6 +384,46 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
 
 # ---------------------------------------------------------------- the job
 def build_study(spec, out, size, preset, workers, force, progress):
+    """Build the stimulus folder of a study of your own motion, as `python -m generation.make_stimuli --study` does.
+
+    Every file is read and checked before anything is written; then the clips are cut, the catch clips made,
+    every clip rendered, and metrics.csv, c2st.csv, items.csv and manifest.csv (last) written to `out`. The
+    summary (objective metrics and the two-sample tests) is printed to stdout.
+
+    Parameters
+    ----------
+    spec : StudySpec
+        The study, as from `read_study_file`.
+    out : str or Path
+        The stimulus folder to write.
+    size : int
+        Video width = height in pixels (even).
+    preset : str
+        The x264 speed preset (make_stimuli's default is ultrafast).
+    workers : int
+        Rendering processes.
+    force : bool
+        Replace a stimulus set already in `out`.
+    progress : bool
+        Show progress bars on stderr.
+
+    Returns
+    -------
+    int
+        0, the exit status of the command.
+
+    Raises
+    ------
+    StimuliError
+        One line naming the folder or file: no matching files, a stem given twice, clips too short, an
+        existing set without `force`, and the like.
+    MotionError
+        A motion file that cannot be read or is implausible.
+    StudyFileError
+        A joint named in the study file's [skeleton] table that the motion does not have.
+    RenderError
+        A sound file that cannot be read or muxed, or a render that fails.
+    """
     t0 = time.perf_counter()
     files = match_items(spec)
     n_catch, own_catch = _catch_items(spec, files[spec.reference])

@@ -115,7 +115,27 @@ def _names(path, key, value):
 
 
 def read_study_file(path):
-    """The StudySpec of a study file; StudyFileError naming the file and key."""
+    """Read and check a study file (TOML, CONTRACTS §10).
+
+    Parameters
+    ----------
+    path : str or Path
+        The study file.
+
+    Returns
+    -------
+    StudySpec
+        The study: its reference condition and the conditions' folders (the reference first), and the seed,
+        n_training, length_s, fps, design, catch, skeleton and audio settings, the defaults where the file
+        gives none.
+
+    Raises
+    ------
+    StudyFileError
+        One line naming the file and the key: an unreadable file, invalid TOML, an unknown key, a reference
+        that is not one of the conditions, a condition named NAT that is not the reference, a value out of
+        range, or a design that needs a table the file lacks.
+    """
     path = Path(path)
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
