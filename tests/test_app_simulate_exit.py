@@ -62,12 +62,49 @@ def test_refused_raters_end_in_one_line_naming_the_setting(app_stimuli, tmp_path
     assert summary["n_raters_refused"] == 3 and summary["n_raters_started"] == 2
 
 
-def test_a_study_left_unfilled_is_a_failure(app_stimuli, tmp_path):
+def test_a_study_left_unfilled_is_a_failure_and_its_report_says_so(app_stimuli, tmp_path):
     db = f"sqlite:///{tmp_path}/r.sqlite"
     with served(app_stimuli, db, ratings_per_clip=50, min_view=0, sessions_per_client=0) as url:
-        r = simulate("--url", url, "--raters", 2, "--manifest", app_stimuli)
+        r = simulate("--url", url, "--raters", 2, "--careless", 0, "--manifest", app_stimuli)
     line = one_error_line(r)
     assert "the study did not fill: all 2 raters took part" in line and "--raters" in line, line
+    # The export says how many raters the study needs (every clip 50 times, each rater all of them: 50), and the
+    # report notes, in its summary, its page and stats.json, that two raters are far fewer.
+    ratings, report = tmp_path / "ratings.csv", tmp_path / "report"
+    r = subprocess.run(
+        [sys.executable, "-m", "rating_app", "export", "--db", db, "--out", ratings], capture_output=True, cwd=ROOT
+    )
+    assert r.returncode == 0, r.stderr
+    assert ratings.read_text().splitlines()[1].endswith(",50")
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "analysis.report",
+            ratings,
+            "--out",
+            report,
+            "--quiet",
+            "--no-ordinal",
+            "--n-boot",
+            "50",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
+    assert r.returncode == 0, r.stderr
+    note = "ratings from 2 raters, fewer than the 50 this study needs to fill"
+    stats = json.loads((report / "stats.json").read_text())
+    assert stats["target_raters"] == 50 and note in stats["notes"][0]
+    assert note in (report / "report.html").read_text()
+    r = subprocess.run(
+        [sys.executable, "-m", "analysis.report", ratings, "--out", report, "--no-ordinal", "--n-boot", "50"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
+    assert r.returncode == 0 and note in r.stdout, r.stdout
 
 
 def test_the_time_limit_is_a_failure_that_names_min_view(app_stimuli, tmp_path):
