@@ -53,13 +53,13 @@ from .stimuli.files import (
     nothing_left_on_failure,
     prepare_out,
     refuse_existing,
-    summary_text,
     write_csv,
     write_items,
     write_tables,
 )
 from .stimuli.items import CATCH, TEST, TRAINING, category_counts, item_arrays, positions, select_items
 from .stimuli.render_pool import render_stimuli
+from .stimuli.summary import condition_fmd, print_summary
 
 # torch is never imported at module level here (training, sampling and the motion encoder import it inside the
 # functions that run them): --help, --export-items and the checks of imported systems need no models, and
@@ -139,18 +139,29 @@ def ensure_model(kind, args, dataset):
     return ckpts[-1], ckpts[0]
 
 
-def sample_condition(kind, ckpt, arrays, idx, temperature, seed, device):
-    """Features x [B, T, 63] sampled by the `kind` model in `ckpt` for the items at `idx`."""
+def sample_condition(kind, ckpt, arrays, idx, temperature, seed, device, precision="float32"):
+    """Features x [B, T, 63] sampled by the `kind` model in `ckpt` for the items at `idx` (MG's sampler in
+    `precision`)."""
     from .sampling.sample import load_model, require_finite, sample_windows
 
     model = load_model(ckpt, device=device)
     if model.kind != kind:
         raise StimuliError(f"{ckpt}: an {model.kind.upper()} checkpoint where {kind.upper()} is needed")
-    x = sample_windows(model, arrays["c"][idx], arrays["hist"][idx], arrays["hist_c"][idx], temperature, seed)
+    c, hist, hist_c = arrays["c"][idx], arrays["hist"][idx], arrays["hist_c"][idx]
+    x = sample_windows(model, c, hist, hist_c, temperature, seed, precision)
     x = np.asarray(x, dtype=np.float32)
     if x.shape != arrays["x"][idx].shape:
         raise StimuliError(f"{ckpt}: sampled {x.shape}, expected {arrays['x'][idx].shape}")
     return require_finite(x, ckpt)
+
+
+def sampler_precision(args):
+    """MG's sampler's precision: --sample-precision, else picked once per CPU (generation.sampling.precision)."""
+    from .training.train import pick_device  # torch (see above)
+
+    chosen = pretrained.sampler_precision(str(pick_device(args.device)), args.sample_precision)
+    log.info(f"models: MG samples in {chosen}")
+    return chosen
 
 
 def rigid_conditions(args):
@@ -186,6 +197,7 @@ def sample_clips(args, dataset, items, arrays):
         if not bad_ckpt.is_file():
             raise StimuliError(f"--bad-checkpoint {bad_ckpt}: no such file")
         log.info(f"models: MG {mg_ckpt}, FL {fl_ckpt}, BAD {bad_ckpt}")
+        precision = sampler_precision(args)
         gen_items, catch = positions(items, TEST, TRAINING), positions(items, CATCH)
         # (condition, (model kind, checkpoint) or None for the real motion, item positions): one batch each.
         # NAT, MG and FL of the catch items too (role catch): NAT is the reference a pairwise or parallel catch
@@ -206,7 +218,7 @@ def sample_clips(args, dataset, items, arrays):
             if model is not None:
                 seed = args.seed + SEED_OFFSET[cond]
                 temperature = pretrained.TEMPERATURE[cond] if args.temperature is None else args.temperature
-                x = sample_condition(*model, arrays, idx, temperature, seed, args.device)
+                x = sample_condition(*model, arrays, idx, temperature, seed, args.device, precision)
             if cond in rigid_conditions(args):  # the bones of the item's actor, from its real history
                 x = rigid.fit_to_history(x, arrays["hist"][idx])
             joints = to_world(x, arrays["c"][idx])
@@ -286,73 +298,6 @@ def run(args):
     return 0
 
 
-# ---------------------------------------------------------------- summary
-def print_summary(out, manifest, metrics_rows, fmd, c2st_rows, seconds):
-    """The run's results on stdout: metrics per condition, the FMD, and what was written."""
-    n = {r: sum(m["role"] == r for m in manifest) for r in study.ROLES}
-    print(
-        f"\nobjective metrics, mean (sd) per condition: foot_skating m/s, bone_length_std m, jerk m/s^3, "
-        f"control_error m, control_following m, acceleration m/s^2\n{summary_text(metrics_rows)}"
-    )
-    if fmd:
-        print(
-            "\nFréchet motion distance of the test clips to training motion of their categories "
-            "(NAT's is the floor): " + ", ".join(f"{r['condition']} {r['fmd']}" for r in fmd)
-        )
-        below = below_floor(fmd)
-        if below:
-            print(
-                f"  {' and '.join(below)} below the floor: real held-out motion is not training motion either, and "
-                "a few dozen windows give the distance some noise, so a model that keeps close to the training "
-                "motion can score under NAT; read it as 'as close as real motion', not 'more real than real'"
-            )
-    print("\n" + c2st.c2st_text(c2st_rows))
-    _warn_if_bad_not_bad(metrics_rows)
-    print(
-        f"\nwrote {Path(out) / 'manifest.csv'}: {len(manifest)} clips ({n['test']} test, {n['catch']} catch, "
-        f"{n['training']} training) in {seconds:.0f} s"
-    )
-
-
-def below_floor(fmd):
-    """The conditions whose FMD is under NAT's (the floor), from condition_fmd's rows."""
-    values = {r["condition"]: float(r["fmd"]) for r in fmd}
-    floor = values.get(study.NATURAL)
-    return [] if floor is None else [c for c, v in values.items() if c != study.NATURAL and v < floor]
-
-
-def condition_fmd(poses, encoder=pretrained.MOTION_ENCODER):
-    """[{condition, n_windows, fmd}] for root-frame test windows {condition: [(x [T, 63], category), ...]};
-    [] (with a note) when the shipped motion encoder is missing."""
-    if not Path(encoder).is_file():
-        log.warning(f"note: no motion encoder at {encoder}; skipping the Fréchet motion distance")
-        return []
-    from .metrics.fmd import MotionEncoder  # torch (see above)
-
-    enc = MotionEncoder.load(encoder)
-    return [
-        dict(condition=cond, n_windows=len(w), fmd=f"{enc.fmd(np.stack([x for x, _ in w]), [k for _, k in w]):.4g}")
-        for cond, w in poses.items()
-    ]
-
-
-def _warn_if_bad_not_bad(rows):
-    """BAD clips should be plainly worse than NAT; say so when no metric shows it."""
-
-    def mean(cond, key):
-        v = [r[key] for r in rows if r["condition"] == cond and np.isfinite(r[key])]
-        return np.mean(v) if v else np.nan
-
-    if not any(r["condition"] == study.CATCH for r in rows):
-        return
-    keys = ("jerk", "bone_length_std", "foot_skating")
-    if not any(mean(study.CATCH, k) > 2 * mean(study.NATURAL, k) for k in keys):
-        log.warning(
-            "warning: the BAD clips are not clearly worse than NAT on jerk, bone length or foot skating; "
-            "pass an earlier --bad-checkpoint"
-        )
-
-
 # ---------------------------------------------------------------- command line
 def build_parser():
     """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
@@ -389,6 +334,13 @@ def build_parser():
         "--precision",
         help="override the config's for training: float32 | bfloat16 (the coupling networks in bfloat16, about 1.4x "
         "faster on AMD Zen 4 CPUs and slower on Intel CPUs without AMX; see generation.training.train)",
+    )
+    ap.add_argument(
+        "--sample-precision",
+        choices=("auto", "float32", "bfloat16"),
+        default=None,
+        help="MG's sampler: auto (the default, or $MOGLOW_SAMPLER_PRECISION) measures both once per CPU and takes "
+        "bfloat16 where it is faster and the quality guard holds (generation.sampling.precision)",
     )
     ap.add_argument("--mg-checkpoint", help="MG checkpoint to sample from (skips MG training)")
     ap.add_argument("--fl-checkpoint", help="FL checkpoint to sample from (skips FL training)")
@@ -516,6 +468,7 @@ _BUILTIN_ONLY = (
     "--config",
     "--train-steps",
     "--precision",
+    "--sample-precision",
     "--mg-checkpoint",
     "--fl-checkpoint",
     "--bad-checkpoint",

@@ -28,6 +28,10 @@ def pytest_configure(config):
     import torch
 
     torch.backends.cudnn.allow_tf32 = False
+    # make_stimuli picks MG's sampler precision per CPU (generation.sampling.precision), measuring at first use and
+    # caching in the user's cache folder. The suite samples in float32 on every host, as its figures were made, and
+    # leaves that cache alone; tests/test_sampler_precision.py tests the pick with measurements it gives it.
+    os.environ.setdefault("MOGLOW_SAMPLER_PRECISION", "float32")
     # The tests' PostgreSQL, before any test module reads its URL (fake_stimuli.PG_BASE): the server at
     # 127.0.0.1:5432 when it answers, else a throwaway one of our own, stopped in pytest_unconfigure (pg_server.py).
     from pg_server import ServerError, suite_server

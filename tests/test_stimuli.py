@@ -366,7 +366,7 @@ def test_render_workers_load_no_torch(module):
 
 def test_a_condition_under_natural_motions_fmd_is_named_and_explained():
     """Issue 46: MG's FMD (126) under NAT's (139) was printed without a word on what that means."""
-    from generation.make_stimuli import below_floor
+    from generation.stimuli.summary import below_floor
 
     rows = [dict(condition="NAT", fmd="139"), dict(condition="MG", fmd="126"), dict(condition="FL", fmd="160")]
     assert below_floor(rows) == ["MG"]
