@@ -1,6 +1,6 @@
 """MG's sampler precision on this CPU (issue 46, item 7): what generation.sampling.precision would pick, and why.
 
-    python bench/bench_sampler_precision.py [--rounds 5] [--frames 60] [--threads 2]
+    python bench/bench_sampler_precision.py [--rounds 5] [--frames 150] [--threads 2]
 
 Measures the shipped MG sampling 30 held-out streams (the default job's batch) in float32 and bfloat16, in
 `--rounds` rounds (each the pick's own measurement: the two precisions taking turns frame by frame, their gain the
@@ -27,7 +27,7 @@ from generation.sampling import precision, pretrained  # noqa: E402
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=5)
-    ap.add_argument("--frames", type=int, default=60)
+    ap.add_argument("--frames", type=int, default=150)
     ap.add_argument("--threads", type=int, default=2)
     a = ap.parse_args()
     torch.set_num_threads(a.threads)

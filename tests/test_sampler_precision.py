@@ -105,3 +105,13 @@ def test_the_cache_is_kept_per_cpu_model_flags_and_torch_version(tmp_path):
     assert (
         precision.cache_file({"XDG_CACHE_HOME": str(tmp_path)}) == tmp_path / "moglow-eval" / "sampler_precision.json"
     )
+
+
+def test_the_shipped_mgs_measurement_and_guard_run_as_the_pick_calls_them():
+    """What pretrained.sampler_precision hands the pick, on the shipped MG: both precisions timed (their values are
+    bench/'s business), and the quality guard's figures in bfloat16 holding, as bench/RESULTS.md records."""
+    from generation.sampling import pretrained
+
+    times = pretrained.measure_speed(frames=3, warmup=1, streams=4)
+    assert set(times) == {"float32", "bfloat16", "ratio"} and all(v > 0 for v in times.values())
+    assert pretrained.bfloat16_guard_failures() == []
