@@ -41,13 +41,17 @@ TARGET_COLUMN = "target_raters"  # the app's export: how many raters fill the st
 
 def study_target(path) -> int | None:
     """The export's target_raters (every row holds the same), None in an export without the column."""
-    with open(path, newline="", encoding="utf-8") as fh:
-        row = next(csv.DictReader(fh), None)
+    # Read after the design's own reader accepted the file; a cell it could not decode only spoils this one column.
+    try:
+        with open(path, newline="", encoding="utf-8-sig", errors="replace") as fh:
+            row = next(csv.DictReader(fh), None)
+    except csv.Error:  # e.g. a cell over the csv module's size limit, which the design's reader allows
+        return None
     raw = (row or {}).get(TARGET_COLUMN)
     if raw is None or raw.strip() == "":
         return None
-    if not raw.strip().isdigit():
-        raise AnalysisError(f"{path}:2: {TARGET_COLUMN} {raw!r} is not a whole number")
+    if not (raw.strip().isascii() and raw.strip().isdigit() and len(raw.strip()) <= 9):
+        raise AnalysisError(f"{path}:2: {TARGET_COLUMN} {raw[:20]!r} is not a whole number")
     return int(raw)
 
 
@@ -83,6 +87,7 @@ def build_report(
     )
     design = design_of(ratings_path)
     data = design.prepare(ratings_path, options)
+    target = study_target(ratings_path)  # before any work: a bad value is the file's problem
     out = Path(out_dir)
     _prepare_out(out)
     bar = tqdm(
@@ -107,7 +112,6 @@ def build_report(
         "alpha": alpha,
         "figures": {k: str(Path(v).relative_to(out)) for k, v in figs.items()},
     }
-    target = study_target(ratings_path)
     note = shortfall_note(data.counts["n_raters_total"], target)
     body = design.html(meta, data.counts, kept, everyone, figs)
     if note:  # right under the title, before any figure is read
