@@ -24,7 +24,6 @@
 import argparse
 import logging
 import os
-import re
 import sys
 import time
 from pathlib import Path
@@ -46,6 +45,7 @@ from .motion.features import to_features, to_world
 from .sampling import pretrained
 from .stimuli.catch_kinds import KINDS as TOOL_CATCH_KINDS
 from .stimuli.catch_kinds import make_catch
+from .stimuli.checkpoints import ensure_dataset, ensure_model, sampler_precision
 from .stimuli.files import (
     StimuliError,
     clip_files,
@@ -72,73 +72,6 @@ MG_EARLY = "mg-early"  # the paper's catch clips: samples of the earliest MG che
 SEED_OFFSET = {MG: 1, FL: 2, study.CATCH: 3}
 
 
-# ---------------------------------------------------------------- data
-def ensure_dataset(args):
-    """The prepared dataset path: --dataset if it exists, else prepared there from --data."""
-    from .data.prepare import default_data_dir, longest_takes, prepare, summary_table
-
-    path = Path(args.dataset)
-    if path.is_file():
-        log.info(f"data: using the prepared dataset {path}")
-        return path
-    data = Path(args.data) if args.data else default_data_dir()
-    if data is None or not data.is_dir():
-        raise StimuliError(
-            f"data folder {args.data or '../shared/data/bandai-namco-locomotion'} not found; "
-            "pass --data DIR (a folder of .bvh/.bvh.gz takes) or --dataset FILE.npz"
-        )
-    log.info(f"data: preparing {data} -> {path}" + (" (quick subset)" if args.quick else ""))
-    takes = longest_takes(data, per_category=10) if args.quick else None
-    summary = prepare(data, path, takes=takes, seed=args.seed, progress=args.progress)
-    log.info(summary_table(summary))
-    return path
-
-
-# ---------------------------------------------------------------- models
-def checkpoints_in(folder):
-    """Checkpoint files step_*.pt of a run folder (or its checkpoints/ subfolder), by step."""
-    folder = Path(folder)
-    if (folder / "checkpoints").is_dir():
-        folder = folder / "checkpoints"
-    files = [p for p in folder.glob("step_*.pt") if re.fullmatch(r"step_\d+\.pt", p.name)]
-    return sorted(files, key=lambda p: int(p.stem.split("_")[1]))
-
-
-def ensure_model(kind, args, dataset):
-    """(final, earliest) checkpoint of `kind`: from --{kind}-checkpoint, else trained into runs/."""
-    from .training.train import train
-
-    given = getattr(args, f"{kind}_checkpoint")
-    if given:
-        path = Path(given)
-        if not path.is_file():
-            raise StimuliError(f"--{kind}-checkpoint {path}: no such file")
-        siblings = checkpoints_in(path.parent)
-        return path, siblings[0] if siblings else path
-    if args.shipped:
-        return pretrained.CHECKPOINTS[kind], pretrained.CHECKPOINTS["bad"]
-    run = Path(args.runs) / f"{kind}_{args.config}"
-    resume = (run / "resume.pt").is_file()
-    log.info(f"models: {'resuming' if resume else 'training'} {kind} (config {args.config}) in {run}")
-    train(
-        kind,
-        args.config,
-        dataset,
-        run,
-        steps=args.train_steps,
-        seed=args.seed,
-        progress=args.progress,
-        resume=resume,
-        device=args.device,
-        threads=args.threads or "auto",
-        precision=args.precision,
-    )
-    ckpts = checkpoints_in(run)
-    if not ckpts:
-        raise StimuliError(f"{run}: training wrote no checkpoint")
-    return ckpts[-1], ckpts[0]
-
-
 def sample_condition(kind, ckpt, arrays, idx, temperature, seed, device, precision="float32"):
     """Features x [B, T, 63] sampled by the `kind` model in `ckpt` for the items at `idx` (MG's sampler in
     `precision`)."""
@@ -153,15 +86,6 @@ def sample_condition(kind, ckpt, arrays, idx, temperature, seed, device, precisi
     if x.shape != arrays["x"][idx].shape:
         raise StimuliError(f"{ckpt}: sampled {x.shape}, expected {arrays['x'][idx].shape}")
     return require_finite(x, ckpt)
-
-
-def sampler_precision(args):
-    """MG's sampler's precision: --sample-precision, else picked once per CPU (generation.sampling.precision)."""
-    from .training.train import pick_device  # torch (see above)
-
-    chosen = pretrained.sampler_precision(str(pick_device(args.device)), args.sample_precision)
-    log.info(f"models: MG samples in {chosen}")
-    return chosen
 
 
 def rigid_conditions(args):
@@ -314,6 +238,14 @@ def build_parser():
         type=cli.number(float, 0.5, 600),
         help="with --study: keep the first LENGTH_S seconds of every clip (default: the study file's, else whole)",
     )
+    _model_flags(ap)
+    _item_flags(ap)
+    _output_flags(ap)
+    return ap
+
+
+def _model_flags(ap):
+    """Where the models come from: shipped, given, or trained (and from which data), and how MG samples."""
     ap.add_argument("--quick", action="store_true", help="tiny models on a subset of takes: a few minutes in all")
     ap.add_argument(
         "--retrain",
@@ -345,6 +277,10 @@ def build_parser():
     ap.add_argument("--mg-checkpoint", help="MG checkpoint to sample from (skips MG training)")
     ap.add_argument("--fl-checkpoint", help="FL checkpoint to sample from (skips FL training)")
     ap.add_argument("--bad-checkpoint", help="checkpoint for the BAD catch clips (default: the earliest MG one)")
+
+
+def _item_flags(ap):
+    """What the set holds: the items, the catch clips, imported systems, and how the generated clips are made."""
     ap.add_argument(
         "--catch-kinds",
         default=f"{MG_EARLY},freeze",
@@ -395,6 +331,10 @@ def build_parser():
         help="keep MG's and FL's bones as sampled (default: set to the item's actor's lengths, motion.rigid)",
     )
     ap.add_argument("--seed", type=cli.number(int, 0), help="item selection, sampling and manifest order (default 0)")
+
+
+def _output_flags(ap):
+    """How the videos are made and how the job runs."""
     ap.add_argument(
         "--size", type=size_flag, help="video width = height in pixels, even (default 640; 320 with --quick)"
     )
@@ -424,7 +364,6 @@ def build_parser():
     )
     ap.add_argument("--force", action="store_true", help="replace an existing stimulus set in --out")
     ap.add_argument("--quiet", action="store_true", help="no progress bars or diagnostics; the summary only")
-    return ap
 
 
 def parse_args(argv):
