@@ -83,15 +83,8 @@ def create_app(
     """`design`: one of moglow_eval.core.study.DESIGNS (designs/; default acr); fixed for the life of the database.
     `ratings_per_clip` and `clips_per_rater` count the design's units (clips, pairs of conditions of an item,
     pages, ...)."""
-    from . import designs, health
-    from .admin import bp as admin_bp
-    from .api import bp as api_bp
-    from .audio_check import bp as audio_check_bp
-    from .audio_check import load_audio_check
-    from .db import make_read_engine
-    from .pages import bp as pages_bp
     from .study_config import study_environment
-    from .videos import ACCEL, VideoStore
+    from .videos import ACCEL
 
     env = study_environment(config or _env("RATING_CONFIG"), SETTINGS)
     manifest = manifest or _env("RATING_MANIFEST", env)
@@ -132,11 +125,27 @@ def create_app(
         MAX_CONTENT_LENGTH=16 * 1024,
         **config,
     )
+    _install_study(app, manifest, db_url or _env("DATABASE_URL", env), env, check_files)
+    return app
+
+
+def _install_study(app, manifest, db_url, env, check_files) -> None:
+    """The study behind a configured app: its design's clips and units, the database (opened and stored to), the
+    videos, the set-up warnings and the blueprints."""
+    from . import designs, health
+    from .admin import bp as admin_bp
+    from .api import bp as api_bp
+    from .audio_check import bp as audio_check_bp
+    from .audio_check import load_audio_check
+    from .db import make_read_engine
+    from .pages import bp as pages_bp
+    from .videos import VideoStore
+
+    config, accel = app.config, app.config["VIDEO_ACCEL"]
     design = designs.get(config["STUDY_DESIGN"])
     clips = design.serving_clips(load_manifest(manifest, check_files=check_files))
     units = design.build_units(clips)
     app.config["STUDY_SOUND"] = any(c.audio for c in clips)  # the page plays sound and checks the rater hears
-    db_url = db_url or _env("DATABASE_URL", env)
     engine = _open_database(
         db_url,
         _env("DB_POOL_SIZE", env),
@@ -168,7 +177,6 @@ def create_app(
     app.register_blueprint(admin_bp)
     _handle_errors(app)
     app.after_request(_headers)
-    return app
 
 
 def _config(

@@ -163,6 +163,13 @@ def build_parser():
     sub = p.add_subparsers(dest="cmd", required=True, parser_class=cli.ArgumentParser)
     count = cli.number(int, 1, 1_000_000)
 
+    _serve_parser(sub)
+    _file_parsers(sub)
+    _simulate_parser(sub, count)
+    return p
+
+
+def _serve_parser(sub):
     s = sub.add_parser("serve", help="run the app (local use; production: gunicorn rating_app.wsgi:app)")
     s.add_argument(
         "--config",
@@ -237,6 +244,9 @@ def build_parser():
     )
     s.set_defaults(fn=_serve)
 
+
+def _file_parsers(sub):
+    """export, backup and restore: the study's database to and from files."""
     e = sub.add_parser("export", help="write ratings.csv from the database")
     e.add_argument("--db", default=None, help="database URL (default $DATABASE_URL or sqlite:///ratings.sqlite)")
     e.add_argument("--out", default="ratings.csv", help="output file, '-' for stdout")
@@ -252,6 +262,8 @@ def build_parser():
     r.add_argument("--db", required=True, help="the new SQLite file or empty PostgreSQL database to restore into")
     r.set_defaults(fn=_restore)
 
+
+def _simulate_parser(sub, count):
     m = sub.add_parser("simulate", help="a simulated crowd rating through the public API")
     m.add_argument("--url", required=True, help="base URL of the running app")
     m.add_argument("--raters", type=count, required=True, help="number of raters (stops early when the study is full)")
@@ -283,7 +295,6 @@ def build_parser():
     m.add_argument("--summary", default=None, help="write the full summary (raters, ratings) as JSON here")
     m.add_argument("--quiet", action="store_true", help="no progress bar")
     m.set_defaults(fn=_simulate)
-    return p
 
 
 def _main(argv):
