@@ -14,6 +14,10 @@ it, the export is pairs.csv (pairwise, appropriateness) or the parallel ratings.
 design's. With --sound (implied by appropriateness) the stimuli are a study of your own motion with speech
 (generation.own_study.demo_study: real non-locomotion mocap, two made-up systems, speech synthesised by espeak-ng), the
 videos carry it, and every simulated rater passes the sound check first.
+
+Each run replaces what an earlier one left in --out (its database would refuse another design, and make_stimuli an
+existing set), so the designs can be tried one after the other in the default folder; a folder the demo did not
+make (no demo.json in it) is refused, never emptied. --stimuli keeps a set (an earlier run's demo/stimuli too).
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import argparse
 import json
 import os
 import secrets
+import shutil
 import signal
 import socket
 import subprocess
@@ -102,7 +107,7 @@ def _wait_until_up(url: str, server: subprocess.Popen, log: Path, timeout_s: flo
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if server.poll() is not None:
-            raise DemoError(f"the rating app exited (code {server.returncode}); log: {log}")
+            raise DemoError(f"the rating app exited (code {server.returncode}){_last_error(log)}; log: {log}")
         try:
             with urllib.request.urlopen(url, timeout=2) as r:
                 if r.status == 200:
@@ -111,6 +116,12 @@ def _wait_until_up(url: str, server: subprocess.Popen, log: Path, timeout_s: flo
             pass
         time.sleep(0.3)
     raise DemoError(f"the rating app did not answer at {url} within {timeout_s:.0f} s; log: {log}")
+
+
+def _last_error(log: Path) -> str:
+    """': ' and the app's own error line (e.g. a database that holds another design's study), or ''."""
+    lines = [x for x in log.read_text(errors="replace").splitlines() if x.startswith("error: ")]
+    return f": {lines[-1][len('error: ') :]}" if lines else ""
 
 
 def _export(url: str, token: str, folder: Path) -> Path:
@@ -127,6 +138,114 @@ def _export(url: str, token: str, folder: Path) -> Path:
     return out
 
 
+MARK = "demo.json"  # written first by every run: what tells a demo's folder from anyone else's
+# What a run writes into --out beside its stimuli; a new run replaces them (the database would refuse another design,
+# make_stimuli an existing set), so each design can be demonstrated after another in the default folder.
+RUN_OUTPUTS = ("logs", "report", "ratings.csv", "pairs.csv", "crowd_summary.json", MARK)
+STIMULI_OUTPUTS = ("stimuli", "study")  # made anew unless --stimuli is given (runs/ keeps the tiny models: reused)
+DB_NAME = "ratings.sqlite"
+ENV_NAMES = {"design": "STUDY_DESIGN"}  # the app's variable of each serve setting: its name in upper case, or this
+
+
+def clear_earlier_run(out: Path, new_stimuli: bool) -> None:
+    """Remove what an earlier demo run left in `out`; DemoError when `out` holds files the demo did not make (it
+    writes MARK first), rather than deleting anyone's work."""
+    if not out.is_dir() or not any(out.iterdir()):
+        return
+    if not (out / MARK).is_file():
+        raise DemoError(f"--out {out}: holds files the demo did not make (no {MARK}); give another --out")
+    names = RUN_OUTPUTS + (STIMULI_OUTPUTS if new_stimuli else ())
+    for path in [out / n for n in names] + sorted(out.glob(DB_NAME + "*")):
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path)
+        elif path.exists() or path.is_symlink():
+            path.unlink()
+
+
+def make_stimuli(procs: "Processes", out: Path, s: dict) -> Path:
+    """Stage 1: a stimulus set in out/stimuli, a study of speech and motion with `sound`, else make_stimuli
+    --quick (its tiny models in `runs`, default out/runs, trained once and reused by later runs)."""
+    seed, design, sound = s["seed"], s["design"], s["sound"]
+    py, stimuli = sys.executable, out / "stimuli"
+    if sound:
+        _stage(f"1/5 a study with sound (generation.own_study.demo_study) → {stimuli}")
+        procs.run(
+            [py, "-m", "generation.own_study.demo_study", "--out", str(out / "study"), "--seed", str(seed)]
+            + (["--appropriateness"] if design == "appropriateness" else []),
+            "generation.own_study.demo_study",
+        )
+        cmd = ["--study", str(out / "study" / "study.toml"), "--size", "320"]
+    else:
+        _stage(f"1/5 make stimuli (--quick) → {stimuli}")
+        cmd = ["--quick", "--runs", str(s["runs"] or out / "runs"), "--seed", str(seed)]
+    procs.run([py, "-m", "generation.make_stimuli", *cmd, "--out", str(stimuli), "--force"], "make_stimuli")
+    return stimuli
+
+
+def serve_command(manifest: Path, db: str, port: int, opts: dict, gunicorn: bool, env: dict) -> list[str]:
+    """The app's command line (or gunicorn's, with the settings in `env`) for the settings `opts`."""
+    py = sys.executable
+    if gunicorn:
+        env.update(RATING_MANIFEST=str(manifest), DATABASE_URL=db)
+        env.update({ENV_NAMES.get(k, k.upper()): str(v) for k, v in opts.items()})
+        return [py, "-m", "gunicorn", "-w", "2", "--threads", "4", "-b", f"127.0.0.1:{port}", "rating_app.wsgi:app"]
+    flags = [x for k, v in opts.items() for x in (f"--{k.replace('_', '-')}", str(v))]
+    return [py, "-m", "rating_app", "serve", "--manifest", str(manifest), "--db", db, "--port", str(port), *flags]
+
+
+def start_app(procs: "Processes", out: Path, manifest: Path, db: str, s: dict) -> tuple[str, dict]:
+    """Stage 2: the app on a free port, once it answers; returns its URL and the environment holding its admin
+    token."""
+    port = _free_port()
+    url = f"http://127.0.0.1:{port}"
+    env = dict(os.environ, ADMIN_TOKEN=secrets.token_hex(16))
+    _stage(f"2/5 rating app at {url} (database {db.split('@')[-1]})")
+    # The crowd runs on loopback (one address) and should not take 4 s per clip: lift the per-address session
+    # limit and lower the minimum viewing time (the dashboard says so); the crowd still waits as required.
+    opts = dict(ratings_per_clip=s["ratings_per_clip"], min_view=s["min_view"], sessions_per_client=0)
+    opts["design"] = s["design"]
+    if s["clips_per_rater"]:
+        opts["clips_per_rater"] = s["clips_per_rater"]
+    cmd = serve_command(manifest, db, port, opts, s["gunicorn"], env)
+    log = out / "logs" / "server.log"
+    with open(log, "w") as fh:
+        server = procs.start(cmd, stdout=fh, stderr=subprocess.STDOUT, env=env)
+    _wait_until_up(f"{url}/", server, log)
+    return url, env
+
+
+def run_crowd(procs: "Processes", out: Path, url: str, env: dict, manifest: Path, s: dict, time_left: float) -> dict:
+    """Stage 3: the simulated crowd until every test unit has its target answers; returns its summary."""
+    raters, rpc = s["raters"], s["ratings_per_clip"]
+    _stage(
+        f"3/5 simulated crowd: up to {raters} raters, {s['careless']:.0%} careless, until every test clip has "
+        f"{rpc} ratings"
+    )
+    summary_path = out / "crowd_summary.json"
+    cmd = [sys.executable, "-m", "rating_app", "simulate", "--url", url, "--manifest", str(manifest)]
+    cmd += ["--raters", str(raters), "--seed", str(s["seed"]), "--careless", str(s["careless"])]
+    cmd += ["--summary", str(summary_path), "--design", s["design"], "--timeout", str(max(60.0, time_left))]
+    try:
+        procs.run(cmd, "the simulated crowd", env=env)
+    except DemoError:
+        if not summary_path.is_file():
+            raise
+    summary = json.loads(summary_path.read_text())
+    if not summary.get("study_full"):  # the crowd's own line above says why; this one says what to change here
+        raise DemoError(f"the crowd of {raters} raters did not fill every clip's {rpc} ratings; raise --raters")
+    return summary
+
+
+def report(procs: "Processes", out: Path, ratings: Path, stimuli: Path) -> None:
+    """Stage 5: the report of the export, with the stimuli's metrics where there are some."""
+    _stage(f"5/5 report → {out / 'report'}")
+    metrics = Path(stimuli) / "metrics.csv"
+    cmd = [sys.executable, "-m", "analysis.report", str(ratings), "--out", str(out / "report")]
+    if metrics.is_file():  # a design whose statistics have no use for the metrics leaves them aside
+        cmd += ["--metrics", str(metrics)]
+    procs.run(cmd, "analysis.report")
+
+
 def run_demo(
     out: Path,
     db: str | None = None,
@@ -141,156 +260,37 @@ def run_demo(
     min_view: float = 0.01,
     design: str = "acr",
     sound: bool = False,
+    runs: Path | None = None,
 ) -> dict:
-    """Run the study; returns paths and the crowd's summary. `stimuli` reuses an existing folder."""
+    """Run the study; returns paths and the crowd's summary. `stimuli` reuses an existing folder. What an earlier
+    run left in `out` is replaced (clear_earlier_run)."""
     out = Path(out)
-    logs = out / "logs"
-    logs.mkdir(parents=True, exist_ok=True)
-    py = sys.executable
+    sound = sound or design == "appropriateness"
+    settings = dict(locals())
+    clear_earlier_run(out, stimuli is None)
+    (out / "logs").mkdir(parents=True, exist_ok=True)
+    (out / MARK).write_text(json.dumps({"design": design, "seed": seed, "sound": sound}) + "\n")
     procs = Processes()
     t0 = time.monotonic()
     try:
-        sound = sound or design == "appropriateness"
-        if stimuli is None and sound:
-            stimuli = out / "stimuli"
-            _stage(f"1/5 a study with sound (generation.own_study.demo_study) → {stimuli}")
-            procs.run(
-                [py, "-m", "generation.own_study.demo_study", "--out", str(out / "study"), "--seed", str(seed)]
-                + (["--appropriateness"] if design == "appropriateness" else []),
-                "generation.own_study.demo_study",
-            )
-            procs.run(
-                [py, "-m", "generation.make_stimuli", "--study", str(out / "study" / "study.toml"), "--out"]
-                + [str(stimuli), "--size", "320"],
-                "make_stimuli",
-            )
-        elif stimuli is None:
-            stimuli = out / "stimuli"
-            _stage(f"1/5 make stimuli (--quick) → {stimuli}")
-            procs.run(
-                [
-                    py,
-                    "-m",
-                    "generation.make_stimuli",
-                    "--quick",
-                    "--out",
-                    str(stimuli),
-                    "--runs",
-                    str(out / "runs"),
-                    "--seed",
-                    str(seed),
-                ],
-                "make_stimuli",
-            )
+        if stimuli is None:
+            stimuli = make_stimuli(procs, out, settings)
         else:
             _stage(f"1/5 stimuli: using {stimuli}")
         manifest = Path(stimuli) / "manifest.csv"
         if not manifest.is_file():
             raise DemoError(f"{manifest}: no manifest (make_stimuli did not write one)")
-
-        db = db or f"sqlite:///{(out / 'ratings.sqlite').resolve()}"
-        port = _free_port()
-        url = f"http://127.0.0.1:{port}"
-        token = secrets.token_hex(16)
-        env = dict(os.environ, ADMIN_TOKEN=token)
-        serve_log = logs / "server.log"
-        _stage(f"2/5 rating app at {url} (database {db.split('@')[-1]})")
-        # The crowd runs on loopback (one address) and should not take 4 s per clip: lift the per-address session
-        # limit and lower the minimum viewing time (the dashboard says so); the crowd still waits as required.
-        serve_opts = [
-            "--ratings-per-clip",
-            str(ratings_per_clip),
-            "--min-view",
-            str(min_view),
-            "--sessions-per-client",
-            "0",
-            "--design",
-            design,
-        ]
-        if clips_per_rater:
-            serve_opts += ["--clips-per-rater", str(clips_per_rater)]
-        if gunicorn:
-            env.update(
-                RATING_MANIFEST=str(manifest),
-                DATABASE_URL=db,
-                RATINGS_PER_CLIP=str(ratings_per_clip),
-                MIN_VIEW=str(min_view),
-                SESSIONS_PER_CLIENT="0",
-                STUDY_DESIGN=design,
-            )
-            if clips_per_rater:
-                env["CLIPS_PER_RATER"] = str(clips_per_rater)
-            cmd = [py, "-m", "gunicorn", "-w", "2", "--threads", "4", "-b", f"127.0.0.1:{port}", "rating_app.wsgi:app"]
-        else:
-            cmd = [
-                py,
-                "-m",
-                "rating_app",
-                "serve",
-                "--manifest",
-                str(manifest),
-                "--db",
-                db,
-                "--port",
-                str(port),
-                *serve_opts,
-            ]
-        with open(serve_log, "w") as fh:
-            server = procs.start(cmd, stdout=fh, stderr=subprocess.STDOUT, env=env)
-        _wait_until_up(f"{url}/", server, serve_log)
-
-        _stage(
-            f"3/5 simulated crowd: up to {raters} raters, {careless:.0%} careless, until every test clip has "
-            f"{ratings_per_clip} ratings"
-        )
-        summary_path = out / "crowd_summary.json"
-        procs.run(
-            [
-                py,
-                "-m",
-                "rating_app",
-                "simulate",
-                "--url",
-                url,
-                "--raters",
-                str(raters),
-                "--seed",
-                str(seed),
-                "--careless",
-                str(careless),
-                "--manifest",
-                str(manifest),
-                "--summary",
-                str(summary_path),
-                "--design",
-                design,
-                "--timeout",
-                str(max(60.0, timeout_s - (time.monotonic() - t0))),
-            ],
-            "the simulated crowd",
-            env=env,
-        )
-        summary = json.loads(summary_path.read_text())
-        if not summary.get("study_full"):
-            raise DemoError(
-                f"the crowd of {raters} raters did not fill every clip's {ratings_per_clip} ratings; raise --raters"
-            )
-
+        db = db or f"sqlite:///{(out / DB_NAME).resolve()}"
+        url, env = start_app(procs, out, manifest, db, settings)
+        summary = run_crowd(procs, out, url, env, manifest, settings, timeout_s - (time.monotonic() - t0))
         _stage("4/5 export")
-        ratings = _export(url, token, out)
+        ratings = _export(url, env["ADMIN_TOKEN"], out)
         print(f"  {ratings}", flush=True)
         procs.stop_all()
-
-        _stage(f"5/5 report → {out / 'report'}")
-        metrics = Path(stimuli) / "metrics.csv"
-        cmd = [py, "-m", "analysis.report", str(ratings), "--out", str(out / "report")]
-        if metrics.is_file():  # a design whose statistics have no use for the metrics leaves them aside
-            cmd += ["--metrics", str(metrics)]
-        procs.run(cmd, "analysis.report")
+        report(procs, out, ratings, stimuli)
     finally:
         procs.stop_all()
-    report = out / "report" / "report.html"
-    print(f"\nDone in {time.monotonic() - t0:.0f} s. Report: {report.resolve()}", flush=True)
+    print(f"\nDone in {time.monotonic() - t0:.0f} s. Report: {(out / 'report' / 'report.html').resolve()}", flush=True)
     return {"stimuli": Path(stimuli), "ratings": ratings, "report": out / "report", "summary": summary}
 
 
@@ -320,6 +320,11 @@ def build_parser():
     )
     p.add_argument("--seed", type=cli.number(int, 0), default=0)
     p.add_argument("--stimuli", default=None, help="reuse this stimulus folder instead of making one")
+    p.add_argument(
+        "--runs",
+        default=None,
+        help="where make_stimuli --quick keeps its tiny models and data, reused when there (default OUT/runs)",
+    )
     p.add_argument("--gunicorn", action="store_true", help="serve with gunicorn (2 workers) instead of Flask's server")
     p.add_argument(
         "--min-view",
@@ -359,6 +364,7 @@ def _main(argv) -> int:
             min_view=a.min_view,
             design=a.design,
             sound=a.sound,
+            runs=Path(a.runs) if a.runs else None,
         )
     except KeyboardInterrupt:
         print("interrupted: everything the demo started has been stopped", file=sys.stderr)

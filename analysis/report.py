@@ -5,6 +5,8 @@ offline), and prints a summary. The file's design is told by its columns (design
 analyses and reports the rows, with the catch-trial rater exclusion and without it ("without_exclusion").
 """
 
+import csv
+import html
 import json
 import os
 import sys
@@ -32,6 +34,35 @@ def _prepare_out(out):
         raise AnalysisError(f"--out {out}: cannot create the report folder ({exc.strerror or exc})") from None
     if not os.access(out, os.W_OK | os.X_OK) or not os.access(out / "figures", os.W_OK | os.X_OK):
         raise AnalysisError(f"--out {out}: folder is not writable")
+
+
+TARGET_COLUMN = "target_raters"  # the app's export: how many raters fill the study (CONTRACTS §6)
+
+
+def study_target(path) -> int | None:
+    """The export's target_raters (every row holds the same), None in an export without the column."""
+    # Read after the design's own reader accepted the file; a cell it could not decode only spoils this one column.
+    try:
+        with open(path, newline="", encoding="utf-8-sig", errors="replace") as fh:
+            row = next(csv.DictReader(fh), None)
+    except csv.Error:  # e.g. a cell over the csv module's size limit, which the design's reader allows
+        return None
+    raw = (row or {}).get(TARGET_COLUMN)
+    if raw is None or raw.strip() == "":
+        return None
+    if not (raw.strip().isascii() and raw.strip().isdigit() and len(raw.strip()) <= 9):
+        raise AnalysisError(f"{path}:2: {TARGET_COLUMN} {raw[:20]!r} is not a whole number")
+    return int(raw)
+
+
+def shortfall_note(n_raters: int, target: int | None) -> str | None:
+    """A sentence for the summary and the report when the ratings come from fewer raters than the study needs."""
+    if target is None or n_raters >= target:
+        return None
+    return (
+        f"note: ratings from {n_raters} raters, fewer than the {target} this study needs to fill ({TARGET_COLUMN} in "
+        "the export): the study did not fill, and every figure here rests on fewer answers than it was planned for"
+    )
 
 
 def build_report(
@@ -101,6 +132,7 @@ def build_report(
     )
     design = design_of(ratings_path)
     data = design.prepare(ratings_path, options)
+    target = study_target(ratings_path)  # before any work: a bad value is the file's problem
     out = Path(out_dir)
     _prepare_out(out)
     bar = tqdm(
@@ -125,14 +157,21 @@ def build_report(
         "alpha": alpha,
         "figures": {k: str(Path(v).relative_to(out)) for k, v in figs.items()},
     }
-    page = report_html.page(design.html(meta, data.counts, kept, everyone, figs))
+    note = shortfall_note(data.counts["n_raters_total"], target)
+    body = design.html(meta, data.counts, kept, everyone, figs)
+    if note:  # right under the title, before any figure is read
+        body.insert(1, f"<p class=warn>{html.escape(note)}</p>")
+    page = report_html.page(body)
     (out / "report.html").write_text(page, encoding="utf-8")
-    doc = report_html.clean({**meta, **data.counts, **design.stats_json(kept, everyone)})
+    extra = {} if target is None else {TARGET_COLUMN: target, "notes": [note] if note else []}
+    doc = report_html.clean({**meta, **data.counts, **extra, **design.stats_json(kept, everyone)})
     (out / "stats.json").write_text(json.dumps(doc, indent=1, allow_nan=False), encoding="utf-8")
     bar.update(bar.total - bar.n)
     bar.close()
     if not quiet:
         print(design.console(data.counts, kept, everyone))
+        if note:
+            print(f"\n{note}")
         print(f"\nReport: {out / 'report.html'}  ({time.perf_counter() - t0:.1f} s)")
     return doc
 

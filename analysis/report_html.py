@@ -57,7 +57,7 @@ padding:0 1em;color:#222;line-height:1.45}h1{font-size:1.6em}h2{font-size:1.2em;
 border-bottom:1px solid #ddd}table{border-collapse:collapse;margin:.6em 0;font-size:.88em}
 td,th{border:1px solid #ddd;padding:3px 8px;text-align:right}th{background:#f5f5f5}td:first-child,
 th:first-child{text-align:left}img{max-width:min(100%,780px)}.note{color:#555;font-size:.9em}.cols{display:flex;gap:2em;
-flex-wrap:wrap}"""
+flex-wrap:wrap}.warn{background:#fff4e0;border-left:4px solid #e69500;padding:.4em .8em}"""
 
 
 def table(df, pcols=()):

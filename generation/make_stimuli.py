@@ -24,7 +24,6 @@
 import argparse
 import logging
 import os
-import re
 import sys
 import time
 from pathlib import Path
@@ -46,18 +45,21 @@ from .motion.features import to_features, to_world
 from .sampling import pretrained
 from .stimuli.catch_kinds import KINDS as TOOL_CATCH_KINDS
 from .stimuli.catch_kinds import make_catch
+from .stimuli.checkpoints import ensure_dataset, ensure_model, sampler_precision
 from .stimuli.files import (
     StimuliError,
     clip_files,
     manifest_row,
+    nothing_left_on_failure,
     prepare_out,
-    summary_text,
+    refuse_existing,
     write_csv,
     write_items,
     write_tables,
 )
 from .stimuli.items import CATCH, TEST, TRAINING, category_counts, item_arrays, positions, select_items
 from .stimuli.render_pool import render_stimuli
+from .stimuli.summary import condition_fmd, print_summary
 
 # torch is never imported at module level here (training, sampling and the motion encoder import it inside the
 # functions that run them): --help, --export-items and the checks of imported systems need no models, and
@@ -70,81 +72,16 @@ MG_EARLY = "mg-early"  # the paper's catch clips: samples of the earliest MG che
 SEED_OFFSET = {MG: 1, FL: 2, study.CATCH: 3}
 
 
-# ---------------------------------------------------------------- data
-def ensure_dataset(args):
-    """The prepared dataset path: --dataset if it exists, else prepared there from --data."""
-    from .data.prepare import default_data_dir, longest_takes, prepare, summary_table
-
-    path = Path(args.dataset)
-    if path.is_file():
-        log.info(f"data: using the prepared dataset {path}")
-        return path
-    data = Path(args.data) if args.data else default_data_dir()
-    if data is None or not data.is_dir():
-        raise StimuliError(
-            f"data folder {args.data or '../shared/data/bandai-namco-locomotion'} not found; "
-            "pass --data DIR (a folder of .bvh/.bvh.gz takes) or --dataset FILE.npz"
-        )
-    log.info(f"data: preparing {data} -> {path}" + (" (quick subset)" if args.quick else ""))
-    takes = longest_takes(data, per_category=10) if args.quick else None
-    summary = prepare(data, path, takes=takes, seed=args.seed, progress=args.progress)
-    log.info(summary_table(summary))
-    return path
-
-
-# ---------------------------------------------------------------- models
-def checkpoints_in(folder):
-    """Checkpoint files step_*.pt of a run folder (or its checkpoints/ subfolder), by step."""
-    folder = Path(folder)
-    if (folder / "checkpoints").is_dir():
-        folder = folder / "checkpoints"
-    files = [p for p in folder.glob("step_*.pt") if re.fullmatch(r"step_\d+\.pt", p.name)]
-    return sorted(files, key=lambda p: int(p.stem.split("_")[1]))
-
-
-def ensure_model(kind, args, dataset):
-    """(final, earliest) checkpoint of `kind`: from --{kind}-checkpoint, else trained into runs/."""
-    from .training.train import train
-
-    given = getattr(args, f"{kind}_checkpoint")
-    if given:
-        path = Path(given)
-        if not path.is_file():
-            raise StimuliError(f"--{kind}-checkpoint {path}: no such file")
-        siblings = checkpoints_in(path.parent)
-        return path, siblings[0] if siblings else path
-    if args.shipped:
-        return pretrained.CHECKPOINTS[kind], pretrained.CHECKPOINTS["bad"]
-    run = Path(args.runs) / f"{kind}_{args.config}"
-    resume = (run / "resume.pt").is_file()
-    log.info(f"models: {'resuming' if resume else 'training'} {kind} (config {args.config}) in {run}")
-    train(
-        kind,
-        args.config,
-        dataset,
-        run,
-        steps=args.train_steps,
-        seed=args.seed,
-        progress=args.progress,
-        resume=resume,
-        device=args.device,
-        threads=args.threads or "auto",
-        precision=args.precision,
-    )
-    ckpts = checkpoints_in(run)
-    if not ckpts:
-        raise StimuliError(f"{run}: training wrote no checkpoint")
-    return ckpts[-1], ckpts[0]
-
-
-def sample_condition(kind, ckpt, arrays, idx, temperature, seed, device):
-    """Features x [B, T, 63] sampled by the `kind` model in `ckpt` for the items at `idx`."""
+def sample_condition(kind, ckpt, arrays, idx, temperature, seed, device, precision="float32"):
+    """Features x [B, T, 63] sampled by the `kind` model in `ckpt` for the items at `idx` (MG's sampler in
+    `precision`)."""
     from .sampling.sample import load_model, require_finite, sample_windows
 
     model = load_model(ckpt, device=device)
     if model.kind != kind:
         raise StimuliError(f"{ckpt}: an {model.kind.upper()} checkpoint where {kind.upper()} is needed")
-    x = sample_windows(model, arrays["c"][idx], arrays["hist"][idx], arrays["hist_c"][idx], temperature, seed)
+    c, hist, hist_c = arrays["c"][idx], arrays["hist"][idx], arrays["hist_c"][idx]
+    x = sample_windows(model, c, hist, hist_c, temperature, seed, precision)
     x = np.asarray(x, dtype=np.float32)
     if x.shape != arrays["x"][idx].shape:
         raise StimuliError(f"{ckpt}: sampled {x.shape}, expected {arrays['x'][idx].shape}")
@@ -184,6 +121,7 @@ def sample_clips(args, dataset, items, arrays):
         if not bad_ckpt.is_file():
             raise StimuliError(f"--bad-checkpoint {bad_ckpt}: no such file")
         log.info(f"models: MG {mg_ckpt}, FL {fl_ckpt}, BAD {bad_ckpt}")
+        precision = sampler_precision(args)
         gen_items, catch = positions(items, TEST, TRAINING), positions(items, CATCH)
         # (condition, (model kind, checkpoint) or None for the real motion, item positions): one batch each.
         # NAT, MG and FL of the catch items too (role catch): NAT is the reference a pairwise or parallel catch
@@ -204,7 +142,7 @@ def sample_clips(args, dataset, items, arrays):
             if model is not None:
                 seed = args.seed + SEED_OFFSET[cond]
                 temperature = pretrained.TEMPERATURE[cond] if args.temperature is None else args.temperature
-                x = sample_condition(*model, arrays, idx, temperature, seed, args.device)
+                x = sample_condition(*model, arrays, idx, temperature, seed, args.device, precision)
             if cond in rigid_conditions(args):  # the bones of the item's actor, from its real history
                 x = rigid.fit_to_history(x, arrays["hist"][idx])
             joints = to_world(x, arrays["c"][idx])
@@ -249,11 +187,12 @@ def run(args):
     systems = dict(parse_system_spec(s) for s in args.system)
     if len(systems) != len(args.system):
         raise StimuliError("--system: the same NAME is given twice")
-    out = None if args.export_items else prepare_out(args.out, args.force)
-
+    if not args.export_items:
+        refuse_existing(args.out, args.force)  # before any work, not after it
     dataset = ensure_dataset(args)
     splits, fps, window = read_heldout(dataset)
     items = select_items(splits, args.n_items, args.n_catch, args.n_training, args.seed)
+    out = None if args.export_items else prepare_out(args.out, args.force)  # once the items are known to exist
     arrays = item_arrays(splits, items)
     log.info(
         f"items: {args.n_items} test, {args.n_catch} catch, {args.n_training} training; "
@@ -283,59 +222,6 @@ def run(args):
     return 0
 
 
-# ---------------------------------------------------------------- summary
-def print_summary(out, manifest, metrics_rows, fmd, c2st_rows, seconds):
-    """The run's results on stdout: metrics per condition, the FMD, and what was written."""
-    n = {r: sum(m["role"] == r for m in manifest) for r in study.ROLES}
-    print(
-        f"\nobjective metrics, mean (sd) per condition: foot_skating m/s, bone_length_std m, jerk m/s^3, "
-        f"control_error m, control_following m, acceleration m/s^2\n{summary_text(metrics_rows)}"
-    )
-    if fmd:
-        print(
-            "\nFréchet motion distance of the test clips to training motion of their categories "
-            "(NAT's is the floor): " + ", ".join(f"{r['condition']} {r['fmd']}" for r in fmd)
-        )
-    print("\n" + c2st.c2st_text(c2st_rows))
-    _warn_if_bad_not_bad(metrics_rows)
-    print(
-        f"\nwrote {Path(out) / 'manifest.csv'}: {len(manifest)} clips ({n['test']} test, {n['catch']} catch, "
-        f"{n['training']} training) in {seconds:.0f} s"
-    )
-
-
-def condition_fmd(poses, encoder=pretrained.MOTION_ENCODER):
-    """[{condition, n_windows, fmd}] for root-frame test windows {condition: [(x [T, 63], category), ...]};
-    [] (with a note) when the shipped motion encoder is missing."""
-    if not Path(encoder).is_file():
-        log.warning(f"note: no motion encoder at {encoder}; skipping the Fréchet motion distance")
-        return []
-    from .metrics.fmd import MotionEncoder  # torch (see above)
-
-    enc = MotionEncoder.load(encoder)
-    return [
-        dict(condition=cond, n_windows=len(w), fmd=f"{enc.fmd(np.stack([x for x, _ in w]), [k for _, k in w]):.4g}")
-        for cond, w in poses.items()
-    ]
-
-
-def _warn_if_bad_not_bad(rows):
-    """BAD clips should be plainly worse than NAT; say so when no metric shows it."""
-
-    def mean(cond, key):
-        v = [r[key] for r in rows if r["condition"] == cond and np.isfinite(r[key])]
-        return np.mean(v) if v else np.nan
-
-    if not any(r["condition"] == study.CATCH for r in rows):
-        return
-    keys = ("jerk", "bone_length_std", "foot_skating")
-    if not any(mean(study.CATCH, k) > 2 * mean(study.NATURAL, k) for k in keys):
-        log.warning(
-            "warning: the BAD clips are not clearly worse than NAT on jerk, bone length or foot skating; "
-            "pass an earlier --bad-checkpoint"
-        )
-
-
 # ---------------------------------------------------------------- command line
 def build_parser():
     """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
@@ -352,6 +238,14 @@ def build_parser():
         type=cli.number(float, 0.5, 600),
         help="with --study: keep the first LENGTH_S seconds of every clip (default: the study file's, else whole)",
     )
+    _model_flags(ap)
+    _item_flags(ap)
+    _output_flags(ap)
+    return ap
+
+
+def _model_flags(ap):
+    """Where the models come from: shipped, given, or trained (and from which data), and how MG samples."""
     ap.add_argument("--quick", action="store_true", help="tiny models on a subset of takes: a few minutes in all")
     ap.add_argument(
         "--retrain",
@@ -373,9 +267,20 @@ def build_parser():
         help="override the config's for training: float32 | bfloat16 (the coupling networks in bfloat16: faster on "
         "some CPU kinds, slower on others; docs/models.md, Mixed precision)",
     )
+    ap.add_argument(
+        "--sample-precision",
+        choices=("auto", "float32", "bfloat16"),
+        default=None,
+        help="MG's sampler: auto (the default, or $MOGLOW_SAMPLER_PRECISION) measures both once per CPU and takes "
+        "bfloat16 where it is faster and the quality guard holds (generation.sampling.precision)",
+    )
     ap.add_argument("--mg-checkpoint", help="MG checkpoint to sample from (skips MG training)")
     ap.add_argument("--fl-checkpoint", help="FL checkpoint to sample from (skips FL training)")
     ap.add_argument("--bad-checkpoint", help="checkpoint for the BAD catch clips (default: the earliest MG one)")
+
+
+def _item_flags(ap):
+    """What the set holds: the items, the catch clips, imported systems, and how the generated clips are made."""
     ap.add_argument(
         "--catch-kinds",
         default=f"{MG_EARLY},freeze",
@@ -426,6 +331,10 @@ def build_parser():
         help="keep MG's and FL's bones as sampled (default: set to the item's actor's lengths, motion.rigid)",
     )
     ap.add_argument("--seed", type=cli.number(int, 0), help="item selection, sampling and manifest order (default 0)")
+
+
+def _output_flags(ap):
+    """How the videos are made and how the job runs."""
     ap.add_argument(
         "--size", type=size_flag, help="video width = height in pixels, even (default 640; 320 with --quick)"
     )
@@ -455,7 +364,6 @@ def build_parser():
     )
     ap.add_argument("--force", action="store_true", help="replace an existing stimulus set in --out")
     ap.add_argument("--quiet", action="store_true", help="no progress bars or diagnostics; the summary only")
-    return ap
 
 
 def parse_args(argv):
@@ -499,6 +407,7 @@ _BUILTIN_ONLY = (
     "--config",
     "--train-steps",
     "--precision",
+    "--sample-precision",
     "--mg-checkpoint",
     "--fl-checkpoint",
     "--bad-checkpoint",
@@ -538,11 +447,12 @@ class _Elapsed(logging.Formatter):
 def _main(argv):
     args = parse_args(argv)
     cli.log_to_stderr(args.quiet, _Elapsed())
-    if args.study:
-        from .own_study.builder import build_study
+    with nothing_left_on_failure(args.export_items or args.out):
+        if args.study:
+            from .own_study.builder import build_study
 
-        return build_study(args.spec, args.out, args.size, args.preset, args.workers, args.force, args.progress)
-    return run(args)
+            return build_study(args.spec, args.out, args.size, args.preset, args.workers, args.force, args.progress)
+        return run(args)
 
 
 def main(argv=None):

@@ -53,9 +53,10 @@ def _demo(args):
     return run(args)
 
 
+APP_COMMANDS = ("serve", "simulate", "export", "backup", "restore")
 COMMANDS = {
     "stimuli": _stimuli,
-    **{c: _app(c) for c in ("serve", "simulate", "export", "backup", "restore")},
+    **{c: _app(c) for c in APP_COMMANDS},
     "report": _report,
     "plan": _plan,
     "demo": _demo,
@@ -77,4 +78,8 @@ def main(argv=None) -> int:
     if argv[0] not in COMMANDS:
         print(f"error: moglow-eval: unknown command {argv[0]!r}; {_usage()}", file=sys.stderr)
         return cli.EXIT_USAGE
-    return COMMANDS[argv[0]](argv[1:]) or 0
+    # Usage and error lines name the command as typed (`moglow-eval report`), not the `python -m` it stands for;
+    # the app's subcommands add their own name to it.
+    name = "moglow-eval" if argv[0] in APP_COMMANDS else f"moglow-eval {argv[0]}"
+    with cli.invoked_as(name):
+        return COMMANDS[argv[0]](argv[1:]) or 0

@@ -106,7 +106,12 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
     units = design.build_units(clips)
     app.config["STUDY_SOUND"] = any(c.audio for c in clips)  # the page plays sound and checks the rater hears
     engine = _open_database(
-        values["DATABASE_URL"], values["DB_POOL_SIZE"], clips, design.name, design.cover_keys(clips, units)
+        values["DATABASE_URL"],
+        values["DB_POOL_SIZE"],
+        clips,
+        design.name,
+        design.cover_keys(clips, units),
+        target_raters(design.pool(clips, units)[0], app.config),
     )
     app.extensions["rating_app"] = {
         "engine": engine,
@@ -150,14 +155,21 @@ def _derived_secret(admin_token):
     return hashlib.sha256(b"rating-app:" + (admin_token or os.urandom(32).hex()).encode()).hexdigest()
 
 
-def _open_database(db_url, pool_size, clips, design, cover_keys):
+def target_raters(test_units: int, config) -> int:
+    """How many raters fill the study: every test unit's target answers, each rater answering CLIPS_PER_RATER
+    units (all of them when unset); a lower bound, as slots of raters who leave are served again."""
+    per_rater = min(config["CLIPS_PER_RATER"] or test_units, test_units)
+    return -(-test_units * config["RATINGS_PER_CLIP"] // max(per_rater, 1))
+
+
+def _open_database(db_url, pool_size, clips, design, cover_keys, n_raters):
     """The engine, with the schema created and the manifest's clips and the design stored; AppError, one line,
     when the database cannot be opened."""
     from . import db as dbm
 
     engine = dbm.make_engine(db_url, pool_size=pool_size)
     try:
-        dbm.init_db(engine, clips, design, cover_keys)
+        dbm.init_db(engine, clips, design, cover_keys, {dbm.TARGET_RATERS: n_raters})
     except SQLAlchemyError as e:
         where = make_url(str(engine.url)).render_as_string(hide_password=True)
         first = str(getattr(e, "orig", None) or e).strip().splitlines()

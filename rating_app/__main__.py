@@ -37,6 +37,8 @@ def _serve(a):
             "warning: minimum viewing time lowered to %g of each clip (tests and simulations only)",
             app.config["MIN_VIEW"],
         )
+    if app.config["SESSIONS_PER_CLIENT"] == 0:
+        log.warning("warning: no limit on new sessions per address (local trials and simulated crowds only)")
     app.run(host=a.host, port=a.port, threaded=True, debug=False, use_reloader=False)
     return 0
 
@@ -94,7 +96,7 @@ def _restore(a):
 
 
 def _simulate(a):
-    from .simulate import parse_quality, run_simulation, write_summary
+    from .simulate import parse_quality, run_simulation, shortfall, write_summary
 
     summary = run_simulation(
         a.url,
@@ -117,7 +119,9 @@ def _simulate(a):
         for k in (
             "n_raters_started",
             "n_raters_completed",
+            "n_raters_refused",
             "study_full",
+            "timed_out",
             "n_ratings",
             "n_ratings_by_condition",
             "quality",
@@ -128,7 +132,10 @@ def _simulate(a):
     short["failed_catch_raters"] = len(summary["failed_catch_raters"])
     short["errors"] = summary["errors"][:5]
     print(json.dumps(short))
-    return 1 if summary["errors"] else 0
+    why = shortfall(summary)
+    if why:  # the summary above is still the record; the exit and this one line say the crowd fell short
+        raise AppError(why)
+    return 0
 
 
 def build_parser():

@@ -184,6 +184,11 @@ class PageRating(Base):
     flags: Mapped[str] = mapped_column(String(64), default="")
 
 
+# The StudySetting (and export column) holding how many raters fill the study as the app was last started
+# (create_app's target_raters): analysis.report notes an export from fewer raters than that (CONTRACTS §6).
+TARGET_RATERS = "target_raters"
+
+
 class StudySetting(Base):
     """Settings fixed for the life of a study's database; `design` is written by the first start."""
 
@@ -392,6 +397,11 @@ def _add_missing_columns(engine: Engine) -> None:
                 conn.execute(text(f"ALTER TABLE {table} ADD COLUMN {column} {kind}"))
 
 
+def study_setting(conn, name: str) -> str | None:
+    """A StudySetting's value, or None when the database has none of that name."""
+    return conn.execute(select(StudySetting.value).where(StudySetting.name == name)).scalar()
+
+
 def study_design(conn) -> str | None:
     """The design stored with the study, or None for a database that has none yet."""
     return conn.execute(select(StudySetting.value).where(StudySetting.name == "design")).scalar()
@@ -409,10 +419,11 @@ def _add_cover_rows(session, keys) -> None:
         session.add_all(Cover(key=k, answered=counts.get(k, (0, 0))[0], held=counts.get(k, (0, 0))[1]) for k in missing)
 
 
-def init_db(engine: Engine, clips=None, design: str | None = None, cover_keys=None) -> None:
+def init_db(engine: Engine, clips=None, design: str | None = None, cover_keys=None, settings=None) -> None:
     """Create the schema (idempotent), upsert the manifest's clips, store the study's design and give every key
     in `cover_keys` (test clips or units) its Cover row; AppError when the database already holds a study of
-    another design (a database that predates designs holds an acr one)."""
+    another design (a database that predates designs holds an acr one). `settings` {name: value}: StudySetting
+    rows that follow the app's configuration, written at every start (the design is written once)."""
     from sqlalchemy.orm import Session
 
     with _init_lock(engine):
@@ -454,3 +465,5 @@ def init_db(engine: Engine, clips=None, design: str | None = None, cover_keys=No
                         row.frames, row.fps, row.motion_item = c.frames, c.fps, c.motion_item
             if cover_keys:
                 _add_cover_rows(s, cover_keys)
+            for name, value in (settings or {}).items():
+                s.merge(StudySetting(name=name, value=str(value)))

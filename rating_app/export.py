@@ -14,7 +14,7 @@ import io
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
-from .db import study_design
+from .db import TARGET_RATERS, study_design, study_setting
 from .designs import get
 
 FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
@@ -33,9 +33,13 @@ def export_csv(engine: Engine, out=None) -> str | int:
     n = 0
     with Session(engine.execution_options(read_only=True)) as s:
         design = get(study_design(s))
-        w = csv.DictWriter(buf, fieldnames=design.columns, lineterminator="\n")
+        # Every row says how many raters the study needs (as the app was last started), so that the report can
+        # tell an export of a study that did not fill; a database from before it has none, and no column.
+        target = study_setting(s, TARGET_RATERS)
+        extra = {TARGET_RATERS: target} if target is not None else {}
+        w = csv.DictWriter(buf, fieldnames=[*design.columns, *extra], lineterminator="\n")
         w.writeheader()
         for row in design.export_rows(s):
-            w.writerow({k: cell(v) for k, v in row.items()})
+            w.writerow({k: cell(v) for k, v in {**row, **extra}.items()})
             n += 1
     return n if out is not None else buf.getvalue()

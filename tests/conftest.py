@@ -7,6 +7,7 @@ no browser. The full tier (`python -m pytest`, what CI runs) adds every test tha
 Torch and PostgreSQL start only in the fixtures and tests that need them. Shared helpers: tests/helpers/.
 """
 
+import os
 import secrets
 import sys
 
@@ -35,6 +36,13 @@ def _float32_on_gpus():
     torch = sys.modules.get("torch")
     if torch is not None:
         torch.backends.cudnn.allow_tf32 = False
+
+
+def pytest_configure(config):
+    # make_stimuli picks MG's sampler precision per CPU (generation.sampling.precision), measuring at first use and
+    # caching in the user's cache folder. The suite samples in float32 on every host, as its figures were made, and
+    # leaves that cache alone; tests/test_sampler_precision.py tests the pick with measurements it gives it.
+    os.environ.setdefault("MOGLOW_SAMPLER_PRECISION", "float32")
 
 
 @pytest.fixture(scope="session")

@@ -393,3 +393,34 @@ def test_console_shows_ordinal_and_df(tmp_path, capsys):
     assert main([str(DATA / "ratings_small.csv"), "--out", str(tmp_path), "--n-boot", "50"]) == 0
     out = capsys.readouterr().out
     assert "Ordinal mixed model" in out and "odds ratio" in out and "df 87.0" in out and "<" in out
+
+
+# ---------------------------------------------------------------------------------------------- issue 46
+def _with_target(tmp_path, value):
+    """ratings_small.csv as the app exports it today: every row also names the raters the study needs."""
+    lines = (DATA / "ratings_small.csv").read_text().splitlines()
+    path = tmp_path / "ratings.csv"
+    path.write_text("\n".join([lines[0] + ",target_raters", *(f"{x},{value}" for x in lines[1:])]) + "\n")
+    return path
+
+
+def test_an_export_from_fewer_raters_than_its_target_is_noted_and_one_from_enough_is_not(tmp_path, capsys):
+    n = json.loads((DATA / "expected_stats.json").read_text())["n_raters_total"]
+    for target, noted in ((n + 40, True), (n, False)):
+        out = tmp_path / str(target)
+        assert main([str(_with_target(tmp_path, target)), "--out", str(out), "--no-mixed", "--n-boot", "20"]) == 0
+        console = capsys.readouterr().out
+        note = f"ratings from {n} raters, fewer than the {target} this study needs to fill"
+        assert (note in console) is noted and (note in (out / "report.html").read_text()) is noted
+        stats = json.loads((out / "stats.json").read_text())
+        assert stats["target_raters"] == target and bool(stats["notes"]) is noted
+    # an export without the column (every one before it) has neither the note nor the keys
+    doc = build_report(DATA / "ratings_small.csv", tmp_path / "old", n_boot=20, mixed=False, progress=False, quiet=True)
+    assert "target_raters" not in doc and "notes" not in doc
+
+
+@pytest.mark.parametrize("value", ["lots", "²", "9" * 5000], ids=["word", "superscript", "huge"])
+def test_a_bad_target_raters_is_one_line(tmp_path, capsys, value):
+    assert main([str(_with_target(tmp_path, value)), "--out", str(tmp_path / "r"), "--no-mixed", "--n-boot", "20"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: ") and "ratings.csv:2: target_raters" in err and "\n" not in err

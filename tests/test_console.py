@@ -49,6 +49,22 @@ def test_a_subcommand_is_the_python_m_command(tmp_path, capsys):
     assert (code, err) == (r.returncode, r.stderr.strip()) == (2, f"error: {missing}: no such database file")
 
 
+@pytest.mark.parametrize("command", ["report", "stimuli", "serve", "demo"])
+def test_help_and_errors_name_the_command_as_typed(command, capsys):
+    """Issue 46: `moglow-eval report --help` said `usage: python -m analysis.report`."""
+    main = entry_point("moglow-eval")
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    assert capsys.readouterr().out.startswith(f"usage: moglow-eval {command} "), command
+    with pytest.raises(SystemExit) as e:
+        main([command, "--no-such-flag"])
+    assert e.value.code == 2 and capsys.readouterr().err.startswith("error: moglow-eval")
+    # and `python -m` keeps its own name afterwards (the name is set only while the console command runs)
+    from analysis.report import build_parser
+
+    assert build_parser().prog == "python -m analysis.report"
+
+
 def test_an_unknown_command_is_one_line(capsys):
     assert entry_point("moglow-eval")(["bogus"]) == 2
     err = capsys.readouterr().err

@@ -110,3 +110,50 @@ def test_demo_stops_everything_on_error(quick_stimuli, tmp_path):
     assert "Traceback" not in r.stderr
     assert _processes_mentioning(str(out)) == []
     assert "Traceback" not in (out / "logs" / "server.log").read_text()
+
+
+def _demo_in_a_row(cwd: Path, runs: list[tuple[str, int, list[str]]]):
+    """`analysis.demo` run in `cwd` with its default --out, once per (design, seed, more flags), each after the
+    other; checks that each run's report is its own design's and the earlier run's export is gone."""
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    small = ["--raters", "40", "--ratings-per-clip", "2", "--clips-per-rater", "0"]
+    for design, seed, more in runs:
+        cmd = [sys.executable, "-m", "analysis.demo", "--design", design, "--seed", str(seed), *small, *more]
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=900, cwd=cwd, env=env)
+        assert r.returncode == 0, (design, r.stdout[-2000:], r.stderr[-2000:])
+        demo = cwd / "demo"
+        assert json.loads((demo / "report" / "stats.json").read_text()).get("design", "acr") == design
+        export = "pairs.csv" if design == "pairwise" else "ratings.csv"
+        assert sorted(p.name for p in demo.glob("*.csv")) == [export]  # the earlier run's export is gone
+    return cwd / "demo"
+
+
+def test_demo_runs_one_design_after_another_in_its_default_folder(quick_stimuli, tmp_path):
+    """Issue 46: `analysis.demo --design pairwise` after `analysis.demo` could not run (its database held an acr
+    study, make_stimuli refused the set there: the slow test below). Here on the session's stimuli."""
+    given = ["--stimuli", str(quick_stimuli)]
+    _demo_in_a_row(tmp_path, [("acr", 0, given), ("pairwise", 0, given), ("acr", 1, given)])
+    # A folder the demo did not make is refused, and left as it was.
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("mine")
+    r = subprocess.run(
+        [sys.executable, "-m", "analysis.demo", "--out", str(mine)], capture_output=True, text=True, cwd=tmp_path
+    )
+    assert r.returncode == 2 and "holds files the demo did not make" in r.stderr, r.stderr
+    assert [p.name for p in mine.iterdir()] == ["notes.txt"]
+
+
+@pytest.mark.slow
+def test_demo_makes_its_stimuli_anew_for_each_run(quick_stimuli, tmp_path):
+    """The newcomer's case in full: each run makes its stimuli into demo/stimuli, where the earlier run's are (the
+    tiny models are brought along with --runs, so that they are reused, not trained)."""
+    import shutil
+
+    runs = tmp_path / "runs"
+    shutil.copytree(quick_stimuli.parent / "runs", runs)
+    for design, seed in (("acr", 0), ("pairwise", 1)):
+        demo = _demo_in_a_row(tmp_path, [(design, seed, ["--runs", str(runs)])])
+        with open(demo / "stimuli" / "manifest.csv", newline="") as fh:
+            seeds = {row["seed"] for row in csv.DictReader(fh) if row["condition"] == "MG"}
+        assert seeds == {str(seed + 1)}  # made anew for this run (MG samples with --seed + 1)

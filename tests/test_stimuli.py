@@ -362,3 +362,56 @@ def test_render_workers_load_no_torch(module):
         cwd=ROOT,
     )
     assert r.returncode == 0 and r.stdout.strip() == "False", r.stderr[-500:]
+
+
+def test_a_condition_under_natural_motions_fmd_is_named_and_explained():
+    """Issue 46: MG's FMD (126) under NAT's (139) was printed without a word on what that means."""
+    from generation.stimuli.summary import below_floor
+
+    rows = [dict(condition="NAT", fmd="139"), dict(condition="MG", fmd="126"), dict(condition="FL", fmd="160")]
+    assert below_floor(rows) == ["MG"]
+    assert below_floor(rows[:1] + rows[2:]) == [] and below_floor(rows[1:]) == []  # no NAT: no floor to be under
+
+
+def _make_stimuli(*args):
+    return subprocess.run(
+        [sys.executable, "-m", "generation.make_stimuli", "--quiet", *map(str, args)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=300,
+    )
+
+
+def _tree(folder):
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+
+
+def test_a_failed_build_leaves_no_new_file_or_folder(tmp_path):
+    """Issue 46: `--n-items 5000` left empty videos/, motion/ and sheets/ behind."""
+    # A folder the build would create, two levels of it: nothing of it is left.
+    r = _make_stimuli("--n-items", 5000, "--out", tmp_path / "new" / "stimuli")
+    assert r.returncode == 2 and r.stderr.startswith("error:") and "Traceback" not in r.stderr, r.stderr
+    assert _tree(tmp_path) == []
+    # A folder that exists, with a file of the user's: only that file is left, after a failure before the clips
+    # (too many items) and after one once the set's folders exist (a checkpoint that is not there).
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    for args in (("--n-items", 5000), ("--mg-checkpoint", tmp_path / "none.pt")):
+        r = _make_stimuli(*args, "--out", out)
+        assert r.returncode == 2 and r.stderr.startswith("error:"), r.stderr
+        assert _tree(out) == ["notes.txt"], (args, _tree(out))
+    assert "none.pt: no such file" in r.stderr
+
+
+def test_refusing_to_replace_a_set_touches_nothing(tmp_path):
+    out = tmp_path / "stimuli"
+    for sub in ("videos", "motion", "sheets"):
+        (out / sub).mkdir(parents=True)
+        (out / sub / "x").write_text("clip")
+    (out / "manifest.csv").write_text("clip_id\n")
+    before = _tree(out)
+    r = _make_stimuli("--out", out)
+    assert r.returncode == 2 and "pass --force to replace it" in r.stderr, r.stderr
+    assert _tree(out) == before

@@ -1,1 +1,2 @@
-"""The stimuli files of a study: items, manifest and tables, tool-made catch clips, and the pool of render workers."""
+"""The stimuli files of a study: items, manifest and tables, tool-made catch clips, the pool of render workers,
+and the main job's closing summary."""

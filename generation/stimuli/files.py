@@ -1,6 +1,7 @@
 """The files of a stimulus folder (CONTRACTS.md §4): the folder itself, manifest.csv, metrics.csv, fmd.csv,
 items.csv and items/ITEM.npz. What goes into them is decided by make_stimuli; their layout is decided here."""
 
+import contextlib
 import csv
 import shutil
 from pathlib import Path
@@ -38,11 +39,16 @@ class StimuliError(UserError):
     """Bad input to make_stimuli; one line naming the file or option."""
 
 
+def refuse_existing(out, force):
+    """StimuliError when `out` holds a stimulus set and `force` is not given."""
+    if (Path(out) / "manifest.csv").exists() and not force:
+        raise StimuliError(f"{out}: already holds a stimulus set (manifest.csv); pass --force to replace it")
+
+
 def prepare_out(out, force):
     """An empty stimulus folder at `out` with its clip subfolders; an existing set is replaced only with `force`."""
     out = Path(out)
-    if (out / "manifest.csv").exists() and not force:
-        raise StimuliError(f"{out}: already holds a stimulus set (manifest.csv); pass --force to replace it")
+    refuse_existing(out, force)
     for sub in (*SUBFOLDERS, "items", "audio_check"):
         if (out / sub).exists():
             shutil.rmtree(out / sub)
@@ -51,6 +57,33 @@ def prepare_out(out, force):
     for sub in SUBFOLDERS:
         (out / sub).mkdir(parents=True, exist_ok=True)
     return out
+
+
+@contextlib.contextmanager
+def nothing_left_on_failure(out):
+    """Within the block, build a stimulus set at `out`; if the block fails (any exception, Ctrl-C included), remove
+    what it left there: `out` itself and any parent folder it made, else every entry of `out` that was not there
+    before and the set's clip folders it left empty (CONTRACTS §4: a failed build leaves nothing behind). What was
+    there before is kept, so a refusal to replace an existing set touches nothing."""
+    out = Path(out).absolute()
+    top = None  # the outermost folder the build creates, when it creates `out`
+    for folder in (out, *out.parents):
+        if folder.exists():
+            break
+        top = folder
+    before = {p.name for p in out.iterdir()} if out.is_dir() else set()
+    try:
+        yield
+    except BaseException:
+        if top is not None:
+            shutil.rmtree(top, ignore_errors=True)
+        elif out.is_dir():
+            for p in out.iterdir():
+                if p.name not in before:
+                    shutil.rmtree(p, ignore_errors=True) if p.is_dir() and not p.is_symlink() else p.unlink()
+                elif p.name in SUBFOLDERS and p.is_dir() and not any(p.iterdir()):
+                    p.rmdir()  # emptied and remade by prepare_out (--force), nothing in it
+        raise
 
 
 def clip_files(out, cid):

@@ -11,6 +11,7 @@ keeps its traceback.
 """
 
 import argparse
+import contextlib
 import logging
 import math
 import sys
@@ -32,11 +33,29 @@ class UserError(ValueError):
     """Bad input from the user: the message is one line naming the file, line, field or flag."""
 
 
+_invoked_as: str | None = None  # the name a command was run by, when not `python -m ...` (see `invoked_as`)
+
+
+@contextlib.contextmanager
+def invoked_as(name: str):
+    """Within the block, a command's parser calls itself `name` (e.g. ``moglow-eval report``) in its usage, help
+    and error lines instead of the ``python -m ...`` it was built with. Only a console command's main uses it."""
+    global _invoked_as
+    before, _invoked_as = _invoked_as, name
+    try:
+        yield
+    finally:
+        _invoked_as = before
+
+
 class ArgumentParser(argparse.ArgumentParser):
     """argparse, but a bad flag gives one line (``error: argument --fps: ...``), not usage plus message; every
     command and subcommand answers ``--version``."""
 
     def __init__(self, *args, **kwargs):
+        # A subcommand's parser gets its prog from its parent's, so only the `python -m` ones are renamed.
+        if _invoked_as and str(kwargs.get("prog", "")).startswith("python -m "):
+            kwargs["prog"] = _invoked_as
         super().__init__(*args, **kwargs)
         self.add_argument("--version", action="version", version=f"moglow-eval {version()}")
 

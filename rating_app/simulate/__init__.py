@@ -7,7 +7,7 @@ It answers whatever design the server runs (the session reply names it, CONTRACT
 - `crowd`: many raters in a thread pool, and the summary of what was submitted and acknowledged.
 """
 
-from .crowd import run_simulation, write_summary
+from .crowd import run_simulation, shortfall, write_summary
 from .raters import parse_quality
 
-__all__ = ["parse_quality", "run_simulation", "write_summary"]
+__all__ = ["parse_quality", "run_simulation", "shortfall", "write_summary"]

@@ -18,16 +18,42 @@ from ..designs import get
 from ..manifest import AppError
 from .raters import ClipInfo, Rater, duration_ms
 
+REACH_S = 5.0  # how long a server that is still starting may take to answer before the crowd gives up
 
-def check_design(url: str, design: str, timeout=30.0) -> None:
-    """AppError unless the server at `url` runs `design` (its /healthz names it)."""
+
+def probe(url: str, wait_s: float = REACH_S) -> dict:
+    """The app's /healthz reply; AppError within about `wait_s` seconds when nothing answers at `url` (connection
+    refused is retried meanwhile: the app may have been started a moment ago) or what answers is not the app."""
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            r = requests.get(url.rstrip("/") + "/healthz", timeout=max(1.0, wait_s))
+            break
+        except requests.RequestException as e:
+            if time.monotonic() + 0.25 > deadline:
+                raise AppError(
+                    f"{url}: no rating app answers ({e.__class__.__name__} for {wait_s:g} s); start it first "
+                    "(python -m rating_app serve) or correct --url"
+                ) from None
+            time.sleep(0.25)
     try:
-        r = requests.get(url.rstrip("/") + "/healthz", timeout=timeout)
-        running = r.json().get("design", study.DEFAULT_DESIGN)
-    except (requests.RequestException, ValueError) as e:
-        raise AppError(f"{url}: server not reachable ({e.__class__.__name__})") from None
+        body = r.json()
+    except ValueError:
+        body = None
+    if r.status_code != 200 or not isinstance(body, dict) or "ok" not in body:
+        raise AppError(f"{url}: HTTP {r.status_code} at /healthz: not the rating app; correct --url")
+    return body
+
+
+def check_design(url: str, design: str) -> None:
+    """AppError unless the server at `url` runs `design` (its /healthz names it)."""
+    running = probe(url).get("design", study.DEFAULT_DESIGN)
     if running != design:
         raise AppError(f"--design {design}: the server at {url} runs a {running} study")
+
+
+class Refused(AppError):
+    """The app turned a new session away (429): too many sessions from this address."""
 
 
 class Client:
@@ -81,6 +107,8 @@ class Visit:
         )
         if status == 409 and body.get("full"):
             return False
+        if status == 429:
+            raise Refused(f"POST /api/sessions: HTTP 429: {body.get('error')}")
         if status not in (200, 201):
             raise AppError(f"POST /api/sessions: HTTP {status}: {body.get('error')}")
         self.token, self.rater_id = body["session"], body["rater_id"]
@@ -138,6 +166,9 @@ class Visit:
                 raise AppError(f"video of trial {trial['trial_id']}: HTTP {status}")
         need = self.design.required_ms([duration_ms(c) for c in shown])
         wait = self.min_view * need / 1000.0 + self.rater.think(self.think_s)
+        if started + wait > self.client.deadline:  # stop at the time limit, not a whole viewing later
+            time.sleep(max(0.0, self.client.deadline - time.monotonic()))
+            raise TimeoutError(f"trial {trial['trial_id']}: the time limit passed while watching")
         time.sleep(max(0.0, started + wait - time.monotonic()))
         body = {"trial_id": trial["trial_id"], self.design.answer_field: value, "watched_ms": watched}
         for _ in range(5):

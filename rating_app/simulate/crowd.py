@@ -14,7 +14,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from ..manifest import AppError
-from .client import Client, Visit, check_design
+from .client import Client, Refused, Visit, check_design, probe
 from .raters import ClipInfo, Rater, duration_ms, load_audio_answers, load_clips, make_raters, set_qualities
 
 MAX_RATERS = 100_000
@@ -43,10 +43,12 @@ def run_simulation(
     server must run (checked at /healthz before any session); None answers whichever it runs."""
     _check_arguments(n_raters, careless, concurrency, timeout_s)
     started = time.monotonic()
+    clips = load_clips(manifest)  # the user's files first: a bad one is named even with no server up
+    by_condition = set_qualities(clips, quality)
     if design is not None:
         check_design(url, design)
-    clips = load_clips(manifest)
-    by_condition = set_qualities(clips, quality)
+    else:
+        probe(url)  # no server: say so now, not at the time limit
     raters = make_raters(n_raters, seed, careless, prefix or f"sim{seed}")
     crowd = _Crowd(url, clips, started + timeout_s, think_s, on_ack)
     crowd.heard = load_audio_answers(manifest)
@@ -68,7 +70,37 @@ def run_simulation(
         "n_raters_requested": n_raters,
         **crowd.summary(),
         "elapsed_s": round(time.monotonic() - started, 2),
+        "timeout_s": timeout_s,
     }
+
+
+def shortfall(summary: dict) -> str | None:
+    """Why the crowd fell short of what was asked, in one line that says what to change; None when it did not:
+    raters were refused, the time limit passed, a rater failed, or every rater took part and none found the study
+    full (a crowd exactly as large as the study needs is told so too: only a rater turned away sees it full)."""
+    n, started = summary["n_raters_requested"], summary["n_raters_started"]
+    refused = summary["n_raters_refused"]
+    if refused:
+        return (
+            f"{refused} of {n} raters refused with 429 after {started} started: the app allows only so many new "
+            "sessions per address an hour, and the simulated crowd is one address (serve --sessions-per-client; "
+            "0 lifts the limit for a local trial)"
+        )
+    if summary["timed_out"]:
+        view = summary.get("min_view")
+        waits = "" if view is None else f"; the app's is {view:g}, and the crowd waits that share of every clip"
+        return (
+            f"the time limit passed (--timeout {summary['timeout_s']:g} s) with {summary['n_raters_completed']} of "
+            f"{n} raters done: raise --timeout, or serve a local trial with a small --min-view{waits}"
+        )
+    if summary["errors"]:
+        return f"{len(summary['errors'])} of {n} raters failed; the first: {summary['errors'][0]}"
+    if not summary["study_full"]:
+        return (
+            f"the study did not fill: all {n} raters took part ({summary['n_ratings']} answers) and none found it "
+            "full; raise --raters"
+        )
+    return None
 
 
 def _check_arguments(n_raters, careless, concurrency, timeout_s):
@@ -101,11 +133,20 @@ class _Crowd:
         self.local = threading.local()  # one HTTP client (keep-alive connection) per thread
         self.bar = None  # a progress bar, counting raters as they finish
         self.heard = {}  # a study with sound: the sound-check samples' digits by their bytes' hash
+        self.timed_out = False  # a rater gave up, or never began, at the time limit
+        self.min_view = None  # the app's, from the first session reply
 
     def take_part(self, rater: Rater) -> None:
         res = self.results[rater.index] = _new_result(rater)
         try:
             self._visit(rater, res)
+        except Refused:  # counted apart: the summary's one line says why and what to change
+            res["refused"] = True
+        except TimeoutError as e:
+            self.timed_out = True
+            with self.lock:
+                self.errors.append(f"{rater.external_id}: {e}")
+            res["error"] = str(e)
         except Exception as e:  # any failure of one rater is reported, never fatal to the crowd
             with self.lock:
                 self.errors.append(f"{rater.external_id}: {e}")
@@ -117,6 +158,7 @@ class _Crowd:
     def _visit(self, rater: Rater, res: dict) -> None:
         if self.full.is_set() or time.monotonic() > self.deadline:
             res["skipped"] = "study full" if self.full.is_set() else "time limit"
+            self.timed_out = self.timed_out or not self.full.is_set()
             return
         if not hasattr(self.local, "client"):
             self.local.client = Client(self.url, self.deadline)
@@ -126,7 +168,10 @@ class _Crowd:
             res["skipped"] = "study full"
             return
         res["rater_id"], res["started"] = visit.rater_id, True
+        self.min_view = visit.min_view
         for _ in range(visit.n_trials + 3):
+            if time.monotonic() > self.deadline:
+                raise TimeoutError(f"rater {rater.external_id}: the time limit passed mid-session")
             kind, got = visit.next()
             if kind == "full":
                 res["skipped"] = "study full"
@@ -173,7 +218,10 @@ class _Crowd:
         return {
             "n_raters_started": len(started),
             "n_raters_completed": sum(r["completed"] for r in raters),
+            "n_raters_refused": sum(r["refused"] for r in raters),
             "study_full": self.full.is_set(),
+            "timed_out": self.timed_out,
+            "min_view": self.min_view,
             "n_ratings": len(self.ratings),
             "n_ratings_by_condition": by_condition,
             "careless_raters": [r["rater_id"] for r in started if r["careless"]],
@@ -190,6 +238,7 @@ def _new_result(rater: Rater) -> dict:
         "careless": rater.careless,
         "rater_id": None,
         "started": False,
+        "refused": False,
         "completed": False,
         "completion_code": None,
         "n_ratings": 0,
