@@ -260,3 +260,46 @@ def test_the_subpackage_guard_sees_an_upward_import():
     }
     wrong = wrong_way_subpackage_imports(edges)
     assert [w.split(":")[0] for w in wrong] == ["y", "z"], wrong
+
+
+# ------------------------------------------------------------------------------------------------ sizes
+MAX_MODULE_LINES = 500
+MAX_FUNCTION_LINES = 80
+
+
+def code_lines(node):
+    """A function's lines less its docstring: the API's docstrings (Parameters, Returns, Examples) are reference
+    text, not stages of the function."""
+    n = node.end_lineno - node.lineno + 1
+    first = node.body[0] if node.body else None
+    if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant) and isinstance(first.value.value, str):
+        n -= first.end_lineno - first.lineno + 1
+    return n
+
+
+def oversized(paths, root=ROOT):
+    """'file: N lines' for a module of MAX_MODULE_LINES or more, 'file:line name: N lines' for a function over
+    MAX_FUNCTION_LINES: a long module is several concepts, a long function several stages."""
+    found = []
+    for path in paths:
+        text = path.read_text(encoding="utf-8")
+        if (n := text.count("\n")) >= MAX_MODULE_LINES:
+            found.append(f"{path.relative_to(root)}: {n} lines")
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                if (n := code_lines(node)) > MAX_FUNCTION_LINES:
+                    found.append(f"{path.relative_to(root)}:{node.lineno} {node.name}: {n} lines")
+    return found
+
+
+def test_no_module_or_function_is_too_long():
+    assert not (found := oversized(p for part in PARTS for p in part_files(part))), "\n".join(found)
+
+
+def test_the_size_guard_sees_a_long_function(tmp_path):
+    body = "".join(f"    x{i} = {i}\n" for i in range(MAX_FUNCTION_LINES))
+    (tmp_path / "long.py").write_text(f"def long():\n{body}")
+    (tmp_path / "short.py").write_text('def short():\n    """' + "doc\n" * 100 + '"""\n    return 1\n')
+    assert oversized([tmp_path / "long.py", tmp_path / "short.py"], tmp_path) == [
+        f"long.py:1 long: {1 + MAX_FUNCTION_LINES} lines"
+    ]

@@ -33,15 +33,15 @@ class MGStream:
 
     precision="bfloat16" reads the big products' weights (the LSTMs' recurrent, history/control and layer-2 input
     weights, 98% of the bytes, with the LSTM biases that ride in them) and their inputs in bfloat16; the products
-    still add up in float32, and the gates, cells, states, output layers and inverse maps stay float32. On an AMD
-    Zen 4 CPU that runs 30 streams about 1.85x faster; on an Intel Xeon with AVX512-BF16 but no AMX it ran 1.3x
-    slower, and one stream gains nothing anywhere (bench/RESULTS.md). It is the same model to within bfloat16's
-    rounding of those weights (RESULTS has its motion figures). The default is float32.
+    still add up in float32, and the gates, cells, states, output layers and inverse maps stay float32. On some CPU
+    kinds that runs many streams faster, on others slower, and one stream gains nothing anywhere
+    (bench/RESULTS.md#sampling-bfloat16). It is the same model to within bfloat16's rounding of those weights
+    (RESULTS has its motion figures). The default is float32.
 
     Two memory layouts compute the same thing (they differ only in float rounding):
     "row": activations [B, features], weights stored [in, out], every product X @ W;
     "col": activations [features, B], weights stored [out, in] as nn.LSTM keeps them, every product W @ X.
-    Which is faster depends on the CPU and its BLAS, by up to 2.8x either way (bench/notes/2026-11-25-history.md), so
+    Which is faster depends on the CPU and its BLAS, by a wide margin either way (bench/notes/2026-11-25-history.md), so
     layout=None takes `default_layout`, a fixed choice per device type, CPU vendor and batch size (never a timing,
     so the same inputs give the same bits run after run); pass a layout to fix it.
     """
@@ -99,7 +99,7 @@ class MGStream:
         self._mm = (lambda wt, x: (x, wt)) if rows else (lambda wt, x: (wt, x))
         # self.cond as every step's slice of layer 1's input (a view: refilled in place).
         self._cond_k = self.cond.expand(k_steps, b, -1) if rows else self.cond.T.expand(k_steps, -1, b)
-        # Per-step views made once: making the same narrow views 16x per frame costs more than it looks (~0.5 ms).
+        # Per-step views made once: making the same narrow views at every step of every frame costs more than it looks.
         # y, the flow's running value, alternates between two buffers: step k reads one and writes the other.
         self._y = [torch.empty(*shape(model.pose_dim), **new) for _ in range(2)]
         c_a, n_b = w["c_a"], w["n_out"] // 2
@@ -200,8 +200,8 @@ def default_layout(device, batch=1):
     depends on a timing race (the two layouts round differently). MOGLOW_LAYOUT=row|col overrides it.
 
     Measured at the paper's size (bench/notes/2026-11-25-history.md): on AMD Zen 3 with MKL "row" is faster for 1
-    and 30 streams (2.8x and 1.2-1.4x); on this project's Intel Xeon host "row" is 1.9x faster for one stream and
-    "col" 1.2x faster for 30. cuBLAS takes either: "row"."""
+    and 30 streams; on this project's Intel Xeon host "row" is faster for one stream and "col" for 30. cuBLAS takes
+    either: "row"."""
     chosen = os.environ.get("MOGLOW_LAYOUT")
     if chosen:
         if chosen not in LAYOUTS:

@@ -166,8 +166,8 @@ def build_parser():
         "--precision",
         choices=sorted(PRECISIONS),
         default="float32",
-        help="MG's sampler: bfloat16 reads its big products in bfloat16, 1.85x faster for many streams on an AMD "
-        "Zen 4 CPU but slower on Intel CPUs without AMX (bench/RESULTS.md; default float32)",
+        help="MG's sampler: bfloat16 reads its big products in bfloat16, faster for many streams on some CPU kinds "
+        "and slower on others (bench/RESULTS.md#sampling-bfloat16; default float32)",
     )
     return ap
 
