@@ -131,7 +131,8 @@ def _header(n_frames=10):
     "where, head, needle",
     [
         ("frames", _header(), "more data than its header's frames and channels can hold"),
-        ("header", b"HIERARCHY\nROOT Hips\n{\n  OFFSET ", "no MOTION block"),
+        ("header", b"HIERARCHY\nROOT Hips\n{\n  OFFSET ", "no whole MOTION header"),
+        ("frame_time", _header()[: _header().index(b"Frame Time")], "no whole MOTION header"),
     ],
 )
 def test_a_gzip_bomb_is_refused_naming_the_file_with_memory_flat(tmp_path, where, head, needle):

@@ -105,7 +105,7 @@ def _read_bounded(f, name):
 
 def _read_head(f, name):
     """(bytes read, (byte budget, frame time) or None at the end of the file before the MOTION header is whole)."""
-    head = bytearray()
+    head, seen, motion = bytearray(), 0, None  # `seen`: the start of the last line searched, which may go on
     while True:
         chunk = f.read(_CHUNK)
         if not chunk:
@@ -113,14 +113,24 @@ def _read_head(f, name):
         if not head and chunk[:3] == b"\xef\xbb\xbf":  # UTF-8 byte-order mark
             chunk = chunk[3:]
         head += chunk
-        found = _budget(head, name)
+        motion = motion or _find_motion(head, seen)
+        seen = head.rfind(b"\n") + 1
+        found = None if motion is None else _budget(head, name, motion)
         if found is not None:
             return head, found
         if len(head) > MAX_HEADER_BYTES:
             raise BvhError(
-                f"{name}:0: no MOTION block with its Frames and Frame Time lines in the first "
+                f"{name}:0: no whole MOTION header (its MOTION, Frames and Frame Time lines) in the first "
                 f"{MAX_HEADER_BYTES >> 20} MB: not a BVH file"
             )
+
+
+def _find_motion(head, seen):
+    """The MOTION line at or after the line start `seen`, or None. The line at `seen` is matched where it starts
+    and only whole new lines are searched, so a header of one endless line costs one pass, not one per chunk."""
+    m = _MOTION.match(head, seen)
+    after = head.find(b"\n", seen) + 1
+    return m or (_MOTION.search(head, after) if after else None)
 
 
 def header_fps(path):
@@ -138,13 +148,10 @@ def header_fps(path):
     return 1.0 / found[1]
 
 
-def _budget(head, name):
-    """(how many bytes the whole file may have, its frame time) once `head` holds the MOTION header; None while it
-    does not yet.
+def _budget(head, name, m):
+    """(how many bytes the whole file may have, its frame time) once `head` holds the MOTION header that starts at
+    the match `m`; None while it does not yet.
     The frame and channel counts are checked against MAX_MOTION_VALUES here, before the frames are read."""
-    m = _MOTION.search(head)
-    if m is None:
-        return None
     complete = head[: head.rfind(b"\n") + 1]  # only whole lines: a cut line would read as a malformed one
     line_no = head.count(b"\n", 0, m.start()) + 1
     try:
