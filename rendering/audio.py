@@ -21,7 +21,8 @@ from .errors import RenderError
 RATE = 48_000  # samples per second of every stimulus's audio
 AAC_BITRATE = "128k"
 SILENCE_DBFS = -60.0  # an RMS below this over a clip's span is silence
-MAX_SECONDS = 3600.0
+MAX_SECONDS = 3600.0  # the most of one file ever decoded
+MAX_RATE = 768_000  # samples per second in a header beyond any real recording
 
 
 def _ffmpeg():
@@ -52,14 +53,20 @@ def _header(path):
     raise RenderError(f"{path}: not a WAV or FLAC file")
 
 
-def read_audio(path):
-    """Samples [N, channels] float32 at RATE Hz (mono or stereo kept as it is)."""
+def read_audio(path, max_seconds=MAX_SECONDS):
+    """Samples [N, channels] float32 at RATE Hz (mono or stereo kept as it is), at most `max_seconds` of them.
+
+    ffmpeg decodes only the first `max_seconds` (at most MAX_SECONDS), so a small FLAC or a WAV whose header
+    claims hours holds at most that much in memory; the caller asks for what it will play."""
     channels, rate = _header(path)
     if rate <= 0:
         raise RenderError(f"{path}: the sample rate is {rate}; an audio file needs a positive one")
+    if rate > MAX_RATE:
+        raise RenderError(f"{path}: the sample rate is {rate} Hz, more than the limit of {MAX_RATE} Hz")
     if channels not in (1, 2):
         raise RenderError(f"{path}: {channels} channels; give mono or stereo audio")
-    cmd = [_ffmpeg(), "-v", "error", "-i", str(path), "-t", str(MAX_SECONDS), "-f", "f32le", "-ac", str(channels)]
+    seconds = f"{min(float(max_seconds), MAX_SECONDS):.3f}"
+    cmd = [_ffmpeg(), "-v", "error", "-i", str(path), "-t", seconds, "-f", "f32le", "-ac", str(channels)]
     out = subprocess.run([*cmd, "-ar", str(RATE), "-"], capture_output=True)
     if out.returncode != 0:
         msg = out.stderr.decode(errors="replace").strip().splitlines()

@@ -2,18 +2,20 @@
 
 A study of your own motion (generation.own_study.builder) reads every condition's files through `read_motion`, which
 returns a `Motion`: world joint positions [T, J, 3] in metres with Y up, the skeleton (names, parents) and the
-frame rate, resampled to the study's rate. Three formats:
+frame rate, resampled to the study's rate. Four formats:
 
 - `ITEM.bvh` / `ITEM.bvh.gz`: every joint of the hierarchy by forward kinematics (rotations slerped when
   resampled, so bones stay rigid), plus each End Site that sits away from its joint (a head top, a finger tip),
   named `PARENT_end`. Fingers and face joints come along.
 - `ITEM.npy`: joint positions [T, J, 3], as GENEA 2022 and HumanML3D exchange them, with the skeleton given once
   in a small JSON (`Skeleton.load`: names, and parents by index or by name); positions are resampled linearly.
-- `ITEM.npz`: a clip file (CONTRACTS §1).
+- `ITEM.npz`: a clip file (CONTRACTS §1), or an SMPL-family parameter file (poses, trans, betas), whose joints
+  come from the user's body model through smplx (generation.data.smpl_files), resampled linearly.
 
-Units and the up axis are read from the study file or detected (`detect_units`, `detect_up`): the body's extent
-along the up axis is a person's height, 0.5-3 m, in whichever unit makes it so. Every problem is a MotionError
-naming the file.
+The up axis is read from the study file or detected (`detect_up`). Units are the study file's, or with "auto"
+the first that makes the standing body a person's height, the skeleton family's own unit tried first
+(generation.data.skeleton_families). Every file is read within bounds set by its header (frames, channels, array
+shapes) before anything is allocated. Every problem is a MotionError naming the file.
 """
 
 import json
@@ -23,11 +25,21 @@ from pathlib import Path
 import numpy as np
 
 from moglow_eval.core.cli import UserError
-from moglow_eval.core.clip import MAX_JOINTS, ClipError, check_skeleton, load_clip
+from moglow_eval.core.clip import (
+    MAX_FRAMES,
+    MAX_JOINTS,
+    MAX_NPZ_BYTES,
+    ClipError,
+    check_fps,
+    check_skeleton,
+    load_clip,
+    npz_headers,
+)
 
-from ..motion.bvh import BvhError, forward_kinematics, read_bvh
-from ..motion.features import SKELETON_MAPS, detect_skeleton
+from ..motion.bvh import BvhError, forward_kinematics, header_fps, read_bvh
 from ..motion.resample import clean_fps, local_quaternions, quat_to_matrix, resample_local, resample_times
+from .skeleton_families import UnitError, choose_unit
+from .smpl_files import FPS_KEYS, SmplError, is_smpl_file, smpl_positions
 from .systems import resample_positions
 
 EXTENSIONS = (".bvh.gz", ".bvh", ".npy", ".npz")
@@ -92,7 +104,7 @@ class Skeleton:
             else:
                 raise MotionError(f"{path}: parent of {name!r} is {p!r}, not a joint name, an index or null")
         try:
-            parents = check_skeleton(np.array(parents, dtype=np.int64), len(names), path)
+            parents = check_skeleton(np.array(parents, dtype=np.int64), len(names), path, names)
         except ClipError as e:
             raise MotionError(str(e)) from None
         return cls(list(names), parents)
@@ -127,18 +139,6 @@ def body_height(joints):
     return float(np.median(joints[..., 1].max(axis=1) - joints[..., 1].min(axis=1)))
 
 
-def detect_units(height, where):
-    """Metres per unit such that `height` (file units) is a body's height; MotionError when none does."""
-    lo, hi = BODY_HEIGHT_M
-    for unit, scale in UNITS.items():
-        if lo <= height * scale <= hi:
-            return scale
-    raise MotionError(
-        f"{where}: the body is {height:.3g} units tall, which is no person's height in m, cm or mm; "
-        "set [skeleton] units in the study file"
-    )
-
-
 def check_height(joints_m, where):
     """MotionError when a clip, in metres, is not the height of a body (absurd units)."""
     h = body_height(joints_m)
@@ -166,23 +166,14 @@ def _bvh_positions(path, fps):
         pos = np.concatenate([pos, tips], axis=1)
         names += [f"{bvh.names[p]}_end" for p, _ in ends]
         parents += [p for p, _ in ends]
-    known = _known_scale(names)
-    return pos, names, np.array(parents, dtype=np.int64), known
-
-
-def _known_scale(names):
-    """Metres per unit of a skeleton the project knows (Bandai-Namco: cm; CMU: 1/0.45 inch), else None."""
-    try:
-        return SKELETON_MAPS[detect_skeleton(names, "")]["scale"]
-    except BvhError:
-        return None
+    return pos, names, np.array(parents, dtype=np.int64)
 
 
 def _npy_positions(path, skeleton, source_fps, fps):
     if skeleton is None:
         raise MotionError(f"{path}: a .npy file needs its skeleton: set [skeleton] file in the study file")
     try:
-        arr = np.load(path, allow_pickle=False, mmap_mode="r")
+        arr = np.load(path, allow_pickle=False, mmap_mode="r")  # mapped: nothing is read before the checks below
     except (OSError, ValueError) as e:
         raise MotionError(f"{path}: not a readable .npy array ({e})") from None
     if not isinstance(arr, np.ndarray) or arr.ndim != 3 or arr.shape[2] != 3:
@@ -193,11 +184,16 @@ def _npy_positions(path, skeleton, source_fps, fps):
         raise MotionError(f"{path}: positions must be numbers, got {arr.dtype}")
     if len(arr) < 2:
         raise MotionError(f"{path}: {len(arr)} frame(s); a clip needs at least 2")
+    if len(arr) > MAX_FRAMES or arr.size * 8 > MAX_NPZ_BYTES:
+        raise MotionError(
+            f"{path}: {len(arr)} frames of {arr.shape[1]} joints is more than the limit "
+            f"({MAX_FRAMES} frames, {MAX_NPZ_BYTES >> 20} MiB of positions)"
+        )
     len(resample_times(len(arr), source_fps, fps))  # bounded before any allocation (MAX_FRAMES)
     joints = np.asarray(arr, dtype=np.float64)
     if not np.isfinite(joints).all():
         raise MotionError(f"{path}: positions contain NaN or infinite values")
-    return resample_positions(joints, source_fps, fps), list(skeleton.names), skeleton.parents.copy(), None
+    return resample_positions(joints, source_fps, fps), list(skeleton.names), skeleton.parents.copy()
 
 
 def _npz_positions(path, fps):
@@ -208,13 +204,70 @@ def _npz_positions(path, fps):
     if len(clip["joints"]) < 2:
         raise MotionError(f"{path}: {len(clip['joints'])} frame(s); a clip needs at least 2")
     joints = resample_positions(np.asarray(clip["joints"], np.float64), float(clip["fps"]), fps)
-    return joints, list(clip["joint_names"]), np.asarray(clip["parents"], np.int64), 1.0  # clips are in metres
+    return joints, list(clip["joint_names"]), np.asarray(clip["parents"], np.int64)
 
 
-def read_motion(path, fps, units="auto", up="auto", skeleton=None, source_fps=None):
+def _smpl_positions(path, fps, smpl_model, smpl_type, source_fps):
+    """An SMPL-family parameter file's joints (generation.data.smpl_files), resampled linearly to `fps`."""
+    joints, names, parents, native = smpl_positions(path, smpl_model, smpl_type, source_fps)
+    try:
+        native = check_fps(native, path)
+    except ClipError as e:
+        raise MotionError(str(e)) from None
+    len(resample_times(len(joints), native, fps))  # bounded before the resampled copy (MAX_FRAMES)
+    return resample_positions(joints, native, fps), names, parents
+
+
+def native_fps(path, source_fps=None):
+    """A motion file's own frame rate, read from its header (BVH's Frame Time, a clip's or an SMPL-family file's
+    fps key) without reading its frames; `source_fps` ([skeleton] fps) for .npy, and for SMPL-family files that
+    store none. MotionError naming the file otherwise."""
+    path = Path(path)
+    try:
+        if path.name.endswith(".npy"):
+            fps = source_fps
+        elif path.name.endswith(".npz"):
+            fps = _npz_fps(path, source_fps)
+        else:
+            fps = clean_fps(header_fps(path))
+    except (BvhError, ClipError) as e:
+        raise MotionError(str(e)) from None
+    if fps is None:
+        raise MotionError(f"{path}: no frame rate in the file: set [skeleton] fps in the study file")
+    return float(fps)
+
+
+def _npz_fps(path, source_fps):
+    keys = ("fps",) if not is_smpl_file(path) else FPS_KEYS
+    names = npz_headers(path)
+    key = next((k for k in keys if k in names), None)
+    if key is None:
+        return source_fps
+    with np.load(path, allow_pickle=False) as f:
+        return check_fps(np.asarray(f[key]).reshape(-1)[0], path)
+
+
+def _positions(path, fps, up, skeleton, source_fps, smpl):
+    """(joints [T, J, 3] Y up in file units, names, parents, metres per unit where the format fixes it)."""
+    if path.name.endswith(".npz"):
+        if is_smpl_file(path):
+            joints, names, parents = _smpl_positions(path, fps, *smpl, source_fps)
+            return to_y_up(joints, detect_up(joints) if up == "auto" else up), names, parents, None
+        return (*_npz_positions(path, fps), 1.0)  # clips are in metres, Y up
+    if path.name.endswith(".npy"):
+        if source_fps is None:
+            raise MotionError(f"{path}: a .npy file needs its frame rate: set [skeleton] fps in the study file")
+        joints, names, parents = _npy_positions(path, skeleton, source_fps, fps)
+    else:
+        joints, names, parents = _bvh_positions(path, fps)
+    return to_y_up(joints, detect_up(joints) if up == "auto" else up), names, parents, None
+
+
+def read_motion(path, fps, units="auto", up="auto", skeleton=None, source_fps=None, smpl_model=None, smpl_type=None):
     """One motion file as a Motion at `fps`, in metres, Y up.
 
-    Reads BVH of any skeleton (.bvh, .bvh.gz), joint-position arrays (.npy [T, J, 3]) and clip .npz files.
+    Reads BVH of any skeleton (.bvh, .bvh.gz), joint-position arrays (.npy [T, J, 3]), clip .npz files and
+    SMPL-family parameter files (.npz with poses, trans and betas, through the body model `smpl_model`).
 
     Parameters
     ----------
@@ -223,14 +276,18 @@ def read_motion(path, fps, units="auto", up="auto", skeleton=None, source_fps=No
     fps : float
         The frame rate wanted; the motion is resampled to it.
     units : str or float
-        "auto" (from the body's height), a key of UNITS ("m", "cm", "mm") or metres per unit (a number). A clip
-        .npz is always metres and Y up.
+        "auto" (from the standing body's height: generation.data.skeleton_families.choose_unit), a key of UNITS
+        ("m", "cm", "mm") or metres per unit (a number). A clip .npz is always metres and Y up.
     up : str
         "auto" (detected from the motion), "y" or "z".
     skeleton : Skeleton or None
         Joint names and parents; needed for .npy.
     source_fps : float or None
-        The frame rate of .npy arrays (a .npy file stores none).
+        The frame rate of .npy arrays (a .npy file stores none), and of SMPL-family files that store none.
+    smpl_model : str or Path or None
+        The SMPL, SMPL-H or SMPL-X body model (.npz) for SMPL-family files; they cannot be read without one.
+    smpl_type : str or None
+        "smpl", "smplh" or "smplx"; None to tell it from the model's joint count.
 
     Returns
     -------
@@ -241,34 +298,31 @@ def read_motion(path, fps, units="auto", up="auto", skeleton=None, source_fps=No
     Raises
     ------
     MotionError
-        One line naming the file: unreadable, a .npy without its frame rate, a first joint that is not the root,
-        NaN or infinite positions, or a body that is not a body's height after unit conversion.
+        One line naming the file: unreadable or too large, a .npy without its frame rate, an SMPL-family file
+        without its body model, a first joint that is not the root, NaN or infinite positions, or a body that is
+        not a body's height after unit conversion (with units "auto": no unit tried gives a person's height).
     """
     path = Path(path)
     try:
-        if path.name.endswith(".npz"):
-            joints, names, parents, scale = _npz_positions(path, fps)
-            up_axis = "y"
-        else:
-            if path.name.endswith(".npy"):
-                if source_fps is None:
-                    raise MotionError(f"{path}: a .npy file needs its frame rate: set [skeleton] fps in the study file")
-                joints, names, parents, scale = _npy_positions(path, skeleton, source_fps, fps)
-            else:
-                joints, names, parents, scale = _bvh_positions(path, fps)
-            up_axis = detect_up(joints) if up == "auto" else up
-    except (BvhError, ClipError) as e:
+        joints, names, parents, scale = _positions(path, fps, up, skeleton, source_fps, (smpl_model, smpl_type))
+    except (BvhError, ClipError, SmplError) as e:
         raise MotionError(str(e)) from None
     if parents[0] != -1:
         raise MotionError(f"{path}: the first joint ({names[0]}) must be the root (parent -1): the camera follows it")
-    joints = to_y_up(joints, up_axis)
     if not np.isfinite(joints).all():
         raise MotionError(f"{path}: positions contain NaN or infinite values")
-    if not path.name.endswith(".npz"):
-        if units != "auto":
-            scale = UNITS.get(units, units)
-        elif scale is None:
-            scale = detect_units(body_height(joints), path)
+    if scale is None:
+        scale = _unit(joints, names, units, path)
     joints = joints * float(scale)
     check_height(joints, path)
     return Motion(joints.astype(np.float32), names, np.asarray(parents, np.int64), float(fps), str(path))
+
+
+def _unit(joints, names, units, path):
+    """Metres per file unit: the study file's, or with "auto" the first candidate giving a person's height."""
+    if units != "auto":
+        return UNITS.get(units, units)
+    try:
+        return choose_unit(body_height(joints), names, path)[0]
+    except UnitError as e:
+        raise MotionError(str(e)) from None

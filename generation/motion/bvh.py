@@ -15,6 +15,7 @@ tests/reference/bvh_fk.py does it with matrices, the plain way, as the reference
 import gzip
 import io
 import re
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,6 +28,12 @@ CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation"
 AXIS = {"X": 0, "Y": 1, "Z": 2}  # a channel name's first letter -> coordinate axis
 # Beyond any real channel value (1e9 cm is 10,000 km); larger ones overflow forward kinematics.
 MAX_VALUE = 1e9
+# Bounds on what a file may make the reader hold, far beyond real capture: a hierarchy of 1000 joints is about
+# 200 kB of text; an hour at 120 fps of 138 channels is 60 million values; no writer spends 64 bytes on a number.
+MAX_HEADER_BYTES = 16 << 20
+MAX_MOTION_VALUES = 60_000_000
+MAX_BYTES_PER_VALUE = 64
+_CHUNK = 1 << 20
 
 
 class BvhError(UserError):
@@ -59,22 +66,107 @@ class Bvh:
 
 
 def _read_bytes(path):
+    """The file's bytes (inflated where it is gzip), read no further than its header says the motion can take."""
     path = Path(path)
     try:
-        raw = path.read_bytes()
+        with open(path, "rb") as f:
+            gz = f.read(2) == b"\x1f\x8b"
+        f = gzip.open(path, "rb") if gz else open(path, "rb")
     except OSError as e:
         raise BvhError(f"{path}:0: cannot read file ({e.strerror or e})") from None
-    if raw[:2] == b"\x1f\x8b":
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError) as e:
-            raise BvhError(f"{path}:0: corrupt gzip data ({e})") from None
-    if raw[:3] == b"\xef\xbb\xbf":  # UTF-8 byte-order mark
-        raw = raw[3:]
-    return raw
+    try:
+        with f:
+            return _read_bounded(f, str(path))
+    except (OSError, EOFError, zlib.error) as e:
+        if not gz:
+            raise BvhError(f"{path}:0: cannot read file ({e.strerror or e})") from None
+        raise BvhError(f"{path}:0: corrupt gzip data ({e})") from None
 
 
 _MOTION = re.compile(rb"^[ \t]*MOTION(?![^\s])", re.M)
+_CHANNELS = re.compile(rb"\bCHANNELS\s+(\d+)")
+
+
+def _read_bounded(f, name):
+    """Read a BVH stream in chunks: the header first (at most MAX_HEADER_BYTES up to the Frame Time line), then
+    at most what its frames of its channels can take as text. A file that is more, such as a few megabytes of
+    gzip that inflate to gigabytes, is refused once it passes that bound, so memory stays flat."""
+    head, found = _read_head(f, name)
+    if found is not None:
+        budget = found[0]
+        head += f.read(max(budget - len(head), 0) + 1)
+        if len(head) > budget:
+            raise BvhError(
+                f"{name}:0: more data than its header's frames and channels can hold "
+                f"(over {budget / 2**20:.1f} MB of text): refused"
+            )
+    return head
+
+
+def _read_head(f, name):
+    """(bytes read, (byte budget, frame time) or None at the end of the file before the MOTION header is whole)."""
+    head, seen, motion = bytearray(), 0, None  # `seen`: the start of the last line searched, which may go on
+    while True:
+        chunk = f.read(_CHUNK)
+        if not chunk:
+            return head, None
+        if not head and chunk[:3] == b"\xef\xbb\xbf":  # UTF-8 byte-order mark
+            chunk = chunk[3:]
+        head += chunk
+        motion = motion or _find_motion(head, seen)
+        seen = head.rfind(b"\n") + 1
+        found = None if motion is None else _budget(head, name, motion)
+        if found is not None:
+            return head, found
+        if len(head) > MAX_HEADER_BYTES:
+            raise BvhError(
+                f"{name}:0: no whole MOTION header (its MOTION, Frames and Frame Time lines) in the first "
+                f"{MAX_HEADER_BYTES >> 20} MB: not a BVH file"
+            )
+
+
+def _find_motion(head, seen):
+    """The MOTION line at or after the line start `seen`, or None. The line at `seen` is matched where it starts
+    and only whole new lines are searched, so a header of one endless line costs one pass, not one per chunk."""
+    m = _MOTION.match(head, seen)
+    after = head.find(b"\n", seen) + 1
+    return m or (_MOTION.search(head, after) if after else None)
+
+
+def header_fps(path):
+    """A BVH file's frame rate, from its header alone (plain or gzip); BvhError naming the file otherwise."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            gz = f.read(2) == b"\x1f\x8b"
+        with gzip.open(path, "rb") if gz else open(path, "rb") as f:
+            _, found = _read_head(f, str(path))
+    except (OSError, EOFError, zlib.error) as e:
+        raise BvhError(f"{path}:0: cannot read file ({getattr(e, 'strerror', None) or e})") from None
+    if found is None:
+        return read_bvh(path).fps  # a malformed file: the full reader names what is wrong
+    return 1.0 / found[1]
+
+
+def _budget(head, name, m):
+    """(how many bytes the whole file may have, its frame time) once `head` holds the MOTION header that starts at
+    the match `m`; None while it does not yet.
+    The frame and channel counts are checked against MAX_MOTION_VALUES here, before the frames are read."""
+    complete = head[: head.rfind(b"\n") + 1]  # only whole lines: a cut line would read as a malformed one
+    line_no = head.count(b"\n", 0, m.start()) + 1
+    try:
+        cursor, _, n_frames, frames_line, dt = _motion_header(complete, m.end(), line_no, name)
+    except BvhError as e:
+        if "truncated before" in str(e):
+            return None
+        raise
+    n_channels = sum(int(n) for n in _CHANNELS.findall(head, 0, m.start()))
+    if n_frames * n_channels > MAX_MOTION_VALUES:
+        raise BvhError(
+            f"{name}:{frames_line}: {n_frames} frames of {n_channels} channels is more than the limit of "
+            f"{MAX_MOTION_VALUES} values"
+        )
+    return cursor + 1 + n_frames * (n_channels * MAX_BYTES_PER_VALUE + 2) + _CHUNK, dt
 
 
 def _number(tok, where):

@@ -39,89 +39,26 @@ from moglow_eval.core.clip import save_clip
 from moglow_eval.core.tables import C2ST_COLUMNS
 from rendering.camera import framing_camera
 
-from ..data.motion_files import Skeleton, motion_stem, read_motion
+from ..data.motion_files import read_motion
 from ..metrics import c2st
 from ..metrics.objective import any_clip_metrics, find_feet
 from ..motion.features import rotate_y
 from ..stimuli.catch_kinds import make_catch
 from ..stimuli.files import StimuliError, clip_files, manifest_row, prepare_out, summary_text, write_csv, write_tables
 from ..stimuli.render_pool import render_stimuli
-from .study_file import check_joint_names
+from .inputs import (
+    check_same_skeleton,
+    folder_files,
+    match_items,
+    read_all,
+    read_options,
+    seconds_text,
+    with_study_fps,
+)
 
 log = logging.getLogger(__name__)
 TEST, CATCH, TRAINING = study.ROLES
-MIN_SECONDS = 1.0  # a clip shorter than this shows nothing a rater can judge
 ITEM_COLUMNS = ["item", "role", "frames", "fps", "catch"]
-
-
-# ---------------------------------------------------------------- finding the files
-def folder_files(name, folder):
-    """{stem: path} of the motion files in a condition's folder; StimuliError for an empty folder or a stem
-    given twice."""
-    found = {}
-    for p in sorted(Path(folder).iterdir()):
-        stem = motion_stem(p)
-        if stem is None or not p.is_file():
-            continue
-        if stem in found:
-            raise StimuliError(f"{folder}: two files for item {stem}: {found[stem].name} and {p.name}")
-        found[stem] = p
-    if not found:
-        raise StimuliError(f"{folder}: condition {name} has no motion files (.bvh, .bvh.gz, .npy or .npz)")
-    return found
-
-
-def match_items(spec):
-    """{condition: {item: path}} with every condition holding exactly the reference's items."""
-    files = {name: folder_files(name, folder) for name, folder in spec.conditions.items()}
-    items = files[spec.reference]
-    for name, found in files.items():
-        missing = [i for i in items if i not in found]
-        if missing:
-            raise StimuliError(
-                f"{spec.conditions[name]}: no file for item {missing[0]} of the reference "
-                f"({items[missing[0]].name}) in condition {name}"
-            )
-        extra = [i for i in found if i not in items]
-        if extra:
-            raise StimuliError(
-                f"{found[extra[0]]}: item {extra[0]} is not in the reference folder {spec.conditions[spec.reference]}"
-            )
-    return files
-
-
-# ---------------------------------------------------------------- reading and checking
-def read_all(spec, files, progress):
-    """{condition: {item: Motion}}, every file read and checked, skeletons matched across each item."""
-    skeleton = Skeleton.load(spec.skeleton_file) if spec.skeleton_file else None
-    read = dict(fps=spec.fps, units=spec.units, up=spec.up, skeleton=skeleton, source_fps=spec.source_fps)
-    jobs = [(name, item, path) for name, found in files.items() for item, path in found.items()]
-    motions = {name: {} for name in files}
-    with tqdm(jobs, desc="read", unit="file", file=sys.stderr, disable=not progress) as bar:
-        for k, (name, item, path) in enumerate(bar):
-            m = read_motion(path, **read)
-            if k == 0:
-                check_joint_names(spec, m.names, path)
-            if m.seconds < MIN_SECONDS:
-                raise StimuliError(f"{path}: {m.seconds:.2f} s long; a clip needs at least {MIN_SECONDS:g} s")
-            if spec.length_s and m.seconds + 0.5 / spec.fps < spec.length_s:
-                raise StimuliError(
-                    f"{path}: {m.seconds:.2f} s long, shorter than the study's length_s {spec.length_s:g}"
-                )
-            motions[name][item] = m
-    ref = motions[spec.reference]
-    for name, by_item in motions.items():
-        for item, m in by_item.items():
-            r = ref[item]
-            if m.names != r.names or not np.array_equal(m.parents, r.parents):
-                raise StimuliError(
-                    f"{m.path}: skeleton ({_skeleton_text(m)}) differs from {r.path} ({_skeleton_text(r)})"
-                )
-    return motions
-
-
-def _skeleton_text(m):
-    return f"{len(m.names)} joints: {', '.join(m.names[:3])}, ..."
 
 
 def cut_items(motions, spec):
@@ -171,14 +108,16 @@ def prepare_audio(spec, motions, folder):
         path = files.get(item)
         if path is None:
             raise StimuliError(f"{spec.audio_folder}: no audio for item {item} (expected {item}.wav or {item}.flac)")
+        need = len(m.joints) / spec.fps
         try:
-            samples = audio.read_audio(path)
+            samples = audio.read_audio(path, max_seconds=need + 1.0)  # no more is played: no more is decoded
         except RenderError as e:
             raise StimuliError(str(e)) from None
-        need = len(m.joints) / spec.fps
         have = len(samples) / audio.RATE
         if have + 0.5 / spec.fps < need:
-            raise StimuliError(f"{path}: the audio is {have:.2f} s, shorter than the item's clips ({need:.2f} s)")
+            raise StimuliError(
+                f"{path}: the audio is {seconds_text(have)}, shorter than the item's clips ({need:.2f} s)"
+            )
         span = samples[: int(round(need * audio.RATE))].astype(np.float32)
         if audio.rms_dbfs(span) < audio.SILENCE_DBFS:
             raise StimuliError(f"{path}: silent over the clip's {need:.2f} s, where the study needs speech or music")
@@ -250,19 +189,11 @@ def catch_clips(spec, motions, catch_items, progress):
     if spec.catch_folder:
         files = folder_files(study.CATCH, spec.catch_folder)
         for item in catch_items:
-            m = read_motion(
-                files[item],
-                spec.fps,
-                spec.units,
-                spec.up,
-                source_fps=spec.source_fps,
-                skeleton=Skeleton.load(spec.skeleton_file) if spec.skeleton_file else None,
-            )
-            if m.names != ref[item].names:
-                raise StimuliError(f"{m.path}: skeleton differs from {ref[item].path}")
+            m = read_motion(files[item], **read_options(spec))
+            check_same_skeleton(m, ref[item])
             n = len(ref[item].joints)
             if len(m.joints) < n:
-                raise StimuliError(f"{m.path}: {m.seconds:.2f} s long, shorter than the item's other clips")
+                raise StimuliError(f"{m.path}: {seconds_text(m.seconds)} long, shorter than the item's other clips")
             out[item] = (m.joints[:n], "own")
         return out
     for k, item in enumerate(catch_items):
@@ -426,6 +357,7 @@ def build_study(spec, out, size, preset, workers, force, progress):
     """
     t0 = time.perf_counter()
     files = match_items(spec)
+    spec = with_study_fps(spec, files)
     n_catch, own_catch = _catch_items(spec, files[spec.reference])
     motions = read_all(spec, files, progress)
     motions = {(study.NATURAL if n == spec.reference else n): m for n, m in motions.items()}

@@ -2,6 +2,7 @@
 
     reference = "NAT"            # the condition that holds the real motion
     length_s = 8                 # optional: keep the first length_s seconds of every clip
+    fps = 30                     # optional: the study's frame rate (else the reference's, up to 60)
     seed = 1
     n_training = 3               # familiarisation items, taken out of the test items
     design = "appropriateness"   # optional: also make each system's mismatched clips (GENEA 2023's design)
@@ -23,6 +24,8 @@
     thin = "auto"                # finger and face joints drawn thinner ("auto"), or a list of names, or []
     feet = "auto"                # foot joints for foot skating: "auto" (from names) or a list of names
     fps = 30                     # the frame rate of .npy arrays (BVH and .npz files carry their own)
+    smpl_model = "models/SMPLX_NEUTRAL.npz"  # the body model for SMPL-family .npz files (poses, trans, betas)
+    smpl_type = "smplx"          # optional: smpl, smplh or smplx (else told from the model's joints)
 
 Relative paths are relative to the file. Command-line flags override the top-level keys. Every problem is one
 StudyFileError naming the file and key.
@@ -37,6 +40,7 @@ from moglow_eval.core import study
 from moglow_eval.core.cli import UserError
 
 from ..data.motion_files import UNITS, UPS
+from ..data.smpl_files import TYPES as SMPL_TYPES
 from ..stimuli.catch_kinds import KINDS as CATCH_KINDS
 
 NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,31}$")
@@ -44,9 +48,9 @@ TOP_KEYS = {"reference", "length_s", "seed", "n_training", "fps", "design", "con
 STIMULUS_DESIGNS = ("appropriateness",)  # designs that need stimuli of their own (mismatched clips)
 AUDIO_KEYS = {"folder", "loudness"}
 CATCH_KEYS = {"make", "n", "folder"}
-SKELETON_KEYS = {"file", "units", "up", "hide", "thin", "feet", "fps"}
+SKELETON_KEYS = {"file", "units", "up", "hide", "thin", "feet", "fps", "smpl_model", "smpl_type"}
 MAX_LENGTH_S = 600.0
-DEFAULT_FPS = 20.0  # the frame rate every clip is resampled to, as the built-in study's
+MAX_DEFAULT_FPS = 60.0  # without `fps`, clips keep the reference's frame rate, up to this (a video's usual most)
 
 
 class StudyFileError(UserError):
@@ -61,7 +65,7 @@ class StudySpec:
     seed: int = 0
     n_training: int = 1
     length_s: float | None = None
-    fps: float = DEFAULT_FPS
+    fps: float | None = None  # None: the reference's frame rate, up to MAX_DEFAULT_FPS (inputs.study_fps)
     catch_make: list = field(default_factory=lambda: ["jitter", "freeze"])
     catch_n: int = 4
     catch_folder: Path | None = None
@@ -72,6 +76,8 @@ class StudySpec:
     thin: object = "auto"
     feet: object = "auto"
     source_fps: float | None = None
+    smpl_model: Path | None = None
+    smpl_type: str | None = None
     design: str | None = None
     audio_folder: Path | None = None
     loudness: float = -23.0
@@ -245,6 +251,20 @@ def _skeleton(path, table, spec):
         )
     if "fps" in table:
         spec.source_fps = _number(path, "[skeleton] fps", table["fps"], 1, 1000)
+    _smpl(path, table, spec)
+
+
+def _smpl(path, table, spec):
+    """[skeleton] smpl_model and smpl_type: the user's body model for SMPL-family parameter files."""
+    if "smpl_model" in table:
+        f = table["smpl_model"]
+        if not isinstance(f, str) or not (path.parent / f).is_file():
+            raise _err(path, "[skeleton] smpl_model", f"file {path.parent / str(f)} not found")
+        spec.smpl_model = path.parent / f
+    if "smpl_type" in table:
+        if table["smpl_type"] not in SMPL_TYPES:
+            raise _err(path, "[skeleton] smpl_type", f"must be {', '.join(SMPL_TYPES)}, got {table['smpl_type']!r}")
+        spec.smpl_type = table["smpl_type"]
 
 
 def _audio(path, table, spec):

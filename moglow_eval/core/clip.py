@@ -20,6 +20,7 @@ MIN_FPS, MAX_FPS = 1.0, 1000.0  # frames per second of any clip or motion file
 MAX_FRAMES = 500_000  # about 7 hours at 20 fps
 MAX_JOINTS = 1000
 MAX_COORD_M = 1e5  # |coordinate| in metres
+MAX_NPZ_BYTES = 1 << 30  # what the arrays of one .npz (or one .npy) may hold, 1 GiB, judged from their headers
 
 
 # What numpy and zipfile raise on a damaged archive: its own types do not cover deflate and header errors.
@@ -68,8 +69,9 @@ def check_joints(joints, where):
         raise ClipError(f"{where}: a joint coordinate exceeds {MAX_COORD_M:g} m (wrong --scale?)")
 
 
-def check_skeleton(parents, n_joints, where):
-    """Integer parent indices, -1 for roots, each naming another joint of the clip."""
+def check_skeleton(parents, n_joints, where, names=None):
+    """Integer parent indices, -1 for roots, each naming another joint of the clip, forming a tree (no cycle);
+    `names`, where given, name the joints of a cycle in the error."""
     parents = np.asarray(parents)
     if parents.dtype.kind not in "iu":
         raise ClipError(f"{where}: 'parents' must be integers, got {parents.dtype}")
@@ -80,7 +82,29 @@ def check_skeleton(parents, n_joints, where):
         raise ClipError(
             f"{where}: joint {bad[0]} has parent {parents[bad[0]]}, not -1 or another of the {n_joints} joints"
         )
+    loop = _cycle(parents)
+    if loop:
+        text = " -> ".join(str(j) if names is None else str(names[j]) for j in loop)
+        raise ClipError(f"{where}: the skeleton is not a tree: its parents form a cycle ({text})")
     return parents.astype(np.int64)
+
+
+def _cycle(parents):
+    """The joints of a cycle in `parents`, the first repeated at the end, or [] when every chain reaches a root.
+
+    Each joint is walked up once: a walk that meets a joint it has already passed is in a cycle, and a joint whose
+    root is known stops later walks, so the whole check is linear in the number of joints."""
+    state = np.zeros(len(parents), np.int8)  # 0 not seen, 1 on the current walk, 2 reaches a root
+    for start in range(len(parents)):
+        walk, j = [], start
+        while j >= 0 and state[j] == 0:
+            state[j] = 1
+            walk.append(j)
+            j = int(parents[j])
+        if j >= 0 and state[j] == 1:
+            return [*walk[walk.index(j) :], j]
+        state[walk] = 2
+    return []
 
 
 def clip_path(path):
@@ -120,8 +144,38 @@ def first_line(exc):
     return text.splitlines()[0] if text else type(exc).__name__
 
 
+_HEADER_READERS = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}
+
+
+def npz_headers(path, limit=MAX_NPZ_BYTES):
+    """{name: (shape, dtype)} of the arrays of an .npz, from each member's .npy header alone; ClipError naming the
+    file when they would hold more than `limit` bytes in all (None: no limit, for a look at the names). numpy
+    allocates an array whole from its header before it inflates the data, so a small archive with a hostile header
+    would otherwise ask for any amount of memory."""
+    out, total = {}, 0
+    try:
+        with zipfile.ZipFile(path) as z:
+            for info in z.infolist():
+                if not info.filename.endswith(".npy"):
+                    continue
+                with z.open(info) as f:
+                    version = np.lib.format.read_magic(f)
+                    if version not in _HEADER_READERS:
+                        raise ClipError(f"{path}: member {info.filename} has .npy format version {version}")
+                    shape, _, dtype = _HEADER_READERS[version](f)
+                out[info.filename[:-4]] = (shape, dtype)
+                total += int(np.prod(shape, dtype=object)) * dtype.itemsize
+    except NPZ_READ_ERRORS as e:
+        raise ClipError(f"{path}: not a readable .npz file ({first_line(e)})") from None
+    if limit is not None and total > limit:
+        raise ClipError(f"{path}: its arrays would take {total / 2**20:.0f} MiB, over the limit of {limit >> 20} MiB")
+    return out
+
+
 def load_clip(path):
     """Read and check a clip .npz; returns a dict with at least joints, parents, joint_names, fps."""
+    if zipfile.is_zipfile(path):
+        npz_headers(path)
     try:
         f = np.load(path, allow_pickle=False)
     except NPZ_READ_ERRORS as e:
@@ -146,9 +200,9 @@ def load_clip(path):
         raise ClipError(f"{path}: {j.shape[1]} joints is more than the limit of {MAX_JOINTS}")
     d["joints"] = j.astype(np.float32)
     check_joints(d["joints"], path)
-    d["parents"] = check_skeleton(d["parents"], j.shape[1], path)
     if d["joint_names"].shape != (j.shape[1],):
         raise ClipError(f"{path}: 'joint_names' must have J={j.shape[1]} entries")
+    d["parents"] = check_skeleton(d["parents"], j.shape[1], path, d["joint_names"])
     if "control" in d and d["control"].shape != (j.shape[0], 3):
         raise ClipError(f"{path}: 'control' must be [T, 3], got {d['control'].shape}")
     if d["fps"].shape != ():

@@ -1,0 +1,148 @@
+"""The inputs of a study of your own motion: the condition folders' files, matched by item, read and checked.
+
+Every file is read and checked before anything is written (generation.own_study.builder): items in every
+condition, one skeleton per item, no NaN, a person's height, long enough. The study's frame rate is settled first:
+the study file's `fps`, or else the reference's own, up to MAX_DEFAULT_FPS. Each problem is one line naming the
+file.
+"""
+
+import dataclasses
+import logging
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from ..data.motion_files import Skeleton, motion_stem, native_fps, read_motion
+from ..stimuli.files import StimuliError
+from .study_file import MAX_DEFAULT_FPS, check_joint_names
+
+log = logging.getLogger(__name__)
+MIN_SECONDS = 1.0  # a clip shorter than this shows nothing a rater can judge
+MIN_FPS = 5.0  # the lowest frame rate a study file may set, kept when the reference's own is lower
+
+
+def seconds_text(seconds):
+    """A length to two decimals, rounded down: a clip 0.999 s long is "0.99 s", never the "1.00 s" it falls short
+    of."""
+    return f"{math.floor(seconds * 100 + 1e-9) / 100:.2f} s"
+
+
+def with_study_fps(spec, files):
+    """The spec with its frame rate settled: the study file's `fps`, else the highest of the reference files' own
+    rates (read from their headers), at most MAX_DEFAULT_FPS, so that motion captured at 30 fps stays at 30."""
+    if spec.fps is not None:
+        return spec
+    rates = [native_fps(p, spec.source_fps) for p in files[spec.reference].values()]
+    fps = min(max(max(rates), MIN_FPS), MAX_DEFAULT_FPS)
+    log.info(f"study: {fps:g} fps, the reference's frame rate (set fps in the study file to change it)")
+    return dataclasses.replace(spec, fps=fps)
+
+
+def read_options(spec):
+    """read_motion's keyword arguments for this study's files."""
+    skeleton = Skeleton.load(spec.skeleton_file) if spec.skeleton_file else None
+    return dict(
+        fps=spec.fps,
+        units=spec.units,
+        up=spec.up,
+        skeleton=skeleton,
+        source_fps=spec.source_fps,
+        smpl_model=spec.smpl_model,
+        smpl_type=spec.smpl_type,
+    )
+
+
+def folder_files(name, folder):
+    """{stem: path} of the motion files in a condition's folder; StimuliError for an empty folder or a stem
+    given twice."""
+    found = {}
+    for p in sorted(Path(folder).iterdir()):
+        stem = motion_stem(p)
+        if stem is None or not p.is_file():
+            continue
+        if stem in found:
+            raise StimuliError(f"{folder}: two files for item {stem}: {found[stem].name} and {p.name}")
+        found[stem] = p
+    if not found:
+        raise StimuliError(f"{folder}: condition {name} has no motion files (.bvh, .bvh.gz, .npy or .npz)")
+    return found
+
+
+def match_items(spec):
+    """{condition: {item: path}} with every condition holding exactly the reference's items."""
+    files = {name: folder_files(name, folder) for name, folder in spec.conditions.items()}
+    items = files[spec.reference]
+    for name, found in files.items():
+        missing = [i for i in items if i not in found]
+        if missing:
+            raise StimuliError(
+                f"{spec.conditions[name]}: no file for item {missing[0]} of the reference "
+                f"({items[missing[0]].name}) in condition {name}"
+            )
+        extra = [i for i in found if i not in items]
+        if extra:
+            raise StimuliError(
+                f"{found[extra[0]]}: item {extra[0]} is not in the reference folder {spec.conditions[spec.reference]}"
+            )
+    return files
+
+
+# ---------------------------------------------------------------- reading and checking
+def read_all(spec, files, progress):
+    """{condition: {item: Motion}}, every file read and checked, skeletons matched across each item."""
+    read = read_options(spec)
+    jobs = [(name, item, path) for name, found in files.items() for item, path in found.items()]
+    motions = {name: {} for name in files}
+    with tqdm(jobs, desc="read", unit="file", file=sys.stderr, disable=not progress) as bar:
+        for k, (name, item, path) in enumerate(bar):
+            m = read_motion(path, **read)
+            if k == 0:
+                check_joint_names(spec, m.names, path)
+            if m.seconds < MIN_SECONDS:
+                raise StimuliError(f"{path}: {seconds_text(m.seconds)} long; a clip needs at least {MIN_SECONDS:g} s")
+            if spec.length_s and m.seconds + 0.5 / spec.fps < spec.length_s:
+                raise StimuliError(
+                    f"{path}: {seconds_text(m.seconds)} long, shorter than the study's length_s {spec.length_s:g}"
+                )
+            motions[name][item] = m
+    ref = motions[spec.reference]
+    for by_item in motions.values():
+        for item, m in by_item.items():
+            check_same_skeleton(m, ref[item])
+    return motions
+
+
+def check_same_skeleton(m, ref):
+    """StimuliError naming both files and what differs: the joints each has that the other lacks, else the first
+    joint whose place (order or parent) differs."""
+    if m.names == ref.names and np.array_equal(m.parents, ref.parents):
+        return
+    in_m, in_ref = set(m.names), set(ref.names)
+    only_m = [n for n in m.names if n not in in_ref]
+    only_ref = [n for n in ref.names if n not in in_m]
+    if only_m or only_ref:
+        what = "; ".join(
+            f"{_joint_list(names)} only in {'/'.join(Path(where).parts[-2:])}"
+            for names, where in ((only_m, m.path), (only_ref, ref.path))
+            if names
+        )
+    else:
+        j = next(j for j, (a, b) in enumerate(zip(m.names, ref.names)) if a != b or _parent(m, j) != _parent(ref, j))
+        what = (
+            f"the same {len(m.names)} joints, but joint {j} is {m.names[j]} (parent {_parent(m, j)}) here and "
+            f"{ref.names[j]} (parent {_parent(ref, j)}) there"
+        )
+    raise StimuliError(f"{m.path}: skeleton differs from {ref.path}: {what}")
+
+
+def _parent(m, j):
+    p = int(m.parents[j])
+    return "none" if p < 0 else m.names[p]
+
+
+def _joint_list(names, most=8):
+    shown = ", ".join(names[:most])
+    return f"{len(names)} joint{'s' if len(names) > 1 else ''} ({shown}{', ...' if len(names) > most else ''})"
