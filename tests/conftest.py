@@ -2,8 +2,9 @@
 
 The fast tier, `python -m pytest -m "not full"`, needs nothing beside the checkout: no ../shared, no PostgreSQL,
 no browser. The full tier (`python -m pytest`, what CI runs) adds every test that reads the real data in ../shared
-(CONTRACTS.md, data/README.md), talks to PostgreSQL, drives a browser or makes a full-size run; those are marked
-`full` here, from their markers and the fixtures they use, so a new test lands in the right tier by itself.
+(CONTRACTS.md, data/README.md), talks to PostgreSQL, drives a browser, runs a crowd against a served app or
+makes a full-size run; those are marked `full` here, from their markers and the fixtures they use, so a new test
+lands in the right tier by itself (a long test without such a fixture says `@pytest.mark.full` itself).
 Torch and PostgreSQL start only in the fixtures and tests that need them. Shared helpers: tests/helpers/.
 """
 

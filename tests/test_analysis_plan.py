@@ -67,6 +67,7 @@ def test_planned_power_matches_observed_rejection_rate():
     check_planner(500, 4000, 0.05)
 
 
+@pytest.mark.full  # the full tier: a power simulation against simulated studies
 def test_planned_power_matches_observed_rejection_rate_short():
     """The CI variant: 200 studies (Monte Carlo SD of the observed rate ~0.03), bound ±0.10 -- still tight
     enough to catch a planner that left the clip variance out (test_clip_variance_matters)."""
@@ -145,6 +146,7 @@ def test_plan_cli_writes_curve_and_table(tmp_path):
         ([], "error: give a pilot ratings file"),
     ],
 )
+@pytest.mark.full  # the full tier: the planner's command per bad flag
 def test_plan_cli_errors_are_one_line(tmp_path, args, start):
     proc = subprocess.run(
         [sys.executable, "-m", "analysis.plan", *args, "--out", str(tmp_path), "--quiet"],

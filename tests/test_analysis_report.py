@@ -404,6 +404,7 @@ def _with_target(tmp_path, value):
     return path
 
 
+@pytest.mark.full  # the full tier: two whole reports
 def test_an_export_from_fewer_raters_than_its_target_is_noted_and_one_from_enough_is_not(tmp_path, capsys):
     n = json.loads((DATA / "expected_stats.json").read_text())["n_raters_total"]
     for target, noted in ((n + 40, True), (n, False)):

@@ -61,6 +61,7 @@ def export(url, out):
     return out.read_bytes()
 
 
+@pytest.mark.full  # the full tier: a crowd while the study is backed up
 def test_a_backup_of_a_running_study_restores_to_the_same_export(databases, tmp_path):
     live, mid, end = databases
     manifest = write_fake_stimuli(tmp_path / "stimuli", n_items=6)

@@ -13,6 +13,8 @@ from rating_app.designs import build_units
 from rating_app.health import catch_pool_warning
 from rating_app.manifest import load_manifest
 
+pytestmark = pytest.mark.full  # the full tier: crowds drawing from catch pools
+
 # The production settings of docs/hosting.md: 30 of 90 test units per rater (pairwise: 30 items x 3 pairs;
 # parallel: 30 pages, 10 per rater), 20 answers per unit; 12 catch items with 4 per rater give catch units the same
 # third of raters.

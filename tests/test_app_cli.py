@@ -57,6 +57,7 @@ def live(app_stimuli, app_db_url):
     app_engine(app).dispose()
 
 
+@pytest.mark.full  # the full tier: a crowd against a served app
 def test_simulated_crowd_matches_export(live, app_stimuli, tmp_path):
     url, db = live
     out = tmp_path / "summary.json"
@@ -109,6 +110,7 @@ def test_simulated_crowd_matches_export(live, app_stimuli, tmp_path):
     assert json.loads(r.stdout)["n_ratings"] == 0
 
 
+@pytest.mark.full  # the full tier: a served app per bad flag
 def test_simulate_arg_errors(app_stimuli, tmp_path):
     url = "http://127.0.0.1:9"
     bad_metrics = tmp_path / "stimuli"

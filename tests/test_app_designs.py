@@ -307,6 +307,7 @@ def test_parallel_bad_input(make, stimuli):
     "design,units,per_rater",
     [("acr", 90, 30), ("pairwise", 90, 30), ("parallel", 30, 10), ("appropriateness", 90, 30)],
 )
+@pytest.mark.full  # the full tier: crowds through every design
 def test_targets_reached_exactly_with_fewest_raters(make, big_stimuli, design, units, per_rater):
     clips = clips_of(big_stimuli)
     target = 2
@@ -344,6 +345,7 @@ def check_exact(c, clips, design, units, target):
     assert len(counts) == units and set(counts.values()) == {target}, collections.Counter(counts.values())
 
 
+@pytest.mark.full  # the full tier: concurrent crowds
 @pytest.mark.parametrize("design,units", [("acr", 90), ("pairwise", 90), ("parallel", 30), ("appropriateness", 90)])
 def test_targets_exact_under_concurrent_sessions(make, big_stimuli, design, units):
     clips = clips_of(big_stimuli)
@@ -450,6 +452,7 @@ def test_acr_never_serves_the_nat_reference_of_a_catch_item(make, stimuli):
 
 
 # ------------------------------------------------------------------------------------------------- simulated crowd
+@pytest.mark.full  # the full tier: a crowd per design
 @pytest.mark.parametrize("design", ["pairwise", "parallel"])
 def test_simulated_crowd_answers_each_design_as_the_page_does(stimuli, app_db_url, tmp_path, design):
     """The crowd fetches every clip, waits as the server requires (10% here) and answers the design; what it

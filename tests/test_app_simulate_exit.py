@@ -14,6 +14,8 @@ from helpers.fake_stimuli import free_port
 from rating_app import create_app
 from rating_app.db import app_engine
 
+pytestmark = pytest.mark.full  # the full tier: served apps and crowds that fall short
+
 ROOT = Path(__file__).resolve().parents[1]
 
 

@@ -108,6 +108,7 @@ BAD = [
 ]
 
 
+@pytest.mark.full  # the full tier: a served app started per bad file
 @pytest.mark.parametrize("text, message", BAD, ids=[m.split(":")[0] for _, m in BAD])
 def test_a_bad_study_file_is_one_line_naming_the_key(study_dir, text, message):
     bad = study_dir / "bad.toml"

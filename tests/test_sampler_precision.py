@@ -107,6 +107,7 @@ def test_the_cache_is_kept_per_cpu_model_flags_and_torch_version(tmp_path):
     )
 
 
+@pytest.mark.full  # the full tier: the shipped MG timed and its quality guard run
 def test_the_shipped_mgs_measurement_and_guard_run_as_the_pick_calls_them():
     """What pretrained.sampler_precision hands the pick, on the shipped MG: both precisions timed (their values are
     bench/'s business), and the quality guard's figures in bfloat16 holding, as bench/RESULTS.md records."""
