@@ -7,6 +7,7 @@ import zipfile
 
 import numpy as np
 import pytest
+from helpers.cli import one_line_error
 from helpers.paths import ROOT, TEST_DATA
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -31,19 +32,6 @@ def real_clip(tmp_path_factory, take_text):
     (folder / "take.bvh").write_text(take_text)
     import_motion.import_motion(folder / "take.bvh", folder / "take.npz")
     return folder / "take.npz"
-
-
-def one_line_error(main, argv, capsys):
-    """Run a CLI's main in-process; returns (exit code, stderr). argparse's exit counts as a return."""
-    try:
-        code = main(argv)
-    except SystemExit as e:
-        code = e.code
-    err = capsys.readouterr().err
-    assert "Traceback" not in err
-    lines = [line for line in err.splitlines() if line.strip() and not line.startswith("note:")]
-    assert len(lines) == 1 and lines[0].startswith("error: "), err
-    return code, lines[0]
 
 
 # ------------------------------------------------------------------ import_motion

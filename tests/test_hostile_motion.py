@@ -15,6 +15,7 @@ import zlib
 import numpy as np
 import pytest
 from helpers.bvh_fixtures import write_family, write_family_study
+from helpers.cli import fails_with
 
 from generation.data.motion_files import Motion, MotionError, Skeleton, read_motion
 from generation.make_stimuli import main as make_stimuli
@@ -27,11 +28,7 @@ FLAT = 64 << 20  # the most a refused file may make the reader hold (bytes), far
 
 
 def _fails(argv, capsys, needle):
-    capsys.readouterr()
-    assert make_stimuli(argv) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and needle in err[0], err
-    return err[0]
+    return fails_with(make_stimuli, argv, capsys, needle)
 
 
 def _peak(fn, *args, **kw):

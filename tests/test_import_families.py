@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from helpers import smpl_fixtures
 from helpers.bvh_fixtures import CMU_UNIT, FAMILIES, write_family, write_family_study, write_zeroeggs
+from helpers.cli import fails_with
 
 from generation.data.motion_files import MotionError, read_motion
 from generation.data.skeleton_families import family
@@ -36,11 +37,7 @@ def _rows(path):
 
 
 def _fails(argv, capsys, needle):
-    capsys.readouterr()
-    assert make_stimuli(argv) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and needle in err[0], err
-    return err[0]
+    return fails_with(make_stimuli, argv, capsys, needle)
 
 
 # ---------------------------------------------------------------- units with units = "auto"
