@@ -18,7 +18,8 @@
    reference of the pairwise and parallel catch trials, MG and FL fill a parallel catch page to a test page's
    size; an acr study shows only BAD); each training item in every condition
    except BAD. Every clip is placed to start at the origin facing +Z.
-5. Videos (in parallel, one process per core), contact sheets, metrics.csv, manifest.csv, items.csv.
+5. Videos (in parallel, one process per core), contact sheets, metrics.csv, fmd.csv, c2st.csv and
+   c2st_features.csv (the classifier two-sample test, and what tells each condition apart), manifest.csv, items.csv.
 """
 
 import argparse
@@ -39,6 +40,7 @@ from rendering.render import size_flag
 from .data.dataset import read_heldout
 from .data.systems import canonical_placement, find_system_files, load_system_motion, parse_system_spec
 from .metrics import c2st
+from .metrics.c2st_features import FEATURE_COLUMNS, feature_table
 from .metrics.objective import clip_metrics
 from .motion import invariants, skeleton
 from .motion.features import to_features, to_world
@@ -167,7 +169,8 @@ def sample_clips(args, dataset, items, arrays):
 
 
 def write_clips(out, clips, items, arrays, fps, args, forbidden):
-    """Clip files, manifest and metrics rows, render jobs and the test clips' root-frame poses (for the FMD).
+    """Clip files, manifest and metrics rows, render jobs, the test clips' root-frame poses (for the FMD) and their
+    C2ST features (c2st.collect).
 
     Clips are written (and rendered) in a random order, so that nothing about the files (creation order, inode
     numbers) follows the condition; ids are random and never contain a condition name (`forbidden`)."""
@@ -189,7 +192,7 @@ def write_clips(out, clips, items, arrays, fps, args, forbidden):
         if it["role"] == TEST:
             poses.setdefault(cond, []).append((to_features(joints, fps)[0], it["category"]))
         c2st.collect(feats, cond, it["role"], it["id"], joints, fps, skeleton.PARENTS)
-    return manifest, metrics_rows, jobs, poses, c2st.c2st_table(feats)
+    return manifest, metrics_rows, jobs, poses, feats
 
 
 def run(args):
@@ -220,12 +223,14 @@ def run(args):
     clips = sample_clips(args, dataset, items, arrays)
     for name, motions in imported.items():
         clips += [(name, k, joints, "") for k, joints in motions.items()]
-    manifest, metrics_rows, jobs, poses, c2st_rows = write_clips(
+    manifest, metrics_rows, jobs, poses, feats = write_clips(
         out, clips, items, arrays, fps, args, [*study.RESERVED, *systems]
     )
     render_stimuli(jobs, args.workers, args.progress)
     fmd = condition_fmd(poses)
-    write_csv(Path(out) / "c2st.csv", C2ST_COLUMNS, c2st_rows)
+    c2st_rows = (c2st.c2st_table(feats), feature_table(feats, skeleton.JOINT_NAMES, skeleton.PARENTS))
+    write_csv(Path(out) / "c2st.csv", C2ST_COLUMNS, c2st_rows[0])
+    write_csv(Path(out) / "c2st_features.csv", FEATURE_COLUMNS, c2st_rows[1])
     write_tables(out, manifest, metrics_rows, fmd)
     write_items(out, items, arrays, fps)
     print_summary(out, manifest, metrics_rows, fmd, c2st_rows, time.perf_counter() - t0)
