@@ -58,3 +58,14 @@ def test_a_sample_loses_its_drift_and_nothing_else(heldout):
 def test_the_hips_of_the_features_are_joint_0_in_the_shipped_skeleton():
     names = read_arrays(pretrained.HELDOUT, ["joint_names"])["joint_names"]
     assert [str(names[d // 3]) for d in invariants.HIPS_XZ] == ["Hips", "Hips"] == [skeleton.JOINT_NAMES[0]] * 2
+
+
+def test_the_command_names_the_invariants_of_a_dataset_and_refuses_one_without_training_windows(
+    heldout, tmp_path, capsys
+):
+    data = tmp_path / "dataset.npz"
+    np.savez(data, train_x=heldout[0][:40])
+    assert invariants.main([str(data)]) == 0
+    assert capsys.readouterr().out.splitlines()[1:] == ["  0: Hips x = 0", "  2: Hips z = 0"]
+    assert invariants.main([str(pretrained.HELDOUT)]) == 2
+    assert "no train_x" in capsys.readouterr().err

@@ -10,7 +10,8 @@ keeps the hips where they are). `make_stimuli` records both steps in the manifes
 quality guard.
 
 `constant_dims` is the check over the training set that finds such invariants: the feature dimensions that hold
-one value (to float tolerance) in every frame of every window. On the Bandai-Namco training windows it finds the
+one value (to float tolerance) in every frame of every window (`python -m generation.motion.invariants
+runs/dataset.npz`). On the Bandai-Namco training windows it finds the
 hips' x and z and nothing else. The models keep spending likelihood on those two dimensions; dropping them from
 the model, or conditioning on them, would need retraining (bench/RESULTS.md#model-realism).
 
@@ -21,9 +22,13 @@ samples move them); and the heading of the root is the smoothed heading of the p
 (features.root_trajectory), so a pose turned against its root is a tell as well (bench/RESULTS.md#c2st).
 """
 
+import sys
+
 import numpy as np
 
-from . import rigid
+from moglow_eval.core import cli
+
+from . import rigid, skeleton
 
 ROOT_HIPS = "root_hips"  # the manifest's postprocess step that puts the hips back on the root
 HIPS_XZ = (0, 2)  # feature dimensions of the hips' x and z in the root frame (joint 0 is the hips)
@@ -38,7 +43,7 @@ def constant_dims(x, tolerance=TOLERANCE):
     if not len(flat):
         raise ValueError("constant_dims: no frames")
     lo, hi = flat.min(0), flat.max(0)
-    return {int(d): float((lo[d] + hi[d]) / 2) for d in np.flatnonzero(hi - lo <= tolerance)}
+    return {int(d): float((lo[d] + hi[d]) / 2) + 0.0 for d in np.flatnonzero(hi - lo <= tolerance)}  # no -0
 
 
 def hold(x, constants):
@@ -60,3 +65,29 @@ def fit_to_actor(x, history):
     read from its real history [B, tau, 63]: what make_stimuli ships for MG and FL (POSTPROCESS), and what the
     quality guard measures."""
     return rigid.fit_to_history(root_hips(x), history)
+
+
+def build_parser():
+    """The command's argument parser: python -m generation.motion.invariants [DATASET.npz]."""
+    ap = cli.ArgumentParser(prog="python -m generation.motion.invariants", description=__doc__.split("\n")[0])
+    ap.add_argument("dataset", nargs="?", default="runs/dataset.npz", help="prepared data (default runs/dataset.npz)")
+    return ap
+
+
+def _main(argv):
+    path = build_parser().parse_args(argv).dataset
+    with np.load(path) as d:
+        if "train_x" not in d.files:
+            raise cli.UserError(f"{path}: no train_x (a dataset of generation.data.prepare, CONTRACTS §2)")
+        x = d["train_x"]
+    print(f"{path}: {len(x)} training windows; the features held at one value (to {TOLERANCE:g} m):")
+    for dim, value in constant_dims(x).items():
+        print(f"  {dim}: {skeleton.JOINT_NAMES[dim // 3]} {'xyz'[dim % 3]} = {value:g}")
+
+
+def main(argv=None):
+    return cli.run(_main, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
