@@ -14,9 +14,11 @@ invariants.fit_to_actor) or as they shipped before (`--post rigid`: the bones on
   over the window: what the independent test read, where the hips' x and z in the root frame told every window);
 - a small 1-D CNN (two convolutions, global average pooling) on the standardised root-frame sequences [T, 63],
   trained per fold with `--cnn-seeds` initialisations.
-Printed as mean (sd) over the sample seeds. With --contacts: per locomotion category, the share of frames with a
-foot in contact (a foot within 1 cm of its lowest height, objective.foot_contacts' rule without its fallback), and
-the foot skating (m/s) of NAT, MG and FL, medians over windows.
+Printed as mean (sd) over the sample seeds, after the floor: NAT's takes split in two at random (`--seeds 0`: the
+floor alone). With --contacts: per locomotion category, the share of frames with a
+foot in contact (a foot within 1 cm of its lowest height, objective.foot_contacts' rule without its fallback), the
+foot skating (m/s) and how high a slow foot sits above its lowest point (cm) for NAT, MG and FL, medians over
+windows.
 """
 
 import argparse
@@ -53,7 +55,9 @@ def logistic_auc(x, y, takes, seed=0):
 
 
 def frame_features(x):
-    """Per window, each root-frame feature's mean and log spread over the window: [N, 2 * 63]."""
+    """Per window, each root-frame feature's mean and log spread over the window: [N, 2 * 63], in float64 whatever
+    x's precision (a single feature's AUC reads ranks, so log(EPS) in float32 against float64 would tell them apart)."""
+    x = np.asarray(x, dtype=np.float64)
     return np.concatenate([x.mean(1), np.log(x.std(1) + c2st.EPS)], axis=1)
 
 
@@ -124,6 +128,21 @@ def one_sample(nat, sample, c, takes, names, groups, cnn_seeds):
     return out
 
 
+def floor(x, c, takes, splits=10):
+    """The floor: NAT's takes split at random into two halves, labelled as two conditions; the logistic
+    regressions' AUCs (project features, root-frame statistics), mean (sd) over `splits` splits."""
+    feats = np.array([c2st.clip_features(w, 20.0, skeleton.PARENTS) for w in to_world(x, c)])
+    frames, names = frame_features(x), np.unique(takes)
+    aucs = {"project C2ST": [], "root-frame statistics": []}
+    for s in range(splits):
+        half = set(names[np.random.default_rng(1000 + s).permutation(len(names))[: len(names) // 2]])
+        y = np.array([t in half for t in takes], dtype=float)
+        aucs["project C2ST"].append(logistic_auc(feats, y, takes, seed=s))
+        aucs["root-frame statistics"].append(logistic_auc(frames, y, takes, seed=s))
+    words = [f"{k} {np.mean(v):.3f} (sd {np.std(v):.3f})" for k, v in aucs.items()]
+    print("NAT split in two by take: " + "; ".join(words))
+
+
 def report(name, runs):
     """Print a model's figures: mean (sd) over sample seeds, and its strongest single features."""
     print(f"\n{name} ({len(runs)} sample seeds): AUC, mean (sd) over seeds")
@@ -137,21 +156,35 @@ def report(name, runs):
         print(f"  strongest {key}: " + "; ".join(f"{n} {a:.3f}" for n, a in top))
 
 
+def stance_height(joints, fps=20.0, slow=0.3):
+    """Median height (cm) of a foot above its lowest point in the clip over the frames where it moves slower than
+    `slow` m/s horizontally (a planted foot, by its own speed): real feet sit on the floor, about 0."""
+    heights = []
+    for pair in np.asarray(skeleton.FEET).reshape(-1, 2):
+        y = joints[:, pair, 1]
+        rel = (y - y.min(0)).max(-1)[1:]
+        speed = np.linalg.norm(np.diff(joints[:, pair][..., [0, 2]], axis=0), axis=-1).mean(-1) * fps
+        heights.append(rel[speed < slow])
+    return float(np.median(np.concatenate(heights)) * 100)
+
+
 def contacts(worlds, labels, fps=20.0):
-    """Per category and system: share of frames with a foot down (no fallback) and foot skating, medians."""
-    print("\n| category | n | " + " | ".join(f"{s} contact share" for s in worlds) + " | ", end="")
-    print(" | ".join(f"{s} skating m/s" for s in worlds) + " |")
-    print("|" + "---|" * (2 + 2 * len(worlds)))
+    """Per category and system, medians over windows: the share of frames with a foot down (no fallback), the foot
+    skating, and the height of the slow feet above their lowest point."""
+    heads = ("contact share", "skating m/s", "slow foot height cm")
+    print("\n| category | n | " + " | ".join(f"{s} {h}" for h in heads for s in worlds) + " |")
+    print("|" + "---|" * (2 + len(heads) * len(worlds)))
     for cat in [*np.unique(labels), "all"]:
         idx = np.flatnonzero((labels == cat) | (cat == "all"))
         share = [np.median([foot_contacts(w[i], fallback=0).any(0).mean() for i in idx]) for w in worlds.values()]
         skate = [np.nanmedian([foot_skating(w[i], fps) for i in idx]) for w in worlds.values()]
-        print(f"| {cat} | {len(idx)} | " + " | ".join(f"{v:.2f}" for v in share + skate) + " |")
+        lift = [np.median([stance_height(w[i], fps) for i in idx]) for w in worlds.values()]
+        print(f"| {cat} | {len(idx)} | " + " | ".join(f"{v:.2f}" for v in share + skate + lift) + " |")
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--seeds", type=int, default=3, help="samples of every window (one C2ST each)")
+    ap.add_argument("--seeds", type=int, default=3, help="samples of every window (one C2ST each; 0: the floor only)")
     ap.add_argument("--cnn-seeds", type=int, default=3, help="initialisations of the CNN per sample")
     ap.add_argument("--post", choices=sorted(POST), default="shipped")
     ap.add_argument("--only", choices=("MG", "FL"), default=None)
@@ -162,6 +195,7 @@ def main(argv=None):
     fps = float(read_arrays(HELDOUT, ["fps"])["fps"])
     names, groups = feature_names(skeleton.JOINT_NAMES, skeleton.PARENTS)
     worlds = {"NAT": to_world(x, c)}
+    floor(x, c, takes)
     for name in ("MG", "FL"):
         if args.only not in (None, name):
             continue
@@ -171,7 +205,8 @@ def main(argv=None):
             s = POST[args.post](sample_windows(model, c, h, hc, TEMPERATURE[name], seed), h)
             runs.append(one_sample(x, s, c, takes, names, groups, args.cnn_seeds))
             worlds.setdefault(name, to_world(s, c))
-        report(f"{name}, post-processed: {args.post}", runs)
+        if runs:
+            report(f"{name}, post-processed: {args.post}", runs)
     if args.contacts:
         contacts(worlds, labels, fps)
 
