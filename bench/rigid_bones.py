@@ -3,12 +3,14 @@
     python bench/rigid_bones.py [--seeds 2] [--temperature 1.0] [--mg CKPT] [--fl CKPT] [--only MG|FL]
 
 The shipped MG and FL sample every held-out window (valid + test, generation/pretrained/heldout.npz: 192 windows
-with their real 10-frame histories) on the same control; each sample is then taken three ways:
+with their real 10-frame histories) on the same control; each sample is then taken four ways:
 - `free`: as sampled;
 - `directions`: every joint at the actor's bone length from its placed parent, along the direction from its parent
   that the model sampled (so a bone's length error moves every joint below it);
-- `nearest` (the shipped rule, rigid.fit_bones): every joint at the actor's bone length from its placed
-  parent, at the point nearest to where the model put it.
+- `nearest` (rigid.fit_bones): every joint at the actor's bone length from its placed parent, at the point nearest
+  to where the model put it;
+- `shipped` (invariants.fit_to_actor): the hips first put back on the root (their x and z in the root frame set to
+  0, as in real data), then `nearest`: what make_stimuli ships.
 The actor's bone lengths are the means over the window's history (real frames). With --seeds N every window is
 sampled N times and its figures are their means over the N samples. Printed per model and variant: the largest
 bone-length std (mm), the worst bone's median error of its mean length (%), each joint's mean jerk over NAT's (the
@@ -34,7 +36,7 @@ from generation.metrics.objective import (  # noqa: E402
     joint_jerk,
     late_stepping,
 )
-from generation.motion import rigid, skeleton
+from generation.motion import invariants, rigid, skeleton  # noqa: E402
 from generation.motion.features import to_world  # noqa: E402
 from generation.sampling.pretrained import CHECKPOINTS, HELDOUT, MOTION_ENCODER  # noqa: E402
 from generation.sampling.sample import load_model, sample_windows  # noqa: E402
@@ -108,6 +110,7 @@ def main(argv=None):
         "free": lambda s: s,
         "directions": lambda s: along_directions(s, lengths),
         "nearest": lambda s: rigid.fit_bones(s, lengths),
+        "shipped": lambda s: rigid.fit_bones(invariants.root_hips(s), lengths),
     }
     nat_jerk = joint_jerk(to_world(x, c), fps).mean(0)
     encoder = MotionEncoder.load(MOTION_ENCODER)

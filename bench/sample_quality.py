@@ -15,7 +15,8 @@ Per category it prints the median of three figures per clip:
   coordinates.
 Over all windows it also prints each system's Fréchet motion distance to training motion of the same categories
 (generation.metrics.fmd; NAT's is the floor), the medians as ratios to NAT's, and each model's classifier
-two-sample test against NAT (generation.metrics.c2st), once per seed, with its spread over seeds.
+two-sample test against NAT (generation.metrics.c2st), once per seed, with its spread over seeds, and what tells
+each model apart: the test per feature group and its strongest single features (generation.metrics.c2st_features).
 The figure shows the feet of the first window of five categories (rows: NAT, then each model).
 """
 
@@ -29,6 +30,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from generation.data.dataset import read_arrays, require  # noqa: E402
 from generation.metrics import c2st  # noqa: E402
+from generation.metrics.c2st_features import feature_names, feature_report  # noqa: E402
 from generation.metrics.fmd import MotionEncoder  # noqa: E402
 from generation.metrics.objective import (  # noqa: E402
     control_following,
@@ -123,6 +125,34 @@ def print_c2st(systems, finite, c, fps):
     for name, xs in list(systems.items())[1:]:
         aucs = [c2st.c2st(nat, feats(x, f), seeds=1)["auc"] for x, f in zip(xs, finite[name])]
         print(f"| {name} | {np.mean(aucs):.3f} | {np.std(aucs):.3f} | {len(aucs)} |")
+    names, groups = feature_names(skeleton.JOINT_NAMES, skeleton.PARENTS)
+    for name, xs in list(systems.items())[1:]:
+        reports = [feature_report(nat, feats(x, f), names, groups, seeds=1) for x, f in zip(xs, finite[name])]
+        print_features(name, reports)
+
+
+def print_features(name, reports, top=8):
+    """What tells a system from NAT (generation.metrics.c2st_features), over seeds: per feature group the AUC of the
+    classifier on that group alone, and the `top` single features (direction-free AUC, and which way it differs),
+    each as mean (sd) over seeds."""
+
+    def spread(kind):
+        values = {}
+        for rows in reports:
+            for r in rows:
+                if r["kind"] == kind:
+                    values.setdefault(r["feature"] or r["group"], []).append((r["auc"], r["direction"]))
+        return sorted(values.items(), key=lambda kv: -np.mean([a for a, _ in kv[1]]))
+
+    print(f"\n{name}: what tells it from NAT, AUC mean (sd) over seeds")
+    print(
+        "  groups: "
+        + "; ".join(
+            f"{g} {np.mean([a for a, _ in v]):.3f} ({np.std([a for a, _ in v]):.3f})" for g, v in spread("group")
+        )
+    )
+    for feature, v in spread("feature")[:top]:
+        print(f"  {feature}: {np.mean([a for a, _ in v]):.3f} ({np.std([a for a, _ in v]):.3f}), {v[0][1]} in {name}")
 
 
 def main():

@@ -6,12 +6,13 @@
 
 Every held-out window of generation/pretrained/heldout.npz (valid + test: 192 windows of styled Bandai-Namco takes,
 proud, old, feminine, ... in the take names) is sampled by the shipped MG (from its 10 real history frames) and FL
-(control only), put onto the actor's bones as make_stimuli ships them. objective.style_retention compares
-each window's mean root-frame pose from frame --start on (default 40: the window's second half, from 2 s) with its
-own NAT window's and with the average of its category's NAT windows from the other takes. Printed per model: the
-share of windows closer to their own NAT (1 = every window keeps its style, 0.5 or below = an average walker), the
-median distance ratio (own / average), each as mean and sd over seeds; and the same for NAT's first half against
-its second (real motion's own drift: the ceiling) and for the category average itself (the floor).
+(control only), the hips put on the root and the poses onto the actor's bones as make_stimuli ships them.
+objective.style_retention compares each window's mean root-frame pose from frame --start on (default 40: the
+window's second half, from 2 s) with its own NAT window's and with the average of its category's NAT windows from
+the other takes. Printed per model: the share of windows closer to their own NAT (1 = every window keeps its style,
+0.5 or below = an average walker), the median distance ratio (own / average), each as mean and sd over seeds; and
+the same for NAT's first half against its second (real motion's own drift: the ceiling) and for the category average
+itself (the floor).
 
 --seed-frames L ... asks whether a longer real seed would carry more style. The held-out windows of a take overlap
 (one every 20 frames), so a window from the take's third on has up to 40 real frames before it. For each L, on the
@@ -39,7 +40,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from generation.data.dataset import heldout_windows, read_arrays  # noqa: E402
 from generation.metrics.objective import style_retention  # noqa: E402
-from generation.motion import rigid, skeleton  # noqa: E402
+from generation.motion import invariants, skeleton  # noqa: E402
 from generation.sampling.pretrained import CHECKPOINTS, HELDOUT  # noqa: E402
 from generation.sampling.sample import load_model, sample_mg, sample_windows  # noqa: E402
 
@@ -72,7 +73,7 @@ def longer_seeds(args, x, c, h, hc, takes, cats, start):
         for seed in range(args.seeds):
             for label, s in zip(kept, (None, style)):
                 y = sample_mg(model, c[idx], h[idx], hc[idx], args.temperature, seed, style=s)
-                kept[label].append(share(rigid.fit_to_history(y, h[idx])))
+                kept[label].append(share(invariants.fit_to_actor(y, h[idx])))
         print(
             f"{n} real seed frames ({len(idx)} windows): their mean held still {share(held):.2f}; MG T="
             f"{args.temperature} " + ", ".join(f"{k} {np.mean(v):.2f} (sd {np.std(v):.2f})" for k, v in kept.items())
@@ -126,7 +127,10 @@ def profile(args, x, c, h, hc, takes, cats):
     held = np.repeat(h.mean(axis=1, keepdims=True), x.shape[1], axis=1)
     models = {n: load_model(ckpt, "cpu") for n, ckpt in (("MG", args.mg), ("FL", args.fl))}
     samples = {
-        n: [rigid.fit_to_history(sample_windows(m, c, h, hc, args.temperature, seed), h) for seed in range(args.seeds)]
+        n: [
+            invariants.fit_to_actor(sample_windows(m, c, h, hc, args.temperature, seed), h)
+            for seed in range(args.seeds)
+        ]
         for n, m in models.items()
     }
     second, half = int(read_arrays(HELDOUT, ["fps"])["fps"]), x.shape[1] // 2
@@ -235,7 +239,7 @@ def main(argv=None):
         model = load_model(ckpt, "cpu")
         got = []
         for seed in range(args.seeds):
-            y = rigid.fit_to_history(sample_windows(model, c, h, hc, args.temperature, seed), h)
+            y = invariants.fit_to_actor(sample_windows(model, c, h, hc, args.temperature, seed), h)
             got.append(style_retention(y, x, takes, cats, start=args.start))
         got = np.array(got)
         print(

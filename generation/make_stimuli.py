@@ -18,7 +18,8 @@
    reference of the pairwise and parallel catch trials, MG and FL fill a parallel catch page to a test page's
    size; an acr study shows only BAD); each training item in every condition
    except BAD. Every clip is placed to start at the origin facing +Z.
-5. Videos (in parallel, one process per core), contact sheets, metrics.csv, manifest.csv, items.csv.
+5. Videos (in parallel, one process per core), contact sheets, metrics.csv, fmd.csv, c2st.csv and
+   c2st_features.csv (the classifier two-sample test, and what tells each condition apart), manifest.csv, items.csv.
 """
 
 import argparse
@@ -39,8 +40,9 @@ from rendering.render import size_flag
 from .data.dataset import read_heldout
 from .data.systems import canonical_placement, find_system_files, load_system_motion, parse_system_spec
 from .metrics import c2st
+from .metrics.c2st_features import FEATURE_COLUMNS, feature_table
 from .metrics.objective import clip_metrics
-from .motion import rigid, skeleton
+from .motion import invariants, skeleton
 from .motion.features import to_features, to_world
 from .sampling import pretrained
 from .stimuli.catch_kinds import KINDS as TOOL_CATCH_KINDS
@@ -88,10 +90,21 @@ def sample_condition(kind, ckpt, arrays, idx, temperature, seed, device, precisi
     return require_finite(x, ckpt)
 
 
-def rigid_conditions(args):
-    """The conditions whose poses are put onto the item's actor's bones (generation.motion.rigid): the generated test
-    conditions, unless --free-bones; never NAT (already rigid) nor BAD (broken on purpose)."""
-    return () if args.free_bones else (MG, FL)
+def postprocess(cond, args):
+    """The manifest's `postprocess` of a condition's clips (CONTRACTS §4): for the generated test conditions, the hips
+    put back on the root (generation.motion.invariants) and, unless --free-bones, the poses put onto the item's
+    actor's bones (generation.motion.rigid); nothing for NAT (real) nor BAD (broken on purpose)."""
+    if cond not in (MG, FL):
+        return ""
+    return invariants.ROOT_HIPS if args.free_bones else invariants.POSTPROCESS
+
+
+def apply_postprocess(x, cond, args, history):
+    """Sampled windows x [B, T, 63] of `cond` post-processed as `postprocess` says, with the bones of each item's
+    actor read from its real `history` [B, tau, 63]."""
+    if not postprocess(cond, args):
+        return x
+    return invariants.root_hips(x) if args.free_bones else invariants.fit_to_actor(x, history)
 
 
 # ---------------------------------------------------------------- the pipeline's stages
@@ -143,8 +156,7 @@ def sample_clips(args, dataset, items, arrays):
                 seed = args.seed + SEED_OFFSET[cond]
                 temperature = pretrained.TEMPERATURE[cond] if args.temperature is None else args.temperature
                 x = sample_condition(*model, arrays, idx, temperature, seed, args.device, precision)
-            if cond in rigid_conditions(args):  # the bones of the item's actor, from its real history
-                x = rigid.fit_to_history(x, arrays["hist"][idx])
+            x = apply_postprocess(x, cond, args, arrays["hist"][idx])  # hips on the root, the actor's bones
             joints = to_world(x, arrays["c"][idx])
             clips += [(cond, k, joints[j], seed) for j, k in enumerate(idx)]
     # The other catch kinds break the catch item's real motion (generation.stimuli.catch_kinds): a mix of kinds spreads
@@ -157,7 +169,8 @@ def sample_clips(args, dataset, items, arrays):
 
 
 def write_clips(out, clips, items, arrays, fps, args, forbidden):
-    """Clip files, manifest and metrics rows, render jobs and the test clips' root-frame poses (for the FMD).
+    """Clip files, manifest and metrics rows, render jobs, the test clips' root-frame poses (for the FMD) and their
+    C2ST features (c2st.collect).
 
     Clips are written (and rendered) in a random order, so that nothing about the files (creation order, inode
     numbers) follows the condition; ids are random and never contain a condition name (`forbidden`)."""
@@ -172,14 +185,14 @@ def write_clips(out, clips, items, arrays, fps, args, forbidden):
         motion, video, sheet = clip_files(out, cid)
         save_clip(motion, joints, skeleton.PARENTS, skeleton.JOINT_NAMES, fps, control=control)
         jobs.append((str(motion), str(video), str(sheet), args.size, args.preset))
-        postprocess = rigid.RIGID if cond in rigid_conditions(args) else ""
-        manifest.append({**manifest_row(cid, cond, it, seed, len(joints), fps, args.size), "postprocess": postprocess})
+        row = manifest_row(cid, cond, it, seed, len(joints), fps, args.size)
+        manifest.append({**row, "postprocess": postprocess(cond, args)})
         m = clip_metrics(joints, fps, control)
         metrics_rows.append(dict(clip_id=cid, condition=cond, role=it["role"], item=it["id"], **m))
         if it["role"] == TEST:
             poses.setdefault(cond, []).append((to_features(joints, fps)[0], it["category"]))
         c2st.collect(feats, cond, it["role"], it["id"], joints, fps, skeleton.PARENTS)
-    return manifest, metrics_rows, jobs, poses, c2st.c2st_table(feats)
+    return manifest, metrics_rows, jobs, poses, feats
 
 
 def run(args):
@@ -210,12 +223,14 @@ def run(args):
     clips = sample_clips(args, dataset, items, arrays)
     for name, motions in imported.items():
         clips += [(name, k, joints, "") for k, joints in motions.items()]
-    manifest, metrics_rows, jobs, poses, c2st_rows = write_clips(
+    manifest, metrics_rows, jobs, poses, feats = write_clips(
         out, clips, items, arrays, fps, args, [*study.RESERVED, *systems]
     )
     render_stimuli(jobs, args.workers, args.progress)
     fmd = condition_fmd(poses)
-    write_csv(Path(out) / "c2st.csv", C2ST_COLUMNS, c2st_rows)
+    c2st_rows = (c2st.c2st_table(feats), feature_table(feats, skeleton.JOINT_NAMES, skeleton.PARENTS))
+    write_csv(Path(out) / "c2st.csv", C2ST_COLUMNS, c2st_rows[0])
+    write_csv(Path(out) / "c2st_features.csv", FEATURE_COLUMNS, c2st_rows[1])
     write_tables(out, manifest, metrics_rows, fmd)
     write_items(out, items, arrays, fps)
     print_summary(out, manifest, metrics_rows, fmd, c2st_rows, time.perf_counter() - t0)
@@ -328,7 +343,8 @@ def _item_flags(ap):
     ap.add_argument(
         "--free-bones",
         action="store_true",
-        help="keep MG's and FL's bones as sampled (default: set to the item's actor's lengths, motion.rigid)",
+        help="keep MG's and FL's bones as sampled (default: set to the item's actor's lengths, motion.rigid; the hips "
+        "go back on the root either way, motion.invariants)",
     )
     ap.add_argument("--seed", type=cli.number(int, 0), help="item selection, sampling and manifest order (default 0)")
 

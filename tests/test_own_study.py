@@ -18,6 +18,7 @@ from helpers.own_study_data import action_takes, make_study
 from generation.data.motion_files import read_motion
 from generation.make_stimuli import main as make_stimuli
 from generation.metrics import c2st
+from generation.metrics.c2st_features import GROUPS
 from generation.stimuli.catch_kinds import make_catch
 from moglow_eval.core.clip import load_clip
 from rendering.camera import framing_camera
@@ -104,6 +105,12 @@ def test_study_folder_follows_the_contract(own_study):
     assert all(r["control_error"] == "nan" for r in metrics)  # no control in a study of your own motion
     table = {r["condition"]: r for r in _rows(out / "c2st.csv")}
     assert set(table) == {"NAT:split", "SYS_A", "SYS_B", "BAD"}
+    features = _rows(out / "c2st_features.csv")  # what tells each condition apart, named by the study's own joints
+    assert {r["condition"] for r in features} == {"SYS_A", "SYS_B", "BAD"}
+    assert {r["group"] for r in features if r["kind"] == "group"} == set(GROUPS)
+    names = {r["feature"] for r in features if r["kind"] == "feature"}
+    assert f"{clip['joint_names'][1]} jerk" in names
+    assert all(0.5 <= float(r["auc"]) <= 1 for r in features if r["kind"] == "feature")
 
 
 # ---------------------------------------------------------------- catch clips and the C2ST

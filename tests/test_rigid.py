@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from generation.data.dataset import read_arrays
-from generation.motion import rigid, skeleton
+from generation.metrics.c2st_features import FEATURE_COLUMNS
+from generation.motion import invariants, rigid, skeleton
 from generation.sampling import pretrained
 from generation.sampling.sample import load_model, sample_windows
 
@@ -66,4 +67,10 @@ def test_the_default_job_records_the_fit_in_the_manifest(tmp_path):
     with open(out / "manifest.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     post = {(r["condition"], r["postprocess"]) for r in rows}
-    assert post == {("NAT", ""), ("MG", rigid.RIGID), ("FL", rigid.RIGID), ("BAD", "")}
+    shipped = invariants.POSTPROCESS  # the hips on the root, then the actor's bones
+    assert shipped == "root_hips+rigid_bones"
+    assert post == {("NAT", ""), ("MG", shipped), ("FL", shipped), ("BAD", "")}
+    with open(out / "c2st_features.csv", newline="") as f:  # what tells MG and FL apart, with its groups
+        features = list(csv.DictReader(f))
+    assert tuple(features[0]) == FEATURE_COLUMNS
+    assert {r["condition"] for r in features} >= {"MG", "FL"}

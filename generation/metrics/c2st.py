@@ -1,19 +1,20 @@
 """A classifier two-sample test (C2ST; Lopez-Paz & Oquab 2017, "Revisiting classifier two-sample tests", ICLR):
 can a small classifier tell a condition's clips from the reference's?
 
-Each clip becomes a vector of summary statistics that any skeleton has (`clip_features`): per joint, the mean
-and spread of its position relative to the root, and its log mean speed, acceleration and jerk; per bone, its
-mean length and log length spread. An L2-regularised logistic regression on standardised features is
-cross-validated with the folds grouped by item, so that a clip is always judged by a classifier that saw no
-clip of its item (otherwise it could learn the items, not the conditions). The out-of-fold AUC is the figure:
-0.5 when the classifier cannot tell the two apart, 1.0 when it always can. The accuracy at 0.5 is given too.
+Each clip becomes a vector of summary statistics that any skeleton has (`clip_features`): per joint, the mean and
+spread of its position relative to the root, and its log mean speed, acceleration and jerk; per bone, its mean
+length and log length spread, read to RESOLUTION (0.1 mm): finer differences are float rounding, not motion. An
+L2-regularised logistic regression on standardised features is cross-validated with the folds grouped by item, so
+that a clip is always judged by a classifier that saw no clip of its item (otherwise it could learn the items, not
+the conditions). The out-of-fold AUC is the figure: 0.5 when the classifier cannot tell the two apart, 1.0 when it
+always can. The accuracy at 0.5 is given too.
 
-What it can say: a high AUC shows that the condition differs from the reference in a way these statistics
-catch, and the per-feature weights say where (stretching bones, jerky hands, a posture). What it cannot: a low
-AUC does not show that the motion is as good as the reference, only that this classifier, on these statistics
-and this many items, finds no difference; a small study (tens of items) has little power, and differences
-outside the statistics (timing, intent, how motion fits speech) are invisible to it. It never replaces the
-raters; it is an objective check beside them.
+What it can say: a high AUC shows that the condition differs from the reference in a way these statistics catch, and
+the test one feature at a time (`c2st_features`) says where (stretching bones, jerky hands, a posture). What it
+cannot: a low AUC does not show that the motion is as good as the reference, only that this classifier, on these
+statistics and this many items, finds no difference; a small study (tens of items) has little power, and differences
+outside the statistics (timing, intent, how motion fits speech) are invisible to it. It never replaces the raters;
+it is an objective check beside them.
 """
 
 import numpy as np
@@ -24,6 +25,10 @@ from moglow_eval.core import study
 
 CATCH_ROLE = study.ROLES[1]
 EPS = 1e-6
+# Metres below which a clip's positions and lengths are taken as equal: a clip file holds float32 metres (about
+# 0.1 micrometre of rounding), and a bone set to an actor's length by a fit and a bone of the mocap differ by that
+# much. Without it the test told rigid bones apart by their rounding alone (bench/RESULTS.md#c2st).
+RESOLUTION = 1e-4
 L2 = 1.0  # penalty on the weights of standardised features (per sample), small data's usual choice
 MAX_FOLDS = 5
 
@@ -34,14 +39,15 @@ def clip_features(joints, fps, parents):
     parents = np.asarray(parents)
     rel = joints.copy()
     rel[..., [0, 2]] -= joints[:, :1, [0, 2]]  # about the root on the floor
-    feats = [rel.mean(0).ravel(), np.log(rel.std(0) + EPS).ravel()]
+    feats = [rel.mean(0).ravel(), np.log(rel.std(0) + RESOLUTION).ravel()]
     for order in (1, 2, 3):
         d = np.linalg.norm(np.diff(joints, n=order, axis=0), axis=-1) * fps**order if len(joints) > order else None
         feats.append(np.log(d.mean(0) + EPS) if d is not None else np.zeros(joints.shape[1]))
     child = np.nonzero(parents >= 0)[0]
     if len(child):
         length = np.linalg.norm(joints[:, child] - joints[:, parents[child]], axis=-1)
-        feats += [length.mean(0), np.log(length.std(0) + EPS)]
+        mean, spread = (np.round(v / RESOLUTION) * RESOLUTION for v in (length.mean(0), length.std(0)))
+        feats += [mean, np.log(spread + RESOLUTION)]
     return np.concatenate(feats)
 
 
@@ -133,18 +139,22 @@ def collect(feats, condition, role, item, joints, fps, parents):
         feats.setdefault(f"{condition}:{CATCH_ROLE}", {})[item] = clip_features(joints, fps, parents)
 
 
-def c2st_table(feats):
-    """c2st.csv's rows (CONTRACTS §4) from `collect`'s features: each condition's test clips against the
-    reference's, BAD against the reference clips of the test and catch items, and the reference against itself split
-    by item (the test's floor, named `NAT:split`)."""
+def pairs(feats):
+    """(condition, reference features, condition's features) of every test `collect` gathered: each condition's
+    test clips against the reference's, then BAD against the reference clips of the test and catch items."""
     ref = feats.get(study.NATURAL, {})
-    rows = [dict(condition=f"{study.NATURAL}:split", **c2st_self(ref))]
-    for cond in study.condition_order(k for k in feats if ":" not in k):
-        if cond != study.NATURAL:
-            rows.append(dict(condition=cond, **c2st(ref, feats[cond])))
+    out = [(c, ref, feats[c]) for c in study.condition_order(k for k in feats if ":" not in k) if c != study.NATURAL]
     if f"{study.CATCH}:{CATCH_ROLE}" in feats:
-        bad = c2st({**feats[f"{study.NATURAL}:{CATCH_ROLE}"], **ref}, feats[f"{study.CATCH}:{CATCH_ROLE}"])
-        rows.append(dict(condition=study.CATCH, **bad))
+        catch_ref = {**feats[f"{study.NATURAL}:{CATCH_ROLE}"], **ref}
+        out.append((study.CATCH, catch_ref, feats[f"{study.CATCH}:{CATCH_ROLE}"]))
+    return out
+
+
+def c2st_table(feats):
+    """c2st.csv's rows (CONTRACTS §4) from `collect`'s features: the tests of `pairs`, after the reference against
+    itself split by item (the test's floor, named `NAT:split`)."""
+    rows = [dict(condition=f"{study.NATURAL}:split", **c2st_self(feats.get(study.NATURAL, {})))]
+    rows += [dict(condition=cond, **c2st(ref, other)) for cond, ref, other in pairs(feats)]
     return [{k: (f"{v:.4g}" if isinstance(v, float) else v) for k, v in r.items()} for r in rows]
 
 

@@ -20,7 +20,8 @@ generation.data.motion_files). The pipeline:
 4. Render with one camera per item that frames all its clips (rendering.camera.framing_camera), every bone of
    the skeleton drawn, finger and face bones thinner; pad and stamp every video alike.
 5. metrics.csv (jerk, acceleration, bone-length variation, foot skating where feet are found), c2st.csv (the
-   classifier two-sample test of each condition against the reference, generation.metrics.c2st), items.csv, and
+   classifier two-sample test of each condition against the reference, generation.metrics.c2st) and
+   c2st_features.csv (which features tell it apart, generation.metrics.c2st_features), items.csv, and
    manifest.csv last.
 """
 
@@ -41,6 +42,7 @@ from rendering.camera import framing_camera
 
 from ..data.motion_files import read_motion
 from ..metrics import c2st
+from ..metrics.c2st_features import FEATURE_COLUMNS, feature_table, feature_text
 from ..metrics.objective import any_clip_metrics, find_feet
 from ..motion.features import rotate_y
 from ..stimuli.catch_kinds import make_catch
@@ -269,11 +271,16 @@ def build_clips(spec, motions, roles, catch_items, bad):
     return clips
 
 
+def skeleton_of(motions):
+    """(joint names, parents) of the study's motion (the reference's; every condition's is checked to match)."""
+    any_ref = next(iter(motions[study.NATURAL].values()))
+    return any_ref.names, any_ref.parents
+
+
 def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=None):
     """Clip files (random order and ids), manifest and metrics rows, render jobs, and C2ST features."""
     rng = np.random.default_rng(spec.seed)
-    any_ref = next(iter(motions[study.NATURAL].values()))
-    names, parents = any_ref.names, any_ref.parents
+    names, parents = skeleton_of(motions)
     feet = find_feet(names) if spec.feet == "auto" else [names.index(n) for n in spec.feet]
     if feet is not None and len(feet) == 2:  # one joint per foot: it is both the foot's ankle and its toe
         feet = [feet[0], feet[0], feet[1], feet[1]]
@@ -379,8 +386,9 @@ def build_study(spec, out, size, preset, workers, force, progress):
         render_stimuli(jobs, workers, progress, groups)
         if sound:
             write_audio_check(out, spec)
-    c2st_table = c2st.c2st_table(feats)
-    write_csv(out / "c2st.csv", C2ST_COLUMNS, c2st_table)
+    c2st_table = c2st.c2st_table(feats), feature_table(feats, *skeleton_of(motions))
+    write_csv(out / "c2st.csv", C2ST_COLUMNS, c2st_table[0])
+    write_csv(out / "c2st_features.csv", FEATURE_COLUMNS, c2st_table[1])
     write_csv(
         out / "items.csv",
         ITEM_COLUMNS,
@@ -406,7 +414,7 @@ def print_study_summary(out, manifest, metrics_rows, c2st_table, seconds):
         "\nobjective metrics, mean (sd) per condition: foot_skating m/s, bone_length_std m, jerk m/s^3, "
         f"acceleration m/s^2\n{summary_text(metrics_rows)}"
     )
-    print("\n" + c2st.c2st_text(c2st_table))
+    print("\n" + c2st.c2st_text(c2st_table[0]) + "\n" + feature_text(c2st_table[1]))
     print(
         f"\nwrote {Path(out) / 'manifest.csv'}: {len(manifest)} clips ({n['test']} test, {n['catch']} catch, "
         f"{n['training']} training) in {seconds:.0f} s"

@@ -67,7 +67,8 @@ def export_heldout(dataset, dst):
 
 def quality(stride=QUALITY_STRIDE, seed=0, precision="float32", models=study.GENERATED):
     """Foot skating and jerk of the shipped MG and FL over NAT's, medians over every `stride`-th test window
-    of the shipped held-out set (at TEMPERATURE and on the actor's bones, as make_stimuli samples), their late stepping:
+    of the shipped held-out set (at TEMPERATURE, the hips on the root and on the actor's bones, as make_stimuli ships
+    them: invariants.fit_to_actor), their late stepping:
     the median over those windows of its ratio to NAT's on the same window (higher is better), the worst joint's
     mean jerk over NAT's, the rigidity of their bones: the largest bone-length std within a window (mm) and
     the largest error of a bone's mean length against the actor's (a fraction), and their Fréchet motion distance
@@ -78,7 +79,7 @@ def quality(stride=QUALITY_STRIDE, seed=0, precision="float32", models=study.GEN
     whether bfloat16 keeps the figures); `models`: which of MG and FL to measure."""
     from ..metrics.fmd import MotionEncoder
     from ..metrics.objective import foot_skating, jerk, joint_jerk, late_stepping, style_retention
-    from ..motion import rigid
+    from ..motion import invariants, rigid
     from ..motion.features import to_world
     from .sample import load_model, sample_windows
 
@@ -94,7 +95,7 @@ def quality(stride=QUALITY_STRIDE, seed=0, precision="float32", models=study.GEN
     for name in models:
         model = load_model(CHECKPOINTS[name.lower()], "cpu")
         sampled = sample_windows(model, c, hist, hist_c, TEMPERATURE[name], seed=seed, precision=precision)
-        samples[name] = rigid.fit_to_history(sampled, hist)  # as make_stimuli ships them
+        samples[name] = invariants.fit_to_actor(sampled, hist)  # as make_stimuli ships them
     per_joint = {}
     for name, xs in samples.items():
         world = to_world(xs, c)  # [B, T, J, 3]

@@ -52,7 +52,7 @@ def prepare_out(out, force):
     for sub in (*SUBFOLDERS, "items", "audio_check"):
         if (out / sub).exists():
             shutil.rmtree(out / sub)
-    for name in ("manifest.csv", "metrics.csv", "items.csv", "c2st.csv", "audio_check.csv"):
+    for name in ("manifest.csv", "metrics.csv", "items.csv", "c2st.csv", "c2st_features.csv", "audio_check.csv"):
         (out / name).unlink(missing_ok=True)
     for sub in SUBFOLDERS:
         (out / sub).mkdir(parents=True, exist_ok=True)

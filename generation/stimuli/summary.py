@@ -1,6 +1,6 @@
 """What the main job prints when it is done (make_stimuli): the metrics per condition, the Fréchet motion distance
-(with what a condition under NAT's floor means), the classifier two-sample test, a warning when the BAD clips are
-not plainly bad, and what was written."""
+(with what a condition under NAT's floor means), the classifier two-sample test and what tells each condition
+apart, a warning when the BAD clips are not plainly bad, and what was written."""
 
 import logging
 from pathlib import Path
@@ -10,6 +10,7 @@ import numpy as np
 from moglow_eval.core import study
 
 from ..metrics import c2st
+from ..metrics.c2st_features import feature_text
 from ..sampling import pretrained
 from .files import summary_text
 
@@ -17,7 +18,8 @@ log = logging.getLogger(__name__)
 
 
 def print_summary(out, manifest, metrics_rows, fmd, c2st_rows, seconds):
-    """The run's results on stdout: metrics per condition, the FMD, and what was written."""
+    """The run's results on stdout: metrics per condition, the FMD, the C2ST (`c2st_rows`: c2st.csv's and
+    c2st_features.csv's rows), and what was written."""
     n = {r: sum(m["role"] == r for m in manifest) for r in study.ROLES}
     print(
         f"\nobjective metrics, mean (sd) per condition: foot_skating m/s, bone_length_std m, jerk m/s^3, "
@@ -35,7 +37,8 @@ def print_summary(out, manifest, metrics_rows, fmd, c2st_rows, seconds):
                 "a few dozen windows give the distance some noise, so a model that keeps close to the training "
                 "motion can score under NAT; read it as 'as close as real motion', not 'more real than real'"
             )
-    print("\n" + c2st.c2st_text(c2st_rows))
+    print("\n" + c2st.c2st_text(c2st_rows[0]))
+    print(feature_text(c2st_rows[1]))
     _warn_if_bad_not_bad(metrics_rows)
     print(
         f"\nwrote {Path(out) / 'manifest.csv'}: {len(manifest)} clips ({n['test']} test, {n['catch']} catch, "
