@@ -8,7 +8,8 @@ from sqlalchemy import func, select
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
-from .db import Event, Rater, Trial
+from . import fetched
+from .db import Event, Rater, Trial, TrialClip
 from .designs import get
 from .export_cells import rater_flags
 
@@ -24,6 +25,7 @@ def progress(engine: Engine, target: int, design: str | None = None, units=None)
                 .group_by(Trial.rater_pk)
             ).all()
         )
+        sent = _bytes_sent(s)
         raters = []
         for r in s.scalars(select(Rater).order_by(Rater.id)):
             nv, pv = p["no_video"].get(r.rater_id, 0), p["partial_video"].get(r.rater_id, 0)
@@ -42,10 +44,29 @@ def progress(engine: Engine, target: int, design: str | None = None, units=None)
                     "ratings_without_video": nv,
                     "ratings_partial_video": pv,
                     "flags": rater_flags(r.n_early, nv, pv),
+                    "bytes_sent": sent.get(r.id, 0),
                 }
             )
         events = s.execute(select(Event.created_at, Event.kind, Event.detail).order_by(Event.id.desc()).limit(50)).all()
     return _summary(target, p["per_clip"], p["per_condition"], raters, events)
+
+
+def _bytes_sent(s) -> dict:
+    """{rater pk: the video bytes the server sent to that session} (each trial's and trial clip's ranges)."""
+    out: dict = {}
+    trials = select(Trial.rater_pk, Trial.video_ranges).where(Trial.video_ranges.is_not(None))
+    clips = select(Trial.rater_pk, TrialClip.video_ranges).join(Trial, TrialClip.trial_pk == Trial.id)
+    for rater_pk, text in [*s.execute(trials), *s.execute(clips.where(TrialClip.video_ranges.is_not(None)))]:
+        out[rater_pk] = out.get(rater_pk, 0) + sum(b - a for a, b in fetched.parse(text))
+    return out
+
+
+def _median(values):
+    values = sorted(values)
+    if not values:
+        return None
+    mid = len(values) // 2
+    return values[mid] if len(values) % 2 else (values[mid - 1] + values[mid]) // 2
 
 
 def _summary(target, per_clip, per_cond, raters, events):
@@ -64,5 +85,7 @@ def _summary(target, per_clip, per_cond, raters, events):
         "raters_failed_catch": sum(r["catch_failures"] > 0 for r in raters),
         "raters_suspicious": sum(bool(r["flags"]) for r in raters),
         "raters_expired": sum(r["expired"] for r in raters),
+        # what a rater downloads: the median over finished sessions of the video bytes sent to each
+        "bytes_per_session": _median([r["bytes_sent"] for r in raters if r["completed"]]),
         "events": [{"at": a, "kind": k, "detail": d} for a, k, d in events],
     }

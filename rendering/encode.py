@@ -3,11 +3,12 @@
 import random
 import subprocess
 
-# The default rate control gives every frame of every video the same size: bits per frame = this times the frame's
-# height, filler included (line drawings cost bits along their lines, so in proportion to the side, not the
-# area). At 640x640 that is 25.6 kB a frame, 2.05 MB a 4-s clip at 20 fps, more than qp 17 spent: the filler and
-# the dither below cost bits that the picture does not get (bench/RESULTS.md#blinded-sizes).
-FRAME_BITS_PER_ROW = 320
+# The default rate control gives every frame of a video the same size: a rate of this many bits per second per row
+# of the frame's height, filler included (line drawings cost bits along their lines, so in proportion to the side,
+# not the area), spread evenly over the frames. At 640x640 that is 1.47 Mb/s at any frame rate: what a rater
+# downloads on a phone. Its image quality against the drawn frames, and what the sizes tell, are measured in
+# bench/RESULTS.md#video-rate.
+RATE_BITS_PER_ROW = 2300
 # The share of that rate x264 aims to spend on the picture on average; the filler data pays for the rest.
 CODED_SHARE = 0.9
 # Each frame's share of the rate is drawn at random (log-normal, this spread, within DITHER_RANGE of the mean):
@@ -17,9 +18,10 @@ DITHER_RANGE = (0.25, 4.0)
 MAX_ZONES = 100  # about 1.5 kB of x264 options in the first frame
 
 
-def frame_bits(size):
-    """The size of every frame at the default rate control, in bits (filler included), for a size x size video."""
-    return FRAME_BITS_PER_ROW * size
+def frame_bits(size, fps):
+    """The size of every frame at the default rate control, in bits (filler included), for a size x size video at
+    `fps` frames per second."""
+    return round(RATE_BITS_PER_ROW * size / fps)
 
 
 def rate_dither(frames, seed=None):
@@ -51,7 +53,7 @@ def _rate_control(size, fps, qp, crf, frames, seed):
     # gets, so the total of the coded (non-filler) NAL units hardly varies with the content either. No scene-cut
     # keyframes and no B-frames: where x264 puts them follows the content, and the boxes would show it. The SEI
     # units (x264's options, the dither among them) are removed, so no parser reads the frames' multiples.
-    bits = frame_bits(size)
+    bits = frame_bits(size, fps)
     cap = round(bits * fps)
     aim = round(CODED_SHARE * bits * fps)
     x264 = ["filler=1", "qcomp=0", "scenecut=0", "bframes=0"]
@@ -64,7 +66,7 @@ def _rate_control(size, fps, qp, crf, frames, seed):
 def ffmpeg_writer(out_mp4, size, fps, preset="ultrafast", qp=None, crf=None, threads=None, frames=None, seed=None):
     """An ffmpeg process reading raw yuv420p frames on stdin and writing H.264 yuv420p +faststart MP4, no audio.
 
-    Rate control: by default every frame is `frame_bits(size)` bits, filler data included, so every video of one
+    Rate control: by default every frame is `frame_bits(size, fps)` bits, filler data included, so every video of one
     size and frame rate has the same frame sizes and byte size: what a blinded stimulus set needs
     (rendering.blinding, CONTRACTS §4). With `qp` (a constant quantiser) or `crf` (x264's rate factor) the
     sizes follow the content instead. ultrafast at qp 17 was the default before; the default now is as close to

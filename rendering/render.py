@@ -74,8 +74,8 @@ def render_clip(
         The x264 speed preset. ultrafast is the fastest and, for these drawings, loses nothing visible (it
         skips deblocking and CABAC).
     qp, crf : int or None
-        Neither (the default): every frame one size, filler data included (`encode.frame_bits`: 2.05 MB per
-        4-s clip at 640x640, 3.2 MB at 1000x1000), so that a set's videos are one size (rendering.blinding).
+        Neither (the default): every frame one size, filler data included (`encode.frame_bits`: 1.47 Mb/s at
+        640x640, a 4-s clip 0.74 MB, at any frame rate), so that a set's videos are one size (rendering.blinding).
         qp (a constant quantiser; 17 was the default before) or crf (x264's rate factor): sizes that follow the
         content, for a video that is not a stimulus.
     threads : int or None

@@ -376,6 +376,32 @@ def test_dashboard_progress_and_catch_failures(client, app_stimuli):
     assert "bad" in html and "NAT" in html and "<progress" in html
 
 
+def test_dashboard_states_the_bytes_a_session_downloads(client, app_stimuli):
+    """What a rater downloads is what the server sent: every byte of each video fetched in full, counted once per
+    session, the median over finished sessions on the dashboard; a session that fetched nothing counts nothing."""
+    token = start(client, external_id="watcher")
+    sent = 0
+    for _ in range(100):
+        j = nxt(client, token)
+        if j.get("done"):
+            break
+        t = j["trial"]
+        body = client.get(t["video_url"]).data
+        client.get(t["video_url"])  # a replay sends the bytes again but adds nothing new
+        sent += len(body)
+        assert answer(client, token, t).status_code == 201
+    assert sent > 0
+    p = client.get("/admin/progress.json", headers=TOKEN_HDR).json
+    raters = {r["external_id"]: r for r in p["raters"]}
+    assert raters["watcher"]["bytes_sent"] == sent and p["bytes_per_session"] == sent
+    complete(client, start(client, external_id="blind"))  # fetched no video: 0 bytes, the median of two
+    p = client.get("/admin/progress.json", headers=TOKEN_HDR).json
+    assert {r["external_id"]: r["bytes_sent"] for r in p["raters"]}["blind"] == 0
+    assert p["bytes_per_session"] == sent // 2
+    client.post("/admin/login", data={"token": "test-admin-token"})
+    assert "MB of video (median)" in client.get("/admin").data.decode()
+
+
 def test_failed_playback_is_logged(client, caplog):
     token = start(client)
     t = nxt(client, token)["trial"]
