@@ -39,6 +39,7 @@ class Style:
 
 
 DEFAULT_STYLE = Style()
+STYLES = ("stick",)  # how the body is drawn (a study file's [render] style)
 
 
 def _wu_lines(flat, width, a, b, value, alpha):

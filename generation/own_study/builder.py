@@ -17,7 +17,7 @@ generation.data.motion_files). The pipeline:
    generation.stimuli.catch_kinds, the kinds dealt in turn), plus copies of the item's clips in every condition with
    role catch (the pairwise and parallel designs show BAD beside the reference). The reference condition is
    written as NAT, the role it plays in the app and the analysis.
-4. Render with one camera per item that frames all its clips (rendering.camera.framing_camera), every bone of
+4. Render with one camera per item that frames all its clips (rendering.framing: [render] view, framing), every bone of
    the skeleton drawn, finger and face bones thinner; pad and stamp every video alike.
 5. metrics.csv (jerk, acceleration, bone-length variation, foot skating where feet are found), c2st.csv (the
    classifier two-sample test of each condition against the reference, generation.metrics.c2st), items.csv, and
@@ -37,7 +37,7 @@ from tqdm import tqdm
 from moglow_eval.core import study
 from moglow_eval.core.clip import save_clip
 from moglow_eval.core.tables import C2ST_COLUMNS
-from rendering.camera import framing_camera
+from rendering.framing import item_camera
 
 from ..data.motion_files import read_motion
 from ..metrics import c2st
@@ -282,7 +282,7 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
     by_item = {}
     for c in clips:
         by_item.setdefault(c.item, []).append(c.joints)
-    cameras = {item: framing_camera(js) for item, js in by_item.items()}
+    cameras = {item: item_camera(js, names, parents, spec.fps, spec.view, spec.framing) for item, js in by_item.items()}
     taken, manifest, metrics_rows, jobs, groups, feats = set(), [], [], [], [], {}
     forbidden = [*study.RESERVED, *spec.conditions]
     options = dict(hide=tuple(spec.hide), thin=None if spec.thin == "auto" else tuple(spec.thin))
