@@ -20,7 +20,8 @@ from .camera import DEFAULT_CAMERA, HEAD_ROOM, NEAR, Projector, camera_targets, 
 VIEWS = {"front": 0.0, "three-quarter": 40.0, "side": 90.0}  # degrees from the body's mean facing
 FRAMINGS = ("full", "upper", "auto")
 UPPER_ELEVATION = 5.0  # degrees: a nearly level camera, as a seated audience sees a speaker
-UPPER_MARGIN = 0.02  # of the half-frame kept free around the framed joints (the drawn bones' own width)
+UPPER_MARGIN = 0.02  # of the half-frame kept free around the framed joints
+BODY_PAD = 0.05  # metres around every framed joint: the solid body's limb capsules (raster.Style.limb_radius)
 UPPER_FOV = 15.0  # degrees: a longer lens than the full body's, so that hands near the camera loom less
 FEET_STILL = 0.4  # metres: "auto" frames the upper body when no foot strays further than this from its start
 LEG_WORDS = {"leg", "upleg", "thigh", "knee", "shin", "calf", "foot", "ankle", "toe", "toes", "heel"}
@@ -84,12 +85,17 @@ def upper_camera(clips, names, parents, fps, base):
     height = float(np.concatenate(points)[:, 1].mean())
     for _ in range(4):  # fit the distance, then centre the look-at height on the framed span, and again
         p = q - height * up
-        distance = float(max((np.abs(p[:, :2]).max(1) / lim - p[:, 2]).max(), NEAR - p[:, 2].min()))
+        distance = _distance(p, lim)
         y = p[:, 1] / (p[:, 2] + distance)
         height += float((y.max() + y.min()) / 2 * np.median(p[:, 2] + distance)) / max(up[1], 1e-6)
-    p = q - height * up
-    distance = float(max((np.abs(p[:, :2]).max(1) / lim - p[:, 2]).max(), NEAR - p[:, 2].min()))
+    distance = _distance(q - height * up, lim)
     return replace(base, distance=distance, height=height)
+
+
+def _distance(p, lim):
+    """The least camera distance at which every point p (camera axes, relative to the look-at point), padded by
+    BODY_PAD, is inside the frame of half-width lim (the tangent of half the field of view)."""
+    return float(max(((np.abs(p[:, :2]).max(1) + BODY_PAD) / lim - p[:, 2]).max(), NEAR + BODY_PAD - p[:, 2].min()))
 
 
 def item_camera(clips, names, parents, fps, view=None, framing="full"):

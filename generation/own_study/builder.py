@@ -38,6 +38,7 @@ from moglow_eval.core import study
 from moglow_eval.core.clip import save_clip
 from moglow_eval.core.tables import C2ST_COLUMNS
 from rendering.framing import item_camera
+from rendering.raster import STYLES
 
 from ..data.motion_files import read_motion
 from ..metrics import c2st
@@ -286,13 +287,15 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
     taken, manifest, metrics_rows, jobs, groups, feats = set(), [], [], [], [], {}
     forbidden = [*study.RESERVED, *spec.conditions]
     options = dict(hide=tuple(spec.hide), thin=None if spec.thin == "auto" else tuple(spec.thin))
-    for k in tqdm(rng.permutation(len(clips)), desc="clips", unit="clip", file=sys.stderr, disable=not progress):
-        c = clips[k]
+    # Every clip in every style: each styled clip is a stimulus of its own, with its own random id.
+    styled = [(c, style) for c in clips for style in spec.styles]
+    for k in tqdm(rng.permutation(len(styled)), desc="clips", unit="clip", file=sys.stderr, disable=not progress):
+        c, style = styled[k] if len(spec.styles) > 1 else (clips[k], spec.styles[0])
         cond, item, role, joints = c.condition, c.item, c.role, c.joints
         cid = study.new_clip_id(taken, forbidden)
         motion, video, sheet = clip_files(out, cid)
         save_clip(motion, joints, parents, names, spec.fps)
-        job = dict(camera=cameras[item], **options)
+        job = dict(camera=cameras[item], style=STYLES[style], **options)
         if sound:
             # Every clip of an item carries the same sound bytes, a catch copy (one frame late) too: an audio track
             # of its own would tell a catch copy from the item's test clip.
@@ -304,11 +307,13 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
             row["motion_item"] = c.motion_item
         if sound:
             row["audio"] = "1"
+        if spec.styles != ["stick"]:
+            row["style"] = style
         manifest.append(row)
         m = any_clip_metrics(joints, spec.fps, parents, feet)
         metrics_rows.append(dict(clip_id=cid, condition=cond, role=role, item=item, **m))
-        if c.motion_item:
-            continue  # the figures are of each condition's own motion
+        if c.motion_item or style != spec.styles[0]:
+            continue  # the figures are of each condition's own motion, once
         c2st.collect(feats, cond, role, item, joints, spec.fps, parents)
     return manifest, metrics_rows, jobs, groups, feats
 
