@@ -19,6 +19,7 @@ from moglow_eval.core import skeleton_names
 
 from .camera import DEFAULT_CAMERA, NEAR, Projector, clip_to_frustum
 from .errors import RenderError
+from .solid import SolidBody
 
 
 @dataclass(frozen=True)
@@ -36,9 +37,15 @@ class Style:
     bone_width: float = 1 / 150  # line width as a fraction of the frame height
     head_radius: float = 0.08  # metres
     thin: float = 0.45  # finger and face bones' line width, as a fraction of the others'
+    body: str = "stick"  # "stick": lines and a head disc; "solid": shaded capsules and a head sphere (solid.py)
+    trunk_radius: float = 0.07  # metres: the solid body's trunk capsules (the bones no side's name tells)
+    limb_radius: float = 0.045  # metres: its arms and legs
+    thin_radius: float = 0.011  # metres: its fingers and face
+    sphere_radius: float = 0.1  # metres: its head
 
 
 DEFAULT_STYLE = Style()
+STYLES = {"stick": DEFAULT_STYLE, "solid": Style(body="solid")}  # a study file's [render] style, by name
 
 
 def _wu_lines(flat, width, a, b, value, alpha):
@@ -168,6 +175,20 @@ class FrameDrawer:
             np.float64,
         )
         self.grid_y = grey_to_y(style.grid)
+        self.solid = SolidBody(size, self.proj.focal) if style.body == "solid" else None
+        if self.solid:
+            self._capsules()
+
+    def _capsules(self):
+        """The solid body's capsules (self.bone_ends' bones, then the head's sphere): radii and colours."""
+        colour = {"left": self.style.left, "right": self.style.right, "centre": self.style.centre}
+        n = len(self.bone_ends)
+        self.capsule_radius = np.full(n + 1, self.style.sphere_radius)
+        self.capsule_colour = np.tile(np.array(self.style.centre, np.float32), (n + 1, 1))
+        for (side, thin), (bones, _) in self.sides.items():
+            limb = self.style.limb_radius if side != "centre" else self.style.trunk_radius
+            self.capsule_radius[bones] = self.style.thin_radius if thin else limb
+            self.capsule_colour[bones] = colour[side]
 
     def _bones(self, joint_names, hide, thin):
         """The bones to draw (child, parent) grouped by (side, thin), each group one slice of self.bone_ends."""
@@ -223,6 +244,8 @@ class FrameDrawer:
             seg = self.proj.to_screen(scam[self.bone_ends])
             r.draw_path(self.gcs["shadow"], Path(seg.reshape(-1, 2), self.codes), t)
             points.append(seg.reshape(-1, 2))
+        if self.solid is not None and (cam[:, 2] > NEAR).all():
+            return self._solid_figure(joints, cam, eye, points)
         if (cam[:, 2] > NEAR).all():
             seg = self.proj.to_screen(cam[self.bone_ends])
             points.append(seg.reshape(-1, 2))
@@ -249,6 +272,31 @@ class FrameDrawer:
                     r.draw_path(self.gcs["head"], disc, t, rgbFace=self.style.centre)
                     points.append(centre[None])
         return (np.concatenate(points) if points else np.zeros((0, 2))), radius
+
+    def _solid_figure(self, joints, cam, eye, points):
+        """The solid body (rendering.solid) over the shadow: the bones' capsules and the head's sphere, just
+        beyond the head joint along the neck. Returns what _figure does."""
+        a, b = cam[self.bone_ends[:, 0]], cam[self.bone_ends[:, 1]]
+        radii, colours = self.capsule_radius, self.capsule_colour
+        if self.head is not None and self.parents[self.head] >= 0:
+            neck = joints[self.head] - joints[self.parents[self.head]]
+            centre = joints[self.head] + 0.8 * self.style.sphere_radius * neck / max(np.linalg.norm(neck), 1e-6)
+            hc = self.proj.to_camera(centre, eye)[None]
+            a, b = np.concatenate([a, hc]), np.concatenate([b, hc])
+        else:
+            radii, colours = radii[:-1], colours[:-1]
+        keep = (a[:, 2] > NEAR) & (b[:, 2] > NEAR)
+        box = self.solid.draw(
+            self.rgba.reshape(-1, 4),
+            a[keep],
+            b[keep],
+            radii[keep],
+            colours[keep],
+            lambda p: self._rows(self.proj.to_screen(p)),
+        )
+        if box is not None:
+            points.append(self._rows(np.array(box, np.float64)))
+        return (np.concatenate(points) if points else np.zeros((0, 2))), 0.0
 
     def draw(self, joints, target):
         """Render one frame (joints [J, 3], look-at target [3]); returns the yuv420p frame (flat uint8 view)."""

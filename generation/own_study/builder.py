@@ -17,7 +17,7 @@ generation.data.motion_files). The pipeline:
    generation.stimuli.catch_kinds, the kinds dealt in turn), plus copies of the item's clips in every condition with
    role catch (the pairwise and parallel designs show BAD beside the reference). The reference condition is
    written as NAT, the role it plays in the app and the analysis.
-4. Render with one camera per item that frames all its clips (rendering.camera.framing_camera), every bone of
+4. Render with one camera per item that frames all its clips (rendering.framing: [render] view, framing), every bone of
    the skeleton drawn, finger and face bones thinner; pad and stamp every video alike.
 5. metrics.csv (jerk, acceleration, bone-length variation, foot skating where feet are found), c2st.csv (the
    classifier two-sample test of each condition against the reference, generation.metrics.c2st) and
@@ -38,7 +38,8 @@ from tqdm import tqdm
 from moglow_eval.core import study
 from moglow_eval.core.clip import save_clip
 from moglow_eval.core.tables import C2ST_COLUMNS
-from rendering.camera import framing_camera
+from rendering.framing import item_camera
+from rendering.raster import STYLES
 
 from ..data.motion_files import read_motion
 from ..metrics import c2st
@@ -289,17 +290,19 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
     by_item = {}
     for c in clips:
         by_item.setdefault(c.item, []).append(c.joints)
-    cameras = {item: framing_camera(js) for item, js in by_item.items()}
+    cameras = {item: item_camera(js, names, parents, spec.fps, spec.view, spec.framing) for item, js in by_item.items()}
     taken, manifest, metrics_rows, jobs, groups, feats = set(), [], [], [], [], {}
     forbidden = [*study.RESERVED, *spec.conditions]
     options = dict(hide=tuple(spec.hide), thin=None if spec.thin == "auto" else tuple(spec.thin))
-    for k in tqdm(rng.permutation(len(clips)), desc="clips", unit="clip", file=sys.stderr, disable=not progress):
-        c = clips[k]
+    # Every clip in every style: each styled clip is a stimulus of its own, with its own random id.
+    styled = [(c, style) for c in clips for style in spec.styles]
+    for k in tqdm(rng.permutation(len(styled)), desc="clips", unit="clip", file=sys.stderr, disable=not progress):
+        c, style = styled[k] if len(spec.styles) > 1 else (clips[k], spec.styles[0])
         cond, item, role, joints = c.condition, c.item, c.role, c.joints
         cid = study.new_clip_id(taken, forbidden)
         motion, video, sheet = clip_files(out, cid)
         save_clip(motion, joints, parents, names, spec.fps)
-        job = dict(camera=cameras[item], **options)
+        job = dict(camera=cameras[item], style=STYLES[style], **options)
         if sound:
             # Every clip of an item carries the same sound bytes, a catch copy (one frame late) too: an audio track
             # of its own would tell a catch copy from the item's test clip.
@@ -311,11 +314,13 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
             row["motion_item"] = c.motion_item
         if sound:
             row["audio"] = "1"
+        if spec.styles != ["stick"]:
+            row["style"] = style
         manifest.append(row)
         m = any_clip_metrics(joints, spec.fps, parents, feet)
         metrics_rows.append(dict(clip_id=cid, condition=cond, role=role, item=item, **m))
-        if c.motion_item:
-            continue  # the figures are of each condition's own motion
+        if c.motion_item or style != spec.styles[0]:
+            continue  # the figures are of each condition's own motion, once
         c2st.collect(feats, cond, role, item, joints, spec.fps, parents)
     return manifest, metrics_rows, jobs, groups, feats
 

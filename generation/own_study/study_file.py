@@ -26,6 +26,10 @@
     fps = 30                     # the frame rate of .npy arrays (BVH and .npz files carry their own)
     smpl_model = "models/SMPLX_NEUTRAL.npz"  # the body model for SMPL-family .npz files (poses, trans, betas)
     smpl_type = "smplx"          # optional: smpl, smplh or smplx (else told from the model's joints)
+    [render]                     # optional
+    view = "front"               # "front", "three-quarter", "side" or degrees from the body's mean facing
+    framing = "upper"            # "full" (the default), "upper" (hips up) or "auto" (upper when the feet stay)
+    style = ["stick", "solid"]   # "stick" (the default) or "solid", or a list: every clip drawn in each
 
 Relative paths are relative to the file. Command-line flags override the top-level keys. Every problem is one
 StudyFileError naming the file and key.
@@ -44,7 +48,20 @@ from ..data.smpl_files import TYPES as SMPL_TYPES
 from ..stimuli.catch_kinds import KINDS as CATCH_KINDS
 
 NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,31}$")
-TOP_KEYS = {"reference", "length_s", "seed", "n_training", "fps", "design", "conditions", "catch", "skeleton", "audio"}
+TOP_KEYS = {
+    "reference",
+    "length_s",
+    "seed",
+    "n_training",
+    "fps",
+    "design",
+    "conditions",
+    "catch",
+    "skeleton",
+    "audio",
+    "render",
+}
+RENDER_KEYS = {"view", "framing", "style"}
 STIMULUS_DESIGNS = ("appropriateness",)  # designs that need stimuli of their own (mismatched clips)
 AUDIO_KEYS = {"folder", "loudness"}
 CATCH_KEYS = {"make", "n", "folder"}
@@ -81,6 +98,9 @@ class StudySpec:
     design: str | None = None
     audio_folder: Path | None = None
     loudness: float = -23.0
+    view: object = None  # None: the built-in study's fixed camera; else a key of rendering.framing.VIEWS or degrees
+    framing: str = "full"
+    styles: list = field(default_factory=lambda: ["stick"])
 
 
 def _err(path, key, message):
@@ -181,6 +201,7 @@ def read_study_file(path):
     _catch(path, data.get("catch", {}), spec)
     _skeleton(path, data.get("skeleton", {}), spec)
     _audio(path, data.get("audio"), spec)
+    _render(path, data.get("render", {}), spec)
     if spec.design == "appropriateness" and spec.audio_folder is None:
         raise _err(path, "design", "appropriateness asks whether motion fits its speech: give the [audio] table")
     return spec
@@ -278,6 +299,32 @@ def _audio(path, table, spec):
     spec.audio_folder = _folder(path, "[audio] folder", table["folder"])
     if "loudness" in table:
         spec.loudness = _number(path, "[audio] loudness", table["loudness"], -70, -5)
+
+
+def _render(path, table, spec):
+    """[render] view, framing and style: how the videos film and draw the body (rendering.framing, raster)."""
+    from rendering.framing import FRAMINGS, VIEWS
+    from rendering.raster import STYLES
+
+    if not isinstance(table, dict):
+        raise _err(path, "[render]", "must be a table")
+    _unknown(path, "render", table, RENDER_KEYS)
+    view = table.get("view")
+    if isinstance(view, (int, float)) and not isinstance(view, bool):
+        spec.view = _number(path, "[render] view", view, -360, 360)
+    elif view is None or view in VIEWS:
+        spec.view = view
+    else:
+        raise _err(path, "[render] view", f"must be {', '.join(VIEWS)} or an azimuth in degrees, got {view!r}")
+    framing = table.get("framing", "full")
+    if framing not in FRAMINGS:
+        raise _err(path, "[render] framing", f"must be {', '.join(FRAMINGS)}, got {framing!r}")
+    spec.framing = framing
+    style = table.get("style", "stick")
+    styles = [style] if isinstance(style, str) else style
+    if not isinstance(styles, list) or not styles or not all(s in STYLES for s in styles):
+        raise _err(path, "[render] style", f"must be {' or '.join(STYLES)}, or a list of them, got {style!r}")
+    spec.styles = list(dict.fromkeys(styles))
 
 
 def check_joint_names(spec, names, where):

@@ -180,10 +180,12 @@ def bandai():
 FAMILIES = {"cmu": cmu, "mixamo": mixamo, "zeroeggs": zeroeggs, "genea": genea, "lafan1": lafan1, "bandai": bandai}
 
 
-def write_family(path, family, frames=40, fps=30.0, seed=0, units_per_metre=None):
+def write_family(path, family, frames=40, fps=30.0, seed=0, units_per_metre=None, turns=None, degrees=4.0):
     """Write a BVH of `family` (a key of FAMILIES) in its own unit, or in `units_per_metre`; returns (path, joint
     names, units per metre). The root stands with its hips 0.95 m up (or, for a floor root, its child does) and
-    sways; every joint turns a little, each at its own phase."""
+    sways; every joint turns a little, each at its own phase. `turns`: {joint name: {rotation channel: degrees}}
+    added to the pose throughout (SPEAKER: a speaker's arms, upper arms down and forearms forward); `degrees`: the
+    amplitude of every joint's turning."""
     body, _, per_metre, channels = FAMILIES[family]()
     per_metre = units_per_metre or per_metre
     rng = np.random.default_rng(seed)
@@ -199,7 +201,8 @@ def write_family(path, family, frames=40, fps=30.0, seed=0, units_per_metre=None
                     base = 0.95 * per_metre
                 cols.append(base + 0.02 * per_metre * np.sin(2 * np.pi * 0.5 * t + rng.uniform(0, 6)))
             else:
-                cols.append(4.0 * np.sin(2 * np.pi * 0.7 * t + rng.uniform(0, 6)))
+                turn = (turns or {}).get(body.names[j], {}).get(c, 0.0)
+                cols.append(turn + degrees * np.sin(2 * np.pi * 0.7 * t + rng.uniform(0, 6)))
     motion = np.stack(cols, axis=1)
     offsets = [o * per_metre for o in body.offsets]
     all_channels = [POS_ROT if j == 0 else channels for j in range(len(body.names))]
@@ -207,9 +210,18 @@ def write_family(path, family, frames=40, fps=30.0, seed=0, units_per_metre=None
     return path, list(body.names), per_metre
 
 
-def write_zeroeggs(path, frames=90, fps=30.0, seed=0):
+# A speaker's pose for write_family's `turns`: the upper arms turned down from the A-pose, the forearms forward.
+SPEAKER = {
+    "LeftArm": {"Zrotation": -35.0},
+    "RightArm": {"Zrotation": 35.0},
+    "LeftForeArm": {"Xrotation": -60.0},
+    "RightForeArm": {"Xrotation": -60.0},
+}
+
+
+def write_zeroeggs(path, frames=90, fps=30.0, seed=0, turns=None, degrees=4.0):
     """The ZeroEGGS-like take: 75 joints with fingers, centimetres, 30 fps; returns its path."""
-    return write_family(path, "zeroeggs", frames, fps, seed)[0]
+    return write_family(path, "zeroeggs", frames, fps, seed, turns=turns, degrees=degrees)[0]
 
 
 def write_family_study(root, family="zeroeggs", n_items=3, frames=45, fps=30.0, top="", tables=""):
