@@ -2,6 +2,7 @@
 
 import random
 import subprocess
+from fractions import Fraction
 
 # The default rate control gives every frame of a video the same size: a rate of this many bits per second per row
 # of the frame's height, filler included (line drawings cost bits along their lines, so in proportion to the side,
@@ -18,10 +19,27 @@ DITHER_RANGE = (0.25, 4.0)
 MAX_ZONES = 100  # about 1.5 kB of x264 options in the first frame
 
 
+def video_rate(fps) -> Fraction:
+    """The frame rate as ffmpeg is given it: the NTSC rates (24000/1001, ...) as they are, others as they read."""
+    for ntsc in (Fraction(24000, 1001), Fraction(30000, 1001), Fraction(60000, 1001)):
+        if abs(fps - ntsc) < 1e-3:
+            return ntsc
+    return Fraction(fps).limit_denominator(1001)
+
+
 def frame_bits(size, fps):
     """The size of every frame at the default rate control, in bits (filler included), for a size x size video at
-    `fps` frames per second."""
-    return round(RATE_BITS_PER_ROW * size / fps)
+    `fps` frames per second: near RATE_BITS_PER_ROW * size / fps, in whole bytes, and where it can be, such that
+    the rate it makes is a whole number of kbit/s. x264 takes its maximum rate in kbit/s and gives each frame that
+    rate over the frame rate; a frame budget with a fraction of a byte makes the filler alternate between two frame
+    sizes (by frame number, whatever the picture: it tells nothing, but one size is simpler to check)."""
+    rate = video_rate(fps)
+    target = RATE_BITS_PER_ROW * size / 1000
+    for kbit in sorted(range(max(1, int(target * 0.8)), int(target * 1.2) + 2), key=lambda k: abs(k - target)):
+        bits = Fraction(kbit * 1000) / rate
+        if bits.denominator == 1 and bits.numerator % 8 == 0:
+            return bits.numerator
+    return 8 * round(RATE_BITS_PER_ROW * size / fps / 8)
 
 
 def rate_dither(frames, seed=None):
@@ -54,8 +72,8 @@ def _rate_control(size, fps, qp, crf, frames, seed):
     # keyframes and no B-frames: where x264 puts them follows the content, and the boxes would show it. The SEI
     # units (x264's options, the dither among them) are removed, so no parser reads the frames' multiples.
     bits = frame_bits(size, fps)
-    cap = round(bits * fps)
-    aim = round(CODED_SHARE * bits * fps)
+    cap = round(bits * video_rate(fps))
+    aim = round(CODED_SHARE * bits * video_rate(fps))
     x264 = ["filler=1", "qcomp=0", "scenecut=0", "bframes=0"]
     if frames:
         x264.append(f"zones={rate_dither(frames, seed)}")
@@ -90,7 +108,7 @@ def ffmpeg_writer(out_mp4, size, fps, preset="ultrafast", qp=None, crf=None, thr
         "-s",
         f"{size}x{size}",
         "-r",
-        f"{fps:g}",
+        str(video_rate(fps)),
         "-i",
         "-",
         "-an",

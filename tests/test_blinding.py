@@ -101,7 +101,8 @@ def test_the_coded_size_of_a_shaken_clip_is_not_the_larger(small_set):
     aucs = size_aucs(small_set["default"])
     assert 0.25 <= aucs["coded total"] <= 0.75, aucs["coded total"]
     coded = [sum(non_filler_sizes(read_layout(p))) for _, p in small_set["default"]]
-    assert max(coded) / min(coded) < 1.1  # at qp 17: 1.4
+    # at qp 17: 1.4; at the default rate the spread is the per-frame dither's and the aim's, whatever the jitter
+    assert max(coded) / min(coded) < 1.15
 
 
 def test_before_issue_37_the_sizes_told_the_catch_clips(small_set):

@@ -58,6 +58,24 @@ def test_render_real_clip_to_h264_mp4_and_contact_sheet(walk_clip, tmp_path):
     assert sheet.size[0] == 4 * 240 and sheet.size[1] > 2 * 240  # 8 frames, 4 per row
 
 
+@pytest.mark.parametrize("fps", [20.0, 30.0, 29.97, 25.0, 60.0])
+def test_every_frame_is_one_whole_byte_size_at_any_frame_rate(tmp_path, fps):
+    """The default rate is per second: a frame's budget is about the rate over the frame rate, in whole bytes and a
+    whole number of kbit/s (else the filler alternates between two sizes), and every frame of the video has it."""
+    from rendering.encode import RATE_BITS_PER_ROW, frame_bits
+    from rendering.mp4_layout import read_layout
+
+    size = 320
+    bits = frame_bits(size, fps)
+    assert bits % 8 == 0 and abs(bits * fps - RATE_BITS_PER_ROW * size) <= 0.05 * RATE_BITS_PER_ROW * size
+    joints = load_take(WALK, fps)[:24]
+    clip = tmp_path / "walk.npz"
+    save_clip(clip, joints, skeleton.PARENTS, skeleton.JOINT_NAMES, fps)
+    render_clip(clip, tmp_path / "walk.mp4", size=size)
+    sizes = set(read_layout(tmp_path / "walk.mp4").sample_sizes)
+    assert len(sizes) == 1 and 0 <= sizes.pop() - bits // 8 <= 16, sizes  # the budget, and a few framing bytes
+
+
 def _figure_pixels(rgb):
     """Mask of pixels drawn in the figure's colours (dark trunk, blue left, red right limbs)."""
     rgb = rgb.astype(int)
