@@ -140,7 +140,33 @@ def _tukey_table(res):
     return table(t)
 
 
-def _section_html(res, title, figs=None, ordinal_fig=None):
+def style_html(st, fig=None):
+    """The condition × style section: the cell means, the two-way ANOVA and the mixed model's interaction."""
+    a, m = st["anova"], st["mixed_model"]
+    names = ", ".join(html.escape(s) for s in st["styles"])
+    if "undefined" in a:
+        anova = f"<p>Two-way ANOVA: {html.escape(a['undefined'])}.</p>"
+    else:
+        rows = pd.DataFrame(a["terms"]).T[["df", "sum_sq", "F", "p"]]
+        anova = f"<p>Two-way ANOVA rating ~ condition × style, type II sums of squares:</p>{table(rows, ('p',))}"
+    if m.get("fixed_effects"):
+        it = m["interaction_test"]
+        test = (
+            f"<p>Interaction (all condition × style effects at once, Wald): χ²({it['df']}) = {it['chi2']:.3f}, "
+            f"{p_equals(it['p'])}. Reference: {html.escape(m['reference'])}, "
+            f"{html.escape(m['style_reference'])}.</p>"
+        )
+        model = f"{mixed_html(m)}{test}"
+    else:
+        model = f"<p>Mixed model with the interaction: {html.escape(str(why_not(m)))}</p>"
+    return (
+        f"<h3>Condition × style ({names})</h3>"
+        f"{table(st['cells'].set_index(['condition', 'style']))}{anova}{model}"
+        + (f"<p>{img(fig)}</p><p class=note>Mean rating per condition and style, 95% t intervals.</p>" if fig else "")
+    )
+
+
+def _section_html(res, title, figs=None, ordinal_fig=None, style_fig=None):
     parts = [
         f"<h2>{html.escape(title)}</h2>",
         f"<p>{res['n_test_ratings']} test ratings from {res['n_raters']} raters on {res['n_clips']} clips.</p>",
@@ -175,6 +201,8 @@ def _section_html(res, title, figs=None, ordinal_fig=None):
             "<h3>Objective metrics vs per-clip mean rating</h3>",
             table(res["metrics"], ("pearson_p", "spearman_p")),
         ]
+    if res.get("style") is not None:
+        parts.append(style_html(res["style"], style_fig))
     if res.get("c2st") is not None:
         parts += [
             "<h3>Classifier two-sample test against the reference</h3>",
@@ -218,6 +246,7 @@ def html_parts(meta, counts, kept, everyone, fig_paths) -> list[str]:
             "With the rater exclusion (primary analysis)",
             [fig_paths["metric_scatter"]] if "metric_scatter" in fig_paths else None,
             fig_paths.get("ordinal_fit"),
+            fig_paths.get("style_means"),
         ),
         _section_html(everyone, "Without the exclusion (all raters)", ordinal_fig=fig_paths.get("ordinal_fit_all")),
         "<h2>Excluded raters</h2><p>" + (html.escape(", ".join(counts["excluded_raters"])) or "none") + "</p>",
