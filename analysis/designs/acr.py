@@ -17,6 +17,7 @@ from .. import bootstrap, figures, rating_models, stats, style
 from ..filtering import exclude_raters, only_test_rows
 from ..load import AnalysisError, load_c2st, load_metrics, load_ratings
 from ..report_html import records
+from ..study_text import rename_c2st, rename_reference
 from . import acr_report
 from .base import Design, Prepared
 
@@ -194,10 +195,11 @@ class Acr(Design):
         return "preference" not in columns and "page_id" not in columns  # the others' columns
 
     def prepare(self, path, options):
-        df = load_ratings(path)
+        df = rename_reference(load_ratings(path), options.reference_name)
         metrics = load_metrics(options.metrics_path) if options.metrics_path else None
         c2st_path = Path(options.metrics_path).parent / "c2st.csv" if options.metrics_path else None
         c2st = load_c2st(c2st_path) if c2st_path and c2st_path.is_file() else None
+        c2st = rename_c2st(c2st, options.reference_name)
         kept_rows, counts = exclude_raters(df, options.threshold)
         kept_test = only_test_rows(kept_rows)
         if len(kept_test) == 0:
@@ -219,6 +221,7 @@ class Acr(Design):
             ordinal_max_ratings=options.ordinal_max_ratings,
             metrics=metrics,
             progress=progress,
+            reference=options.reference_name,
         )
         kept = analyse(only_test_rows(data.kept), **opts)
         everyone = analyse(only_test_rows(data.rows), **opts)

@@ -8,6 +8,7 @@ import html
 import pandas as pd
 
 from ..report_html import img, mixed_html, p_equals, p_text, table, why_not
+from ..study_text import C2ST_LOW_AUC, C2ST_MIN_ITEMS, c2st_with_notes, captions
 
 
 def console_summary(counts, kept, everyone):
@@ -210,8 +211,9 @@ def _section_html(res, title, figs=None, ordinal_fig=None, style_fig=None):
             "condition's clips from the reference's, folds grouped by item (Lopez-Paz &amp; Oquab 2017): 0.5 = "
             "it cannot tell them apart, 1 = it always can. NAT:split is the reference against itself, the "
             "test's floor. A low AUC is no proof of quality: only that these statistics on this many items show "
-            "no difference.</p>",
-            table(res["c2st"], ()),
+            f"no difference. With fewer than {C2ST_MIN_ITEMS} items the AUC's chance spread is too wide to mean "
+            f"much; an AUC below {C2ST_LOW_AUC} means the classifier learned the items, not the systems.</p>",
+            table(c2st_with_notes(res["c2st"]), ()),
         ]
     return "\n".join(parts)
 
@@ -219,6 +221,7 @@ def _section_html(res, title, figs=None, ordinal_fig=None, style_fig=None):
 def html_parts(meta, counts, kept, everyone, fig_paths) -> list[str]:
     """report.html's parts (report_html.page wraps them)."""
     s = kept["summary"]
+    caption = captions(s.index)
     # every name below comes from the ratings file: escaped, so a condition called "<b>" stays text
     means = ", ".join(f"{html.escape(str(c))} {s.at[c, 'mean']:.2f}" for c in s.index)
     sig = [html.escape(f"{t.group2}–{t.group1}") for _, t in kept["tukey"].iterrows() if t.reject]
@@ -237,9 +240,9 @@ def html_parts(meta, counts, kept, everyone, fig_paths) -> list[str]:
         f"({counts['n_test_ratings_kept']} test ratings). Mean ratings: {means}. "
         f"{_anova_text(kept, 2)[0]} {tukey}</p>",
         f"<p>{img(fig_paths['ratings_histogram'])}</p>",
-        "<p class=note>Fig. 5 of the paper: responses per scale point and condition; dashed lines at the means.</p>",
+        f"<p class=note>{caption['ratings_histogram']}</p>",
         f"<p>{img(fig_paths['per_clip_means'])}</p>",
-        "<p class=note>Fig. 6 of the paper: mean rating of each clip, sorted worst to best within each condition.</p>",
+        f"<p class=note>{caption['per_clip_means']}</p>",
         f"<p>{img(fig_paths['condition_means'])}</p>",
         _section_html(
             kept,
