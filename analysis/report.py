@@ -22,6 +22,7 @@ from .designs import Options, design_of
 from .designs.acr import MIXED_MAX_LEVELS, ORDINAL_MAX_RATINGS
 from .filtering import DEFAULT_THRESHOLD
 from .load import AnalysisError
+from .study_text import reference_from_study_file
 
 
 def _prepare_out(out):
@@ -79,6 +80,7 @@ def build_report(
     quiet=False,
     ordinal=True,
     ordinal_max_ratings=ORDINAL_MAX_RATINGS,
+    reference_name=None,
 ):
     """Run the whole analysis of a ratings file, of whichever design it holds, and write the report.
 
@@ -115,6 +117,9 @@ def build_report(
         Fit the ordinal mixed model.
     ordinal_max_ratings : int
         The ordinal model is skipped above this many test ratings (it works on every rating).
+    reference_name : str or None
+        The reference condition's own name (acr): the export calls it NAT (CONTRACTS §10); the report, its
+        figures and its models then use this name.
 
     Returns
     -------
@@ -128,7 +133,16 @@ def build_report(
     """
     t0 = time.perf_counter()
     options = Options(
-        metrics_path, threshold, mixed, seed, n_boot, alpha, mixed_max_levels, ordinal, ordinal_max_ratings
+        metrics_path,
+        threshold,
+        mixed,
+        seed,
+        n_boot,
+        alpha,
+        mixed_max_levels,
+        ordinal,
+        ordinal_max_ratings,
+        reference_name,
     )
     design = design_of(ratings_path)
     data = design.prepare(ratings_path, options)
@@ -218,12 +232,20 @@ def build_parser():
         default=0.05,
         help="family-wise error rate (0 < alpha <= 0.5; default 0.05)",
     )
+    ap.add_argument(
+        "--reference-name",
+        help="the reference condition's own name: the export calls it NAT (acr; default: NAT, or --study's)",
+    )
+    ap.add_argument("--study", help="the study file (STUDY.toml) the stimuli were built from: its reference's name")
     ap.add_argument("--quiet", action="store_true", help="no console summary or progress bar")
     return ap
 
 
 def _main(argv):
     args = build_parser().parse_args(argv)
+    reference = args.reference_name
+    if reference is None and args.study:
+        reference = reference_from_study_file(args.study)
     build_report(
         args.ratings,
         args.out,
@@ -238,6 +260,7 @@ def _main(argv):
         quiet=args.quiet,
         ordinal=not args.no_ordinal,
         ordinal_max_ratings=args.ordinal_max_ratings,
+        reference_name=reference,
     )
     return 0
 

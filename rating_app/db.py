@@ -68,6 +68,8 @@ class Clip(Base):
     fps: Mapped[float | None] = mapped_column(Float, nullable=True)
     # appropriateness: the other item whose motion a mismatched clip shows (CONTRACTS §10); "" for the others
     motion_item: Mapped[str | None] = mapped_column(String(128), nullable=True, default="")
+    # how the body is drawn (manifest `style`, CONTRACTS §4); "" or NULL when the manifest has no style column
+    style: Mapped[str | None] = mapped_column(String(16), nullable=True, default="")
 
 
 class Rater(Base):
@@ -379,6 +381,7 @@ ADDED_COLUMNS = (
     ("trials", "video_ranges", "VARCHAR(400)"),  # bytes sent (CONTRACTS §5); NULL = none recorded
     ("trial_clips", "video_ranges", "VARCHAR(400)"),
     ("clips", "motion_item", "VARCHAR(128)"),  # appropriateness: NULL for every clip of an older study
+    ("clips", "style", "VARCHAR(16)"),  # the manifest's style: NULL for every clip of an older study
     ("raters", "audio_sample", "VARCHAR(64)"),  # the sound check
     ("raters", "audio_tries", "INTEGER"),
     ("raters", "audio_passed_at", "TIMESTAMP"),
@@ -458,11 +461,13 @@ def init_db(engine: Engine, clips=None, design: str | None = None, cover_keys=No
                                 frames=c.frames,
                                 fps=c.fps,
                                 motion_item=c.motion_item,
+                                style=c.style,
                             )
                         )
                     else:
                         row.condition, row.role, row.item = c.condition, c.role, c.item
                         row.frames, row.fps, row.motion_item = c.frames, c.fps, c.motion_item
+                        row.style = c.style
             if cover_keys:
                 _add_cover_rows(s, cover_keys)
             for name, value in (settings or {}).items():

@@ -16,6 +16,7 @@ from sqlalchemy.orm import Session
 
 from .db import TARGET_RATERS, study_design, study_setting
 from .designs import get
+from .export_cells import clip_styles, row_style
 
 FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
 
@@ -37,9 +38,14 @@ def export_csv(engine: Engine, out=None) -> str | int:
         # tell an export of a study that did not fill; a database from before it has none, and no column.
         target = study_setting(s, TARGET_RATERS)
         extra = {TARGET_RATERS: target} if target is not None else {}
-        w = csv.DictWriter(buf, fieldnames=[*design.columns, *extra], lineterminator="\n")
+        # A manifest with a style column (CONTRACTS §4): every row says how its clips were drawn (§7).
+        styles = clip_styles(s)
+        style_col = ["style"] if styles else []
+        w = csv.DictWriter(buf, fieldnames=[*design.columns, *style_col, *extra], lineterminator="\n")
         w.writeheader()
         for row in design.export_rows(s):
+            if styles:
+                row = {**row, "style": row_style(row, styles)}
             w.writerow({k: cell(v) for k, v in {**row, **extra}.items()})
             n += 1
     return n if out is not None else buf.getvalue()

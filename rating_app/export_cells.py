@@ -6,7 +6,9 @@ The `flags` column marks answers to look at before trusting them (FLAGS). A desi
 
 from __future__ import annotations
 
-from .db import Rater
+from sqlalchemy import select
+
+from .db import Clip, Rater
 
 # The columns after a design's own, in every export (CONTRACTS §6, §8).
 TAIL = ("trial_index", "watched_ms", "submitted_at", "external_id", "study_id", "rater_completed", "flags")
@@ -43,3 +45,25 @@ def common(rater_id, idx, watched, at, ext, study, completed, flags, n_early) ->
         "rater_completed": int(completed is not None),
         "flags": row_flags(flags, n_early),
     }
+
+
+# The columns of a row that name a clip: acr and parallel rows have one, pairwise and appropriateness rows two.
+CLIP_COLUMNS = ("clip_id", "clip_a", "clip_b")
+
+
+def clip_styles(s) -> dict[str, str]:
+    """{clip_id: style} of the study's clips (manifest `style`, CONTRACTS §4); empty when no clip has a style,
+    and the export then has no style column."""
+    styles = {c: st for c, st in s.execute(select(Clip.clip_id, Clip.style)) if st}
+    return styles
+
+
+def row_style(row: dict, styles: dict[str, str]) -> str:
+    """The style of the clips a row names: one style, or the distinct ones joined by `/` in the row's clip order
+    (a pair of clips drawn in different styles)."""
+    seen = []
+    for col in CLIP_COLUMNS:
+        st = styles.get(row.get(col) or "", "")
+        if st and st not in seen:
+            seen.append(st)
+    return "/".join(seen)

@@ -29,6 +29,7 @@ class ManifestClip:
     fps: float | None
     motion_item: str = ""  # appropriateness: the other item whose motion this clip shows (CONTRACTS §10)
     audio: bool = False  # the video carries sound (a study with [audio], CONTRACTS §10)
+    style: str = ""  # how the body is drawn (a study with [render] style, CONTRACTS §4): exported, never served
 
     @property
     def duration_ms(self) -> int | None:
@@ -104,4 +105,5 @@ def _clip(row: dict, where: str, base: Path, check_files: bool) -> ManifestClip:
         fps=_number(row.get("fps"), float, where, "fps"),
         motion_item=(row.get("motion_item") or "").strip()[:128],
         audio=(row.get("audio") or "").strip() == "1",
+        style=(row.get("style") or "").strip()[:16],
     )

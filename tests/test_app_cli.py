@@ -207,17 +207,39 @@ def test_quality_follows_the_metrics(app_stimuli):
     q = quality_from_metrics(clips)
     assert q["NAT"] > q["MG"] > q["FL"] > q["BAD"]
     assert q["NAT"] == pytest.approx(4.3) and q["BAD"] == pytest.approx(1.3)
-    # metrics decide: if the 'NAT' clips had the worst metrics they would get the lowest quality
+    # metrics decide: if the 'MG' clips had FL's metrics (farther from the reference's) they would be below FL
     flipped = {
-        k: ClipInfo(k, {"NAT": "BAD", "BAD": "NAT"}.get(c.condition, c.condition), c.role, metrics=c.metrics)
+        k: ClipInfo(k, {"MG": "FL", "FL": "MG"}.get(c.condition, c.condition), c.role, metrics=c.metrics)
         for k, c in clips.items()
     }
     q2 = quality_from_metrics(flipped)
-    assert q2["BAD"] > q2["NAT"]
+    assert q2["NAT"] > q2["FL"] > q2["MG"] > q2["BAD"]
     assert parse_quality("NAT=4.5, MG=3") == {"NAT": 4.5, "MG": 3.0}
     for bad in ("NAT", "NAT=x", "=3", "NAT=0.5"):
         with pytest.raises(AppError):
             parse_quality(bad)
+
+
+def test_a_smoothed_system_is_rated_below_the_reference_not_above_it():
+    """The simulated crowd scores a system by how far its motion statistics are from the reference's: a system
+    whose jerk and acceleration are a tenth of the real motion's (heavily smoothed) is not better than it."""
+    from rating_app.simulate.raters import make_raters
+
+    rng = np.random.default_rng(0)
+    clips = {}
+    for i in range(12):
+        for cond, jerk, acc in (("NAT", 30.0, 6.0), ("SMOOTH", 3.0, 0.6), ("SYS", 36.0, 7.0)):
+            cid = f"{cond.lower()}{i:02d}"
+            m = {"foot_skating": 0.05, "bone_length_std": 0.0, "jerk": jerk, "acceleration": acc}
+            clips[cid] = ClipInfo(cid, cond, "test", metrics={k: v * rng.uniform(0.9, 1.1) for k, v in m.items()})
+    q = quality_from_metrics(clips)
+    assert q["NAT"] > q["SYS"] > q["SMOOTH"]
+    raters = [r for r in make_raters(40, seed=1, careless=0.0, prefix="sim") if not r.careless]
+    mean = {
+        cond: np.mean([r.rate(c)[0] for r in raters for c in clips.values() if c.condition == cond])
+        for cond in ("NAT", "SMOOTH")
+    }
+    assert mean["SMOOTH"] < mean["NAT"] - 1
 
 
 def test_unmeasured_metrics_are_skipped(app_stimuli, tmp_path):

@@ -6,14 +6,18 @@ Kruskal-Wallis and Mann-Whitney, a cluster bootstrap over raters and clips, a li
 model (bootstrap.py, rating_models.py), and the objective metrics' correlations. Its report parts are in acr_report.py.
 """
 
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
-from .. import bootstrap, figures, rating_models, stats
+from moglow_eval.core import study
+
+from .. import bootstrap, figures, rating_models, stats, style
 from ..filtering import exclude_raters, only_test_rows
 from ..load import AnalysisError, load_c2st, load_metrics, load_ratings
 from ..report_html import records
+from ..study_text import rename_c2st, rename_reference
 from . import acr_report
 from .base import Design, Prepared
 
@@ -88,6 +92,7 @@ def analyse(
     ordinal_max_ratings=ORDINAL_MAX_RATINGS,
     metrics=None,
     progress=None,
+    reference=None,
 ):
     """All analyses of one set of test rows -> dict of tables and dicts (see to_json for the file layout)."""
     step = progress.update if progress is not None else (lambda n=1: None)
@@ -115,8 +120,12 @@ def analyse(
     out["mannwhitney"] = stats.pairwise_mannwhitney(test, alpha=alpha)
     step()
     sizes = (out["n_raters"], out["n_clips"], mixed_max_levels)
-    out["mixed"] = _fit_model(rating_models.mixed_model, test, mixed, "--no-mixed", *sizes)
-    out["ordinal"] = _fit_model(rating_models.ordinal_model, test, ordinal, "--no-ordinal", *sizes, ordinal_max_ratings)
+    ref = reference if reference in set(conds) else (study.NATURAL if study.NATURAL in set(conds) else None)
+    out["mixed"] = _fit_model(partial(rating_models.mixed_model, reference=ref), test, mixed, "--no-mixed", *sizes)
+    out["ordinal"] = _fit_model(
+        partial(rating_models.ordinal_model, reference=ref), test, ordinal, "--no-ordinal", *sizes, ordinal_max_ratings
+    )
+    out["style"] = style.style_analysis(test, ref)  # condition x style, when the clips have more than one style
     step()
     if metrics is not None:
         out["metrics"] = stats.metric_correlations(out["clips"], metrics)
@@ -160,6 +169,8 @@ def section_json(res):
     }
     if "metrics" in res:
         out["metric_correlations"] = records(res["metrics"])
+    if res.get("style") is not None:
+        out["style"] = style.style_json(res["style"])
     return out
 
 
@@ -184,10 +195,11 @@ class Acr(Design):
         return "preference" not in columns and "page_id" not in columns  # the others' columns
 
     def prepare(self, path, options):
-        df = load_ratings(path)
+        df = rename_reference(load_ratings(path), options.reference_name)
         metrics = load_metrics(options.metrics_path) if options.metrics_path else None
         c2st_path = Path(options.metrics_path).parent / "c2st.csv" if options.metrics_path else None
         c2st = load_c2st(c2st_path) if c2st_path and c2st_path.is_file() else None
+        c2st = rename_c2st(c2st, options.reference_name)
         kept_rows, counts = exclude_raters(df, options.threshold)
         kept_test = only_test_rows(kept_rows)
         if len(kept_test) == 0:
@@ -209,6 +221,7 @@ class Acr(Design):
             ordinal_max_ratings=options.ordinal_max_ratings,
             metrics=metrics,
             progress=progress,
+            reference=options.reference_name,
         )
         kept = analyse(only_test_rows(data.kept), **opts)
         everyone = analyse(only_test_rows(data.rows), **opts)
@@ -232,6 +245,8 @@ class Acr(Design):
         for key, res in (("ordinal_fit", kept), ("ordinal_fit_all", everyone)):
             if res["ordinal"].get("fixed_effects"):
                 figs[key] = figures.ordinal_fit(res["ordinal"], folder / f"{key}.png")
+        if kept.get("style") is not None:
+            figs["style_means"] = style.style_figure(kept["style"], folder / "style_means.png")
         metrics = data.extra["metrics"]
         if metrics is not None:
             figs["metric_scatter"] = figures.metric_scatter(

@@ -8,6 +8,7 @@ import html
 import pandas as pd
 
 from ..report_html import img, mixed_html, p_equals, p_text, table, why_not
+from ..study_text import C2ST_LOW_AUC, C2ST_MIN_ITEMS, c2st_with_notes, captions
 
 
 def console_summary(counts, kept, everyone):
@@ -140,7 +141,33 @@ def _tukey_table(res):
     return table(t)
 
 
-def _section_html(res, title, figs=None, ordinal_fig=None):
+def style_html(st, fig=None):
+    """The condition × style section: the cell means, the two-way ANOVA and the mixed model's interaction."""
+    a, m = st["anova"], st["mixed_model"]
+    names = ", ".join(html.escape(s) for s in st["styles"])
+    if "undefined" in a:
+        anova = f"<p>Two-way ANOVA: {html.escape(a['undefined'])}.</p>"
+    else:
+        rows = pd.DataFrame(a["terms"]).T[["df", "sum_sq", "F", "p"]]
+        anova = f"<p>Two-way ANOVA rating ~ condition × style, type II sums of squares:</p>{table(rows, ('p',))}"
+    if m.get("fixed_effects"):
+        it = m["interaction_test"]
+        test = (
+            f"<p>Interaction (all condition × style effects at once, Wald): χ²({it['df']}) = {it['chi2']:.3f}, "
+            f"{p_equals(it['p'])}. Reference: {html.escape(m['reference'])}, "
+            f"{html.escape(m['style_reference'])}.</p>"
+        )
+        model = f"{mixed_html(m)}{test}"
+    else:
+        model = f"<p>Mixed model with the interaction: {html.escape(str(why_not(m)))}</p>"
+    return (
+        f"<h3>Condition × style ({names})</h3>"
+        f"{table(st['cells'].set_index(['condition', 'style']))}{anova}{model}"
+        + (f"<p>{img(fig)}</p><p class=note>Mean rating per condition and style, 95% t intervals.</p>" if fig else "")
+    )
+
+
+def _section_html(res, title, figs=None, ordinal_fig=None, style_fig=None):
     parts = [
         f"<h2>{html.escape(title)}</h2>",
         f"<p>{res['n_test_ratings']} test ratings from {res['n_raters']} raters on {res['n_clips']} clips.</p>",
@@ -175,6 +202,8 @@ def _section_html(res, title, figs=None, ordinal_fig=None):
             "<h3>Objective metrics vs per-clip mean rating</h3>",
             table(res["metrics"], ("pearson_p", "spearman_p")),
         ]
+    if res.get("style") is not None:
+        parts.append(style_html(res["style"], style_fig))
     if res.get("c2st") is not None:
         parts += [
             "<h3>Classifier two-sample test against the reference</h3>",
@@ -182,8 +211,9 @@ def _section_html(res, title, figs=None, ordinal_fig=None):
             "condition's clips from the reference's, folds grouped by item (Lopez-Paz &amp; Oquab 2017): 0.5 = "
             "it cannot tell them apart, 1 = it always can. NAT:split is the reference against itself, the "
             "test's floor. A low AUC is no proof of quality: only that these statistics on this many items show "
-            "no difference.</p>",
-            table(res["c2st"], ()),
+            f"no difference. With fewer than {C2ST_MIN_ITEMS} items the AUC's chance spread is too wide to mean "
+            f"much; an AUC below {C2ST_LOW_AUC} means the classifier learned the items, not the systems.</p>",
+            table(c2st_with_notes(res["c2st"]), ()),
         ]
     return "\n".join(parts)
 
@@ -191,6 +221,7 @@ def _section_html(res, title, figs=None, ordinal_fig=None):
 def html_parts(meta, counts, kept, everyone, fig_paths) -> list[str]:
     """report.html's parts (report_html.page wraps them)."""
     s = kept["summary"]
+    caption = captions(s.index)
     # every name below comes from the ratings file: escaped, so a condition called "<b>" stays text
     means = ", ".join(f"{html.escape(str(c))} {s.at[c, 'mean']:.2f}" for c in s.index)
     sig = [html.escape(f"{t.group2}–{t.group1}") for _, t in kept["tukey"].iterrows() if t.reject]
@@ -209,15 +240,16 @@ def html_parts(meta, counts, kept, everyone, fig_paths) -> list[str]:
         f"({counts['n_test_ratings_kept']} test ratings). Mean ratings: {means}. "
         f"{_anova_text(kept, 2)[0]} {tukey}</p>",
         f"<p>{img(fig_paths['ratings_histogram'])}</p>",
-        "<p class=note>Fig. 5 of the paper: responses per scale point and condition; dashed lines at the means.</p>",
+        f"<p class=note>{caption['ratings_histogram']}</p>",
         f"<p>{img(fig_paths['per_clip_means'])}</p>",
-        "<p class=note>Fig. 6 of the paper: mean rating of each clip, sorted worst to best within each condition.</p>",
+        f"<p class=note>{caption['per_clip_means']}</p>",
         f"<p>{img(fig_paths['condition_means'])}</p>",
         _section_html(
             kept,
             "With the rater exclusion (primary analysis)",
             [fig_paths["metric_scatter"]] if "metric_scatter" in fig_paths else None,
             fig_paths.get("ordinal_fit"),
+            fig_paths.get("style_means"),
         ),
         _section_html(everyone, "Without the exclusion (all raters)", ordinal_fig=fig_paths.get("ordinal_fit_all")),
         "<h2>Excluded raters</h2><p>" + (html.escape(", ".join(counts["excluded_raters"])) or "none") + "</p>",

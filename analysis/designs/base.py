@@ -30,6 +30,7 @@ class Options:
     mixed_max_levels: int
     ordinal: bool
     ordinal_max_ratings: int
+    reference_name: str | None = None  # the reference's own name for NAT (analysis.study_text)
 
 
 @dataclass

@@ -6,9 +6,10 @@ noise level, and recognises the bad examples (catch clips) as such: it rates the
 never prefers them (pairwise) and puts them below the page's NAT clip (parallel). A careless rater answers
 uniformly at random in every design, and so fails catch trials.
 
-The per-clip quality comes by default from metrics.csv (worse objective metrics -> lower quality; the best
-condition by the metrics gets QUALITY_HIGH, the worst QUALITY_LOW), else from DEFAULT_QUALITY, and can be set per
-condition. Only the manifest and metrics.csv say which condition a clip is: the server never tells.
+The per-clip quality comes by default from metrics.csv (objective metrics farther from the reference's -> lower
+quality; the condition nearest the reference gets QUALITY_HIGH, the farthest QUALITY_LOW), else from
+DEFAULT_QUALITY, and can be set per condition. Only the manifest and metrics.csv say which condition a clip is:
+the server never tells.
 """
 
 from __future__ import annotations
@@ -102,27 +103,43 @@ def load_audio_answers(manifest) -> dict[str, str]:
         return {hashlib.sha256((base / r["file"]).read_bytes()).hexdigest(): r["answer"] for r in csv.DictReader(f)}
 
 
+def metric_distances(clips: list[ClipInfo], name: str) -> np.ndarray:
+    """How far each clip's metric `name` is from the reference's (the median over the NAT clips, else over every
+    clip): |log ratio|, each side shifted by a tenth of the metric's median so that a reference value of 0
+    (bones of exactly constant length) stays finite; for a metric with negative values, the absolute difference
+    in units of its standard deviation. NaN where the clip has no value. Far in either direction is
+    worse: motion smoother (lower jerk) than the reference's is as unlike it as motion jerkier by the same ratio."""
+    vals = np.array([np.nan if c.metrics.get(name) is None else c.metrics[name] for c in clips], float)
+    ok = np.isfinite(vals)
+    ref_vals = vals[ok & np.array([c.condition == study.NATURAL for c in clips])]
+    if not ref_vals.size:
+        ref_vals = vals[ok]
+    if not ref_vals.size:
+        return np.full(len(clips), np.nan)
+    ref = float(np.median(ref_vals))
+    if (vals[ok] < 0).any():  # a signed metric: the distance in units of its spread
+        return np.abs(vals - ref) / (float(np.std(vals[ok])) + 1e-12)
+    shift = 0.1 * float(np.median(vals[ok])) + 1e-12
+    return np.abs(np.log((vals + shift) / (ref + shift)))
+
+
 def quality_from_metrics(clips: dict[str, ClipInfo]) -> dict[str, float]:
     """Per-condition quality from the clips' objective metrics; also sets a small per-clip offset.
 
-    Each metric is turned into a percentile rank over all clips (0 = best, 1 = worst; ranks, so one extreme
-    condition such as NAT with zero bone-length error does not squash the others together); a clip's badness is
-    its mean rank. Conditions are placed linearly between QUALITY_HIGH (least bad) and QUALITY_LOW (most bad)
-    by mean badness, so the order of the conditions is the order the metrics give (NAT best and BAD worst
-    whenever the metrics say so)."""
+    A clip's metrics count by how far they are from the reference's (metric_distances), never by how low they
+    are: a heavily smoothed system has a low jerk, but not the reference's. Each metric's distance is turned
+    into a percentile rank over all clips (0 = nearest the reference, 1 = farthest; ranks, so one extreme
+    condition does not squash the others together); a clip's badness is its mean rank. Conditions are placed
+    linearly between QUALITY_HIGH (least bad) and QUALITY_LOW (most bad) by mean badness."""
     from scipy.stats import rankdata
 
-    def value(c, m):
-        x = c.metrics.get(m)
-        return np.nan if x is None else x
-
-    have = [c for c in clips.values() if any(np.isfinite(value(c, m)) for m in study.METRIC_NAMES)]
+    have = [c for c in clips.values() if any(np.isfinite(c.metrics.get(m, np.nan)) for m in study.METRIC_NAMES)]
     if not have:
         return {}
     total = np.zeros(len(have))
     n = np.zeros(len(have))
     for m in study.METRIC_NAMES:
-        vals = np.array([value(c, m) for c in have], float)
+        vals = metric_distances(have, m)
         ok = np.isfinite(vals)
         if ok.sum() < 2 or np.ptp(vals[ok]) == 0:
             continue

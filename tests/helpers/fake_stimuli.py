@@ -57,6 +57,7 @@ def write_fake_stimuli(
     seed=0,
     catch_nat=False,
     mismatched=False,
+    styles=(),
 ) -> Path:
     """Write manifest.csv (+ metrics.csv) with one short MP4 per clip; return the manifest path.
 
@@ -64,13 +65,18 @@ def write_fake_stimuli(
     clip of every condition of each catch item (role catch), as make_stimuli writes them for pairwise and parallel
     catch trials (NAT is the reference, the others fill a parallel catch page to a test page's size). `mismatched`:
     also each condition's mismatched clip of every test item (the next item's motion, CONTRACTS §10), for the
-    appropriateness design; the other designs leave those out."""
+    appropriateness design; the other designs leave those out. `styles` (e.g. ("stick", "solid")): every clip once
+    in each style, each its own stimulus, and a manifest `style` column, as a study with `[render] style` makes."""
     folder = Path(folder)
     (folder / "videos").mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     rows, taken = [], set()
 
     def add(condition, role, item, motion_item=""):
+        for style in styles or (None,):
+            add_one(condition, role, item, motion_item, style)
+
+    def add_one(condition, role, item, motion_item, style):
         cid = study.new_clip_id(taken)  # as make_stimuli names clips: no id spells a condition
         video = f"videos/{cid}.mp4"
         write_mp4(folder / video, n_frames=n_frames, fps=fps, shade=len(rows))
@@ -86,6 +92,7 @@ def write_fake_stimuli(
                 "frames": n_frames,
                 "fps": fps,
                 "motion_item": motion_item,
+                **({"style": style} if style else {}),
             }
         )
 
