@@ -42,6 +42,7 @@ class Style:
     limb_radius: float = 0.045  # metres: its arms and legs
     thin_radius: float = 0.011  # metres: its fingers and face
     sphere_radius: float = 0.1  # metres: its head
+    solid_grid: int = 1  # frame pixels per pixel of the grid the solid body is rasterised on (solid.SolidBody)
 
 
 DEFAULT_STYLE = Style()
@@ -175,7 +176,7 @@ class FrameDrawer:
             np.float64,
         )
         self.grid_y = grey_to_y(style.grid)
-        self.solid = SolidBody(size, self.proj.focal) if style.body == "solid" else None
+        self.solid = SolidBody(size, self.proj.focal, style.solid_grid) if style.body == "solid" else None
         if self.solid:
             self._capsules()
 
@@ -189,6 +190,10 @@ class FrameDrawer:
             limb = self.style.limb_radius if side != "centre" else self.style.trunk_radius
             self.capsule_radius[bones] = self.style.thin_radius if thin else limb
             self.capsule_colour[bones] = colour[side]
+        # A bone's capsule needs no round end at its parent joint where a bone at least as thick ends there.
+        end_radius = np.zeros(len(self.parents))
+        np.maximum.at(end_radius, self.bone_ends[:, 0], self.capsule_radius[:n])
+        self.capsule_capped = np.append(end_radius[self.bone_ends[:, 1]] < self.capsule_radius[:n], True)
 
     def _bones(self, joint_names, hide, thin):
         """The bones to draw (child, parent) grouped by (side, thin), each group one slice of self.bone_ends."""
@@ -277,14 +282,14 @@ class FrameDrawer:
         """The solid body (rendering.solid) over the shadow: the bones' capsules and the head's sphere, just
         beyond the head joint along the neck. Returns what _figure does."""
         a, b = cam[self.bone_ends[:, 0]], cam[self.bone_ends[:, 1]]
-        radii, colours = self.capsule_radius, self.capsule_colour
+        radii, colours, capped = self.capsule_radius, self.capsule_colour, self.capsule_capped
         if self.head is not None and self.parents[self.head] >= 0:
             neck = joints[self.head] - joints[self.parents[self.head]]
             centre = joints[self.head] + 0.8 * self.style.sphere_radius * neck / max(np.linalg.norm(neck), 1e-6)
             hc = self.proj.to_camera(centre, eye)[None]
             a, b = np.concatenate([a, hc]), np.concatenate([b, hc])
         else:
-            radii, colours = radii[:-1], colours[:-1]
+            radii, colours, capped = radii[:-1], colours[:-1], capped[:-1]
         keep = (a[:, 2] > NEAR) & (b[:, 2] > NEAR)
         box = self.solid.draw(
             self.rgba.reshape(-1, 4),
@@ -293,6 +298,7 @@ class FrameDrawer:
             radii[keep],
             colours[keep],
             lambda p: self._rows(self.proj.to_screen(p)),
+            capped[keep],
         )
         if box is not None:
             points.append(self._rows(np.array(box, np.float64)))

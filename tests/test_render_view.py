@@ -135,3 +135,25 @@ def test_two_styles_each_clip_its_own_stimulus_on_pixels(tmp_path):
     for r in rows:
         by_item.setdefault(r["item"], set()).add((out / r["video"]).stat().st_size)
     assert all(len(sizes) == 1 for sizes in by_item.values())  # blinding: one size per item, across styles
+
+
+def test_solid_on_a_coarser_grid_keeps_the_body(speaker):
+    """The solid body rasterised on a grid of half the frame's resolution (Style.solid_grid = 2) covers the
+    full grid's pixels in each colour, but for its edges."""
+    from dataclasses import replace
+
+    from helpers.figure_pixels import classes
+
+    from rendering.camera import camera_targets as targets
+    from rendering.raster import STYLES, FrameDrawer
+
+    joints, names, parents = speaker
+    camera = item_camera([joints], names, parents, 30.0, view="front", framing="upper")
+    target = targets(joints, 30.0, camera)[10]
+    masks = []
+    for grid in (1, 2):
+        drawer = FrameDrawer(parents, names, 240, camera, replace(STYLES["solid"], solid_grid=grid))
+        drawer.draw(joints[10], target)
+        masks.append(classes(drawer.rgb()))
+    for fine, coarse in zip(*masks):
+        assert fine.sum() > 200 and (fine ^ coarse).sum() < 0.1 * fine.sum()
