@@ -40,11 +40,15 @@ class SolidBody:
         bounding box corners drawn, or None."""
         sa, sb = to_rows(a) / self.scale, to_rows(b) / self.scale
         ra, rb = self.focal * radii / a[:, 2], self.focal * radii / b[:, 2]  # radii in pixels
-        frags = self._fragments(sa, sb, np.maximum(ra, rb) + 1)
+        capped = np.ones(len(a), bool) if capped is None else np.asarray(capped, bool)
+        pad = np.maximum(ra, rb)[:, None] + 1
+        # Without its round end at b, a capsule reaches past b only across its axis: by the radius times the axis's
+        # other component.
+        across = np.abs((sb - sa)[:, ::-1]) / np.maximum(np.linalg.norm(sb - sa, axis=1), 1e-9)[:, None]
+        frags = self._fragments(sa, sb, pad, np.where(capped[:, None], pad, pad * across + 1))
         if frags is None:
             return None
         k, col, row, lo, hi = frags
-        capped = np.ones(len(a), bool) if capped is None else np.asarray(capped, bool)
         hit = self._cover(k, col, row, sa, sb, ra, rb, capped)
         if hit is None:
             return lo * self.scale, hi * self.scale
@@ -68,23 +72,35 @@ class SolidBody:
         _composite(rgba_flat.view(np.uint32).reshape(-1), (first[:, None] + self.block).reshape(-1), word)
         return lo * self.scale, hi * self.scale
 
-    def _fragments(self, sa, sb, pad):
-        """Every pixel of every capsule's bounding box (screen ends sa, sb [N, 2], `pad` pixels around):
-        (capsule index, column, row, the boxes' union's low corner, its high corner), or None where none."""
+    def _fragments(self, sa, sb, pad_a, pad_b):
+        """The pixels near each capsule (screen ends sa, sb [N, 2], `pad_a`, `pad_b` [N, 2] pixels around each):
+        per row of its bounding box, the columns within the larger pad of the axis's stretch over the rows within
+        that pad (a diagonal arm's box is mostly empty). Returns (capsule index, column, row, the boxes' union's
+        low corner, its high corner), or None where none."""
         size = self.size
-        lo = np.floor(np.minimum(sa, sb) - pad[:, None]).clip(0, size).astype(np.int64)
-        hi = np.ceil(np.maximum(sa, sb) + pad[:, None]).clip(0, size).astype(np.int64)
-        w, h = hi[:, 0] - lo[:, 0], hi[:, 1] - lo[:, 1]
-        n = np.where((w > 0) & (h > 0), w * h, 0)
+        lo = np.floor(np.minimum(sa - pad_a, sb - pad_b)).clip(0, size).astype(np.int64)
+        hi = np.ceil(np.maximum(sa + pad_a, sb + pad_b)).clip(0, size).astype(np.int64)
+        h = np.where(hi[:, 0] > lo[:, 0], np.maximum(hi[:, 1] - lo[:, 1], 0), 0)
+        if h.sum() == 0:
+            return None
+        kr = np.repeat(np.arange(len(h)), h)  # one (capsule, row) pair a row of its box
+        y = lo[kr, 1] + np.arange(len(kr)) - np.repeat(np.cumsum(h) - h, h)
+        pad = np.maximum(pad_a, pad_b).max(1)[kr]
+        d = (sb - sa)[kr]
+        steep = np.abs(d[:, 1]) > 1e-6
+        dy = np.where(steep, d[:, 1], 1.0)
+        t0 = np.where(steep, (y - pad - sa[kr, 1]) / dy, 0.0).clip(0, 1)
+        t1 = np.where(steep, (y + 1 + pad - sa[kr, 1]) / dy, 1.0).clip(0, 1)
+        x0, x1 = sa[kr, 0] + t0 * d[:, 0], sa[kr, 0] + t1 * d[:, 0]
+        xlo = np.maximum(np.floor(np.minimum(x0, x1) - pad), lo[kr, 0]).astype(np.int64)
+        xhi = np.minimum(np.ceil(np.maximum(x0, x1) + pad), hi[kr, 0]).astype(np.int64)
+        n = np.maximum(xhi - xlo, 0)
         total = int(n.sum())
         if total == 0:
             return None
-        k = np.repeat(np.arange(len(n), dtype=np.int32), n)
-        local = np.arange(total, dtype=np.int32) - np.repeat((np.cumsum(n) - n).astype(np.int32), n)
-        row, col = np.divmod(local, w.astype(np.int32)[k])
-        col += lo[:, 0].astype(np.int32)[k]
-        row += lo[:, 1].astype(np.int32)[k]
-        return k, col, row, lo.min(0), hi.max(0)
+        pair = np.repeat(np.arange(len(n), dtype=np.int32), n)
+        col = (np.arange(total) - np.repeat(np.cumsum(n) - n, n) + np.repeat(xlo, n)).astype(np.int32)
+        return kr[pair].astype(np.int32), col, y[pair].astype(np.int32), lo.min(0), hi.max(0)
 
     def _cover(self, k, col, row, sa, sb, ra, rb, capped):
         """The fragments a capsule covers: (capsule, flat pixel, t along the axis, the offset from the axis
