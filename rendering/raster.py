@@ -147,7 +147,7 @@ class FrameDrawer:
         self.quad = np.array([0, 1, size, size + 1])  # a 2x2 block's pixels from its top left
         self.parents = np.asarray(parents)
         self._bones(joint_names, hide, thin)
-        self.head = _head_joint(joint_names)
+        self.head = head_joint(joint_names)
         self.circle = Path.unit_circle()
         self.width = style.bone_width * size
         self.gcs = {}
@@ -351,7 +351,7 @@ class FrameDrawer:
         return yuv_to_rgb(self.frame, self.size)
 
 
-def _head_joint(names):
+def head_joint(names):
     """Index of the head joint (its last name token is 'head': Head, mixamorig:Head, b_head), or None."""
     for j, name in enumerate(names):
         words = skeleton_names.tokens(name)
