@@ -291,8 +291,9 @@ class FrameDrawer:
         else:
             radii, colours, capped = radii[:-1], colours[:-1], capped[:-1]
         keep = (a[:, 2] > NEAR) & (b[:, 2] > NEAR)
+        self.solid.blocks = None
         box = self.solid.draw(
-            self.rgba.reshape(-1, 4),
+            None if self.solid.scale == 2 else self.rgba.reshape(-1, 4),
             a[keep],
             b[keep],
             radii[keep],
@@ -319,7 +320,21 @@ class FrameDrawer:
             c1, r1 = (np.ceil((xy.max(0) + pad) / 2) * 2).clip(0, self.size).astype(int)
             if c1 > c0 and r1 > r0:
                 self._blend(r0, r1, c0, c1)
+        if self.solid is not None and self.solid.blocks is not None:
+            self._blend_blocks(*self.solid.blocks)
         return self.frame
+
+    def _blend_blocks(self, blocks, rgb, cover):
+        """Composite the solid body drawn on a grid of 2 over the planes: each of its pixels [M] (a 2x2 block's
+        index, as the chroma planes count them) of colour `rgb` [M, 3] (0-255) and coverage `cover` [M]."""
+        br, bc = np.divmod(blocks, self.size // 2)
+        idx = (2 * self.size * br + 2 * bc)[:, None] + self.quad
+        c = cover[:, None]
+        y = self.y_flat[idx].astype(np.float32)
+        self.y_flat[idx] = (y + c * ((rgb @ _TO_Y)[:, None] + 16 - y) + np.float32(0.5)).astype(np.uint8)
+        for plane, to in ((self.u_flat, _TO_U), (self.v_flat, _TO_V)):
+            old = plane[blocks].astype(np.float32)
+            plane[blocks] = (old + cover * (rgb @ to + 128 - old) + np.float32(0.5)).astype(np.uint8)
 
     def _blend(self, r0, r1, c0, c1):
         """Composite the Agg figure (straight alpha) over the planes in the 2x2 blocks it touched inside rows

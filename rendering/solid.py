@@ -8,7 +8,8 @@ their coverage and depth (the axis's depth less the capsule's bulge towards the 
 `np.minimum.at` per frame) keeps the nearest capsule's pixel, so a hand in front of the chest is in front of it,
 and only those pixels get a normal and a Lambert shade from a light above, left and in front. They are written
 into the rasteriser's RGBA buffer as packed words, which `FrameDrawer` blends into the video frame. On a coarser
-grid (`Style.solid_grid` = 2) a quarter of the pixels are rasterised, each written to its 2x2 frame pixels.
+grid (`Style.solid_grid` = 2) a quarter of the pixels are rasterised, each one 2x2 block of the frame that
+`FrameDrawer` writes straight into the yuv420p planes (one chroma sample a block); its edges step by two pixels.
 bench/bench_render_solid.py measures it against the stick figure.
 """
 
@@ -31,10 +32,12 @@ class SolidBody:
         self.zbuf = np.full(self.size * self.size, np.inf, np.float32)
         step = np.arange(scale)
         self.block = (step[:, None] * size + step[None]).reshape(-1)  # a grid pixel's frame pixels from its first
+        self.blocks = None
 
     def draw(self, rgba_flat, a, b, radii, colours, to_rows, capped=None):
         """Rasterise capsules a->b (camera coordinates [N, 3], depth > 0) of `radii` (metres) and `colours`
-        into `rgba_flat` ([size*size, 4] uint8, straight alpha); `to_rows`: camera points [N, 3] -> image
+        into `rgba_flat` ([size*size, 4] uint8, straight alpha; None on a grid of 2: `blocks` then holds each
+        grid pixel's 2x2 block of the frame, its colour (0-255) and coverage); `to_rows`: camera points [N, 3] -> image
         (column, row); `capped` [N] bool: whether a capsule has its round end at b (None: all have; a bone needs
         none at a joint that another capsule at least as thick ends at). Returns the (column, row)
         bounding box corners drawn, or None."""
@@ -64,7 +67,11 @@ class SolidBody:
         flat, k, ox, oy, inv, bulge, cover = (x[front] for x in (flat, k, ox, oy, inv, bulge, cover))
         light = (ox * f32(LIGHT[0]) - oy * f32(LIGHT[1])) * inv - bulge * f32(LIGHT[2])  # rows grow downwards
         shade = np.minimum(f32(AMBIENT) + f32(DIFFUSE) * np.maximum(light, f32(0)), f32(1.1))
-        rgb = np.minimum(colours.astype(f32)[k] * (shade * f32(255))[:, None] + f32(0.5), f32(255)).astype(np.uint32)
+        rgb = np.minimum(colours.astype(f32)[k] * (shade * f32(255))[:, None] + f32(0.5), f32(255))
+        if self.scale == 2 and rgba_flat is None:  # the caller writes them into the yuv420p planes itself
+            self.blocks = flat, rgb, cover
+            return lo * self.scale, hi * self.scale
+        rgb = rgb.astype(np.uint32)
         alpha = (cover * f32(255)).astype(np.uint32)
         word = rgb[:, 0] | rgb[:, 1] << 8 | rgb[:, 2] << 16 | alpha << 24
         row, col = np.divmod(flat, self.size)
