@@ -326,12 +326,13 @@ class FrameDrawer:
 
     def _blend_blocks(self, blocks, rgb, cover):
         """Composite the solid body drawn on a grid of 2 over the planes: each of its pixels [M] (a 2x2 block's
-        index, as the chroma planes count them) of colour `rgb` [M, 3] (0-255) and coverage `cover` [M]."""
+        index, as the chroma planes count them) of colour `rgb` [M, 3] (0-255) and its frame pixels' coverage
+        `cover` [M, 4] (in self.quad's order)."""
         br, bc = np.divmod(blocks, self.size // 2)
         idx = (2 * self.size * br + 2 * bc)[:, None] + self.quad
-        c = cover[:, None]
         y = self.y_flat[idx].astype(np.float32)
-        self.y_flat[idx] = (y + c * ((rgb @ _TO_Y)[:, None] + 16 - y) + np.float32(0.5)).astype(np.uint8)
+        self.y_flat[idx] = (y + cover * ((rgb @ _TO_Y)[:, None] + 16 - y) + np.float32(0.5)).astype(np.uint8)
+        cover = cover.mean(1)
         for plane, to in ((self.u_flat, _TO_U), (self.v_flat, _TO_V)):
             old = plane[blocks].astype(np.float32)
             plane[blocks] = (old + cover * (rgb @ to + 128 - old) + np.float32(0.5)).astype(np.uint8)

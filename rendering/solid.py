@@ -64,12 +64,14 @@ class SolidBody:
         self.zbuf[flat] = np.inf
         np.minimum.at(self.zbuf, flat, depth)
         front = np.flatnonzero(depth <= self.zbuf[flat])
-        flat, k, ox, oy, inv, bulge, cover = (x[front] for x in (flat, k, ox, oy, inv, bulge, cover))
+        flat, k, ox, oy, inv, bulge, cover, dist, rad = (
+            x[front] for x in (flat, k, ox, oy, inv, bulge, cover, dist, rad)
+        )
         light = (ox * f32(LIGHT[0]) - oy * f32(LIGHT[1])) * inv - bulge * f32(LIGHT[2])  # rows grow downwards
         shade = np.minimum(f32(AMBIENT) + f32(DIFFUSE) * np.maximum(light, f32(0)), f32(1.1))
         rgb = np.minimum(colours.astype(f32)[k] * (shade * f32(255))[:, None] + f32(0.5), f32(255))
         if self.scale == 2 and rgba_flat is None:  # the caller writes them into the yuv420p planes itself
-            self.blocks = flat, rgb, cover
+            self.blocks = flat, rgb, _block_cover(ox, oy, dist, rad)
             return lo * self.scale, hi * self.scale
         rgb = rgb.astype(np.uint32)
         alpha = (cover * f32(255)).astype(np.uint32)
@@ -136,6 +138,20 @@ class SolidBody:
         cover = np.minimum(rad - dist + f32(0.5), f32(1))
         flat = row[inside].astype(np.int64) * self.size + col[inside]
         return k, flat, t, ox, oy, dist, rad, cover
+
+
+# The 2x2 frame pixels' centres from their grid pixel's centre (column, row; in grid pixels), in the order
+# FrameDrawer.quad takes them: top left, top right, bottom left, bottom right.
+SUB = np.array([[-0.25, -0.25], [0.25, -0.25], [-0.25, 0.25], [0.25, 0.25]], np.float32)
+
+
+def _block_cover(ox, oy, dist, rad):
+    """Each frame pixel's coverage [M, 4] in the 2x2 blocks of grid pixels at offset (ox, oy) [M] and distance
+    `dist` from their capsule's axis of radius `rad` (grid pixels): the distance moved along the offset's
+    direction, so that the silhouette's edge is smooth at the frame's resolution, not stepped by the grid's."""
+    inv = f32(1) / np.maximum(dist, f32(1e-6))
+    d = dist[:, None] + (ox * inv)[:, None] * SUB[:, 0] + (oy * inv)[:, None] * SUB[:, 1]
+    return np.clip((rad[:, None] - d) * f32(2) + f32(0.5), f32(0), f32(1))
 
 
 def _composite(words, flat, word):
