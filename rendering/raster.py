@@ -329,9 +329,16 @@ class FrameDrawer:
         index, as the chroma planes count them) of colour `rgb` [M, 3] (0-255) and its frame pixels' coverage
         `cover` [M, 4] (in self.quad's order)."""
         br, bc = np.divmod(blocks, self.size // 2)
-        idx = (2 * self.size * br + 2 * bc)[:, None] + self.quad
+        luma = rgb @ _TO_Y + np.float32(16.5)
+        whole = cover.min(1) >= 1
+        pairs = self.y_flat.view(np.uint16)  # a block's two pixels in a row are one word
+        top = (self.size * br + bc)[whole]
+        pairs[top] = pairs[top + self.size // 2] = luma[whole].astype(np.uint16) * 257
+        part = np.flatnonzero(~whole)
+        idx = (2 * self.size * br[part] + 2 * bc[part])[:, None] + self.quad
         y = self.y_flat[idx].astype(np.float32)
-        self.y_flat[idx] = (y + cover * ((rgb @ _TO_Y)[:, None] + 16 - y) + np.float32(0.5)).astype(np.uint8)
+        blend = y + cover[part] * (luma[part, None] - np.float32(0.5) - y) + np.float32(0.5)
+        self.y_flat[idx] = blend.astype(np.uint8)
         cover = cover.mean(1)
         for plane, to in ((self.u_flat, _TO_U), (self.v_flat, _TO_V)):
             old = plane[blocks].astype(np.float32)

@@ -149,9 +149,13 @@ def _block_cover(ox, oy, dist, rad):
     """Each frame pixel's coverage [M, 4] in the 2x2 blocks of grid pixels at offset (ox, oy) [M] and distance
     `dist` from their capsule's axis of radius `rad` (grid pixels): the distance moved along the offset's
     direction, so that the silhouette's edge is smooth at the frame's resolution, not stepped by the grid's."""
+    cover = np.ones((len(dist), 4), f32)
+    edge = np.flatnonzero(dist > rad - f32(1))  # further in, every frame pixel is covered
+    ox, oy, dist, rad = ox[edge], oy[edge], dist[edge], rad[edge]
     inv = f32(1) / np.maximum(dist, f32(1e-6))
     d = dist[:, None] + (ox * inv)[:, None] * SUB[:, 0] + (oy * inv)[:, None] * SUB[:, 1]
-    return np.clip((rad[:, None] - d) * f32(2) + f32(0.5), f32(0), f32(1))
+    cover[edge] = np.clip((rad[:, None] - d) * f32(2) + f32(0.5), f32(0), f32(1))
+    return cover
 
 
 def _composite(words, flat, word):
