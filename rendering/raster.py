@@ -42,7 +42,7 @@ class Style:
     limb_radius: float = 0.045  # metres: its arms and legs
     thin_radius: float = 0.011  # metres: its fingers and face
     sphere_radius: float = 0.1  # metres: its head
-    solid_grid: int = 1  # frame pixels per pixel of the grid the solid body is rasterised on (solid.SolidBody)
+    solid_grid: int = 2  # frame pixels per pixel of the grid the solid body is rasterised on (solid.SolidBody)
 
 
 DEFAULT_STYLE = Style()

@@ -6,10 +6,13 @@ of every capsule's bounding box is one row of flat arrays (no Python loop over b
 to the bone's axis on screen culls the pixels outside the capsule before any square root, and the rest get
 their coverage and depth (the axis's depth less the capsule's bulge towards the camera). A z-buffer (one
 `np.minimum.at` per frame) keeps the nearest capsule's pixel, so a hand in front of the chest is in front of it,
-and only those pixels get a normal and a Lambert shade from a light above, left and in front. They are written
-into the rasteriser's RGBA buffer as packed words, which `FrameDrawer` blends into the video frame. On a coarser
-grid (`Style.solid_grid` = 2) a quarter of the pixels are rasterised, each one 2x2 block of the frame that
-`FrameDrawer` writes straight into the yuv420p planes (one chroma sample a block); its edges step by two pixels.
+and only those pixels get a normal and a Lambert shade from a light above, left and in front. On every frame
+pixel (`Style.solid_grid` = 1) they are written into the rasteriser's RGBA buffer as packed words, which
+`FrameDrawer` blends into the video frame. On a grid of half the frame's resolution (2, the default) a quarter of
+the pixels are rasterised, each one 2x2 block of the frame that `FrameDrawer` writes straight into the yuv420p
+planes (one chroma sample a block); near a capsule's edge each of the block's pixels gets its own coverage, so
+the silhouette is smooth at the frame's resolution, while where one capsule meets another the edge steps by two
+pixels.
 bench/bench_render_solid.py measures it against the stick figure.
 """
 
