@@ -62,8 +62,8 @@ class SolidBody:
         inv = f32(1) / np.maximum(rad, f32(1e-6))
         u = np.minimum(dist * inv, f32(1))
         bulge = np.sqrt(f32(1) - u * u)  # the normal's component towards the camera
-        za, zb = a[:, 2].astype(f32), b[:, 2].astype(f32)
-        depth = za[k] + t * (zb - za)[k] - radii.astype(f32)[k] * bulge
+        za, dz, rk = np.take(np.stack([a[:, 2], b[:, 2] - a[:, 2], radii]).astype(f32), k, axis=1)
+        depth = za + t * dz - rk * bulge
         self.zbuf[flat] = np.inf
         np.minimum.at(self.zbuf, flat, depth)
         front = np.flatnonzero(depth <= self.zbuf[flat])
@@ -118,19 +118,20 @@ class SolidBody:
         """The fragments a capsule covers: (capsule, flat pixel, t along the axis, the offset from the axis
         (x, y), its length, the radius there, the coverage), all in pixels; None where none is covered. A
         squared-distance test culls the rest before any square root."""
-        ax, ay = (sb - sa).astype(f32).T
-        length2 = np.maximum(ax * ax + ay * ay, f32(1e-9))
-        rx = col.astype(f32) + f32(0.5) - sa[:, 0].astype(f32)[k]
-        ry = row.astype(f32) + f32(0.5) - sa[:, 1].astype(f32)[k]
-        axk, ayk = ax[k], ay[k]
-        t = (rx * axk + ry * ayk) / length2[k]
-        ra32, rb32 = ra.astype(f32), rb.astype(f32)
+        ax, ay = (sb - sa).T
+        length2 = np.maximum(ax * ax + ay * ay, 1e-9)
+        # Per capsule, gathered for every fragment in one take: [8, M] rows.
+        per = np.stack([0.5 - sa[:, 0], 0.5 - sa[:, 1], ax, ay, ax / length2, ay / length2, ra, rb - ra, capped])
+        x0, y0, axk, ayk, axn, ayn, rak, drk, cap = np.take(per.astype(f32), k, axis=1)
+        rx = col.astype(f32) + x0
+        ry = row.astype(f32) + y0
+        t = rx * axn + ry * ayn
         keep = t <= f32(1)
-        keep |= capped[k]  # a capsule without its round end at b covers nothing beyond b
+        keep |= cap > 0  # a capsule without its round end at b covers nothing beyond b
         np.clip(t, f32(0), f32(1), out=t)
         ox, oy = rx - t * axk, ry - t * ayk  # from the axis's nearest point to the pixel, on screen
         d2 = ox * ox + oy * oy
-        rad = ra32[k] + t * (rb32 - ra32)[k]
+        rad = rak + t * drk
         reach = rad + f32(0.5)
         keep &= d2 < reach * reach
         inside = np.flatnonzero(keep)
