@@ -291,7 +291,6 @@ class FrameDrawer:
         else:
             radii, colours, capped = radii[:-1], colours[:-1], capped[:-1]
         keep = (a[:, 2] > NEAR) & (b[:, 2] > NEAR)
-        self.solid.blocks = None
         box = self.solid.draw(
             None if self.solid.scale == 2 else self.rgba.reshape(-1, 4),
             a[keep],
@@ -311,6 +310,8 @@ class FrameDrawer:
         np.copyto(self.y, self.blank_y)
         self.uv.fill(128)
         self._grid(target, eye)
+        if self.solid is not None:
+            self.solid.blocks = None  # (set by _figure where it draws the solid body on a grid of 2)
         points, radius = self._figure(joints, eye)
         if len(points):
             # The figure's bounding box in image rows/columns, on even pixels (for the 2x2 chroma blocks).
