@@ -16,12 +16,15 @@ import numpy as np
 from moglow_eval.core import skeleton_names
 
 from .camera import DEFAULT_CAMERA, HEAD_ROOM, NEAR, Projector, camera_targets, framing_camera
+from .raster import head_joint
 
 VIEWS = {"front": 0.0, "three-quarter": 40.0, "side": 90.0}  # degrees from the body's mean facing
 FRAMINGS = ("full", "upper", "auto")
 UPPER_ELEVATION = 5.0  # degrees: a nearly level camera, as a seated audience sees a speaker
-UPPER_MARGIN = 0.02  # of the half-frame kept free around the framed joints
+UPPER_MARGIN = 0.005  # of the half-frame kept free around the framed body
 BODY_PAD = 0.05  # metres around every framed joint: the solid body's limb capsules (raster.Style.limb_radius)
+DETAIL_PAD = 0.012  # metres around a finger or face joint: the thin capsules (raster.Style.thin_radius)
+HEAD_TOP = 0.18  # metres from the head joint along the neck to the drawn head's top (the solid's sphere; stick 0.16)
 UPPER_FOV = 15.0  # degrees: a longer lens than the full body's, so that hands near the camera loom less
 FEET_STILL = 0.4  # metres: "auto" frames the upper body when no foot strays further than this from its start
 LEG_WORDS = {"leg", "upleg", "thigh", "knee", "shin", "calf", "foot", "ankle", "toe", "toes", "heel"}
@@ -65,37 +68,49 @@ def feet_still(clips, names, parents):
 
 
 def upper_camera(clips, names, parents, fps, base):
-    """A camera that frames the body from the hips up: every joint but the legs' (and the head's top) inside the
-    frame in every frame of every clip, as large as that allows, through a nearly level camera at `base`'s
-    azimuth that follows the root as `camera_targets` does."""
+    """A camera that frames the body from the hips up: every joint but the legs' and the drawn head's top inside
+    the frame in every frame of every clip, as large as that allows, through a nearly level camera at `base`'s
+    azimuth that follows the root as `camera_targets` does. Each joint is padded by what is drawn around it
+    (BODY_PAD, DETAIL_PAD for fingers and face), the head's top (HEAD_TOP along the neck) by nothing, so that
+    the frame ends at the head's top above and at the lowest fingertip below: hands hanging below the hips
+    extend the frame downwards, and the hips-to-head share of the frame is what is left above them."""
     base = replace(base, elevation=UPPER_ELEVATION, fov=UPPER_FOV)
     legs = set(leg_joints(names, parents))
     keep = [j for j in range(len(names)) if j not in legs] or list(range(len(names)))
+    head = head_joint(names)
     rot = Projector(replace(base, distance=1.0), 2, 2).rot
-    points = []
+    points, pads = [], []
     for joints in clips:
         joints = np.asarray(joints, dtype=np.float64)
         floor = camera_targets(joints, fps, base) * np.array([1.0, 0.0, 1.0])
-        rel = joints[:, keep] - floor[:, None]
-        top = rel[np.arange(len(rel)), rel[..., 1].argmax(1)] + np.array([0.0, HEAD_ROOM, 0.0])  # the head's top
-        points.append(np.concatenate([rel.reshape(-1, 3), top]))
-    q = np.concatenate(points) @ rot.T  # camera axes, relative to the target on the floor
+        rel = joints - floor[:, None]
+        if head is not None and parents[head] >= 0:
+            neck = rel[:, head] - rel[:, parents[head]]
+            top = rel[:, head] + HEAD_TOP * neck / np.maximum(np.linalg.norm(neck, axis=1, keepdims=True), 1e-6)
+        else:
+            top = rel[np.arange(len(rel)), rel[:, keep, 1].argmax(1)] + np.array([0.0, HEAD_ROOM, 0.0])
+        points += [rel[:, keep].reshape(-1, 3), top]
+        pad = [DETAIL_PAD if skeleton_names.is_detail(names[j]) else BODY_PAD for j in keep]
+        pads += [np.tile(pad, len(rel)), np.zeros(len(rel))]
+    points, pad = np.concatenate(points), np.concatenate(pads)
+    q = points @ rot.T  # camera axes, relative to the target on the floor
     up = rot[:, 1]  # the camera-axis components of world up
     lim = (1 - UPPER_MARGIN) * np.tan(np.radians(base.fov) / 2)
-    height = float(np.concatenate(points)[:, 1].mean())
+    height = float(points[:, 1].mean())
     for _ in range(4):  # fit the distance, then centre the look-at height on the framed span, and again
         p = q - height * up
-        distance = _distance(p, lim)
-        y = p[:, 1] / (p[:, 2] + distance)
-        height += float((y.max() + y.min()) / 2 * np.median(p[:, 2] + distance)) / max(up[1], 1e-6)
-    distance = _distance(q - height * up, lim)
+        distance = _distance(p, lim, pad)
+        z = p[:, 2] + distance
+        y_hi, y_lo = ((p[:, 1] + pad) / z).max(), ((p[:, 1] - pad) / z).min()
+        height += float((y_hi + y_lo) / 2 * np.median(z)) / max(up[1], 1e-6)
+    distance = _distance(q - height * up, lim, pad)
     return replace(base, distance=distance, height=height)
 
 
-def _distance(p, lim):
+def _distance(p, lim, pad):
     """The least camera distance at which every point p (camera axes, relative to the look-at point), padded by
-    BODY_PAD, is inside the frame of half-width lim (the tangent of half the field of view)."""
-    return float(max(((np.abs(p[:, :2]).max(1) + BODY_PAD) / lim - p[:, 2]).max(), NEAR + BODY_PAD - p[:, 2].min()))
+    `pad` metres (one a point), is inside the frame of half-width lim (the tangent of half the field of view)."""
+    return float(max(((np.abs(p[:, :2]).max(1) + pad) / lim - p[:, 2]).max(), NEAR + BODY_PAD - p[:, 2].min()))
 
 
 def item_camera(clips, names, parents, fps, view=None, framing="full"):

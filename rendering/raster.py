@@ -42,6 +42,7 @@ class Style:
     limb_radius: float = 0.045  # metres: its arms and legs
     thin_radius: float = 0.011  # metres: its fingers and face
     sphere_radius: float = 0.1  # metres: its head
+    solid_grid: int = 2  # frame pixels per pixel of the grid the solid body is rasterised on (solid.SolidBody)
 
 
 DEFAULT_STYLE = Style()
@@ -146,7 +147,7 @@ class FrameDrawer:
         self.quad = np.array([0, 1, size, size + 1])  # a 2x2 block's pixels from its top left
         self.parents = np.asarray(parents)
         self._bones(joint_names, hide, thin)
-        self.head = _head_joint(joint_names)
+        self.head = head_joint(joint_names)
         self.circle = Path.unit_circle()
         self.width = style.bone_width * size
         self.gcs = {}
@@ -175,7 +176,7 @@ class FrameDrawer:
             np.float64,
         )
         self.grid_y = grey_to_y(style.grid)
-        self.solid = SolidBody(size, self.proj.focal) if style.body == "solid" else None
+        self.solid = SolidBody(size, self.proj.focal, style.solid_grid) if style.body == "solid" else None
         if self.solid:
             self._capsules()
 
@@ -189,6 +190,10 @@ class FrameDrawer:
             limb = self.style.limb_radius if side != "centre" else self.style.trunk_radius
             self.capsule_radius[bones] = self.style.thin_radius if thin else limb
             self.capsule_colour[bones] = colour[side]
+        # A bone's capsule needs no round end at its parent joint where a bone at least as thick ends there.
+        end_radius = np.zeros(len(self.parents))
+        np.maximum.at(end_radius, self.bone_ends[:, 0], self.capsule_radius[:n])
+        self.capsule_capped = np.append(end_radius[self.bone_ends[:, 1]] < self.capsule_radius[:n], True)
 
     def _bones(self, joint_names, hide, thin):
         """The bones to draw (child, parent) grouped by (side, thin), each group one slice of self.bone_ends."""
@@ -277,22 +282,23 @@ class FrameDrawer:
         """The solid body (rendering.solid) over the shadow: the bones' capsules and the head's sphere, just
         beyond the head joint along the neck. Returns what _figure does."""
         a, b = cam[self.bone_ends[:, 0]], cam[self.bone_ends[:, 1]]
-        radii, colours = self.capsule_radius, self.capsule_colour
+        radii, colours, capped = self.capsule_radius, self.capsule_colour, self.capsule_capped
         if self.head is not None and self.parents[self.head] >= 0:
             neck = joints[self.head] - joints[self.parents[self.head]]
             centre = joints[self.head] + 0.8 * self.style.sphere_radius * neck / max(np.linalg.norm(neck), 1e-6)
             hc = self.proj.to_camera(centre, eye)[None]
             a, b = np.concatenate([a, hc]), np.concatenate([b, hc])
         else:
-            radii, colours = radii[:-1], colours[:-1]
+            radii, colours, capped = radii[:-1], colours[:-1], capped[:-1]
         keep = (a[:, 2] > NEAR) & (b[:, 2] > NEAR)
         box = self.solid.draw(
-            self.rgba.reshape(-1, 4),
+            None if self.solid.scale == 2 else self.rgba.reshape(-1, 4),
             a[keep],
             b[keep],
             radii[keep],
             colours[keep],
             lambda p: self._rows(self.proj.to_screen(p)),
+            capped[keep],
         )
         if box is not None:
             points.append(self._rows(np.array(box, np.float64)))
@@ -304,6 +310,8 @@ class FrameDrawer:
         np.copyto(self.y, self.blank_y)
         self.uv.fill(128)
         self._grid(target, eye)
+        if self.solid is not None:
+            self.solid.blocks = None  # (set by _figure where it draws the solid body on a grid of 2)
         points, radius = self._figure(joints, eye)
         if len(points):
             # The figure's bounding box in image rows/columns, on even pixels (for the 2x2 chroma blocks).
@@ -313,7 +321,30 @@ class FrameDrawer:
             c1, r1 = (np.ceil((xy.max(0) + pad) / 2) * 2).clip(0, self.size).astype(int)
             if c1 > c0 and r1 > r0:
                 self._blend(r0, r1, c0, c1)
+        if self.solid is not None and self.solid.blocks is not None:
+            self._blend_blocks(*self.solid.blocks)
         return self.frame
+
+    def _blend_blocks(self, blocks, rgb, cover):
+        """Composite the solid body drawn on a grid of 2 over the planes: each of its pixels [M] (a 2x2 block's
+        index, as the chroma planes count them) of colour `rgb` [M, 3] (0-255) and its frame pixels' coverage
+        `cover` [M, 4] (in self.quad's order)."""
+        br, bc = np.divmod(blocks, self.size // 2)
+        luma = rgb @ _TO_Y + np.float32(16.5)
+        c0, c1, c2, c3 = cover.T  # (an axis-1 reduction over 4 is slow in numpy)
+        whole = np.minimum(np.minimum(c0, c1), np.minimum(c2, c3)) >= 1
+        pairs = self.y_flat.view(np.uint16)  # a block's two pixels in a row are one word
+        top = (self.size * br + bc)[whole]
+        pairs[top] = pairs[top + self.size // 2] = luma[whole].astype(np.uint16) * 257
+        part = np.flatnonzero(~whole)
+        idx = (2 * self.size * br[part] + 2 * bc[part])[:, None] + self.quad
+        y = self.y_flat[idx].astype(np.float32)
+        blend = y + cover[part] * (luma[part, None] - np.float32(0.5) - y) + np.float32(0.5)
+        self.y_flat[idx] = blend.astype(np.uint8)
+        cover = (c0 + c1 + c2 + c3) * np.float32(0.25)
+        for plane, to in ((self.u_flat, _TO_U), (self.v_flat, _TO_V)):
+            old = plane[blocks].astype(np.float32)
+            plane[blocks] = (old + cover * (rgb @ to + 128 - old) + np.float32(0.5)).astype(np.uint8)
 
     def _blend(self, r0, r1, c0, c1):
         """Composite the Agg figure (straight alpha) over the planes in the 2x2 blocks it touched inside rows
@@ -345,7 +376,7 @@ class FrameDrawer:
         return yuv_to_rgb(self.frame, self.size)
 
 
-def _head_joint(names):
+def head_joint(names):
     """Index of the head joint (its last name token is 'head': Head, mixamorig:Head, b_head), or None."""
     for j, name in enumerate(names):
         words = skeleton_names.tokens(name)

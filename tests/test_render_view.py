@@ -10,7 +10,7 @@ from generation.motion.features import rotate_y
 from generation.own_study.builder import place
 from generation.own_study.study_file import StudyFileError, read_study_file
 from rendering.camera import DEFAULT_CAMERA, Projector, camera_targets
-from rendering.framing import item_camera, leg_joints, mean_facing
+from rendering.framing import HEAD_TOP, item_camera, leg_joints, mean_facing
 
 
 @pytest.fixture(scope="module")
@@ -54,9 +54,17 @@ def test_upper_framing_keeps_every_hand_in_frame_and_fills_it(speaker):
     s = _screen(joints, upper)
     hands = [j for j, n in enumerate(names) if "Hand" in n]
     assert np.abs(s[:, hands]).max() <= 1.0  # every hand and finger joint in every frame
-    share = lambda cam: (_screen(joints, cam)[:, names.index("HeadEnd"), 1] - _screen(joints, cam)[:, 0, 1]) / 2  # noqa: E731
+    head, neck = names.index("Head"), names.index("Neck1")
+    up = joints[:, head] - joints[:, neck]
+    top = joints[:, head] + HEAD_TOP * up / np.linalg.norm(up, axis=1, keepdims=True)  # the drawn head's top
+    with_top = np.concatenate([joints, top[:, None]], 1)
+
+    def share(cam):  # from the hips to the drawn head's top, of the frame's height
+        s = _screen(with_top, cam)
+        return (s[:, -1, 1] - s[:, 0, 1]) / 2
+
     assert share(upper).min() > 1.5 * share(full).max()  # hips to head far larger than in the full framing
-    assert share(upper).min() > 0.55  # to the head's end joint; the drawn head adds about a tenth
+    assert share(upper).min() >= 0.7  # in every frame, though the fingertips hang below the hips
 
 
 def test_auto_framing_is_upper_for_a_speaker_and_full_for_a_walker(speaker):
@@ -128,10 +136,32 @@ def test_two_styles_each_clip_its_own_stimulus_on_pixels(tmp_path):
             trunk, left, right = classes(f)
             assert left.sum() > 20 and right.sum() > 20  # both sides, in their own colours
             assert not touches_edge(left) and not touches_edge(right)  # no hand leaves the frame
-            assert height_share(f) > 0.55
+            assert height_share(f) > (0.7 if r["style"] == "solid" else 0.62)  # the stick's head disc is smaller
             pixels[r["style"]].append(int((trunk | left | right).sum()))
     assert np.mean(pixels["solid"]) > 3 * np.mean(pixels["stick"])
     by_item = {}
     for r in rows:
         by_item.setdefault(r["item"], set()).add((out / r["video"]).stat().st_size)
     assert all(len(sizes) == 1 for sizes in by_item.values())  # blinding: one size per item, across styles
+
+
+def test_solid_on_a_coarser_grid_keeps_the_body(speaker):
+    """The solid body rasterised on a grid of half the frame's resolution (Style.solid_grid = 2) covers the
+    full grid's pixels in each colour, but for its edges."""
+    from dataclasses import replace
+
+    from helpers.figure_pixels import classes
+
+    from rendering.camera import camera_targets as targets
+    from rendering.raster import STYLES, FrameDrawer
+
+    joints, names, parents = speaker
+    camera = item_camera([joints], names, parents, 30.0, view="front", framing="upper")
+    target = targets(joints, 30.0, camera)[10]
+    masks = []
+    for grid in (1, 2):
+        drawer = FrameDrawer(parents, names, 240, camera, replace(STYLES["solid"], solid_grid=grid))
+        drawer.draw(joints[10], target)
+        masks.append(classes(drawer.rgb()))
+    for fine, coarse in zip(*masks):
+        assert fine.sum() > 200 and (fine ^ coarse).sum() < 0.1 * fine.sum()

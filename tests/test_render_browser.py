@@ -1,0 +1,125 @@
+"""The rendering targets, done when: a study built from a ZeroEGGS-like speaker (75 joints, fingers, cm, 30 fps)
+and a made-up second system with units = "auto", view = "front", framing = "upper" and style = ["stick", "solid"]
+is served to a real browser, which rates a few trials; the videos it played, decoded, are at 30 fps, the figure
+from the hips to the head fills most of the frame's height, both hands stay inside it, the solid body covers
+several times the stick figure's pixels and left and right are told apart by colour."""
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+import requests
+from helpers.bvh_fixtures import SPEAKER, write_zeroeggs
+from helpers.figure_pixels import classes, decode, height_share, touches_edge
+
+from generation.make_stimuli import main as make_stimuli
+
+pytestmark = pytest.mark.browser
+
+STUDY = """reference = "speaker"
+seed = 1
+n_training = 0
+[conditions]
+speaker = "real"
+SYS_A = "sys_a"
+[catch]
+n = 0
+[skeleton]
+units = "auto"
+[render]
+view = "front"
+framing = "upper"
+style = ["stick", "solid"]
+"""
+
+
+@pytest.fixture(scope="module")
+def app_stimuli(tmp_path_factory):
+    """The study's manifest: two items, each clip 1.5 s (the browser plays them in real time) in both styles."""
+    root = tmp_path_factory.mktemp("speaker")
+    for k in range(2):
+        for sub, seed in (("real", k), ("sys_a", 100 + k)):
+            (root / sub).mkdir(exist_ok=True)
+            write_zeroeggs(root / sub / f"item{k:02d}.bvh", frames=45, seed=seed, turns=SPEAKER, degrees=2.0)
+    (root / "study.toml").write_text(STUDY)
+    args = ["--study", str(root / "study.toml"), "--out", str(root / "out"), "--size", "240", "--quiet"]
+    assert make_stimuli(args) == 0
+    return str(root / "out" / "manifest.csv")
+
+
+from test_app_browser import browser, live_server  # noqa: E402, F401  (fixtures, served with the study above)
+
+
+def _rate_trials(driver, url, n):
+    """Take a rater (in `driver`) through consent and `n` trials, each played to its end; returns the videos' URLs."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support import expected_conditions as EC
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    wait = WebDriverWait(driver, 20)
+    driver.get(url + "/?PROLIFIC_PID=renderpid1&STUDY_ID=st1&SESSION_ID=se1")
+    driver.find_element(By.ID, "consent").click()
+    wait.until(EC.element_to_be_clickable((By.ID, "start"))).click()
+    state = (
+        "var vis=['trial','rating-intro','done'].filter(function(id){return !document.getElementById(id).hidden});"
+        "return {section: vis.length ? vis[0] : null, src: document.getElementById('video').currentSrc,"
+        " count: document.getElementById('trial-count').textContent};"
+    )
+    srcs = []
+    while len(srcs) < n:
+        wait.until(lambda d: d.execute_script(state)["section"])
+        s = driver.execute_script(state)
+        assert s["section"] != "done", "the session ended before the trials were rated"
+        if s["section"] == "rating-intro":
+            driver.find_element(By.ID, "rating-go").click()
+            wait.until(lambda d: d.execute_script(state)["section"] == "trial")
+            continue
+        wait.until(EC.element_to_be_clickable((By.CSS_SELECTOR, 'button.rate[data-rating="3"]'))).click()  # ended
+        srcs.append(s["src"])
+        wait.until(
+            lambda d: (
+                (d.execute_script(state)["section"], d.execute_script(state)["count"]) != (s["section"], s["count"])
+            )
+        )
+    return srcs
+
+
+def _check(frames, style):
+    """Pixel checks on decoded frames of one clip in `style`; returns its figure's mean pixel count."""
+    masks = [classes(f) for f in frames[::3]]
+    for f, (trunk, left, right) in zip(frames[::3], masks):
+        assert left.sum() > 20 and right.sum() > 20  # left and right, each in its own colour
+        # both hands inside the frame: no side's pixels at its left, right or top edge (the legs leave at the bottom)
+        assert not touches_edge(left) and not touches_edge(right)
+        # from the hips to the head's top; the stick's head disc is smaller than the solid's sphere
+        assert height_share(f) >= (0.7 if style == "solid" else 0.62)
+    return np.mean([(t | le | r).sum() for t, le, r in masks])
+
+
+@pytest.mark.parametrize("app_db_url", ["sqlite"], indirect=True)
+def test_speaker_study_in_a_real_browser(app_stimuli, live_server, browser, tmp_path):  # noqa: F811
+    from sqlalchemy import select
+    from test_app_browser import live_server_manifest
+
+    from rating_app.db import Trial, app_engine
+
+    srcs = _rate_trials(browser, live_server, 3)
+    with app_engine(live_server_manifest[1]).connect() as conn:
+        clip_of = dict(conn.execute(select(Trial.id, Trial.clip_id)).all())
+    rows = list(csv.DictReader(open(app_stimuli, newline="")))
+    by_id = {r["clip_id"]: r for r in rows}
+    for k, src in enumerate(srcs):
+        played = by_id[clip_of[int(src.rsplit("/", 2)[1])]]  # .../trials/ID/video.mp4
+        (tmp_path / f"{k}.mp4").write_bytes(requests.get(src, timeout=10).content)
+        frames, fps = decode(tmp_path / f"{k}.mp4")
+        assert fps == 30.0 and len(frames) == 45
+        pixels = {played["style"]: _check(frames, played["style"])}
+        # the same motion in the other style, from the study's folder
+        (twin,) = [
+            r for r in rows if (r["item"], r["condition"]) == (played["item"], played["condition"]) and r != played
+        ]
+        frames, fps = decode(Path(app_stimuli).parent / twin["video"])
+        assert fps == 30.0
+        pixels[twin["style"]] = _check(frames, twin["style"])
+        assert pixels["solid"] > 3 * pixels["stick"]
