@@ -41,6 +41,18 @@ def leg_joints(names, parents):
     return sorted(out)
 
 
+def hips_ancestors(parents, legs):
+    """The joints above the hips in the hierarchy (the hips: the parents of the legs' top joints): a root joint on
+    the floor, as Bandai-Namco's `joint_Root`, is no part of the upper body and would pull the frame down to it."""
+    hips = {parents[j] for j in legs if parents[j] >= 0 and parents[j] not in legs}
+    out = set()
+    for j in hips:
+        while parents[j] >= 0:
+            j = parents[j]
+            out.add(j)
+    return out
+
+
 def mean_facing(clips, names):
     """The body's mean facing over `clips` (joints [T, J, 3], Y up) as an azimuth in degrees (from +Z towards
     +X), from the left joints' mean minus the right's in every frame; 0 where the names tell no sides."""
@@ -76,7 +88,8 @@ def upper_camera(clips, names, parents, fps, base):
     extend the frame downwards, and the hips-to-head share of the frame is what is left above them."""
     base = replace(base, elevation=UPPER_ELEVATION, fov=UPPER_FOV)
     legs = set(leg_joints(names, parents))
-    keep = [j for j in range(len(names)) if j not in legs] or list(range(len(names)))
+    below = legs | hips_ancestors(parents, legs)
+    keep = [j for j in range(len(names)) if j not in below] or list(range(len(names)))
     head = head_joint(names)
     rot = Projector(replace(base, distance=1.0), 2, 2).rot
     points, pads = [], []

@@ -4,13 +4,14 @@ auto) and the style keys, checked on the camera's projection of a ZeroEGGS-like 
 import numpy as np
 import pytest
 from helpers.bvh_fixtures import SPEAKER, write_family_study, write_zeroeggs
+from helpers.paths import TEST_DATA
 
 from generation.data.motion_files import read_motion
 from generation.motion.features import rotate_y
 from generation.own_study.builder import place
 from generation.own_study.study_file import StudyFileError, read_study_file
 from rendering.camera import DEFAULT_CAMERA, Projector, camera_targets
-from rendering.framing import HEAD_TOP, item_camera, leg_joints, mean_facing
+from rendering.framing import HEAD_TOP, hips_ancestors, item_camera, leg_joints, mean_facing
 
 
 @pytest.fixture(scope="module")
@@ -65,6 +66,18 @@ def test_upper_framing_keeps_every_hand_in_frame_and_fills_it(speaker):
 
     assert share(upper).min() > 1.5 * share(full).max()  # hips to head far larger than in the full framing
     assert share(upper).min() >= 0.7  # in every frame, though the fingertips hang below the hips
+
+
+def test_upper_framing_leaves_out_a_root_on_the_floor():
+    """Bandai-Namco's skeleton hangs the hips under `joint_Root`, a joint on the floor: it is no part of the upper
+    body, so the upper framing's frame ends near the hips, not at the floor (the take of tests/data/bvh)."""
+    m = read_motion(TEST_DATA / "bvh" / "bandai_dash_normal_001.bvh.gz", fps=30.0)
+    joints, names, parents = place(m.joints, m.names).astype(np.float64), list(m.names), np.asarray(m.parents)
+    assert hips_ancestors(parents, set(leg_joints(names, parents))) == {names.index("joint_Root")}
+    upper = item_camera([joints], names, parents, 30.0, view="front", framing="upper")
+    s = _screen(joints, upper)
+    assert s[:, names.index("joint_Root"), 1].max() < -1.0  # the floor below the frame
+    assert np.abs(s[:, [names.index(n) for n in ("Hips", "Head", "Hand_L", "Hand_R")]]).max() <= 1.0
 
 
 def test_auto_framing_is_upper_for_a_speaker_and_full_for_a_walker(speaker):
