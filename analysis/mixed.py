@@ -173,20 +173,23 @@ def satterthwaite_df(s, varpar):
     return 2 * np.diag(cov) ** 2 / denom
 
 
-def fit_crossed(y, X, rater, clip, names):
+def fit_crossed(y, X, rater, clip, names, with_cov=False):
     """REML fit. y float [n]; X [n, p] fixed-effects design (first column the intercept); rater, clip int codes.
 
     Returns dict: fixed_effects, std_errors, df (Satterthwaite), t, p_values (t tests on those df),
     ci_low/ci_high (95%, t on those df),
-    variance_components {rater, clip, residual}, reml_log_likelihood, converged.
+    variance_components {rater, clip, residual}, reml_log_likelihood, converged; with `with_cov`, also
+    "covariance": the fixed effects' covariance matrix [p, p] (for a joint Wald test of several effects).
     """
     # One BLAS thread: the criterion is a chain of small factorisations, where thread hand-offs cost more than
     # they save (far slower on a busy 2-core machine), and the rounding is then identical from run to run.
     with threadpool_limits(limits=1, user_api="blas"):
-        return _fit(np.asarray(y, float), np.asarray(X, float), np.asarray(rater), np.asarray(clip), names)
+        fit, cov = _fit(np.asarray(y, float), np.asarray(X, float), np.asarray(rater), np.asarray(clip), names)
+    return {**fit, "covariance": cov} if with_cov else fit
 
 
 def _fit(y, X, rater, clip, names):
+    """(fit_crossed's dict, the fixed effects' covariance matrix)."""
     s = _Suff(y, X, rater, clip)
 
     def objective(rel_sd):  # lme4's parameters: random-effect SDs relative to the residual SD, >= 0
@@ -231,4 +234,4 @@ def _fit(y, X, rater, clip, names):
         "variance_components": {"rater": float(varpar[0]), "clip": float(varpar[1]), "residual": float(sigma2)},
         "reml_log_likelihood": -0.5 * dev,
         "converged": bool(best.success or polish.success),
-    }
+    }, cov

@@ -124,14 +124,16 @@ def anova_table(n, k, ss_between, ss_within):
 
 # ---------------------------------------------------------------------------------------------- descriptives
 def group_summary(df, dv="rating", between="condition", level=0.95):
-    """Per group: n, mean, sd, sem and the t-based confidence interval of the mean (own-group variance)."""
+    """Per group: n, mean, sd, sem and the t-based confidence interval of the mean (own-group variance). `between`:
+    a column, or a list of columns for their cells (condition x style)."""
     g = df.groupby(between, sort=True)[dv]
     out = pd.DataFrame({"n": g.size(), "mean": g.mean(), "sd": g.std(ddof=1)})
     out["sem"] = out["sd"] / np.sqrt(out["n"])
     tcrit = sps.t.ppf(0.5 + level / 2, out["n"] - 1)
     out["t_low"] = out["mean"] - tcrit * out["sem"]
     out["t_high"] = out["mean"] + tcrit * out["sem"]
-    out.index.name = between
+    if isinstance(between, str):
+        out.index.name = between
     return out.loc[condition_order(out.index)] if between == "condition" else out
 
 

@@ -13,8 +13,6 @@ CONTRACTS §4, §6): condition × style.
 Pure functions on the long table of test ratings returning dicts; the figure writes one PNG.
 """
 
-import math
-
 import numpy as np
 import pandas as pd
 from scipy import linalg
@@ -23,6 +21,7 @@ from scipy import stats as sps
 from moglow_eval.core.study import condition_order
 
 from .rating_models import ModelUndefined, random_effects_problem
+from .stats import group_summary
 
 STYLE = "style"
 DEFAULT_STYLE = "stick"  # the baseline style when present (the built-in study's drawing)
@@ -37,29 +36,16 @@ def styles_in(test) -> list[str]:
 
 
 def cell_means(test, level=0.95) -> pd.DataFrame:
-    """One row per (condition, style): n, mean, sd and the t interval (NaN for a single rating)."""
-    rows = []
-    conds = condition_order(test["condition"])
-    for c in conds:
-        for s in styles_in(test):
-            r = test.loc[(test["condition"] == c) & (test[STYLE] == s), "rating"].astype(float)
-            n = len(r)
-            if not n:
-                continue
-            mean, sd = float(r.mean()), float(r.std(ddof=1)) if n > 1 else math.nan
-            half = sps.t.ppf(0.5 + level / 2, n - 1) * sd / math.sqrt(n) if n > 1 else math.nan
-            rows.append(
-                {
-                    "condition": c,
-                    "style": s,
-                    "n": n,
-                    "mean": mean,
-                    "sd": sd,
-                    "ci_low": mean - half,
-                    "ci_high": mean + half,
-                }
-            )
-    return pd.DataFrame(rows)
+    """One row per (condition, style) with ratings, conditions in their order and the default style first: n,
+    mean, sd and the t interval (stats.group_summary's; NaN for a single rating)."""
+    cells = group_summary(test.assign(rating=test["rating"].astype(float)), between=["condition", STYLE], level=level)
+    cells = cells.reset_index().rename(columns={"t_low": "ci_low", "t_high": "ci_high"})
+    styles = styles_in(test)
+    cells = cells[cells[STYLE].isin(styles)]
+    rank = {c: i for i, c in enumerate(condition_order(test["condition"]))}
+    cells = cells.assign(_c=cells["condition"].map(rank), _s=cells[STYLE].map(styles.index))
+    cells = cells.sort_values(["_c", "_s"])
+    return cells[["condition", STYLE, "n", "mean", "sd", "ci_low", "ci_high"]].reset_index(drop=True)
 
 
 def two_way_anova(test) -> dict:
@@ -111,7 +97,7 @@ def mixed_model_style(test, reference=None) -> dict:
     `rating_models.mixed_model` (the same engine: Satterthwaite t tests per effect), plus "interaction_test": a
     Wald chi-square of every condition:style effect at once (df = their number). ModelUndefined as there, with
     the cells (condition, style) in place of the conditions."""
-    from .mixed import _gls, _Suff, fit_crossed
+    from .mixed import fit_crossed
 
     styles = styles_in(test)
     cells = test["condition"].astype(str) + "\x00" + test[STYLE].astype(str)
@@ -126,10 +112,8 @@ def mixed_model_style(test, reference=None) -> dict:
         raise ModelUndefined("a (condition, style) cell has no ratings: the interaction is not estimable")
     y = test["rating"].to_numpy(dtype=float)
     rater, clip = pd.factorize(test["rater_id"])[0], pd.factorize(test["clip_id"])[0]
-    fit = fit_crossed(y, X, rater, clip, names)
-    vc = fit["variance_components"]
-    _, _, xvx, _ = _gls(_Suff(y, X, rater, clip), vc["rater"] / vc["residual"], vc["clip"] / vc["residual"])
-    cov = vc["residual"] * linalg.inv(xvx)
+    fit = fit_crossed(y, X, rater, clip, names, with_cov=True)
+    cov = fit.pop("covariance")
     idx = [i for i, n in enumerate(names) if ":" in n]
     b = np.array([fit["fixed_effects"][names[i]] for i in idx])
     chi2 = float(b @ linalg.solve(cov[np.ix_(idx, idx)], b))
