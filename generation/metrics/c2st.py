@@ -99,18 +99,24 @@ def grouped_cv(x, y, groups, seed=0, folds=MAX_FOLDS):
     return auc(prob, y), float(((prob > 0.5) == (y > 0.5)).mean())
 
 
+def labelled(reference, other):
+    """(features [N, F], labels [N]: 0 the reference, 1 the other, items [N]) of two sets {item: features [F]},
+    each in item order: what the classifier is cross-validated on, its folds grouped by item."""
+    ref_items, items = sorted(reference), sorted(other)
+    x = np.array([reference[i] for i in ref_items] + [other[i] for i in items], dtype=float)
+    y = np.r_[np.zeros(len(ref_items)), np.ones(len(items))]
+    return x, y, np.array(ref_items + items)
+
+
 def c2st(reference, other, seeds=5):
     """C2ST of `other` against `reference`, each {item: features [F]}: an item's clips in both sit in one fold.
 
     Returns dict(n_items (of `other`), auc, auc_sd, accuracy): means (and the AUC's sd) over `seeds` random fold
     deals."""
-    ref_items, items = sorted(reference), sorted(other)
-    x = np.array([reference[i] for i in ref_items] + [other[i] for i in items])
-    y = np.r_[np.zeros(len(ref_items)), np.ones(len(items))]
-    groups = np.array(ref_items + items)
+    x, y, groups = labelled(reference, other)
     runs = np.array([grouped_cv(x, y, groups, seed=s) for s in range(seeds)])
     return dict(
-        n_items=len(items),
+        n_items=len(other),
         auc=float(runs[:, 0].mean()),
         auc_sd=float(runs[:, 0].std()),
         accuracy=float(runs[:, 1].mean()),

@@ -65,10 +65,7 @@ def feature_report(reference, other, names, groups, seeds=5):
     """Rows (kind, feature, group, auc, direction) of `other` against `reference` (each {item: features [F]}): a
     row per group (its cross-validated AUC, mean over `seeds` fold deals; feature and direction empty), then a row
     per feature (direction-free AUC and direction), strongest first within each kind."""
-    ref_items, items = sorted(reference), sorted(other)
-    x = np.array([reference[i] for i in ref_items] + [other[i] for i in items], dtype=float)
-    y = np.r_[np.zeros(len(ref_items)), np.ones(len(items))]
-    item_groups = np.array(ref_items + items)
+    x, y, item_groups = c2st.labelled(reference, other)
     if x.shape[1] != len(names):
         raise ValueError(f"feature_report: {x.shape[1]} features but {len(names)} names")
     groups = np.asarray(groups)
