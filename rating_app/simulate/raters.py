@@ -109,7 +109,7 @@ def metric_distances(clips: list[ClipInfo], name: str) -> np.ndarray:
     (bones of exactly constant length) stays finite; for a metric with negative values, the absolute difference
     in units of its standard deviation. NaN where the clip has no value. Far in either direction is
     worse: motion smoother (lower jerk) than the reference's is as unlike it as motion jerkier by the same ratio."""
-    vals = np.array([np.nan if c.metrics.get(name) is None else c.metrics[name] for c in clips], float)
+    vals = np.array([c.metrics.get(name, np.nan) for c in clips], float)  # metrics hold floats, NaN unmeasured
     ok = np.isfinite(vals)
     ref_vals = vals[ok & np.array([c.condition == study.NATURAL for c in clips])]
     if not ref_vals.size:
