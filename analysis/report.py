@@ -15,7 +15,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from moglow_eval.core import cli
+from moglow_eval.core import cli, study
 
 from . import report_html
 from .designs import Options, design_of
@@ -40,16 +40,33 @@ def _prepare_out(out):
 TARGET_COLUMN = "target_raters"  # the app's export: how many raters fill the study (CONTRACTS §6)
 
 
-def study_target(path) -> int | None:
-    """The export's target_raters (every row holds the same), None in an export without the column."""
+def _study_column(path, column) -> str | None:
+    """A column the app's export repeats on every row (a study's setting), read from the first row; None where
+    the export has no such column or it is empty."""
     # Read after the design's own reader accepted the file; a cell it could not decode only spoils this one column.
     try:
         with open(path, newline="", encoding="utf-8-sig", errors="replace") as fh:
             row = next(csv.DictReader(fh), None)
     except csv.Error:  # e.g. a cell over the csv module's size limit, which the design's reader allows
         return None
-    raw = (row or {}).get(TARGET_COLUMN)
-    if raw is None or raw.strip() == "":
+    raw = (row or {}).get(column)
+    return None if raw is None or raw.strip() == "" else raw
+
+
+def study_reference(path) -> str | None:
+    """The reference's own name the export carries (a study of your own motion, CONTRACTS §6), None without it."""
+    raw = _study_column(path, study.REFERENCE_NAME)
+    if raw is None or raw.strip() == study.NATURAL:
+        return None
+    if not study.CONDITION_NAME.fullmatch(raw.strip()):
+        raise AnalysisError(f"{path}:2: {study.REFERENCE_NAME} {raw[:40]!r} is not a condition name")
+    return raw.strip()
+
+
+def study_target(path) -> int | None:
+    """The export's target_raters (every row holds the same), None in an export without the column."""
+    raw = _study_column(path, TARGET_COLUMN)
+    if raw is None:
         return None
     if not (raw.strip().isascii() and raw.strip().isdigit() and len(raw.strip()) <= 9):
         raise AnalysisError(f"{path}:2: {TARGET_COLUMN} {raw[:20]!r} is not a whole number")
@@ -234,7 +251,8 @@ def build_parser():
     )
     ap.add_argument(
         "--reference-name",
-        help="the reference condition's own name: the export calls it NAT (acr; default: NAT, or --study's)",
+        help="the reference condition's own name, which the rows call NAT (acr; default: the export's reference_name "
+        "column, else --study's, else NAT)",
     )
     ap.add_argument("--study", help="the study file (STUDY.toml) the stimuli were built from: its reference's name")
     ap.add_argument("--quiet", action="store_true", help="no console summary or progress bar")
@@ -246,6 +264,8 @@ def _main(argv):
     reference = args.reference_name
     if reference is None and args.study:
         reference = reference_from_study_file(args.study)
+    if reference is None:
+        reference = study_reference(args.ratings)
     build_report(
         args.ratings,
         args.out,
