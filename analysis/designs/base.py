@@ -31,6 +31,7 @@ class Options:
     ordinal: bool
     ordinal_max_ratings: int
     reference_name: str | None = None  # the reference's own name for NAT (analysis.study_text)
+    reference: str | None = None  # pairwise: the condition at strength 0 and Elo 1000 (default NAT, or the first)
 
 
 @dataclass
