@@ -10,6 +10,11 @@ from ..report_html import table
 from .base import FailedCatchDesign
 
 
+def _renamed_nat(df, name):
+    """The reference's own name where the rows carry it (NAT renamed): it stays the default anchor."""
+    return name if name and name in set(df["condition_a"]) | set(df["condition_b"]) else None
+
+
 class Pairwise(FailedCatchDesign):
     name = "pairwise"
 
@@ -24,7 +29,11 @@ class Pairwise(FailedCatchDesign):
 
     def analyse_rows(self, df, options):
         return pairwise.analyse(
-            df, n_boot=options.n_boot, seed=options.seed, alpha=options.alpha, reference=options.reference
+            df,
+            n_boot=options.n_boot,
+            seed=options.seed,
+            alpha=options.alpha,
+            reference=options.reference or _renamed_nat(df, options.reference_name),
         )
 
     def figures(self, data, kept, everyone, folder):
