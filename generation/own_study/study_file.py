@@ -10,7 +10,7 @@
     NAT = "real"
     SYS_A = "system_a"
     [catch]
-    make = ["jitter", "freeze"]  # broken versions of reference clips made by the tool ...
+    make = ["jitter", "freeze", "swap"]  # broken versions of reference clips made by the tool ...
     n = 4                        # ... on this many items
     # folder = "bad"             # ... or the user's own bad clips
     [skeleton]                   # optional
@@ -81,7 +81,7 @@ class StudySpec:
     n_training: int = 1
     length_s: float | None = None
     fps: float | None = None  # None: the reference's frame rate, up to MAX_DEFAULT_FPS (inputs.study_fps)
-    catch_make: list = field(default_factory=lambda: ["jitter", "freeze"])
+    catch_make: list = field(default_factory=lambda: ["jitter", "freeze", "swap"])
     catch_n: int = 4
     catch_folder: Path | None = None
     skeleton_file: Path | None = None
