@@ -2,7 +2,6 @@
 (CONTRACTS §4) -> the app's export column reference_name (§6) -> the report's tables (§7)."""
 
 import csv
-import io
 import json
 
 import pytest

@@ -14,6 +14,7 @@ import requests
 from helpers.bvh_fixtures import SPEAKER, write_zeroeggs
 from helpers.figure_pixels import classes, decode, height_share, touches_edge
 from helpers.own_study_data import speech
+from helpers.sound_check import pass_sound_check
 
 from generation.make_stimuli import main as make_stimuli
 
@@ -57,27 +58,6 @@ def app_stimuli(tmp_path_factory):
 from test_app_browser import browser, live_server  # noqa: E402, F401  (fixtures, served with the study above)
 
 
-def _pass_sound_check(driver, wait, app):
-    """Play the sound check's sample and type the digits it speaks (the test reads them from the app)."""
-    from selenium.webdriver.common.by import By
-    from selenium.webdriver.support import expected_conditions as EC
-    from sqlalchemy import select
-
-    from rating_app.db import Rater, app_engine
-
-    wait.until(EC.visibility_of_element_located((By.ID, "audio-check")))
-    wait.until(EC.element_to_be_clickable((By.ID, "audio-play"))).click()
-    token = driver.execute_script("return sessionStorage.getItem('rating_app_session')")
-
-    def sample(_):
-        with app_engine(app).connect() as conn:
-            return conn.execute(select(Rater.audio_sample).where(Rater.token == token)).scalar()
-
-    name = wait.until(sample)
-    driver.find_element(By.ID, "audio-answer").send_keys(app.extensions["rating_app"]["audio_check"][name][1])
-    wait.until(EC.element_to_be_clickable((By.ID, "audio-submit"))).click()
-
-
 def _rate_trials(driver, url, n, app):
     """Take a rater (in `driver`) through consent, the sound check and `n` trials, each started by a tap and
     played to its end with its sound; returns the videos' URLs."""
@@ -89,7 +69,7 @@ def _rate_trials(driver, url, n, app):
     driver.get(url + "/?PROLIFIC_PID=renderpid1&STUDY_ID=st1&SESSION_ID=se1")
     driver.find_element(By.ID, "consent").click()
     wait.until(EC.element_to_be_clickable((By.ID, "start"))).click()
-    _pass_sound_check(driver, wait, app)
+    pass_sound_check(driver, wait, app)
     state = (
         "var vis=['intro','trial','rating-intro','done'].filter(function(id){"
         " return !document.getElementById(id).hidden});"
