@@ -377,6 +377,8 @@ def analyse(df, n_boot=1000, seed=0, alpha=0.05, reference=None):
         "n_items": int(o["item"].nunique()),
         "pairs": counts,
         "bradley_terry": bt,
-        "ranking": ranking.rank_table(bt["strengths"], bt["boot"], conds, bt["reference"], bt["level"]),
+        "ranking": ranking.rank_table(
+            bt["strengths"], bt["boot"], conds, bt["reference"], bt["level"], ranking.unbounded(counts)
+        ),
         "reliability": ranking.split_half(bt["tables"], bt["pairs"], conds, fit, seed=seed),
     }

@@ -46,7 +46,22 @@ def groups(order, rank_low, rank_high):
     return out
 
 
-def rank_table(strengths, boot, conds, reference, level=0.95):
+def unbounded(pairs):
+    """{condition: note} for conditions whose strength has no finite estimate: one that never won a vote (nor
+    tied one) sits at the ridge's floor, one that never lost at its ceiling; their Elo is a bound, not a value."""
+    notes = {}
+    for cond in set(pairs["condition_a"]) | set(pairs["condition_b"]):
+        a, b = pairs[pairs["condition_a"] == cond], pairs[pairs["condition_b"] == cond]
+        won = a["wins_a"].sum() + b["wins_b"].sum() + a["ties"].sum() + b["ties"].sum()
+        lost = a["wins_b"].sum() + b["wins_a"].sum() + a["ties"].sum() + b["ties"].sum()
+        if won == 0:
+            notes[cond] = "never won a vote: its Elo is an upper bound"
+        elif lost == 0:
+            notes[cond] = "never lost a vote: its Elo is a lower bound"
+    return notes
+
+
+def rank_table(strengths, boot, conds, reference, level=0.95, notes=None):
     """One row per condition, strongest first.
 
     Parameters
@@ -66,7 +81,8 @@ def rank_table(strengths, boot, conds, reference, level=0.95):
     -------
     DataFrame
         condition, log_strength, elo, elo_low, elo_high, rank (of the point estimate), rank_low, rank_high,
-        group (1 = best; conditions in one group are not told apart), rank_range (e.g. "1-3").
+        group (1 = best; conditions in one group are not told apart), rank_range (e.g. "1-3"), note (`notes`'
+        entry, e.g. from `unbounded`, else empty).
     """
     boot = np.asarray(boot, dtype=float).reshape(-1, len(conds))
     ref = strengths[reference]
@@ -99,6 +115,7 @@ def rank_table(strengths, boot, conds, reference, level=0.95):
     table["group"] = table["condition"].map(g)
     span = table.groupby("group")["rank"].agg(["min", "max"])
     table["rank_range"] = [_range(span.at[g_, "min"], span.at[g_, "max"]) for g_ in table["group"]]
+    table["note"] = [(notes or {}).get(c, "") for c in table["condition"]]
     return table
 
 

@@ -161,3 +161,11 @@ def test_imported_leaderboard_votes_give_an_independent_fits_ranking(tmp_path):
     assert [groups[c] for c in order] == sorted(groups[c] for c in order)
     assert {c for c in conds if groups[c] == max(groups.values())} == {"AMUSE", "DiffuseStyleGesture"}
     assert json.loads((tmp_path / "rep" / "stats.json").read_text())["reliability"]["n_raters"] == 20
+
+
+def test_a_condition_that_never_wins_is_flagged(tmp_path):
+    truth = {"NAT": 0.0, "S1": -0.5, "BROKEN": -60.0}
+    path = simulated_pairs(tmp_path / "pairs.csv", truth, n_raters=8, votes=20)
+    table = pairwise.analyse(pairwise.load_pairs(path), n_boot=50)["ranking"].set_index("condition")
+    assert table.at["BROKEN", "note"].startswith("never won a vote")
+    assert table.at["NAT", "note"] == "" and table.at["S1", "note"] == ""

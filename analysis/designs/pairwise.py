@@ -92,7 +92,9 @@ class Pairwise(FailedCatchDesign):
         )
         rank = kept["ranking"]
         ranked = "; ".join(
-            f"{r.rank_range} {r.condition} {r.elo:.0f} [{r.elo_low:.0f}, {r.elo_high:.0f}]" for r in rank.itertuples()
+            f"{r.rank_range} {r.condition} {r.elo:.0f} [{r.elo_low:.0f}, {r.elo_high:.0f}]"
+            + (f" ({r.note})" if r.note else "")
+            for r in rank.itertuples()
         )
         lines += ["", f"Bradley-Terry log strengths ({bt['reference']} = 0): " + strengths]
         lines += ["", f"Ranking, Elo ({bt['reference']} = 1000) [95%]; a shared rank = intervals overlap: " + ranked]
@@ -129,6 +131,7 @@ def ranking_html(res) -> list[str]:
         .set_index("condition")
     )
     cols = ["rank", "Elo", "Elo 95% low", "Elo 95% high", "log strength", "rank 95% low", "rank 95% high", "group"]
+    cols += ["note"] if rank["note"].any() else []
     rel = res["reliability"]
     return [
         "<h3>Ranking</h3><p>Elo: 400 points per factor of ten in the odds of winning, the reference at 1000. "
