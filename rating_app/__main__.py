@@ -1,4 +1,5 @@
-"""python -m rating_app serve | export | backup | restore | simulate  (see --help of each)."""
+"""python -m rating_app serve | export | backup | restore | add-condition | withdraw-condition | simulate  (see --help
+of each)."""
 
 from __future__ import annotations
 
@@ -138,6 +139,74 @@ def _simulate(a):
     return 0
 
 
+def _open_db(db_url):
+    """The engine of an existing rating app database; AppError, one line, otherwise."""
+    from sqlalchemy import inspect
+    from sqlalchemy.engine import make_url
+
+    from .db import check_url, make_engine
+
+    url = check_url(db_url)
+    parsed = make_url(url)
+    if parsed.drivername.startswith("sqlite") and not os.path.isfile(parsed.database or ""):
+        raise AppError(f"{parsed.database}: no such database file")
+    engine = make_engine(url)
+    if "study_conditions" not in inspect(engine).get_table_names():
+        engine.dispose()
+        raise AppError(f"{parsed.render_as_string(hide_password=True)}: not a study started by this version of the app")
+    return engine
+
+
+def _add_condition(a):
+    from .conditions import add_condition
+
+    engine = _open_db(a.db)
+    try:
+        out = add_condition(engine, a.manifest, a.condition or (), a.study_manifest)
+    finally:
+        engine.dispose()
+    log.info(
+        "round %s: %s joined the study (%s clips, %s new pairs)",
+        out["round"],
+        ", ".join(out["conditions"]),
+        out["clips"],
+        out["pairs"],
+    )
+    print(json.dumps(out))
+    return 0
+
+
+def _withdraw_condition(a):
+    from .conditions import withdraw_condition
+
+    engine = _open_db(a.db)
+    try:
+        out = withdraw_condition(engine, a.condition)
+    finally:
+        engine.dispose()
+    log.info("%s withdrawn: its pairs are no longer served; its votes stay in the export", a.condition)
+    print(json.dumps(out))
+    return 0
+
+
+def _rounds_parsers(sub, db):
+    """add-condition and withdraw-condition (conditions.py)."""
+    c = sub.add_parser("add-condition", help="add a condition's clips to a running pairwise study (a new round)")
+    c.add_argument("--db", default=None, help=db)
+    c.add_argument("--manifest", required=True, help="the new condition's stimulus folder's manifest.csv")
+    c.add_argument(
+        "--condition", action="append", help="the condition to add (repeatable; default: every one the study lacks)"
+    )
+    c.add_argument(
+        "--study-manifest", default=None, help="the study's manifest (default: the one the app was last started with)"
+    )
+    c.set_defaults(fn=_add_condition)
+    w = sub.add_parser("withdraw-condition", help="stop serving a condition's pairs (its votes stay in the export)")
+    w.add_argument("--db", default=None, help=db)
+    w.add_argument("--condition", required=True, help="the condition to withdraw")
+    w.set_defaults(fn=_withdraw_condition)
+
+
 def build_parser():
     """The command's parser (also read by tests/test_docs.py to check the docs' commands)."""
     p = cli.ArgumentParser(prog="python -m rating_app", description=__doc__)
@@ -156,6 +225,7 @@ def build_parser():
     r.add_argument("backup", help="the file `backup` wrote")
     r.add_argument("--db", required=True, help="the new SQLite file or empty PostgreSQL database to restore into")
     r.set_defaults(fn=_restore)
+    _rounds_parsers(sub, db)
     _simulate_parser(sub)
     return p
 
