@@ -49,6 +49,7 @@ def _export(a):
     from sqlalchemy.engine import make_url
     from sqlalchemy.exc import SQLAlchemyError
 
+    from .battles import export_battles
     from .db import check_url, make_engine, study_design
     from .designs import get
     from .export import export_csv
@@ -65,17 +66,25 @@ def _export(a):
             )
         with engine.connect() as conn:
             design = study_design(conn)
+        write = export_csv if a.format == "csv" else export_battles
         if a.out == "-":
-            n = export_csv(engine, sys.stdout)
+            n = write(engine, sys.stdout)
         else:
-            with open(a.out, "w", newline="", encoding="utf-8") as fh:
-                n = export_csv(engine, fh)
+            # Into a file beside the output, renamed over it once written: a refusal leaves no half-written file.
+            tmp = a.out + ".partial"
+            try:
+                with open(tmp, "w", newline="", encoding="utf-8") as fh:
+                    n = write(engine, fh)
+                os.replace(tmp, a.out)
+            finally:
+                if os.path.exists(tmp):
+                    os.unlink(tmp)
     except SQLAlchemyError as e:
         first = str(getattr(e, "orig", None) or e).strip().splitlines()
         raise AppError(f"cannot read the database: {first[0] if first else e.__class__.__name__}") from None
     finally:
         engine.dispose()
-    log.info("%s %s -> %s", n, get(design).export_noun, a.out)
+    log.info("%s %s -> %s", n, get(design).export_noun if a.format == "csv" else "battles", a.out)
     return 0
 
 
@@ -216,6 +225,13 @@ def build_parser():
     e = sub.add_parser("export", help="write ratings.csv from the database")
     e.add_argument("--db", default=None, help=db)
     e.add_argument("--out", default="ratings.csv", help="output file, '-' for stdout")
+    e.add_argument(
+        "--format",
+        choices=("csv", "battles"),
+        default="csv",
+        help="csv: the design's file (ratings.csv, pairs.csv, ...); battles: a pairwise study's test votes in the "
+        "GENEA leaderboard's battle format",
+    )
     e.set_defaults(fn=_export)
     b = sub.add_parser("backup", help="a consistent copy of a running study's database (SQLite backup API / pg_dump)")
     b.add_argument("--db", default=None, help=db)

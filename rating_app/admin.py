@@ -205,8 +205,16 @@ def logout():
 @bp.get("/export.csv")
 def export():
     require_admin()
-    body = export_csv(app_engine())
-    name = current_app.extensions["rating_app"]["design"].export_file
+    if request.args.get("format") == "battles":  # the leaderboard's battle format (battles.py)
+        from .battles import export_battles
+
+        try:
+            body, name = export_battles(app_engine()), "battles.csv"
+        except AppError as e:
+            abort(400, str(e))
+    else:
+        body = export_csv(app_engine())
+        name = current_app.extensions["rating_app"]["design"].export_file
     return Response(body, mimetype="text/csv", headers={"Content-Disposition": f"attachment; filename={name}"})
 
 

@@ -5,7 +5,7 @@ import html
 
 import pandas as pd
 
-from .. import appropriateness, design_figures, pairwise
+from .. import appropriateness, design_figures, pairwise, reasons
 from ..report_html import table
 from .base import FailedCatchDesign
 
@@ -23,7 +23,9 @@ class Pairwise(FailedCatchDesign):
         return pairwise.failed_raters(df)
 
     def analyse_rows(self, df, options):
-        return pairwise.analyse(df, n_boot=options.n_boot, seed=options.seed, alpha=options.alpha)
+        res = pairwise.analyse(df, n_boot=options.n_boot, seed=options.seed, alpha=options.alpha)
+        res["reasons_when_lost"] = reasons.when_lost(df)  # None when the votes carry no reasons
+        return res
 
     def figures(self, data, kept, everyone, folder):
         return {
@@ -44,7 +46,21 @@ class Pairwise(FailedCatchDesign):
                 k: bt[k]
                 for k in ("reference", "nu", "log_likelihood", "converged", "method", "n_boot", "seed", "level")
             },
+            **self._reasons_json(res),
         }
+
+    def _reasons_json(self, res):
+        lost = res.get("reasons_when_lost")
+        return {} if lost is None else {"reasons_when_lost": reasons.as_json(lost)}
+
+    def _reasons_html(self, res):
+        lost = res.get("reasons_when_lost")
+        if lost is None:
+            return []
+        return [
+            "<h3>Why a system lost: the share of its lost votes that gave each reason</h3>",
+            table(lost.set_index("condition")),
+        ]
 
     def section_html(self, res):
         bt = res["bradley_terry"]
@@ -60,6 +76,7 @@ class Pairwise(FailedCatchDesign):
             f"<h3>Bradley–Terry strengths</h3><p>{html.escape(bt['method'])}; reference "
             f"<b>{html.escape(bt['reference'])}</b> = 0; tie parameter ν = {bt['nu']:.3f}.</p>",
             table(pd.DataFrame(strengths).T),
+            *self._reasons_html(res),
         ]
 
     def console_lines(self, kept):
