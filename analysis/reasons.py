@@ -40,6 +40,7 @@ def when_lost(df):
     Examples
     --------
     >>> import pandas as pd
+    >>> from analysis.reasons import when_lost
     >>> df = pd.DataFrame({"condition_a": ["MG", "MG", "FL"], "condition_b": ["NAT", "NAT", "MG"],
     ...                    "preference": [-2, -1, -1], "role": ["test"] * 3,
     ...                    "reasons": ["UnrealisticMotion;MotionSmoothness", "UnrealisticMotion", ""]})

@@ -188,6 +188,7 @@ def _open_database(db_url, pool_size, clips, design, cover_keys, n_raters):
     """The engine, with the schema created and the manifest's clips and the design stored; AppError, one line,
     when the database cannot be opened."""
     from . import db as dbm
+    from . import rounds  # noqa: F401  (its tables, on db.Base, are part of the schema init_db creates)
 
     engine = dbm.make_engine(db_url, pool_size=pool_size)
     try:

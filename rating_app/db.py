@@ -438,8 +438,6 @@ def init_db(engine: Engine, clips=None, design: str | None = None, cover_keys=No
     rows that follow the app's configuration, written at every start (the design is written once)."""
     from sqlalchemy.orm import Session
 
-    from . import rounds  # noqa: F401  (its tables are part of the schema)
-
     with _init_lock(engine):
         Base.metadata.create_all(engine)
         _add_missing_columns(engine)
