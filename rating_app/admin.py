@@ -37,7 +37,7 @@ from .guard import client_key, same_site_only
 from .manifest import AppError
 from .progress import progress
 from .reasons import latest_texts
-from .rounds import current_units
+from .rounds import current_units, refresh
 
 bp = Blueprint("admin", __name__, url_prefix="/admin")
 
@@ -115,7 +115,8 @@ def dashboard():
 
 def _conditions():
     """The study's conditions and rounds (a design that grows round by round), or None."""
-    from .conditions import GROWS, conditions_table
+    from .conditions import conditions_table
+    from .rounds import GROWS
 
     if current_app.config["STUDY_DESIGN"] not in GROWS:
         return None
@@ -136,6 +137,8 @@ def _round_change(fn, *args):
             return jsonify(error=str(e)), 400
         flash(str(e), "error")
         return redirect(url_for("admin.dashboard"))
+    with app_engine().connect() as conn:
+        refresh(conn)  # this worker at once; the others when they next hand out a unit or start a session
     if script:
         return jsonify(out)
     flash(" ".join(f"{k}: {v if not isinstance(v, list) else ', '.join(v)};" for k, v in out.items()), "done")

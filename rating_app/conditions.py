@@ -30,15 +30,13 @@ from .db import Clip, Cover, study_design, utcnow
 from .designs import get
 from .manifest import AppError, load_manifest
 
-GROWS = ("pairwise",)  # the designs whose units a new condition only adds to (a parallel page would change)
-
 
 def _study(s, study_manifest):
     """(the design, the study's manifest path, {clip id: condition} of the database's clips)."""
     design = study_design(s)
-    if design not in GROWS:
+    if design not in rounds.GROWS:
         raise AppError(
-            f"add-condition: the database holds a {design} study; only a {' or '.join(GROWS)} study takes new "
+            f"add-condition: the database holds a {design} study; only a {' or '.join(rounds.GROWS)} study takes new "
             "conditions (its new pairs leave every stored one as it is)"
         )
     path = study_manifest
@@ -266,6 +264,9 @@ def _store(engine, added, units, names) -> int:
 def withdraw_condition(engine, name: str) -> dict:
     """Stop serving the pairs of condition `name` (its votes stay); {"condition", "round", "served"}."""
     with Session(engine) as s, s.begin():
+        design = study_design(s)
+        if design not in rounds.GROWS:
+            raise AppError(f"withdraw-condition: the database holds a {design} study; only a pairwise one has rounds")
         lock_assign(s.connection())
         rows = {r.name: r for r in s.scalars(select(rounds.StudyCondition))}
         row = rows.get(name)

@@ -21,6 +21,7 @@ from sqlalchemy.orm import Mapped, mapped_column
 from .db import Base, StudySetting, study_setting
 from .manifest import AppError, load_manifest
 
+GROWS = ("pairwise",)  # the designs whose units a new condition only adds to (a parallel page would change)
 ROUND = "round"  # StudySetting: the study's round now (absent: 1); designs/pairwise.py reads it with each vote
 REVISION = "revision"  # StudySetting: bumped by every add and withdrawal, so that workers reload
 _reload_lock = threading.Lock()
@@ -95,11 +96,15 @@ def load(ext: dict, conn, manifest) -> None:
     ext["revision"] = rev
 
 
-def refresh(conn, app=None) -> dict:
-    """The app's state (`extensions["rating_app"]`), reloaded first when the study changed since it was loaded."""
+def refresh(conn, app=None, seen: str | None = None) -> dict:
+    """The app's state (`extensions["rating_app"]`), reloaded first when the study changed since it was loaded.
+    `seen`: the revision as a statement of the caller's already read it (None: read it here); a design that
+    cannot grow never reads it."""
     app = app or current_app
     ext = app.extensions["rating_app"]
-    if revision(conn) != ext.get("revision"):
+    if ext["design"].name not in GROWS:
+        return ext
+    if (seen or revision(conn)) != ext.get("revision"):
         with _reload_lock:
             if revision(conn) != ext.get("revision"):
                 try:
@@ -109,9 +114,9 @@ def refresh(conn, app=None) -> dict:
     return ext
 
 
-def current_units(conn) -> dict:
-    """The units this worker serves now (after a refresh)."""
-    return refresh(conn)["units"]
+def current_units(conn, seen: str | None = None) -> dict:
+    """The units this worker serves now; `seen` as for `refresh` (GET next reads it with the current trial)."""
+    return refresh(conn, seen=seen)["units"]
 
 
 def know_clips(conn, clip_ids) -> dict:

@@ -25,7 +25,8 @@ from .rounds import current_units
 
 def _assign(conn, rng, rater_pk, t, wait):
     """The clip id or Unit for trial `t`, or None."""
-    units = current_units(conn)  # as of the study's latest round and withdrawals (rounds.py)
+    # As of the study's latest round and withdrawals (rounds.py); its revision was read with the trial ("0": none yet).
+    units = current_units(conn, t.study_revision or "0")
     return of_app().assign(conn, rng, rater_pk, t.kind, current_app.config["RATINGS_PER_CLIP"], units, wait)
 
 

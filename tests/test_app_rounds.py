@@ -79,15 +79,15 @@ def folder_state(manifest: Path) -> dict:
 
 
 def complete(c, reasons=None):
-    """A new rater through the whole session; the (condition pair, round) of each rating trial."""
+    """A new rater through the whole session; its rater id."""
     r = c.post("/api/sessions", json={})
     assert r.status_code == 201, r.json
-    token = r.json["session"]
+    token, rater_id = r.json["session"], r.json["rater_id"]
     for _ in range(400):
         r = c.get(f"/api/sessions/{token}/next")
         assert r.status_code == 200, r.json
         if r.json.get("done"):
-            return token
+            return rater_id
         t = r.json["trial"]
         for x in (t["a"], t["b"]):
             assert c.get(x["video_url"]).status_code == 200  # the new clips' videos are served too
@@ -97,6 +97,16 @@ def complete(c, reasons=None):
         r = c.post(f"/api/sessions/{token}/ratings", json=body)
         assert r.status_code == 201, r.json
     raise AssertionError("session never ended")
+
+
+def through_training(c):
+    """(token, rater id) of a new session with its familiarisation trials answered, and no rating trial served."""
+    r = c.post("/api/sessions", json={}).json
+    for _ in range(r["n_training"]):
+        t = c.get(f"/api/sessions/{r['session']}/next").json["trial"]
+        assert t["phase"] == "training"
+        assert c.post(f"/api/sessions/{r['session']}/ratings", json={"trial_id": t["trial_id"]}).status_code == 201
+    return r["session"], r["rater_id"]
 
 
 def export(c):
@@ -113,7 +123,8 @@ def test_a_condition_joins_a_running_study_and_is_withdrawn(make, folders, app_d
     study, new = folders
     app = make(study, "pairwise", ratings_per_clip=3)
     c = app.test_client()
-    complete(c, reasons=["MotionSmoothness"])
+    first = complete(c, reasons=["MotionSmoothness"])
+    early, early_id = through_training(c)  # a session that has started, and has not been served a rating trial yet
     engine = app_engine(app)
     before, files_before = dump(engine), folder_state(study)
 
@@ -140,16 +151,27 @@ def test_a_condition_joins_a_running_study_and_is_withdrawn(make, folders, app_d
     mtimes = {p.stat().st_mtime for p in (study.parent / "videos").glob("*.mp4")}
     assert len(mtimes) == 1  # the copies carry the set's one file time
 
-    # The running app (not restarted) gives a new rater the new pairs; every vote records its round.
-    complete(c)
+    # The running app (not restarted) learns of the round as it hands out a unit: the early session's first test
+    # trial is a new pair (the least covered), though no session has started since.
+    clips = {x.clip_id: x.condition for x in load_manifest(study)}
+    while True:
+        t = c.get(f"/api/sessions/{early}/next").json["trial"]
+        shown = {clips[t["a"]["clip_id"]], clips[t["b"]["clip_id"]]}
+        answer = c.post(f"/api/sessions/{early}/ratings", json={"trial_id": t["trial_id"], "preference": 2})
+        assert answer.status_code == 201
+        if "BAD" not in shown:
+            assert "SYS" in shown, shown
+            break
+
+    # The running app gives a new rater the new pairs; every vote records its round.
+    second = complete(c)
     rows = export(c)
-    raters = list(dict.fromkeys(r["rater_id"] for r in rows))
-    assert len(raters) == 2
-    assert {r["round"] for r in rows if r["rater_id"] == raters[0]} == {"1"}
-    assert {r["round"] for r in rows if r["rater_id"] == raters[1]} == {"2"}
-    second = pairs_of([r for r in rows if r["role"] == "test"], raters[1])
-    assert sum("SYS" in p for p in second) == 3 * N_ITEMS
-    assert all("SYS" not in p for p in pairs_of(rows, raters[0]))
+    assert {r["rater_id"] for r in rows} == {first, early_id, second}
+    assert {r["round"] for r in rows if r["rater_id"] == first} == {"1"}
+    assert {r["round"] for r in rows if r["rater_id"] != first} == {"2"}
+    pairs = pairs_of([r for r in rows if r["role"] == "test"], second)
+    assert sum("SYS" in p for p in pairs) == 3 * N_ITEMS
+    assert all("SYS" not in p for p in pairs_of(rows, first))
 
     # Withdrawn through the dashboard's endpoint: a new rater gets no SYS pair; its votes stay in the export.
     r = c.post("/admin/conditions/withdraw", data={"condition": "SYS"}, headers=TOKEN_HDR)
@@ -157,7 +179,7 @@ def test_a_condition_joins_a_running_study_and_is_withdrawn(make, folders, app_d
     assert c.post("/admin/conditions/withdraw", data={"condition": "SYS"}, headers=TOKEN_HDR).status_code == 400
     complete(c)
     rows = export(c)
-    third = [r for r in rows if r["rater_id"] not in raters]
+    third = [r for r in rows if r["rater_id"] not in (first, early_id, second)]
     assert third and all("SYS" not in (r["condition_a"], r["condition_b"]) for r in third)
     assert sum("SYS" in (r["condition_a"], r["condition_b"]) for r in rows) >= 3 * N_ITEMS
 
