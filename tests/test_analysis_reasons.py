@@ -1,6 +1,7 @@
 """Why a system lost (analysis/reasons.py): the share of each reason in the votes a condition lost, checked by hand
 on a small table, against a plain count on the GENEA leaderboard's released votes, and through analysis.report
-(stats.json's "reasons_when_lost" and a table in report.html, escaped)."""
+(stats.json's "reasons_when_lost" and a table in report.html, escaped); and the votes of each round
+(analysis/rounds.py)."""
 
 import csv
 import json
@@ -10,7 +11,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from analysis import reasons
+from analysis import reasons, rounds
 from analysis.report import main as report_main
 from moglow_eval.core import votes
 
@@ -100,3 +101,32 @@ def test_the_report_gives_the_table(tmp_path):
     assert got["AMUSE"]["shares"] == pytest.approx(want["AMUSE"]["shares"])
     page = (out / "report.html").read_text()
     assert "Why a system lost" in page and "&lt;i&gt;odd&lt;/i&gt;" in page and "<i>odd" not in page
+
+
+def test_votes_per_round(tmp_path):
+    df = pd.DataFrame(
+        {
+            "condition_a": ["MG", "NAT", "SYS", "NAT", "MG", "NAT", "BAD"],
+            "condition_b": ["NAT", "FL", "MG", "SYS", "FL", "NEW", "NAT"],
+            "role": ["test"] * 6 + ["catch"],
+            "round": ["1", "", "2", "2", "2", "3", "3"],  # empty: a vote from before rounds, i.e. round 1
+        }
+    )
+    assert rounds.per_round(df) == [
+        {"round": 1, "n_votes": 2, "new_conditions": ["FL", "MG", "NAT"]},
+        {"round": 2, "n_votes": 3, "new_conditions": ["SYS"]},
+        {"round": 3, "n_votes": 1, "new_conditions": ["NEW"]},
+    ]
+    assert rounds.per_round(df.drop(columns="round")) is None
+    # Through the report: a pairs.csv with rounds (the leaderboard's votes, their last rater's as a second round).
+    _, pairs = leaderboard_pairs()
+    last = pairs[-1]["rater_id"]
+    for p in pairs:
+        p["round"] = 2 if p["rater_id"] == last else 1
+    path = tmp_path / "pairs.csv"
+    pd.DataFrame(pairs).to_csv(path, index=False)
+    assert report_main([str(path), "--out", str(tmp_path / "r"), "--n-boot", "20"]) == 0
+    stats = json.loads((tmp_path / "r" / "stats.json").read_text())
+    n_last = sum(p["rater_id"] == last for p in pairs)
+    assert [(r["round"], r["n_votes"]) for r in stats["rounds"]] == [(1, len(pairs) - n_last), (2, n_last)]
+    assert "Rounds: the votes of each" in (tmp_path / "r" / "report.html").read_text()

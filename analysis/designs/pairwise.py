@@ -5,7 +5,7 @@ import html
 
 import pandas as pd
 
-from .. import appropriateness, design_figures, pairwise, reasons
+from .. import appropriateness, design_figures, pairwise, reasons, rounds
 from ..report_html import table
 from .base import FailedCatchDesign
 
@@ -25,6 +25,7 @@ class Pairwise(FailedCatchDesign):
     def analyse_rows(self, df, options):
         res = pairwise.analyse(df, n_boot=options.n_boot, seed=options.seed, alpha=options.alpha)
         res["reasons_when_lost"] = reasons.when_lost(df)  # None when the votes carry no reasons
+        res["rounds"] = rounds.per_round(df)  # None for a file without rounds
         return res
 
     def figures(self, data, kept, everyone, folder):
@@ -46,18 +47,26 @@ class Pairwise(FailedCatchDesign):
                 k: bt[k]
                 for k in ("reference", "nu", "log_likelihood", "converged", "method", "n_boot", "seed", "level")
             },
-            **self._reasons_json(res),
+            **self._votes_json(res),
         }
 
-    def _reasons_json(self, res):
+    def _votes_json(self, res):
+        """What the votes carry beside the preference: their rounds and their reasons, when the file has them."""
+        out = {} if res.get("rounds") is None else {"rounds": res["rounds"]}
         lost = res.get("reasons_when_lost")
-        return {} if lost is None else {"reasons_when_lost": reasons.as_json(lost)}
+        return out if lost is None else {**out, "reasons_when_lost": reasons.as_json(lost)}
 
-    def _reasons_html(self, res):
+    def _votes_html(self, res):
+        out = []
+        if res.get("rounds") and len(res["rounds"]) > 1:
+            out += [
+                "<h3>Rounds: the votes of each, and the conditions it brought in</h3>",
+                table(pd.DataFrame(res["rounds"]).assign(new_conditions=lambda d: d.new_conditions.map(", ".join))),
+            ]
         lost = res.get("reasons_when_lost")
         if lost is None:
-            return []
-        return [
+            return out
+        return out + [
             "<h3>Why a system lost: the share of its lost votes that gave each reason</h3>",
             table(lost.set_index("condition")),
         ]
@@ -76,7 +85,7 @@ class Pairwise(FailedCatchDesign):
             f"<h3>Bradley–Terry strengths</h3><p>{html.escape(bt['method'])}; reference "
             f"<b>{html.escape(bt['reference'])}</b> = 0; tie parameter ν = {bt['nu']:.3f}.</p>",
             table(pd.DataFrame(strengths).T),
-            *self._reasons_html(res),
+            *self._votes_html(res),
         ]
 
     def console_lines(self, kept):
