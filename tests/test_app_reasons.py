@@ -23,14 +23,14 @@ def stimuli(tmp_path_factory):
     return write_fake_stimuli(tmp_path_factory.mktemp("reason_api"), catch_nat=True)
 
 
-def first_rating_trial(c):
+def first_rating_trial(c, reason=IDS[0]):
     """(token, the first rating-phase trial), the familiarisation trials answered (and a reason refused there)."""
     token = c.post("/api/sessions", json={}).json["session"]
     while True:
         t = c.get(f"/api/sessions/{token}/next").json["trial"]
         if t["phase"] == "rating":
             return token, t
-        r = c.post(f"/api/sessions/{token}/ratings", json={"trial_id": t["trial_id"], "reasons": [IDS[0]]})
+        r = c.post(f"/api/sessions/{token}/ratings", json={"trial_id": t["trial_id"], "reasons": [reason]})
         assert r.status_code == 400 and "familiarisation" in r.json["error"]
         assert c.post(f"/api/sessions/{token}/ratings", json={"trial_id": t["trial_id"]}).status_code == 201
 
@@ -192,3 +192,20 @@ def test_our_battle_rows_write_a_vote_as_the_leaderboard_does(name):
     assert set(variants) <= allowed
     n_ties = sum(r["winner"] == "tie" for r in rows)
     assert len(variants) == (2 if name == "battles_elo.csv" else n_ties)
+
+
+def test_appropriateness_asks_for_reasons_only_when_told(make, tmp_path):
+    m = write_fake_stimuli(tmp_path / "fit", n_items=2, catch_nat=True, mismatched=True)
+    plain = make(m, "appropriateness")
+    assert plain.config["VOTE_REASONS"] == () and plain.config["REASON_TEXT"] == 0
+    app = make(m, "appropriateness", reasons="FitRhythmTiming=Rhythm and timing", reason_text=100)
+    c = app.test_client()
+    assert 'value="FitRhythmTiming"' in c.get("/").get_data(as_text=True)
+    token, t = first_rating_trial(c, "FitRhythmTiming")
+    r = c.post(
+        f"/api/sessions/{token}/ratings",
+        json={"trial_id": t["trial_id"], "preference": 1, "reasons": ["FitRhythmTiming"], "reason_text": "late"},
+    )
+    assert r.status_code == 201, r.json
+    row = export_rows(c)[0]
+    assert (row["reasons"], row["reason_text"]) == ("FitRhythmTiming", "late") and "matched" in row

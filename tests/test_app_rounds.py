@@ -245,3 +245,27 @@ def test_only_a_pairwise_study_grows(make, folders, capsys, app_db_url):
     study, new = folders
     make(study, "acr")
     fails_with(main, ["add-condition", "--db", app_db_url, "--manifest", str(new)], capsys, "only a pairwise study")
+
+
+def test_the_dashboard_adds_and_withdraws(make, folders):
+    study, new = folders
+    app = make(study, "pairwise")
+    c = app.test_client()
+    r = c.post("/admin/conditions", data={"manifest": str(study)}, headers=TOKEN_HDR)
+    assert r.status_code == 400 and "already in the study" in r.json["error"]
+    assert c.post("/admin/conditions", data={"manifest": str(new)}).status_code == 401  # admins only
+    # A browser: logged in through the form, the result is a message on the dashboard.
+    assert c.post("/admin/login", data={"token": "test-admin-token"}).status_code == 302
+    r = c.post("/admin/conditions", data={"manifest": str(new), "condition": "SYS"}, follow_redirects=True)
+    page = r.get_data(as_text=True)
+    assert r.status_code == 200 and "round: 2;" in page and "conditions: SYS;" in page
+    assert "<td>SYS</td><td>2</td>" in page  # the conditions table
+    r = c.post("/admin/conditions/withdraw", data={"condition": "<b>x</b>"}, follow_redirects=True)
+    assert "no condition &#39;&lt;b&gt;x&lt;/b&gt;&#39;" in r.get_data(as_text=True)  # refused, shown as text
+    r = c.post("/admin/conditions/withdraw", data={"condition": "SYS"}, follow_redirects=True)
+    assert "withdrawn" in r.get_data(as_text=True)
+    units = app.extensions["rating_app"]["units"]  # this worker at once
+    clips = app.extensions["rating_app"]["clips"]
+    assert not any("SYS" in {clips[x].condition for x in u.clips} for u in units.values() if u.role == "test")
+    r = c.post("/admin/conditions", data={"manifest": str(new)}, headers={"Sec-Fetch-Site": "cross-site", **TOKEN_HDR})
+    assert r.status_code == 403  # never on behalf of another site
