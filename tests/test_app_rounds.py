@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import requests
 from helpers.cli import fails_with
 from helpers.fake_stimuli import write_fake_stimuli
 from sqlalchemy import MetaData, select
@@ -269,3 +270,48 @@ def test_the_dashboard_adds_and_withdraws(make, folders):
     assert not any("SYS" in {clips[x].condition for x in u.clips} for u in units.values() if u.role == "test")
     r = c.post("/admin/conditions", data={"manifest": str(new)}, headers={"Sec-Fetch-Site": "cross-site", **TOKEN_HDR})
     assert r.status_code == 403  # never on behalf of another site
+
+
+def test_the_workers_of_a_running_gunicorn_learn_of_the_round(folders, app_db_url, tmp_path):
+    """A real server, three worker processes: a crowd rates, add-condition runs beside it, a second crowd gets the
+    new pairs from whichever worker it meets, and every count still adds up."""
+    from helpers.concurrent_raters import cover_mismatches
+    from helpers.fake_stimuli import free_port
+    from helpers.servers import crowd_env, start_gunicorn, stop
+
+    from rating_app.db import make_engine
+    from rating_app.simulate import run_simulation
+
+    study, new = folders
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    log = open(tmp_path / "gunicorn.log", "w")
+    proc = start_gunicorn(port, crowd_env(study, app_db_url, "round-token", STUDY_DESIGN="pairwise"), log)
+    try:
+
+        def crowd(prefix):
+            out = run_simulation(url, 8, manifest=study, seed=1, prefix=prefix, concurrency=8, timeout_s=120,
+                                 progress=False)  # fmt: skip
+            assert out["errors"] == [] and out["n_raters_completed"] == 8, out["errors"][:3]
+
+        crowd("before")
+        assert main(["add-condition", "--db", app_db_url, "--manifest", str(new)]) == 0
+        crowd("after")
+        r = requests.get(url + "/admin/export.csv", headers={"Authorization": "Bearer round-token"}, timeout=30)
+        assert r.status_code == 200
+    finally:
+        stop([proc])
+        log.close()
+    rows = [x for x in csv.DictReader(io.StringIO(r.text)) if x["role"] == "test"]
+    before = [x for x in rows if x["external_id"].startswith("before")]
+    after = [x for x in rows if x["external_id"].startswith("after")]
+    assert len(before) == len(after) == 16  # two test pairs a rater (crowd_env)
+    assert {x["round"] for x in before} == {"1"} and {x["round"] for x in after} == {"2"}
+    assert not any("SYS" in (x["condition_a"], x["condition_b"]) for x in before)
+    # The new pairs are the least covered: the second crowd's first nine test slots go to them.
+    assert sum("SYS" in (x["condition_a"], x["condition_b"]) for x in after) >= 3 * N_ITEMS
+    engine = make_engine(app_db_url)
+    try:
+        assert cover_mismatches(engine) == {}
+    finally:
+        engine.dispose()
