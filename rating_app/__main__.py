@@ -76,6 +76,8 @@ def _export(a):
                 with open(tmp, "w", newline="", encoding="utf-8") as fh:
                     n = write(engine, fh)
                 os.replace(tmp, a.out)
+            except OSError as e:
+                raise AppError(f"{a.out}: {e.strerror}") from None
             finally:
                 if os.path.exists(tmp):
                     os.unlink(tmp)
