@@ -19,12 +19,12 @@ from ..bodies import int_field
 from ..db import Clip, Preference, Rater, StudySetting, Trial
 from ..export_cells import RATER_EXTRA, TAIL, common
 from ..reasons import parse_answer as parse_reasons
+from ..rounds import ROUND
 from .base import Unit, new_condition_row
 from .units import UnitDesign, check_comparable, record_head
 
 # After `role` in pairs.csv: the study's round the vote was stored in, the reasons ticked, the free text.
 VOTE_EXTRA = ("round", "reasons", "reason_text")
-ROUND_NOW = "round"  # the StudySetting holding the study's round (rounds.py); absent: round 1
 
 COLUMNS = (
     "rater_id",
@@ -109,7 +109,7 @@ class Pairwise(UnitDesign):
 
     def store(self, conn, trial, rater_pk, shown, value, watched_ms, now, flags):
         # The round is read in the storing statement itself, so a vote can never miss a round that began before it.
-        round_now = select(cast(StudySetting.value, Integer)).where(StudySetting.name == ROUND_NOW).scalar_subquery()
+        round_now = select(cast(StudySetting.value, Integer)).where(StudySetting.name == ROUND).scalar_subquery()
         conn.execute(
             insert(Preference).values(
                 trial_pk=trial.id,
