@@ -58,7 +58,7 @@ def test_reasons_reach_the_export_intact_and_are_shown_escaped(reason_stimuli, a
             pref = (2, -1, 0)[index % 3]
             btn = wait.until(EC.element_to_be_clickable((By.CSS_SELECTOR, f'button.pref[data-preference="{pref}"]')))
             if index == 1:
-                browser.set_window_size(1280, 1000)
+                browser.set_window_size(1280, 1150)
                 _screenshot(browser, "pairwise_reasons.png")
                 browser.set_window_size(390, 844)
             btn.click()
