@@ -145,6 +145,10 @@ def _round_change(fn, *args):
     return redirect(url_for("admin.dashboard"))
 
 
+def _iso(t):
+    return None if t is None else t.isoformat() + "Z"
+
+
 @bp.post("/conditions")
 def add_condition_form():
     """Add a condition from a stimulus folder on the server (the form's `manifest`, optional `condition`)."""
@@ -228,6 +232,12 @@ def progress_json():
     data["min_view"] = current_app.config["MIN_VIEW"]
     data["design"] = current_app.config["STUDY_DESIGN"]
     data["warnings"] = health.of_app().list()
+    conditions = _conditions()
+    if conditions is not None:  # a study with rounds: its conditions, the round each joined in, withdrawn when
+        data["conditions"] = [
+            {**c, "added_at": c["added_at"].isoformat() + "Z", "withdrawn_at": _iso(c["withdrawn_at"])}
+            for c in conditions
+        ]
     for r in data["raters"]:
         r["started"], r["last_seen"] = r["started"].isoformat() + "Z", r["last_seen"].isoformat() + "Z"
     for e in data["events"]:

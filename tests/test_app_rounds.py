@@ -191,6 +191,13 @@ def test_a_condition_joins_a_running_study_and_is_withdrawn(make, folders, app_d
     assert units and all("SYS" not in {clips[x].condition for x in u.clips} for u in units.values() if u.role == "test")
     page = again.test_client().get("/admin", headers=TOKEN_HDR).get_data(as_text=True)
     assert 'id="conditions"' in page and "withdrawn" in page
+    listed = again.test_client().get("/admin/progress.json", headers=TOKEN_HDR).json["conditions"]
+    assert {(x["name"], x["round"], x["withdrawn_at"] is None) for x in listed} == {
+        ("NAT", 1, True),
+        ("MG", 1, True),
+        ("FL", 1, True),
+        ("SYS", 2, False),
+    }
 
 
 def test_clashes_are_refused_with_one_line_and_change_nothing(make, folders, tmp_path, capsys, app_db_url):
