@@ -79,7 +79,10 @@ def _app_config(values) -> dict:
     completion_url = values["COMPLETION_URL"]
     if completion_url and not completion_url.startswith(("https://", "http://")):
         raise AppError(f"completion URL must start with https:// or http://, got {completion_url!r}")
+    from .reasons import configure
+
     return {
+        **configure(design, values["VOTE_REASONS"], values["REASON_TEXT"]),
         "RATINGS_PER_CLIP": values["RATINGS_PER_CLIP"],
         "CLIPS_PER_RATER": values["CLIPS_PER_RATER"] or None,  # 0: all clips still short of their target
         "CATCH_PER_RATER": values["CATCH_PER_RATER"] or None,  # 0: every catch unit
@@ -117,6 +120,7 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
         reference_name(manifest),
     )
     app.extensions["rating_app"] = {
+        "manifest": Path(manifest).resolve(),
         "engine": engine,
         "read_engine": make_read_engine(engine),
         "clips": {c.clip_id: c for c in clips},
@@ -129,11 +133,29 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
         "audio_check": load_audio_check(manifest) if app.config["STUDY_SOUND"] else {},
         "warnings": health.Warnings(app.logger),
     }
+    _open_rounds(app)
     pool = health.catch_pool_warning(
         design.name, clips, units, app.config["CLIPS_PER_RATER"], app.config["CATCH_PER_RATER"]
     )
     if pool:
         health.of_app(app).add("catch_pool", pool)
+
+
+def _open_rounds(app: Flask) -> None:
+    """Record the study's manifest and conditions (rounds.py) and serve what the database says is served now: a
+    withdrawn condition's pairs never again."""
+    from sqlalchemy.orm import Session
+
+    from . import rounds
+    from .db import utcnow
+
+    ext = app.extensions["rating_app"]
+    with Session(ext["engine"]) as s, s.begin():
+        rounds.record_start(s, ext["manifest"], ext["clips"].values(), utcnow())
+        gone = rounds.withdrawn(s.connection())
+        ext["units"] = rounds.active_units(ext["units"], ext["clips"], gone)
+        ext["revision"] = rounds.revision(s.connection())
+    ext["engine"].dispose()  # as _open_database: forked workers start without the set-up's connections
 
 
 def _register(app: Flask) -> None:
@@ -169,6 +191,7 @@ def _open_database(db_url, pool_size, clips, design, cover_keys, n_raters, refer
     """The engine, with the schema created and the manifest's clips and the design stored; AppError, one line,
     when the database cannot be opened."""
     from . import db as dbm
+    from . import rounds  # noqa: F401  (its tables, on db.Base, are part of the schema init_db creates)
 
     engine = dbm.make_engine(db_url, pool_size=pool_size)
     try:

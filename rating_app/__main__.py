@@ -1,4 +1,5 @@
-"""python -m rating_app serve | export | backup | restore | simulate  (see --help of each)."""
+"""python -m rating_app serve | export | backup | restore | add-condition | withdraw-condition | simulate  (see --help
+of each)."""
 
 from __future__ import annotations
 
@@ -48,6 +49,7 @@ def _export(a):
     from sqlalchemy.engine import make_url
     from sqlalchemy.exc import SQLAlchemyError
 
+    from .battles import export_battles
     from .db import check_url, make_engine, study_design
     from .designs import get
     from .export import export_csv
@@ -64,17 +66,27 @@ def _export(a):
             )
         with engine.connect() as conn:
             design = study_design(conn)
+        write = export_csv if a.format == "csv" else export_battles
         if a.out == "-":
-            n = export_csv(engine, sys.stdout)
+            n = write(engine, sys.stdout)
         else:
-            with open(a.out, "w", newline="", encoding="utf-8") as fh:
-                n = export_csv(engine, fh)
+            # Into a file beside the output, renamed over it once written: a refusal leaves no half-written file.
+            tmp = a.out + ".partial"
+            try:
+                with open(tmp, "w", newline="", encoding="utf-8") as fh:
+                    n = write(engine, fh)
+                os.replace(tmp, a.out)
+            except OSError as e:
+                raise AppError(f"{a.out}: {e.strerror}") from None
+            finally:
+                if os.path.exists(tmp):
+                    os.unlink(tmp)
     except SQLAlchemyError as e:
         first = str(getattr(e, "orig", None) or e).strip().splitlines()
         raise AppError(f"cannot read the database: {first[0] if first else e.__class__.__name__}") from None
     finally:
         engine.dispose()
-    log.info("%s %s -> %s", n, get(design).export_noun, a.out)
+    log.info("%s %s -> %s", n, get(design).export_noun if a.format == "csv" else "battles", a.out)
     return 0
 
 
@@ -138,6 +150,74 @@ def _simulate(a):
     return 0
 
 
+def _open_db(db_url):
+    """The engine of an existing rating app database; AppError, one line, otherwise."""
+    from sqlalchemy import inspect
+    from sqlalchemy.engine import make_url
+
+    from .db import check_url, make_engine
+
+    url = check_url(db_url)
+    parsed = make_url(url)
+    if parsed.drivername.startswith("sqlite") and not os.path.isfile(parsed.database or ""):
+        raise AppError(f"{parsed.database}: no such database file")
+    engine = make_engine(url)
+    if "study_conditions" not in inspect(engine).get_table_names():
+        engine.dispose()
+        raise AppError(f"{parsed.render_as_string(hide_password=True)}: not a study started by this version of the app")
+    return engine
+
+
+def _add_condition(a):
+    from .conditions import add_condition
+
+    engine = _open_db(a.db)
+    try:
+        out = add_condition(engine, a.manifest, a.condition or (), a.study_manifest)
+    finally:
+        engine.dispose()
+    log.info(
+        "round %s: %s joined the study (%s clips, %s new pairs)",
+        out["round"],
+        ", ".join(out["conditions"]),
+        out["clips"],
+        out["pairs"],
+    )
+    print(json.dumps(out))
+    return 0
+
+
+def _withdraw_condition(a):
+    from .conditions import withdraw_condition
+
+    engine = _open_db(a.db)
+    try:
+        out = withdraw_condition(engine, a.condition)
+    finally:
+        engine.dispose()
+    log.info("%s withdrawn: its pairs are no longer served; its votes stay in the export", a.condition)
+    print(json.dumps(out))
+    return 0
+
+
+def _rounds_parsers(sub, db):
+    """add-condition and withdraw-condition (conditions.py)."""
+    c = sub.add_parser("add-condition", help="add a condition's clips to a running pairwise study (a new round)")
+    c.add_argument("--db", default=None, help=db)
+    c.add_argument("--manifest", required=True, help="the new condition's stimulus folder's manifest.csv")
+    c.add_argument(
+        "--condition", action="append", help="the condition to add (repeatable; default: every one the study lacks)"
+    )
+    c.add_argument(
+        "--study-manifest", default=None, help="the study's manifest (default: the one the app was last started with)"
+    )
+    c.set_defaults(fn=_add_condition)
+    w = sub.add_parser("withdraw-condition", help="stop serving a condition's pairs (its votes stay in the export)")
+    w.add_argument("--db", default=None, help=db)
+    w.add_argument("--condition", required=True, help="the condition to withdraw")
+    w.set_defaults(fn=_withdraw_condition)
+
+
 def build_parser():
     """The command's parser (also read by tests/test_docs.py to check the docs' commands)."""
     p = cli.ArgumentParser(prog="python -m rating_app", description=__doc__)
@@ -147,6 +227,13 @@ def build_parser():
     e = sub.add_parser("export", help="write ratings.csv from the database")
     e.add_argument("--db", default=None, help=db)
     e.add_argument("--out", default="ratings.csv", help="output file, '-' for stdout")
+    e.add_argument(
+        "--format",
+        choices=("csv", "battles"),
+        default="csv",
+        help="csv: the design's file (ratings.csv, pairs.csv, ...); battles: a pairwise study's test votes in the "
+        "GENEA leaderboard's battle format",
+    )
     e.set_defaults(fn=_export)
     b = sub.add_parser("backup", help="a consistent copy of a running study's database (SQLite backup API / pg_dump)")
     b.add_argument("--db", default=None, help=db)
@@ -156,6 +243,7 @@ def build_parser():
     r.add_argument("backup", help="the file `backup` wrote")
     r.add_argument("--db", required=True, help="the new SQLite file or empty PostgreSQL database to restore into")
     r.set_defaults(fn=_restore)
+    _rounds_parsers(sub, db)
     _simulate_parser(sub)
     return p
 

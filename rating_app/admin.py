@@ -14,14 +14,30 @@ import hashlib
 import hmac
 import secrets
 
-from flask import Blueprint, Response, abort, current_app, jsonify, redirect, render_template, request, session, url_for
+from flask import (
+    Blueprint,
+    Response,
+    abort,
+    current_app,
+    flash,
+    get_flashed_messages,
+    jsonify,
+    redirect,
+    render_template,
+    request,
+    session,
+    url_for,
+)
 from sqlalchemy import delete, func, insert, select
 
 from . import health
 from .db import AdminLogin, LoginFailure, app_engine, utcnow
 from .export import export_csv
-from .guard import client_key
+from .guard import client_key, same_site_only
+from .manifest import AppError
 from .progress import progress
+from .reasons import latest_texts
+from .rounds import current_units, refresh
 
 bp = Blueprint("admin", __name__, url_prefix="/admin")
 
@@ -91,12 +107,84 @@ def dashboard():
         words=current_app.extensions["rating_app"]["design"].dashboard,
         export_file=current_app.extensions["rating_app"]["design"].export_file,
         warnings=health.of_app().list(),
+        reason_texts=_reason_texts(),
+        conditions=_conditions(),
+        messages=get_flashed_messages(with_categories=True),
     )
 
 
+def _conditions():
+    """The study's conditions and rounds (a design that grows round by round), or None."""
+    from .conditions import conditions_table
+    from .rounds import GROWS
+
+    if current_app.config["STUDY_DESIGN"] not in GROWS:
+        return None
+    with app_engine().connect() as conn:
+        return conditions_table(conn)
+
+
+def _round_change(fn, *args):
+    """Run an add or a withdrawal for the dashboard's form (a message, back to the dashboard) or a script with
+    the Bearer token (JSON: the result, or 400 with the one-line refusal)."""
+    require_admin()
+    same_site_only()
+    script = request.headers.get("Authorization", "").startswith("Bearer ")
+    try:
+        out = fn(app_engine(), *args)
+    except AppError as e:
+        if script:
+            return jsonify(error=str(e)), 400
+        flash(str(e), "error")
+        return redirect(url_for("admin.dashboard"))
+    with app_engine().connect() as conn:
+        refresh(conn)  # this worker at once; the others when they next hand out a unit or start a session
+    if script:
+        return jsonify(out)
+    flash(" ".join(f"{k}: {v if not isinstance(v, list) else ', '.join(v)};" for k, v in out.items()), "done")
+    return redirect(url_for("admin.dashboard"))
+
+
+def _iso(t):
+    return None if t is None else t.isoformat() + "Z"
+
+
+@bp.post("/conditions")
+def add_condition_form():
+    """Add a condition from a stimulus folder on the server (the form's `manifest`, optional `condition`)."""
+    from .conditions import add_condition
+
+    manifest = (request.form.get("manifest") or "").strip()
+    if not manifest:
+        abort(400, "field 'manifest' must name the new condition's manifest.csv on the server")
+    cond = (request.form.get("condition") or "").strip()
+    study = current_app.extensions["rating_app"]["manifest"]
+    return _round_change(lambda eng: add_condition(eng, manifest, [cond] if cond else (), study))
+
+
+@bp.post("/conditions/withdraw")
+def withdraw_condition_form():
+    from .conditions import withdraw_condition
+
+    cond = (request.form.get("condition") or "").strip()
+    if not cond:
+        abort(400, "field 'condition' is required")
+    return _round_change(withdraw_condition, cond)
+
+
+def _reason_texts():
+    """The latest free texts given with votes (a design that takes reasons), or None."""
+    if not current_app.extensions["rating_app"]["design"].takes_reasons:
+        return None
+    with app_engine().connect() as conn:
+        return latest_texts(conn)
+
+
 def _progress():
-    cfg, ext = current_app.config, current_app.extensions["rating_app"]
-    return progress(app_engine(), cfg["RATINGS_PER_CLIP"], cfg["STUDY_DESIGN"], ext["units"])
+    cfg = current_app.config
+    with app_engine().connect() as conn:
+        units = current_units(conn)
+    return progress(app_engine(), cfg["RATINGS_PER_CLIP"], cfg["STUDY_DESIGN"], units)
 
 
 @bp.post("/login")
@@ -124,8 +212,16 @@ def logout():
 @bp.get("/export.csv")
 def export():
     require_admin()
-    body = export_csv(app_engine())
-    name = current_app.extensions["rating_app"]["design"].export_file
+    if request.args.get("format") == "battles":  # the leaderboard's battle format (battles.py)
+        from .battles import export_battles
+
+        try:
+            body, name = export_battles(app_engine()), "battles.csv"
+        except AppError as e:
+            abort(400, str(e))
+    else:
+        body = export_csv(app_engine())
+        name = current_app.extensions["rating_app"]["design"].export_file
     return Response(body, mimetype="text/csv", headers={"Content-Disposition": f"attachment; filename={name}"})
 
 
@@ -136,6 +232,12 @@ def progress_json():
     data["min_view"] = current_app.config["MIN_VIEW"]
     data["design"] = current_app.config["STUDY_DESIGN"]
     data["warnings"] = health.of_app().list()
+    conditions = _conditions()
+    if conditions is not None:  # a study with rounds: its conditions, the round each joined in, withdrawn when
+        data["conditions"] = [
+            {**c, "added_at": c["added_at"].isoformat() + "Z", "withdrawn_at": _iso(c["withdrawn_at"])}
+            for c in conditions
+        ]
     for r in data["raters"]:
         r["started"], r["last_seen"] = r["started"].isoformat() + "Z", r["last_seen"].isoformat() + "Z"
     for e in data["events"]:

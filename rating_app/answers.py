@@ -20,6 +20,8 @@ from .assign import answer, expire_idle
 from .bodies import int_field, json_body
 from .db import Rater, Trial, TrialClip, app_engine, utcnow
 from .designs import of_app
+from .reasons import parse_answer as parse_reasons
+from .rounds import know_clips
 from .sessions import OPEN, is_open
 
 MAX_WATCHED_MS = 24 * 3600 * 1000
@@ -64,11 +66,11 @@ _ANSWERED_TRIAL_CLIPS = (
 )
 
 
-def required_ms(clip_ids) -> int:
+def required_ms(clip_ids, conn=None) -> int:
     """The least time between serving a trial and its answer: the design's playing time of the trial's clips
     (durations, frames / fps, from the manifest) less a small tolerance, times MIN_VIEW (1 unless lowered for
     tests and simulations)."""
-    clips = current_app.extensions["rating_app"]["clips"]
+    clips = know_clips(conn, clip_ids) if conn is not None else current_app.extensions["rating_app"]["clips"]
 
     def duration(cid):
         clip = clips.get(cid or "")
@@ -84,6 +86,8 @@ def _parse(design, body, training, shown):
     if training:
         if body.get(name) is not None:
             abort(400, f"field '{name}' must be null for a familiarisation trial")
+        if design.answer_extra:
+            parse_reasons(body, training=True)  # none on a familiarisation trial
         return None
     if name not in body:
         abort(400, f"missing field '{name}'")
@@ -108,7 +112,7 @@ def _answered_trial(conn, design, trial_id, rater_pk):
 
 def _too_early(conn, rater_pk, trial, shown, now):
     """The 425 reply when the trial's clips cannot have played to the end yet, else None."""
-    need = required_ms([r.clip_id for r in shown] or [trial.clip_id])
+    need = required_ms([r.clip_id for r in shown] or [trial.clip_id], conn)
     elapsed = (now - trial.served_at).total_seconds() * 1000
     if elapsed >= need:
         return None
@@ -123,7 +127,7 @@ def _too_early(conn, rater_pk, trial, shown, now):
 def accept(token):
     """The reply to POST /api/sessions/TOKEN/ratings."""
     cfg, design = current_app.config, of_app()
-    body = json_body(("trial_id", design.answer_field, "watched_ms"), required=("trial_id",))
+    body = json_body(("trial_id", design.answer_field, "watched_ms", *design.answer_extra), required=("trial_id",))
     trial_id = int_field(body, "trial_id", 1, 2**31 - 1)
     watched_ms = int_field(body, "watched_ms", 0, MAX_WATCHED_MS, nullable=True)
     now = utcnow()

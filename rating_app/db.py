@@ -29,6 +29,7 @@ from sqlalchemy import (
     ForeignKey,
     Integer,
     String,
+    Text,
     UniqueConstraint,
     and_,
     case,
@@ -166,6 +167,11 @@ class Preference(Base):
     watched_ms: Mapped[int | None] = mapped_column(Integer, nullable=True)
     submitted_at: Mapped[dt.datetime] = mapped_column(DateTime)
     flags: Mapped[str] = mapped_column(String(64), default="")
+    # The study's round when the vote was stored (rounds.py; NULL: stored before rounds, i.e. round 1), the reasons
+    # ticked (ids joined by ';') and the free text exactly as typed (reasons.py).
+    round: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    reasons: Mapped[str | None] = mapped_column(String(500), nullable=True, default="")
+    reason_text: Mapped[str | None] = mapped_column(Text, nullable=True, default="")
 
 
 class PageRating(Base):
@@ -385,6 +391,9 @@ ADDED_COLUMNS = (
     ("raters", "audio_sample", "VARCHAR(64)"),  # the sound check
     ("raters", "audio_tries", "INTEGER"),
     ("raters", "audio_passed_at", "TIMESTAMP"),
+    ("preferences", "round", "INTEGER"),  # votes stored before rounds: NULL, exported as round 1
+    ("preferences", "reasons", "VARCHAR(500)"),
+    ("preferences", "reason_text", "TEXT"),
 )
 
 

@@ -13,6 +13,7 @@ from moglow_eval.core import study
 from . import health
 from .bodies import EXTERNAL
 from .db import app_engine
+from .rounds import refresh
 
 bp = Blueprint("pages", __name__)
 
@@ -34,9 +35,9 @@ def index():
             if v and EXTERNAL.fullmatch(v):
                 ids[key] = v
                 break
-    ext = current_app.extensions["rating_app"]
     cfg = current_app.config
     with Session(app_engine().execution_options(read_only=True)) as s:  # no write lock on SQLite
+        ext = refresh(s.connection())
         target = cfg["RATINGS_PER_CLIP"]
         full = ext["design"].is_full(s, target, ext["units"]) or not ext["clips"]
     design = ext["design"]
@@ -50,6 +51,8 @@ def index():
         answer_field=design.answer_field,
         question=cfg["STUDY_QUESTION"],
         sound=cfg["STUDY_SOUND"],
+        reasons=cfg["VOTE_REASONS"],  # the boxes shown with a vote, and the free text's limit (reasons.py)
+        reason_text=cfg["REASON_TEXT"],
     )
 
 

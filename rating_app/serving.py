@@ -20,12 +20,14 @@ from . import sessions
 from .assign import expire_idle, hold, lock_assign
 from .db import Rater, Trial, TrialClip, read_engine
 from .designs import LABELS, of_app
+from .rounds import current_units
 
 
 def _assign(conn, rng, rater_pk, t, wait):
     """The clip id or Unit for trial `t`, or None."""
-    ext = current_app.extensions["rating_app"]
-    return of_app().assign(conn, rng, rater_pk, t.kind, current_app.config["RATINGS_PER_CLIP"], ext["units"], wait)
+    # As of the study's latest round and withdrawals (rounds.py); its revision was read with the trial ("0": none yet).
+    units = current_units(conn, t.study_revision or "0")
+    return of_app().assign(conn, rng, rater_pk, t.kind, current_app.config["RATINGS_PER_CLIP"], units, wait)
 
 
 def _give(conn, rng, t, assigned, now):

@@ -25,6 +25,7 @@ from .bodies import ext_field, json_body
 from .db import Rater, Trial, TrialClip, app_engine, utcnow
 from .designs import LABELS, of_app
 from .guard import client_key
+from .rounds import refresh
 
 RESUME_COOKIE = "rating_resume"
 CLIENT_WINDOW = dt.timedelta(hours=1)
@@ -109,7 +110,7 @@ def start():
             expire_idle(conn, cfg["SLOT_TIMEOUT_S"], now)
             rng = random.Random(secrets.randbits(64))
             try:
-                ext = current_app.extensions["rating_app"]
+                ext = refresh(conn)  # a round begun or a condition withdrawn since this worker loaded the study
                 plan = of_app().plan(conn, rng, cfg, ext["clips"].values(), ext["units"])
             except StudyFull as e:
                 return jsonify(error=str(e), full=True), 409

@@ -14,7 +14,8 @@ from sqlalchemy import and_, bindparam, select, update
 from sqlalchemy.orm import aliased
 
 from .bodies import check_token
-from .db import Rater, Trial
+from .db import Rater, StudySetting, Trial
+from .rounds import REVISION
 
 TOUCH_EVERY_S = 30  # last_seen (shown on the dashboard) is refreshed at most this often
 RATER_COLS = (
@@ -50,8 +51,14 @@ def is_open(t=Trial):
     return and_(t.answered_at.is_(None), t.released.is_(False))
 
 
+# With the study's revision (rounds.py) read in the same statement, so that the worker that hands the trial a unit
+# learns of a round begun or a condition withdrawn without a statement of its own.
+_REVISION = select(StudySetting.value).where(StudySetting.name == REVISION).scalar_subquery().label("study_revision")
 _CURRENT = (
-    select(*TRIAL_COLS).where(Trial.rater_pk == bindparam("rater_pk"), is_open()).order_by(Trial.position).limit(1)
+    select(*TRIAL_COLS, _REVISION)
+    .where(Trial.rater_pk == bindparam("rater_pk"), is_open())
+    .order_by(Trial.position)
+    .limit(1)
 )
 OPEN = aliased(Trial)  # another trial of the same rater
 # The rater and its current trial in one read (GET next's read-only first step on SQLite). A read only: under a

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass
 
-from moglow_eval.core import study
+from moglow_eval.core import study, votes
 from moglow_eval.core.cli import number
 
 from .manifest import AppError
@@ -95,6 +95,22 @@ TABLE = (
         flag="--question",
         help="the question on the rating page (unset: the design's, e.g. 'Which motion looks more natural?' for "
         "pairwise)",
+    ),
+    Setting(
+        "VOTE_REASONS",
+        arg="reasons",
+        flag="--reasons",
+        help="tick boxes shown with each pairwise vote: ID=Label entries joined by commas, or none (unset: GENEA's "
+        "four realism reasons for pairwise, none for the other designs)",
+    ),
+    Setting(
+        "REASON_TEXT",
+        int,
+        arg="reason_text",
+        flag="--reason-text",
+        bounds=(0, votes.FREE_TEXT_MAX),
+        help=f"most characters of the optional free text with each pairwise vote, 0: no text box (unset: "
+        f"{votes.FREE_TEXT_MAX} for pairwise, 0 for the other designs)",
     ),
     Setting(
         "COMPLETION_CODE",

@@ -13,6 +13,7 @@ from sqlalchemy import bindparam, func, select, update
 from . import fetched, sessions
 from .bodies import check_token
 from .db import Rater, Trial, TrialClip, app_engine, read_engine, utcnow
+from .rounds import know_clips
 
 TRIAL_VIDEO = (
     select(Trial.id, Trial.clip_id, Trial.video_ranges, Trial.released, Trial.served_at)
@@ -43,6 +44,9 @@ def send_video(table, row):
     still holds the ones read, so two concurrent range requests never drop each other's bytes: the loser reads
     again and retries."""
     videos = current_app.extensions["rating_app"]["videos"]
+    if row.clip_id not in videos.paths:  # a clip of a round this worker has not loaded yet (rounds.py)
+        with read_engine().connect() as conn:
+            know_clips(conn, [row.clip_id])
     size = videos.size(row.clip_id)
     if current_app.config["VIDEO_ACCEL"] != "off":
         resp, new = videos.accel(row.clip_id)  # the proxy sends the bytes: the range it was asked for

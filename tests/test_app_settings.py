@@ -28,6 +28,8 @@ FLAGS = {
     "--slot-timeout": "SLOT_TIMEOUT",
     "--min-view": "MIN_VIEW",
     "--sessions-per-client": "SESSIONS_PER_CLIENT",
+    "--reasons": "VOTE_REASONS",  # added with the reasons of a pairwise vote
+    "--reason-text": "REASON_TEXT",
 }
 DEFAULTS = {
     "RATINGS_PER_CLIP": 20,
@@ -44,7 +46,7 @@ DEFAULTS = {
 ARGUMENTS = {  # create_app's keyword arguments before the table
     "manifest", "db_url", "ratings_per_clip", "clips_per_rater", "catch_per_rater", "admin_token", "slot_timeout_s",
     "completion_code", "completion_url", "secret_key", "min_view", "sessions_per_client", "design", "question",
-    "config",
+    "config", "reasons", "reason_text",
 }  # fmt: skip
 
 

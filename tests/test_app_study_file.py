@@ -18,6 +18,8 @@ STUDY = {  # every key a study file may hold, with a value other than its defaul
     "database_url": "sqlite:///db/ratings.sqlite",
     "study_design": "pairwise",
     "study_question": "Which one moves like a person?",
+    "vote_reasons": "Jerky=Jerky motion,Feet=Feet slide",
+    "reason_text": 120,
     "completion_code": "C0DE42",
     "completion_url": "https://app.prolific.com/submissions/complete?cc={code}",
     "ratings_per_clip": 7,

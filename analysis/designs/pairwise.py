@@ -5,7 +5,7 @@ import html
 
 import pandas as pd
 
-from .. import appropriateness, design_figures, pairwise, ranking
+from .. import appropriateness, design_figures, pairwise, ranking, reasons, rounds
 from ..report_html import table
 from .base import FailedCatchDesign
 
@@ -28,13 +28,16 @@ class Pairwise(FailedCatchDesign):
         return pairwise.failed_raters(df)
 
     def analyse_rows(self, df, options):
-        return pairwise.analyse(
+        res = pairwise.analyse(
             df,
             n_boot=options.n_boot,
             seed=options.seed,
             alpha=options.alpha,
             reference=options.reference or _renamed_nat(df, options.reference_name),
         )
+        res["reasons_when_lost"] = reasons.when_lost(df)  # None when the votes carry no reasons
+        res["rounds"] = rounds.per_round(df)  # None for a file without rounds
+        return res
 
     def figures(self, data, kept, everyone, folder):
         order = list(kept["ranking"]["condition"])  # strongest first
@@ -61,7 +64,29 @@ class Pairwise(FailedCatchDesign):
             "ranking": res["ranking"].to_dict(orient="records"),
             "elo": dict(zip(res["ranking"]["condition"], res["ranking"]["elo"])),
             "reliability": res["reliability"],
+            **self._votes_json(res),
         }
+
+    def _votes_json(self, res):
+        """What the votes carry beside the preference: their rounds and their reasons, when the file has them."""
+        out = {} if res.get("rounds") is None else {"rounds": res["rounds"]}
+        lost = res.get("reasons_when_lost")
+        return out if lost is None else {**out, "reasons_when_lost": reasons.as_json(lost)}
+
+    def _votes_html(self, res):
+        out = []
+        if res.get("rounds") and len(res["rounds"]) > 1:
+            out += [
+                "<h3>Rounds: the votes of each, and the conditions it brought in</h3>",
+                table(pd.DataFrame(res["rounds"]).assign(new_conditions=lambda d: d.new_conditions.map(", ".join))),
+            ]
+        lost = res.get("reasons_when_lost")
+        if lost is None:
+            return out
+        return out + [
+            "<h3>Why a system lost: the share of its lost votes that gave each reason</h3>",
+            table(lost.set_index("condition")),
+        ]
 
     def section_html(self, res):
         bt = res["bradley_terry"]
@@ -78,6 +103,7 @@ class Pairwise(FailedCatchDesign):
             f"<b>{html.escape(bt['reference'])}</b> = 0; tie parameter ν = {bt['nu']:.3f}.</p>",
             table(pd.DataFrame(strengths).T),
             *ranking_html(res),
+            *self._votes_html(res),
         ]
 
     def console_lines(self, kept):

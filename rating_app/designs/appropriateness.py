@@ -25,6 +25,7 @@ class Appropriateness(Pairwise):
     question = "Which motion fits the speech better?"
     export_noun = "appropriateness answers"
     columns = COLUMNS
+    default_reasons, default_reason_text = (), 0  # GENEA's reasons are about realism; set VOTE_REASONS to ask
     dashboard = {
         **Pairwise.dashboard,
         "note": " (a system's motion for the speech heard and for another item's, a preference; targets per item "

@@ -34,12 +34,17 @@ class Design:
 
     name = ""  # as moglow_eval.core.study.DESIGNS spells it: in the database, the API's "design" and the files
     answer_field = ""  # the JSON field that carries an answer (API, simulated crowd)
+    answer_extra: tuple[str, ...] = ()  # further optional answer fields (pairwise: its reasons)
     answer_noun = "answer"  # what one answer is called in messages
     question = ""  # the page's default question
     export_file = ""  # the export's file name (/admin/export.csv)
     export_noun = ""  # what one export row is, for the export command's log line
     columns: tuple[str, ...] = ()  # the export's columns, in order
     several_clips = True  # a trial shows TrialClip rows (labelled A, B, ...) rather than one Trial.clip_id
+    # The reasons asked with a vote (reasons.py): whether the design can take them, and its defaults.
+    takes_reasons = False
+    default_reasons: tuple[tuple[str, str], ...] = ()
+    default_reason_text = 0
     page = ""  # how the rater's page (static/study.js) shows a trial: "one" clip, a "pair" A/B, a "page" of clips
     # The dashboard's words (templates/admin.html): what the design is, what its units and answers are called.
     dashboard = {

@@ -8,18 +8,44 @@ answer, A being the clip that rater saw as A.
 
 from __future__ import annotations
 
-from sqlalchemy import insert, select
+from typing import NamedTuple
+
+from sqlalchemy import Integer, cast, func, insert, select
 from sqlalchemy.orm import aliased
 
-from moglow_eval.core import study
+from moglow_eval.core import study, votes
 
 from ..bodies import int_field
-from ..db import Clip, Preference, Rater, Trial
+from ..db import Clip, Preference, Rater, StudySetting, Trial
 from ..export_cells import RATER_EXTRA, TAIL, common
+from ..reasons import parse_answer as parse_reasons
+from ..rounds import ROUND
 from .base import Unit, new_condition_row
 from .units import UnitDesign, check_comparable, record_head
 
-COLUMNS = ("rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role", *TAIL)
+# After `role` in pairs.csv: the study's round the vote was stored in, the reasons ticked, the free text.
+VOTE_EXTRA = ("round", "reasons", "reason_text")
+
+COLUMNS = (
+    "rater_id",
+    "item",
+    "clip_a",
+    "clip_b",
+    "condition_a",
+    "condition_b",
+    "preference",
+    "role",
+    *VOTE_EXTRA,
+    *TAIL,
+)
+
+
+class Vote(NamedTuple):
+    """A rating-phase answer: the preference and the reasons given with it (reasons.py)."""
+
+    preference: int
+    reasons: str  # ids joined by ';'
+    reason_text: str
 
 
 class Pairwise(UnitDesign):
@@ -30,6 +56,10 @@ class Pairwise(UnitDesign):
     export_noun = "pairwise answers"
     columns = COLUMNS
     page = "pair"
+    takes_reasons = True
+    answer_extra = ("reasons", "reason_text")
+    default_reasons = votes.REALISM_REASONS
+    default_reason_text = votes.FREE_TEXT_MAX
     dashboard = {
         **UnitDesign.dashboard,
         "note": " (two clips, a preference; targets per item and pair of conditions)",
@@ -75,19 +105,24 @@ class Pairwise(UnitDesign):
         return {"design": self.name, "a": clips[0], "b": clips[1]}
 
     def parse_answer(self, body, shown):
-        return int_field(body, "preference", -2, 2)
+        return Vote(int_field(body, "preference", -2, 2), *parse_reasons(body, training=False))
 
     def store(self, conn, trial, rater_pk, shown, value, watched_ms, now, flags):
+        # The round is read in the storing statement itself, so a vote can never miss a round that began before it.
+        round_now = select(cast(StudySetting.value, Integer)).where(StudySetting.name == ROUND).scalar_subquery()
         conn.execute(
             insert(Preference).values(
                 trial_pk=trial.id,
                 rater_pk=rater_pk,
                 clip_a=shown[0].clip_id,
                 clip_b=shown[1].clip_id,
-                preference=value,
+                preference=value.preference,
                 watched_ms=watched_ms,
                 submitted_at=now,
                 flags=flags,
+                round=func.coalesce(round_now, 1),
+                reasons=value.reasons,
+                reason_text=value.reason_text,
             )
         )
 
@@ -112,7 +147,8 @@ class Pairwise(UnitDesign):
             d["target"] += target if u.role == "test" else 0
         for r in rows:
             pair = sorted((r["condition_a"], r["condition_b"]))
-            d = per_cond[" vs ".join(pair)]
+            name = " vs ".join(pair)  # a withdrawn condition's pairs are no longer units, but keep their votes
+            d = per_cond.setdefault(name, new_condition_row(name, r["role"]))
             d["ratings"] += 1
             d["_sum"] += self.signed(r, pair[0])
         return per_cond
@@ -161,6 +197,9 @@ def iter_pair_rows(s):
             cb.condition,
             Preference.preference,
             Trial.kind,
+            Preference.round,
+            Preference.reasons,
+            Preference.reason_text,
             Trial.index,
             Preference.watched_ms,
             Preference.submitted_at,
@@ -174,7 +213,7 @@ def iter_pair_rows(s):
         .join(cb, cb.clip_id == Preference.clip_b)
         .order_by(Rater.id, Trial.index)
     )
-    for rater_id, item, a, b, cond_a, cond_b, pref, kind, *rest in s.execute(q):
+    for rater_id, item, a, b, cond_a, cond_b, pref, kind, rnd, reasons, text, *rest in s.execute(q):
         row = {
             "item": item,
             "clip_a": a,
@@ -183,6 +222,9 @@ def iter_pair_rows(s):
             "condition_b": cond_b,
             "preference": pref,
             "role": kind,
+            "round": rnd or 1,  # a vote stored before rounds belongs to the start
+            "reasons": reasons or "",
+            "reason_text": text or "",
         }
         row.update(common(rater_id, *rest))
         yield row

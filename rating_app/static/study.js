@@ -290,6 +290,7 @@
     $("pair-replay").disabled = true;
     $("pair-msg").hidden = true;
     prefButtons.forEach(function (b) { b.disabled = true; });
+    resetReasons(training);
     show("pair");
     // Side by side both play at once; one above the other (a phone) A plays, then B. With sound always one after
     // the other: two voices at once could not be heard.
@@ -394,6 +395,21 @@
     send(value, 3);
   }
 
+  // The reasons shown with a pairwise vote (optional): ticked before the preference, sent with it.
+  var reasonBox = $("reasons");
+  function resetReasons(training) {
+    if (!reasonBox) { return; }
+    reasonBox.hidden = training;
+    reasonBox.querySelectorAll("input[name=reason]").forEach(function (x) { x.checked = false; });
+    if ($("reason-text")) { $("reason-text").value = ""; }
+  }
+  function reasonFields(body) {
+    if (!reasonBox || trial.phase === "training") { return; }
+    body.reasons = Array.prototype.slice.call(reasonBox.querySelectorAll("input[name=reason]:checked"))
+      .map(function (x) { return x.value; });
+    if ($("reason-text") && $("reason-text").value) { body.reason_text = $("reason-text").value; }
+  }
+
   prefButtons.forEach(function (b) {
     b.addEventListener("click", function () { answerMulti(parseInt(b.dataset.preference, 10)); });
   });
@@ -414,6 +430,7 @@
   function send(rating, early) {
     var body = { trial_id: trial.trial_id, watched_ms: Math.round(watchedMs) };
     body[answerField] = rating;
+    if (page === "pair") { reasonFields(body); }
     api("POST", "/api/sessions/" + token + "/ratings", body)
       .then(function (r) {
         if (r.status === 201 || r.status === 200) { next(); }
