@@ -77,7 +77,12 @@ def _app_config(values) -> dict:
     completion_url = values["COMPLETION_URL"]
     if completion_url and not completion_url.startswith(("https://", "http://")):
         raise AppError(f"completion URL must start with https:// or http://, got {completion_url!r}")
+    for env, plain in (("PAIRING", "balanced"), ("STOP_WHEN", "never")):
+        if values[env] != plain and design.name != "pairwise":
+            raise AppError(f"{env.lower()}: {values[env]} needs the pairwise design, not {design.name}")
     return {
+        **{k: values[k] for k in ("PAIRING", "PAIRING_RANDOM", "STOP_WHEN", "STOP_LEVEL", "STOP_WIDTH")},
+        "STOP_MAX_VOTES": values["STOP_MAX_VOTES"],
         "RATINGS_PER_CLIP": values["RATINGS_PER_CLIP"],
         "CLIPS_PER_RATER": values["CLIPS_PER_RATER"] or None,  # 0: all clips still short of their target
         "CATCH_PER_RATER": values["CATCH_PER_RATER"] or None,  # 0: every catch unit
@@ -126,6 +131,10 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
         "audio_check": load_audio_check(manifest) if app.config["STUDY_SOUND"] else {},
         "warnings": health.Warnings(app.logger),
     }
+    if app.config["PAIRING"] == "active" or app.config["STOP_WHEN"] == "settled":
+        from .active import Ranking
+
+        app.extensions["rating_app"]["ranking"] = Ranking(units, app.extensions["rating_app"]["clips"], app.config)
     pool = health.catch_pool_warning(
         design.name, clips, units, app.config["CLIPS_PER_RATER"], app.config["CATCH_PER_RATER"]
     )

@@ -96,7 +96,12 @@ def dashboard():
 
 def _progress():
     cfg, ext = current_app.config, current_app.extensions["rating_app"]
-    return progress(app_engine(), cfg["RATINGS_PER_CLIP"], cfg["STUDY_DESIGN"], ext["units"])
+    data = progress(app_engine(), cfg["RATINGS_PER_CLIP"], cfg["STUDY_DESIGN"], ext["units"])
+    if ext.get("ranking") is not None:  # active pairing or the stopping rule: how far from settled
+        with app_engine().connect() as conn:
+            ext["ranking"].refresh(conn, now=True)
+        data["ranking"] = ext["ranking"].status()
+    return data
 
 
 @bp.post("/login")

@@ -24,8 +24,12 @@ from .designs import LABELS, of_app
 
 def _assign(conn, rng, rater_pk, t, wait):
     """The clip id or Unit for trial `t`, or None."""
-    ext = current_app.extensions["rating_app"]
-    return of_app().assign(conn, rng, rater_pk, t.kind, current_app.config["RATINGS_PER_CLIP"], ext["units"], wait)
+    ext, cfg = current_app.extensions["rating_app"], current_app.config
+    if t.kind == "test" and cfg["PAIRING"] == "active":  # active.py: chooses among what the balanced rule allows
+        unit = ext["ranking"].pick(conn, rng, rater_pk, ext["units"], cfg["RATINGS_PER_CLIP"], wait)
+        if unit is not None:
+            return unit
+    return of_app().assign(conn, rng, rater_pk, t.kind, cfg["RATINGS_PER_CLIP"], ext["units"], wait)
 
 
 def _give(conn, rng, t, assigned, now):

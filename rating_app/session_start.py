@@ -107,6 +107,10 @@ def start():
             ):
                 return jsonify(error="too many new sessions from this address; please try again later"), 429
             expire_idle(conn, cfg["SLOT_TIMEOUT_S"], now)
+            ranking = current_app.extensions["rating_app"].get("ranking")
+            closed = ranking.closed(conn) if ranking is not None else None
+            if closed:  # the stopping rule (active.py): no new raters, started sessions finish
+                return jsonify(error=closed, full=True, closed=True), 409
             rng = random.Random(secrets.randbits(64))
             try:
                 ext = current_app.extensions["rating_app"]
