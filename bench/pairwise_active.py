@@ -186,7 +186,8 @@ def main(argv=None):
             v = np.array([x[0] for x in res])
             print(
                 f"{scheme:9s} stop (level 0.95, cap {a.cap}): votes median {np.median(v):.0f}, 5-95% "
-                f"{np.percentile(v, 5):.0f}-{np.percentile(v, 95):.0f}; at tau>=0.9 {np.mean([x[1] >= 0.9 for x in res]):.3f}, "
+                f"{np.percentile(v, 5):.0f}-{np.percentile(v, 95):.0f}; "
+                f"at tau>=0.9 {np.mean([x[1] >= 0.9 for x in res]):.3f}, "
                 f"every pair right {np.mean([x[2] for x in res]):.3f}, at the cap {np.mean([x[3] for x in res]):.3f}"
                 f"  ({time.time() - t0:.0f} s)"
             )
@@ -197,7 +198,10 @@ def main(argv=None):
             "evenly 0.3 apart": 0.3 * np.arange(k)[::-1],
             "evenly 0.15 apart": 0.15 * np.arange(k)[::-1],
         }
-        print("| strengths | level | scheme | studies stopped | ordered some pair wrongly | share | nominal | median votes |")
+        print(
+            "| strengths | level | scheme | studies stopped | ordered some pair wrongly | share | nominal "
+            "| median votes |"
+        )
         for label, level, scheme, n, wrong, med in error_table(
             truths, a.error_reps, a.cap, a.seed, a.random_share, (0.9, 0.95)
         ):

@@ -178,7 +178,7 @@ TABLE = (
         0.95,
         arg="stop_level",
         flag="--stop-level",
-        bounds=(0.5, 1.0, True),
+        bounds=(0.5, 0.9999),
         help="the stopping rule's level: the chance that the whole order is right (split over the adjacent pairs)",
     ),
     Setting(

@@ -3,8 +3,9 @@ preference, a fit to the speech, a page of ratings); each design (rating_app/des
 
 An attentive rater answers round(quality(clip) + bias + noise), clipped to the scale, with a personal bias and
 noise level (acr, parallel); in a pairwise test its choice follows a Bradley-Terry model of the two clips'
-qualities, its certainty (no preference, slightly, clearly) blurred by its noise level; and recognises the bad examples (catch clips) as such: it rates them below CATCH_FAIL_AT (acr),
-never prefers them (pairwise) and puts them below the page's NAT clip (parallel). A careless rater answers
+qualities, its certainty (no preference, slightly, clearly) blurred by its noise level. It
+recognises the bad examples (catch clips) as such: it rates them below CATCH_FAIL_AT (acr), never prefers them
+(pairwise) and puts them below the page's NAT clip (parallel). A careless rater answers
 uniformly at random in every design, and so fails catch trials.
 
 The per-clip quality comes by default from metrics.csv (objective metrics farther from the reference's -> lower
