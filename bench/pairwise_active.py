@@ -1,7 +1,7 @@
 """Votes a pairwise ranking study needs, balanced against active pairing, with and without the stopping rule; and
 the stopping rule's error rate against its nominal level. Pure simulation against moglow_eval.core.ranking, no app.
 
-    nice python bench/pairwise_active.py [--reps 200] [--max-votes 4000] [--error-reps 400] [--seed 0]
+    nice python bench/pairwise_active.py [--reps 100] [--max-votes 40000] [--error-reps 150] [--skip fixed,stop,error]
 
 The truth: Bradley-Terry log strengths of the 8 systems of the GENEA leaderboard's released realism votes
 (../shared/data/genea-leaderboard-votes/battles_elo.csv, read there, never copied; ties half to each side),
@@ -121,7 +121,20 @@ def votes_needed(taus, step, tau=0.9, share=0.95):
     return (first_all if first_all <= taus.shape[1] * step else None), np.array(per_rep)
 
 
-def run_stopping(truth, scheme, reps, cap, seed, share, level, width=None, check=10):
+def ratio_interval(taus, step, rng, n_boot=500):
+    """A percentile interval of active / balanced votes needed, replications resampled in each scheme."""
+    ratios = []
+    for _ in range(n_boot):
+        got = []
+        for scheme in ("active", "balanced"):
+            t = taus[scheme]
+            got.append(votes_needed(t[rng.integers(len(t), size=len(t))], step)[0])
+        if all(got):
+            ratios.append(got[0] / got[1])
+    return np.percentile(ratios, 2.5), np.percentile(ratios, 97.5)
+
+
+def run_stopping(truth, scheme, reps, cap, seed, share, level, width=None, check=25):
     """Per replication (votes at the stop, tau there, every pair right): the rule checked every `check` votes."""
     out = []
     right = np.argsort(-truth)
@@ -152,11 +165,13 @@ def error_table(truths, reps, cap, seed, share, levels):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--reps", type=int, default=200)
-    ap.add_argument("--max-votes", type=int, default=4000)
-    ap.add_argument("--step", type=int, default=50)
-    ap.add_argument("--error-reps", type=int, default=300)
-    ap.add_argument("--cap", type=int, default=6000)
+    ap.add_argument("--reps", type=int, default=100)
+    ap.add_argument("--max-votes", type=int, default=40000)
+    ap.add_argument("--step", type=int, default=1000)
+    ap.add_argument("--error-reps", type=int, default=150)
+    ap.add_argument("--cap", type=int, default=30000)
+    ap.add_argument("--stop-reps", type=int, default=60)
+    ap.add_argument("--width", type=float, default=50.0, help="the stopping rule's Elo width in the stop runs")
     ap.add_argument("--random-share", type=float, default=0.2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--skip", default="", help="comma-separated parts to skip: fixed, stop, error")
@@ -168,10 +183,10 @@ def main(argv=None):
     print(f"Machine: {platform.processor() or platform.machine()}, load average {os.getloadavg()[0]:.2f}")
     t0 = time.time()
     if "fixed" not in skip:
-        needed = {}
+        needed, taus = {}, {}
         for scheme in ("balanced", "active"):
-            taus = run_fixed(truth, scheme, a.reps, a.max_votes, a.step, a.seed, a.random_share)
-            n95, per_rep = votes_needed(taus, a.step)
+            taus[scheme] = run_fixed(truth, scheme, a.reps, a.max_votes, a.step, a.seed, a.random_share)
+            n95, per_rep = votes_needed(taus[scheme], a.step)
             needed[scheme] = n95
             q = np.percentile(per_rep, [5, 25, 50, 75, 95])
             print(
@@ -179,13 +194,17 @@ def main(argv=None):
                 f"5/25/50/75/95%: {' / '.join(f'{x:.0f}' for x in q)}  ({time.time() - t0:.0f} s)"
             )
         if needed["balanced"] and needed["active"]:
-            print(f"active / balanced: {needed['active'] / needed['balanced']:.2f}")
+            lo, hi = ratio_interval(taus, a.step, np.random.default_rng(a.seed))
+            print(
+                f"active / balanced: {needed['active'] / needed['balanced']:.2f} (bootstrap over replications, "
+                f"95%: {lo:.2f}-{hi:.2f})"
+            )
     if "stop" not in skip:
         for scheme in ("balanced", "active"):
-            res = run_stopping(truth, scheme, a.reps, a.cap, a.seed, a.random_share, 0.95)
+            res = run_stopping(truth, scheme, a.stop_reps, a.cap, a.seed, a.random_share, 0.95, a.width)
             v = np.array([x[0] for x in res])
             print(
-                f"{scheme:9s} stop (level 0.95, cap {a.cap}): votes median {np.median(v):.0f}, 5-95% "
+                f"{scheme:9s} stop (level 0.95, width {a.width}, cap {a.cap}): votes median {np.median(v):.0f}, 5-95% "
                 f"{np.percentile(v, 5):.0f}-{np.percentile(v, 95):.0f}; "
                 f"at tau>=0.9 {np.mean([x[1] >= 0.9 for x in res]):.3f}, "
                 f"every pair right {np.mean([x[2] for x in res]):.3f}, at the cap {np.mean([x[3] for x in res]):.3f}"
@@ -193,11 +212,7 @@ def main(argv=None):
             )
     if "error" not in skip:
         k = len(truth)
-        truths = {
-            "leaderboard": truth,
-            "evenly 0.3 apart": 0.3 * np.arange(k)[::-1],
-            "evenly 0.15 apart": 0.15 * np.arange(k)[::-1],
-        }
+        truths = {"8 evenly 0.3 apart": 0.3 * np.arange(k)[::-1], "8 evenly 0.2 apart": 0.2 * np.arange(k)[::-1]}
         print(
             "| strengths | level | scheme | studies stopped | ordered some pair wrongly | share | nominal "
             "| median votes |"
