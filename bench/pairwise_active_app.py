@@ -15,6 +15,7 @@ the app's dashboard gives, and its Kendall tau against the truth's order.
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import sys
 import threading
@@ -43,6 +44,7 @@ def one_study(manifest, quality, pairing, a):
     """(votes held, the dashboard's ranking block, seconds) of one study run until the app closes it."""
     from werkzeug.serving import make_server
 
+    logging.getLogger("werkzeug").setLevel(logging.ERROR)  # not a line per request
     with pg_schema() as url:
         app = create_app(
             manifest=manifest,
