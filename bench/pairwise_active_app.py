@@ -97,7 +97,7 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args(argv)
     names, theta = leaderboard_truth()
-    quality = {n: round(3.0 + (t - theta.mean()) / BT_SCALE, 4) for n, t in zip(names, theta)}
+    quality = {n: round(float(3.0 + (t - theta.mean()) / BT_SCALE), 4) for n, t in zip(names, theta)}
     cluster, _ = suite_server()
     tmp = Path(os.environ.get("TMPDIR", "/tmp")) / f"pairwise_active_app_{os.getpid()}"
     try:
