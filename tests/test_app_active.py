@@ -69,14 +69,17 @@ def test_an_idle_session_gives_its_pair_back(active_make, stimuli):
     base.test_an_idle_session_gives_its_pair_back(active_make, stimuli)
 
 
+@pytest.mark.full  # the full tier: crowds, as in the modules these checks come from
 def test_targets_reached_exactly_with_fewest_raters(active_make, big_stimuli):
     base.test_targets_reached_exactly_with_fewest_raters(active_make, big_stimuli, "pairwise", 90, 30)
 
 
+@pytest.mark.full  # the full tier: crowds, as in the modules these checks come from
 def test_targets_exact_under_concurrent_sessions(active_make, big_stimuli):
     base.test_targets_exact_under_concurrent_sessions(active_make, big_stimuli, "pairwise", 90)
 
 
+@pytest.mark.full  # the full tier: crowds, as in the modules these checks come from
 def test_catch_units_recur_like_test_units(active_make, pool_stimuli, monkeypatch):
     pool.test_catch_units_recur_like_test_units(active_make, pool_stimuli, "pairwise", 24, monkeypatch)
 
