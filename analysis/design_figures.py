@@ -145,3 +145,31 @@ def mas_bars(table, path, title=None):
         if title:
             fig.suptitle(text(title))
         return _save(fig, path)
+
+
+def win_matrix(rate, p, conds, path, alpha=0.05):
+    """Heat map of the win rate of each row condition over each column condition (ties half), strongest first;
+    a star marks a pair whose Holm-adjusted sign test rejects at `alpha`; grey where two conditions never met."""
+    import numpy as np
+
+    k = len(conds)
+    with matplotlib.rc_context(STYLE):
+        fig, ax = subplots(figsize=(1.0 + 0.62 * k, 0.8 + 0.55 * k))
+        shown = np.ma.masked_invalid(rate)
+        cmap = matplotlib.colormaps["RdBu"].with_extremes(bad="#eeeeee")
+        im = ax.imshow(shown, cmap=cmap, vmin=0, vmax=1)
+        for i in range(k):
+            for j in range(k):
+                if i != j and np.isfinite(rate[i, j]):
+                    star = "*" if np.isfinite(p[i, j]) and p[i, j] < alpha else ""
+                    dark = abs(rate[i, j] - 0.5) > 0.3
+                    ax.text(j, i, f"{100 * rate[i, j]:.0f}{star}", ha="center", va="center", fontsize=7,
+                            color="white" if dark else "black")  # fmt: skip
+        labels = [text(c) for c in conds]
+        ax.set_xticks(range(k), labels, rotation=45, ha="right")
+        ax.set_yticks(range(k), labels)
+        ax.set_xlabel("against (column)")
+        ax.set_ylabel("wins of (row)")
+        fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="win rate (ties half)")
+        ax.set_title(text(f"win rate, row over column, % (* Holm-adjusted sign test p < {alpha:g})"), fontsize=8)
+        return _save(fig, path)

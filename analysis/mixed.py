@@ -193,7 +193,12 @@ def _fit(y, X, rater, clip, names):
     s = _Suff(y, X, rater, clip)
 
     def objective(rel_sd):  # lme4's parameters: random-effect SDs relative to the residual SD, >= 0
-        return _gls(s, rel_sd[0] ** 2, rel_sd[1] ** 2)[0]
+        try:
+            return _gls(s, rel_sd[0] ** 2, rel_sd[1] ** 2)[0]
+        except linalg.LinAlgError:
+            # A line search can step to SDs so large that X'V^-1X loses definiteness in floating point (seen on
+            # a rater-bootstrap resample); such a point is never the optimum, so it only has to look bad.
+            return 1e300
 
     # Tolerances sit above the float noise of the criterion (~1e-16 x its size), so both stop cleanly.
     best = optimize.minimize(

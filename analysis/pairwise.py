@@ -24,6 +24,7 @@ from scipy import stats as sps
 
 from moglow_eval.core import study
 
+from . import ranking
 from .load import AnalysisError, read_export
 
 REQUIRED = ("rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role")
@@ -263,7 +264,7 @@ def fit_bradley_terry(counts, pairs, conds, reference=None, ties=None, x0=None):
     return fits[0] if single else fits
 
 
-def bradley_terry(o, n_boot=1000, seed=0, level=0.95):
+def bradley_terry(o, n_boot=1000, seed=0, level=0.95, reference=None):
     """The Davidson-Bradley-Terry fit on the oriented test rows, with percentile intervals from a bootstrap over
     raters.
 
@@ -277,13 +278,16 @@ def bradley_terry(o, n_boot=1000, seed=0, level=0.95):
         The seed of the resampling.
     level : float
         The coverage of the intervals.
+    reference : str or None
+        The condition whose strength is 0 (`analysis.report --reference`); None: NAT, or else the first.
 
     Returns
     -------
     dict
         strengths {cond: log strength relative to the reference}, ci {cond: [low, high]}, nu (the tie
-        parameter, 0 without ties in the data), reference (NAT, or else the first condition), log_likelihood,
-        converged, n_boot, seed, level and method.
+        parameter, 0 without ties in the data), reference, log_likelihood, converged, n_boot, seed, level and
+        method; and for analysis.ranking (not in stats.json) boot, the resamples' strengths [n_boot, K] in conds
+        order, conds, and tables/pairs, the per-rater counts behind them.
 
     Notes
     -----
@@ -291,7 +295,9 @@ def bradley_terry(o, n_boot=1000, seed=0, level=0.95):
     resample is fitted at once.
     """
     conds = sorted(set(o["first"]) | set(o["second"]))
-    reference = REFERENCE if REFERENCE in conds else conds[0]
+    if reference is not None and reference not in conds:
+        raise AnalysisError(f"--reference {reference}: no such condition in the test rows ({', '.join(conds)})")
+    reference = reference or (REFERENCE if REFERENCE in conds else conds[0])
     tables, pairs = _tables(o, conds)
     total = tables.sum(axis=0)
     ties = bool(total[:, 2].sum() > 0)
@@ -309,6 +315,10 @@ def bradley_terry(o, n_boot=1000, seed=0, level=0.95):
     return {
         **fit,
         "ci": ci,
+        "boot": boot,
+        "conds": conds,
+        "tables": tables,
+        "pairs": pairs,
         "n_boot": n_boot,
         "seed": seed,
         "level": level,
@@ -321,7 +331,7 @@ def bradley_terry(o, n_boot=1000, seed=0, level=0.95):
     }
 
 
-def analyse(df, n_boot=1000, seed=0, alpha=0.05):
+def analyse(df, n_boot=1000, seed=0, alpha=0.05, reference=None):
     """All pairwise statistics of the test rows of `df` (catch rows never enter them).
 
     Parameters
@@ -334,13 +344,16 @@ def analyse(df, n_boot=1000, seed=0, alpha=0.05):
         The seed of that bootstrap.
     alpha : float
         The level at which the Holm-corrected sign tests reject.
+    reference : str or None
+        The condition at strength 0 and Elo 1000; None: NAT, or else the first.
 
     Returns
     -------
     dict
         n_test_answers, n_raters, n_items; pairs, a DataFrame with one row per pair of conditions (wins, ties,
         the share of each answer level, the sign test p and its Holm correction); bradley_terry, as from
-        `bradley_terry`.
+        `bradley_terry`; ranking (analysis.ranking.rank_table: Elo, rank intervals, groups); reliability
+        (analysis.ranking.split_half, None with fewer than 4 raters or 3 conditions).
 
     Raises
     ------
@@ -352,11 +365,20 @@ def analyse(df, n_boot=1000, seed=0, alpha=0.05):
     if len(conds) < 2:
         raise AnalysisError(f"the test rows compare {len(conds)} condition; comparisons need at least 2")
     counts = pair_counts(o, alpha)
-    bt = bradley_terry(o, n_boot=n_boot, seed=seed)
+    bt = bradley_terry(o, n_boot=n_boot, seed=seed, reference=reference)
+    ties = bool(bt["nu"] > 0)
+
+    def fit(batch):
+        return fit_bradley_terry(batch, bt["pairs"], conds, bt["reference"], ties)
+
     return {
         "n_test_answers": int(len(o)),
         "n_raters": int(o["rater_id"].nunique()),
         "n_items": int(o["item"].nunique()),
         "pairs": counts,
         "bradley_terry": bt,
+        "ranking": ranking.rank_table(
+            bt["strengths"], bt["boot"], conds, bt["reference"], bt["level"], ranking.unbounded(counts)
+        ),
+        "reliability": ranking.split_half(bt["tables"], bt["pairs"], conds, fit, seed=seed),
     }

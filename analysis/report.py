@@ -15,13 +15,14 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from moglow_eval.core import cli
+from moglow_eval.core import cli, study
 
 from . import report_html
 from .designs import Options, design_of
 from .designs.acr import MIXED_MAX_LEVELS, ORDINAL_MAX_RATINGS
 from .filtering import DEFAULT_THRESHOLD
 from .load import AnalysisError
+from .methods import methods_paragraph
 from .study_text import reference_from_study_file
 
 
@@ -40,16 +41,33 @@ def _prepare_out(out):
 TARGET_COLUMN = "target_raters"  # the app's export: how many raters fill the study (CONTRACTS §6)
 
 
-def study_target(path) -> int | None:
-    """The export's target_raters (every row holds the same), None in an export without the column."""
+def _study_column(path, column) -> str | None:
+    """A column the app's export repeats on every row (a study's setting), read from the first row; None where
+    the export has no such column or it is empty."""
     # Read after the design's own reader accepted the file; a cell it could not decode only spoils this one column.
     try:
         with open(path, newline="", encoding="utf-8-sig", errors="replace") as fh:
             row = next(csv.DictReader(fh), None)
-    except csv.Error:  # e.g. a cell over the csv module's size limit, which the design's reader allows
+    except (csv.Error, OSError):  # a cell over the csv module's size limit; a missing file the design's reader names
         return None
-    raw = (row or {}).get(TARGET_COLUMN)
-    if raw is None or raw.strip() == "":
+    raw = (row or {}).get(column)
+    return None if raw is None or raw.strip() == "" else raw
+
+
+def study_reference(path) -> str | None:
+    """The reference's own name the export carries (a study of your own motion, CONTRACTS §6), None without it."""
+    raw = _study_column(path, study.REFERENCE_NAME)
+    if raw is None or raw.strip() == study.NATURAL:
+        return None
+    if not study.CONDITION_NAME.fullmatch(raw.strip()):
+        raise AnalysisError(f"{path}:2: {study.REFERENCE_NAME} {raw[:40]!r} is not a condition name")
+    return raw.strip()
+
+
+def study_target(path) -> int | None:
+    """The export's target_raters (every row holds the same), None in an export without the column."""
+    raw = _study_column(path, TARGET_COLUMN)
+    if raw is None:
         return None
     if not (raw.strip().isascii() and raw.strip().isdigit() and len(raw.strip()) <= 9):
         raise AnalysisError(f"{path}:2: {TARGET_COLUMN} {raw[:20]!r} is not a whole number")
@@ -81,6 +99,7 @@ def build_report(
     ordinal=True,
     ordinal_max_ratings=ORDINAL_MAX_RATINGS,
     reference_name=None,
+    reference=None,
 ):
     """Run the whole analysis of a ratings file, of whichever design it holds, and write the report.
 
@@ -120,6 +139,8 @@ def build_report(
     reference_name : str or None
         The reference condition's own name (acr): the export calls it NAT (CONTRACTS §10); the report, its
         figures and its models then use this name.
+    reference : str or None
+        pairwise: the condition at log strength 0 and Elo 1000 (None: NAT, else the first by name).
 
     Returns
     -------
@@ -143,6 +164,7 @@ def build_report(
         ordinal,
         ordinal_max_ratings,
         reference_name,
+        reference,
     )
     design = design_of(ratings_path)
     data = design.prepare(ratings_path, options)
@@ -172,13 +194,16 @@ def build_report(
         "figures": {k: str(Path(v).relative_to(out)) for k, v in figs.items()},
     }
     note = shortfall_note(data.counts["n_raters_total"], target)
+    methods = methods_paragraph(design.name, data.rows, data.kept, data.counts, options)
+    (out / "methods.txt").write_text(methods + "\n", encoding="utf-8")
     body = design.html(meta, data.counts, kept, everyone, figs)
+    body.append(f"<h2>Methods, for a paper</h2><p class=methods>{html.escape(methods)}</p>")
     if note:  # right under the title, before any figure is read
         body.insert(1, f"<p class=warn>{html.escape(note)}</p>")
     page = report_html.page(body)
     (out / "report.html").write_text(page, encoding="utf-8")
     extra = {} if target is None else {TARGET_COLUMN: target, "notes": [note] if note else []}
-    doc = report_html.clean({**meta, **data.counts, **extra, **design.stats_json(kept, everyone)})
+    doc = report_html.clean({**meta, **data.counts, **extra, **design.stats_json(kept, everyone), "methods": methods})
     (out / "stats.json").write_text(json.dumps(doc, indent=1, allow_nan=False), encoding="utf-8")
     bar.update(bar.total - bar.n)
     bar.close()
@@ -234,7 +259,13 @@ def build_parser():
     )
     ap.add_argument(
         "--reference-name",
-        help="the reference condition's own name: the export calls it NAT (acr; default: NAT, or --study's)",
+        help="the reference condition's own name, which the rows call NAT (acr; default: the export's reference_name "
+        "column, else --study's, else NAT)",
+    )
+    ap.add_argument(
+        "--reference",
+        metavar="NAME",
+        help="pairwise: the condition at log strength 0 and Elo 1000 (default: NAT, else the first by name)",
     )
     ap.add_argument("--study", help="the study file (STUDY.toml) the stimuli were built from: its reference's name")
     ap.add_argument("--quiet", action="store_true", help="no console summary or progress bar")
@@ -246,6 +277,8 @@ def _main(argv):
     reference = args.reference_name
     if reference is None and args.study:
         reference = reference_from_study_file(args.study)
+    if reference is None:
+        reference = study_reference(args.ratings)
     build_report(
         args.ratings,
         args.out,
@@ -261,6 +294,7 @@ def _main(argv):
         ordinal=not args.no_ordinal,
         ordinal_max_ratings=args.ordinal_max_ratings,
         reference_name=reference,
+        reference=args.reference,
     )
     return 0
 

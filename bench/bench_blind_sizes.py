@@ -26,21 +26,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import imageio_ffmpeg  # noqa: E402
 import numpy as np  # noqa: E402
-from scipy.stats import mannwhitneyu  # noqa: E402
 
 from moglow_eval.core import study  # noqa: E402
 from moglow_eval.core.clip import load_clip  # noqa: E402
+from rendering.blinding import SIZE_AUC_BAND, auc  # noqa: E402
 from rendering.camera import camera_targets  # noqa: E402
 from rendering.encode import ffmpeg_writer  # noqa: E402
 from rendering.mp4_layout import content_signal, read_layout, size_signals  # noqa: E402
 from rendering.raster import FrameDrawer  # noqa: E402
 
-LOW, HIGH = 0.25, 0.75  # issue 37: the AUC every size signal must stay within
-
-
-def auc(a, b):
-    """P(a value of `a` > one of `b`), ties counted half: Mann-Whitney U / (n_a n_b)."""
-    return mannwhitneyu(a, b).statistic / (len(a) * len(b))
+LOW, HIGH = SIZE_AUC_BAND  # the AUC every size signal must stay within
 
 
 def groups(rows):

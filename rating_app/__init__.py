@@ -21,7 +21,9 @@ from sqlalchemy.exc import DBAPIError, InterfaceError, OperationalError, SQLAlch
 from sqlalchemy.exc import TimeoutError as PoolTimeout
 from werkzeug.exceptions import HTTPException
 
-from .manifest import AppError, load_manifest
+from moglow_eval.core import study
+
+from .manifest import AppError, load_manifest, reference_name
 from .settings import ARGS, SETTINGS, resolve
 
 __all__ = ["create_app", "AppError", "SETTINGS"]
@@ -117,6 +119,7 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
         design.name,
         design.cover_keys(clips, units),
         target_raters(design.pool(clips, units)[0], app.config),
+        reference_name(manifest),
     )
     app.extensions["rating_app"] = {
         "engine": engine,
@@ -171,14 +174,15 @@ def target_raters(test_units: int, config) -> int:
     return -(-test_units * config["RATINGS_PER_CLIP"] // max(per_rater, 1))
 
 
-def _open_database(db_url, pool_size, clips, design, cover_keys, n_raters):
+def _open_database(db_url, pool_size, clips, design, cover_keys, n_raters, reference):
     """The engine, with the schema created and the manifest's clips and the design stored; AppError, one line,
     when the database cannot be opened."""
     from . import db as dbm
 
     engine = dbm.make_engine(db_url, pool_size=pool_size)
     try:
-        dbm.init_db(engine, clips, design, cover_keys, {dbm.TARGET_RATERS: n_raters})
+        names = {study.REFERENCE_NAME: reference} if reference else {}
+        dbm.init_db(engine, clips, design, cover_keys, {dbm.TARGET_RATERS: n_raters, **names})
     except SQLAlchemyError as e:
         where = make_url(str(engine.url)).render_as_string(hide_password=True)
         first = str(getattr(e, "orig", None) or e).strip().splitlines()

@@ -14,6 +14,8 @@ import io
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
+from moglow_eval.core import study
+
 from .db import TARGET_RATERS, study_design, study_setting
 from .designs import get
 from .export_cells import clip_styles, row_style
@@ -38,6 +40,10 @@ def export_csv(engine: Engine, out=None) -> str | int:
         # tell an export of a study that did not fill; a database from before it has none, and no column.
         target = study_setting(s, TARGET_RATERS)
         extra = {TARGET_RATERS: target} if target is not None else {}
+        # A study of your own motion: the reference's own name, which the rows call NAT (CONTRACTS §4, §6).
+        reference = study_setting(s, study.REFERENCE_NAME)
+        if reference is not None:
+            extra[study.REFERENCE_NAME] = reference
         # A manifest with a style column (CONTRACTS §4): every row says how its clips were drawn (§7).
         styles = clip_styles(s)
         style_col = ["style"] if styles else []

@@ -4,6 +4,7 @@ core.tables.read_metrics."""
 from __future__ import annotations
 
 import csv
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -107,3 +108,23 @@ def _clip(row: dict, where: str, base: Path, check_files: bool) -> ManifestClip:
         audio=(row.get("audio") or "").strip() == "1",
         style=(row.get("style") or "").strip()[:16],
     )
+
+
+def reference_name(manifest) -> str | None:
+    """The reference condition's own name from study.json beside the manifest (a study of your own motion,
+    CONTRACTS §4), None where there is no such file or it names NAT; AppError, one line, on a malformed file."""
+    path = Path(manifest).resolve().parent / study.STUDY_NAMES_FILE
+    if not path.is_file():
+        return None
+    try:
+        if path.stat().st_size > 4096:  # a few names: anything larger is not this file
+            raise ValueError("larger than 4 KB")
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        name = doc[study.REFERENCE_NAME] if isinstance(doc, dict) else None
+    except (OSError, ValueError, KeyError) as exc:
+        raise AppError(f"{path}: not a study names file ({exc})") from None
+    if not isinstance(name, str) or not study.CONDITION_NAME.fullmatch(name):
+        raise AppError(
+            f"{path}: {study.REFERENCE_NAME} must be a condition name (a letter, then letters, digits, _ or -)"
+        )
+    return None if name == study.NATURAL else name

@@ -17,6 +17,8 @@ Every file also gets the same modification time.
 
 import os
 
+import numpy as np
+
 from .errors import RenderError
 from .mp4_layout import content_signal, read_layout, size_signals
 
@@ -57,3 +59,31 @@ def same_mtime(paths, mtime):
     """Give every file in `paths` the access and modification time `mtime` (seconds since the epoch)."""
     for path in paths:
         os.utime(path, (mtime, mtime))
+
+
+# How far from chance a size signal may tell catch clips from test clips (an AUC, CONTRACTS §4): what the
+# built-in study holds, and what a study of your own is checked against (`coded_tells`).
+SIZE_AUC_BAND = (0.25, 0.75)
+
+
+def auc(a, b):
+    """P(a value of `a` > one of `b`), ties counted half (the Mann-Whitney U over n_a n_b)."""
+    from scipy.stats import rankdata
+
+    ranks = rankdata(np.concatenate([np.asarray(a, float), np.asarray(b, float)]))
+    return float((ranks[: len(a)].sum() - len(a) * (len(a) + 1) / 2) / (len(a) * len(b)))
+
+
+def coded_tells(catch_videos, test_videos):
+    """The coded-size signal (the only sizes that follow the content) that best tells catch videos from test
+    videos: (signal name, AUC), the AUC furthest from 0.5; (None, 0.5) with no catch or test videos."""
+    if not catch_videos or not test_videos:
+        return None, 0.5
+    signals = [{k: v for k, v in size_signals(read_layout(p)).items() if content_signal(k)} for p in catch_videos]
+    tests = [{k: v for k, v in size_signals(read_layout(p)).items() if content_signal(k)} for p in test_videos]
+    worst = (None, 0.5)
+    for name in signals[0]:
+        value = auc([s.get(name, -1) for s in signals], [t.get(name, -1) for t in tests])
+        if abs(value - 0.5) > abs(worst[1] - 0.5):
+            worst = (name, value)
+    return worst

@@ -91,7 +91,13 @@ def frozen_run(tmp_path_factory):
     return out, doc
 
 
-VOLATILE = {"generated_at", "input", "max_abs_gradient", "n_evaluations"}  # the last two: optimiser diagnostics
+VOLATILE = {
+    "generated_at",
+    "input",
+    "max_abs_gradient",
+    "n_evaluations",
+    "methods",
+}  # optimiser diagnostics; prose (the tool version)
 
 
 def _compare(got, want, path=""):

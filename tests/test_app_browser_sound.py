@@ -9,12 +9,12 @@ from pathlib import Path
 
 import pytest
 from helpers.own_study_data import make_study
-from sqlalchemy import select
+from helpers.sound_check import pass_sound_check
 from test_app_browser import chrome
 
 from generation.make_stimuli import main as make_stimuli
 from rating_app import create_app
-from rating_app.db import Rater, app_engine
+from rating_app.db import app_engine
 
 pytestmark = pytest.mark.browser
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"  # SAVE_SCREENSHOTS=1 writes the pages there
@@ -89,21 +89,9 @@ def test_sound_check_and_a_trial_with_sound(served, window, tmp_path):
         assert "headphones" in browser.find_element(By.ID, "welcome").text.lower()
         browser.find_element(By.ID, "consent").click()
         wait.until(EC.element_to_be_clickable((By.ID, "start"))).click()
-        wait.until(EC.visibility_of_element_located((By.ID, "audio-check")))
-        wait.until(EC.element_to_be_clickable((By.ID, "audio-play"))).click()
-        token = browser.execute_script("return sessionStorage.getItem('rating_app_session')")
-
-        def sample(_):
-            with app_engine(app).connect() as conn:
-                return conn.execute(select(Rater.audio_sample).where(Rater.token == token)).scalar()
-
-        name = wait.until(sample)  # the page fetched its sample: the rater hears it (the test reads it)
         shots = os.environ.get("SAVE_SCREENSHOTS") == "1"
-        if shots:
-            browser.save_screenshot(str(IMG / f"sound_check_{window.split(',')[0]}.png"))
-        answer = app.extensions["rating_app"]["audio_check"][name][1]
-        browser.find_element(By.ID, "audio-answer").send_keys(answer)
-        wait.until(EC.element_to_be_clickable((By.ID, "audio-submit"))).click()
+        shot = IMG / f"sound_check_{window.split(',')[0]}.png" if shots else None
+        pass_sound_check(browser, wait, app, screenshot=shot)
         wait.until(EC.visibility_of_element_located((By.ID, "intro")))
         browser.find_element(By.ID, "intro-go").click()
 

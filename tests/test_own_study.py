@@ -83,6 +83,8 @@ def test_study_folder_follows_the_contract(own_study):
     manifest = _rows(out / "manifest.csv")
     conds = {r["condition"] for r in manifest}
     assert conds == {"NAT", "SYS_A", "SYS_B", "BAD"}  # the reference plays NAT's role
+    # ... and keeps its own name beside the manifest, for the app's export and the report (CONTRACTS §4)
+    assert json.loads((out / "study.json").read_text()) == {"reference_name": "real"}
     roles = {r["role"] for r in manifest}
     assert roles == {"test", "catch", "training"}
     catch_items = {r["item"] for r in manifest if r["condition"] == "BAD"}
@@ -305,10 +307,13 @@ def test_own_study_end_to_end(own_study, tmp_path, db, request):
     r = subprocess.run([*cmd, "--raters", "60", "--seed", "3"], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     stats = json.loads((out / "report" / "stats.json").read_text())
-    assert set(stats["condition_means"]) == {"NAT", "SYS_A", "SYS_B"}
+    # The reference keeps the study file's name ("real") from the stimulus folder through the app's export to
+    # the report's tables, with no flag given.
+    assert set(stats["condition_means"]) == {"real", "SYS_A", "SYS_B"}
+    assert {row["reference_name"] for row in csv.DictReader(open(out / "ratings.csv"))} == {"real"}
     # The simulated raters follow the metrics: the trembling system (SYS_B) is rated lowest.
     assert min(stats["condition_means"], key=stats["condition_means"].get) == "SYS_B"
-    assert {row["condition"] for row in stats["c2st"]} == {"NAT:split", "SYS_A", "SYS_B", "BAD"}
+    assert {row["condition"] for row in stats["c2st"]} == {"real:split", "SYS_A", "SYS_B", "BAD"}
     assert "Classifier two-sample test" in (out / "report" / "report.html").read_text()
 
 

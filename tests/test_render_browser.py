@@ -1,8 +1,9 @@
-"""The rendering targets, done when: a study built from a ZeroEGGS-like speaker (75 joints, fingers, cm, 30 fps)
-and a made-up second system with units = "auto", view = "front", framing = "upper" and style = ["stick", "solid"]
-is served to a real browser, which rates a few trials; the videos it played, decoded, are at 30 fps, the figure
-from the hips to the head fills most of the frame's height, both hands stay inside it, the solid body covers
-several times the stick figure's pixels and left and right are told apart by colour."""
+"""The rendering targets, done when: a study built from a ZeroEGGS-like speaker (75 joints, fingers, cm, 30 fps,
+with speech) and a made-up second system with units = "auto", view = "front", framing = "upper" and
+style = ["stick", "solid"] is served to a real browser (on SQLite and on PostgreSQL), which passes the sound check
+and rates a few trials with their sound playing; the videos it played, decoded, are at 30 fps and carry the
+speech, the figure from the hips to the head fills most of the frame's height, both hands stay inside it, the
+solid body covers several times the stick figure's pixels and left and right are told apart by colour."""
 
 import csv
 from pathlib import Path
@@ -12,6 +13,8 @@ import pytest
 import requests
 from helpers.bvh_fixtures import SPEAKER, write_zeroeggs
 from helpers.figure_pixels import classes, decode, height_share, touches_edge
+from helpers.own_study_data import speech
+from helpers.sound_check import pass_sound_check
 
 from generation.make_stimuli import main as make_stimuli
 
@@ -31,6 +34,8 @@ units = "auto"
 view = "front"
 framing = "upper"
 style = ["stick", "solid"]
+[audio]
+folder = "audio"
 """
 
 
@@ -38,7 +43,9 @@ style = ["stick", "solid"]
 def app_stimuli(tmp_path_factory):
     """The study's manifest: two items, each clip 1.5 s (the browser plays them in real time) in both styles."""
     root = tmp_path_factory.mktemp("speaker")
+    (root / "audio").mkdir()
     for k in range(2):
+        speech(root / "audio" / f"item{k:02d}.wav", f"item {k + 1}, look at my hands", 1.5)
         for sub, seed in (("real", k), ("sys_a", 100 + k)):
             (root / sub).mkdir(exist_ok=True)
             write_zeroeggs(root / sub / f"item{k:02d}.bvh", frames=45, seed=seed, turns=SPEAKER, degrees=2.0)
@@ -51,31 +58,39 @@ def app_stimuli(tmp_path_factory):
 from test_app_browser import browser, live_server  # noqa: E402, F401  (fixtures, served with the study above)
 
 
-def _rate_trials(driver, url, n):
-    """Take a rater (in `driver`) through consent and `n` trials, each played to its end; returns the videos' URLs."""
+def _rate_trials(driver, url, n, app):
+    """Take a rater (in `driver`) through consent, the sound check and `n` trials, each started by a tap and
+    played to its end with its sound; returns the videos' URLs."""
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
     from selenium.webdriver.support.ui import WebDriverWait
 
-    wait = WebDriverWait(driver, 20)
+    wait = WebDriverWait(driver, 30)
     driver.get(url + "/?PROLIFIC_PID=renderpid1&STUDY_ID=st1&SESSION_ID=se1")
     driver.find_element(By.ID, "consent").click()
     wait.until(EC.element_to_be_clickable((By.ID, "start"))).click()
+    pass_sound_check(driver, wait, app)
     state = (
-        "var vis=['trial','rating-intro','done'].filter(function(id){return !document.getElementById(id).hidden});"
-        "return {section: vis.length ? vis[0] : null, src: document.getElementById('video').currentSrc,"
-        " count: document.getElementById('trial-count').textContent};"
+        "var vis=['intro','trial','rating-intro','done'].filter(function(id){"
+        " return !document.getElementById(id).hidden});"
+        "var v=document.getElementById('video');"
+        "return {section: vis.length ? vis[0] : null, src: v.currentSrc, ended: v.ended, muted: v.muted,"
+        " decoded: v.webkitAudioDecodedByteCount||0, count: document.getElementById('trial-count').textContent};"
     )
     srcs = []
     while len(srcs) < n:
         wait.until(lambda d: d.execute_script(state)["section"])
         s = driver.execute_script(state)
         assert s["section"] != "done", "the session ended before the trials were rated"
-        if s["section"] == "rating-intro":
-            driver.find_element(By.ID, "rating-go").click()
+        if s["section"] in ("intro", "rating-intro"):
+            driver.find_element(By.ID, "intro-go" if s["section"] == "intro" else "rating-go").click()
             wait.until(lambda d: d.execute_script(state)["section"] == "trial")
             continue
-        wait.until(EC.element_to_be_clickable((By.CSS_SELECTOR, 'button.rate[data-rating="3"]'))).click()  # ended
+        assert not s["muted"], "a study with sound plays its videos unmuted"
+        driver.find_element(By.ID, "video").click()  # with sound nothing plays by itself: the rater taps
+        wait.until(lambda d: d.execute_script(state)["ended"])
+        assert driver.execute_script(state)["decoded"] > 0  # its speech was decoded while it played
+        wait.until(EC.element_to_be_clickable((By.CSS_SELECTOR, 'button.rate[data-rating="3"]'))).click()
         srcs.append(s["src"])
         wait.until(
             lambda d: (
@@ -97,14 +112,14 @@ def _check(frames, style):
     return np.mean([(t | le | r).sum() for t, le, r in masks])
 
 
-@pytest.mark.parametrize("app_db_url", ["sqlite"], indirect=True)
+@pytest.mark.parametrize("app_db_url", ["sqlite", "postgres"], indirect=True)
 def test_speaker_study_in_a_real_browser(app_stimuli, live_server, browser, tmp_path):  # noqa: F811
     from sqlalchemy import select
     from test_app_browser import live_server_manifest
 
     from rating_app.db import Trial, app_engine
 
-    srcs = _rate_trials(browser, live_server, 3)
+    srcs = _rate_trials(browser, live_server, 3, live_server_manifest[1])
     with app_engine(live_server_manifest[1]).connect() as conn:
         clip_of = dict(conn.execute(select(Trial.id, Trial.clip_id)).all())
     rows = list(csv.DictReader(open(app_stimuli, newline="")))
@@ -114,6 +129,7 @@ def test_speaker_study_in_a_real_browser(app_stimuli, live_server, browser, tmp_
         (tmp_path / f"{k}.mp4").write_bytes(requests.get(src, timeout=10).content)
         frames, fps = decode(tmp_path / f"{k}.mp4")
         assert fps == 30.0 and len(frames) == 45
+        assert has_speech(tmp_path / f"{k}.mp4")
         pixels = {played["style"]: _check(frames, played["style"])}
         # the same motion in the other style, from the study's folder
         (twin,) = [
@@ -123,3 +139,18 @@ def test_speaker_study_in_a_real_browser(app_stimuli, live_server, browser, tmp_
         assert fps == 30.0
         pixels[twin["style"]] = _check(frames, twin["style"])
         assert pixels["solid"] > 3 * pixels["stick"]
+
+
+def has_speech(path) -> bool:
+    """Whether the video's AAC track, decoded by ffmpeg, holds sound above silence."""
+    import subprocess
+
+    import imageio_ffmpeg
+
+    raw = subprocess.run(
+        [imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-i", str(path), "-map", "0:a:0", "-f", "s16le", "-"],
+        capture_output=True,
+        check=True,
+    ).stdout
+    pcm = np.frombuffer(raw, "<i2").astype(float)
+    return len(pcm) > 0 and np.sqrt(np.mean(pcm**2)) > 100

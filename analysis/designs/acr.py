@@ -13,7 +13,7 @@ import numpy as np
 
 from moglow_eval.core import study
 
-from .. import bootstrap, figures, rating_models, stats, style
+from .. import agreement, bootstrap, figures, rating_models, stats, style
 from ..filtering import exclude_raters, only_test_rows
 from ..load import AnalysisError, load_c2st, load_metrics, load_ratings
 from ..report_html import records
@@ -126,6 +126,7 @@ def analyse(
         partial(rating_models.ordinal_model, reference=ref), test, ordinal, "--no-ordinal", *sizes, ordinal_max_ratings
     )
     out["style"] = style.style_analysis(test, ref)  # condition x style, when the clips have more than one style
+    out["agreement"] = agreement.agreement(test, n_boot=n_boot, seed=seed)
     step()
     if metrics is not None:
         out["metrics"] = stats.metric_correlations(out["clips"], metrics)
@@ -163,6 +164,7 @@ def section_json(res):
         "mixed_model": res["mixed"],
         "ordinal_model": res["ordinal"],
         "undefined": res["undefined"],
+        "agreement": res["agreement"],
         "per_clip_means": records(
             res["clips"][["clip_id", "condition", "rank", "n", "mean", "sd", "ci_low", "ci_high"]]
         ),

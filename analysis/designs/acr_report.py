@@ -7,6 +7,7 @@ import html
 
 import pandas as pd
 
+from ..agreement import agreement_text
 from ..report_html import img, mixed_html, p_equals, p_text, table, why_not
 from ..study_text import C2ST_LOW_AUC, C2ST_MIN_ITEMS, c2st_with_notes, captions
 
@@ -29,6 +30,7 @@ def console_summary(counts, kept, everyone):
             f"{f'[{r.boot_low:.3f}, {r.boot_high:.3f}]':>22}{all_mean:>18}"
         )
     a, kw, undef = kept["anova"], kept["kruskal"], kept["undefined"]
+    lines += ["", agreement_text(kept["agreement"])]
     lines += [
         "",
         f"One-way ANOVA: {undef['anova']}"
@@ -192,6 +194,7 @@ def _section_html(res, title, figs=None, ordinal_fig=None, style_fig=None):
         table(res["bootstrap"]["differences"], ("boot_p",)),
         "<h3>Linear mixed model</h3>",
         mixed_html(res["mixed"]),
+        f"<h3>Rater agreement</h3><p>{html.escape(agreement_text(res['agreement']))}</p>",
         "<h3>Ordinal mixed model (cumulative logit)</h3>",
         _ordinal_html(res["ordinal"], ordinal_fig),
     ]

@@ -15,6 +15,7 @@ import pandas as pd
 
 from .. import report_html
 from ..load import AnalysisError
+from ..study_text import rename_reference
 
 
 @dataclass
@@ -31,6 +32,7 @@ class Options:
     ordinal: bool
     ordinal_max_ratings: int
     reference_name: str | None = None  # the reference's own name for NAT (analysis.study_text)
+    reference: str | None = None  # pairwise: the condition at strength 0 and Elo 1000 (default NAT, or the first)
 
 
 @dataclass
@@ -123,9 +125,13 @@ class FailedCatchDesign(Design):
 
     def prepare(self, path, options):
         df = self.load(path)
-        kept, counts = exclude(df, self.failed_raters(df))
+        kept, counts = exclude(df, self.failed_raters(df))  # the catch rules key on NAT: before any renaming
         if not (kept["role"] == "test").any():
             raise AnalysisError(f"{path}: every rater failed the catch trials; no test answers are left")
+        name = options.reference_name
+        for col in ("condition", "condition_a", "condition_b"):
+            if name and col in df.columns:
+                df, kept = rename_reference(df, name, col), rename_reference(kept, name, col)
         return Prepared(df, kept, counts, {})
 
     def analyse(self, data, options, progress):

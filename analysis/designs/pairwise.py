@@ -5,9 +5,14 @@ import html
 
 import pandas as pd
 
-from .. import appropriateness, design_figures, pairwise
+from .. import appropriateness, design_figures, pairwise, ranking
 from ..report_html import table
 from .base import FailedCatchDesign
+
+
+def _renamed_nat(df, name):
+    """The reference's own name where the rows carry it (NAT renamed): it stays the default anchor."""
+    return name if name and name in set(df["condition_a"]) | set(df["condition_b"]) else None
 
 
 class Pairwise(FailedCatchDesign):
@@ -23,12 +28,21 @@ class Pairwise(FailedCatchDesign):
         return pairwise.failed_raters(df)
 
     def analyse_rows(self, df, options):
-        return pairwise.analyse(df, n_boot=options.n_boot, seed=options.seed, alpha=options.alpha)
+        return pairwise.analyse(
+            df,
+            n_boot=options.n_boot,
+            seed=options.seed,
+            alpha=options.alpha,
+            reference=options.reference or _renamed_nat(df, options.reference_name),
+        )
 
     def figures(self, data, kept, everyone, folder):
+        order = list(kept["ranking"]["condition"])  # strongest first
+        rate, p = ranking.win_matrix(kept["pairs"], order)
         return {
             "preference_bars": design_figures.preference_bars(kept["pairs"], folder / "preference_bars.png"),
             "bradley_terry": design_figures.bradley_terry(kept["bradley_terry"], folder / "bradley_terry.png"),
+            "win_matrix": design_figures.win_matrix(rate, p, order, folder / "win_matrix.png"),
         }
 
     def section_json(self, res):
@@ -44,6 +58,9 @@ class Pairwise(FailedCatchDesign):
                 k: bt[k]
                 for k in ("reference", "nu", "log_likelihood", "converged", "method", "n_boot", "seed", "level")
             },
+            "ranking": res["ranking"].to_dict(orient="records"),
+            "elo": dict(zip(res["ranking"]["condition"], res["ranking"]["elo"])),
+            "reliability": res["reliability"],
         }
 
     def section_html(self, res):
@@ -60,6 +77,7 @@ class Pairwise(FailedCatchDesign):
             f"<h3>Bradley–Terry strengths</h3><p>{html.escape(bt['method'])}; reference "
             f"<b>{html.escape(bt['reference'])}</b> = 0; tie parameter ν = {bt['nu']:.3f}.</p>",
             table(pd.DataFrame(strengths).T),
+            *ranking_html(res),
         ]
 
     def console_lines(self, kept):
@@ -72,4 +90,55 @@ class Pairwise(FailedCatchDesign):
         strengths = ", ".join(
             f"{c} {v:.2f} [{bt['ci'][c][0]:.2f}, {bt['ci'][c][1]:.2f}]" for c, v in bt["strengths"].items()
         )
-        return lines + ["", f"Bradley-Terry log strengths ({bt['reference']} = 0): " + strengths]
+        rank = kept["ranking"]
+        ranked = "; ".join(
+            f"{r.rank_range} {r.condition} {r.elo:.0f} [{r.elo_low:.0f}, {r.elo_high:.0f}]"
+            + (f" ({r.note})" if r.note else "")
+            for r in rank.itertuples()
+        )
+        lines += ["", f"Bradley-Terry log strengths ({bt['reference']} = 0): " + strengths]
+        lines += ["", f"Ranking, Elo ({bt['reference']} = 1000) [95%]; a shared rank = intervals overlap: " + ranked]
+        rel = kept["reliability"]
+        if rel:
+            lines.append(reliability_text(rel))
+        return lines
+
+
+def reliability_text(rel) -> str:
+    return (
+        f"Split-half reliability over {rel['n_splits']} random halves of the {rel['n_raters']} raters: Kendall's "
+        f"tau {rel['tau_median']:.2f} (95% of splits {rel['tau_low']:.2f} to {rel['tau_high']:.2f}); "
+        f"{100 * rel['same_order']:.0f}% of splits give both halves the same order."
+    )
+
+
+def ranking_html(res) -> list[str]:
+    """The ranking's table (Elo, intervals, rank intervals, groups) and the reliability sentence."""
+    rank = (
+        res["ranking"]
+        .rename(
+            columns={
+                "rank_range": "rank",
+                "rank": "rank (point)",
+                "elo_low": "Elo 95% low",
+                "elo_high": "Elo 95% high",
+                "rank_low": "rank 95% low",
+                "rank_high": "rank 95% high",
+                "log_strength": "log strength",
+                "elo": "Elo",
+            }
+        )
+        .set_index("condition")
+    )
+    cols = ["rank", "Elo", "Elo 95% low", "Elo 95% high", "log strength", "rank 95% low", "rank 95% high", "group"]
+    cols += ["note"] if rank["note"].any() else []
+    rel = res["reliability"]
+    return [
+        "<h3>Ranking</h3><p>Elo: 400 points per factor of ten in the odds of winning, the reference at 1000. "
+        "Conditions share a rank (and a group) while their bootstrap rank intervals overlap: the data do not "
+        "order them.</p>",
+        table(rank[cols]),
+        f"<p>{html.escape(reliability_text(rel))}</p>"
+        if rel
+        else "<p>Split-half reliability: too few raters (fewer than 4) or conditions (fewer than 3).</p>",
+    ]

@@ -1,7 +1,9 @@
 """parallel (CONTRACTS §8, MUSHRA-like): a ratings.csv with `page_id`; condition means and medians with bootstrap
 intervals, page-paired Wilcoxon tests and a linear mixed model (analysis/parallel.py), and a box plot."""
 
-from .. import design_figures, parallel
+import html
+
+from .. import agreement, design_figures, parallel
 from ..report_html import mixed_html, table
 from .base import FailedCatchDesign
 
@@ -19,7 +21,8 @@ class Parallel(FailedCatchDesign):
         return parallel.failed_raters(df)
 
     def analyse_rows(self, df, options):
-        return parallel.analyse(df, n_boot=options.n_boot, seed=options.seed, alpha=options.alpha, mixed=options.mixed)
+        res = parallel.analyse(df, n_boot=options.n_boot, seed=options.seed, alpha=options.alpha, mixed=options.mixed)
+        return {**res, "agreement": agreement.agreement(df, n_boot=options.n_boot, seed=options.seed)}
 
     def figures(self, data, kept, everyone, folder):
         test = data.kept[data.kept["role"] == "test"]
@@ -39,6 +42,7 @@ class Parallel(FailedCatchDesign):
             "condition_summary": {c: {k: s.at[c, k] for k in s.columns if k != "n"} for c in s.index},
             "wilcoxon": res["wilcoxon"].to_dict(orient="records"),
             "mixed_model": res["mixed"],
+            "agreement": res["agreement"],
         }
 
     def section_html(self, res):
@@ -50,13 +54,14 @@ class Parallel(FailedCatchDesign):
             table(res["wilcoxon"], ("p", "p_holm")),
             "<h3>Linear mixed model</h3>",
             mixed_html(res["mixed"]),
+            f"<h3>Rater agreement</h3><p>{html.escape(agreement.agreement_text(res['agreement']))}</p>",
         ]
 
     def console_lines(self, kept):
         s = kept["summary"]
         lines = [f"{'condition':<10}{'n':>6}{'mean':>8}{'median':>8}"]
         lines += [f"{c:<10}{int(s.at[c, 'n']):>6}{s.at[c, 'mean']:>8.1f}{s.at[c, 'median']:>8.1f}" for c in s.index]
-        lines.append("")
+        lines += ["", agreement.agreement_text(kept["agreement"]), ""]
         for _, r in kept["wilcoxon"].iterrows():
             p = "n/a" if r["p_holm"] != r["p_holm"] else f"{r['p_holm']:.3g}"
             lines.append(f"Wilcoxon {r['group2']}-{r['group1']}: median diff {r['median_diff']:.1f}, p (Holm) {p}")

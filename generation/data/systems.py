@@ -13,21 +13,19 @@ of generation.motion.skeleton or a skeleton that features knows (e.g. the output
 `python -m generation.data.import_motion`); their positions are taken as metres and linearly resampled.
 """
 
-import re
 from pathlib import Path
 
 import numpy as np
 
 from moglow_eval.core.cli import UserError
 from moglow_eval.core.clip import ClipError, load_clip
-from moglow_eval.core.study import RESERVED
+from moglow_eval.core.study import CONDITION_NAME, RESERVED
 
 from ..motion import skeleton
 from ..motion.bvh import BvhError
 from ..motion.features import detect_skeleton, load_take, map_joints, root_trajectory, rotate_y
 from ..motion.resample import lerp_indices
 
-NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,31}$")
 EXTENSIONS = (".bvh.gz", ".bvh", ".npz")
 
 
@@ -40,7 +38,7 @@ def parse_system_spec(spec):
     if "=" not in spec:
         raise SystemError_(f"--system {spec!r}: expected NAME=DIR, e.g. --system MYMODEL=out/bvh")
     name, folder = spec.split("=", 1)
-    if not NAME_RE.match(name):
+    if not CONDITION_NAME.fullmatch(name):
         raise SystemError_(f"--system {spec!r}: NAME must be a letter then letters, digits, _ or - (at most 32)")
     if name.upper() in RESERVED:
         raise SystemError_(f"--system {spec!r}: NAME {name} is taken by a built-in condition ({', '.join(RESERVED)})")

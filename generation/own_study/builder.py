@@ -25,6 +25,7 @@ generation.data.motion_files). The pipeline:
    manifest.csv last.
 """
 
+import json
 import logging
 import sys
 import tempfile
@@ -49,6 +50,7 @@ from ..motion.features import rotate_y
 from ..stimuli.catch_kinds import make_catch
 from ..stimuli.files import StimuliError, clip_files, manifest_row, prepare_out, summary_text, write_csv, write_tables
 from ..stimuli.render_pool import render_stimuli
+from ..stimuli.summary import blinding_warning
 from .inputs import (
     check_same_skeleton,
     folder_files,
@@ -408,8 +410,13 @@ def build_study(spec, out, size, preset, workers, force, progress):
             for i in items
         ],
     )
+    # The reference's own name for the app's export and the report (CONTRACTS §4); the manifest calls it NAT.
+    (out / study.STUDY_NAMES_FILE).write_text(json.dumps({study.REFERENCE_NAME: spec.reference}) + "\n")
     write_tables(out, manifest, metrics_rows, [])  # manifest.csv last: a folder without one is no stimulus set
     print_study_summary(out, manifest, metrics_rows, c2st_table, time.perf_counter() - t0)
+    warning = blinding_warning(out, manifest)
+    if warning:
+        log.warning(warning)
     return 0
 
 

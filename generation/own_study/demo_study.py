@@ -115,7 +115,7 @@ SMOOTH = "smooth"
 TREMBLE = "tremble"
 
 [catch]
-make = ["jitter", "freeze"]
+make = ["jitter", "freeze", "swap"]
 n = 4
 
 [skeleton]

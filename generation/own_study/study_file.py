@@ -10,7 +10,7 @@
     NAT = "real"
     SYS_A = "system_a"
     [catch]
-    make = ["jitter", "freeze"]  # broken versions of reference clips made by the tool ...
+    make = ["jitter", "freeze", "swap"]  # broken versions of reference clips made by the tool ...
     n = 4                        # ... on this many items
     # folder = "bad"             # ... or the user's own bad clips
     [skeleton]                   # optional
@@ -35,7 +35,6 @@ Relative paths are relative to the file. Command-line flags override the top-lev
 StudyFileError naming the file and key.
 """
 
-import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -47,7 +46,6 @@ from ..data.motion_files import UNITS, UPS
 from ..data.smpl_files import TYPES as SMPL_TYPES
 from ..stimuli.catch_kinds import KINDS as CATCH_KINDS
 
-NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,31}$")
 TOP_KEYS = {
     "reference",
     "length_s",
@@ -83,7 +81,7 @@ class StudySpec:
     n_training: int = 1
     length_s: float | None = None
     fps: float | None = None  # None: the reference's frame rate, up to MAX_DEFAULT_FPS (inputs.study_fps)
-    catch_make: list = field(default_factory=lambda: ["jitter", "freeze"])
+    catch_make: list = field(default_factory=lambda: ["jitter", "freeze", "swap"])
     catch_n: int = 4
     catch_folder: Path | None = None
     skeleton_file: Path | None = None
@@ -214,7 +212,7 @@ def _conditions(path, table):
         raise _err(path, "[conditions]", "a study compares at least two conditions: the reference and a system")
     out = {}
     for name, folder in table.items():
-        if not NAME_RE.match(name):
+        if not study.CONDITION_NAME.fullmatch(name):
             raise _err(path, f"[conditions] {name}", "a name is a letter, then letters, digits, _ or - (at most 32)")
         if name.upper() == study.CATCH:
             raise _err(path, f"[conditions] {name}", f"{study.CATCH} is the name of the catch clips")

@@ -84,3 +84,24 @@ def _warn_if_bad_not_bad(rows):
             "warning: the BAD clips are not clearly worse than NAT on jerk, bone length or foot skating; "
             "pass an earlier --bad-checkpoint"
         )
+
+
+def blinding_warning(out, manifest):
+    """A warning line when the videos' coded sizes (the only sizes that follow the content, CONTRACTS §4) tell the
+    catch clips from the test clips beyond SIZE_AUC_BAND, naming the signal and what to change; None otherwise.
+    A parser that sums each frame's coded NAL units could then find the catch trials, e.g. a `freeze` clip, whose
+    still frames cost nearly nothing, among speakers who move little."""
+    from rendering.blinding import SIZE_AUC_BAND, coded_tells
+
+    catch = [Path(out) / m["video"] for m in manifest if m["condition"] == study.CATCH and m["role"] == "catch"]
+    test = [Path(out) / m["video"] for m in manifest if m["role"] == "test"]
+    name, auc = coded_tells(catch, test)
+    lo, hi = SIZE_AUC_BAND
+    if name is None or lo <= auc <= hi:
+        return None
+    return (
+        f"warning: the coded sizes tell the {len(catch)} catch clips from the {len(test)} test clips ({name}: AUC "
+        f"{auc:.2f}, outside [{lo}, {hi}]): a parser could find the catch trials. Mix catch kinds whose encoded "
+        'sizes fall on both sides of the test clips\' (e.g. [catch] make = ["jitter", "freeze", "swap"], or '
+        "fewer freeze clips), or use your own catch folder"
+    )

@@ -33,6 +33,16 @@ CLIP_ID_ALPHABET = "abcdefghijklmnopqrstuvwxyz0123456789"
 METRIC_NAMES = ("foot_skating", "bone_length_std", "jerk", "control_error", "control_following", "acceleration")
 METRIC_KEYS = ("clip_id", "condition", "role", "item")  # the columns of metrics.csv that are not metrics
 
+# A study of your own motion writes its reference as NATURAL in the manifest (every design's catch and anchor
+# rules key on it); the name the study file gave it travels beside the manifest in this file, as
+# {"reference_name": NAME} (CONTRACTS §4), into the app's export as a column of that name (§6), and back into the
+# report's tables and figures.
+STUDY_NAMES_FILE = "study.json"
+REFERENCE_NAME = "reference_name"
+# A condition's name as a user gives it (an imported system, a study file's condition): short, and safe in a file
+# name, a CSV cell, an HTML page and a figure label. Always fullmatch.
+CONDITION_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,31}")
+
 
 def condition_order(conditions):
     """The paper's order for tables and figures: NAT, MG, FL, then other systems in name order, BAD last."""

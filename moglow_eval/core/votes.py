@@ -41,3 +41,11 @@ def battle_to_preference(winner: str, is_strong: str) -> int:
     if strong is None:
         raise ValueError(f"is_strong is {is_strong!r}, not True or False")
     return strong if winner == "model_a" else -strong
+
+# The reasons' columns of pairs.csv (CONTRACTS §8): the ticked ids joined by REASON_SEPARATOR, and the free text.
+REASONS_COLUMN = "reasons"
+REASON_TEXT_COLUMN = "reason_text"
+REASON_SEPARATOR = ";"
+
+# The leaderboard's speech-mismatch study names the motion made for other speech as the system's name and this.
+MISMATCH_SUFFIX = "_Mismatched"

@@ -1,0 +1,34 @@
+"""A study of your own whose catch clips the coded sizes give away is built, but with a warning naming the signal
+(CONTRACTS §4): `freeze` clips, whose still frames cost nearly nothing, among test clips that move throughout."""
+
+import csv
+
+from helpers.own_study_data import make_study
+
+from generation.make_stimuli import main as make_stimuli
+from generation.stimuli.summary import blinding_warning
+from rendering.blinding import auc, coded_tells
+from rendering.mp4_layout import content_signal
+
+
+def test_auc_counts_ties_half():
+    assert auc([1, 2], [0, 0]) == 1.0 and auc([0], [0]) == 0.5 and auc([0, 3], [1, 2]) == 0.5
+
+
+def test_a_pool_of_freeze_clips_is_warned_about(tmp_path, capsys):
+    study = make_study(tmp_path / "in", n_items=8, n_catch=4)
+    text = study.read_text().replace('make = ["jitter", "freeze", "swap"]', 'make = ["freeze"]')
+    study.write_text(text.replace("n_training = 1", "n_training = 0\nlength_s = 1.5"))
+    assert make_stimuli(["--study", str(study), "--out", str(tmp_path / "out"), "--size", "64", "--quiet"]) == 0
+    err = capsys.readouterr().err
+    manifest = list(csv.DictReader(open(tmp_path / "out" / "manifest.csv")))
+    name, value = coded_tells(
+        [tmp_path / "out" / m["video"] for m in manifest if m["condition"] == "BAD"],
+        [tmp_path / "out" / m["video"] for m in manifest if m["role"] == "test"],
+    )
+    assert content_signal(name) and not 0.25 <= value <= 0.75
+    warned = [line.split("] ", 1)[-1] for line in err.splitlines() if "coded sizes tell" in line]
+    assert warned == [blinding_warning(tmp_path / "out", manifest)]  # shown even with --quiet
+    assert "4 catch clips" in warned[0] and name in warned[0]
+    # with the catch clips left out there is nothing to tell
+    assert blinding_warning(tmp_path / "out", [m for m in manifest if m["condition"] != "BAD"]) is None

@@ -1,0 +1,52 @@
+"""Gesture studies end to end through `analysis.demo --stimuli` (the app, the simulated crowd, the export and the
+report, as processes): the appropriateness design on a study with speech, and an acr study drawn in two styles,
+both filmed from the front, hips up. The reports name the reference as the study file does, and the two-style
+report tests condition x style."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+from helpers.own_study_data import make_study
+
+from generation.make_stimuli import main as make_stimuli
+
+RENDER = '[render]\nview = "front"\nframing = "upper"\n'
+
+
+def build(root, extra, audio, style=""):
+    study = make_study(root / "in", n_items=6, n_catch=2, audio=audio)
+    text = study.read_text().replace("n_training = 1", f"n_training = 1\nlength_s = 2{extra}")
+    study.write_text(text.replace("[audio]", RENDER + style + "\n[audio]") if audio else text + RENDER + style)
+    assert make_stimuli(["--study", str(study), "--out", str(root / "out"), "--size", "96", "--quiet"]) == 0
+    return root / "out"
+
+
+def demo(stimuli, out, design):
+    cmd = [sys.executable, "-m", "analysis.demo", "--out", str(out), "--stimuli", str(stimuli), "--design", design]
+    r = subprocess.run([*cmd, "--raters", "40", "--seed", "2"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    return json.loads((out / "report" / "stats.json").read_text())
+
+
+@pytest.mark.slow
+def test_appropriateness_with_speech_through_the_demo(tmp_path):
+    stimuli = build(tmp_path / "a", '\ndesign = "appropriateness"', audio=True)
+    stats = demo(stimuli, tmp_path / "demo_a", "appropriateness")
+    assert stats["design"] == "appropriateness"
+    # every condition against its own mismatched motion, the reference under the study file's name
+    assert set(stats["mas"]) == {"real", "SYS_A", "SYS_B"}
+    assert all(v["n"] > 0 for v in stats["mas"].values())
+
+
+@pytest.mark.slow
+def test_a_two_style_acr_study_through_the_demo(tmp_path):
+    stimuli = build(tmp_path / "s", "", audio=False, style='style = ["stick", "solid"]\n')
+    stats = demo(stimuli, tmp_path / "demo_s", "acr")
+    assert "real" in stats["condition_means"] and "NAT" not in stats["condition_means"]  # the study's own name
+    assert stats["style"]["styles"] == ["stick", "solid"]
+    assert "condition:style" in stats["style"]["anova"]["terms"]
+    assert "interaction_test" in stats["style"]["mixed_model"]
+    assert (tmp_path / "demo_s" / "report" / "figures" / "style_means.png").stat().st_size > 1000
+    assert "methods" in stats and stats["agreement"]["krippendorff"] is not None

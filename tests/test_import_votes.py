@@ -1,0 +1,110 @@
+"""analysis.import_votes: the GENEA leaderboard's battle files (read in ../shared, never copied) into pairs.csv,
+keeping the 5 levels and the reasons; bad files give one line and write nothing."""
+
+import csv
+import json
+
+import pytest
+from helpers.paths import SHARED
+
+from analysis import import_votes as iv
+from analysis import report
+from moglow_eval.core import votes
+
+LB = SHARED / "data" / "genea-leaderboard-votes"
+HEAD = "user,input_code,model_a,model_b,winner,is_strong,juiceOptions,juiceOtherReason\n"
+
+
+def rows(path):
+    return list(csv.DictReader(open(path, newline="", encoding="utf-8")))
+
+
+@pytest.mark.full
+def test_the_realism_votes_keep_levels_reasons_and_text(tmp_path):
+    out = tmp_path / "pairs.csv"
+    summary = iv.import_votes(LB / "battles_elo.csv", out)
+    assert summary["design"] == "pairwise" and summary["n_votes"] == 500 and summary["n_raters"] == 20
+    got, src = rows(out), rows(LB / "battles_elo.csv")
+    assert len(got) == len(src) == 500
+    prefs = [int(r["preference"]) for r in got]
+    # the counts README.md gives: model_a 203, model_b 197, tie 100; strong/slight 179/221
+    assert sum(p > 0 for p in prefs) == 203 and sum(p < 0 for p in prefs) == 197 and prefs.count(0) == 100
+    assert sum(abs(p) == 2 for p in prefs) == 179 and sum(abs(p) == 1 for p in prefs) == 221
+    for g, s in zip(got, src):
+        assert g["condition_a"] == s["model_a"] and g["item"] == s["input_code"] and g["rater_id"] == s["user"]
+        assert int(g["preference"]) == votes.battle_to_preference(s["winner"], s["is_strong"] or "False")
+        ticked = [] if s["juiceOptions"].strip() in ("{}", "[]", "") else json.loads(s["juiceOptions"])
+        assert (g["reasons"].split(";") if g["reasons"] else []) == list(dict.fromkeys(ticked))
+        text = json.loads(s["juiceOtherReason"]) if s["juiceOtherReason"] else ""
+        assert g["reason_text"] == text
+    # the same clip gets the same id wherever it appears
+    ids = {(r["item"], r["condition_a"]): r["clip_a"] for r in got}
+    assert all(ids.get((r["item"], r["condition_b"]), r["clip_b"]) == r["clip_b"] for r in got)
+
+
+@pytest.mark.full
+def test_the_mismatch_votes_become_an_appropriateness_export(tmp_path):
+    out = tmp_path / "pairs.csv"
+    assert iv.import_votes(LB / "battles_mismatch.csv", out)["design"] == "appropriateness"
+    got = rows(out)
+    assert all(r["condition_a"] == r["condition_b"] and r["matched"] in "ab" for r in got)
+    assert sum(r["matched"] == "b" for r in got) == 22  # README: the mismatched clip is on the left in 22 rows
+    doc = report.build_report(out, tmp_path / "rep", n_boot=50, progress=False, quiet=True)
+    assert doc["design"] == "appropriateness" and sum(v["n"] for v in doc["mas"].values()) == 50
+
+
+def write(tmp_path, body):
+    path = tmp_path / "battles.csv"
+    path.write_text(HEAD + body)
+    return path
+
+
+@pytest.mark.parametrize(
+    "body, needle",
+    [
+        ("u1,i1,A,B,model_c,True,{},\n", "battles.csv:2: winner is 'model_c'"),
+        ("u1,i1,A,B,model_a,maybe,{},\n", "battles.csv:2: is_strong is 'maybe'"),
+        ('u1,i1,A,B,model_a,True,"[""a b""]",\n', "battles.csv:2: juiceOptions"),
+        ("u1,i1,A,B,model_a,True,[oops,\n", "battles.csv:2: juiceOptions"),
+        ("u1,i1,A,A,model_a,True,{},\n", "battles.csv:2: model A on both sides"),
+        (",i1,A,B,model_a,True,{},\n", "battles.csv:2: empty user"),
+        ("u1,i1,A,A_Mismatched,model_a,True,{},\nu1,i2,A,B,tie,,{},\n", "battles.csv:3: A against B"),
+        ("", "no votes"),
+    ],
+)
+def test_bad_battle_files_are_one_line_and_write_nothing(tmp_path, capsys, body, needle):
+    path = write(tmp_path, body)
+    out = tmp_path / "pairs.csv"
+    assert iv.main([str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert needle in err and len(err.splitlines()) == 1
+    assert not out.exists() and not list(tmp_path.glob("*.part"))
+
+
+def test_not_a_battle_file(tmp_path, capsys):
+    path = tmp_path / "other.csv"
+    path.write_text("a,b\n1,2\n")
+    assert iv.main([str(path), "--out", str(tmp_path / "p.csv")]) == 2
+    assert "not a battle file: no column user" in capsys.readouterr().err
+
+
+def test_a_file_too_large_is_refused_before_reading(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(iv, "MAX_BYTES", 100)
+    path = write(tmp_path, "u1,i1,A,B,model_a,True,{},\n" * 10)
+    assert iv.main([str(path), "--out", str(tmp_path / "p.csv")]) == 2
+    assert "larger than a battle file can be" in capsys.readouterr().err
+
+
+def test_free_text_is_unquoted_and_a_hostile_text_stays_a_text(tmp_path):
+    body = (
+        'u1,i1,A,B,model_a,True,"[""MotionSmoothness""]","""It\'s in the hands, <b>really</b>"""\n'
+        'u2,i1,A,B,model_b,False,{},=HYPERLINK("x")\n'
+    )
+    out = tmp_path / "pairs.csv"
+    iv.import_votes(write(tmp_path, body), out)
+    got = rows(out)
+    assert got[0]["reasons"] == "MotionSmoothness" and got[0]["reason_text"] == "It's in the hands, <b>really</b>"
+    assert got[1]["reason_text"] == '=HYPERLINK("x")' and int(got[1]["preference"]) == -1
+    doc = report.build_report(out, tmp_path / "rep", n_boot=20, progress=False, quiet=True)
+    assert doc["design"] == "pairwise"
+    assert "<b>really</b>" not in (tmp_path / "rep" / "report.html").read_text()
