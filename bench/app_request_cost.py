@@ -1,6 +1,7 @@
 """What one rater's request costs the app: SQL statements and CPU milliseconds per call, by design.
 
     python bench/app_request_cost.py [--design acr|pairwise|parallel] [--db postgres|sqlite] [--answers 600]
+        [--pairing balanced|active] [--stop-when never|settled] [--refresh S]
 
 Raters go through a paper-sized study (30 items x NAT/MG/FL, 4 catch, 4 training clips) in one process, one
 call at a time, through Flask's test client: create a session, then GET next, GET every video of the trial and
@@ -20,6 +21,8 @@ import tempfile
 import time
 from collections import defaultdict
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -77,7 +80,16 @@ def main():
     p.add_argument("--db", choices=("postgres", "sqlite"), default="postgres")
     p.add_argument("--answers", type=int, default=600)
     p.add_argument("--stimuli", default=None, help="reuse (or create) the stimulus folder here")
+    p.add_argument("--pairing", choices=("balanced", "active"), default="balanced", help="pairwise: PAIRING")
+    p.add_argument("--stop-when", choices=("never", "settled"), default="never", help="pairwise: STOP_WHEN")
+    p.add_argument(
+        "--refresh", type=float, default=None, help="active: seconds between refits (rating_app.active.REFRESH_S)"
+    )
     a = p.parse_args()
+    if a.refresh is not None:
+        from rating_app import active
+
+        active.REFRESH_S = a.refresh
     tmp = Path(tempfile.mkdtemp(prefix="app_cost_"))
     stim = Path(a.stimuli) if a.stimuli else tmp / "stimuli"
     manifest = stim / "manifest.csv"
@@ -94,17 +106,19 @@ def main():
             design=a.design,
             admin_token="bench",
             sessions_per_client=0,
+            **({"pairing": a.pairing, "stop_when": a.stop_when} if a.design == "pairwise" else {}),
         )
         cost = run(app, a.design, a.answers)
     finally:
         if ctx:
             ctx.__exit__(None, None, None)
-    print(f"| call | n | CPU ms, median / mean | statements (median) |  ({a.design}, {a.db})")
+    setting = f", {a.pairing}, stop {a.stop_when}" if a.design == "pairwise" else ""
+    print(f"| call | n | CPU ms, median / mean / p99 | statements (median / max) |  ({a.design}, {a.db}{setting})")
     for kind, (cpu, stmts) in cost.items():
         ms = [1000 * x for x in cpu]
         print(
-            f"| {kind} | {len(ms)} | {statistics.median(ms):.2f} / {statistics.mean(ms):.2f} | "
-            f"{statistics.median(stmts):g} |"
+            f"| {kind} | {len(ms)} | {statistics.median(ms):.2f} / {statistics.mean(ms):.2f} / "
+            f"{np.percentile(ms, 99):.2f} | {statistics.median(stmts):g} / {max(stmts)} |"
         )
 
 

@@ -3,6 +3,7 @@
     python bench/bench_app.py [--behind caddy --hosts 2] [--design acr|pairwise|parallel|appropriateness]
         [--pace app|stress] [--raters 200]
         [--duration 30] [--think S] [--db sqlite|postgres|URL] [--workers 4] [--threads 16] [--json out.json]
+        [--pairing balanced|active] [--stop-when never|settled]
 
 A real gunicorn process (gthread workers) serves a paper-sized study (30 items x NAT/MG/FL + 4 catch + 4
 training clips, real MP4s of --clip-frames frames at 20 fps, 4 s like the paper's) from a fresh PostgreSQL schema
@@ -25,7 +26,9 @@ Target: p99 <= 100 ms for the answer POST and the next-trial GET, 0 errors.
 --design pairwise / parallel / appropriateness runs that test design (CONTRACTS §8): each answer is a preference for
 the trial's two clips, or a 0-100 rating of every clip of its page (one POST per page); the stimuli then include the
 NAT clip of each catch item (and, for appropriateness, each condition's mismatched clip of every item, whose two
-clips play one after the other). The answer POST is reported as "rating" in every design.
+clips play one after the other). The answer POST is reported as "rating" in every design. --pairing active and
+--stop-when settled (pairwise) turn on the app's active pairing and its stopping rule (the answers are random, so
+the ranking never settles: every new session checks it).
 """
 
 from __future__ import annotations
@@ -296,6 +299,8 @@ def main():
         "videos (VIDEO_ACCEL=caddy); target p99 <= 150 ms",
     )
     p.add_argument("--hosts", type=int, default=2, help="app hosts (gunicorn processes) behind the proxy (2)")
+    p.add_argument("--pairing", choices=("balanced", "active"), default="balanced", help="pairwise: PAIRING")
+    p.add_argument("--stop-when", choices=("never", "settled"), default="never", help="pairwise: STOP_WHEN")
     a = p.parse_args()
     if a.think is None:
         a.think = 1.0 if a.pace == "app" else 2.0
@@ -325,6 +330,8 @@ def main():
         MIN_VIEW="1" if a.pace == "app" else "0",
         SESSIONS_PER_CLIENT="0",  # every rater is on loopback
         STUDY_DESIGN=a.design,
+        PAIRING=a.pairing,
+        STOP_WHEN=a.stop_when,
     )
     log = open(tmp / "gunicorn.log", "w")
     tls, procs = None, []
@@ -362,6 +369,8 @@ def main():
     measured = sum(len(v) for k, v in rec.items() if k != "session")
     out = {
         "design": a.design,
+        "pairing": a.pairing,
+        "stop_when": a.stop_when,
         "raters": a.raters,
         "pace": a.pace,
         "think_s": a.think,
@@ -389,8 +398,10 @@ def main():
         raise SystemExit("bench_app: no trial was answered; see the server log " + str(tmp / "gunicorn.log"))
     target = 150 if a.behind != "none" else 100
     ok = out["errors"] == 0 and out["next"].get("p99_ms", 1e9) <= target and out["rating"].get("p99_ms", 1e9) <= target
-    db = f"{a.db} {a.design} {a.pace}" + (
-        f" via {a.behind}, {a.hosts} hosts, worker RSS {rss} MB" if a.behind != "none" else ""
+    db = (
+        f"{a.db} {a.design} {a.pace}"
+        + (f" {a.pairing}" if a.design == "pairwise" else "")
+        + (f" via {a.behind}, {a.hosts} hosts, worker RSS {rss} MB" if a.behind != "none" else "")
     )
     print(
         f"| {db} | {a.raters} | {a.think} | {a.workers}x{a.threads} | {out['throughput_rps']} | "

@@ -79,10 +79,15 @@ def _app_config(values) -> dict:
     completion_url = values["COMPLETION_URL"]
     if completion_url and not completion_url.startswith(("https://", "http://")):
         raise AppError(f"completion URL must start with https:// or http://, got {completion_url!r}")
+    for env, plain in (("PAIRING", "balanced"), ("STOP_WHEN", "never")):
+        if values[env] != plain and design.name != "pairwise":
+            raise AppError(f"{env.lower()}: {values[env]} needs the pairwise design, not {design.name}")
     from .reasons import configure
 
     return {
         **configure(design, values["VOTE_REASONS"], values["REASON_TEXT"]),
+        **{k: values[k] for k in ("PAIRING", "PAIRING_RANDOM", "STOP_WHEN", "STOP_LEVEL", "STOP_WIDTH")},
+        "STOP_MAX_VOTES": values["STOP_MAX_VOTES"],
         "RATINGS_PER_CLIP": values["RATINGS_PER_CLIP"],
         "CLIPS_PER_RATER": values["CLIPS_PER_RATER"] or None,  # 0: all clips still short of their target
         "CATCH_PER_RATER": values["CATCH_PER_RATER"] or None,  # 0: every catch unit
@@ -133,7 +138,12 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
         "audio_check": load_audio_check(manifest) if app.config["STUDY_SOUND"] else {},
         "warnings": health.Warnings(app.logger),
     }
-    _open_rounds(app)
+    _open_rounds(app)  # may withdraw units: the ranking below is built on what is served
+    if app.config["PAIRING"] == "active" or app.config["STOP_WHEN"] == "settled":
+        from .active import Ranking
+
+        ext = app.extensions["rating_app"]
+        ext["ranking"] = Ranking(ext["units"], ext["clips"], app.config)
     pool = health.catch_pool_warning(
         design.name, clips, units, app.config["CLIPS_PER_RATER"], app.config["CATCH_PER_RATER"]
     )

@@ -31,6 +31,7 @@ from flask import (
 from sqlalchemy import delete, func, insert, select
 
 from . import health
+from .active import for_units
 from .db import AdminLogin, LoginFailure, app_engine, utcnow
 from .export import export_csv
 from .guard import client_key, same_site_only
@@ -181,10 +182,16 @@ def _reason_texts():
 
 
 def _progress():
-    cfg = current_app.config
+    cfg, ext = current_app.config, current_app.extensions["rating_app"]
     with app_engine().connect() as conn:
         units = current_units(conn)
-    return progress(app_engine(), cfg["RATINGS_PER_CLIP"], cfg["STUDY_DESIGN"], units)
+    data = progress(app_engine(), cfg["RATINGS_PER_CLIP"], cfg["STUDY_DESIGN"], units)
+    ranking = for_units(ext, units)
+    if ranking is not None:  # active pairing or the stopping rule: how far from settled
+        with app_engine().connect() as conn:
+            ranking.refresh(conn, now=True)
+        data["ranking"] = ranking.status()
+    return data
 
 
 @bp.post("/login")

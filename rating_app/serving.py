@@ -16,7 +16,7 @@ from types import SimpleNamespace
 from flask import current_app, jsonify, url_for
 from sqlalchemy import insert, select, text, update
 
-from . import sessions
+from . import active, sessions
 from .assign import expire_idle, hold, lock_assign
 from .db import Rater, Trial, TrialClip, read_engine
 from .designs import LABELS, of_app
@@ -27,7 +27,12 @@ def _assign(conn, rng, rater_pk, t, wait):
     """The clip id or Unit for trial `t`, or None."""
     # As of the study's latest round and withdrawals (rounds.py); its revision was read with the trial ("0": none yet).
     units = current_units(conn, t.study_revision or "0")
-    return of_app().assign(conn, rng, rater_pk, t.kind, current_app.config["RATINGS_PER_CLIP"], units, wait)
+    ext, cfg = current_app.extensions["rating_app"], current_app.config
+    if t.kind == "test" and cfg["PAIRING"] == "active":  # active.py: chooses among what the balanced rule allows
+        unit = active.for_units(ext, units).pick(conn, rng, rater_pk, units, cfg["RATINGS_PER_CLIP"], wait)
+        if unit is not None:
+            return unit
+    return of_app().assign(conn, rng, rater_pk, t.kind, cfg["RATINGS_PER_CLIP"], units, wait)
 
 
 def _give(conn, rng, t, assigned, now):

@@ -19,6 +19,7 @@ from sqlalchemy import func, insert, select
 from sqlalchemy.exc import IntegrityError
 
 from . import sessions
+from .active import for_units
 from .answers import TOLERANCE_MS
 from .assign import StudyFull, expire_idle, lock_assign
 from .bodies import ext_field, json_body
@@ -108,9 +109,13 @@ def start():
             ):
                 return jsonify(error="too many new sessions from this address; please try again later"), 429
             expire_idle(conn, cfg["SLOT_TIMEOUT_S"], now)
+            ext = refresh(conn)  # a round begun or a condition withdrawn since this worker loaded the study
+            ranking = for_units(ext, ext["units"])
+            closed = ranking.closed(conn) if ranking is not None else None
+            if closed:  # the stopping rule (active.py): no new raters, started sessions finish
+                return jsonify(error=closed, full=True, closed=True), 409
             rng = random.Random(secrets.randbits(64))
             try:
-                ext = refresh(conn)  # a round begun or a condition withdrawn since this worker loaded the study
                 plan = of_app().plan(conn, rng, cfg, ext["clips"].values(), ext["units"])
             except StudyFull as e:
                 return jsonify(error=str(e), full=True), 409

@@ -160,6 +160,63 @@ TABLE = (
         "catch-per-rater / pool matches clips-per-rater / test units",
     ),
     Setting(
+        "PAIRING",
+        default="balanced",
+        arg="pairing",
+        flag="--pairing",
+        choices=("balanced", "active"),
+        help="pairwise: how a slot's pair of conditions is chosen: balanced (least-covered unit) or active (the pair "
+        "whose vote tells most about the ranking, under the Bradley-Terry posterior of the votes so far)",
+    ),
+    Setting(
+        "PAIRING_RANDOM",
+        float,
+        0.2,
+        arg="pairing_random",
+        flag="--pairing-random",
+        bounds=(0.0, 1.0),
+        help="active pairing: the share of slots that keep the balanced rule, so that a wrong model cannot starve a "
+        "pair",
+    ),
+    Setting(
+        "STOP_WHEN",
+        default="never",
+        arg="stop_when",
+        flag="--stop-when",
+        choices=("never", "settled"),
+        help="pairwise: settled closes the study to new raters once the ranking is settled (every adjacent pair "
+        "separated at --stop-level, or every Elo interval narrower than --stop-width) or at --stop-max-votes; "
+        "sessions already started finish",
+    ),
+    Setting(
+        "STOP_LEVEL",
+        float,
+        0.95,
+        arg="stop_level",
+        flag="--stop-level",
+        bounds=(0.5, 0.9999),
+        help="the stopping rule's level: the chance that the whole order is right (split over the adjacent pairs)",
+    ),
+    Setting(
+        "STOP_WIDTH",
+        float,
+        0.0,
+        arg="stop_width",
+        flag="--stop-width",
+        bounds=(0.0, 10_000.0),
+        help="the stopping rule's Elo width: settled too when every condition's interval at --stop-level is "
+        "narrower (Elo points; 0: not used)",
+    ),
+    Setting(
+        "STOP_MAX_VOTES",
+        int,
+        0,
+        arg="stop_max_votes",
+        flag="--stop-max-votes",
+        bounds=_ZERO_UP,
+        help="the stopping rule's cap: closed once the test votes reach it (0: no cap)",
+    ),
+    Setting(
         "SLOT_TIMEOUT",
         float,
         3600.0,

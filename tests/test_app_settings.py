@@ -30,6 +30,12 @@ FLAGS = {
     "--sessions-per-client": "SESSIONS_PER_CLIENT",
     "--reasons": "VOTE_REASONS",  # added with the reasons of a pairwise vote
     "--reason-text": "REASON_TEXT",
+    "--pairing": "PAIRING",
+    "--pairing-random": "PAIRING_RANDOM",
+    "--stop-when": "STOP_WHEN",
+    "--stop-level": "STOP_LEVEL",
+    "--stop-width": "STOP_WIDTH",
+    "--stop-max-votes": "STOP_MAX_VOTES",
 }
 DEFAULTS = {
     "RATINGS_PER_CLIP": 20,
@@ -42,11 +48,18 @@ DEFAULTS = {
     "DB_POOL_SIZE": 10,
     "VIDEO_ACCEL": "off",
     "STUDY_DESIGN": "acr",
+    "PAIRING": "balanced",
+    "PAIRING_RANDOM": 0.2,
+    "STOP_WHEN": "never",
+    "STOP_LEVEL": 0.95,
+    "STOP_WIDTH": 0.0,
+    "STOP_MAX_VOTES": 0,
 }
 ARGUMENTS = {  # create_app's keyword arguments before the table
     "manifest", "db_url", "ratings_per_clip", "clips_per_rater", "catch_per_rater", "admin_token", "slot_timeout_s",
     "completion_code", "completion_url", "secret_key", "min_view", "sessions_per_client", "design", "question",
-    "config", "reasons", "reason_text",
+    "config", "reasons", "reason_text", "pairing", "pairing_random", "stop_when", "stop_level", "stop_width",
+    "stop_max_votes",
 }  # fmt: skip
 
 

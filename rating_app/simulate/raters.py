@@ -2,8 +2,10 @@
 preference, a fit to the speech, a page of ratings); each design (rating_app/designs/) picks the one its page asks.
 
 An attentive rater answers round(quality(clip) + bias + noise), clipped to the scale, with a personal bias and
-noise level, and recognises the bad examples (catch clips) as such: it rates them below CATCH_FAIL_AT (acr),
-never prefers them (pairwise) and puts them below the page's NAT clip (parallel). A careless rater answers
+noise level (acr, parallel); in a pairwise test its choice follows a Bradley-Terry model of the two clips'
+qualities, its certainty (no preference, slightly, clearly) blurred by its noise level. It
+recognises the bad examples (catch clips) as such: it rates them below CATCH_FAIL_AT (acr), never prefers them
+(pairwise) and puts them below the page's NAT clip (parallel). A careless rater answers
 uniformly at random in every design, and so fails catch trials.
 
 The per-clip quality comes by default from metrics.csv (objective metrics farther from the reference's -> lower
@@ -31,6 +33,12 @@ OTHER_QUALITY = 3.0  # an imported system without metrics, or a clip missing fro
 QUALITY_HIGH, QUALITY_LOW = 4.3, 1.3
 BIAS_SD = 0.3
 PREFERENCE_TIE, PREFERENCE_CLEAR = 0.3, 1.0  # quality margins: below the first no preference, above the second clear
+# Pairwise choices follow Bradley-Terry on the qualities: log strength = BT_SCALE * quality, so A wins with
+# probability 1 / (1 + exp(-BT_SCALE (quality A - quality B))) (one quality point: 88%; NAT over MG by default: 77%).
+BT_SCALE = 2.0
+# How sure a rater is of a choice: |2 P(A wins) - 1| plus its own noise (CERTAINTY_NOISE x its noise level); below
+# TIE_BELOW it answers no preference, above CLEAR_ABOVE clearly, in between slightly.
+TIE_BELOW, CLEAR_ABOVE, CERTAINTY_NOISE = 0.1, 0.5, 0.3
 NOISE_SD = (0.35, 0.7)  # each rater's own noise level is drawn from this range
 UNKNOWN_DURATION_MS = 2000  # a clip the manifest gives no frames/fps for
 
@@ -211,12 +219,17 @@ class Rater:
         return x, int(dur + self.rng.uniform(0, 300))
 
     def prefer(self, a: ClipInfo | None, b: ClipInfo | None) -> int:
-        """A pairwise answer: 2 = A clearly .. -2 = B clearly."""
+        """A pairwise answer: 2 = A clearly .. -2 = B clearly. The side comes from Bradley-Terry on the two clips'
+        qualities (bt_probability); how sure the rater is (tie, slightly, clearly) from how far that probability
+        is from a half, blurred by the rater's own noise, and drawn apart from the side, so that among the answers
+        that prefer one clip, A's share is exactly the model's probability."""
         if self.careless:
             return int(self.rng.integers(-2, 3))
-        d = quality_of(a) - quality_of(b) + self.rng.normal(0, self.noise_sd)
-        level = 0 if abs(d) < PREFERENCE_TIE else 1 if abs(d) < PREFERENCE_CLEAR else 2
-        pref = level if d > 0 else -level
+        p = bt_probability(quality_of(a), quality_of(b))
+        a_wins = self.rng.random() < p
+        sure = abs(2.0 * p - 1.0) + self.rng.normal(0, CERTAINTY_NOISE * self.noise_sd)
+        level = 0 if sure < TIE_BELOW else 1 if sure < CLEAR_ABOVE else 2
+        pref = level if a_wins else -level
         if a is not None and b is not None and study.CATCH in (a.condition, b.condition):
             strength = abs(pref) or 1  # never the bad example, never a tie with it
             pref = strength if b.condition == study.CATCH else -strength
@@ -259,6 +272,11 @@ def _below_natural(ratings: list[int], conds: list[str | None]) -> None:
             ratings[i] = max(0, nat - 10)
             if nat == 0:
                 ratings[at] = 10
+
+
+def bt_probability(quality_a: float, quality_b: float) -> float:
+    """The chance a simulated rater prefers A: Bradley-Terry with log strengths BT_SCALE x quality."""
+    return 1.0 / (1.0 + math.exp(-BT_SCALE * (quality_a - quality_b)))
 
 
 def make_raters(n: int, seed: int, careless: float, prefix: str) -> list[Rater]:

@@ -1,0 +1,208 @@
+"""A Bradley-Terry ranking of conditions that grows vote by vote: its posterior, which pair of conditions to ask
+about next, and whether the ranking is settled (CONTRACTS §8, "Active pairing and the stopping rule").
+
+Votes come as a win matrix W (W[i, j]: the votes for condition i over condition j, a tie counting half to each
+side). The model is Bradley-Terry, P(i over j) = 1 / (1 + exp(theta_j - theta_i)), with an independent normal
+prior N(0, PRIOR_SD^2) on each log strength theta, weak enough that a few dozen votes outweigh it but proper, so
+that the posterior exists from zero votes on. The posterior is approximated by a normal distribution at its mode
+(Laplace): mean = the MAP log strengths, covariance = the inverse of the negative log posterior's Hessian.
+
+From it:
+- `gains`: the expected information one more vote on each pair of conditions brings about the ranking, measured
+  as the expected drop in the summed binary entropy of the order of each adjacent pair of the posterior-mean order
+  (P(theta_i > theta_j) under the posterior). The expectation is over the vote's outcome, through the preposterior: one vote on pair (a, b) adds
+  w x x' to the precision (x = e_a - e_b, w = p (1 - p) the vote's Fisher information), which shrinks the
+  variance of every difference theta_i - theta_j by a known amount, and the mean of that difference moves by a
+  normal amount whose variance is exactly that shrinkage (the law of total variance). This follows ASAP
+  (Mikhailiuk et al. 2020, "Active sampling for pairwise comparisons via approximate message passing and
+  information gain maximization", ICPR), which picks the pair of highest expected information gain under a
+  Gaussian posterior; here the information is about the order, which is what a ranking study reports.
+- `settledness`: every adjacent pair in the posterior-mean order separated, P(order right) at least
+  1 - (1 - level) / (k - 1) each (a Bonferroni split of the error over the k - 1 adjacent pairs: if every adjacent
+  pair of the estimated order is right, the whole order is), or every condition's Elo interval narrower than a
+  width. Elo = 400 log10 of the odds, centred on 1000 (the GENEA leaderboard's scale, Nagy et al. 2025).
+
+Pure numpy/scipy, no database: the app (rating_app/active.py) counts the votes and calls this; the benchmark
+(bench/pairwise_active.py) simulates studies against it.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import expit, ndtr, ndtri
+
+PRIOR_SD = 2.0  # log strengths: two systems a prior sd apart win 88% of their votes; a few dozen votes outweigh it
+ELO_PER_LOG = 400.0 / math.log(10.0)  # Elo points per unit of log strength (400 log10 odds)
+ELO_ANCHOR = 1000.0  # the mean condition's Elo
+# Gauss-Hermite nodes (probabilists') for the expectation over where the posterior mean moves after one vote.
+_NODES, _WEIGHTS = np.polynomial.hermite_e.hermegauss(8)
+_WEIGHTS = _WEIGHTS / _WEIGHTS.sum()
+
+
+@dataclass(frozen=True)
+class Posterior:
+    """The Laplace posterior of k log strengths: `mean` [k] (the MAP), `cov` [k, k], from `votes` votes."""
+
+    mean: np.ndarray
+    cov: np.ndarray
+    votes: float
+
+
+def win_matrix(k: int, firsts, seconds, outcomes) -> np.ndarray:
+    """W [k, k] from votes on (first, second) condition indices with outcomes 1 (the first won), 0 (the second
+    won) or 0.5 (a tie, half to each side)."""
+    w = np.zeros((k, k))
+    o = np.asarray(outcomes, float)
+    np.add.at(w, (np.asarray(firsts, int), np.asarray(seconds, int)), o)
+    np.add.at(w, (np.asarray(seconds, int), np.asarray(firsts, int)), 1.0 - o)
+    return w
+
+
+def fit(wins, prior_sd: float = PRIOR_SD, start=None, tol: float = 1e-9) -> Posterior:
+    """The Laplace posterior from a win matrix (`start`: log strengths to start Newton from, e.g. the last fit's).
+
+    The negative log posterior is strictly convex (the prior adds 1/prior_sd^2 to every eigenvalue), so plain
+    Newton steps from the last fit converge in a few iterations; a step is halved where it would not lower it."""
+    w = np.asarray(wins, float)
+    k = len(w)
+    n = w + w.T
+    theta = np.zeros(k) if start is None else np.asarray(start, float).copy()
+    prec = 1.0 / prior_sd**2
+
+    def objective(t):
+        d = t[:, None] - t[None, :]
+        return -(w * -np.logaddexp(0.0, -d)).sum() + 0.5 * prec * (t @ t)
+
+    f = objective(theta)
+    for _ in range(100):
+        p = expit(theta[:, None] - theta[None, :])
+        grad = -(w - n * p).sum(axis=1) + prec * theta
+        hess = _laplacian(n * p * (1.0 - p)) + prec * np.eye(k)
+        step = np.linalg.solve(hess, grad)
+        t = 1.0
+        while t > 1e-6:
+            new = theta - t * step
+            f_new = objective(new)
+            if f_new <= f + 1e-12 * abs(f):
+                break
+            t /= 2
+        theta, f = new, f_new
+        if np.max(np.abs(step)) * t < tol:
+            break
+    return Posterior(theta, covariance(theta, n, prior_sd), float(w.sum()))
+
+
+def covariance(mean, counts, prior_sd: float = PRIOR_SD) -> np.ndarray:
+    """The Laplace covariance at log strengths `mean` after `counts` votes (a symmetric [k, k] matrix of votes per
+    pair): what it is before their outcomes are known, so that votes asked for but not yet in (slots held by raters
+    now watching) already count for the choice of the next pair."""
+    mean = np.asarray(mean, float)
+    p = expit(mean[:, None] - mean[None, :])
+    return np.linalg.inv(_laplacian(np.asarray(counts, float) * p * (1.0 - p)) + np.eye(len(mean)) / prior_sd**2)
+
+
+def with_counts(post: Posterior, counts, prior_sd: float = PRIOR_SD) -> Posterior:
+    """`post`'s mean with the covariance of `counts` votes (covariance): between two fits, each vote asked for
+    shrinks its pair's uncertainty at once, so the next choice moves on to another pair."""
+    counts = np.asarray(counts, float)
+    return Posterior(post.mean, covariance(post.mean, counts, prior_sd), float(np.triu(counts, 1).sum()))
+
+
+def refit_due(votes_at_fit: float, votes_now: float) -> bool:
+    """Whether the mean is refitted: the votes grew by a twentieth since the last fit (at least one), so that fits
+    stay rare in a big study while a small one follows every vote."""
+    return votes_now - votes_at_fit >= max(1.0, votes_at_fit / 20.0)
+
+
+def _laplacian(weights: np.ndarray) -> np.ndarray:
+    """The graph Laplacian of symmetric pair weights: what the BT log-likelihood's Hessian is made of."""
+    weights = weights - np.diag(np.diag(weights))
+    return np.diag(weights.sum(axis=1)) - weights
+
+
+@functools.lru_cache(maxsize=64)
+def pairs(k: int) -> np.ndarray:
+    """Every pair (i, j), i < j, as rows of an int array [k (k - 1) / 2, 2] (in this order everywhere)."""
+    i, j = np.triu_indices(k, 1)
+    out = np.stack([i, j], axis=1)
+    out.flags.writeable = False
+    return out
+
+
+def _order_entropy(z: np.ndarray) -> np.ndarray:
+    """Binary entropy (bits) of an order that holds with probability Phi(z)."""
+    q = np.clip(ndtr(-np.abs(z)), 1e-300, 0.5)
+    return -(q * np.log2(q) + (1.0 - q) * np.log2(1.0 - q))
+
+
+def gains(post: Posterior) -> np.ndarray:
+    """The expected drop in the summed order entropy of the adjacent pairs of the posterior-mean order from one
+    more vote on each pair, [P] in the order of `pairs(k)` (module docstring). Adjacent pairs only: the order of
+    two conditions farther apart follows from theirs, and the entropy of P(order) is then nearly zero anyway."""
+    k = len(post.mean)
+    pr = pairs(k)
+    cov, mean = post.cov, post.mean
+    order = np.argsort(-mean, kind="stable")
+    ta, tb = order[:-1], order[1:]  # the targets: adjacent in the current order
+    a, b = pr[:, 0], pr[:, 1]
+    d_cand = mean[a] - mean[b]
+    var_cand = cov[a, a] + cov[b, b] - 2 * cov[a, b]
+    d = mean[ta] - mean[tb]
+    var = cov[ta, ta] + cov[tb, tb] - 2 * cov[ta, tb]
+    cross = cov[a][:, ta] - cov[a][:, tb] - cov[b][:, ta] + cov[b][:, tb]  # [candidate, target]
+    # The predictive win probability of each candidate pair (the probit approximation of the logistic-normal
+    # integral), and so the Fisher information of one vote on it.
+    p = expit(d_cand / np.sqrt(1.0 + math.pi * var_cand / 8.0))
+    info = p * (1.0 - p)
+    # Rank-one update: var' of target y after a vote on candidate c = var_y - info_c cov_cy^2 / (1 + info_c var_c).
+    shrink = info[:, None] * cross**2 / (1.0 + info * var_cand)[:, None]
+    var_after = np.maximum(var[None, :] - shrink, 1e-12)
+    before = _order_entropy(d / np.sqrt(var)).sum()
+    # The mean of each difference moves by N(0, shrink): integrate the entropy after over it.
+    moved = d[None, :, None] + np.sqrt(shrink)[..., None] * _NODES
+    after = (_order_entropy(moved / np.sqrt(var_after)[..., None]) @ _WEIGHTS).sum(axis=1)
+    return before - after
+
+
+def elo(post: Posterior) -> tuple[np.ndarray, np.ndarray]:
+    """(Elo of each condition, its standard error): 400 log10 odds, the mean condition at ELO_ANCHOR."""
+    k = len(post.mean)
+    centre = np.eye(k) - 1.0 / k
+    sd = np.sqrt(np.maximum(np.diag(centre @ post.cov @ centre), 0.0))
+    return ELO_ANCHOR + ELO_PER_LOG * (post.mean - post.mean.mean()), ELO_PER_LOG * sd
+
+
+def settledness(post: Posterior, level: float, width: float | None = None) -> dict:
+    """How far the ranking is from settled (module docstring).
+
+    -> {"order": condition indices best first, "weakest": the lowest P(order right) of an adjacent pair,
+    "needed": the P each adjacent pair needs, "widest": the widest Elo interval at `level` (points), "width",
+    "separated", "narrow", "settled"}."""
+    k = len(post.mean)
+    order = np.argsort(-post.mean, kind="stable")
+    if k < 2:
+        return {"order": order.tolist(), "weakest": 1.0, "needed": level, "widest": 0.0, "width": width,
+                "separated": True, "narrow": True, "settled": True}  # fmt: skip
+    a, b = order[:-1], order[1:]
+    c = post.cov
+    var = c[a, a] + c[b, b] - 2 * c[a, b]
+    weakest = float(ndtr((post.mean[a] - post.mean[b]) / np.sqrt(var)).min())
+    needed = 1.0 - (1.0 - level) / (k - 1)
+    _, se = elo(post)
+    widest = float(2.0 * ndtri(1.0 - (1.0 - level) / 2.0) * se.max())
+    separated = weakest >= needed
+    narrow = width is not None and width > 0 and widest <= width
+    return {
+        "order": order.tolist(),
+        "weakest": weakest,
+        "needed": needed,
+        "widest": widest,
+        "width": width,
+        "separated": bool(separated),
+        "narrow": bool(narrow),
+        "settled": bool(separated or narrow),
+    }

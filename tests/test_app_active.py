@@ -1,0 +1,182 @@
+"""Active pairing and the stopping rule of a pairwise study (CONTRACTS §8), on SQLite and PostgreSQL.
+
+`--pairing active` only chooses among the units the balanced rule allows, so the pairwise checks of
+test_app_designs.py and test_app_catch_pool.py (the flow, every unit and catch pair, the sides drawn per trial,
+catch failures, bad input, an idle session's pair given back, exact targets alone and under concurrent sessions,
+catch units recurring like test units) run here again with it on; then what it changes: the votes go to the
+pairs the ranking is unsure of. `--stop-when settled` closes the study to new raters, never to started ones."""
+
+import collections
+
+import pytest
+import test_app_catch_pool as pool
+import test_app_designs as base
+from helpers.concurrent_raters import cover_mismatches
+from helpers.fake_stimuli import write_fake_stimuli
+from test_app_api import TOKEN_HDR
+
+from rating_app import AppError, active, create_app
+from rating_app.db import app_engine
+
+
+@pytest.fixture
+def active_make(make, monkeypatch):
+    """`make` with --pairing active, the posterior refitted at every call (not at most once a second)."""
+    monkeypatch.setattr(active, "REFRESH_S", 0.0)
+    return lambda manifest, design, **kw: make(manifest, design, **{"pairing": "active", **kw})
+
+
+@pytest.fixture(scope="module")
+def stimuli(tmp_path_factory):
+    return write_fake_stimuli(tmp_path_factory.mktemp("active_stimuli"), catch_nat=True)
+
+
+@pytest.fixture(scope="module")
+def big_stimuli(tmp_path_factory):
+    """As test_app_designs' big_stimuli: 3 conditions x 30 items, 4 catch items, 3 training clips."""
+    return write_fake_stimuli(
+        tmp_path_factory.mktemp("active_big"), n_items=30, n_catch=4, n_frames=4, metrics=False, catch_nat=True
+    )
+
+
+@pytest.fixture(scope="module")
+def pool_stimuli(tmp_path_factory):
+    """As test_app_catch_pool's: 3 conditions x 30 items, 12 catch items."""
+    return write_fake_stimuli(
+        tmp_path_factory.mktemp("active_pool"),
+        n_items=30,
+        n_catch=pool.CATCH_ITEMS,
+        n_frames=4,
+        metrics=False,
+        catch_nat=True,
+    )
+
+
+# ------------------------------------------------------------------------------------ the rules it keeps
+def test_flow_units_catch_sides_and_export(active_make, stimuli):
+    base.test_pairwise_flow_units_catch_and_export(active_make, stimuli)
+
+
+def test_catch_failures_on_the_dashboard(active_make, stimuli):
+    base.test_pairwise_catch_failures_on_the_dashboard(active_make, stimuli)
+
+
+def test_bad_input_and_training(active_make, stimuli):
+    base.test_pairwise_bad_input_and_training(active_make, stimuli)
+
+
+def test_an_idle_session_gives_its_pair_back(active_make, stimuli):
+    base.test_an_idle_session_gives_its_pair_back(active_make, stimuli)
+
+
+@pytest.mark.full  # the full tier: crowds, as in the modules these checks come from
+def test_targets_reached_exactly_with_fewest_raters(active_make, big_stimuli):
+    base.test_targets_reached_exactly_with_fewest_raters(active_make, big_stimuli, "pairwise", 90, 30)
+
+
+@pytest.mark.full  # the full tier: crowds, as in the modules these checks come from
+def test_targets_exact_under_concurrent_sessions(active_make, big_stimuli):
+    base.test_targets_exact_under_concurrent_sessions(active_make, big_stimuli, "pairwise", 90)
+
+
+@pytest.mark.full  # the full tier: crowds, as in the modules these checks come from
+def test_catch_units_recur_like_test_units(active_make, pool_stimuli, monkeypatch):
+    pool.test_catch_units_recur_like_test_units(active_make, pool_stimuli, "pairwise", 24, monkeypatch)
+
+
+# ---------------------------------------------------------------------------------- what it changes
+def conditions(app, t):
+    clips = app.extensions["rating_app"]["clips"]
+    return clips[t["a"]["clip_id"]].condition, clips[t["b"]["clip_id"]].condition
+
+
+def crowd(app, n_raters, prefer):
+    """`n_raters` sessions one after another, each answering prefer(condition A, condition B, i); the number
+    of test votes per pair of conditions, and the status of the last new session."""
+    c = app.test_client()
+    votes, i = collections.Counter(), 0
+    for _ in range(n_raters):
+        r = c.post("/api/sessions", json={})
+        if r.status_code != 201:
+            return votes, r
+        token = r.json["session"]
+        while not (r := c.get(f"/api/sessions/{token}/next")).json.get("done"):
+            t = r.json["trial"]
+            value = None
+            if t["phase"] == "rating":
+                a, b = conditions(app, t)
+                value, i = prefer(a, b, i), i + 1
+                if "BAD" not in (a, b):
+                    votes[" vs ".join(sorted((a, b)))] += 1
+            assert base.post(c, token, t, preference=value).status_code == 201
+    return votes, r
+
+
+RANK = {"NAT": 3, "MG": 2, "FL": 1, "BAD": 0}
+
+
+def nat_clearly_mg_fl_a_toss_up(a, b, i):
+    """NAT always clearly best; MG against FL each way in turn (so that pair stays uncertain)."""
+    if "NAT" in (a, b) or "BAD" in (a, b):
+        return 2 if RANK[a] > RANK[b] else -2
+    return 1 if i % 2 else -1
+
+
+@pytest.mark.parametrize("pairing", ["active", "balanced"])
+def test_active_pairing_spends_the_votes_on_the_uncertain_pair(make, big_stimuli, monkeypatch, pairing):
+    monkeypatch.setattr(active, "REFRESH_S", 0.0)
+    app = make(big_stimuli, "pairwise", ratings_per_clip=20, clips_per_rater=15, pairing=pairing)
+    votes, _ = crowd(app, 12, nat_clearly_mg_fl_a_toss_up)
+    assert sum(votes.values()) == 12 * 15
+    if pairing == "balanced":  # least-covered first: every pair alike
+        assert max(votes.values()) - min(votes.values()) <= 1, votes
+    else:  # the toss-up pair gets most; the pair of the two ends (NAT, FL) only the random share's
+        assert votes["FL vs MG"] > 2 * votes["FL vs NAT"] and votes["FL vs MG"] > votes["MG vs NAT"], votes
+    assert cover_mismatches(app_engine(app)) == {}
+
+
+# ---------------------------------------------------------------------------------- the stopping rule
+def test_a_settled_ranking_closes_the_study_to_new_raters_only(make, big_stimuli, monkeypatch):
+    monkeypatch.setattr(active, "REFRESH_S", 0.0)
+    app = make(big_stimuli, "pairwise", ratings_per_clip=20, clips_per_rater=6, stop_when="settled")
+    c = app.test_client()
+    early = base.start(c)  # started before the stop: it may finish
+    votes, refused = crowd(app, 30, lambda a, b, i: 2 if RANK[a] > RANK[b] else -2)
+    assert refused.status_code == 409 and refused.json["closed"] and refused.json["full"], refused.json
+    assert "ranking is settled" in refused.json["error"]
+    p = c.get("/admin/progress.json", headers=TOKEN_HDR).json["ranking"]
+    assert p["closed"] and p["settled"] and p["order"] == ["NAT", "MG", "FL"]
+    assert p["weakest_separation"] >= p["separation_needed"] == pytest.approx(1 - 0.05 / 2)
+    assert p["votes"] == sum(votes.values()) < 20 * 90  # long before the targets
+    trials, done = base.complete(
+        c, early, pref=lambda t: 2 if RANK[conditions(app, t)[0]] > RANK[conditions(app, t)[1]] else -2
+    )
+    assert done["done"] and trials
+    page = c.get("/admin", headers=TOKEN_HDR).get_data(as_text=True)
+    assert "closed to new raters" in page and 'id="ranking"' in page
+
+
+def test_the_vote_cap_closes_the_study(make, stimuli):
+    app = make(stimuli, "pairwise", ratings_per_clip=20, stop_when="settled", stop_max_votes=5)
+    votes, refused = crowd(app, 30, lambda a, b, i: 1 if i % 2 else -1)  # a toss-up: never settled
+    assert refused.status_code == 409 and "all the votes" in refused.json["error"]
+    p = app.test_client().get("/admin/progress.json", headers=TOKEN_HDR).json["ranking"]
+    assert p["closed"] and not p["settled"] and p["votes"] == sum(votes.values()) >= 5 == p["max_votes"]
+
+
+def test_the_defaults_change_nothing_and_bad_settings_stop_the_start(make, stimuli, app_db_url):
+    app = make(stimuli, "pairwise")
+    assert app.config["PAIRING"] == "balanced" and app.config["STOP_WHEN"] == "never"
+    assert "ranking" not in app.extensions["rating_app"]
+    assert "ranking" not in app.test_client().get("/admin/progress.json", headers=TOKEN_HDR).json
+    for kw, needle in (
+        ({"design": "acr", "pairing": "active"}, "pairing: active needs the pairwise design, not acr"),
+        ({"design": "parallel", "stop_when": "settled"}, "stop_when: settled needs the pairwise design"),
+        ({"design": "pairwise", "pairing": "smart"}, "pairing: 'smart' must be one of balanced, active"),
+        ({"design": "pairwise", "stop_level": "1"}, "stop_level"),
+        ({"design": "pairwise", "pairing_random": "1.5"}, "pairing_random"),
+        ({"design": "pairwise", "stop_max_votes": "-1"}, "stop_max_votes"),
+    ):
+        with pytest.raises(AppError, match=needle) as e:
+            create_app(manifest=stimuli, db_url=app_db_url, **kw)
+        assert "\n" not in str(e.value)

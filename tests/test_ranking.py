@@ -1,0 +1,169 @@
+"""moglow_eval.core.ranking (CONTRACTS §8, "Active pairing and the stopping rule") against references: the
+posterior mean against analysis.pairwise's independent maximum-likelihood fit, the covariance against a numerical
+Hessian, the Elo scale against the two-condition closed form, the information gain against refitting on each
+outcome, and the stopping rule on simulated studies with known strengths."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.special import expit
+
+from analysis.pairwise import fit_bradley_terry
+from moglow_eval.core import ranking
+
+
+def simulate(truth, n, rng, pair=None):
+    """A win matrix of `n` votes on random pairs (or always `pair`) with Bradley-Terry outcomes."""
+    k = len(truth)
+    pr = ranking.pairs(k)
+    picks = pr[rng.integers(len(pr), size=n)] if pair is None else np.tile(pair, (n, 1))
+    won = rng.random(n) < expit(truth[picks[:, 0]] - truth[picks[:, 1]])
+    return ranking.win_matrix(k, picks[:, 0], picks[:, 1], won.astype(float))
+
+
+def test_the_mean_is_the_independent_maximum_likelihood_fit_under_a_flat_prior():
+    rng = np.random.default_rng(1)
+    truth = rng.normal(0, 1, 6)
+    w = simulate(truth, 3000, rng)
+    post = ranking.fit(w, prior_sd=1e5)
+    pr = ranking.pairs(6)
+    counts = np.array([[w[i, j], w[j, i], 0.0] for i, j in pr])
+    ref = fit_bradley_terry(counts, [tuple(p) for p in pr], list(range(6)), reference=0, ties=False)
+    assert ref["converged"]
+    ours = post.mean - post.mean[0]
+    assert np.allclose(ours, [ref["strengths"][c] for c in range(6)], atol=1e-6)
+    assert post.votes == 3000
+    # and it recovers the truth it was drawn from
+    assert np.abs(ours - (truth - truth[0])).max() < 0.25
+
+
+def test_ties_count_half_to_each_side():
+    w = ranking.win_matrix(3, [0, 0, 1], [1, 2, 2], [0.5, 1.0, 0.0])
+    assert w.tolist() == [[0.0, 0.5, 1.0], [0.5, 0.0, 0.0], [0.0, 1.0, 0.0]]
+    # two wins and a tie: 2.5 to 0.5
+    tie = ranking.fit(ranking.win_matrix(2, [0, 0, 0], [1, 1, 1], [1.0, 1.0, 0.5]), prior_sd=1e6)
+    assert tie.mean[0] - tie.mean[1] == pytest.approx(math.log(2.5 / 0.5), abs=1e-6)
+
+
+def test_the_covariance_is_the_inverse_hessian_of_the_log_posterior():
+    rng = np.random.default_rng(2)
+    w = simulate(np.array([0.5, 0.0, -0.3, -1.0]), 200, rng)
+    post = ranking.fit(w)
+
+    def neg_log_post(t):
+        d = t[:, None] - t[None, :]
+        return (w * np.logaddexp(0, -d)).sum() + 0.5 * (t @ t) / ranking.PRIOR_SD**2
+
+    h, eps, k = np.zeros((4, 4)), 1e-4, 4
+    for i in range(k):
+        for j in range(k):
+            e_i, e_j = np.eye(k)[i] * eps, np.eye(k)[j] * eps
+            t = post.mean
+            h[i, j] = (
+                neg_log_post(t + e_i + e_j)
+                - neg_log_post(t + e_i - e_j)
+                - neg_log_post(t - e_i + e_j)
+                + neg_log_post(t - e_i - e_j)
+            ) / (4 * eps**2)
+    assert np.allclose(post.cov, np.linalg.inv(h), rtol=1e-4, atol=1e-6)
+    # the covariance of the votes' counts at the same mean is the same thing
+    assert np.allclose(ranking.covariance(post.mean, w + w.T), post.cov)
+
+
+def test_the_elo_scale_is_400_log10_odds_around_1000():
+    # two conditions, 30 to 10: the maximum-likelihood log odds is log 3
+    post = ranking.fit(np.array([[0.0, 30.0], [10.0, 0.0]]), prior_sd=1e3)
+    e, se = ranking.elo(post)
+    assert e[0] - e[1] == pytest.approx(400 * math.log10(3), abs=1e-4)
+    assert e.mean() == pytest.approx(1000.0)
+    # the s.e. of the difference is sqrt(1/30 + 1/10) log units; each centred condition carries half of it
+    assert se[0] == pytest.approx(ranking.ELO_PER_LOG * math.sqrt(1 / 30 + 1 / 10) / 2, rel=1e-4)
+
+
+def exact_gain(post, wins, a, b):
+    """The expected drop of the adjacent-order entropy from one vote on (a, b), by refitting on each outcome."""
+    order = np.argsort(-post.mean, kind="stable")
+    pairs = list(zip(order[:-1], order[1:]))
+
+    def entropy(p):
+        z = [(p.mean[i] - p.mean[j]) / math.sqrt(p.cov[i, i] + p.cov[j, j] - 2 * p.cov[i, j]) for i, j in pairs]
+        return ranking._order_entropy(np.array(z)).sum()
+
+    v = post.cov[a, a] + post.cov[b, b] - 2 * post.cov[a, b]
+    p_a = expit((post.mean[a] - post.mean[b]) / math.sqrt(1 + math.pi * v / 8))
+    after = 0.0
+    for won, prob in (((a, b), p_a), ((b, a), 1 - p_a)):
+        w = wins.copy()
+        w[won] += 1
+        after += prob * entropy(ranking.fit(w, start=post.mean))
+    return entropy(post) - after
+
+
+def test_the_information_gain_ranks_pairs_as_refitting_on_each_outcome_does():
+    rng = np.random.default_rng(3)
+    truth = np.array([1.0, 0.3, 0.25, -0.4, -1.5])
+    w = simulate(truth, 150, rng)
+    post = ranking.fit(w)
+    g = ranking.gains(post)
+    ref = np.array([exact_gain(post, w, a, b) for a, b in ranking.pairs(5)])
+    assert np.argmax(g) == np.argmax(ref)
+    assert np.corrcoef(g, ref)[0, 1] > 0.9, (g, ref)
+    # the closest adjacent pair, the one the order is least sure of, is the one to ask about
+    i, j = ranking.pairs(5)[np.argmax(g)]
+    assert {i, j} == {1, 2}
+
+
+def test_held_votes_move_the_next_choice_on():
+    w = simulate(np.array([0.4, 0.0, -0.4]), 60, np.random.default_rng(4))
+    post = ranking.fit(w)
+    best = np.argmax(ranking.gains(post))
+    assert np.allclose(ranking.with_counts(post, w + w.T).cov, post.cov)
+    i, j = ranking.pairs(3)[best]
+    held = w + w.T
+    held[i, j] += 200  # many slots of that pair given out, not yet answered
+    held[j, i] += 200
+    assert np.argmax(ranking.gains(ranking.with_counts(post, held))) != best
+
+
+def run_study(truth, level, rng, cap=4000, check=20, width=None):
+    """Votes on the least-voted pair until the rule says settled (or the cap): (stopped, every pair right)."""
+    k = len(truth)
+    pr = ranking.pairs(k)
+    w = np.zeros((k, k))
+    post = ranking.fit(w)
+    while w.sum() < cap:
+        for _ in range(check):
+            n = (w + w.T)[pr[:, 0], pr[:, 1]]
+            i, j = pr[rng.choice(np.flatnonzero(n == n.min()))]
+            w[(i, j) if rng.random() < expit(truth[i] - truth[j]) else (j, i)] += 1
+        post = ranking.fit(w, start=post.mean)
+        if ranking.settledness(post, level, width)["settled"]:
+            return True, bool((np.argsort(-post.mean) == np.argsort(-truth)).all()), w.sum()
+    return False, None, w.sum()
+
+
+def test_the_stopping_rule_on_simulated_strengths_errs_no_more_than_its_level():
+    rng = np.random.default_rng(5)
+    truth = np.array([0.6, 0.3, 0.0, -0.3])
+    runs = [run_study(truth, 0.9, rng) for _ in range(60)]
+    stopped = [r for r in runs if r[0]]
+    assert len(stopped) == 60  # 0.3 apart: every study settles well before the cap
+    wrong = sum(not r[1] for r in stopped)
+    # nominal 10%: 6 of 60 expected at most; 12 would be beyond any sampling noise (binomial p < 0.01)
+    assert wrong <= 11, wrong
+    # a stricter level costs more votes
+    strict = [run_study(truth, 0.99, np.random.default_rng([5, i]))[2] for i in range(10)]
+    assert np.median(strict) > np.median([r[2] for r in stopped])
+
+
+def test_not_settled_from_nothing_and_the_width_rule():
+    s = ranking.settledness(ranking.fit(np.zeros((4, 4))), 0.95)
+    assert not s["settled"] and s["weakest"] == 0.5 and s["needed"] == pytest.approx(1 - 0.05 / 3)
+    # two equal conditions never separate, but many votes make their intervals narrow
+    w = np.array([[0.0, 5000.0], [5000.0, 0.0]])
+    post = ranking.fit(w)
+    assert not ranking.settledness(post, 0.95)["settled"]
+    s = ranking.settledness(post, 0.95, width=50.0)
+    assert s["narrow"] and s["settled"] and not s["separated"] and s["widest"] < 50.0
+    assert not ranking.settledness(post, 0.95, width=s["widest"] / 2)["settled"]
