@@ -322,3 +322,24 @@ def test_the_workers_of_a_running_gunicorn_learn_of_the_round(folders, app_db_ur
         assert cover_mismatches(engine) == {}
     finally:
         engine.dispose()
+
+
+def test_active_pairing_takes_in_a_new_condition_and_lets_a_withdrawn_one_go(make, folders, app_db_url):
+    """With `--pairing active` the running app's ranking grows with the round: the new system, with no votes yet,
+    is the most uncertain, so a new rater's test pairs go to it first; withdrawn, it leaves the ranking."""
+    study, new = folders
+    app = make(study, "pairwise", ratings_per_clip=6, pairing="active", pairing_random=0.0, clips_per_rater=3)
+    c = app.test_client()
+    for _ in range(2):
+        complete(c)
+    ranking = c.get("/admin/progress.json", headers=TOKEN_HDR).json["ranking"]
+    assert set(ranking["order"]) == {"NAT", "MG", "FL"}
+    assert main(["add-condition", "--db", app_db_url, "--manifest", str(new)]) == 0
+    rater = complete(c)
+    test = [r for r in export(c) if r["rater_id"] == rater and r["role"] == "test"]
+    assert test and all("SYS" in (r["condition_a"], r["condition_b"]) for r in test)
+    assert set(c.get("/admin/progress.json", headers=TOKEN_HDR).json["ranking"]["order"]) == {"NAT", "MG", "FL", "SYS"}
+    assert c.post("/admin/conditions/withdraw", data={"condition": "SYS"}, headers=TOKEN_HDR).status_code == 200
+    assert set(c.get("/admin/progress.json", headers=TOKEN_HDR).json["ranking"]["order"]) == {"NAT", "MG", "FL"}
+    rater = complete(c)
+    assert all("SYS" not in (r["condition_a"], r["condition_b"]) for r in export(c) if r["rater_id"] == rater)
