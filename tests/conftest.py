@@ -75,12 +75,12 @@ def needs_full(item):
 
 
 def pytest_collection_modifyitems(config, items):
-    import os
+    from helpers.tiers import run_slow
 
     for item in items:
         if needs_full(item):
             item.add_marker(pytest.mark.full)
-    if config.getoption("--run-slow") or os.environ.get("RUN_SLOW") == "1":
+    if run_slow(config):
         return
     skip = pytest.mark.skip(reason="slow: run with --run-slow (CI runs the short variant)")
     for item in items:

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from helpers.own_study_data import action_takes, make_study
+from helpers.tiers import only_when_slow
 
 from generation.data.motion_files import read_motion
 from generation.make_stimuli import main as make_stimuli
@@ -300,6 +301,8 @@ def test_builtin_study_output_unchanged(tmp_path):
 @pytest.mark.parametrize("db", ["sqlite", "postgres"])
 def test_own_study_end_to_end(own_study, tmp_path, db, request):
     """Study from folders -> app -> simulated crowd -> export -> report, on SQLite and on PostgreSQL."""
+    if db == "sqlite":
+        only_when_slow(request, "the short variant runs on PostgreSQL; the database is the app's concern")
     _, stimuli = own_study
     url = f"sqlite:///{tmp_path / 'r.sqlite'}" if db == "sqlite" else request.getfixturevalue("pg_database")
     out = tmp_path / "demo"
