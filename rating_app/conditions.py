@@ -26,7 +26,7 @@ from sqlalchemy.orm import Session
 
 from . import rounds
 from .assign import lock_assign
-from .db import Clip, Cover, study_design, utcnow
+from .db import Clip, Cover, clip_row, study_design, utcnow
 from .designs import get
 from .manifest import AppError, load_manifest
 
@@ -242,19 +242,7 @@ def _store(engine, added, units, names) -> int:
         if s.scalars(select(rounds.StudyCondition.name).where(rounds.StudyCondition.name.in_(names))).first():
             raise AppError(f"add-condition: {', '.join(names)} joined the study meanwhile")
         new_round = rounds.current_round(s.connection()) + 1
-        s.add_all(
-            Clip(
-                clip_id=c.clip_id,
-                condition=c.condition,
-                role=c.role,
-                item=c.item,
-                frames=c.frames,
-                fps=c.fps,
-                motion_item=c.motion_item,
-                style=c.style,
-            )
-            for c in added
-        )
+        s.add_all(clip_row(c) for c in added)
         s.add_all(Cover(key=k, answered=0, held=0) for k in units)
         s.add_all(rounds.StudyCondition(name=n, round=new_round, added_at=now) for n in names)
         rounds.bump(s, new_round)

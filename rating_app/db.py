@@ -431,6 +431,20 @@ def _add_cover_rows(session, keys) -> None:
         session.add_all(Cover(key=k, answered=counts.get(k, (0, 0))[0], held=counts.get(k, (0, 0))[1]) for k in missing)
 
 
+def clip_row(c) -> Clip:
+    """The Clip row of a manifest clip (manifest.ManifestClip)."""
+    return Clip(
+        clip_id=c.clip_id,
+        condition=c.condition,
+        role=c.role,
+        item=c.item,
+        frames=c.frames,
+        fps=c.fps,
+        motion_item=c.motion_item,
+        style=c.style,
+    )
+
+
 def init_db(engine: Engine, clips=None, design: str | None = None, cover_keys=None, settings=None) -> None:
     """Create the schema (idempotent), upsert the manifest's clips, store the study's design and give every key
     in `cover_keys` (test clips or units) its Cover row; AppError when the database already holds a study of
@@ -461,18 +475,7 @@ def init_db(engine: Engine, clips=None, design: str | None = None, cover_keys=No
                 for c in clips:
                     row = have.get(c.clip_id)
                     if row is None:
-                        s.add(
-                            Clip(
-                                clip_id=c.clip_id,
-                                condition=c.condition,
-                                role=c.role,
-                                item=c.item,
-                                frames=c.frames,
-                                fps=c.fps,
-                                motion_item=c.motion_item,
-                                style=c.style,
-                            )
-                        )
+                        s.add(clip_row(c))
                     else:
                         row.condition, row.role, row.item = c.condition, c.role, c.item
                         row.frames, row.fps, row.motion_item = c.frames, c.fps, c.motion_item
