@@ -20,8 +20,11 @@ import numpy as np
 import pandas as pd
 from scipy import stats as sps
 
-ELO_ANCHOR = 1000.0  # the reference condition's Elo
-ELO_PER_LOG = 400.0 / math.log(10)  # Elo points per unit of log strength (400 per factor of ten in the odds)
+from moglow_eval.core import ranking as core_ranking
+
+# The scale is the app's (moglow_eval.core.ranking): 400 Elo per factor of ten in the odds; the report puts the
+# reference condition, not the mean one, at ELO_ANCHOR.
+ELO_ANCHOR, ELO_PER_LOG = core_ranking.ELO_ANCHOR, core_ranking.ELO_PER_LOG
 
 
 def elo(theta, reference_theta=0.0):
