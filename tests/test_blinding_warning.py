@@ -3,6 +3,7 @@
 
 import csv
 
+import pytest
 from helpers.own_study_data import make_study
 
 from generation.make_stimuli import main as make_stimuli
@@ -15,6 +16,7 @@ def test_auc_counts_ties_half():
     assert auc([1, 2], [0, 0]) == 1.0 and auc([0], [0]) == 0.5 and auc([0, 3], [1, 2]) == 0.5
 
 
+@pytest.mark.full  # make_study's takes are in ../shared
 def test_a_pool_of_freeze_clips_is_warned_about(tmp_path, capsys):
     study = make_study(tmp_path / "in", n_items=8, n_catch=4)
     text = study.read_text().replace('make = ["jitter", "freeze", "swap"]', 'make = ["freeze"]')

@@ -12,6 +12,8 @@ from helpers.own_study_data import make_study
 
 from generation.make_stimuli import main as make_stimuli
 
+pytestmark = pytest.mark.full  # make_study's takes are in ../shared
+
 RENDER = '[render]\nview = "front"\nframing = "upper"\n'
 
 
