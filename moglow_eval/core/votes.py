@@ -42,6 +42,7 @@ def battle_to_preference(winner: str, is_strong: str) -> int:
         raise ValueError(f"is_strong is {is_strong!r}, not True or False")
     return strong if winner == "model_a" else -strong
 
+
 # The reasons' columns of pairs.csv (CONTRACTS §8): the ticked ids joined by REASON_SEPARATOR, and the free text.
 REASONS_COLUMN = "reasons"
 REASON_TEXT_COLUMN = "reason_text"
