@@ -8,15 +8,15 @@ that the posterior exists from zero votes on. The posterior is approximated by a
 (Laplace): mean = the MAP log strengths, covariance = the inverse of the negative log posterior's Hessian.
 
 From it:
-- `gains`: the expected information one more vote on each pair of conditions brings about the ranking, measured
-  as the expected drop in the summed binary entropy of the order of each adjacent pair of the posterior-mean order
-  (P(theta_i > theta_j) under the posterior). The expectation is over the vote's outcome, through the
-  preposterior: one vote on pair (a, b) adds w x x' to the precision (x = e_a - e_b, w = p (1 - p) the vote's Fisher information), which shrinks the
-  variance of every difference theta_i - theta_j by a known amount, and the mean of that difference moves by a
-  normal amount whose variance is exactly that shrinkage (the law of total variance). This follows ASAP
-  (Mikhailiuk et al. 2020, "Active sampling for pairwise comparisons via approximate message passing and
-  information gain maximization", ICPR), which picks the pair of highest expected information gain under a
-  Gaussian posterior; here the information is about the order, which is what a ranking study reports.
+- `gains`: the expected information one more vote on each pair of conditions brings about the ranking, measured as the
+  expected drop in the summed binary entropy of the order of each adjacent pair of the posterior-mean order (P(theta_i
+  > theta_j) under the posterior). The expectation is over the vote's outcome, through the preposterior: one vote on
+  pair (a, b) adds w x x' to the precision (x = e_a - e_b, w = p (1 - p) the vote's Fisher information), which shrinks
+  the variance of every difference theta_i - theta_j by a known amount, and the mean of that difference moves by a
+  normal amount whose variance is exactly that shrinkage (the law of total variance). This follows ASAP (Mikhailiuk et
+  al. 2020, "Active sampling for pairwise comparisons via approximate message passing and information gain
+  maximization", ICPR), which picks the pair of highest expected information gain under a Gaussian posterior; here the
+  information is about the order, which is what a ranking study reports.
 - `settledness`: every adjacent pair in the posterior-mean order separated, P(order right) at least
   1 - (1 - level) / (k - 1) each (a Bonferroni split of the error over the k - 1 adjacent pairs: if every adjacent
   pair of the estimated order is right, the whole order is), or every condition's Elo interval narrower than a
