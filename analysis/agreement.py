@@ -17,6 +17,7 @@
 import numpy as np
 import pandas as pd
 
+from .filtering import only_test_rows
 from .mixed import fit_crossed
 
 FIT_ERRORS = (ValueError, ZeroDivisionError, FloatingPointError, np.linalg.LinAlgError)
@@ -180,15 +181,15 @@ def icc(df, unit="clip_id", value="rating", n_boot=ICC_BOOT_MAX, seed=0, level=0
 
 def agreement(df, unit="clip_id", value="rating", n_boot=1000, seed=0):
     """Both measures over the test rows: {"krippendorff": ..., "icc": ...}."""
-    test = df[df["role"] == "test"]
+    test = only_test_rows(df)
+    measures = {  # the ICC's bootstrap refits a model per resample: it keeps its own count (ICC_BOOT_MAX)
+        "krippendorff": lambda: krippendorff_alpha(test, unit, value, n_boot=n_boot, seed=seed),
+        "icc": lambda: icc(test, unit, value, seed=seed),
+    }
     out = {}
-    for name, measure in (("krippendorff", krippendorff_alpha), ("icc", icc)):
+    for name, measure in measures.items():
         try:
-            out[name] = (
-                measure(test, unit, value, n_boot=n_boot, seed=seed)
-                if name == "krippendorff"
-                else (measure(test, unit, value, seed=seed))
-            )
+            out[name] = measure()
         except FIT_ERRORS:  # degenerate data (no variance within clips or at all): the measure is undefined
             out[name] = None
     return out

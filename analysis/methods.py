@@ -15,6 +15,8 @@ import numpy as np
 
 from moglow_eval.core import study
 
+from .filtering import only_test_rows
+
 DESIGN_TEXT = {
     "acr": "rated each clip on its own on a five-point scale (1 = bad, 5 = excellent)",
     "pairwise": (
@@ -74,9 +76,8 @@ def manifest_hash(metrics_path) -> str | None:
         return None
 
 
-def answers_per_unit(design, kept) -> tuple[str, int, int, float]:
-    """(what a unit is, fewest, most, median answers per unit) over the kept test rows."""
-    test = kept[kept["role"] == "test"]
+def answers_per_unit(design, test) -> tuple[str, int, int, float]:
+    """(what a unit is, fewest, most, median answers per unit) over the kept test rows `test`."""
     if design == "pairwise":
         lo = np.minimum(test["condition_a"], test["condition_b"])
         hi = np.maximum(test["condition_a"], test["condition_b"])
@@ -90,7 +91,7 @@ def answers_per_unit(design, kept) -> tuple[str, int, int, float]:
 
 def conditions_of(rows) -> list[str]:
     """The conditions of the rows' test answers, in the study's order."""
-    test = rows[rows["role"] == "test"]
+    test = only_test_rows(rows)
     cols = [c for c in ("condition", "condition_a", "condition_b") if c in test.columns]
     return study.condition_order(np.concatenate([test[c].astype(str).to_numpy() for c in cols]))
 
@@ -101,8 +102,8 @@ def methods_paragraph(design, rows, kept, counts, options) -> str:
     conditions = conditions_of(rows)
     n_total, n_excl = counts["n_raters_total"], counts["n_raters_excluded"]
     catch = CATCH_TEXT.get(design, CATCH_PAIR).format(threshold=options.threshold)
-    unit, lo, hi, med = answers_per_unit(design, kept)
-    test = kept[kept["role"] == "test"]
+    test = only_test_rows(kept)
+    unit, lo, hi, med = answers_per_unit(design, test)
     n_items = test["item"].nunique() if "item" in test.columns else 0
     conds = [c for c in conditions if c != study.CATCH]
     if counts.get("n_catch_ratings", 1):
