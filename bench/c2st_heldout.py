@@ -1,11 +1,13 @@
 """What still tells the shipped MG and FL from the mocap, on every held-out window (issue: Realism III).
 
-    python bench/c2st_heldout.py [--seeds 3] [--cnn-seeds 3] [--post shipped|rigid] [--only MG|FL] [--contacts]
+    python bench/c2st_heldout.py [--seeds 3] [--cnn-seeds 3] [--post shipped|bones|rigid] [--only MG|FL] [--contacts]
+        [--temperature NAME=T] [--ckpt NAME=PATH] [--posture] [--ripple]
 
 The shipped MG and FL sample the 192 held-out windows (valid + test, generation/pretrained/heldout.npz) on their
 real control and history, at the stimuli's temperatures (MG 0.5, FL 1.0), once per seed; each sample is then
-post-processed as the stimuli ship it (`--post shipped`: the hips on the root, then the actor's bones,
-invariants.fit_to_actor) or as they shipped before (`--post rigid`: the bones only). Every classifier below runs in
+post-processed as the stimuli ship it (`--post shipped`: the hips on the root, then the actor's rigid skeleton,
+invariants.fit_to_actor) or as they shipped before (`--post bones`: the hips on the root, then the bone lengths
+alone, until 2026-11-26; `--post rigid`: the bone lengths alone, before Realism III). Every classifier below runs in
 5 folds grouped by take (a take's windows are never on both sides of a fold), against NAT on the same windows:
 - the project's C2ST (generation.metrics.c2st: a logistic regression on per-window statistics of the world
   joints) on all features and per feature group (generation.metrics.c2st_features.GROUPS), and its strongest
@@ -15,10 +17,11 @@ invariants.fit_to_actor) or as they shipped before (`--post rigid`: the bones on
 - a small 1-D CNN (two convolutions, global average pooling) on the standardised root-frame sequences [T, 63],
   trained per fold with `--cnn-seeds` initialisations.
 Printed as mean (sd) over the sample seeds, after the floor: NAT's takes split in two at random (`--seeds 0`: the
-floor alone). With --contacts: per locomotion category, the share of frames with a
-foot in contact (a foot within 1 cm of its lowest height, objective.foot_contacts' rule without its fallback), the
-foot skating (m/s) and how high a slow foot sits above its lowest point (cm) for NAT, MG and FL, medians over
-windows.
+floor alone). With --posture: per category, the joint whose mean pose sits farthest from NAT's (the first sample
+seed). With --ripple: the jerk on even and on odd frames. With --contacts: per locomotion category, the share of
+frames with a foot in contact (a foot within 1 cm of its lowest height, objective.foot_contacts' rule without its
+fallback), the foot skating (m/s) and how high a slow foot sits above its lowest point (cm) for NAT, MG and FL,
+medians over windows.
 """
 
 import argparse
@@ -39,7 +42,11 @@ from generation.sampling.pretrained import CHECKPOINTS, HELDOUT, TEMPERATURE  # 
 from generation.sampling.sample import load_model, sample_windows  # noqa: E402
 
 FOLDS = 5
-POST = {"shipped": invariants.fit_to_actor, "rigid": rigid.fit_to_history}
+POST = {
+    "shipped": invariants.fit_to_actor,
+    "bones": lambda x, h: rigid.fit_bones(invariants.root_hips(x), rigid.bone_lengths(h)),
+    "rigid": lambda x, h: rigid.fit_bones(x, rigid.bone_lengths(h)),
+}
 
 
 def fold_of(takes, seed=0):
@@ -182,6 +189,29 @@ def contacts(worlds, labels, fps=20.0):
         print(f"| {cat} | {len(idx)} | " + " | ".join(f"{v:.2f}" for v in share + skate + lift) + " |")
 
 
+def posture_offsets(samples, nat, labels):
+    """Per category and model, the joint whose mean root-frame pose over the category's windows sits farthest from
+    NAT's on the same windows (cm), and over all windows: where a posture term on the batch's mean cannot see it."""
+    print("\n| category | n | " + " | ".join(f"{m} farthest joint, cm" for m in samples) + " |")
+    print("|" + "---|" * (2 + len(samples)))
+    for cat in [*np.unique(labels), "all"]:
+        idx = np.flatnonzero((labels == cat) | (cat == "all"))
+        cells = []
+        for s in samples.values():
+            gap = (s[idx].mean(1) - nat[idx].mean(1)).mean(0).reshape(skeleton.N_JOINTS, 3)
+            dist = np.linalg.norm(gap, axis=-1) * 100
+            cells.append(f"{skeleton.JOINT_NAMES[int(dist.argmax())]} {dist.max():.1f}")
+        print(f"| {cat} | {len(idx)} | " + " | ".join(cells) + " |")
+
+
+def ripple(worlds):
+    """Each system's mean jerk magnitude (mm per frame^3) on even and on odd frames: a flow that squeezes time in
+    pairs of frames (FL) leaves them unequal, where the mocap's are alike."""
+    for name, w in worlds.items():
+        jerk = np.linalg.norm(np.diff(w, 3, axis=1), axis=-1).mean((0, 2)) * 1000
+        print(f"{name}: jerk on even frames {jerk[0::2].mean():.2f}, on odd frames {jerk[1::2].mean():.2f} mm/frame^3")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", type=int, default=3, help="samples of every window (one C2ST each; 0: the floor only)")
@@ -189,26 +219,49 @@ def main(argv=None):
     ap.add_argument("--post", choices=sorted(POST), default="shipped")
     ap.add_argument("--only", choices=("MG", "FL"), default=None)
     ap.add_argument("--contacts", action="store_true", help="the contact and skating table per category")
+    ap.add_argument("--posture", action="store_true", help="per category, the farthest joint of the mean pose")
+    ap.add_argument("--ripple", action="store_true", help="the jerk on even and on odd frames")
+    ap.add_argument(
+        "--temperature",
+        action="append",
+        default=[],
+        metavar="NAME=T",
+        help="sample NAME (MG, FL) at T instead of the stimuli's temperature",
+    )
+    ap.add_argument(
+        "--ckpt",
+        action="append",
+        default=[],
+        metavar="NAME=PATH",
+        help="sample NAME from this checkpoint instead of the shipped one",
+    )
     args = ap.parse_args(argv)
+    temps = {**TEMPERATURE, **{k: float(v) for k, v in (a.split("=", 1) for a in args.temperature)}}
+    ckpts = {n: CHECKPOINTS[n.lower()] for n in ("MG", "FL")} | dict(a.split("=", 1) for a in args.ckpt)
     torch.set_num_threads(1)
     x, c, h, hc, labels, takes = heldout_windows(HELDOUT, ("x", "c", "hist", "hist_c", "labels", "take"))
     fps = float(read_arrays(HELDOUT, ["fps"])["fps"])
     names, groups = feature_names(skeleton.JOINT_NAMES, skeleton.PARENTS)
-    worlds = {"NAT": to_world(x, c)}
+    worlds, firsts = {"NAT": to_world(x, c)}, {}
     floor(x, c, takes)
     for name in ("MG", "FL"):
         if args.only not in (None, name):
             continue
-        model = load_model(CHECKPOINTS[name.lower()], "cpu")
+        model = load_model(ckpts[name], "cpu")
         runs = []
         for seed in range(args.seeds):
-            s = POST[args.post](sample_windows(model, c, h, hc, TEMPERATURE[name], seed), h)
+            s = POST[args.post](sample_windows(model, c, h, hc, temps[name], seed), h)
             runs.append(one_sample(x, s, c, takes, names, groups, args.cnn_seeds))
             worlds.setdefault(name, to_world(s, c))
+            firsts.setdefault(name, s)
         if runs:
-            report(f"{name}, post-processed: {args.post}", runs)
+            report(f"{name} ({ckpts[name]}, temperature {temps[name]}), post-processed: {args.post}", runs)
     if args.contacts:
         contacts(worlds, labels, fps)
+    if args.posture:
+        posture_offsets(firsts, x, labels)
+    if args.ripple:
+        ripple(worlds)
 
 
 if __name__ == "__main__":

@@ -3,14 +3,17 @@
     python bench/rigid_bones.py [--seeds 2] [--temperature 1.0] [--mg CKPT] [--fl CKPT] [--only MG|FL]
 
 The shipped MG and FL sample every held-out window (valid + test, generation/pretrained/heldout.npz: 192 windows
-with their real 10-frame histories) on the same control; each sample is then taken four ways:
+with their real 10-frame histories) on the same control; each sample is then taken five ways:
 - `free`: as sampled;
 - `directions`: every joint at the actor's bone length from its placed parent, along the direction from its parent
   that the model sampled (so a bone's length error moves every joint below it);
 - `nearest` (rigid.fit_bones): every joint at the actor's bone length from its placed parent, at the point nearest
   to where the model put it;
-- `shipped` (invariants.fit_to_actor): the hips first put back on the root (their x and z in the root frame set to
-  0, as in real data), then `nearest`: what make_stimuli ships.
+- `bones`: the hips first put back on the root (their x and z in the root frame set to 0, as in real data), then
+  `nearest`: what make_stimuli shipped before 2026-11-26 (`root_hips+rigid_bones`);
+- `shipped` (invariants.fit_to_actor): the hips on the root, then the actor's rigid skeleton (rigid.fit_skeleton:
+  `nearest`, with the hips' and the chest's children turned into place together in the actor's shape): what
+  make_stimuli ships (`root_hips+rigid_skeleton`).
 The actor's bone lengths are the means over the window's history (real frames). With --seeds N every window is
 sampled N times and its figures are their means over the N samples. Printed per model and variant: the largest
 bone-length std (mm), the worst bone's median error of its mean length (%), each joint's mean jerk over NAT's (the
@@ -110,7 +113,8 @@ def main(argv=None):
         "free": lambda s: s,
         "directions": lambda s: along_directions(s, lengths),
         "nearest": lambda s: rigid.fit_bones(s, lengths),
-        "shipped": lambda s: rigid.fit_bones(invariants.root_hips(s), lengths),
+        "bones": lambda s: rigid.fit_bones(invariants.root_hips(s), lengths),
+        "shipped": lambda s: invariants.fit_to_actor(s, h),
     }
     nat_jerk = joint_jerk(to_world(x, c), fps).mean(0)
     encoder = MotionEncoder.load(MOTION_ENCODER)
@@ -131,8 +135,8 @@ def main(argv=None):
             f, a = summary(runs[v], nat_jerk, labels), np.array(aucs[v])
             print(
                 f"{name} {v:10s} bone std max {f['bone_std_mm']:6.2f} mm | length err max {f['length_err']:5.1f}%"
-                f" | jerk/NAT max {f['jerk_max']:.2f} ({f['jerk_worst']}) | skating/NAT {f['skating']:.2f} | "
-                f"late stepping min {f['late_min']:.2f} | C2ST AUC {a.mean():.3f} (sd {a.std():.3f}) | "
+                f" | jerk/NAT max {f['jerk_max']:.2f} ({f['jerk_worst']}) | skating/NAT {f['skating']:.3f} | "
+                f"late stepping min {f['late_min']:.3f} | C2ST AUC {a.mean():.3f} (sd {a.std():.3f}) | "
                 f"FMD/floor {min(fmds[v]):.2f}-{max(fmds[v]):.2f}"
             )
             print("    jerk/NAT per joint:", " ".join(f"{n}:{r:.2f}" for n, r in zip(skeleton.JOINT_NAMES, f["jerk"])))

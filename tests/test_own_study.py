@@ -284,7 +284,7 @@ def test_builtin_study_output_unchanged(tmp_path):
     for r in _rows(out / "manifest.csv"):
         # postprocess came later (MG's and FL's hips put on the root, then their bones set to the actor's), only
         # for MG and FL
-        assert r["postprocess"] == ("root_hips+rigid_bones" if r["condition"] in ("MG", "FL") else "")
+        assert r["postprocess"] == ("root_hips+rigid_skeleton" if r["condition"] in ("MG", "FL") else "")
         row = {k: v for k, v in r.items() if k not in ("clip_id", "video", "motion", "postprocess")}
         if r["condition"] == "NAT":
             h = hashlib.sha256()

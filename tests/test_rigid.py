@@ -26,6 +26,37 @@ def test_real_motion_is_left_as_it_is(heldout):
     assert np.abs(rigid.fit_to_history(x, hist) - x).max() < 1e-5
 
 
+def widths(x):
+    """Per frame, the distances between the children of each rigid group: [..., T, pairs]."""
+    j = np.asarray(x, dtype=np.float64).reshape(*np.shape(x)[:-1], skeleton.N_JOINTS, 3)
+    pairs = [(a, b) for kids in rigid.rigid_groups().values() for i, a in enumerate(kids) for b in kids[i + 1 :]]
+    return np.stack([np.linalg.norm(j[..., a, :] - j[..., b, :], axis=-1) for a, b in pairs], axis=-1)
+
+
+def test_rigid_groups_are_the_hips_and_the_chest():
+    names = {skeleton.JOINT_NAMES[p]: [skeleton.JOINT_NAMES[k] for k in ks] for p, ks in rigid.rigid_groups().items()}
+    assert names == {"Hips": ["Spine", "UpperLeg_L", "UpperLeg_R"], "Chest": ["Neck", "Shoulder_L", "Shoulder_R"]}
+
+
+def test_fit_skeleton_holds_the_groups_shape_and_is_a_no_op_on_real_frames(heldout):
+    """Real windows hold the hips' and the chest's shapes to float rounding, and fit_skeleton leaves them; windows
+    with 1 cm of noise on every joint get the reference's bone lengths and group shapes exactly, stay within the
+    noise of where they were, and a whole window turned about the vertical comes back turned, not unturned."""
+    x, hist = heldout["test_x"][:8].astype(np.float64), heldout["test_hist"][:8].astype(np.float64)
+    assert widths(x).std(axis=1).max() < 1e-6  # the invariant in the data
+    assert np.abs(rigid.fit_skeleton(x, hist[:, -1]) - x).max() < 1e-5
+    noisy = x + np.random.default_rng(0).normal(0, 0.01, x.shape)
+    assert widths(noisy).std(axis=1).max() > 5e-3
+    y = rigid.fit_skeleton(noisy, hist[:, -1])
+    assert np.abs(widths(y) - widths(hist[:, -1:])).max() < 1e-9
+    assert np.abs(lengths_of(y) - lengths_of(hist[:, -1:])).max() < 1e-9
+    assert np.abs(y - noisy).reshape(8, -1, 21, 3).max(-1).mean() < 0.03
+    turn = np.radians(50.0)
+    rot = np.array([[np.cos(turn), 0, np.sin(turn)], [0, 1, 0], [-np.sin(turn), 0, np.cos(turn)]])
+    turned = (x.reshape(8, -1, 21, 3) @ rot.T).reshape(x.shape)
+    assert np.abs(rigid.fit_skeleton(turned, hist[:, -1]) - turned).max() < 1e-5
+
+
 def test_sampled_motion_gets_the_actors_bones_and_stays_near_it(heldout):
     d = {k: v[::12] for k, v in heldout.items()}
     mg = load_model(pretrained.CHECKPOINTS["mg"], "cpu")
@@ -68,7 +99,7 @@ def test_the_default_job_records_the_fit_in_the_manifest(tmp_path):
         rows = list(csv.DictReader(f))
     post = {(r["condition"], r["postprocess"]) for r in rows}
     shipped = invariants.POSTPROCESS  # the hips on the root, then the actor's bones
-    assert shipped == "root_hips+rigid_bones"
+    assert shipped == "root_hips+rigid_skeleton"
     assert post == {("NAT", ""), ("MG", shipped), ("FL", shipped), ("BAD", "")}
     with open(out / "c2st_features.csv", newline="") as f:  # what tells MG and FL apart, with its groups
         features = list(csv.DictReader(f))

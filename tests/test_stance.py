@@ -15,6 +15,7 @@ from generation.training.stance import (
     foot_world_steps,
     posture_offset,
     posture_spread,
+    stance_height,
     stance_loss,
     stance_speed,
 )
@@ -103,6 +104,25 @@ def test_posture_offset_is_the_mean_pose_shift_and_ignores_per_window_difference
     assert float(posture_offset(shifted, real)) == pytest.approx(0.09**2 / skeleton.N_JOINTS)
 
 
+def test_posture_offset_by_category_sees_offsets_that_cancel_in_the_batch():
+    """Two categories leaning opposite ways by d: the batch's mean pose is right (0), the categories' are not (d^2
+    per shifted joint over 21); with one category it is the plain batch-mean offset."""
+    g = torch.Generator().manual_seed(0)
+    real = torch.randn(6, 10, 63, generator=g, dtype=torch.float64)
+    cats = torch.tensor([0, 0, 0, 1, 1, 1])
+    lean = real.clone()
+    head_z = 3 * skeleton.INDEX["Head"] + 2
+    lean[:3, :, head_z] += 0.06
+    lean[3:, :, head_z] -= 0.06
+    assert float(posture_offset(lean, real)) == pytest.approx(0.0, abs=1e-12)
+    assert float(posture_offset(lean, real, cats)) == pytest.approx(0.06**2 / skeleton.N_JOINTS)
+    shifted = real + 0.01
+    one = torch.zeros(6, dtype=torch.long)
+    assert float(posture_offset(shifted, real, one)) == pytest.approx(float(posture_offset(shifted, real)))
+    assert float(posture_offset(real.flip(0), real, torch.tensor([1, 1, 1, 0, 0, 0]).flip(0))) != 0.0  # paired
+    assert float(posture_offset(real[[1, 0, 2, 4, 3, 5]], real, cats)) == pytest.approx(0.0, abs=1e-12)
+
+
 def test_posture_term_pulls_a_shifted_fl_back(tiny_runs, small_dataset):
     """Trained on the posture term alone against windows whose left hand is raised by 9 cm, a tiny FL's samples
     move their mean pose towards them."""
@@ -154,3 +174,44 @@ def test_spread_term_spreads_a_collapsed_fl(tiny_runs, small_dataset):
 
     before, after = descend(model, term)
     assert before > 0 and after < before / 2, (before, after)
+
+
+def test_stance_height_counts_the_planted_feet_only():
+    """0 for the real frames themselves; a planted foot raised by h metres gives h, a swinging foot raised gives 0,
+    and a foot that bobs by +-h around the real one gives h (the gap is absolute: bobbing is not cancelled)."""
+    g = torch.Generator().manual_seed(0)
+    real = torch.randn(2, 6, 63, generator=g, dtype=torch.float64) * 0.05
+    down = torch.zeros(2, 6, 2, dtype=torch.bool)
+    down[:, :, 0] = True  # the left foot down in every frame, the right one never
+    assert float(stance_height(real, real, down).abs().max()) == 0.0
+    left = [3 * skeleton.INDEX[j] + 1 for j in ("Foot_L", "Toes_L")]
+    right = [3 * skeleton.INDEX[j] + 1 for j in ("Foot_R", "Toes_R")]
+    raised = real.clone()
+    raised[..., left] += 0.02
+    assert stance_height(raised, real, down).tolist() == pytest.approx([0.02, 0.02])
+    swing = real.clone()
+    swing[..., right] += 0.05
+    assert float(stance_height(swing, real, down).abs().max()) == pytest.approx(0.0, abs=1e-12)
+    bob = real.clone()
+    bob[:, 0::2, left[0]] += 0.01
+    bob[:, 1::2, left[0]] -= 0.01
+    assert stance_height(bob, real, down).tolist() == pytest.approx([0.005, 0.005])  # the ankle of (ankle, toe)
+    assert float(stance_height(raised, real, torch.zeros_like(down)).abs().max()) == 0.0  # no contact, no term
+
+
+def test_height_term_pulls_a_floating_mg_foot_down(tiny_runs, small_dataset):
+    """Trained on the height term alone against windows whose feet are 3 cm lower than the model predicts them,
+    a tiny MG's predicted stance feet move towards the real height."""
+    model = load_model(sorted((tiny_runs["mg"] / "checkpoints").glob("step_*.pt"))[-1]).train()
+    model.config["dropout"] = 0.0
+    split = load_dataset(small_dataset).splits["train"]
+    x, c = split.x[:8, :32].to(model.x_mean.device).clone(), split.c[:8, :32].to(model.x_mean.device)
+    for j in ("Foot_L", "Toes_L", "Foot_R", "Toes_R"):
+        k = 3 * skeleton.INDEX[j] + 1
+        x[..., k] -= 0.03 / model.x_std[k]  # standardised units: every foot 3 cm lower than the model learnt
+
+    def term():
+        return stance_loss(model, x, c, 20.0, height=1.0).mean() - stance_loss(model, x, c, 20.0).mean()
+
+    before, after = descend(model, term)
+    assert before > 0.02 and after < before / 2, (before, after)

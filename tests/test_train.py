@@ -435,3 +435,62 @@ def test_torch_threads_are_restored():
     assert torch.get_num_threads() == before
     with torch_threads(None):
         assert torch.get_num_threads() == before
+
+
+def test_init_fine_tunes_from_a_checkpoint_at_its_step(small_dataset, tmp_path):
+    """--init: the run starts from the checkpoint's weights and step, Adam afresh, and trains on to the config's
+    steps, as one run with a restart at that step would; a checkpoint of another size, of other data or already
+    at the last step is refused in one line."""
+    first = replace(load_config("mg", "tiny"), steps=6, ckpt_every=6, early_ckpts=())
+    a = train("mg", first, small_dataset, tmp_path / "a", seed=1, progress=False)
+    ckpt = a / "checkpoints" / "step_0000006.pt"
+    fine = replace(
+        first,
+        steps=9,
+        restart_step=6,
+        restart_lr=1e-4,
+        restart_lr_min=1e-5,
+        foot_height_weight=5.0,
+        stance_weight=1.0,
+        stance_start=6,
+        ckpt_every=9,
+    )
+    b = train("mg", fine, small_dataset, tmp_path / "b", seed=1, progress=False, init=ckpt)
+    assert [r["step"] for r in rows(b)] == ["9"] and float(rows(b)[0]["train_stance"]) > 0
+    assert torch.load(b / "checkpoints" / "step_0000009.pt", weights_only=True)["step"] == 9
+    opt = torch.load(b / "resume.pt", weights_only=True)["opt"]["state"]
+    assert {int(v["step"]) for v in opt.values()} == {3}  # three steps of a fresh Adam
+    # The same bits as one run of the fine-tune's config from step 0: its first six steps are the first run's and
+    # its restart at step 6 clears Adam, so the fine-tune took the checkpoint's weights and step as they were.
+    whole = train("mg", fine, small_dataset, tmp_path / "c", seed=1, progress=False)
+    assert all(torch.equal(state(b)[k], state(whole)[k]) for k in state(b))
+    with pytest.raises(TrainError, match="step_0000006.pt: a mg checkpoint of size .* but the config builds"):
+        train("mg", replace(fine, hidden=24), small_dataset, tmp_path / "d", progress=False, init=ckpt)
+    with pytest.raises(TrainError, match=r"already at step 6; the config's 'steps' \(6\)"):
+        train("mg", first, small_dataset, tmp_path / "e", progress=False, init=ckpt)
+    other = torch.load(ckpt, weights_only=True)
+    other["stats"]["x_std"] = [v * 2 for v in other["stats"]["x_std"]]
+    torch.save(other, tmp_path / "other.pt")
+    with pytest.raises(TrainError, match="other.pt: trained on data whose statistics differ .*'x_std'"):
+        train("mg", fine, small_dataset, tmp_path / "f", progress=False, init=tmp_path / "other.pt")
+
+
+def test_posture_by_category_reaches_the_loss(small_dataset, tmp_path):
+    """With posture_by_category the posture term is matched within the batch's categories: the same run draws the
+    same batches and books a larger stance loss than with the batch's mean alone (the categories' offsets do not
+    cancel), and the run's config records it."""
+    cfg = replace(
+        load_config("fl", "tiny"),
+        steps=4,
+        valid_every=1,
+        stance_weight=1.0,
+        stance_start=2,
+        stance_temperature=1.0,
+        posture_weight=50.0,
+        category_balance=0.5,
+    )
+    plain = train("fl", cfg, small_dataset, tmp_path / "a", seed=1, progress=False)
+    by = train("fl", replace(cfg, posture_by_category=True), small_dataset, tmp_path / "b", seed=1, progress=False)
+    a, b = ([float(r["train_stance"]) for r in rows(run)] for run in (plain, by))
+    assert a[:2] == b[:2] == [0.0, 0.0] and b[2] > a[2] > 0
+    assert json.loads((by / "config.json").read_text())["posture_by_category"] is True

@@ -4,10 +4,10 @@ In the feature space (CONTRACTS §2) the root is the hips' floor projection, so 
 are 0 in every real frame, by construction. MG and FL model all 63 values freely, so their samples leave the hips a
 little off the root, and a classifier that reads those two values tells every generated window from a real one,
 though no rater can see it (bench/RESULTS.md#c2st). `root_hips` sets them back to 0 (the point of the invariant
-nearest to the sample: the other 61 values stay), before the bones are fitted to the actor's (`rigid.fit_bones`
-keeps the hips where they are). `make_stimuli` records both steps in the manifest's `postprocess` column as
-`root_hips+rigid_bones` (CONTRACTS §4); `fit_to_actor` is the one function that applies them, there and in the
-quality guard.
+nearest to the sample: the other 61 values stay), before the pose is fitted to the actor's rigid skeleton
+(`rigid.fit_skeleton` keeps the hips where they are). `make_stimuli` records both steps in the manifest's
+`postprocess` column as `root_hips+rigid_skeleton` (CONTRACTS §4); `fit_to_actor` is the one function that applies
+them, there and in the quality guard.
 
 `constant_dims` is the check over the training set that finds such invariants: the feature dimensions that hold
 one value (to float tolerance) in every frame of every window (`python -m generation.motion.invariants
@@ -15,11 +15,12 @@ runs/dataset.npz`). On the Bandai-Namco training windows it finds the
 hips' x and z and nothing else. The models keep spending likelihood on those two dimensions; dropping them from
 the model, or conditioning on them, would need retraining (bench/RESULTS.md#model-realism).
 
-Real data holds invariants that are not one feature's value too, and these are not treated here: the hips' three
-children (the spine and both thighs) turn with the hips as one rigid body, so the hips sit at one fixed mix of
-their three positions and the hip width never changes (exact to float rounding in the training windows; MG's
-samples move them); and the heading of the root is the smoothed heading of the pose itself
-(features.root_trajectory), so a pose turned against its root is a tell as well (bench/RESULTS.md#c2st).
+Real data holds invariants that are not one feature's value too. The hips' three children (the spine and both
+thighs) turn with the hips as one rigid body, and the chest's (the neck and both shoulders) with the chest, so the
+hip and shoulder widths never change (exact to float rounding in the training windows; the models' samples move
+them): `rigid.fit_skeleton` holds these, with the bone lengths. Not treated: the heading of the root is the pose's
+own heading smoothed over the whole take (features.root_trajectory), so it is not a function of the window alone and
+has no nearest point within it.
 """
 
 import sys

@@ -11,13 +11,18 @@ condition alike (MG and FL; the bad examples stay as they are, broken on purpose
 `postprocess` column (CONTRACTS §4). bench/rigid_bones.py measures what it does to every figure, beside keeping each
 bone's sampled direction instead (the foot then carries every length error of its leg, and skates more:
 bench/RESULTS.md#model-realism).
+
+Bone lengths are not the skeleton's only rigidity: a joint with several children (the hips with the spine and both
+thighs, the chest with the neck and both shoulders) places them all by its one rotation, so they keep one shape in
+every real frame. `fit_skeleton` holds that too (Realism III: the exact invariants of the data held in what ships),
+and it is what `fit_to_history`, and so the manifest's `rigid_skeleton` step, applies.
 """
 
 import numpy as np
 
 from . import skeleton
 
-RIGID = "rigid_bones"  # the manifest's postprocess value for a projected clip
+RIGID = "rigid_skeleton"  # the manifest's postprocess value for a clip put onto the actor's rigid skeleton
 
 
 def frame_bone_lengths(poses, parents=skeleton.PARENTS):
@@ -50,10 +55,66 @@ def fit_bones(poses, lengths, parents=skeleton.PARENTS):
     return out.reshape(poses.shape).astype(poses.dtype)
 
 
+def rigid_groups(parents=skeleton.PARENTS):
+    """{joint: its children} for every joint with two or more children. A BVH joint's rotation places all its
+    children at once, so in real motion they and the joint move as one rigid body: the hips with the spine and both
+    thighs (the hip width never changes), the chest with the neck and both shoulders."""
+    children = {}
+    for k, p in enumerate(parents):
+        if p >= 0:
+            children.setdefault(int(p), []).append(k)
+    return {p: ks for p, ks in children.items() if len(ks) >= 2}
+
+
+def fit_skeleton(poses, reference, parents=skeleton.PARENTS):
+    """poses [..., T, J*3] (or [..., T, J, 3]) put onto the skeleton of one real frame reference [..., J*3] (or
+    [..., J, 3]; per window, or one for all), the same shape and dtype back. As fit_bones, parents first, with one
+    more rule: the children of a joint with two or more (rigid_groups) are placed together, as the reference's
+    shape turned by the rotation that best fits where the model put them (Kabsch's least squares), so the hip and
+    shoulder widths and the angles between the spine and the thighs are the actor's, as they are in every real
+    frame. Every other joint goes along the model's direction at the reference's bone length."""
+    poses = np.asarray(poses)
+    j = _joints(poses, len(parents)).astype(np.float64)
+    ref = _joints(np.asarray(reference), len(parents)).astype(np.float64)[..., None, :, :]  # over frames
+    lengths = np.linalg.norm(ref[..., 1:, :] - ref[..., parents[1:], :], axis=-1)[..., None]
+    groups = rigid_groups(parents)
+    out = j.copy()
+    placed = {0}
+    for k in _parent_first(parents):
+        if k in placed:
+            continue
+        p = parents[k]
+        if p in groups:
+            kids = groups[p]
+            shape = ref[..., kids, :] - ref[..., [p], :]  # [..., 1, n, 3]
+            model = j[..., kids, :] - out[..., [p], :]  # [..., T, n, 3]
+            out[..., kids, :] = out[..., [p], :] + shape @ _best_rotation(shape, model).swapaxes(-1, -2)
+            placed.update(kids)
+            continue
+        bone = j[..., k, :] - out[..., p, :]
+        norm = np.linalg.norm(bone, axis=-1, keepdims=True)
+        unit = np.divide(bone, norm, out=np.zeros_like(bone), where=norm > 1e-9)
+        out[..., k, :] = out[..., p, :] + unit * lengths[..., k - 1, :]
+        placed.add(k)
+    return out.reshape(poses.shape).astype(poses.dtype)
+
+
+def _best_rotation(a, b):
+    """The rotations R [..., 3, 3] that best turn point sets a [..., n, 3] onto b [..., n, 3] (least squares over
+    the n points, det R = +1: Kabsch's algorithm)."""
+    h = np.swapaxes(a, -1, -2) @ b  # [..., 3, 3]
+    u, _, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(np.swapaxes(vt, -1, -2) @ np.swapaxes(u, -1, -2)))
+    fix = np.ones(d.shape + (3,))
+    fix[..., 2] = np.where(d == 0, 1.0, d)
+    return np.swapaxes(vt, -1, -2) @ (fix[..., :, None] * np.swapaxes(u, -1, -2))
+
+
 def fit_to_history(x, history):
-    """Generated windows x [B, T, 63] put onto the bones of each window's actor, read from its real history
-    [B, tau, 63]: what make_stimuli ships for MG and FL, and what the quality guard measures."""
-    return fit_bones(x, bone_lengths(history))
+    """Generated windows x [B, T, 63] put onto the rigid skeleton of each window's actor, read from the last frame
+    of its real history [B, tau, 63] (fit_skeleton): what make_stimuli ships for MG and FL, and what the quality
+    guard measures."""
+    return fit_skeleton(x, np.asarray(history)[:, -1])
 
 
 def _joints(poses, n_joints):

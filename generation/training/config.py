@@ -60,6 +60,9 @@ class TrainConfig:
     # stance.posture_offset and stance.posture_spread, added to the stance loss (m^2 per joint, times the weight)
     posture_weight: float = field(default=0.0, metadata=_ZERO_UP)
     spread_weight: float = field(default=0.0, metadata=_ZERO_UP)
+    posture_by_category: bool = False  # posture_offset matched within each locomotion category of the batch
+    # stance.stance_height, added to the stance loss (m, times the weight): the planted feet at the real feet's height
+    foot_height_weight: float = field(default=0.0, metadata=_ZERO_UP)
     category_balance: float = field(default=0.0, metadata=_ZERO_UP)
     # 'bfloat16': the coupling networks run under autocast (flows.set_net_precision); faster than float32 on some
     # CPU kinds and slower on others (bench/RESULTS.md#train-speed); not yet measured on a GPU.

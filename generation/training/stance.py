@@ -59,12 +59,31 @@ def stance_speed(prev, cur, ctrl, contact, fps):
     return (speed * mask).sum(dim=(1, 2)) / mask.sum(dim=(1, 2)).clamp_min(1.0)
 
 
-def posture_offset(pred, real):
+def stance_height(cur, real, contact):
+    """Mean height gap (m) between the feet of cur [B, n, 63] and of the real frames real [B, n, 63] over the frame
+    pairs where `contact` [B, n, n_feet] holds, per batch element [B] (0 where a window has no contact). A planted
+    foot neither rises nor bobs: MG's stance feet, horizontally still under stance_speed, bob from frame to frame
+    several times as much as the mocap's (bench/RESULTS.md "model-realism")."""
+    gap = (_feet(cur)[..., 1] - _feet(real)[..., 1]).abs().mean(dim=-1)  # [B, n, n_feet], ankle and toe
+    mask = contact.to(gap.dtype)
+    return (gap * mask).sum(dim=(1, 2)) / mask.sum(dim=(1, 2)).clamp_min(1.0)
+
+
+def posture_offset(pred, real, categories=None):
     """Mean squared distance (m^2) over joints between the batch's mean root-frame pose in the prediction and in
     the real windows [B, n, 63], one scalar. A first-moment match of the posture: it leaves each window free to
-    differ from its real one (FL has no history to follow), and holds the sampled posture where the data's is."""
-    offset = (pred - real).reshape(-1, skeleton.N_JOINTS, 3).mean(dim=0)
-    return offset.pow(2).sum(dim=-1).mean()
+    differ from its real one (FL has no history to follow), and holds the sampled posture where the data's is.
+    With `categories` [B] (integer codes of the windows' locomotion categories) the mean is matched within each
+    category and the squared distances averaged over the batch's windows: a model may hold the batch's mean pose
+    while leaning back on side-steps and forward on backward walks (FL did, by 6-14 cm)."""
+    gap = (pred - real).mean(dim=1)  # [B, 63]: each window's mean pose gap
+    if categories is None:
+        categories = torch.zeros(len(gap), dtype=torch.long, device=gap.device)
+    member = torch.nn.functional.one_hot(categories.long()).to(gap.dtype)  # [B, G]
+    counts = member.sum(dim=0)
+    offset = (member.T @ gap) / counts.clamp_min(1.0)[:, None]  # [G, 63]
+    per_category = offset.reshape(len(offset), skeleton.N_JOINTS, 3).pow(2).sum(dim=-1).mean(dim=-1)
+    return (per_category * counts).sum() / counts.sum()
 
 
 def posture_spread(pred, real):
@@ -79,7 +98,7 @@ def posture_spread(pred, real):
     return gap.reshape(skeleton.N_JOINTS, 3).pow(2).sum(dim=-1).mean()
 
 
-def stance_loss(net, x, c, fps, keep=None, history=None, z=None, posture=0.0, spread=0.0):
+def stance_loss(net, x, c, fps, keep=None, history=None, z=None, posture=0.0, spread=0.0, height=0.0, categories=None):
     """Stance-foot speed (m/s) of `net`'s prediction of training windows x [B, T, 63], c [B, T, 3] (standardised)
     from latents z [B, T, 63] (None: zeros, the most likely motion; MG reads frames tau..T-1 of it), over the real
     windows' contact frames, per batch element [B]. Both frames of each pair are predictions: FL predicts the
@@ -89,17 +108,22 @@ def stance_loss(net, x, c, fps, keep=None, history=None, z=None, posture=0.0, sp
 
     With `posture` > 0 the loss adds that weight times posture_offset of the same prediction: the plain loss, on
     samples, bent FL's whole posture to still its feet (hands 9 cm low, feet 7 cm forward), which likelihood alone
-    did not (bench/RESULTS.md "fl-posture"). With `spread` > 0 it adds that weight times posture_spread, which
-    keeps the samples' postures as varied over windows as the data's."""
+    did not (bench/RESULTS.md "fl-posture"); with `categories` [B] it is matched within each category. With
+    `spread` > 0 it adds that weight times posture_spread, which keeps the samples' postures as varied over windows
+    as the data's. With `height` > 0 it adds that weight times stance_height: the planted feet at the real foot's
+    height (m), which the horizontal speed alone leaves free."""
     real, ctrl = net.unstandardize_x(x), c * net.c_std + net.c_mean
     if net.kind == "mg":
         pred = net.predict_frames(x, c, None if z is None else z[:, net.tau :], keep, history)
         pred, first = net.unstandardize_x(pred), net.tau + 1
     else:
         pred, first = net.unstandardize_x(net.inverse((torch.zeros_like(x) if z is None else z).flatten(1), c)[0]), 1
-    loss = stance_speed(pred[:, :-1], pred[:, 1:], ctrl[:, first:], contacts(real, first), fps)
+    down = contacts(real, first)
+    loss = stance_speed(pred[:, :-1], pred[:, 1:], ctrl[:, first:], down, fps)
+    if height:
+        loss = loss + height * stance_height(pred[:, 1:], real[:, first:], down)
     if posture:
-        loss = loss + posture * posture_offset(pred, real[:, first - 1 :])
+        loss = loss + posture * posture_offset(pred, real[:, first - 1 :], categories)
     if spread:
         loss = loss + spread * posture_spread(pred, real[:, first - 1 :])
     return loss

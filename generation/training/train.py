@@ -1,13 +1,16 @@
 """Train FL or MG by exact maximum likelihood (CONTRACTS.md §3).
 
     python -m generation.training.train --model mg --config cpu --data dataset.npz --out runs/mg [--steps N] [--resume]
+    python -m generation.training.train --model mg --config FINE.json --data dataset.npz --out runs/mg_fine --init mg.pt
     torchrun --nproc_per_node 4 -m generation.training.train ...     # several GPUs (or CPU processes): DDP
 
 Writes OUT/config.json, OUT/checkpoints/step_XXXXXXX.pt (early ones kept: the bad examples come from them),
 OUT/metrics.csv (step, train_nll, valid_nll in nats per dimension of the standardised data) and
 OUT/resume.pt (optimiser state for --resume). Adam with linear warm-up, gradient-norm clipping; batches
 and dropout masks are functions of (seed, step), so a run is reproducible and a resumed run continues
-exactly as an uninterrupted one would.
+exactly as an uninterrupted one would. --init CKPT fine-tunes: the run starts from CKPT's weights at CKPT's step,
+with Adam afresh, and trains on to the config's `steps` along the config's schedule (a fine-tune config puts its
+restart at CKPT's step, so that its learning rate starts at restart_lr).
 
 Under torchrun (WORLD_SIZE > 1) the same batch is split across the ranks: every rank draws the whole batch,
 its crop, noise and dropout masks from the shared seed and keeps its own rows, DistributedDataParallel
@@ -23,6 +26,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import torch
 from torch import nn
 from tqdm import tqdm
@@ -86,17 +90,17 @@ class _BatchLoss(nn.Module):
     """The model's NLL, and with `stance` its stance-foot loss (stance.py), per batch element, as a module's
     forward, so that DistributedDataParallel can wrap it."""
 
-    def __init__(self, net, fps, posture_weight=0.0, spread_weight=0.0):
+    def __init__(self, net, fps, posture_weight=0.0, spread_weight=0.0, height_weight=0.0):
         super().__init__()
-        self.net, self.fps, self.posture_weight, self.spread_weight = net, fps, posture_weight, spread_weight
+        self.net, self.fps = net, fps
+        self.posture_weight, self.spread_weight, self.height_weight = posture_weight, spread_weight, height_weight
 
-    def forward(self, x, c, keep, history, stance_z, stance):
+    def forward(self, x, c, keep, history, stance_z, stance, categories=None):
         nll = self.net.nll(x, c, keep, history)
         if not stance:
             return nll, torch.zeros_like(nll)
-        return nll, stance_loss(
-            self.net, x, c, self.fps, keep, history, stance_z, self.posture_weight, self.spread_weight
-        )
+        weights = (self.posture_weight, self.spread_weight, self.height_weight)
+        return nll, stance_loss(self.net, x, c, self.fps, keep, history, stance_z, *weights, categories)
 
 
 def build_model(kind, cfg, stats=None):
@@ -151,15 +155,17 @@ def train(
     device=None,
     threads=None,
     precision=None,
+    init=None,
 ):
     """Train `model` ('fl' or 'mg') with `config` on a prepared dataset; returns out_dir (see module doc).
+    `init`: a checkpoint to fine-tune from (its weights and step; --resume of the same out_dir wins over it).
     `steps` and `precision` (None: the config's) override the config's fields of those names.
     `threads`: CPU threads for torch: None keeps torch's choice, a number fixes it (and the bits of the result),
     "auto" follows the cores other processes leave free (threads.CoreShare; the command's default). The
     thread count is restored on return."""
     with torch_threads(None if threads in (None, "auto") else threads):
         cfg, ds = _config_and_data(model, config, steps, data_path, precision)
-        return _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, threads == "auto")
+        return _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, threads == "auto", init)
 
 
 def _config_and_data(model, config, steps, data_path, precision=None):
@@ -176,7 +182,7 @@ def _config_and_data(model, config, steps, data_path, precision=None):
     return cfg, ds
 
 
-def _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, share_cores):
+def _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, share_cores, init=None):
     device = pick_device(device)
     rank, world = join_ranks(device)
     if cfg.batch_size % world:
@@ -189,15 +195,16 @@ def _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, s
         net.check_length(cfg.train_window or ds.window)
     flows.set_net_precision(net, flows.PRECISIONS[cfg.precision])
     opt = make_optimiser(net, cfg)
-    start, elapsed = _resume(out / "resume.pt", resume, net, opt, device)
+    start, elapsed = _first_step(out, resume, init, net, opt, cfg, ds, device)
     run = _Run(out, rank == 0, cfg, ds, net, opt, start, elapsed)
     if run.writes:
         run.write_config(data_path, seed, device, world)
     tx, tc = ds.splits["train"].x.to(device), ds.splits["train"].c.to(device)
     crop = cfg.train_window or tx.shape[1]
     weights = category_weights(ds.splits["train"].labels, cfg.category_balance)
+    codes = category_codes(ds.splits["train"].labels) if cfg.posture_by_category else None
     rows = slice(rank * cfg.batch_size // world, (rank + 1) * cfg.batch_size // world)
-    step_loss = _wrap_ranks(net, ds.fps, world, device, cfg.posture_weight, cfg.spread_weight)
+    step_loss = _wrap_ranks(net, ds.fps, world, device, cfg.posture_weight, cfg.spread_weight, cfg.foot_height_weight)
     net.train()
     share = CoreShare() if share_cores and device.type == "cpu" else None
     bar = tqdm(
@@ -220,7 +227,12 @@ def _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, s
             share.step()
         x, c, keep, history, stance_z = draw_batch(net, tx, tc, cfg, seed, step, crop, weights)
         stance = stance_on(cfg, step)
-        nll, foot = step_loss(*(None if v is None else v[rows] for v in (x, c, keep, history, stance_z)), stance)
+        cats = None if codes is None else codes[batch_indices(len(tx), cfg.batch_size, seed, step, weights)]
+        nll, foot = step_loss(
+            *(None if v is None else v[rows] for v in (x, c, keep, history, stance_z)),
+            stance,
+            None if cats is None else cats[rows].to(device),
+        )
         nll, foot = nll.mean(), foot.mean()
         grad_norm = _optimise(nll + cfg.stance_weight * foot if stance else nll, net, opt, cfg, world)
         if grad_norm is None:
@@ -257,9 +269,9 @@ def _optimise(loss, net, opt, cfg, world):
     return grad_norm
 
 
-def _wrap_ranks(net, fps, world, device, posture_weight=0.0, spread_weight=0.0):
+def _wrap_ranks(net, fps, world, device, posture_weight=0.0, spread_weight=0.0, height_weight=0.0):
     """The model's loss as a module, wrapped for DistributedDataParallel under torchrun."""
-    step_loss = _BatchLoss(net, fps, posture_weight, spread_weight)
+    step_loss = _BatchLoss(net, fps, posture_weight, spread_weight, height_weight)
     if world > 1:
         ids = [device] if device.type == "cuda" else None
         step_loss = nn.parallel.DistributedDataParallel(step_loss, device_ids=ids)
@@ -280,6 +292,36 @@ def _resume(path, resume, net, opt, device):
     except Exception as e:  # another model's or another tool's file: one line, not a traceback
         first = (str(e).strip().splitlines() or [""])[0]
         raise TrainError(f"{path}: not a resume state of this run's model ({type(e).__name__}: {first})") from None
+
+
+def _first_step(out, resume, init, net, opt, cfg, ds, device):
+    """(first step, seconds trained so far): a resumed run's (OUT/resume.pt), a fine-tune's (`init`) or (0, 0)."""
+    if init is not None and not resume:
+        return _init_from(Path(init), net, cfg, ds, device), 0.0
+    return _resume(out / "resume.pt", resume, net, opt, device)
+
+
+def _init_from(path, net, cfg, ds, device):
+    """Load a finished checkpoint's weights into `net` for a fine-tune and return its step (the run's first). The
+    checkpoint must be of the same kind and size, trained on data with the same statistics (the weights read
+    standardised inputs), and end before the config's last step; else TrainError, one line naming the file."""
+    ck = load_torch_file(path, device, TrainError)
+    if not isinstance(ck, dict) or "state" not in ck or "kind" not in ck:
+        raise TrainError(f"{path}: not a checkpoint of generation.training.train")
+    if ck["kind"] != net.kind or dict(ck.get("model_config", {})) != dict(net.config):
+        raise TrainError(
+            f"{path}: a {ck['kind']} checkpoint of size {ck.get('model_config')}, but the config builds a "
+            f"{net.kind} of size {net.config}"
+        )
+    for key, value in ds.stats.items():
+        theirs = np.asarray(ck.get("stats", {}).get(key, []), dtype=np.float64)
+        if theirs.shape != value.shape or not np.allclose(theirs, value, rtol=1e-5, atol=1e-7):
+            raise TrainError(f"{path}: trained on data whose statistics differ from this data set's ('{key}')")
+    step = int(ck.get("step", 0))
+    if step >= cfg.steps:
+        raise TrainError(f"{path}: already at step {step}; the config's 'steps' ({cfg.steps}) must be beyond it")
+    net.load_state_dict(ck["state"])
+    return step
 
 
 class _Run:
@@ -336,6 +378,14 @@ class _Run:
         elapsed = self.elapsed + time.perf_counter() - self.t0
         state = dict(state=self.net.state_dict(), opt=self.opt.state_dict(), step=done, elapsed=elapsed)
         torch.save(state, self.out / "resume.pt")
+
+
+def category_codes(labels):
+    """Integer codes [N] (a CPU tensor) of the training windows' category labels, for the posture term by
+    category; TrainError without labels."""
+    if labels is None:
+        raise TrainError("config field 'posture_by_category' needs 'train_labels' in the data set (re-run prepare)")
+    return torch.as_tensor(np.unique(labels, return_inverse=True)[1].reshape(-1), dtype=torch.long)
 
 
 def stance_on(cfg, step):
@@ -395,6 +445,7 @@ def build_parser():
     ap.add_argument("--steps", type=cli.number(int, 1), default=None, help="override the config's number of steps")
     ap.add_argument("--seed", type=cli.number(int, 0), default=0)
     ap.add_argument("--resume", action="store_true", help="continue from OUT/resume.pt")
+    ap.add_argument("--init", default=None, metavar="CKPT", help="fine-tune: start from CKPT's weights at its step")
     ap.add_argument("--device", default=None, help="default: cuda when present, else cpu")
     ap.add_argument(
         "--threads",
@@ -428,6 +479,7 @@ def _main(argv):
         device=a.device,
         threads=a.threads,
         precision=a.precision,
+        init=a.init,
     )
     print(f"trained {a.model}: {out}")
 
