@@ -48,11 +48,16 @@ def fit_bones(poses, lengths, parents=skeleton.PARENTS):
     lengths = np.asarray(lengths, dtype=np.float64)[..., None, :, None]  # over frames and xyz
     out = j.copy()
     for k in _parent_first(parents):
-        bone = j[..., k, :] - out[..., parents[k], :]
-        norm = np.linalg.norm(bone, axis=-1, keepdims=True)
-        unit = np.divide(bone, norm, out=np.zeros_like(bone), where=norm > 1e-9)
-        out[..., k, :] = out[..., parents[k], :] + unit * lengths[..., k - 1, :]
+        out[..., k, :] = _along_bone(j[..., k, :], out[..., parents[k], :], lengths[..., k - 1, :])
     return out.reshape(poses.shape).astype(poses.dtype)
+
+
+def _along_bone(joint, parent, length):
+    """The point at `length` from the placed `parent` nearest to where the model put `joint` (the parent itself
+    where the model put the joint on it: no direction)."""
+    bone = joint - parent
+    norm = np.linalg.norm(bone, axis=-1, keepdims=True)
+    return parent + np.divide(bone, norm, out=np.zeros_like(bone), where=norm > 1e-9) * length
 
 
 def rigid_groups(parents=skeleton.PARENTS):
@@ -78,24 +83,18 @@ def fit_skeleton(poses, reference, parents=skeleton.PARENTS):
     ref = _joints(np.asarray(reference), len(parents)).astype(np.float64)[..., None, :, :]  # over frames
     lengths = np.linalg.norm(ref[..., 1:, :] - ref[..., parents[1:], :], axis=-1)[..., None]
     groups = rigid_groups(parents)
+    order = _parent_first(parents)
+    first = {p: next(k for k in order if k in kids) for p, kids in groups.items()}  # places the whole group
     out = j.copy()
-    placed = {0}
-    for k in _parent_first(parents):
-        if k in placed:
-            continue
+    for k in order:
         p = parents[k]
-        if p in groups:
+        if p not in groups:
+            out[..., k, :] = _along_bone(j[..., k, :], out[..., p, :], lengths[..., k - 1, :])
+        elif k == first[p]:
             kids = groups[p]
             shape = ref[..., kids, :] - ref[..., [p], :]  # [..., 1, n, 3]
             model = j[..., kids, :] - out[..., [p], :]  # [..., T, n, 3]
             out[..., kids, :] = out[..., [p], :] + shape @ _best_rotation(shape, model).swapaxes(-1, -2)
-            placed.update(kids)
-            continue
-        bone = j[..., k, :] - out[..., p, :]
-        norm = np.linalg.norm(bone, axis=-1, keepdims=True)
-        unit = np.divide(bone, norm, out=np.zeros_like(bone), where=norm > 1e-9)
-        out[..., k, :] = out[..., p, :] + unit * lengths[..., k - 1, :]
-        placed.add(k)
     return out.reshape(poses.shape).astype(poses.dtype)
 
 
