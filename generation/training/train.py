@@ -225,9 +225,10 @@ def _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, s
             opt.state.clear()  # a warm restart starts Adam afresh: its moments belong to the finished phase
         if share is not None:
             share.step()
-        x, c, keep, history, stance_z = draw_batch(net, tx, tc, cfg, seed, step, crop, weights)
+        idx = batch_indices(len(tx), cfg.batch_size, seed, step, weights)
+        x, c, keep, history, stance_z = draw_batch(net, tx, tc, cfg, seed, step, crop, weights, idx)
         stance = stance_on(cfg, step)
-        cats = None if codes is None else codes[batch_indices(len(tx), cfg.batch_size, seed, step, weights)]
+        cats = None if codes is None else codes[idx]
         nll, foot = step_loss(
             *(None if v is None else v[rows] for v in (x, c, keep, history, stance_z)),
             stance,
@@ -393,12 +394,14 @@ def stance_on(cfg, step):
     return cfg.stance_weight > 0 and step >= cfg.stance_start
 
 
-def draw_batch(net, tx, tc, cfg, seed, step, crop, weights=None):
+def draw_batch(net, tx, tc, cfg, seed, step, crop, weights=None, idx=None):
     """The whole training batch of `step` (every rank draws the same): windows (drawn with probabilities
     `weights`, None: uniform), their random crop, the dequantisation noise, for MG the history dropout mask and
     the history the conditioning reads, and the latents of the stance loss's prediction (None where unused), all
     functions of (seed, step)."""
-    idx = batch_indices(len(tx), cfg.batch_size, seed, step, weights).to(tx.device)
+    if idx is None:  # the windows of (seed, step); the training loop draws them once and passes them in
+        idx = batch_indices(len(tx), cfg.batch_size, seed, step, weights)
+    idx = idx.to(tx.device)
     x, c = tx[idx], tc[idx]
     torch.manual_seed(seed * 1_000_003 + step)
     if crop < x.shape[1]:
