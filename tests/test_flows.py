@@ -1,6 +1,10 @@
 """Flow layers and both models: invertibility and log-determinants (one generic test), ActNorm init,
 MG causality. All at small sizes."""
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 import torch
@@ -163,6 +167,32 @@ def test_bfloat16_networks_leave_the_flow_float32_and_invertible(name):
         assert 0 < (y - y32).abs().max().item() < 0.1  # the networks' rounding shows, and stays small
         set_net_precision(model, None)
         assert torch.equal(fwd(x)[0], y32)
+
+
+LSTM_WITHOUT_AVX512 = """
+import torch
+from generation.models.moglow import LSTMNet, lstm_runs_in
+torch.manual_seed(0)
+net = LSTMNet(4, 3, 6, 16, 2)
+torch.nn.init.normal_(net.out.weight, 0, 0.1)
+x, c = torch.randn(2, 4, 9), torch.randn(2, 3, 9)
+y32 = net(x, c)
+with torch.autocast("cpu", dtype=torch.bfloat16):
+    y = net(x, c)
+y.float().sum().backward()
+print(lstm_runs_in("cpu", torch.bfloat16), y.dtype, (y.float() - y32).abs().max().item())
+"""
+
+
+def test_bfloat16_lstm_falls_back_to_float32_where_onednn_has_none():
+    """oneDNN builds no bfloat16 LSTM on a CPU without AVX-512 (CI's AMD host): there LSTMNet runs its LSTM in
+    float32 and its output layer in bfloat16, instead of failing. ONEDNN_MAX_CPU_ISA makes this CPU such a one."""
+    env = {**os.environ, "ONEDNN_MAX_CPU_ISA": "AVX2", "OMP_NUM_THREADS": "1"}
+    out = subprocess.run([sys.executable, "-c", LSTM_WITHOUT_AVX512], env=env, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    probe, dtype, diff = out.stdout.split()
+    assert (probe, dtype) == ("False", "torch.bfloat16")
+    assert 0 < float(diff) < 0.05  # the output layer's rounding, nothing more
 
 
 def test_actnorm_initialises_to_zero_mean_unit_variance():

@@ -36,6 +36,7 @@ mean as before, so its NLL is the same quantity; a caller with a longer real see
 (sample.sample_mg's `style`).
 """
 
+import functools
 from dataclasses import asdict, dataclass, field
 
 import torch
@@ -66,6 +67,21 @@ class MGConfig:
 _FEET = torch.tensor(FEET)
 
 
+@functools.cache
+def lstm_runs_in(device_type, dtype):
+    """Whether torch builds an LSTM kernel for `dtype` under autocast on `device_type`. oneDNN has no bfloat16 LSTM
+    on CPUs without AVX-512 (it fails to create the primitive), so there LSTMNet runs its LSTM in float32 and the
+    rest of the coupling network in bfloat16. Probed once per kind of device, forward and backward."""
+    lstm = nn.LSTM(2, 2).to(device_type)
+    try:
+        with torch.autocast(device_type, dtype=dtype):
+            h, _ = lstm(torch.zeros(1, 1, 2, device=device_type))
+        h.float().sum().backward()
+    except RuntimeError:
+        return False
+    return True
+
+
 class LSTMNet(nn.Module):
     """Coupling network of MG: LSTM over frames of [x_a, cond], then a zero-initialised linear layer."""
 
@@ -78,7 +94,13 @@ class LSTMNet(nn.Module):
 
     def forward(self, x_a, cond):
         # Joined straight into the LSTM's [frames, batch, channels] layout: one copy per coupling.
-        h, _ = self.lstm(torch.cat([x_a.permute(2, 0, 1), cond.permute(2, 0, 1)], dim=2))  # zero initial state
+        z = torch.cat([x_a.permute(2, 0, 1), cond.permute(2, 0, 1)], dim=2)
+        dev = z.device.type
+        if torch.is_autocast_enabled(dev) and not lstm_runs_in(dev, torch.get_autocast_dtype(dev)):
+            with torch.autocast(dev, enabled=False):
+                h, _ = self.lstm(z.float())  # zero initial state
+        else:
+            h, _ = self.lstm(z)
         # Batch first again for the output layer: its weight gradient then adds the frames up in the order that
         # trained the shipped models, so float32 training keeps their bits.
         return self.out(h.transpose(0, 1)).transpose(1, 2)

@@ -182,6 +182,15 @@ def _config_and_data(model, config, steps, data_path, precision=None):
     return cfg, ds
 
 
+def _set_precision(net, precision, device, says):
+    """The coupling networks' arithmetic; where torch has no LSTM in that precision, MG's LSTMs keep float32
+    (moglow.LSTMNet), and the first rank says so."""
+    low = flows.PRECISIONS[precision]
+    flows.set_net_precision(net, low)
+    if says and low is not None and net.kind == "mg" and not moglow.lstm_runs_in(device.type, low):
+        print(f"note: torch has no {precision} LSTM on this {device.type}: MG's LSTMs run in float32", file=sys.stderr)
+
+
 def _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, share_cores, init=None):
     device = pick_device(device)
     rank, world = join_ranks(device)
@@ -193,7 +202,7 @@ def _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, s
     net = build_model(model, cfg, ds.stats).to(device)
     if model == "fl":
         net.check_length(cfg.train_window or ds.window)
-    flows.set_net_precision(net, flows.PRECISIONS[cfg.precision])
+    _set_precision(net, cfg.precision, device, rank == 0)
     opt = make_optimiser(net, cfg)
     start, elapsed = _first_step(out, resume, init, net, opt, cfg, ds, device)
     run = _Run(out, rank == 0, cfg, ds, net, opt, start, elapsed)
