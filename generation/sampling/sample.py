@@ -29,7 +29,8 @@ from ..models.flows import PRECISIONS
 from ..models.mg_stream import MGStream
 from ..models.moglow import MoGlow
 from ..motion import skeleton
-from ..training.train import MODELS, pick_device
+from ..training.devices import pick_device
+from ..training.train import MODELS
 
 
 class SampleError(UserError):

@@ -80,7 +80,7 @@ def ensure_model(kind, args, dataset):
 
 def sampler_precision(args):
     """MG's sampler's precision: --sample-precision, else picked once per CPU (generation.sampling.precision)."""
-    from ..training.train import pick_device  # torch: only when the job samples
+    from ..training.devices import pick_device  # torch: only when the job samples
 
     chosen = pretrained.sampler_precision(str(pick_device(args.device)), args.sample_precision)
     log.info(f"models: MG samples in {chosen}")

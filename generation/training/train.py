@@ -21,7 +21,6 @@ N ranks train the same model as one process would (up to float rounding). Rank 0
 import csv
 import json
 import math
-import os
 import sys
 import time
 from pathlib import Path
@@ -37,6 +36,7 @@ from ..data.dataset import batch_indices, category_weights, eval_batches, load_d
 from ..data.torch_files import load_torch_file
 from ..models import fl, flows, moglow
 from .config import TrainError, as_dict, load_config, model_config, shortened, with_changes
+from .devices import finite_on_every_rank, join_ranks, pick_device, set_precision
 from .stance import stance_loss
 from .threads import CoreShare, torch_threads
 
@@ -65,25 +65,6 @@ def learning_rate(cfg, step):
         return lr
     progress = (step - cfg.warmup) / max(1, end - start - 1 - cfg.warmup)
     return lr_min + (lr - lr_min) * 0.5 * (1 + math.cos(math.pi * min(1.0, progress)))
-
-
-def pick_device(device=None):
-    """`device`, or CUDA when present, else the CPU; under torchrun a bare 'cuda' is the rank's own GPU."""
-    device = torch.device(device) if device else torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    if device.type == "cuda" and device.index is None:
-        return torch.device("cuda", int(os.environ.get("LOCAL_RANK", 0)))
-    return device
-
-
-def join_ranks(device):
-    """(rank, world size): (0, 1) alone; under torchrun, after joining the process group: nccl where the ranks
-    train on CUDA, gloo on the CPU (also on a machine that has a GPU, when --device cpu asks for it)."""
-    world = int(os.environ.get("WORLD_SIZE", "1"))
-    if world == 1:
-        return 0, 1
-    if not torch.distributed.is_initialized():
-        torch.distributed.init_process_group("nccl" if device.type == "cuda" else "gloo")
-    return torch.distributed.get_rank(), world
 
 
 class _BatchLoss(nn.Module):
@@ -182,15 +163,6 @@ def _config_and_data(model, config, steps, data_path, precision=None):
     return cfg, ds
 
 
-def _set_precision(net, precision, device, says):
-    """The coupling networks' arithmetic; where torch has no LSTM in that precision, MG's LSTMs keep float32
-    (moglow.LSTMNet), and the first rank says so."""
-    low = flows.PRECISIONS[precision]
-    flows.set_net_precision(net, low)
-    if says and low is not None and net.kind == "mg" and not moglow.lstm_runs_in(device.type, low):
-        print(f"note: torch has no {precision} LSTM on this {device.type}: MG's LSTMs run in float32", file=sys.stderr)
-
-
 def _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, share_cores, init=None):
     device = pick_device(device)
     rank, world = join_ranks(device)
@@ -202,7 +174,7 @@ def _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, s
     net = build_model(model, cfg, ds.stats).to(device)
     if model == "fl":
         net.check_length(cfg.train_window or ds.window)
-    _set_precision(net, cfg.precision, device, rank == 0)
+    set_precision(net, cfg.precision, device, rank == 0)
     opt = make_optimiser(net, cfg)
     start, elapsed = _first_step(out, resume, init, net, opt, cfg, ds, device)
     run = _Run(out, rank == 0, cfg, ds, net, opt, start, elapsed)
@@ -271,7 +243,7 @@ def _optimise(loss, net, opt, cfg, world):
     """One optimiser step on `loss` with gradient-norm clipping; returns the norm, or None (no step) when the loss
     is not finite on some rank."""
     opt.zero_grad(set_to_none=True)
-    if not _finite_on_every_rank(loss, world):
+    if not finite_on_every_rank(loss, world):
         return None
     loss.backward()
     grad_norm = float(torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.clip_grad, foreach=True))
@@ -433,14 +405,6 @@ def draw_batch(net, tx, tc, cfg, seed, step, crop, weights=None, idx=None):
     if stance_on(cfg, step) and cfg.stance_temperature > 0:
         stance_z = cfg.stance_temperature * torch.randn_like(x)  # drawn last: other runs draw as before
     return x, c, keep, history, stance_z
-
-
-def _finite_on_every_rank(loss, world):
-    """Whether the loss is finite on every rank (a rank that skipped its step alone would hang the others)."""
-    finite = torch.isfinite(loss.detach()).to(torch.int32)
-    if world > 1:
-        torch.distributed.all_reduce(finite, op=torch.distributed.ReduceOp.MIN)
-    return bool(finite)
 
 
 def _threads(text):
