@@ -14,6 +14,7 @@ import sys
 
 import psycopg
 import pytest
+from helpers.once import built_once
 from helpers.paths import BANDAI, ROOT, SHARED, small_take_names
 
 # Fixtures that need the full machine: ../shared, PostgreSQL, or a real run of the pipeline.
@@ -94,9 +95,10 @@ def small_dataset(tmp_path_factory):
     """Path of a dataset.npz prepared from 4 real takes of every Bandai-Namco category (about a second)."""
     from generation.data.prepare import prepare
 
-    out = tmp_path_factory.mktemp("small_dataset") / "dataset.npz"
-    prepare(BANDAI, out, takes=small_take_names(), workers=1, progress=False)
-    return out
+    def build(folder):
+        prepare(BANDAI, folder / "dataset.npz", takes=small_take_names(), workers=1, progress=False)
+
+    return built_once(tmp_path_factory, "small_dataset", build) / "dataset.npz"
 
 
 # --- models ---
@@ -107,16 +109,16 @@ def tiny_runs(small_dataset, tmp_path_factory):
 
     from generation.training.train import train
 
-    threads = torch.get_num_threads()
-    root = tmp_path_factory.mktemp("tiny_runs")
-    try:
-        runs = {
-            kind: train(kind, "tiny", small_dataset, root / kind, steps=150, seed=0, progress=False, threads=1)
-            for kind in ("mg", "fl")
-        }
-    finally:
-        torch.set_num_threads(threads)
-    return runs
+    def build(root):
+        threads = torch.get_num_threads()
+        try:
+            for kind in ("mg", "fl"):
+                train(kind, "tiny", small_dataset, root / kind, steps=150, seed=0, progress=False, threads=1)
+        finally:
+            torch.set_num_threads(threads)
+
+    root = built_once(tmp_path_factory, "tiny_runs", build)
+    return {kind: root / kind for kind in ("mg", "fl")}
 
 
 # --- rating app: one small real stimulus folder; every app test runs on SQLite and PostgreSQL ---
@@ -189,27 +191,28 @@ def quick_stimuli(tmp_path_factory):
     import subprocess
     import sys
 
-    root = tmp_path_factory.mktemp("quick_stimuli")
-    r = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "generation.make_stimuli",
-            "--quick",
-            "--out",
-            str(root / "stimuli"),
-            "--runs",
-            str(root / "runs"),
-        ],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=900,
-    )
-    if r.returncode != 0:
-        pytest.fail(f"make_stimuli --quick failed ({r.returncode}): {r.stderr[-3000:]}")
-    (root / "make_stimuli.log").write_text(r.stdout + r.stderr)
-    return root / "stimuli"
+    def build(root):
+        r = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "generation.make_stimuli",
+                "--quick",
+                "--out",
+                str(root / "stimuli"),
+                "--runs",
+                str(root / "runs"),
+            ],
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+            timeout=900,
+        )
+        if r.returncode != 0:
+            pytest.fail(f"make_stimuli --quick failed ({r.returncode}): {r.stderr[-3000:]}")
+        (root / "make_stimuli.log").write_text(r.stdout + r.stderr)
+
+    return built_once(tmp_path_factory, "quick_stimuli", build) / "stimuli"
 
 
 @pytest.fixture

@@ -22,8 +22,21 @@ def pg_base() -> str:
     return os.environ.get("RATING_TEST_PG", "postgresql+psycopg://postgres@127.0.0.1:5432/test")
 
 
+_ENCODED = {}  # (n_frames, size, fps, shade) -> the MP4's bytes: an ffmpeg process per clip was most of a folder's time
+
+
 def write_mp4(path, n_frames=6, size=64, fps=20, shade=0):
-    """A few frames of real H.264 yuv420p video (+faststart), as the stimuli contract asks."""
+    """A few frames of real H.264 yuv420p video (+faststart), as the stimuli contract asks; encoded once per
+    process for each set of arguments, and copied after that."""
+    key = (n_frames, size, fps, shade)
+    if key not in _ENCODED:
+        _encode(path, *key)
+        _ENCODED[key] = Path(path).read_bytes()
+    else:
+        Path(path).write_bytes(_ENCODED[key])
+
+
+def _encode(path, n_frames, size, fps, shade):
     import imageio_ffmpeg
 
     w = imageio_ffmpeg.write_frames(
