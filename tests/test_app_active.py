@@ -81,7 +81,7 @@ def test_targets_exact_under_concurrent_sessions(active_make, big_stimuli):
 
 @pytest.mark.full  # the full tier: crowds, as in the modules these checks come from
 def test_catch_units_recur_like_test_units(active_make, pool_stimuli, monkeypatch):
-    pool.test_catch_units_recur_like_test_units(active_make, pool_stimuli, "pairwise", 24, monkeypatch)
+    pool.catch_recurrence(active_make, pool_stimuli, "pairwise", 24, monkeypatch)
 
 
 # ---------------------------------------------------------------------------------- what it changes

@@ -100,9 +100,14 @@ def test_catch_units_recur_like_test_units(make, pool_stimuli, design, n_session
     """60 sessions (--run-slow: the whole acr study) and a 24-session short variant for CI."""
     if design != "acr" and request.node.callspec.params["app_db_url"] == "sqlite":
         only_when_slow(request, "the short variant runs every design on PostgreSQL and acr on SQLite too")
+    catch_recurrence(make, pool_stimuli, design, n_sessions, monkeypatch)
+
+
+def catch_recurrence(make, stimuli, design, n_sessions, monkeypatch):
+    """`n_sessions` sessions of `design` on `stimuli`, checked by check_recurrence_tells_nothing."""
     per_rater = PRODUCTION[design]
     monkeypatch.setenv("CATCH_PER_RATER", str(CATCH_PER_RATER))  # as gunicorn's settings come
-    app = make(pool_stimuli, design, ratings_per_clip=TARGET, clips_per_rater=per_rater, check_files=False)
+    app = make(stimuli, design, ratings_per_clip=TARGET, clips_per_rater=per_rater, check_files=False)
     sessions = run_sessions(app, n_sessions)
     check_recurrence_tells_nothing(sessions, per_rater)
 

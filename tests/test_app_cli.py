@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import requests
 from helpers.fake_stimuli import free_port
+from helpers.tiers import only_when_slow
 
 from moglow_eval.core.tables import read_metrics
 from rating_app import create_app
@@ -58,8 +59,10 @@ def live(app_stimuli, app_db_url):
 
 
 @pytest.mark.full  # the full tier: a crowd against a served app
-def test_simulated_crowd_matches_export(live, app_stimuli, tmp_path):
+def test_simulated_crowd_matches_export(live, app_stimuli, tmp_path, request):
     url, db = live
+    if db.startswith("sqlite"):
+        only_when_slow(request, "the short variant serves the crowd from PostgreSQL")
     out = tmp_path / "summary.json"
     r = cli(
         "simulate",
