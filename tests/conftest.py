@@ -105,17 +105,11 @@ def small_dataset(tmp_path_factory):
 @pytest.fixture(scope="session")
 def tiny_runs(small_dataset, tmp_path_factory):
     """{'mg': run_dir, 'fl': run_dir}: mg_tiny and fl_tiny trained 150 steps on `small_dataset` (seconds)."""
-    import torch
-
     from generation.training.train import train
 
-    def build(root):
-        threads = torch.get_num_threads()
-        try:
-            for kind in ("mg", "fl"):
-                train(kind, "tiny", small_dataset, root / kind, steps=150, seed=0, progress=False, threads=1)
-        finally:
-            torch.set_num_threads(threads)
+    def build(root):  # train restores torch's thread count on return (threads.torch_threads)
+        for kind in ("mg", "fl"):
+            train(kind, "tiny", small_dataset, root / kind, steps=150, seed=0, progress=False, threads=1)
 
     root = built_once(tmp_path_factory, "tiny_runs", build)
     return {kind: root / kind for kind in ("mg", "fl")}
