@@ -29,9 +29,10 @@ from tqdm import tqdm
 
 from moglow_eval.core import cli
 
-from . import figures, rating_models, stats
-from .filtering import DEFAULT_THRESHOLD, exclude_raters, only_test_rows
-from .load import AnalysisError, load_ratings
+from .data.filtering import DEFAULT_THRESHOLD, exclude_raters, only_test_rows
+from .data.load import AnalysisError, load_ratings
+from .page import figures
+from .stats import anova, rating_models
 
 MAX_RATERS = 5000
 
@@ -117,7 +118,7 @@ def simulate_power(design, pair, n_raters, n_sim=1000, alpha=0.05, seed=0, chunk
     df_w = N - K
     if df_w < 1:
         return 0.0, 0.0, 1.0
-    qcrit = stats.tukey_qcrit(alpha, K, df_w)
+    qcrit = anova.tukey_qcrit(alpha, K, df_w)
     rng = np.random.default_rng(seed)
     rejected = 0
     for start in range(0, n_sim, chunk):

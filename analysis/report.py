@@ -17,13 +17,13 @@ from tqdm import tqdm
 
 from moglow_eval.core import cli, study
 
-from . import report_html
+from .data.filtering import DEFAULT_THRESHOLD
+from .data.load import AnalysisError
 from .designs import Options, design_of
-from .designs.acr import MIXED_MAX_LEVELS, ORDINAL_MAX_RATINGS
-from .filtering import DEFAULT_THRESHOLD
-from .load import AnalysisError
-from .methods import methods_paragraph
-from .study_text import reference_from_study_file
+from .designs.acr.design import MIXED_MAX_LEVELS, ORDINAL_MAX_RATINGS
+from .page import report_html
+from .page.methods import methods_paragraph
+from .page.study_text import reference_from_study_file
 
 
 def _prepare_out(out):

@@ -36,7 +36,7 @@ from sqlalchemy import event  # noqa: E402
 from moglow_eval.core import cli  # noqa: E402
 from moglow_eval.core.study import DESIGNS  # noqa: E402
 from rating_app import create_app  # noqa: E402
-from rating_app.db import app_engine  # noqa: E402
+from rating_app.study.db import app_engine  # noqa: E402
 
 SAME_SITE = {"Sec-Fetch-Site": "same-origin"}
 
@@ -83,7 +83,10 @@ def main():
     p.add_argument("--pairing", choices=("balanced", "active"), default="balanced", help="pairwise: PAIRING")
     p.add_argument("--stop-when", choices=("never", "settled"), default="never", help="pairwise: STOP_WHEN")
     p.add_argument(
-        "--refresh", type=float, default=None, help="active: seconds between refits (rating_app.active.REFRESH_S)"
+        "--refresh",
+        type=float,
+        default=None,
+        help="active: seconds between refits (rating_app.pairing.active.REFRESH_S)",
     )
     a = p.parse_args()
     if a.refresh is not None:

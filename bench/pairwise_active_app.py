@@ -35,9 +35,9 @@ from helpers.pg_server import suite_server  # noqa: E402
 from pairwise_active import leaderboard_truth  # noqa: E402
 
 from rating_app import create_app  # noqa: E402
-from rating_app.db import app_engine  # noqa: E402
 from rating_app.simulate import run_simulation  # noqa: E402
 from rating_app.simulate.raters import BT_SCALE  # noqa: E402
+from rating_app.study.db import app_engine  # noqa: E402
 
 
 def one_study(manifest, quality, pairing, a):

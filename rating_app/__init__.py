@@ -23,8 +23,8 @@ from werkzeug.exceptions import HTTPException
 
 from moglow_eval.core import study
 
-from .manifest import AppError, load_manifest, reference_name
-from .settings import ARGS, SETTINGS, resolve
+from .study.manifest import AppError, load_manifest, reference_name
+from .study.settings import ARGS, SETTINGS, resolve
 
 __all__ = ["create_app", "AppError", "SETTINGS"]
 
@@ -34,7 +34,7 @@ def create_app(*, config=None, check_files=True, **given) -> Flask:
     is one of moglow_eval.core.study.DESIGNS, fixed for the life of the database; ratings_per_clip and
     clips_per_rater count the design's units: clips, pairs of conditions of an item, pages, ...), the others from
     the environment, the study file `config` and the defaults. `check_files`: read every video at the start."""
-    from .study_config import study_environment
+    from .study.config import study_environment
 
     unknown = sorted(set(given) - set(ARGS))
     if unknown:
@@ -82,7 +82,7 @@ def _app_config(values) -> dict:
     for env, plain in (("PAIRING", "balanced"), ("STOP_WHEN", "never")):
         if values[env] != plain and design.name != "pairwise":
             raise AppError(f"{env.lower()}: {values[env]} needs the pairwise design, not {design.name}")
-    from .reasons import configure
+    from .study.reasons import configure
 
     return {
         **configure(design, values["VOTE_REASONS"], values["REASON_TEXT"]),
@@ -105,10 +105,11 @@ def _app_config(values) -> dict:
 
 def _open_study(app: Flask, values: dict, check_files: bool) -> None:
     """The manifest's clips, the design's units, the database and the videos, in the app's extension state."""
-    from . import designs, health
-    from .audio_check import load_audio_check
-    from .db import make_read_engine
-    from .videos import VideoStore
+    from . import designs
+    from .media.audio_check import load_audio_check
+    from .media.videos import VideoStore
+    from .operations import health
+    from .study.db import make_read_engine
 
     manifest = values["RATING_MANIFEST"]
     design = designs.get(app.config["STUDY_DESIGN"])
@@ -140,7 +141,7 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
     }
     _open_rounds(app)  # may withdraw units: the ranking below is built on what is served
     if app.config["PAIRING"] == "active" or app.config["STOP_WHEN"] == "settled":
-        from .active import Ranking
+        from .pairing.active import Ranking
 
         ext = app.extensions["rating_app"]
         ext["ranking"] = Ranking(ext["units"], ext["clips"], app.config)
@@ -156,8 +157,8 @@ def _open_rounds(app: Flask) -> None:
     withdrawn condition's pairs never again."""
     from sqlalchemy.orm import Session
 
-    from . import rounds
-    from .db import utcnow
+    from .study import rounds
+    from .study.db import utcnow
 
     ext = app.extensions["rating_app"]
     with Session(ext["engine"]) as s, s.begin():
@@ -170,11 +171,11 @@ def _open_rounds(app: Flask) -> None:
 
 def _register(app: Flask) -> None:
     """The blueprints, the error handlers and the response headers."""
-    from . import health
-    from .admin import bp as admin_bp
-    from .api import bp as api_bp
-    from .audio_check import bp as audio_check_bp
-    from .pages import bp as pages_bp
+    from .media.audio_check import bp as audio_check_bp
+    from .operations import health
+    from .web.admin import bp as admin_bp
+    from .web.api import bp as api_bp
+    from .web.pages import bp as pages_bp
 
     app.before_request(health.note_untrusted_proxy)
     app.register_blueprint(pages_bp)
@@ -200,8 +201,8 @@ def target_raters(test_units: int, config) -> int:
 def _open_database(db_url, pool_size, clips, design, cover_keys, n_raters, reference):
     """The engine, with the schema created and the manifest's clips and the design stored; AppError, one line,
     when the database cannot be opened."""
-    from . import db as dbm
     from . import rounds  # noqa: F401  (its tables, on db.Base, are part of the schema init_db creates)
+    from .study import db as dbm
 
     engine = dbm.make_engine(db_url, pool_size=pool_size)
     try:

@@ -11,8 +11,8 @@ import sys
 from moglow_eval.core import cli
 from moglow_eval.core.study import DESIGNS
 
-from .manifest import AppError
-from .settings import add_flags
+from .study.manifest import AppError
+from .study.settings import add_flags
 
 # Diagnostics (where the app runs, how many rows were exported) go to the log, on stderr; results to stdout.
 log = logging.getLogger("rating_app")
@@ -22,7 +22,7 @@ def _serve(a):
     from . import create_app
 
     app = create_app(**a.given)  # the settings given as flags; the rest from the environment and study file
-    from .db import app_engine
+    from .study.db import app_engine
 
     db = app_engine(app).url.render_as_string(hide_password=True)
     log.info(
@@ -49,10 +49,10 @@ def _export(a):
     from sqlalchemy.engine import make_url
     from sqlalchemy.exc import SQLAlchemyError
 
-    from .battles import export_battles
-    from .db import check_url, make_engine, study_design
     from .designs import get
-    from .export import export_csv
+    from .operations.battles import export_battles
+    from .operations.export import export_csv
+    from .study.db import check_url, make_engine, study_design
 
     url = check_url(a.db)
     parsed = make_url(url)
@@ -91,7 +91,7 @@ def _export(a):
 
 
 def _backup(a):
-    from .backup import backup
+    from .operations.backup import backup
 
     kind = backup(a.db, a.out)
     log.info("%s backup -> %s", kind, a.out)
@@ -100,7 +100,7 @@ def _backup(a):
 
 
 def _restore(a):
-    from .backup import restore
+    from .operations.backup import restore
 
     kind = restore(a.backup, a.db)
     log.info("%s backup %s restored", kind, a.backup)
@@ -155,7 +155,7 @@ def _open_db(db_url):
     from sqlalchemy import inspect
     from sqlalchemy.engine import make_url
 
-    from .db import check_url, make_engine
+    from .study.db import check_url, make_engine
 
     url = check_url(db_url)
     parsed = make_url(url)
@@ -169,7 +169,7 @@ def _open_db(db_url):
 
 
 def _add_condition(a):
-    from .conditions import add_condition
+    from .operations.conditions import add_condition
 
     engine = _open_db(a.db)
     try:
@@ -188,7 +188,7 @@ def _add_condition(a):
 
 
 def _withdraw_condition(a):
-    from .conditions import withdraw_condition
+    from .operations.conditions import withdraw_condition
 
     engine = _open_db(a.db)
     try:

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from scipy import stats as sps
 
-from analysis.appropriateness import analyse, failed_raters, load_answers
+from analysis.designs.appropriateness.mas import analyse, failed_raters, load_answers
 
 VOTES = Path(__file__).resolve().parents[2] / "shared" / "data" / "genea-leaderboard-votes" / "battles_mismatch.csv"
 COLUMNS = ["rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role", "matched"]
@@ -70,7 +70,7 @@ def test_catch_pairs_exclude_raters_who_prefer_the_broken_clip(tmp_path):
 
 
 def test_bad_matched_side_is_one_line(tmp_path):
-    from analysis.load import AnalysisError
+    from analysis.data.load import AnalysisError
 
     path = tmp_path / "a.csv"
     path.write_text(",".join(COLUMNS) + "\nr1,i1,x1,x2,S,S,2,test,left\n")

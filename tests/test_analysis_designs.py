@@ -16,8 +16,8 @@ import pytest
 from scipy import stats as sps
 
 from analysis import pairwise, parallel
+from analysis.data.load import AnalysisError
 from analysis.designs import detect_design
-from analysis.load import AnalysisError
 from analysis.report import build_report
 
 ROOT = Path(__file__).resolve().parents[1]

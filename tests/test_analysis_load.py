@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from analysis.load import AnalysisError, load_metrics, load_ratings
+from analysis.data.load import AnalysisError, load_metrics, load_ratings
 from analysis.report import main
 
 ROOT = Path(__file__).resolve().parents[1]

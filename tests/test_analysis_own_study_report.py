@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from analysis import report, study_text
-from analysis.load import AnalysisError
+from analysis.data.load import AnalysisError
 
 PAPER = "of the paper"
 

@@ -93,7 +93,7 @@ def test_reference_flag_sets_the_anchor(tmp_path):
     doc = report.build_report(path, tmp_path / "rep", n_boot=50, progress=False, quiet=True, reference="S2")
     assert doc["elo"]["S2"] == 1000.0 and doc["bradley_terry"]["S2"] == 0.0
     assert doc["elo"]["NAT"] > doc["elo"]["S1"] > 1000.0
-    from analysis.load import AnalysisError
+    from analysis.data.load import AnalysisError
 
     with pytest.raises(AnalysisError, match="--reference XYZ: no such condition"):
         report.build_report(path, tmp_path / "rep2", n_boot=50, progress=False, quiet=True, reference="XYZ")

@@ -1,7 +1,8 @@
-"""Why a system lost (analysis/reasons.py): the share of each reason in the votes a condition lost, checked by hand
+"""Why a system lost (analysis/designs/pairwise/reasons.py):
+the share of each reason in the votes a condition lost, checked by hand
 on a small table, against a plain count on the GENEA leaderboard's released votes, and through analysis.report
 (stats.json's "reasons_when_lost" and a table in report.html, escaped); and the votes of each round
-(analysis/rounds.py)."""
+(analysis/designs/pairwise/rounds.py)."""
 
 import csv
 import json

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from analysis.filtering import exclude_raters
-from analysis.load import load_ratings
+from analysis.data.filtering import exclude_raters
+from analysis.data.load import load_ratings
 from analysis.report import build_report, main
 
 DATA = Path(__file__).parent / "data" / "analysis"
@@ -358,7 +358,7 @@ def test_tiny_tukey_p_values_are_bounds(frozen_run):
 def test_tukey_bound_is_a_true_upper_bound():
     from scipy import stats as sps
 
-    from analysis.stats import tukey_p
+    from analysis.stats.anova import tukey_p
 
     for q in (6.0, 8.0, 9.5, 10.5):  # where the numerical tail is still accurate, the bound holds above it
         exact = float(sps.studentized_range.sf(q, 3, 200))

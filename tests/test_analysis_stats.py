@@ -10,8 +10,8 @@ import pytest
 from reference.anova_exact import one_way_anova_exact
 
 from analysis import bootstrap, rating_models, stats
-from analysis.filtering import exclude_raters, only_test_rows
-from analysis.load import load_ratings
+from analysis.data.filtering import exclude_raters, only_test_rows
+from analysis.data.load import load_ratings
 
 DATA = Path(__file__).parent / "data"
 NIST = sorted((DATA / "nist_anova").glob("*.dat"))

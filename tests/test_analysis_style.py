@@ -1,4 +1,4 @@
-"""The style factor (analysis.style): condition × style in a two-way ANOVA and a mixed model, a figure; the
+"""The style factor (analysis.stats.style): condition × style in a two-way ANOVA and a mixed model, a figure; the
 interaction is found where the data hold one and not where they do not."""
 
 import numpy as np

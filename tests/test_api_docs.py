@@ -132,4 +132,4 @@ def test_the_checks_catch_missing_sections_wrong_parameters_and_false_examples()
     ]
     attempted, report = doctest_failures(_wrong_parameter, "_wrong_parameter")
     assert attempted == 1 and "Expected:\n    4\nGot:\n    3" in "".join(report)
-    assert documented_names()[0] == "analysis.load.load_ratings"  # the page's `::: name` lines are read
+    assert documented_names()[0] == "analysis.data.load.load_ratings"  # the page's `::: name` lines are read

@@ -16,7 +16,7 @@ from helpers.fake_stimuli import write_fake_stimuli
 from test_app_api import TOKEN_HDR
 
 from rating_app import AppError, active, create_app
-from rating_app.db import app_engine
+from rating_app.study.db import app_engine
 
 
 @pytest.fixture

@@ -17,8 +17,8 @@ from helpers.pg_server import pg_admin_url
 from werkzeug.serving import make_server
 
 from rating_app import create_app
-from rating_app.db import app_engine
 from rating_app.simulate import run_simulation
+from rating_app.study.db import app_engine
 
 
 def cli(*args):

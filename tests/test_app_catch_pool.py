@@ -11,8 +11,8 @@ from helpers.tiers import only_when_slow
 from test_app_designs import shown, value_for
 
 from rating_app.designs import build_units
-from rating_app.health import catch_pool_warning
-from rating_app.manifest import load_manifest
+from rating_app.operations.health import catch_pool_warning
+from rating_app.study.manifest import load_manifest
 
 pytestmark = pytest.mark.full  # the full tier: crowds drawing from catch pools
 

@@ -22,9 +22,9 @@ from helpers.fake_stimuli import free_port, write_fake_stimuli
 from helpers.proxies import caddy_accel, nginx_accel, nginx_head, nginx_temp_paths
 from helpers.servers import crowd_env, kill9, start_gunicorn, stop
 
-from rating_app.db import make_engine
 from rating_app.designs.acr import iter_rows
 from rating_app.simulate import run_simulation
+from rating_app.study.db import make_engine
 
 pytestmark = pytest.mark.full  # the full tier: two hosts, proxies and PostgreSQL
 

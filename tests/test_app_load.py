@@ -13,12 +13,12 @@ from helpers.fake_stimuli import free_port, write_fake_stimuli
 from helpers.servers import crowd_env, kill9, start_gunicorn, stop
 from helpers.tiers import only_when_slow
 
-from rating_app.db import make_engine
 from rating_app.designs.acr import iter_rows
 from rating_app.designs.appropriateness import iter_fit_rows
 from rating_app.designs.pairwise import iter_pair_rows
 from rating_app.designs.parallel import iter_page_rows
 from rating_app.simulate import run_simulation
+from rating_app.study.db import make_engine
 
 pytestmark = pytest.mark.full  # the full tier: hundreds of raters against real servers
 

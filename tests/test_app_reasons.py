@@ -173,7 +173,7 @@ def test_our_battle_rows_write_a_vote_as_the_leaderboard_does(name):
     path = LEADERBOARD / name
     if not path.is_file():
         pytest.skip(f"{path} is absent")
-    from rating_app.battles import battle_row
+    from rating_app.operations.battles import battle_row
 
     with open(path, newline="", encoding="utf-8") as fh:
         rows = list(csv.DictReader(fh))

@@ -12,9 +12,9 @@ from helpers.fake_stimuli import write_fake_stimuli
 from sqlalchemy import select
 from test_app_designs import complete, post, shown
 
-from analysis.appropriateness import analyse, load_answers
-from rating_app.db import Rater, app_engine
-from rating_app.manifest import AppError, load_manifest
+from analysis.designs.appropriateness.mas import analyse, load_answers
+from rating_app.study.db import Rater, app_engine
+from rating_app.study.manifest import AppError, load_manifest
 
 
 @pytest.fixture(scope="module")

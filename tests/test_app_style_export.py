@@ -7,7 +7,7 @@ import io
 import pytest
 from helpers.fake_stimuli import write_fake_stimuli
 
-from rating_app.manifest import load_manifest
+from rating_app.study.manifest import load_manifest
 
 TOKEN_HDR = {"Authorization": "Bearer test-admin-token"}
 
@@ -59,7 +59,7 @@ def test_an_export_without_styles_has_no_style_column(make_app, tmp_path):
 
 
 def test_row_style_joins_a_pairs_two_styles():
-    from rating_app.export_cells import row_style
+    from rating_app.designs.export_cells import row_style
 
     styles = {"a": "stick", "b": "solid", "c": "stick"}
     assert row_style({"clip_id": "a"}, styles) == "stick"

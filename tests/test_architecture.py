@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from moglow_eval.core import moved
+
 ROOT = Path(__file__).resolve().parents[1]
 # Each part may import only the parts listed: core is the floor, rendering draws clips, generation makes them
 # (and renders its stimuli), the app and the analysis read only files and core's contracts.
@@ -23,9 +25,19 @@ ALLOWED = {
     "moglow_eval": {"moglow_eval.core", "rendering", "generation", "rating_app", "analysis"},
 }
 PARTS = tuple(ALLOWED)
-# generation's subpackages, lowest first: each may import those before it, never one after it. Its top-level
-# modules (the main job, make_stimuli) may import every subpackage.
-GENERATION = ("motion", "data", "metrics", "models", "training", "sampling", "stimuli", "own_study")
+# Each big part's rooms (subpackages), lowest first: a room may import those before it, never one after it. The
+# part's top-level modules (its commands: the main job, the report, the app's factory) may import every room.
+ROOMS = {
+    "generation": ("motion", "data", "metrics", "models", "training", "sampling", "stimuli", "own_study"),
+    "rating_app": ("study", "guard", "media", "pairing", "designs", "trials", "operations", "web", "simulate"),
+    "analysis": ("data", "stats", "page", "designs"),
+}
+# The modules a part keeps at its top, beside its rooms (the one-line pointers of moved commands are checked apart).
+TOP_MODULES = {
+    "generation": ["make_stimuli"],
+    "rating_app": ["wsgi"],
+    "analysis": ["demo", "import_votes", "plan", "report"],
+}
 
 
 def part_of(module):
@@ -217,49 +229,60 @@ def test_the_module_cycle_finder_sees_lazy_and_relative_imports(tmp_path, monkey
     assert ("demo_part.kinds.a", "demo_part.kinds.base") in module_edges("demo_part")
 
 
-# ------------------------------------------------------------------------------ generation's subpackages
-def subpackage_of(module):
-    """`generation.models.fl` -> `models`; a top-level module of generation (the main job) -> None."""
+# ------------------------------------------------------------------------------------------------ rooms
+def room_of(module, rooms):
+    """`generation.models.fl` (or the room's package, `generation.models`) -> `models`; a part's top-level module
+    (the main job, a command) -> None."""
     parts = module.split(".")
-    return parts[1] if len(parts) > 2 else None
+    return parts[1] if len(parts) > 1 and parts[1] in rooms else None
 
 
-def wrong_way_subpackage_imports(edges):
-    """'file:line: a imports b' for every edge from a generation subpackage to one above it (or not in the order)."""
-    rank = {name: i for i, name in enumerate(GENERATION)}
+def wrong_way_room_imports(edges, rooms):
+    """'file:line: a imports b' for every edge from a room to one above it (or not in the order), or to the part's
+    top-level modules."""
+    rank = {name: i for i, name in enumerate(rooms)}
     wrong = []
     for (a, b), where in sorted(edges.items()):
-        sa, sb = subpackage_of(a), subpackage_of(b)
-        if sb is None and b != "generation" and sa is not None:
+        ra, rb = room_of(a, rooms), room_of(b, rooms)
+        if rb is None and "." in b and ra is not None:
             wrong.append(f"{where}: {a} imports the top-level {b}")
-        elif sa is not None and sb is not None and sa != sb and not rank.get(sb, 99) < rank.get(sa, -1):
-            wrong.append(f"{where}: {a} imports {b} ({sa} may import only {list(GENERATION[: rank.get(sa, 0)])})")
+        elif ra is not None and rb is not None and ra != rb and not rank.get(rb, 99) < rank.get(ra, -1):
+            wrong.append(f"{where}: {a} imports {b} ({ra} may import only {list(rooms[: rank.get(ra, 0)])})")
     return wrong
 
 
-def test_generation_is_its_subpackages_in_order():
-    """Every module of generation but the main job lives in a subpackage of GENERATION, and the subpackages
-    import only downwards: motion at the floor, a study of your own motion at the top."""
-    folder = ROOT / "generation"
+@pytest.mark.parametrize("part", ROOMS)
+def test_a_part_is_its_rooms_in_order(part):
+    """Every module of generation, rating_app and analysis but the part's commands lives in a room named for its
+    concept, and the rooms import only downwards: in generation motion at the floor and a study of your own motion at
+    the top; in the app the study's state at the floor and the blueprints above; in the analysis the data, then the
+    statistics, the page, and the designs that use all three."""
+    folder = ROOT / part
     subs = {p.name for p in folder.iterdir() if (p / "__init__.py").is_file()}
-    assert subs == set(GENERATION), f"generation's subpackages {sorted(subs)} vs the order {GENERATION}"
-    top = sorted(p.stem for p in folder.glob("*.py") if p.stem not in ("__init__", "__main__"))
-    assert top == ["make_stimuli"], f"generation/ holds modules outside a subpackage: {top}"
-    wrong = wrong_way_subpackage_imports(module_edges("generation"))
+    assert subs == set(ROOMS[part]), f"{part}'s subpackages {sorted(subs)} vs the order {ROOMS[part]}"
+    top = sorted(
+        p.stem for p in folder.glob("*.py") if p.stem not in ("__init__", "__main__") and not moved.is_pointer(p)
+    )
+    assert top == TOP_MODULES[part], f"{part}/ holds modules outside a room: {top}"
+    wrong = wrong_way_room_imports(module_edges(part), ROOMS[part])
     assert not wrong, "\n".join(wrong)
 
 
-def test_the_subpackage_guard_sees_an_upward_import():
+def test_the_room_guard_sees_an_upward_import():
     """The guard itself can fail: the shape the move removed (sampling reaching into training is fine, a model
-    reaching into the stimuli is not, and neither is a subpackage reaching the main job)."""
+    reaching into the stimuli is not, and neither is a room reaching the main job)."""
     edges = {
         ("generation.sampling.sample", "generation.training.train"): "x:1",
         ("generation.models.fl", "generation.stimuli.items"): "y:2",
         ("generation.motion.bvh", "generation.make_stimuli"): "z:3",
         ("generation.make_stimuli", "generation.own_study.builder"): "w:4",
+        ("rating_app.study.settings", "rating_app.media.videos"): "v:5",
+        ("analysis.designs.base", "analysis.page.report_html"): "u:6",
     }
-    wrong = wrong_way_subpackage_imports(edges)
-    assert [w.split(":")[0] for w in wrong] == ["y", "z"], wrong
+    wrong = []
+    for part, rooms in ROOMS.items():
+        wrong += wrong_way_room_imports({k: v for k, v in edges.items() if k[0].startswith(part + ".")}, rooms)
+    assert [w.split(":")[0] for w in wrong] == ["y", "z", "v"], wrong
 
 
 # ------------------------------------------------------------------------------------------------ sizes

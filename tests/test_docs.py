@@ -139,7 +139,7 @@ def check_python(args):
 
 
 def app_settings():
-    """Every environment variable the rating app reads as a setting (rating_app.SETTINGS, rating_app.study_config)."""
+    """Every environment variable the rating app reads as a setting (rating_app.SETTINGS, rating_app.study.config)."""
     from rating_app import SETTINGS
     from rating_app import study_config as s
 

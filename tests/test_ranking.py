@@ -1,5 +1,6 @@
 """moglow_eval.core.ranking (CONTRACTS §8, "Active pairing and the stopping rule") against references: the
-posterior mean against analysis.pairwise's independent maximum-likelihood fit, the covariance against a numerical
+posterior mean against analysis.designs.pairwise.preference's independent maximum-likelihood
+fit, the covariance against a numerical
 Hessian, the Elo scale against the two-condition closed form, the information gain against refitting on each
 outcome, and the stopping rule on simulated studies with known strengths."""
 
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.special import expit
 
-from analysis.pairwise import fit_bradley_terry
+from analysis.designs.pairwise.preference import fit_bradley_terry
 from moglow_eval.core import ranking
 
 

@@ -1,63 +1,84 @@
-"""The README's Layout section names every module of the product, and names nothing that is not there."""
+"""The README's Layout is one short line per top-level part and points to docs/ARCHITECTURE.md; ARCHITECTURE names
+every room of every part and every module in it, and names nothing that is not there (issue 53, item 4)."""
 
 import re
 from pathlib import Path
 
 import pytest
+from test_architecture import ROOMS
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("moglow_eval/core", "rendering", "rating_app", "analysis")
+ARCHITECTURE = ROOT / "docs" / "ARCHITECTURE.md"
+ROW_CHARS = 150  # one line of the README's table: what a part holds, not its modules
+
+
+def table_rows(text, heading):
+    """{first cell without backticks: the rest of the row} of the table under `heading` (up to the next heading)."""
+    section = text.split(heading, 1)[1].split("\n#", 1)[0]
+    return {m[1]: m[2] for m in re.finditer(r"^\| `([\w./ ()]+?)/?` \| (.*) \|$", section, re.M)}
 
 
 def layout_rows():
-    """{folder: the text of its row} from the README's Layout table."""
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
-    section = text.split("## Layout", 1)[1].split("\n## ", 1)[0]
-    return {m[1]: m[2] for m in re.finditer(r"^\| `([\w/]+)/` \| (.*) \|$", section, re.M)}
+    return table_rows((ROOT / "README.md").read_text(encoding="utf-8"), "## Layout")
 
 
-def modules(package):
-    """Module and subpackage names of a package, as the README names them (`simulate/` for a subpackage)."""
-    folder = ROOT / package
+def modules(folder):
+    """Module names of a folder (its .py files less __init__/__main__), and its subpackages as `name/`."""
     names = {p.stem for p in folder.glob("*.py") if p.stem not in ("__init__", "__main__")}
-    names |= {f"{p.name}/" for p in folder.iterdir() if p.is_dir() and (p / "__init__.py").is_file()}
-    return names
+    return names | {f"{p.name}/" for p in folder.iterdir() if p.is_dir() and (p / "__init__.py").is_file()}
 
 
-@pytest.mark.parametrize("package", PACKAGES)
-def test_layout_names_every_module(package):
-    row = layout_rows()[package]
-    missing = sorted(m for m in modules(package) if f"`{m}`" not in row and f"`{m.rstrip('/')}`" not in row)
-    assert not missing, f"README Layout, {package}/: add {missing}"
+def room_rows():
+    """(part, room, the row's text, the room's folder) for every room in ARCHITECTURE, and for moglow_eval.core and
+    rendering, whose rows in the parts table list their modules."""
+    text = ARCHITECTURE.read_text(encoding="utf-8")
+    parts = table_rows(text, "An arrow between boxes")
+    # the parts table: | part | may import | holds |; a room's table: | room | holds | may import |
+    rows = [("moglow_eval.core", "", parts["moglow_eval.core"].split(" | ")[-1], ROOT / "moglow_eval/core")]
+    rows.append(("rendering", "", parts["rendering"].split(" | ")[-1], ROOT / "rendering"))
+    for part in ROOMS:
+        rooms = table_rows(text, f"### {part}'s rooms")
+        assert set(rooms) == set(ROOMS[part]), f"ARCHITECTURE, {part}'s rooms: {sorted(rooms)} vs {ROOMS[part]}"
+        rows += [(part, room, rooms[room].split(" | ")[0], ROOT / part / room) for room in ROOMS[part]]
+    return rows
 
 
-@pytest.mark.parametrize("package", PACKAGES)
-def test_layout_names_only_what_exists(package):
-    folder = ROOT / package
-    named = re.findall(r"`([\w.]+/?)`", layout_rows()[package])
-    gone = [n for n in named if not any(folder.rglob(f"{n}.py")) and not (folder / n.rstrip("/")).exists()]
-    gone = [n for n in gone if n not in ("create_app", "metrics.csv", "dataset.npz")]  # names of things, not files
-    assert not gone, f"README Layout, {package}/: {gone} not in the tree"
-
-
-def test_layout_gives_generation_a_row_per_subpackage():
-    """generation/ is read by concept: a row of its own for each subpackage (what it holds, not its 30 modules),
-    and the generation/ row names what sits outside them."""
+def test_readme_layout_is_a_short_line_per_top_level_part():
     rows = layout_rows()
-    folder = ROOT / "generation"
-    subs = sorted(p.name for p in folder.iterdir() if (p / "__init__.py").is_file())
-    assert subs and all(f"generation/{s}" in rows for s in subs), [s for s in subs if f"generation/{s}" not in rows]
-    named = {r.removeprefix("generation/") for r in rows if r.startswith("generation/")}
-    assert named <= set(subs), sorted(named - set(subs))
-    top = [p.stem for p in folder.glob("*.py") if p.stem != "__init__"] + ["configs", "pretrained"]
-    assert all(f"`{m}" in rows["generation"] for m in top), top
-
-
-def test_layout_lists_every_tracked_folder():
-    """Every top-level folder of the repository has its row (local outputs such as runs/ are not tracked)."""
-    tracked = {"moglow_eval/core", "generation", "rendering", "rating_app", "analysis", "bench", "docs", "tests"}
+    tracked = {"moglow_eval/core", "moglow_eval", "generation", "rendering", "rating_app", "analysis", "bench", "docs"}
+    tracked |= {"tests", "scripts"}
     assert all((ROOT / f).is_dir() for f in tracked)
-    assert tracked <= set(layout_rows()), sorted(tracked - set(layout_rows()))
+    assert set(rows) == tracked, sorted(set(rows) ^ tracked)
+    long = {folder: len(row) for folder, row in rows.items() if len(row) > ROW_CHARS}
+    assert not long, f"README Layout: one short line per part ({ROW_CHARS} characters), not module lists: {long}"
+    section = (ROOT / "README.md").read_text(encoding="utf-8").split("## Layout", 1)[1].split("\n## ", 1)[0]
+    assert "docs/ARCHITECTURE.md" in section
+
+
+@pytest.mark.parametrize("part", ["moglow_eval.core", "rendering", *ROOMS])
+def test_architecture_names_every_module_of_every_room(part):
+    missing = []
+    for _, room, row, folder in (r for r in room_rows() if r[0] == part):
+        for name in modules(folder):
+            if name.endswith("/"):  # a design's folder: its modules named in the row too
+                missing += [f"{room}/{name}{m}" for m in modules(folder / name) if f"`{m}`" not in row]
+                name = name.rstrip("/")
+            if f"`{name}`" not in row and f"`{name}/`" not in row:
+                missing.append(f"{room}/{name}")
+    assert not missing, f"docs/ARCHITECTURE.md, {part}: add {missing}"
+
+
+@pytest.mark.parametrize("part", ["moglow_eval.core", "rendering", *ROOMS])
+def test_architecture_names_only_what_exists(part):
+    gone = []
+    for _, room, row, folder in (r for r in room_rows() if r[0] == part):
+        for name in re.findall(r"`([a-z_]+/?)`", row):
+            found = any(folder.rglob(f"{name.rstrip('/')}.py")) or (folder / name.rstrip("/")).is_dir()
+            if not found and not (ROOT / part.replace(".", "/") / f"{name}.py").exists():
+                gone.append(f"{room}: {name}")
+    known = {"create_app", "run"}  # names of functions, not files
+    gone = [g for g in gone if g.split(": ")[1].rstrip("/") not in known]
+    assert not gone, f"docs/ARCHITECTURE.md, {part}: {gone} not in the tree"
 
 
 def test_ci_runs_the_readmes_two_commands():

@@ -9,8 +9,8 @@ from helpers.fake_stimuli import write_fake_stimuli
 from test_app_style_export import rate_everything
 
 from analysis import report
-from analysis.load import AnalysisError
-from rating_app.manifest import AppError, reference_name
+from analysis.data.load import AnalysisError
+from rating_app.study.manifest import AppError, reference_name
 
 
 @pytest.fixture

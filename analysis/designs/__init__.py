@@ -8,12 +8,12 @@ from pathlib import Path
 
 from moglow_eval.core import study
 
-from ..load import AnalysisError
-from .acr import Acr
-from .appropriateness import Appropriateness
+from ..data.load import AnalysisError
+from .acr.design import Acr
+from .appropriateness.design import Appropriateness
 from .base import Design, Options
-from .pairwise import Pairwise
-from .parallel import Parallel
+from .pairwise.design import Pairwise
+from .parallel.design import Parallel
 
 DESIGNS: dict[str, Design] = {d.name: d for d in (Acr(), Pairwise(), Parallel(), Appropriateness())}
 assert tuple(DESIGNS) == study.DESIGNS, "moglow_eval.core.study.DESIGNS and the registry list the same designs"

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from .. import report_html
-from ..load import AnalysisError
-from ..study_text import rename_reference
+from ..data.load import AnalysisError
+from ..page import report_html
+from ..page.study_text import rename_reference
 
 
 @dataclass
@@ -31,7 +31,7 @@ class Options:
     mixed_max_levels: int
     ordinal: bool
     ordinal_max_ratings: int
-    reference_name: str | None = None  # the reference's own name for NAT (analysis.study_text)
+    reference_name: str | None = None  # the reference's own name for NAT (analysis.page.study_text)
     reference: str | None = None  # pairwise: the condition at strength 0 and Elo 1000 (default NAT, or the first)
 
 
@@ -74,7 +74,7 @@ class Design:
         raise NotImplementedError
 
     def html(self, meta: dict, counts: dict, kept: dict, everyone: dict, figs: dict) -> list[str]:
-        """report.html's parts (report_html.page wraps them)."""
+        """report.html's parts (html.page wraps them)."""
         raise NotImplementedError
 
     def console(self, counts: dict, kept: dict, everyone: dict) -> str:

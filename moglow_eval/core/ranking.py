@@ -22,7 +22,7 @@ From it:
   pair of the estimated order is right, the whole order is), or every condition's Elo interval narrower than a
   width. Elo = 400 log10 of the odds, centred on 1000 (the GENEA leaderboard's scale, Nagy et al. 2025).
 
-Pure numpy/scipy, no database: the app (rating_app/active.py) counts the votes and calls this; the benchmark
+Pure numpy/scipy, no database: the app (rating_app/pairing/active.py) counts the votes and calls this; the benchmark
 (bench/pairwise_active.py) simulates studies against it.
 """
 

@@ -10,11 +10,11 @@ from sqlalchemy import bindparam, func, insert, or_, select
 
 from moglow_eval.core import study
 
-from ..assign import NO_TARGET, StudyFull, claim, cover, n_catch_slots, short_or_full, slots
-from ..bodies import int_field
-from ..db import Clip, Cover, Rater, Rating, Trial
-from ..export_cells import RATER_EXTRA, TAIL, common
+from ..guard.bodies import int_field
+from ..pairing.assign import NO_TARGET, StudyFull, claim, cover, n_catch_slots, short_or_full, slots
+from ..study.db import Clip, Cover, Rater, Rating, Trial
 from .base import Design, new_condition_row
+from .export_cells import RATER_EXTRA, TAIL, common
 
 # The clips a slot of each kind draws from: test clips, or the bad examples among the catch clips. One statement
 # for both kinds, so that their timing matches.

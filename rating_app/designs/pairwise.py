@@ -15,12 +15,12 @@ from sqlalchemy.orm import aliased
 
 from moglow_eval.core import study, votes
 
-from ..bodies import int_field
-from ..db import Clip, Preference, Rater, StudySetting, Trial
-from ..export_cells import RATER_EXTRA, TAIL, common
-from ..reasons import parse_answer as parse_reasons
-from ..rounds import ROUND
+from ..guard.bodies import int_field
+from ..study.db import Clip, Preference, Rater, StudySetting, Trial
+from ..study.reasons import parse_answer as parse_reasons
+from ..study.rounds import ROUND
 from .base import Unit, new_condition_row
+from .export_cells import RATER_EXTRA, TAIL, common
 from .units import UnitDesign, check_comparable, record_head
 
 # After `role` in pairs.csv: the study's round the vote was stored in, the reasons ticked, the free text.

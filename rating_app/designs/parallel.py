@@ -14,11 +14,11 @@ from sqlalchemy import insert, select
 
 from moglow_eval.core import study
 
-from ..bodies import int_field
-from ..db import Clip, PageRating, Rater, Trial, TrialClip
-from ..export_cells import RATER_EXTRA, TAIL, common
-from ..manifest import AppError
+from ..guard.bodies import int_field
+from ..study.db import Clip, PageRating, Rater, Trial, TrialClip
+from ..study.manifest import AppError
 from .base import MAX_PAGE, Unit, new_condition_row
+from .export_cells import RATER_EXTRA, TAIL, common
 from .units import UnitDesign, check_comparable, record_head
 
 COLUMNS = ("rater_id", "page_id", "item", "clip_id", "condition", "rating", "role", *TAIL)

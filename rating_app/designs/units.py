@@ -12,9 +12,9 @@ from sqlalchemy import func, select
 
 from moglow_eval.core import study
 
-from ..assign import NO_TARGET, claim, cover, n_catch_slots, short_or_full, slots
-from ..db import Clip, Trial
-from ..manifest import AppError
+from ..pairing.assign import NO_TARGET, claim, cover, n_catch_slots, short_or_full, slots
+from ..study.db import Clip, Trial
+from ..study.manifest import AppError
 from .base import Design, Unit
 
 

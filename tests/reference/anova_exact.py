@@ -2,7 +2,7 @@
 
 Those sets carry 13-15 constant leading digits (1000000000000.4), which float64 cannot even hold, so no
 float algorithm can reach their certified values. Ratings never look like that, so this path lives with the
-tests: it checks that the product's ANOVA table (analysis.stats.anova_table) is right given exact sums.
+tests: it checks that the product's ANOVA table (analysis.stats.anova.anova_table) is right given exact sums.
 """
 
 from fractions import Fraction

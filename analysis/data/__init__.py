@@ -1,0 +1,1 @@
+"""Ratings in: reading an export and the exclusion rules."""

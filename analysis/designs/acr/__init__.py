@@ -1,0 +1,1 @@
+"""The acr design: its plug-in (design) and its report sections."""

@@ -1,0 +1,1 @@
+"""The appropriateness design: its plug-in (design) and the MAS."""

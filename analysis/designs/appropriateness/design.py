@@ -1,0 +1,54 @@
+"""appropriateness (CONTRACTS §8, GENEA 2023): pairs.csv with `matched`; the mean appropriateness score per system
+with its interval, shares and sign test (analysis/designs/appropriateness/mas.py), and its bar figure."""
+
+from ...page import design_figures
+from ...page.report_html import table
+from ..base import FailedCatchDesign
+from . import mas
+
+
+class Appropriateness(FailedCatchDesign):
+    name = "appropriateness"
+
+    def detects(self, columns):
+        return "preference" in columns and mas.MATCHED in columns
+
+    def load(self, path):
+        return mas.load_answers(path)
+
+    def failed_raters(self, df):
+        return mas.failed_raters(df)
+
+    def analyse_rows(self, df, options):
+        return mas.analyse(df, alpha=options.alpha)
+
+    def figures(self, data, kept, everyone, folder):
+        return {"mas": design_figures.mas_bars(kept["mas"], folder / "mas.png")}
+
+    def section_json(self, res):
+        t = res["mas"].set_index("condition")
+        return {
+            "n_test_answers": res["n_test_answers"],
+            "n_raters": res["n_raters"],
+            "n_items": res["n_items"],
+            "mas": {c: {k: t.at[c, k] for k in t.columns} for c in t.index},
+        }
+
+    def section_html(self, res):
+        return [
+            f"<p>{res['n_test_answers']} test answers from {res['n_raters']} raters on {res['n_items']} "
+            "items.</p><h3>Mean appropriateness score (MAS: +2 = the matched motion clearly preferred, -2 = the "
+            "mismatched one; 0 = chance), 95% Student-t interval, shares of preferences, sign test against "
+            "chance (ties dropped), Holm</h3>",
+            table(res["mas"], ("p", "p_holm")),
+        ]
+
+    def console_lines(self, kept):
+        lines = [f"{'system':<14}{'n':>6}{'MAS':>8}{'95% interval':>18}{'matched %':>11}{'p (Holm)':>10}"]
+        for _, r in kept["mas"].iterrows():
+            ci = f"[{r['ci_low']:.2f}, {r['ci_high']:.2f}]"
+            lines.append(
+                f"{r['condition']:<14}{r['n']:>6}{r['mas']:>8.2f}{ci:>18}{r['percent_matched']:>11.1f}"
+                f"{r['p_holm']:>10.3g}"
+            )
+        return lines

@@ -1,0 +1,173 @@
+"""pairwise (CONTRACTS §8): pairs.csv without `matched`; wins, ties and sign tests per condition pair and
+Bradley-Terry strengths (preference.py beside this file), with the preference bars and the strengths as
+figures."""
+
+import html
+
+import pandas as pd
+
+from ...page import design_figures
+from ...page.report_html import table
+from ..appropriateness import mas
+from ..base import FailedCatchDesign
+from . import preference, ranking, reasons, rounds
+
+
+def _renamed_nat(df, name):
+    """The reference's own name where the rows carry it (NAT renamed): it stays the default anchor."""
+    return name if name and name in set(df["condition_a"]) | set(df["condition_b"]) else None
+
+
+class Pairwise(FailedCatchDesign):
+    name = "pairwise"
+
+    def detects(self, columns):
+        return "preference" in columns and mas.MATCHED not in columns  # that column: appropriateness
+
+    def load(self, path):
+        return preference.load_pairs(path)
+
+    def failed_raters(self, df):
+        return preference.failed_raters(df)
+
+    def analyse_rows(self, df, options):
+        res = preference.analyse(
+            df,
+            n_boot=options.n_boot,
+            seed=options.seed,
+            alpha=options.alpha,
+            reference=options.reference or _renamed_nat(df, options.reference_name),
+        )
+        res["reasons_when_lost"] = reasons.when_lost(df)  # None when the votes carry no reasons
+        res["rounds"] = rounds.per_round(df)  # None for a file without rounds
+        return res
+
+    def figures(self, data, kept, everyone, folder):
+        order = list(kept["ranking"]["condition"])  # strongest first
+        rate, p = ranking.win_matrix(kept["pairs"], order)
+        return {
+            "preference_bars": design_figures.preference_bars(kept["pairs"], folder / "preference_bars.png"),
+            "bradley_terry": design_figures.bradley_terry(kept["bradley_terry"], folder / "bradley_terry.png"),
+            "win_matrix": design_figures.win_matrix(rate, p, order, folder / "win_matrix.png"),
+        }
+
+    def section_json(self, res):
+        p, bt = res["pairs"], res["bradley_terry"]
+        return {
+            "n_test_answers": res["n_test_answers"],
+            "n_raters": res["n_raters"],
+            "n_items": res["n_items"],
+            "pairwise": p.to_dict(orient="records"),
+            "bradley_terry": bt["strengths"],
+            "bradley_terry_ci": bt["ci"],
+            "bradley_terry_fit": {
+                k: bt[k]
+                for k in ("reference", "nu", "log_likelihood", "converged", "method", "n_boot", "seed", "level")
+            },
+            "ranking": res["ranking"].to_dict(orient="records"),
+            "elo": dict(zip(res["ranking"]["condition"], res["ranking"]["elo"])),
+            "reliability": res["reliability"],
+            **self._votes_json(res),
+        }
+
+    def _votes_json(self, res):
+        """What the votes carry beside the preference: their rounds and their reasons, when the file has them."""
+        out = {} if res.get("rounds") is None else {"rounds": res["rounds"]}
+        lost = res.get("reasons_when_lost")
+        return out if lost is None else {**out, "reasons_when_lost": reasons.as_json(lost)}
+
+    def _votes_html(self, res):
+        out = []
+        if res.get("rounds") and len(res["rounds"]) > 1:
+            out += [
+                "<h3>Rounds: the votes of each, and the conditions it brought in</h3>",
+                table(pd.DataFrame(res["rounds"]).assign(new_conditions=lambda d: d.new_conditions.map(", ".join))),
+            ]
+        lost = res.get("reasons_when_lost")
+        if lost is None:
+            return out
+        return out + [
+            "<h3>Why a system lost: the share of its lost votes that gave each reason</h3>",
+            table(lost.set_index("condition")),
+        ]
+
+    def section_html(self, res):
+        bt = res["bradley_terry"]
+        pairs = res["pairs"][["condition_a", "condition_b", "wins_a", "wins_b", "ties", "n", "p", "p_holm", "reject"]]
+        strengths = {
+            c: {"log strength": v, "95% low": bt["ci"][c][0], "95% high": bt["ci"][c][1]}
+            for c, v in bt["strengths"].items()
+        }
+        return [
+            f"<p>{res['n_test_answers']} test answers from {res['n_raters']} raters on {res['n_items']} "
+            "items.</p><h3>Wins, ties and losses per pair; two-sided sign test (ties dropped), Holm</h3>",
+            table(pairs, ("p", "p_holm")),
+            f"<h3>Bradley–Terry strengths</h3><p>{html.escape(bt['method'])}; reference "
+            f"<b>{html.escape(bt['reference'])}</b> = 0; tie parameter ν = {bt['nu']:.3f}.</p>",
+            table(pd.DataFrame(strengths).T),
+            *ranking_html(res),
+            *self._votes_html(res),
+        ]
+
+    def console_lines(self, kept):
+        lines = [f"{'pair':<18}{'wins':>6}{'ties':>6}{'losses':>8}{'sign p (Holm)':>15}"]
+        for _, r in kept["pairs"].iterrows():
+            p = "n/a" if r["p_holm"] != r["p_holm"] else f"{r['p_holm']:.3g}"
+            pair = r["condition_a"] + " vs " + r["condition_b"]
+            lines.append(f"{pair:<18}{r['wins_a']:>6}{r['ties']:>6}{r['wins_b']:>8}{p:>15}")
+        bt = kept["bradley_terry"]
+        strengths = ", ".join(
+            f"{c} {v:.2f} [{bt['ci'][c][0]:.2f}, {bt['ci'][c][1]:.2f}]" for c, v in bt["strengths"].items()
+        )
+        rank = kept["ranking"]
+        ranked = "; ".join(
+            f"{r.rank_range} {r.condition} {r.elo:.0f} [{r.elo_low:.0f}, {r.elo_high:.0f}]"
+            + (f" ({r.note})" if r.note else "")
+            for r in rank.itertuples()
+        )
+        lines += ["", f"Bradley-Terry log strengths ({bt['reference']} = 0): " + strengths]
+        lines += ["", f"Ranking, Elo ({bt['reference']} = 1000) [95%]; a shared rank = intervals overlap: " + ranked]
+        rel = kept["reliability"]
+        if rel:
+            lines.append(reliability_text(rel))
+        return lines
+
+
+def reliability_text(rel) -> str:
+    return (
+        f"Split-half reliability over {rel['n_splits']} random halves of the {rel['n_raters']} raters: Kendall's "
+        f"tau {rel['tau_median']:.2f} (95% of splits {rel['tau_low']:.2f} to {rel['tau_high']:.2f}); "
+        f"{100 * rel['same_order']:.0f}% of splits give both halves the same order."
+    )
+
+
+def ranking_html(res) -> list[str]:
+    """The ranking's table (Elo, intervals, rank intervals, groups) and the reliability sentence."""
+    rank = (
+        res["ranking"]
+        .rename(
+            columns={
+                "rank_range": "rank",
+                "rank": "rank (point)",
+                "elo_low": "Elo 95% low",
+                "elo_high": "Elo 95% high",
+                "rank_low": "rank 95% low",
+                "rank_high": "rank 95% high",
+                "log_strength": "log strength",
+                "elo": "Elo",
+            }
+        )
+        .set_index("condition")
+    )
+    cols = ["rank", "Elo", "Elo 95% low", "Elo 95% high", "log strength", "rank 95% low", "rank 95% high", "group"]
+    cols += ["note"] if rank["note"].any() else []
+    rel = res["reliability"]
+    return [
+        "<h3>Ranking</h3><p>Elo: 400 points per factor of ten in the odds of winning, the reference at 1000. "
+        "Conditions share a rank (and a group) while their bootstrap rank intervals overlap: the data do not "
+        "order them.</p>",
+        table(rank[cols]),
+        f"<p>{html.escape(reliability_text(rel))}</p>"
+        if rel
+        else "<p>Split-half reliability: too few raters (fewer than 4) or conditions (fewer than 3).</p>",
+    ]

@@ -1,0 +1,1 @@
+"""The parallel (MUSHRA-like) design: its plug-in (design) and its statistics."""

@@ -1,0 +1,3 @@
+"""Statistics as pure functions on DataFrames: ANOVA and Tukey HSD, bootstrap, mixed and ordinal models, agreement, the
+style factor.
+"""

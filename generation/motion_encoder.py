@@ -1,0 +1,5 @@
+"""Moved to `generation.metrics.fmd` (moglow_eval.core.moved)."""
+
+from moglow_eval.core import moved
+
+moved.point(__spec__.name, __name__)

@@ -1,0 +1,57 @@
+"""The study's export (ratings.csv, CONTRACTS §6, or its design's file, §8), straight from the database.
+
+The study's design (stored in the database) gives the columns and the rows (designs/). Every text cell that a
+spreadsheet would take for a formula (starting with = + - @, a tab or a carriage return) is written with a
+leading apostrophe, so opening the export can never run anything a rater typed. The `flags` column marks
+answers to look at before trusting them (export_cells.FLAGS).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+
+from sqlalchemy.engine import Engine
+from sqlalchemy.orm import Session
+
+from moglow_eval.core import study
+
+from ..designs import get
+from ..designs.export_cells import clip_styles, row_style
+from ..study.db import TARGET_RATERS, study_design, study_setting
+
+FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def cell(value):
+    """A CSV cell that no spreadsheet evaluates."""
+    if isinstance(value, str) and value.startswith(FORMULA_START):
+        return "'" + value
+    return value
+
+
+def export_csv(engine: Engine, out=None) -> str | int:
+    """Write the study's export to the file object `out` (returns the row count) or return it as a string."""
+    buf = out if out is not None else io.StringIO()
+    n = 0
+    with Session(engine.execution_options(read_only=True)) as s:
+        design = get(study_design(s))
+        # Every row says how many raters the study needs (as the app was last started), so that the report can
+        # tell an export of a study that did not fill; a database from before it has none, and no column.
+        target = study_setting(s, TARGET_RATERS)
+        extra = {TARGET_RATERS: target} if target is not None else {}
+        # A study of your own motion: the reference's own name, which the rows call NAT (CONTRACTS §4, §6).
+        reference = study_setting(s, study.REFERENCE_NAME)
+        if reference is not None:
+            extra[study.REFERENCE_NAME] = reference
+        # A manifest with a style column (CONTRACTS §4): every row says how its clips were drawn (§7).
+        styles = clip_styles(s)
+        style_col = ["style"] if styles else []
+        w = csv.DictWriter(buf, fieldnames=[*design.columns, *style_col, *extra], lineterminator="\n")
+        w.writeheader()
+        for row in design.export_rows(s):
+            if styles:
+                row = {**row, "style": row_style(row, styles)}
+            w.writerow({k: cell(v) for k, v in {**row, **extra}.items()})
+            n += 1
+    return n if out is not None else buf.getvalue()

@@ -1,0 +1,1 @@
+"""The blueprints: the rater API, the pages and the admin dashboard."""
