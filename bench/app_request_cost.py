@@ -90,7 +90,7 @@ def main():
     )
     a = p.parse_args()
     if a.refresh is not None:
-        from rating_app import active
+        from rating_app.pairing import active
 
         active.REFRESH_S = a.refresh
     tmp = Path(tempfile.mkdtemp(prefix="app_cost_"))

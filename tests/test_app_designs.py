@@ -502,7 +502,8 @@ def test_simulated_crowd_answers_each_design_as_the_page_does(stimuli, app_db_ur
     failed = {r["rater_id"] for r in p["raters"] if r["catch_failures"]}
     assert failed and failed == set(summary["failed_catch_raters"]) and failed <= set(summary["careless_raters"])
     # the report excludes exactly the raters the dashboard lists as failing a catch trial
-    from analysis import pairwise, parallel
+    from analysis.designs.pairwise import preference as pairwise
+    from analysis.designs.parallel import mushra as parallel
 
     f = tmp_path / "export.csv"
     with open(f, "w", newline="") as fh:

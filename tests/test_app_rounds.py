@@ -19,8 +19,8 @@ from helpers.cli import fails_with
 from helpers.fake_stimuli import write_fake_stimuli
 from sqlalchemy import MetaData, select
 
-from rating_app import rounds
 from rating_app.__main__ import main
+from rating_app.study import rounds
 from rating_app.study.db import app_engine, utcnow
 from rating_app.study.manifest import load_manifest
 
