@@ -201,8 +201,8 @@ def target_raters(test_units: int, config) -> int:
 def _open_database(db_url, pool_size, clips, design, cover_keys, n_raters, reference):
     """The engine, with the schema created and the manifest's clips and the design stored; AppError, one line,
     when the database cannot be opened."""
-    from .study import rounds  # noqa: F401  (its tables, on db.Base, are part of the schema init_db creates)
     from .study import db as dbm
+    from .study import rounds  # noqa: F401  (its tables, on db.Base, are part of the schema init_db creates)
 
     engine = dbm.make_engine(db_url, pool_size=pool_size)
     try:
