@@ -21,7 +21,7 @@ from sqlalchemy.exc import DBAPIError, InterfaceError, OperationalError, SQLAlch
 from sqlalchemy.exc import TimeoutError as PoolTimeout
 from werkzeug.exceptions import HTTPException
 
-from moglow_eval.core import study
+from moglow_eval.core import study as core_study  # not `study`: the package attribute of .study shadows it
 
 from .study.manifest import AppError, load_manifest, reference_name
 from .study.settings import ARGS, SETTINGS, resolve
@@ -206,7 +206,7 @@ def _open_database(db_url, pool_size, clips, design, cover_keys, n_raters, refer
 
     engine = dbm.make_engine(db_url, pool_size=pool_size)
     try:
-        names = {study.REFERENCE_NAME: reference} if reference else {}
+        names = {core_study.REFERENCE_NAME: reference} if reference else {}
         dbm.init_db(engine, clips, design, cover_keys, {dbm.TARGET_RATERS: n_raters, **names})
     except SQLAlchemyError as e:
         where = make_url(str(engine.url)).render_as_string(hide_password=True)
