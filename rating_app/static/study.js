@@ -397,11 +397,21 @@
 
   // The reasons shown with a pairwise vote (optional): ticked before the preference, sent with it.
   var reasonBox = $("reasons");
+  // The free text is counted in characters (code points), as the server counts it (Python's len), not in the
+  // UTF-16 units of maxlength, which count an emoji twice: the page keeps the first data-max-chars characters.
+  var reasonText = $("reason-text");
+  function keepChars() {
+    var max = parseInt(reasonText.dataset.maxChars, 10);
+    var chars = Array.from(reasonText.value);
+    if (chars.length > max) { chars = chars.slice(0, max); reasonText.value = chars.join(""); }
+    $("reason-count").textContent = chars.length + " / " + max + " characters";
+  }
+  if (reasonText) { reasonText.addEventListener("input", keepChars); }
   function resetReasons(training) {
     if (!reasonBox) { return; }
     reasonBox.hidden = training;
     reasonBox.querySelectorAll("input[name=reason]").forEach(function (x) { x.checked = false; });
-    if ($("reason-text")) { $("reason-text").value = ""; }
+    if (reasonText) { reasonText.value = ""; keepChars(); }
   }
   function reasonFields(body) {
     if (!reasonBox || trial.phase === "training") { return; }
