@@ -171,3 +171,53 @@ def test_a_condition_that_never_wins_is_flagged(tmp_path):
     table = pairwise.analyse(pairwise.load_pairs(path), n_boot=50)["ranking"].set_index("condition")
     assert table.at["BROKEN", "note"].startswith("never won a vote")
     assert table.at["NAT", "note"] == "" and table.at["S1", "note"] == ""
+
+
+def one_winner_three_alike(path, n_raters=8, items=6):
+    """pairs.csv of issue 55's degenerate study: W wins every vote it is in; NAT, A and B tie every vote among
+    themselves, so the data treats them alike."""
+    rows = []
+    for r in range(n_raters):
+        for i in range(items):
+            for a, b in (("W", "NAT"), ("W", "A"), ("B", "W"), ("NAT", "A"), ("A", "B"), ("NAT", "B")):
+                pref = 2 if a == "W" else -2 if b == "W" else 0
+                rows.append([f"r{r}", f"i{i}", f"{a}{i}".lower() + "x", f"{b}{i}".lower() + "x", a, b, pref, "test"])
+    cols = ["rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role"]
+    pd.DataFrame(rows, columns=cols).to_csv(path, index=False)
+    return path
+
+
+def test_degenerate_votes_are_said_so_and_alike_conditions_share_a_group(tmp_path):
+    path = one_winner_three_alike(tmp_path / "pairs.csv")
+    doc = report.build_report(path, tmp_path / "rep", n_boot=100, progress=False, quiet=True)
+    fit = doc["bradley_terry_fit"]
+    # No "converged" fit with a tie parameter of 1e5 or more: the fit says it has no maximum, and no ν is given.
+    assert fit["converged"] is False and fit["separated"] is True
+    assert fit["nu"] is None and fit["nu_estimable"] is False
+    rank = {r["condition"]: r for r in doc["ranking"]}
+    assert rank["W"]["rank_range"] == "1" and rank["W"]["note"].startswith("never lost a vote")
+    alike = [rank[c] for c in ("NAT", "A", "B")]
+    assert {r["group"] for r in alike} == {2} and {r["rank_range"] for r in alike} == {"2-4"}
+    assert max(r["elo"] for r in alike) - min(r["elo"] for r in alike) < 0.5
+    page = (tmp_path / "rep" / "report.html").read_text()
+    assert "No maximum-likelihood fit: the votes are separated (W never lost a vote)" in page
+    assert "tie parameter ν not estimable" in page
+
+
+def test_a_separated_study_with_an_estimable_tie_parameter_says_so_too(tmp_path):
+    truth = {"NAT": 0.0, "S1": -0.5, "BROKEN": -60.0}
+    path = simulated_pairs(tmp_path / "pairs.csv", truth, n_raters=8, votes=20, tie_band=0.1)
+    df = pd.read_csv(path)
+    broken = (df["condition_a"] == "BROKEN") | (df["condition_b"] == "BROKEN")
+    df.loc[broken, "preference"] = np.where(df.loc[broken, "condition_a"] == "BROKEN", -2, 2)  # never even a tie
+    df.to_csv(path, index=False)
+    res = pairwise.analyse(pairwise.load_pairs(path), n_boot=50)
+    bt = res["bradley_terry"]
+    assert bt["separated"] and bt["nu_estimable"] and not bt["converged"] and 0 < bt["nu"] < 10
+    table = res["ranking"].set_index("condition")
+    assert table.at["BROKEN", "group"] == table["group"].max() and table.at["BROKEN", "rank_range"] == "3"
+
+
+def test_tied_ranks_share_their_mean_rank_within_the_tolerance():
+    assert ranking.tied_ranks([0.0, 1e-5, 2.0, -1.0]).tolist() == [2.5, 2.5, 1.0, 4.0]
+    assert ranking.tied_ranks([0.0, 0.5, 1.0]).tolist() == [3.0, 2.0, 1.0]

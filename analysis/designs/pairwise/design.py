@@ -61,8 +61,13 @@ class Pairwise(FailedCatchDesign):
             "bradley_terry": bt["strengths"],
             "bradley_terry_ci": bt["ci"],
             "bradley_terry_fit": {
-                k: bt[k]
-                for k in ("reference", "nu", "log_likelihood", "converged", "method", "n_boot", "seed", "level")
+                **{
+                    k: bt[k]
+                    for k in ("reference", "nu", "log_likelihood", "converged", "method", "n_boot", "seed", "level")
+                },
+                "nu": bt["nu"] if bt["nu_estimable"] else None,  # not a number the data gave
+                "separated": bt["separated"],
+                "nu_estimable": bt["nu_estimable"],
             },
             "ranking": res["ranking"].to_dict(orient="records"),
             "elo": dict(zip(res["ranking"]["condition"], res["ranking"]["elo"])),
@@ -103,7 +108,8 @@ class Pairwise(FailedCatchDesign):
             "items.</p><h3>Wins, ties and losses per pair; two-sided sign test (ties dropped), Holm</h3>",
             table(pairs, ("p", "p_holm")),
             f"<h3>Bradley–Terry strengths</h3><p>{html.escape(bt['method'])}; reference "
-            f"<b>{html.escape(bt['reference'])}</b> = 0; tie parameter ν = {bt['nu']:.3f}.</p>",
+            f"<b>{html.escape(bt['reference'])}</b> = 0; {html.escape(tie_text(bt))}.</p>",
+            *([f"<p class=flag>{html.escape(fit_warning(res))}</p>"] if fit_warning(res) else []),
             table(pd.DataFrame(strengths).T),
             *ranking_html(res),
             *self._votes_html(res),
@@ -125,12 +131,37 @@ class Pairwise(FailedCatchDesign):
             + (f" ({r.note})" if r.note else "")
             for r in rank.itertuples()
         )
-        lines += ["", f"Bradley-Terry log strengths ({bt['reference']} = 0): " + strengths]
+        lines += ["", f"Bradley-Terry log strengths ({bt['reference']} = 0; {tie_text(bt)}): " + strengths]
+        if fit_warning(kept):
+            lines.append(fit_warning(kept))
         lines += ["", f"Ranking, Elo ({bt['reference']} = 1000) [95%]; a shared rank = intervals overlap: " + ranked]
         rel = kept["reliability"]
         if rel:
             lines.append(reliability_text(rel))
         return lines
+
+
+def tie_text(bt) -> str:
+    if bt["nu_estimable"]:
+        return f"tie parameter ν = {bt['nu']:.3f}"
+    return (
+        "tie parameter ν not estimable (every vote between conditions the votes can compare was a tie; the "
+        f"strengths are fitted with ν = {bt['nu']:g})"
+    )
+
+
+def fit_warning(res) -> str:
+    """What the report says when the fit has no maximum likelihood: the conditions that won or lost every vote
+    (separated votes; their strengths are bounds the ridge holds), or ties alone between the others."""
+    bt = res["bradley_terry"]
+    if not bt["separated"]:
+        return ""
+    notes = ranking.unbounded(res["pairs"])
+    named = "; ".join(f"{c} {n.split(':')[0]}" for c, n in sorted(notes.items()))
+    return (
+        f"No maximum-likelihood fit: the votes are separated ({named or 'some conditions never beat others'}), "
+        "so those strengths have no finite estimate and their Elo is a bound, not a value."
+    )
 
 
 def reliability_text(rel) -> str:

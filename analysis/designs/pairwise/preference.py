@@ -25,7 +25,7 @@ from scipy import stats as sps
 from moglow_eval.core import study
 
 from ...data.load import AnalysisError, read_export
-from . import ranking
+from . import ranking, separation
 
 REQUIRED = ("rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role")
 ROLES = ("test", "catch")
@@ -194,14 +194,15 @@ def _outcome_map(pairs, k, ref, ties):
     return A
 
 
-def _newton(counts, A, ridge, x0, max_iter=200):
-    """Maximum likelihood for a batch of count tables at once: counts [B, P, K], start x0 [m]. The negative
-    log-likelihood is convex in the parameters (a log-sum-exp of affine logits less a linear term) and the ridge
-    makes it strictly so, so damped Newton steps reach the one optimum. -> (x [B, m], nll [B], grad [B, m])."""
+def _newton(counts, A, ridge, x0, max_iter=200, offset=0.0):
+    """Maximum likelihood for a batch of count tables at once: counts [B, P, K], start x0 [m], `offset` added to
+    the logits [P, K] (a tie parameter held fixed). The negative log-likelihood is convex in the parameters (a
+    log-sum-exp of affine logits less a linear term) and the ridge makes it strictly so, so damped Newton steps
+    reach the one optimum. -> (x [B, m], nll [B], grad [B, m])."""
     n = counts.sum(axis=2)
 
     def evaluate(x):
-        logits = np.einsum("pkm,bm->bpk", A, x)
+        logits = np.einsum("pkm,bm->bpk", A, x) + offset
         lse = np.logaddexp.reduce(logits, axis=2)
         nll = (n * lse - (counts * logits).sum(axis=2)).sum(axis=1) + (ridge * x**2).sum(axis=1)
         prob = np.exp(logits - lse[..., None])
@@ -232,11 +233,11 @@ def _newton(counts, A, ridge, x0, max_iter=200):
     return x, nll, grad
 
 
-def fit_bradley_terry(counts, pairs, conds, reference=None, ties=None, x0=None):
+def fit_bradley_terry(counts, pairs, conds, reference=None, ties=None, x0=None, fixed_nu=None):
     """ML fit on pair counts [P, 3] (wins of the first, wins of the second, ties), or on a batch of them
     [B, P, 3] (the bootstrap) -> {"strengths": {cond: log strength, reference 0}, "nu": tie parameter or 0,
     "log_likelihood", "converged"}, or a list of those for a batch; `x0`: starting parameters (a bootstrap starts
-    from the full fit's "params")."""
+    from the full fit's "params"); `fixed_nu`: the tie parameter held at this value (separation.py), not fitted."""
     k = len(conds)
     ref = conds.index(reference) if reference in conds else 0
     batch = np.asarray(counts, dtype=float)
@@ -244,8 +245,13 @@ def fit_bradley_terry(counts, pairs, conds, reference=None, ties=None, x0=None):
     batch = batch[None] if single else batch
     ties = bool(batch[..., 2].sum() > 0) if ties is None else ties
     A = _outcome_map(pairs, k, ref, ties)
-    ridge = np.r_[np.full(k - 1, RIDGE), np.zeros(int(ties))]
-    x, nll, grad = _newton(batch[..., : 2 + ties], A, ridge, np.zeros(k - 1 + ties) if x0 is None else x0)
+    offset = 0.0
+    if ties and fixed_nu is not None:  # log nu moves from the parameters into the tie's logit as a constant
+        A, offset = A[..., :-1], np.array([0.0, 0.0, math.log(fixed_nu)])
+    free_nu = ties and fixed_nu is None
+    ridge = np.r_[np.full(k - 1, RIDGE), np.zeros(int(free_nu))]
+    start = np.zeros(k - 1 + free_nu) if x0 is None else x0
+    x, nll, grad = _newton(batch[..., : 2 + ties], A, ridge, start, offset=offset)
     free = [c for c in range(k) if c != ref]
     fits = []
     for b in range(len(batch)):
@@ -254,7 +260,7 @@ def fit_bradley_terry(counts, pairs, conds, reference=None, ties=None, x0=None):
         fits.append(
             {
                 "strengths": {c: float(theta[n]) for n, c in enumerate(conds)},
-                "nu": float(math.exp(x[b, -1])) if ties else 0.0,
+                "nu": float(math.exp(x[b, -1])) if free_nu else (float(fixed_nu) if ties else 0.0),
                 "log_likelihood": -float(nll[b] - (ridge * x[b] ** 2).sum()),
                 "converged": bool(np.max(np.abs(grad[b]), initial=0.0) < 1e-4),
                 "reference": conds[ref],
@@ -285,7 +291,9 @@ def bradley_terry(o, n_boot=1000, seed=0, level=0.95, reference=None):
     -------
     dict
         strengths {cond: log strength relative to the reference}, ci {cond: [low, high]}, nu (the tie
-        parameter, 0 without ties in the data), reference, log_likelihood, converged, n_boot, seed, level and
+        parameter, 0 without ties in the data; separation.NU_FIXED where the data cannot estimate it), reference,
+        log_likelihood, converged (False also where no maximum likelihood exists: separated votes, or a tie
+        parameter the data cannot estimate), separated, nu_estimable (separation.check), n_boot, seed, level and
         method; and for ranking.py (not in stats.json) boot, the resamples' strengths [n_boot, K] in conds
         order, conds, and tables/pairs, the per-rater counts behind them.
 
@@ -301,13 +309,17 @@ def bradley_terry(o, n_boot=1000, seed=0, level=0.95, reference=None):
     tables, pairs = _tables(o, conds)
     total = tables.sum(axis=0)
     ties = bool(total[:, 2].sum() > 0)
-    fit = fit_bradley_terry(total, pairs, conds, reference, ties)
+    sep = separation.check(total, pairs, len(conds))
+    fixed_nu = None if sep["nu_estimable"] else separation.NU_FIXED
+    fit = fit_bradley_terry(total, pairs, conds, reference, ties, fixed_nu=fixed_nu)
+    # No maximum likelihood where the votes are separated or the tie parameter runs off: the fit is the ridge's.
+    fit["converged"] = fit["converged"] and not sep["separated"] and sep["nu_estimable"]
     rng = np.random.default_rng(seed)
     n_r = tables.shape[0]
     # Each resample's counts: how often each rater was drawn, times that rater's table. All fits run at once.
     weights = np.stack([np.bincount(rng.integers(0, n_r, n_r), minlength=n_r) for _ in range(n_boot)]).astype(float)
     resampled = np.einsum("br,rpk->bpk", weights, tables)
-    fits = fit_bradley_terry(resampled, pairs, conds, reference, ties, x0=fit["params"])
+    fits = fit_bradley_terry(resampled, pairs, conds, reference, ties, x0=fit["params"], fixed_nu=fixed_nu)
     boot = np.array([[f["strengths"][x] for x in conds] for f in fits]).reshape(n_boot, len(conds))
     lo, hi = 100 * (1 - level) / 2, 100 * (1 + level) / 2
     ci = {c: [float(np.percentile(boot[:, n], lo)), float(np.percentile(boot[:, n], hi))] for n, c in enumerate(conds)}
@@ -322,6 +334,8 @@ def bradley_terry(o, n_boot=1000, seed=0, level=0.95, reference=None):
         "n_boot": n_boot,
         "seed": seed,
         "level": level,
+        "separated": sep["separated"],
+        "nu_estimable": sep["nu_estimable"],
         "method": (
             "Bradley-Terry with Davidson's tie parameter, maximum likelihood"
             if ties
@@ -369,7 +383,8 @@ def analyse(df, n_boot=1000, seed=0, alpha=0.05, reference=None):
     ties = bool(bt["nu"] > 0)
 
     def fit(batch):
-        return fit_bradley_terry(batch, bt["pairs"], conds, bt["reference"], ties)
+        fixed = None if bt["nu_estimable"] else bt["nu"]
+        return fit_bradley_terry(batch, bt["pairs"], conds, bt["reference"], ties, fixed_nu=fixed)
 
     return {
         "n_test_answers": int(len(o)),

@@ -32,9 +32,27 @@ def elo(theta, reference_theta=0.0):
     return ELO_ANCHOR + ELO_PER_LOG * (np.asarray(theta, dtype=float) - reference_theta)
 
 
+# Log strengths closer than this are one strength when ranked: the fit is far more precise, and conditions the votes
+# treat alike (ties among them, the same wins and losses) come out equal only to rounding (issue 55).
+SAME_STRENGTH = 1e-3  # 0.07 Elo points
+
+
+def tied_ranks(row):
+    """Ranks of strengths `row` (1 = strongest); strengths within SAME_STRENGTH of their neighbour in order share
+    their mean rank."""
+    row = np.asarray(row, dtype=float)
+    order = np.argsort(-row, kind="stable")
+    run = np.r_[0, np.cumsum(np.diff(-row[order]) > SAME_STRENGTH)]  # a new run where the gap is real
+    positions = np.arange(1, len(row) + 1, dtype=float)
+    mean = np.bincount(run, weights=positions) / np.bincount(run)
+    out = np.empty(len(row))
+    out[order] = mean[run]
+    return out
+
+
 def ranks(boot):
-    """Ranks [B, K] of bootstrap strengths [B, K]: 1 = strongest; tied strengths share their mean rank."""
-    return np.apply_along_axis(lambda row: sps.rankdata(-row), 1, np.atleast_2d(boot))
+    """Ranks [B, K] of bootstrap strengths [B, K]: 1 = strongest; equal strengths share their mean rank."""
+    return np.apply_along_axis(tied_ranks, 1, np.atleast_2d(boot))
 
 
 def groups(order, rank_low, rank_high):
@@ -91,7 +109,7 @@ def rank_table(strengths, boot, conds, reference, level=0.95, notes=None):
     ref = strengths[reference]
     lo_q, hi_q = 100 * (1 - level) / 2, 100 * (1 + level) / 2
     r = ranks(boot)
-    point = dict(zip(conds, sps.rankdata([-strengths[c] for c in conds])))
+    point = dict(zip(conds, tied_ranks([strengths[c] for c in conds])))
     rows = []
     for k, c in enumerate(conds):
         e = elo(boot[:, k], boot[:, conds.index(reference)]) if len(boot) else np.array([elo(strengths[c], ref)])
@@ -116,7 +134,9 @@ def rank_table(strengths, boot, conds, reference, level=0.95, notes=None):
         dict(zip(table["condition"], table["rank_high"])),
     )
     table["group"] = table["condition"].map(g)
-    span = table.groupby("group")["rank"].agg(["min", "max"])
+    # A group's ranks are the places its members take in the order (equal strengths share a mean rank, 3 for
+    # places 2-4, and the range names the places).
+    span = pd.Series(np.arange(1, len(table) + 1), index=table.index).groupby(table["group"]).agg(["min", "max"])
     table["rank_range"] = [_range(span.at[g_, "min"], span.at[g_, "max"]) for g_ in table["group"]]
     table["note"] = [(notes or {}).get(c, "") for c in table["condition"]]
     return table
