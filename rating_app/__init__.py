@@ -100,6 +100,7 @@ def _app_config(values) -> dict:
         "COMPLETION_URL": completion_url,
         "STUDY_DESIGN": design.name,
         "STUDY_QUESTION": question,
+        "UPLOAD_ROOT": values["UPLOAD_ROOT"] or None,
     }
 
 
@@ -132,7 +133,10 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
         "clips": {c.clip_id: c for c in clips},
         # With VIDEO_ACCEL the proxy sends the bytes: no video is read into a worker's memory.
         "videos": VideoStore(
-            clips, Path(manifest).resolve().parent, preload=check_files and values["VIDEO_ACCEL"] == "off"
+            clips,
+            Path(manifest).resolve().parent,
+            preload=check_files and values["VIDEO_ACCEL"] == "off",
+            key=hashlib.sha256(b"video-etag:" + app.secret_key.encode()).digest(),
         ),
         "design": design,
         "units": units,

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 import requests
 from helpers.cli import fails_with
-from helpers.fake_stimuli import write_fake_stimuli
+from helpers.fake_stimuli import write_fake_stimuli, write_stimulus_mp4
 from sqlalchemy import MetaData, select
 
 from rating_app.__main__ import main
@@ -30,21 +30,28 @@ N_ITEMS = 3
 
 
 def one_size(folder: Path, ref: Path) -> None:
-    """Every video of a stimulus folder the same bytes as `ref`: a set that keeps CONTRACTS §4's one-size rule."""
+    """Every video of a stimulus folder the same bytes as `ref` (made by the stimulus encoder), and every motion
+    file the manifest names present: a set that keeps CONTRACTS §4's one-size rule, as make_stimuli writes one."""
     for v in (folder / "videos").glob("*.mp4"):
         shutil.copyfile(ref, v)
         os.utime(v, (1.7e9, 1.7e9))  # and one file time (make_stimuli's same_mtime)
+    for row in csv.DictReader(open(folder / "manifest.csv")):
+        (folder / row["motion"]).parent.mkdir(exist_ok=True)
+        (folder / row["motion"]).write_bytes(b"motion of " + row["clip_id"].encode())
+
+
+@pytest.fixture(scope="session")
+def stimulus_mp4(tmp_path_factory):
+    return write_stimulus_mp4(tmp_path_factory.mktemp("mp4") / "ref.mp4")
 
 
 @pytest.fixture
-def folders(tmp_path):
+def folders(tmp_path, stimulus_mp4):
     """(the study's manifest, a new system's stimulus folder's manifest with NAT and SYS) in one-size sets."""
     study = write_fake_stimuli(tmp_path / "study", n_items=N_ITEMS, catch_nat=True)
     new = write_fake_stimuli(tmp_path / "new", n_items=N_ITEMS, conditions=("NAT", "SYS"), catch_nat=True, seed=1)
-    ref = tmp_path / "ref.mp4"
-    shutil.copyfile(next((tmp_path / "study" / "videos").glob("*.mp4")), ref)
-    one_size(study.parent, ref)
-    one_size(new.parent, ref)
+    one_size(study.parent, stimulus_mp4)
+    one_size(new.parent, stimulus_mp4)
     return study, new
 
 
@@ -79,8 +86,9 @@ def folder_state(manifest: Path) -> dict:
     }
 
 
-def complete(c, reasons=None):
-    """A new rater through the whole session; its rater id."""
+def complete(c, reasons=None, bad=()):
+    """A new rater through the whole session, preferring A but never a clip of `bad` (catch clips' ids, so that
+    it passes its catch trials); its rater id."""
     r = c.post("/api/sessions", json={})
     assert r.status_code == 201, r.json
     token, rater_id = r.json["session"], r.json["rater_id"]
@@ -93,6 +101,8 @@ def complete(c, reasons=None):
         for x in (t["a"], t["b"]):
             assert c.get(x["video_url"]).status_code == 200  # the new clips' videos are served too
         body = {"trial_id": t["trial_id"], "preference": None if t["phase"] == "training" else 1}
+        if t["phase"] != "training" and t["a"]["clip_id"] in bad:
+            body["preference"] = -1
         if reasons and t["phase"] != "training":
             body["reasons"] = reasons
         r = c.post(f"/api/sessions/{token}/ratings", json=body)
@@ -200,7 +210,9 @@ def test_a_condition_joins_a_running_study_and_is_withdrawn(make, folders, app_d
     }
 
 
-def test_clashes_are_refused_with_one_line_and_change_nothing(make, folders, tmp_path, capsys, app_db_url):
+def test_clashes_are_refused_with_one_line_and_change_nothing(
+    make, folders, tmp_path, capsys, app_db_url, stimulus_mp4
+):
     study, new = folders
     app = make(study, "pairwise")
     complete(app.test_client())
@@ -210,7 +222,7 @@ def test_clashes_are_refused_with_one_line_and_change_nothing(make, folders, tmp
 
     def variant(name, **kw):
         m = write_fake_stimuli(tmp_path / name, catch_nat=True, **{"n_items": N_ITEMS, "seed": 2, **kw})
-        one_size(m.parent, next((study.parent / "videos").glob("*.mp4")))
+        one_size(m.parent, stimulus_mp4)
         return m
 
     def same():
@@ -255,9 +267,9 @@ def test_only_a_pairwise_study_grows(make, folders, capsys, app_db_url):
     fails_with(main, ["add-condition", "--db", app_db_url, "--manifest", str(new)], capsys, "only a pairwise study")
 
 
-def test_the_dashboard_adds_and_withdraws(make, folders):
+def test_the_dashboard_adds_and_withdraws(make, folders, tmp_path):
     study, new = folders
-    app = make(study, "pairwise")
+    app = make(study, "pairwise", upload_root=str(tmp_path))
     c = app.test_client()
     r = c.post("/admin/conditions", data={"manifest": str(study)}, headers=TOKEN_HDR)
     assert r.status_code == 400 and "already in the study" in r.json["error"]
@@ -330,8 +342,9 @@ def test_active_pairing_takes_in_a_new_condition_and_lets_a_withdrawn_one_go(mak
     study, new = folders
     app = make(study, "pairwise", ratings_per_clip=6, pairing="active", pairing_random=0.0, clips_per_rater=3)
     c = app.test_client()
+    bad = {x.clip_id for x in load_manifest(study) if x.condition == "BAD"}
     for _ in range(2):
-        complete(c)
+        complete(c, bad=bad)  # trusted raters: their votes make the ranking of the first three
     ranking = c.get("/admin/progress.json", headers=TOKEN_HDR).json["ranking"]
     assert set(ranking["order"]) == {"NAT", "MG", "FL"}
     assert main(["add-condition", "--db", app_db_url, "--manifest", str(new)]) == 0

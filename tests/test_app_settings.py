@@ -22,6 +22,7 @@ FLAGS = {
     "--question": "STUDY_QUESTION",
     "--completion-code": "COMPLETION_CODE",
     "--completion-url": "COMPLETION_URL",
+    "--upload-root": "UPLOAD_ROOT",  # added by issue 55
     "--ratings-per-clip": "RATINGS_PER_CLIP",
     "--clips-per-rater": "CLIPS_PER_RATER",
     "--catch-per-rater": "CATCH_PER_RATER",
@@ -59,7 +60,7 @@ ARGUMENTS = {  # create_app's keyword arguments before the table
     "manifest", "db_url", "ratings_per_clip", "clips_per_rater", "catch_per_rater", "admin_token", "slot_timeout_s",
     "completion_code", "completion_url", "secret_key", "min_view", "sessions_per_client", "design", "question",
     "config", "reasons", "reason_text", "pairing", "pairing_random", "stop_when", "stop_level", "stop_width",
-    "stop_max_votes",
+    "stop_max_votes", "upload_root",
 }  # fmt: skip
 
 

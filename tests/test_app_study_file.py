@@ -38,6 +38,7 @@ STUDY = {  # every key a study file may hold, with a value other than its defaul
     "db_pool_size": 4,
     "cookie_secure": True,
     "video_accel": "nginx",
+    "upload_root": "uploads",
 }
 
 
@@ -73,7 +74,11 @@ def test_every_settable_key_is_in_the_test():
 def test_the_file_and_the_environment_give_the_same_app(study_dir, monkeypatch):
     from_file = made(config=study_dir / "study.toml")
     for key, value in STUDY.items():
-        value = {"cookie_secure": "1", "rating_manifest": study_dir / "stimuli/manifest.csv"}.get(key, value)
+        value = {
+            "cookie_secure": "1",
+            "rating_manifest": study_dir / "stimuli/manifest.csv",
+            "upload_root": study_dir / "uploads",  # relative to the file, as the manifest is
+        }.get(key, value)
         value = f"sqlite:///{study_dir}/db/ratings.sqlite" if key == "database_url" else value
         monkeypatch.setenv(key.upper(), str(value))
     from_env = made()

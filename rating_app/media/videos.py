@@ -2,13 +2,16 @@
 
 make_stimuli renders conditions one after the other, so file times follow the condition: a Last-Modified header
 or an mtime-based ETag would let a rater sort clips by condition. Videos are therefore served with no date at
-all and with an ETag that is a hash of the bytes. The bytes are read once at start-up (up to a cap), so the
-response time does not depend on the file system's cache either. Range requests (video seeking) still work.
+all and with an ETag that is a keyed hash of the bytes (HMAC with the app's secret key): a plain hash would let
+whoever holds a video's bytes, a system's submitter among them, recognise it without downloading it. The bytes
+are read once at start-up (up to a cap), so the response time does not depend on the file system's cache either.
+Range requests (video seeking) still work.
 """
 
 from __future__ import annotations
 
 import hashlib
+import hmac
 import io
 import os
 from dataclasses import dataclass
@@ -33,8 +36,9 @@ class Video:
 class VideoStore:
     """clip_id -> Video; each path is checked to lie inside the stimulus folder when it is read."""
 
-    def __init__(self, clips, root: Path, preload: bool = True):
+    def __init__(self, clips, root: Path, preload: bool = True, key: bytes = b""):
         self.root = Path(root).resolve()
+        self.key = key
         self.paths = {c.clip_id: c.video for c in clips}
         self.videos: dict[str, Video] = {}
         self.cached = 0
@@ -52,7 +56,8 @@ class VideoStore:
         data = self._read(cid)
         keep = self.cached + len(data) <= CACHE_BYTES
         self.cached += len(data) if keep else 0
-        v = Video(self.paths[cid], hashlib.sha256(data).hexdigest()[:32], data if keep else None)
+        etag = hmac.new(self.key, data, hashlib.sha256).hexdigest()[:32]
+        v = Video(self.paths[cid], etag, data if keep else None)
         self.videos[cid] = v
         return v
 

@@ -5,19 +5,24 @@ The new condition's clips come from a stimulus folder built the same way as the 
 with `--system`, or a study of one's own): its manifest is checked as the app checks one at its start, then
 against the study: no clip id of the study's, every test item of the study and no other, the same design (style,
 sound, frames and fps per item), and videos of the byte size the study's videos of that item have (the one-size
-rule of CONTRACTS §4, so that a file's size never tells the new condition apart). Its test clips are then copied
-into the study's stimulus folder (where the app, and a proxy's internal location, serve videos from) with the
-study's file time, appended to the study's manifest (and metrics.csv), and written to the database with the
-Cover rows of their new pairs, in one transaction that begins the next round. A refusal is one line and leaves
-the study folder and the database as they were; so does any failure on the way.
+rule of CONTRACTS §4, so that a file's size never tells the new condition apart). Every file of that folder is
+read as hostile (submission.py: paths inside it, regular files under a size cap, cells stripped once). Its test
+clips get fresh random ids, their videos are encoded again with fresh randomness and checked against the one-size
+rule again, and their files land in the study's stimulus folder (where the app, and a proxy's internal location,
+serve videos from) with the study's file time; their rows are appended to the study's manifest (and metrics.csv)
+and written to the database with the Cover rows of their new pairs, in one transaction that begins the next
+round. All or nothing: a refusal is one line and leaves the study folder (files and folders) and the database as
+they were; so does any failure on the way.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import os
 import shutil
+import tempfile
 from dataclasses import replace
 from pathlib import Path
 
@@ -28,7 +33,8 @@ from ..designs import get
 from ..pairing.assign import lock_assign
 from ..study import rounds
 from ..study.db import Clip, Cover, clip_row, study_design, utcnow
-from ..study.manifest import AppError, load_manifest
+from ..study.manifest import AppError, load_manifest, read_rows
+from . import submission
 
 
 def _study(s, study_manifest):
@@ -130,100 +136,121 @@ def _new_units(design, study_clips, added) -> dict:
     return {k: u for k, u in after.items() if k not in before}
 
 
-def _read_table(path: Path):
-    """(the header, the rows as dicts, the file's bytes) of a CSV file."""
-    data = path.read_bytes()
-    reader = csv.DictReader(io.StringIO(data.decode("utf-8")))
-    rows = list(reader)
-    return list(reader.fieldnames or []), rows, data
-
-
-def _append_rows(path: Path, header, rows, fill="") -> None:
-    """Append `rows` (dicts) to the CSV `path` under its `header`, atomically (a new file renamed over it)."""
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=header, extrasaction="ignore", restval=fill, lineterminator="\n")
-    w.writerows(rows)
-    old = path.read_bytes()
-    tmp = path.with_name(path.name + ".adding")
-    sep = b"" if old.endswith(b"\n") else b"\n"
-    tmp.write_bytes(old + sep + buf.getvalue().encode("utf-8"))
-    shutil.copymode(path, tmp)
-    os.replace(tmp, path)
-
-
 class _Files:
-    """The study folder's changes, undone by `undo` when the database refuses them."""
+    """The study folder's side of an add, all or nothing: every new file is made in a staging folder first, then
+    moved into place with the folders it needs; the manifest and metrics.csv are replaced whole. `undo` puts back
+    every file, removes every folder made, and the staging folder."""
 
-    def __init__(self, root: Path):
-        self.root, self.made, self.saved = root, [], {}
+    def __init__(self, root: Path, mtime: float):
+        self.root, self.mtime = root, mtime
+        self.staging = Path(tempfile.mkdtemp(prefix=".adding-", dir=root))
+        self.placed, self.folders, self.saved = [], [], {}
 
-    def copy(self, src: Path, rel: str, mtime: float) -> Path:
+    def staged(self, rel: str) -> Path:
+        return self.staging / rel.replace("/", "__")
+
+    def place(self, rel: str) -> None:
         dst = (self.root / rel).resolve()
         if not dst.is_relative_to(self.root):
             raise AppError(f"{rel}: leaves the study folder {self.root}")
         if dst.exists():
             raise AppError(f"{dst}: already exists in the study folder; it is never replaced")
-        dst.parent.mkdir(parents=True, exist_ok=True)
-        self.made.append(dst)
-        shutil.copyfile(src, dst)
-        os.utime(dst, (mtime, mtime))  # the set's one file time (CONTRACTS §4)
-        return dst
+        missing = [p for p in reversed(dst.parents) if p.is_relative_to(self.root) and not p.exists()]
+        for folder in missing:
+            folder.mkdir()
+            self.folders.append(folder)
+        os.replace(self.staged(rel), dst)
+        self.placed.append(dst)
+        os.utime(dst, (self.mtime, self.mtime))  # the set's one file time (CONTRACTS §4)
 
-    def append(self, path: Path, header, rows, fill="") -> None:
-        self.saved.setdefault(path, path.read_bytes())
-        _append_rows(path, header, rows, fill)
+    def rewrite(self, path: Path, header, rows, fill="") -> None:
+        """`path` (a CSV) with `rows` appended under its `header`: a new file renamed over it."""
+        old = self.saved.setdefault(path, path.read_bytes())
+        buf = io.StringIO()
+        csv.DictWriter(buf, fieldnames=header, extrasaction="ignore", restval=fill, lineterminator="\n").writerows(rows)
+        tmp = self.staging / (path.name + ".new")
+        tmp.write_bytes(old + (b"" if old.endswith(b"\n") else b"\n") + buf.getvalue().encode("utf-8"))
+        shutil.copymode(path, tmp)
+        os.replace(tmp, path)
+
+    def done(self) -> None:
+        shutil.rmtree(self.staging, ignore_errors=True)
 
     def undo(self) -> None:
         for path, data in self.saved.items():
             path.write_bytes(data)
-        for p in self.made:
+        for p in self.placed:
             p.unlink(missing_ok=True)
+        for folder in reversed(self.folders):
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        self.done()
 
 
-def _write_files(files: _Files, study_path: Path, new_path: Path, added) -> None:
-    """Copy the added clips' videos (and motion files) into the study folder; append their manifest and metrics
-    rows."""
-    ids = {c.clip_id for c in added}
-    header, study_rows, _ = _read_table(study_path)
-    _, new_rows, _ = _read_table(new_path)
-    rows = [r for r in new_rows if (r.get("clip_id") or "").strip() in ids]
-    mtime = Path(study_path.parent / study_rows[0]["video"]).stat().st_mtime if study_rows else None
-    for r in rows:
-        for col in ("video", "motion"):
-            src = (new_path.parent / (r.get(col) or "")).resolve()
-            if col in header and r.get(col) and src.is_file():
-                files.copy(src, r[col].strip(), mtime or src.stat().st_mtime)
-    files.append(study_path, header, rows)
-    study_metrics, new_metrics = study_path.parent / "metrics.csv", new_path.parent / "metrics.csv"
-    if study_metrics.is_file() and new_metrics.is_file():
-        m_header, _, _ = _read_table(study_metrics)
-        _, m_rows, _ = _read_table(new_metrics)
-        files.append(study_metrics, m_header, [r for r in m_rows if r.get("clip_id") in ids], fill="nan")
+def _stage(files: _Files, taken, study_clips) -> None:
+    """Every taken clip's files, made in the staging folder: its video encoded again like the study's videos of
+    its item (submission.reencode), its other files copied; then the one-size rule checked on what was made."""
+    like = {c.item: c.video for c in study_clips if c.role == "test" and not c.motion_item}
+    for t in taken:
+        for col, rel in t.targets.items():
+            if col == "video":
+                submission.reencode(t.sources[col], files.staged(rel), like[t.clip.item])
+            else:
+                submission.copy_file(t.sources[col], files.staged(rel), col)
+    _check_sizes(study_clips, [replace(t.clip, video=files.staged(t.targets["video"])) for t in taken], "encoded again")
+
+
+def _metrics(study_path: Path, sub, taken):
+    """(the study's metrics.csv, its header, the rows the taken clips add) when both folders have one, else None;
+    read before any file is made, so that a bad metrics.csv refuses the add at once."""
+    study_metrics = study_path.parent / submission.METRICS
+    if not (study_metrics.is_file() and (sub.path.resolve().parent / submission.METRICS).is_file()):
+        return None
+    with read_rows(study_metrics) as (header, _):
+        pass
+    return study_metrics, header, submission.metrics_rows(sub, taken, header)
+
+
+def _write(files: _Files, study_path: Path, header, taken, metrics) -> None:
+    """The staged files moved into the study folder, and the taken clips' rows appended to its manifest and its
+    metrics.csv (`metrics`, from _metrics)."""
+    for t in taken:
+        for rel in t.targets.values():
+            files.place(rel)
+    files.rewrite(study_path, header, [t.row for t in taken])
+    if metrics is not None:
+        files.rewrite(*metrics, fill="nan")
 
 
 def add_condition(engine, new_manifest, conditions=(), study_manifest=None) -> dict:
     """Add the test clips of `conditions` (default: every condition of `new_manifest` the study lacks) to the
     running study in `engine`'s database; {"round", "conditions", "clips", "pairs"}. AppError, one line, and
-    nothing changed, on a clash."""
+    nothing changed (no file, no folder, no row), on a clash or a file it will not take."""
     with Session(engine) as s:
         design, study_path, db_clips = _study(s, study_manifest)
     where = str(new_manifest)
     study_clips = load_manifest(study_path, check_files=True)
-    new_clips = load_manifest(new_manifest, check_files=True)
-    picked = _pick(study_clips, db_clips, new_clips, set(conditions), where)
+    sub = submission.read(new_manifest)
+    picked = _pick(study_clips, db_clips, sub.clips, set(conditions), where)
     _check_design(study_clips, picked, where)
     _check_sizes(study_clips, picked, where)
     root = study_path.resolve().parent
-    # As the study's manifest will name them: the same relative path, in the study folder.
-    added = [replace(c, video=root / c.video.relative_to(Path(new_manifest).resolve().parent)) for c in picked]
+    with read_rows(study_path) as (header, rows):
+        study_rows = list(rows)
+    taken_ids = {c.clip_id for c in study_clips} | set(db_clips) | {c.clip_id for c in sub.clips}
+    taken = submission.take(sub, picked, header, study_rows, root, taken_ids)
+    added = [t.clip for t in taken]
     units = _new_units(design, study_clips, added)
-    files = _Files(root)
+    metrics = _metrics(study_path, sub, taken)
+    files = _Files(root, study_clips[0].video.stat().st_mtime)
     try:
-        _write_files(files, study_path, Path(new_manifest), picked)
+        _stage(files, taken, study_clips)
+        _write(files, study_path, header, taken, metrics)
         new_round = _store(engine, added, units, sorted({c.condition for c in added}))
     except BaseException:
         files.undo()
         raise
+    files.done()
     return {
         "round": new_round,
         "conditions": sorted({c.condition for c in added}),

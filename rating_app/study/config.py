@@ -4,7 +4,7 @@ Its keys are the environment variables of the settings in lower case (`ratings_p
 `RATINGS_PER_CLIP=20`), and an environment variable that is set overrides its key. Secrets stay out of the file:
 the admin token and the cookie key are given in the environment, the database password in `PGPASSWORD` or
 `~/.pgpass` (libpq reads both), so the file can be kept with the study and shared. Relative paths in the file
-(`rating_manifest`, an SQLite `database_url`) are relative to the file.
+(`rating_manifest`, `upload_root`, an SQLite `database_url`) are relative to the file.
 
     rating_manifest = "stimuli/manifest.csv"
     database_url = "postgresql://rater@127.0.0.1:5432/study"
@@ -75,8 +75,9 @@ def _as_environment(where, value, setting) -> str:
 
 def _resolve_paths(path: Path, values: dict) -> dict:
     home = path.resolve().parent
-    if "RATING_MANIFEST" in values:
-        values["RATING_MANIFEST"] = str(home / Path(values["RATING_MANIFEST"]).expanduser())
+    for name in ("RATING_MANIFEST", "UPLOAD_ROOT"):
+        if values.get(name):
+            values[name] = str(home / Path(values[name]).expanduser())
     if "DATABASE_URL" in values:
         try:
             url = make_url(values["DATABASE_URL"])

@@ -70,7 +70,7 @@ def load_manifest(path, check_files: bool = True) -> list[ManifestClip]:
         if missing:
             raise AppError(f"{path}:1: missing column(s) {', '.join(missing)}")
         for line, row in rows:
-            clip = _clip(row, f"{path}:{line}", base, check_files)
+            clip = clip_from_row(row, f"{path}:{line}", base, check_files)
             if clip.clip_id in seen:
                 raise AppError(f"{path}:{line}: duplicate clip_id {clip.clip_id}")
             seen.add(clip.clip_id)
@@ -80,7 +80,7 @@ def load_manifest(path, check_files: bool = True) -> list[ManifestClip]:
     return clips
 
 
-def _clip(row: dict, where: str, base: Path, check_files: bool) -> ManifestClip:
+def clip_from_row(row: dict, where: str, base: Path, check_files: bool) -> ManifestClip:
     """One manifest row, checked; `where` is "file:line" for the error."""
     cid = (row["clip_id"] or "").strip()
     if not study.CLIP_ID.fullmatch(cid):

@@ -128,6 +128,13 @@ TABLE = (
         "https://app.prolific.com/submissions/complete?cc={code}",
     ),
     Setting(
+        "UPLOAD_ROOT",
+        arg="upload_root",
+        flag="--upload-root",
+        help="the folder under which the dashboard's add-condition form may read a new system's stimulus folder "
+        "(unset: the form is off; python -m rating_app add-condition reads any path its user can)",
+    ),
+    Setting(
         "VIDEO_ACCEL",
         default="off",
         choices=ACCEL,

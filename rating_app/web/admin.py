@@ -12,6 +12,7 @@ from __future__ import annotations
 import datetime as dt
 import hashlib
 import hmac
+import os
 import secrets
 
 from flask import (
@@ -155,12 +156,30 @@ def add_condition_form():
     """Add a condition from a stimulus folder on the server (the form's `manifest`, optional `condition`)."""
     from ..operations.conditions import add_condition
 
+    require_admin()  # before any answer that names a path
+    same_site_only()
     manifest = (request.form.get("manifest") or "").strip()
     if not manifest:
         abort(400, "field 'manifest' must name the new condition's manifest.csv on the server")
+    manifest = _under_upload_root(manifest)
     cond = (request.form.get("condition") or "").strip()
     study = current_app.extensions["rating_app"]["manifest"]
     return _round_change(lambda eng: add_condition(eng, manifest, [cond] if cond else (), study))
+
+
+def _under_upload_root(manifest: str) -> str:
+    """The form's manifest path, resolved, when it lies under UPLOAD_ROOT (symlinks followed); otherwise the form
+    reads nothing: 400. Without UPLOAD_ROOT the form is off, so a stolen admin login never makes the app read its
+    own files (its environment, its database) into the study folder."""
+    root = current_app.config["UPLOAD_ROOT"]
+    if not root:
+        abort(400, "the dashboard adds conditions only from under UPLOAD_ROOT, which is not set; set it, or run "
+              "python -m rating_app add-condition on the server")  # fmt: skip
+    root = os.path.realpath(root)
+    path = os.path.realpath(os.path.join(root, manifest))
+    if os.path.commonpath([root, path]) != root or path == root:
+        abort(400, f"field 'manifest' must name a manifest.csv under the upload root {root}")
+    return path
 
 
 @bp.post("/conditions/withdraw")

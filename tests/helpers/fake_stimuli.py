@@ -58,6 +58,23 @@ def _encode(path, n_frames, size, fps, shade):
     w.close()
 
 
+def write_stimulus_mp4(path, n_frames=16, size=64, fps=20, seed=0):
+    """A video as the stimulus encoder makes them (rendering.encode's one-size rate control): every such video of
+    the same size, rate and length has the same byte size, whatever it shows, as a study's videos have."""
+    from rendering.encode import ffmpeg_writer
+
+    proc = ffmpeg_writer(path, size, fps, frames=n_frames, seed=seed)
+    chroma = np.full(size * size // 2, 128, np.uint8).tobytes()
+    for t in range(n_frames):
+        luma = np.full((size, size), 235, np.uint8)
+        x = (t * 7 + seed * 5) % (size - 8)
+        luma[size // 2 - 10 : size // 2 + 10, x : x + 8] = 20
+        proc.stdin.write(luma.tobytes() + chroma)
+    proc.stdin.close()
+    assert proc.wait() == 0, proc.stderr.read()
+    return Path(path)
+
+
 def write_fake_stimuli(
     folder,
     n_items=4,

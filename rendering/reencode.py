@@ -1,0 +1,127 @@
+"""`python -m rendering.reencode IN.mp4 OUT.mp4 --like STUDY.mp4`: a stimulus video encoded again, with fresh
+randomness, so that its bytes cannot be predicted from the file it came from.
+
+A system that joins a running study (`python -m rating_app add-condition`) brings its own videos; served as they
+are, their bytes (or any hash of them) would let whoever submitted them pick out their own system's clips and vote
+for it. So the study takes the frames, not the file: each video is decoded and encoded again by the stimulus
+encoder (rendering.encode: the one-size rate control, each frame's share of the rate drawn afresh), and its sound,
+if any, is copied across as the study's videos carry it. The result has the study's sizes by construction; the
+caller checks them. Only a video of the size, frame rate and number of frames of the study's video `--like` is
+taken: the decoder reads a hostile file, and nothing larger than the study's own clips is ever decoded.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+from moglow_eval.core import cli
+
+from .encode import ffmpeg_writer
+from .errors import RenderError
+
+TIMEOUT_S = 600  # one clip: decoding and encoding a few hundred frames takes seconds
+
+
+def _ffmpeg() -> str:
+    import imageio_ffmpeg  # here, as in encode: importing rendering needs no encoder
+
+    return imageio_ffmpeg.get_ffmpeg_exe()
+
+
+def _probe(src: Path) -> tuple[tuple[int, int], float, bool]:
+    """((width, height), fps, has sound) of the video `src`, from ffmpeg's stream listing."""
+    import imageio_ffmpeg
+
+    gen = imageio_ffmpeg.read_frames(str(src), pix_fmt="yuv420p")
+    try:
+        meta = next(gen)
+    except (RuntimeError, StopIteration, OSError) as exc:
+        last = (str(exc).strip().splitlines() or ["no message"])[-1]
+        raise RenderError(f"{src}: not a video ffmpeg can read ({last})") from None
+    finally:
+        gen.close()
+    listing = subprocess.run([_ffmpeg(), "-hide_banner", "-i", str(src)], capture_output=True, text=True)
+    return tuple(meta["size"]), float(meta["fps"]), "Audio:" in listing.stderr
+
+
+def reencode(src, dst, like, seed: int | None = None) -> None:
+    """Encode the video `src` again into `dst` (stimulus encoder, fresh randomness unless `seed`), as the video
+    `like` is: its size, frame rate and number of frames; RenderError, one line, when `src` differs in any or
+    ffmpeg fails, and then no `dst`."""
+    import imageio_ffmpeg
+
+    src, dst = Path(src), Path(dst)
+    (w, h), fps, _ = _probe(Path(like))
+    if w != h:
+        raise RenderError(f"{like}: {w}x{h} pixels; a stimulus video is square")
+    frames = imageio_ffmpeg.count_frames_and_secs(str(like))[0]
+    try:
+        _reencode(src, dst, w, fps, frames, seed)
+    except BaseException:
+        dst.unlink(missing_ok=True)
+        dst.with_name(dst.stem + ".video.mp4").unlink(missing_ok=True)
+        raise
+
+
+def _reencode(src: Path, dst: Path, size: int, fps: float, frames: int, seed: int | None) -> None:
+    (w, h), src_fps, sound = _probe(src)
+    if (w, h) != (size, size) or abs(src_fps - fps) > 1e-3:
+        raise RenderError(f"{src}: {w}x{h} pixels at {src_fps:g} fps; the study's are {size}x{size} at {fps:g}")
+    frame_bytes = size * size * 3 // 2  # yuv420p
+    video = dst.with_name(dst.stem + ".video.mp4") if sound else dst
+    decode = [_ffmpeg(), "-v", "error", "-i", str(src), "-map", "0:v:0", "-frames:v", str(frames + 1)]
+    decode += ["-f", "rawvideo", "-pix_fmt", "yuv420p", "-"]
+    reader = subprocess.Popen(decode, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+    writer = ffmpeg_writer(video, size, fps, frames=frames, seed=seed)
+    n = 0
+    try:
+        while chunk := reader.stdout.read(frame_bytes):
+            if len(chunk) < frame_bytes or n == frames:
+                raise RenderError(f"{src}: more than {frames} frames, or a partial one; the study's clip has {frames}")
+            writer.stdin.write(chunk)
+            n += 1
+        if n != frames:
+            raise RenderError(f"{src}: {n} frames; the study's clips of this item have {frames}")
+    finally:
+        reader.kill()
+        reader.wait()
+        writer.stdin.close()
+        writer.wait(TIMEOUT_S)
+    if writer.returncode != 0:
+        raise RenderError(f"{dst}: encoding failed ({writer.stderr.read().decode(errors='replace').strip()[-200:]})")
+    if sound:
+        _copy_sound(src, video, dst)
+
+
+def _copy_sound(src: Path, video: Path, dst: Path) -> None:
+    """`video` with the sound stream of `src` copied across, as rendering.audio.mux_audio writes a study's."""
+    cmd = [_ffmpeg(), "-y", "-v", "error", "-i", str(video), "-i", str(src), "-map", "0:v", "-map", "1:a:0"]
+    cmd += ["-c", "copy", "-map_metadata", "-1", "-fflags", "+bitexact", "-movflags", "+faststart", str(dst)]
+    out = subprocess.run(cmd, capture_output=True, timeout=TIMEOUT_S)
+    video.unlink(missing_ok=True)
+    if out.returncode != 0:
+        raise RenderError(f"{src}: copying its sound failed ({out.stderr.decode(errors='replace').strip()[-200:]})")
+
+
+def build_parser():
+    p = cli.ArgumentParser(prog="python -m rendering.reencode", description=__doc__.splitlines()[0])
+    p.add_argument("video", help="the video to encode again (.mp4)")
+    p.add_argument("out", help="where to write it (.mp4)")
+    p.add_argument("--like", required=True, help="a video of the study: the size, frame rate and length to keep")
+    return p
+
+
+def _main(argv):
+    args = build_parser().parse_args(argv)
+    reencode(args.video, args.out, args.like)
+    return 0
+
+
+def main(argv=None):
+    return cli.run(_main, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
