@@ -14,8 +14,8 @@ import statsmodels.api as sm
 from helpers.paths import SHARED
 
 from analysis import report
+from analysis.designs.pairwise import partisans, ranking
 from analysis.designs.pairwise import preference as pairwise
-from analysis.designs.pairwise import ranking
 from analysis.import_votes import import_votes
 
 BATTLES = SHARED / "data" / "genea-leaderboard-votes" / "battles_elo.csv"
@@ -221,3 +221,42 @@ def test_a_separated_study_with_an_estimable_tie_parameter_says_so_too(tmp_path)
 def test_tied_ranks_share_their_mean_rank_within_the_tolerance():
     assert ranking.tied_ranks([0.0, 1e-5, 2.0, -1.0]).tolist() == [2.5, 2.5, 1.0, 4.0]
     assert ranking.tied_ranks([0.0, 0.5, 1.0]).tolist() == [3.0, 2.0, 1.0]
+
+
+def with_a_stuffer(path, truth, seed=0, n_raters=30):
+    """An honest crowd on `truth`, and one rater who votes clearly for SYS whenever it is shown and "no
+    preference" elsewhere (issue 55, failure 3): nothing a catch trial could catch."""
+    simulated_pairs(path, truth, n_raters=n_raters, votes=40, seed=seed, tie_band=0.05)
+    df = pd.read_csv(path)
+    bot = df[df["rater_id"] == "r0"].copy()
+    bot["rater_id"] = "stuffer"
+    bot["clip_a"] = "s" + bot["clip_a"]
+    bot["clip_b"] = "s" + bot["clip_b"]
+    bot["preference"] = np.where(bot["condition_a"] == "SYS", 2, np.where(bot["condition_b"] == "SYS", -2, 0))
+    pd.concat(
+        [df, bot, bot.assign(rater_id="stuffer2", clip_a="t" + bot["clip_a"], clip_b="t" + bot["clip_b"])]
+    ).to_csv(path, index=False)
+    return path
+
+
+def test_raters_who_favour_one_condition_far_beyond_the_crowd_are_flagged(tmp_path):
+    truth = {"NAT": 0.0, "MG": -0.4, "FL": -0.8, "SYS": -1.2}
+    path = with_a_stuffer(tmp_path / "pairs.csv", truth)
+    doc = report.build_report(path, tmp_path / "rep", n_boot=100, progress=False, quiet=True)
+    part = doc["partisan_raters"]
+    assert {(r["rater_id"], r["condition"]) for r in part["flagged"]} == {("stuffer", "SYS"), ("stuffer2", "SYS")}
+    assert "Bonferroni" in part["rule"]
+    with_them = {r["condition"]: r["elo"] for r in doc["ranking"]}
+    without = {r["condition"]: r["elo"] for r in part["ranking_without_them"]}
+    assert without["SYS"] < with_them["SYS"] and min(without, key=without.get) == "SYS"
+    page = (tmp_path / "rep" / "report.html").read_text()
+    assert "Raters who favour one condition far beyond the crowd" in page and "stuffer" in page
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_an_honest_crowd_has_no_partisans(tmp_path, seed):
+    truth = {"NAT": 0.0, "MG": -0.4, "FL": -0.8, "SYS": -1.2, "X": 0.3}
+    path = simulated_pairs(tmp_path / "pairs.csv", truth, n_raters=40, votes=40, seed=seed, tie_band=0.05)
+    res = pairwise.analyse(pairwise.load_pairs(path), n_boot=20)
+    o = pairwise.oriented(pairwise.load_pairs(path))
+    assert partisans.flag(o).empty and res["n_raters"] == 40

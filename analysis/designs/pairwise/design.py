@@ -6,11 +6,12 @@ import html
 
 import pandas as pd
 
+from ...data.load import AnalysisError
 from ...page import design_figures
 from ...page.report_html import table
 from ..appropriateness import mas
 from ..base import FailedCatchDesign
-from . import preference, ranking, reasons, rounds
+from . import partisans, preference, ranking, reasons, rounds
 
 
 def _renamed_nat(df, name):
@@ -31,16 +32,29 @@ class Pairwise(FailedCatchDesign):
         return preference.failed_raters(df)
 
     def analyse_rows(self, df, options):
-        res = preference.analyse(
+        res = self._fit(df, options)
+        res["reasons_when_lost"] = reasons.when_lost(df)  # None when the votes carry no reasons
+        res["rounds"] = rounds.per_round(df)  # None for a file without rounds
+        # Raters who favour one condition far beyond the crowd (partisans.py): flagged, and the ranking shown
+        # without them beside the ranking with them; nobody is excluded by it.
+        res["partisans"] = partisans.flag(preference.oriented(df))
+        res["ranking_without_partisans"] = None
+        flagged = set(res["partisans"]["rater_id"])
+        if flagged:
+            try:
+                res["ranking_without_partisans"] = self._fit(df[~df["rater_id"].isin(flagged)], options)["ranking"]
+            except AnalysisError:  # too little left to rank
+                pass
+        return res
+
+    def _fit(self, df, options):
+        return preference.analyse(
             df,
             n_boot=options.n_boot,
             seed=options.seed,
             alpha=options.alpha,
             reference=options.reference or _renamed_nat(df, options.reference_name),
         )
-        res["reasons_when_lost"] = reasons.when_lost(df)  # None when the votes carry no reasons
-        res["rounds"] = rounds.per_round(df)  # None for a file without rounds
-        return res
 
     def figures(self, data, kept, everyone, folder):
         order = list(kept["ranking"]["condition"])  # strongest first
@@ -76,13 +90,22 @@ class Pairwise(FailedCatchDesign):
         }
 
     def _votes_json(self, res):
-        """What the votes carry beside the preference: their rounds and their reasons, when the file has them."""
-        out = {} if res.get("rounds") is None else {"rounds": res["rounds"]}
+        """What the votes carry beside the preference: their rounds and their reasons, when the file has them;
+        the raters who favour one condition far beyond the crowd, and the ranking without them."""
+        without = res.get("ranking_without_partisans")
+        out = {
+            "partisan_raters": {
+                "rule": partisans.rule_text(),
+                "flagged": res["partisans"].to_dict(orient="records"),
+                "ranking_without_them": None if without is None else without.to_dict(orient="records"),
+            }
+        }
+        out = out if res.get("rounds") is None else {**out, "rounds": res["rounds"]}
         lost = res.get("reasons_when_lost")
         return out if lost is None else {**out, "reasons_when_lost": reasons.as_json(lost)}
 
     def _votes_html(self, res):
-        out = []
+        out = partisans_html(res)
         if res.get("rounds") and len(res["rounds"]) > 1:
             out += [
                 "<h3>Rounds: the votes of each, and the conditions it brought in</h3>",
@@ -134,11 +157,32 @@ class Pairwise(FailedCatchDesign):
         lines += ["", f"Bradley-Terry log strengths ({bt['reference']} = 0; {tie_text(bt)}): " + strengths]
         if fit_warning(kept):
             lines.append(fit_warning(kept))
+        flagged = kept["partisans"]
+        if not flagged.empty:
+            who = ", ".join(f"{r.rater_id} ({r.condition}, {r.share:.0%} against the crowd's {r.crowd_share:.0%})"
+                            for r in flagged.itertuples())  # fmt: skip
+            lines.append(f"Raters who favour one condition far beyond the crowd: {who}")
         lines += ["", f"Ranking, Elo ({bt['reference']} = 1000) [95%]; a shared rank = intervals overlap: " + ranked]
         rel = kept["reliability"]
         if rel:
             lines.append(reliability_text(rel))
         return lines
+
+
+def partisans_html(res) -> list[str]:
+    """The raters flagged for favouring one condition far beyond the crowd, and the ranking without them."""
+    flagged = res["partisans"]
+    head = "<h3>Raters who favour one condition far beyond the crowd</h3>"
+    rule = f"<p>The rule: {html.escape(partisans.rule_text())}.</p>"
+    if flagged.empty:
+        return [head, rule, "<p>None flagged.</p>"]
+    out = [head, rule, table(flagged.set_index("rater_id"), ())]
+    without = res.get("ranking_without_partisans")
+    if without is not None:
+        cols = ["condition", "rank_range", "elo", "elo_low", "elo_high", "group"]
+        out += ["<p>The ranking without the flagged raters (the ranking above keeps them):</p>"]
+        out += [table(without[cols].set_index("condition"), ())]
+    return out
 
 
 def tie_text(bt) -> str:
