@@ -15,8 +15,9 @@ from helpers.concurrent_raters import cover_mismatches
 from helpers.fake_stimuli import write_fake_stimuli
 from test_app_api import TOKEN_HDR
 
-from rating_app import AppError, active, create_app
-from rating_app.study.db import app_engine
+from rating_app import AppError, create_app
+from rating_app.pairing import active
+from rating_app.store.db import app_engine
 
 
 @pytest.fixture

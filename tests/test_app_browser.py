@@ -13,8 +13,8 @@ import pytest
 import requests
 
 from rating_app import create_app
-from rating_app.study.db import app_engine
-from rating_app.study.manifest import load_manifest
+from rating_app.store.db import app_engine
+from rating_app.store.manifest import load_manifest
 
 ROOT = Path(__file__).resolve().parents[1]
 CHROMIUM, CHROMEDRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
@@ -154,7 +154,7 @@ def test_rater_flow_in_a_real_browser(live_server, browser):
     rows = [row for row in csv.DictReader(io.StringIO(r.text)) if row["external_id"] == "browserpid1"]
     from sqlalchemy import select
 
-    from rating_app.study.db import Trial
+    from rating_app.store.db import Trial
 
     with app_engine(live_server_manifest[1]).connect() as conn:
         clip_of = dict(conn.execute(select(Trial.id, Trial.clip_id)).all())

@@ -19,8 +19,8 @@ from sqlalchemy import update
 from test_app_api import TOKEN_HDR, idle
 
 from rating_app import create_app
-from rating_app.study.db import Trial, app_engine, utcnow
-from rating_app.study.manifest import AppError, load_manifest
+from rating_app.store.db import Trial, app_engine, utcnow
+from rating_app.store.manifest import AppError, load_manifest
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -502,7 +502,8 @@ def test_simulated_crowd_answers_each_design_as_the_page_does(stimuli, app_db_ur
     failed = {r["rater_id"] for r in p["raters"] if r["catch_failures"]}
     assert failed and failed == set(summary["failed_catch_raters"]) and failed <= set(summary["careless_raters"])
     # the report excludes exactly the raters the dashboard lists as failing a catch trial
-    from analysis import pairwise, parallel
+    from analysis.designs.pairwise import preference as pairwise
+    from analysis.designs.parallel import mushra as parallel
 
     f = tmp_path / "export.csv"
     with open(f, "w", newline="") as fh:

@@ -13,8 +13,8 @@ from sqlalchemy import select
 from test_app_designs import complete, post, shown
 
 from analysis.designs.appropriateness.mas import analyse, load_answers
-from rating_app.study.db import Rater, app_engine
-from rating_app.study.manifest import AppError, load_manifest
+from rating_app.store.db import Rater, app_engine
+from rating_app.store.manifest import AppError, load_manifest
 
 
 @pytest.fixture(scope="module")

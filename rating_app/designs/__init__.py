@@ -8,7 +8,7 @@ from flask import current_app
 
 from moglow_eval.core import study
 
-from ..study.manifest import AppError
+from ..store.manifest import AppError
 from .acr import Acr
 from .appropriateness import Appropriateness
 from .base import LABELS, MAX_PAGE, Design, Unit

@@ -12,8 +12,8 @@ from __future__ import annotations
 
 from sqlalchemy import select
 
-from ..study.db import Clip
-from ..study.manifest import AppError
+from ..store.db import Clip
+from ..store.manifest import AppError
 from .base import Unit
 from .pairwise import Pairwise, iter_pair_rows
 

@@ -20,8 +20,8 @@ from flask import Blueprint, abort, current_app, jsonify, send_file
 from sqlalchemy import update
 
 from ..guard.bodies import check_token, json_body
-from ..study.db import Rater, app_engine, utcnow
-from ..study.manifest import AppError
+from ..store.db import Rater, app_engine, utcnow
+from ..store.manifest import AppError
 
 bp = Blueprint("audio_check", __name__, url_prefix="/api")
 MAX_TRIES = 2

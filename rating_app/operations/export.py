@@ -18,7 +18,7 @@ from moglow_eval.core import study
 
 from ..designs import get
 from ..designs.export_cells import clip_styles, row_style
-from ..study.db import TARGET_RATERS, study_design, study_setting
+from ..store.db import TARGET_RATERS, study_design, study_setting
 
 FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
 

@@ -11,7 +11,7 @@ from sqlalchemy.orm import Session
 from ..designs import get
 from ..designs.export_cells import rater_flags
 from ..media import fetched
-from ..study.db import Event, Rater, Trial, TrialClip
+from ..store.db import Event, Rater, Trial, TrialClip
 
 
 def progress(engine: Engine, target: int, design: str | None = None, units=None) -> dict:

@@ -19,8 +19,8 @@ from sqlalchemy import insert, select, text, update
 from ..designs import LABELS, of_app
 from ..pairing import active
 from ..pairing.assign import expire_idle, hold, lock_assign
-from ..study.db import Rater, Trial, TrialClip, read_engine
-from ..study.rounds import current_units
+from ..store.db import Rater, Trial, TrialClip, read_engine
+from ..store.rounds import current_units
 from . import sessions
 
 

@@ -23,8 +23,8 @@ from ..guard.bodies import ext_field, json_body
 from ..guard.limits import client_key
 from ..pairing.active import for_units
 from ..pairing.assign import StudyFull, expire_idle, lock_assign
-from ..study.db import Rater, Trial, TrialClip, app_engine, utcnow
-from ..study.rounds import refresh
+from ..store.db import Rater, Trial, TrialClip, app_engine, utcnow
+from ..store.rounds import refresh
 from . import sessions
 from .answers import TOLERANCE_MS
 

@@ -14,8 +14,8 @@ from sqlalchemy import and_, bindparam, select, update
 from sqlalchemy.orm import aliased
 
 from ..guard.bodies import check_token
-from ..study.db import Rater, StudySetting, Trial
-from ..study.rounds import REVISION
+from ..store.db import Rater, StudySetting, Trial
+from ..store.rounds import REVISION
 
 TOUCH_EVERY_S = 30  # last_seen (shown on the dashboard) is refreshed at most this often
 RATER_COLS = (

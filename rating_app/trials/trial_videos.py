@@ -12,8 +12,8 @@ from sqlalchemy import bindparam, func, select, update
 
 from ..guard.bodies import check_token
 from ..media import fetched
-from ..study.db import Rater, Trial, TrialClip, app_engine, read_engine, utcnow
-from ..study.rounds import know_clips
+from ..store.db import Rater, Trial, TrialClip, app_engine, read_engine, utcnow
+from ..store.rounds import know_clips
 from . import sessions
 
 TRIAL_VIDEO = (

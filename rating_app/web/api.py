@@ -15,7 +15,7 @@ from sqlalchemy import func, insert, select, update
 from ..guard.bodies import int_field, json_body
 from ..guard.limits import escape_text, same_site_only
 from ..pairing.assign import expire_idle
-from ..study.db import Event, Rater, Trial, TrialClip, app_engine, read_engine, utcnow
+from ..store.db import Event, Rater, Trial, TrialClip, app_engine, read_engine, utcnow
 from ..trials import answers, session_start, sessions
 from ..trials.serving import serve, trial_reply
 from ..trials.trial_videos import CLIP_VIDEO, TRIAL_VIDEO, send_video, video_row

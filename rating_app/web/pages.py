@@ -12,8 +12,8 @@ from moglow_eval.core import study
 
 from ..guard.bodies import EXTERNAL
 from ..operations import health
-from ..study.db import app_engine
-from ..study.rounds import refresh
+from ..store.db import app_engine
+from ..store.rounds import refresh
 
 bp = Blueprint("pages", __name__)
 
