@@ -40,7 +40,7 @@ DESIGNS = {
     ),
     "appropriateness": (
         ("rater_id", "clip_a", "clip_b", "preference"),
-        iter_fit_rows,
+        lambda s: iter_fit_rows(s, "mismatched_item"),
         4,
         lambda r: (r["item"], r["condition_a"]),
     ),
