@@ -201,7 +201,7 @@ def _withdraw_condition(a):
 
 
 def _rounds_parsers(sub, db):
-    """add-condition and withdraw-condition (conditions.py)."""
+    """add-condition and withdraw-condition (operations/conditions.py)."""
     c = sub.add_parser("add-condition", help="add a condition's clips to a running pairwise study (a new round)")
     c.add_argument("--db", default=None, help=db)
     c.add_argument("--manifest", required=True, help="the new condition's stimulus folder's manifest.csv")

@@ -41,7 +41,7 @@ COLUMNS = (
 
 
 class Vote(NamedTuple):
-    """A rating-phase answer: the preference and the reasons given with it (reasons.py)."""
+    """A rating-phase answer: the preference and the reasons given with it (store/reasons.py)."""
 
     preference: int
     reasons: str  # ids joined by ';'

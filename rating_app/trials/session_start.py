@@ -112,7 +112,7 @@ def start():
             ext = refresh(conn)  # a round begun or a condition withdrawn since this worker loaded the study
             ranking = for_units(ext, ext["units"])
             closed = ranking.closed(conn) if ranking is not None else None
-            if closed:  # the stopping rule (active.py): no new raters, started sessions finish
+            if closed:  # the stopping rule (pairing/active.py): no new raters, started sessions finish
                 return jsonify(error=closed, full=True, closed=True), 409
             rng = random.Random(secrets.randbits(64))
             try:

@@ -219,7 +219,7 @@ def logout():
 @bp.get("/export.csv")
 def export():
     require_admin()
-    if request.args.get("format") == "battles":  # the leaderboard's battle format (battles.py)
+    if request.args.get("format") == "battles":  # the leaderboard's battle format (operations/battles.py)
         from ..operations.battles import export_battles
 
         try:

@@ -51,7 +51,7 @@ def index():
         answer_field=design.answer_field,
         question=cfg["STUDY_QUESTION"],
         sound=cfg["STUDY_SOUND"],
-        reasons=cfg["VOTE_REASONS"],  # the boxes shown with a vote, and the free text's limit (reasons.py)
+        reasons=cfg["VOTE_REASONS"],  # the boxes shown with a vote, and the free text's limit (store/reasons.py)
         reason_text=cfg["REASON_TEXT"],
     )
 
