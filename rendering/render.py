@@ -20,6 +20,7 @@ from .errors import RenderError
 from .raster import DEFAULT_STYLE, FrameDrawer
 
 MIN_SIZE, MAX_SIZE = 32, 4096  # pixels; beyond 4096 x264's level limits and memory get in the way
+MESH_CHUNK = 64  # frames of a mesh's vertices skinned and held at once
 
 
 def size_flag(text):
@@ -51,6 +52,7 @@ def render_clip(
     hide=(),
     thin=None,
     rate_seed=None,
+    mesh=None,
 ):
     """Render a clip to an MP4 of a stick figure.
 
@@ -87,6 +89,10 @@ def render_clip(
     rate_seed : int or None
         The seed of the default rate control's random share of the rate per frame (None: fresh randomness, so
         the bytes differ from one render to the next; the pixels hardly do).
+    mesh : object or None
+        With `style.body == "mesh"`: the person's skinned mesh, with `faces` [F, 3], `mask` [V] (the face mask's
+        vertices) and `vertices(a, b)` -> frames a..b's vertices [b - a, V, 3] in the joints' world
+        (generation.data.smpl_files.MeshSource), read a chunk at a time so that memory does not grow with the clip.
 
     Returns
     -------
@@ -109,19 +115,27 @@ def render_clip(
         raise RenderError(f"{name}: joints must be [T >= 1, J, 3], got {joints.shape}")
     check_joints(joints, name)
     fps = check_fps(clip["fps"], name)
-    drawer = FrameDrawer(clip["parents"], list(clip["joint_names"]), size, camera, style, hide, thin)
+    if mesh is not None and getattr(mesh, "n_frames", len(joints)) != len(joints):
+        raise RenderError(f"{name}: the mesh has {mesh.n_frames} frames, the joints {len(joints)}")
+    drawer = FrameDrawer(
+        clip["parents"], list(clip["joint_names"]), size, camera, style, hide, thin, meshes=[mesh] if mesh else None
+    )
     targets = camera_targets(joints, fps, camera)
     keep = set(np.linspace(0, len(joints) - 1, sheet_frames).round().astype(int)) if sheet else set()
     kept = []
     proc = ffmpeg_writer(out_mp4, size, fps, preset, qp, crf, threads, frames=len(joints), seed=rate_seed)
     try:
-        for t in range(len(joints)):
-            proc.stdin.write(drawer.draw(joints[t], targets[t]))
-            if t in keep:
-                kept.append((t, drawer.rgb()))
+        for t0 in range(0, len(joints), MESH_CHUNK):
+            chunk = mesh.vertices(t0, min(len(joints), t0 + MESH_CHUNK)) if drawer.mesh is not None else None
+            for t in range(t0, min(len(joints), t0 + MESH_CHUNK)):
+                proc.stdin.write(drawer.draw(joints[t], targets[t], None if chunk is None else [chunk[t - t0]]))
+                if t in keep:
+                    kept.append((t, drawer.rgb()))
         proc.stdin.close()
     except BrokenPipeError:
         pass
+    finally:
+        drawer.close()
     err = proc.stderr.read().decode(errors="replace").strip()
     if proc.wait() != 0:
         raise RenderError(f"{out_mp4}: ffmpeg failed: {err.splitlines()[-1] if err else 'no message'}")
