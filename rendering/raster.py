@@ -333,14 +333,15 @@ class FrameDrawer:
         c0, r0, c1, r1 = box
         under = self.rgba[r0:r1, c0:c1]
         drawn = rgba[..., 3] != 0
-        new, old = rgba[drawn], under[drawn]
-        if old[:, 3].any():  # over the shadow: "over" in straight alpha, on the body's pixels only
+        if not ((under[..., 3] != 0) & drawn).any():  # nothing under the body (the shadow is elsewhere): a copy
+            np.copyto(under, rgba, where=drawn[..., None])
+        else:  # over the shadow: "over" in straight alpha, on the body's pixels only
+            new, old = rgba[drawn], under[drawn]
             am = new[:, 3:].astype(np.float32) * np.float32(1 / 255)
             au = old[:, 3:].astype(np.float32) * np.float32(1 / 255) * (1 - am)
             out_a = am + au
             rgb = (new[:, :3] * am + old[:, :3] * au) / np.maximum(out_a, np.float32(1e-6))
-            new = np.concatenate([rgb + np.float32(0.5), out_a * 255 + np.float32(0.5)], 1).astype(np.uint8)
-        under[drawn] = new
+            under[drawn] = np.concatenate([rgb + np.float32(0.5), out_a * 255 + np.float32(0.5)], 1).astype(np.uint8)
         points.append(self._rows(np.array([[c0, r0], [c1, r1]], np.float64)))
         return np.concatenate(points), 0.0
 

@@ -8,6 +8,7 @@ pipe and x264.
 """
 
 import argparse
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -124,9 +125,9 @@ def render_clip(
     keep = set(np.linspace(0, len(joints) - 1, sheet_frames).round().astype(int)) if sheet else set()
     kept = []
     proc = ffmpeg_writer(out_mp4, size, fps, preset, qp, crf, threads, frames=len(joints), seed=rate_seed)
+    chunks = _mesh_chunks(mesh if drawer.mesh is not None else None, len(joints))
     try:
-        for t0 in range(0, len(joints), MESH_CHUNK):
-            chunk = mesh.vertices(t0, min(len(joints), t0 + MESH_CHUNK)) if drawer.mesh is not None else None
+        for t0, chunk in chunks:
             for t in range(t0, min(len(joints), t0 + MESH_CHUNK)):
                 proc.stdin.write(drawer.draw(joints[t], targets[t], None if chunk is None else [chunk[t - t0]]))
                 if t in keep:
@@ -135,6 +136,7 @@ def render_clip(
     except BrokenPipeError:
         pass
     finally:
+        chunks.close()
         drawer.close()
     err = proc.stderr.read().decode(errors="replace").strip()
     if proc.wait() != 0:
@@ -142,6 +144,23 @@ def render_clip(
     if sheet:
         contact_sheet(kept, fps, sheet)
     return len(joints)
+
+
+def _mesh_chunks(mesh, n):
+    """(first frame, its chunk's vertices [<= MESH_CHUNK, V, 3] or None) for each chunk of a clip of n frames; the
+    next chunk is skinned on a thread while this one is drawn (the skinning's torch and the drawing's OpenGL both
+    let go of the GIL), so at most two chunks are held at once."""
+    if mesh is None:
+        for t0 in range(0, n, MESH_CHUNK):
+            yield t0, None
+        return
+    with ThreadPoolExecutor(1) as pool:
+        ahead = pool.submit(mesh.vertices, 0, min(n, MESH_CHUNK))
+        for t0 in range(0, n, MESH_CHUNK):
+            chunk = ahead.result()
+            if t0 + MESH_CHUNK < n:
+                ahead = pool.submit(mesh.vertices, t0 + MESH_CHUNK, min(n, t0 + 2 * MESH_CHUNK))
+            yield t0, chunk
 
 
 def contact_sheet(frames, fps, out_png, columns=4, thumb=240):
