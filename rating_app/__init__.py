@@ -2,9 +2,9 @@
 
     app = create_app(manifest="stimuli/manifest.csv", db_url="postgresql://...", ratings_per_clip=20)
 
-The settings are one table (store/settings.py): each is a keyword argument here, an environment variable (how
+The settings are one table (settings.py): each is a keyword argument here, an environment variable (how
 `rating_app.wsgi:app` is configured under gunicorn), a key of the study file (`config`, or RATING_CONFIG;
-store/config.py) and, most of them, a flag of `serve`. An argument left as None is read from the environment,
+study_config.py) and, most of them, a flag of `serve`. An argument left as None is read from the environment,
 then the study file, then the default. Every setting is checked here, so a bad one stops the start with one line
 instead of failing on each request.
 """
@@ -153,7 +153,7 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
 
 
 def _open_rounds(app: Flask) -> None:
-    """Record the study's manifest and conditions (store/rounds.py) and serve what the database says is served now: a
+    """Record the study's manifest and conditions (rounds.py) and serve what the database says is served now: a
     withdrawn condition's pairs never again."""
     from sqlalchemy.orm import Session
 

@@ -35,11 +35,10 @@ Relative paths are relative to the file. Command-line flags override the top-lev
 StudyFileError naming the file and key.
 """
 
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from moglow_eval.core import study
+from moglow_eval.core import study, user_files
 from moglow_eval.core.cli import UserError
 
 from ..data.motion_files import UNITS, UPS
@@ -65,6 +64,7 @@ AUDIO_KEYS = {"folder", "loudness"}
 CATCH_KEYS = {"make", "n", "folder"}
 SKELETON_KEYS = {"file", "units", "up", "hide", "thin", "feet", "fps", "smpl_model", "smpl_type"}
 MAX_LENGTH_S = 600.0
+MAX_BYTES = 1 << 20  # a study file is a few dozen keys
 MAX_DEFAULT_FPS = 60.0  # without `fps`, clips keep the reference's frame rate, up to this (a video's usual most)
 
 
@@ -161,12 +161,7 @@ def read_study_file(path):
         range, or a design that needs a table the file lacks.
     """
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise StudyFileError(f"{path}: cannot read the study file ({e.strerror or e})") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise StudyFileError(f"{path}: not valid TOML ({e})") from None
+    data = user_files.read_toml(path, MAX_BYTES, StudyFileError, "study file")
     _unknown(path, "", data, TOP_KEYS)
     conditions = _conditions(path, data.get("conditions"))
     reference = data.get("reference")

@@ -4,6 +4,7 @@ The parts exchange files, not code, so these names are also what the files hold:
 "NAT", a role column "catch", a clip id matches CLIP_ID.
 """
 
+import collections
 import re
 import secrets
 
@@ -87,3 +88,22 @@ def pair_catch_failed(condition_a, condition_b, preference):
 def page_catch_failed(bad_rating, natural_rating):
     """A parallel page rates its BAD clip at or above its NAT clip."""
     return bad_rating >= natural_rating
+
+
+# The rater exclusion (CONTRACTS §6, §8): a rater who fails this many catch trials, by the design's rule above, is
+# excluded. Their answers are kept and exported (flagged `failed_catch`), and none of them enters a statistic: not
+# the report's primary analysis, nor the app's ranking (the posterior behind active pairs, the stopping rule, the
+# dashboard's "how far from settled"). Both parts call `excluded_raters`, so they exclude the same raters.
+EXCLUDE_AT_FAILS = 1
+
+
+def excluded(n_failed: int) -> bool:
+    """Whether a rater who failed `n_failed` catch trials is excluded."""
+    return n_failed >= EXCLUDE_AT_FAILS
+
+
+def excluded_raters(catch_answers) -> list:
+    """The raters excluded, sorted, from (rater, failed) for each catch answer (any other answer may come too,
+    as failed False)."""
+    fails = collections.Counter(rater for rater, failed in catch_answers if bool(failed))
+    return sorted(rater for rater, n in fails.items() if excluded(n))

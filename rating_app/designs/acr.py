@@ -116,6 +116,9 @@ class Acr(Design):
     def export_rows(self, s):
         yield from iter_rows(s)
 
+    def catch_answers(self, rows):
+        return ((r["rater_id"], r["role"] == "catch" and study.acr_catch_failed(r["rating"])) for r in rows)
+
     def progress(self, s, target, units):
         return progress_tables(s, target)
 

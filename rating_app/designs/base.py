@@ -122,6 +122,11 @@ class Design:
         """The export's rows (dicts keyed by `columns`), in rater and trial order."""
         raise NotImplementedError
 
+    def catch_answers(self, rows):
+        """(rater_id, failed a catch trial) per answer of the export `rows`, by the design's catch rule in
+        moglow_eval.core.study: what study.excluded_raters takes."""
+        raise NotImplementedError
+
     def progress(self, s, target: int, units) -> dict:
         """The dashboard's figures: {"per_clip", "per_condition", and {rater_id: count} for "answers", "fails",
         "no_video", "partial_video"}."""

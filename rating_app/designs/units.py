@@ -142,6 +142,9 @@ class UnitDesign(Design):
         """(rater_id, failed a catch trial, flags) per answer, from the export rows."""
         raise NotImplementedError
 
+    def catch_answers(self, rows):
+        return ((rid, failed) for rid, failed, _ in self.answers(rows))
+
     def progress(self, s, target, units):
         conditions = dict(s.execute(select(Clip.clip_id, Clip.condition)).all())
         counts = _unit_counts(s)
