@@ -148,6 +148,31 @@ def normalise(samples, target_lufs):
     return np.clip(samples * gain, -1.0, 1.0).astype(np.float32)
 
 
+SPEECH_FLOOR_LUFS = -50.0  # a voice quieter than this over an item says nothing there: it is never raised
+PAN = 0.6  # how far to its side each voice of a stereo mix is panned (1: hard left or right)
+
+
+def mix_voices(tracks, target_lufs, pans=None):
+    """One item's sound from each person's voice: the tracks [N, channels] float32 at RATE (of one length) each
+    made mono and normalised to `target_lufs` where it holds speech (a listener's near-silence, quieter than
+    SPEECH_FLOOR_LUFS, is kept as it is, never raised to speech level), then summed, and the sum normalised to
+    `target_lufs`. Mono [N, 1] with `pans` None; else stereo [N, 2], voice k panned to pans[k] (-1 left .. 1
+    right) at constant power."""
+    voices = []
+    for track in tracks:
+        mono = np.asarray(track, np.float32).mean(axis=1, keepdims=True)
+        if integrated_loudness(mono) > SPEECH_FLOOR_LUFS:
+            mono = normalise(mono, target_lufs)
+        voices.append(mono[:, 0])
+    if pans is None:
+        mixed = np.sum(voices, axis=0)[:, None]
+    else:
+        angle = (np.clip(np.asarray(pans, np.float64), -1, 1) + 1) * np.pi / 4
+        gains = np.stack([np.cos(angle), np.sin(angle)], 1) * np.sqrt(2)  # centred: each channel at unity
+        mixed = sum(v[:, None] * g[None].astype(np.float32) for v, g in zip(voices, gains))
+    return normalise(mixed.astype(np.float32), target_lufs)
+
+
 def write_wav(path, samples, rate=RATE):
     """Float samples [N] or [N, channels] in [-1, 1] as a 16-bit PCM WAV file."""
     import wave

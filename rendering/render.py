@@ -15,9 +15,10 @@ from moglow_eval.core import cli
 from moglow_eval.core.clip import check_fps, check_joints, load_clip
 
 from .camera import DEFAULT_CAMERA, camera_targets
+from .captions import CaptionLayer
 from .encode import ffmpeg_writer
 from .errors import RenderError
-from .raster import DEFAULT_STYLE, FrameDrawer
+from .raster import DEFAULT_STYLE, FrameDrawer, one_colour
 
 MIN_SIZE, MAX_SIZE = 32, 4096  # pixels; beyond 4096 x264's level limits and memory get in the way
 
@@ -51,8 +52,12 @@ def render_clip(
     hide=(),
     thin=None,
     rate_seed=None,
+    partner=None,
+    partner_style=None,
+    target=None,
+    captions=None,
 ):
-    """Render a clip to an MP4 of a stick figure.
+    """Render a clip to an MP4 of a stick figure (or a solid body), with a second person and captions if asked.
 
     Parameters
     ----------
@@ -87,6 +92,16 @@ def render_clip(
     rate_seed : int or None
         The seed of the default rate control's random share of the rate per frame (None: fresh randomness, so
         the bytes differ from one render to the next; the pixels hardly do).
+    partner : str or Path or dict or None
+        A second person (a clip .npz or dict of as many frames, any skeleton) drawn in the same frame: the real
+        interlocutor of a two-person video. The farther of the two is drawn first in every frame.
+    partner_style : Style or None
+        The second person's drawing; None: `style` in one neutral colour (raster.one_colour).
+    target : sequence of float or None
+        A fixed look-at point [3] for every frame (a two-person video's camera stays put, so that the partner is
+        the same pixels in every condition's video); None: the camera follows the clip's root.
+    captions : sequence of captions.Phrase or None
+        Phrases burned in at the bottom while they are on (rendering.captions).
 
     Returns
     -------
@@ -110,13 +125,20 @@ def render_clip(
     check_joints(joints, name)
     fps = check_fps(clip["fps"], name)
     drawer = FrameDrawer(clip["parents"], list(clip["joint_names"]), size, camera, style, hide, thin)
-    targets = camera_targets(joints, fps, camera)
+    people = [(drawer, joints)]
+    if partner is not None:
+        people.append(_partner(partner, len(joints), size, camera, partner_style or one_colour(style), drawer, name))
+    if target is None:
+        targets = camera_targets(joints, fps, camera)
+    else:
+        targets = np.tile(np.asarray(target, np.float64), (len(joints), 1))
+    layer = CaptionLayer(captions, size) if captions else None
     keep = set(np.linspace(0, len(joints) - 1, sheet_frames).round().astype(int)) if sheet else set()
     kept = []
     proc = ffmpeg_writer(out_mp4, size, fps, preset, qp, crf, threads, frames=len(joints), seed=rate_seed)
     try:
         for t in range(len(joints)):
-            proc.stdin.write(drawer.draw(joints[t], targets[t]))
+            proc.stdin.write(compose(people, t, targets[t], layer, fps))
             if t in keep:
                 kept.append((t, drawer.rgb()))
         proc.stdin.close()
@@ -128,6 +150,28 @@ def render_clip(
     if sheet:
         contact_sheet(kept, fps, sheet)
     return len(joints)
+
+
+def _partner(partner, frames, size, camera, style, drawer, name):
+    """(drawer, joints) of the second person, drawing into `drawer`'s frame; RenderError naming the clip when its
+    joints are not [frames, J, 3]."""
+    other = _as_clip(partner)
+    joints = np.asarray(other["joints"], dtype=np.float64)
+    if joints.ndim != 3 or joints.shape[2] != 3 or len(joints) != frames:
+        raise RenderError(f"{name}: the partner's joints must be [{frames}, J, 3] as the clip's, got {joints.shape}")
+    check_joints(joints, name)
+    second = FrameDrawer(other["parents"], list(other["joint_names"]), size, camera, style, frame=drawer.frame)
+    return second, joints
+
+
+def compose(people, t, target, layer=None, fps=1.0):
+    """Frame t as yuv420p: the floor, then each person [(drawer, joints [T, J, 3])] from the farthest to the
+    nearest, then the captions on at t / fps."""
+    people[0][0].background(target)
+    for drawer, joints in sorted(people, key=lambda p: -p[0].depth(p[1][t], target)):
+        drawer.add_figure(joints[t], target)
+    frame = people[0][0].frame
+    return layer.apply(frame, t / fps) if layer is not None else frame
 
 
 def contact_sheet(frames, fps, out_png, columns=4, thumb=240):
