@@ -8,7 +8,7 @@ writer.
 """
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from matplotlib.backends.backend_agg import RendererAgg
@@ -51,6 +51,14 @@ class Style:
 DEFAULT_STYLE = Style()
 STYLES = {"stick": DEFAULT_STYLE, "solid": Style(body="solid"), "mesh": Style(body="mesh")}  # [render] style
 MESH_INPUTS = "SMPL-family parameter files (SMPL, SMPL-H, SMPL-X)"  # what the mesh style can draw
+# The second person of a two-person video (the real interlocutor) is one colour, no side told: a muted green that
+# no side colour, grey of the floor or caption shares.
+PARTNER_COLOUR = (0.40, 0.60, 0.44)
+
+
+def one_colour(style, colour=PARTNER_COLOUR):
+    """`style` with every bone and the head in `colour`: the interlocutor's drawing in any style."""
+    return replace(style, centre=tuple(colour), left=tuple(colour), right=tuple(colour), mesh_colour=tuple(colour))
 
 
 def _wu_lines(flat, width, a, b, value, alpha):
@@ -133,7 +141,16 @@ class FrameDrawer:
     """
 
     def __init__(
-        self, parents, joint_names, size, camera=DEFAULT_CAMERA, style=DEFAULT_STYLE, hide=(), thin=None, meshes=None
+        self,
+        parents,
+        joint_names,
+        size,
+        camera=DEFAULT_CAMERA,
+        style=DEFAULT_STYLE,
+        hide=(),
+        thin=None,
+        frame=None,
+        meshes=None,
     ):
         if size % 2:
             raise RenderError(f"size must be even for yuv420p, got {size}")
@@ -145,7 +162,8 @@ class FrameDrawer:
         self.px = self.rgba.view(np.uint32).reshape(size, size)  # one word per pixel: nonzero where drawn
         self.px_flat = self.px.reshape(-1)
         n = size * size
-        self.frame = np.empty(n * 3 // 2, np.uint8)  # the yuv420p frame written to the encoder
+        # The yuv420p frame written to the encoder; a second person's drawer draws into the first's (`frame`).
+        self.frame = np.empty(n * 3 // 2, np.uint8) if frame is None else frame
         self.y = self.frame[:n].reshape(size, size)
         self.y_flat = self.frame[:n]
         self.uv = self.frame[n:].reshape(2, size // 2, size // 2)
@@ -346,12 +364,26 @@ class FrameDrawer:
         return np.concatenate(points), 0.0
 
     def draw(self, joints, target, vertices=None):
-        """Render one frame (joints [J, 3], look-at target [3]; with the mesh style, `vertices`: each person's
-        [V, 3] in the joints' world); returns the yuv420p frame (flat uint8 view)."""
-        eye = target + self.proj.offset
+        """Render one frame (joints [J, 3], look-at target [3]; with the mesh style, `vertices`: the person's
+        [V, 3] in the joints' world, in a list); returns the yuv420p frame (flat uint8 view)."""
+        self.background(target)
+        return self.add_figure(joints, target, vertices)
+
+    def background(self, target):
+        """Start a frame: the sky, the floor and its grid seen from the look-at point `target` [3]."""
         np.copyto(self.y, self.blank_y)
         self.uv.fill(128)
-        self._grid(target, eye)
+        self._grid(target, target + self.proj.offset)
+
+    def depth(self, joints, target):
+        """How far the body (joints [J, 3], their mean) is in front of the camera looking at `target`: the farther
+        of two people is drawn first."""
+        return float(self.proj.to_camera(joints.mean(0), target + self.proj.offset)[2])
+
+    def add_figure(self, joints, target, vertices=None):
+        """Draw the body (joints [J, 3]; with the mesh style also its vertices, as `draw` takes them) over what the
+        frame holds, seen from the look-at point `target` [3]; returns the yuv420p frame."""
+        eye = target + self.proj.offset
         if self.solid is not None:
             self.solid.blocks = None  # (set by _figure where it draws the solid body on a grid of 2)
         points, radius = self._figure(joints, eye, vertices)

@@ -66,31 +66,42 @@ def smpl_positions(path, model, smpl_type=None, source_fps=None):
     if model is None:
         raise SmplError(f"{path}: an SMPL-family parameter file (poses, trans, betas); {WHERE_TO_GET}")
     poses, trans, betas, fps = _read_motion(path, source_fps)
+    joints, names, parents = pose_joints(poses, trans, betas, model, smpl_type, path)
+    return joints, names, parents, fps
+
+
+def pose_joints(poses, trans, betas, model, smpl_type, where):
+    """(joints [T, J, 3] float64, names, parents) of axis-angle poses [T, 3J] (the root first), translations
+    [T, 3] and shape `betas` [B] (empty: the model's mean shape) through the body model file `model`, with smplx's
+    kinematics. Every frame is posed from its own rotations: nothing is interpolated between frames here, so a
+    rotation's axis-angle flipping near pi between two frames moves no joint. SmplError naming `where`."""
     template, shapedirs, regressor, parents, kind = _read_model(model, smpl_type)
     n = len(parents)
     if poses.shape[1] != 3 * n:
         raise SmplError(
-            f"{path}: 'poses' has {poses.shape[1]} values a frame, but the {kind} model {model} has {n} joints "
+            f"{where}: 'poses' has {poses.shape[1]} values a frame, but the {kind} model {model} has {n} joints "
             f"({3 * n} values); give the model the file was made with"
         )
     try:
         import torch
         from smplx.lbs import batch_rigid_transform, batch_rodrigues, blend_shapes, vertices2joints
     except ImportError:
-        raise SmplError(f"{path}: reading SMPL-family files needs smplx: pip install 'moglow-eval[smpl]'") from None
+        raise SmplError(f"{where}: reading SMPL-family files needs smplx: pip install 'moglow-eval[smpl]'") from None
     n_shape = min(len(betas), _shape_components(kind, shapedirs.shape[2]))
     with torch.no_grad():
-        shape = torch.from_numpy(betas[:n_shape])[None]
-        shaped = torch.from_numpy(template)[None] + blend_shapes(shape, torch.from_numpy(shapedirs[:, :, :n_shape]))
+        shaped = torch.from_numpy(template)[None]
+        if n_shape:
+            shape = torch.from_numpy(np.asarray(betas[:n_shape], np.float64))[None]
+            shaped = shaped + blend_shapes(shape, torch.from_numpy(shapedirs[:, :, :n_shape]))
         rest = vertices2joints(torch.from_numpy(regressor), shaped)  # [1, J, 3]
         tree = torch.from_numpy(parents)
         out = np.empty((len(poses), n, 3))
         for a in range(0, len(poses), BATCH):
-            pose = torch.from_numpy(poses[a : a + BATCH])
+            pose = torch.from_numpy(np.ascontiguousarray(poses[a : a + BATCH], np.float64))
             rot = batch_rodrigues(pose.reshape(-1, 3)).reshape(len(pose), n, 3, 3)
             posed, _ = batch_rigid_transform(rot, rest.expand(len(pose), -1, -1), tree, dtype=torch.float64)
             out[a : a + BATCH] = posed.numpy()
-    return out + trans[:, None], list(JOINT_NAMES[kind]), parents.astype(np.int64), fps
+    return out + trans[:, None], list(JOINT_NAMES[kind]), parents.astype(np.int64)
 
 
 def smpl_mesh(path, model, smpl_type=None, source_fps=None, face="mask"):

@@ -53,6 +53,7 @@ from ..stimuli.render_pool import render_stimuli
 from ..stimuli.summary import blinding_warning
 from .inputs import (
     check_same_skeleton,
+    check_valid,
     folder_files,
     match_items,
     read_all,
@@ -72,6 +73,7 @@ def cut_items(motions, spec):
         clips = [by_item[item] for by_item in motions.values()]
         n = int(round(spec.length_s * spec.fps)) if spec.length_s else min(len(m.joints) for m in clips)
         for m in clips:
+            check_valid(m, n)
             m.joints = m.joints[:n]
 
 
