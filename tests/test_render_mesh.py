@@ -3,12 +3,17 @@ layout (tests/helpers/smpl_fixtures.py), checked against the joints' projection 
 silhouette covers the wrists, elbows and head, both hands are in frame, the face mask sits over the head, and the
 body's colour is not the background's. Front and upper framing; the one-line errors of the inputs it cannot draw."""
 
+import csv
+
 import numpy as np
 import pytest
 from helpers import smpl_fixtures
+from helpers.bvh_fixtures import write_zeroeggs
 from helpers.figure_pixels import decode
 
 from generation.data.smpl_files import MeshSource, SmplError, smpl_mesh, smpl_positions
+from generation.make_stimuli import main as make_stimuli
+from generation.stimuli.mesh_track import MeshTrack
 from rendering.camera import Projector, camera_targets
 from rendering.errors import RenderError
 from rendering.framing import item_camera
@@ -117,3 +122,80 @@ def test_a_model_that_does_not_fit_is_one_line(take, tmp_path):
         smpl_mesh(motion, tmp_path / "missing.npz")
     assert "missing.npz" in str(e.value)
     assert isinstance(smpl_mesh(motion, model), MeshSource)
+
+
+def _rows(path):
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def smpl_study(root, style='["stick", "mesh"]', model_kind="smplh"):
+    """A study of two conditions of three SMPL-H items each, the body model named in the study file."""
+    for sub, seed in (("real", 0), ("sys", 1)):
+        (root / sub).mkdir(parents=True)
+        for k in range(3):
+            smpl_fixtures.write_motion(root / sub / f"i{k}.npz", "smplh", frames=36, fps=30.0, seed=seed + 10 * k)
+    (root / "models").mkdir()
+    smpl_fixtures.write_body_model(root / "models" / "SMPLH_NEUTRAL.npz", model_kind)
+    (root / "study.toml").write_text(
+        'reference = "real"\nn_training = 1\n[conditions]\nreal = "real"\nSYS = "sys"\n[catch]\nn = 1\n'
+        '[skeleton]\nsmpl_model = "models/SMPLH_NEUTRAL.npz"\n'
+        f'[render]\nview = "front"\nframing = "upper"\nstyle = {style}\n'
+    )
+    return root / "study.toml"
+
+
+def test_a_study_draws_every_clip_as_stick_and_mesh(tmp_path):
+    """`[render] style = ["stick", "mesh"]`: every clip in both styles, the mesh ones skinned from their files (the
+    BAD clip's broken with its joints), with the style column; the mesh videos show the body in its colour."""
+    study_file = smpl_study(tmp_path / "s")
+    assert make_stimuli(["--study", str(study_file), "--out", str(tmp_path / "o"), "--size", "128", "--quiet"]) == 0
+    rows = _rows(tmp_path / "o" / "manifest.csv")
+    assert {r["style"] for r in rows} == {"stick", "mesh"}
+    by_style = {
+        s: sorted((r["condition"], r["item"], r["role"]) for r in rows if r["style"] == s) for s in ("stick", "mesh")
+    }
+    assert by_style["stick"] == by_style["mesh"] and any(c == "BAD" for c, _, _ in by_style["mesh"])
+    for r in rows:
+        frames, _ = decode(tmp_path / "o" / r["video"])
+        body, _ = body_pixels(frames[len(frames) // 2])
+        assert (body.mean() > 0.04) == (r["style"] == "mesh"), (
+            r["style"],
+            r["condition"],
+            body.mean(),
+        )  # a body, not lines
+
+
+def test_the_mesh_style_refuses_other_motion_in_one_line(tmp_path, capsys):
+    root = tmp_path / "s"
+    for sub in ("real", "sys"):
+        (root / sub).mkdir(parents=True)
+        for k in range(3):
+            write_zeroeggs(root / sub / f"i{k}.bvh", frames=30, seed=k)
+    (root / "study.toml").write_text(
+        'reference = "real"\nn_training = 1\n[conditions]\nreal = "real"\nSYS = "sys"\n[render]\nstyle = "mesh"\n'
+    )
+    assert make_stimuli(["--study", str(root / "study.toml"), "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "i0.bvh: the mesh style draws SMPL-family parameter files" in err[0]
+    assert "can use stick or solid" in err[0] and not (tmp_path / "o").exists()
+
+
+def test_the_mesh_follows_its_clips_joints(take):
+    """MeshTrack: a clip that is its file turned, scaled and moved gets the file's mesh turned, scaled and moved
+    exactly; a joint moved on its own (a catch clip's break) moves the vertices it skins by as much."""
+    folder, model, motion, clip = take
+    source = smpl_mesh(motion, model)
+    verts, joints = source.posed(0, 10)
+    yaw = np.radians(70)
+    rot = np.array([[np.cos(yaw), 0, np.sin(yaw)], [0, 1, 0], [-np.sin(yaw), 0, np.cos(yaw)]])
+    moved = 0.9 * joints.astype(np.float64) @ rot.T + np.array([0.3, -0.1, 2.0])
+    got = MeshTrack(source, moved, np.arange(10)).vertices(0, 10)
+    want = 0.9 * verts.astype(np.float64) @ rot.T + np.array([0.3, -0.1, 2.0])
+    assert np.abs(got - want).max() < 1e-4
+    broken = moved.copy()
+    broken[:, 20] += (0.0, 0.2, 0.0)  # the left wrist raised 20 cm: the hand's vertices follow it
+    got = MeshTrack(source, broken, np.arange(10)).vertices(0, 10)
+    hand = source.weights[:, 20] == 1.0
+    shift = got - want
+    assert np.allclose(shift[:, hand, 1], 0.2, atol=0.03) and np.abs(shift[:, ~hand]).max() < 0.03

@@ -113,13 +113,22 @@ def smpl_mesh(path, model, smpl_type=None, source_fps=None, face="mask"):
     if model is None or not Path(model).is_file():
         raise SmplError(f"{model or path}: no body model file for the mesh style; {WHERE_TO_GET}")
     poses, trans, betas, fps = _read_motion(path, source_fps)
+    return mesh_source(poses, trans, betas, fps, model, smpl_type, face, path)
+
+
+def mesh_source(poses, trans, betas, fps, model, smpl_type, face, where):
+    """The MeshSource of poses [T, 3J], translations [T, 3] and `betas` (empty: the mean shape) at `fps`, through
+    the body model file `model` (smpl_mesh, and Seamless Interaction's files through seamless_files). SmplError
+    naming `where` or the model."""
+    if model is None or not Path(model).is_file():
+        raise SmplError(f"{model or where}: no body model file for the mesh style; {WHERE_TO_GET}")
     template, shapedirs, regressor, parents, kind = _read_model(model, smpl_type)
     if poses.shape[1] != 3 * len(parents):
         raise SmplError(
-            f"{path}: 'poses' has {poses.shape[1]} values a frame; the {kind} model {model} takes {3 * len(parents)}"
+            f"{where}: 'poses' has {poses.shape[1]} values a frame; the {kind} model {model} takes {3 * len(parents)}"
         )
     skin = _read_skin(model, len(template), len(parents))
-    return MeshSource(path, poses, trans, betas, fps, template, shapedirs, regressor, parents, kind, skin, face)
+    return MeshSource(where, poses, trans, betas, fps, template, shapedirs, regressor, parents, kind, skin, face)
 
 
 class MeshSource:
@@ -147,16 +156,21 @@ class MeshSource:
 
     def vertices(self, a, b):
         """Frames a..b's vertices [b - a, V, 3] float32, in metres, the root translation applied."""
+        return self.posed(a, b)[0]
+
+    def posed(self, a, b):
+        """(vertices [b - a, V, 3], joints [b - a, J, 3]) of frames a..b, float32, the root translation applied:
+        smplx's forward pass, a chunk of MESH_BATCH frames at a time."""
         import torch
         from smplx.lbs import lbs
 
-        out = np.empty((b - a, len(self.template), 3), np.float32)
+        verts = np.empty((b - a, len(self.template), 3), np.float32)
+        joints = np.empty((b - a, len(self.parents), 3), np.float32)
         with torch.no_grad():
             for s in range(a, b, MESH_BATCH):
                 e = min(b, s + MESH_BATCH)
-                n = e - s
-                verts, _ = lbs(
-                    torch.from_numpy(np.repeat(self.betas[None], n, 0)),
+                v, j = lbs(
+                    torch.from_numpy(np.repeat(self.betas[None], e - s, 0)),
                     torch.from_numpy(self.poses[s:e].astype(np.float32)),
                     torch.from_numpy(self.template),
                     torch.from_numpy(self.shapedirs),
@@ -165,8 +179,10 @@ class MeshSource:
                     torch.from_numpy(self.parents),
                     torch.from_numpy(self.weights),
                 )
-                out[s - a : e - a] = verts.numpy() + self.trans[s:e, None].astype(np.float32)
-        return out
+                shift = self.trans[s:e, None].astype(np.float32)
+                verts[s - a : e - a] = v.numpy() + shift
+                joints[s - a : e - a] = j.numpy() + shift
+        return verts, joints
 
 
 def face_vertices(shaped, joints):

@@ -29,7 +29,8 @@
     [render]                     # optional
     view = "front"               # "front", "three-quarter", "side" or degrees from the body's mean facing
     framing = "upper"            # "full" (the default), "upper" (hips up) or "auto" (upper when the feet stay)
-    style = ["stick", "solid"]   # "stick" (the default) or "solid", or a list: every clip drawn in each
+    style = ["stick", "mesh"]    # "stick" (the default), "solid", "mesh" (SMPL-family files), or a list of them
+    face = "mask"                # the mesh's face: a plain mask over it (the default), or "none"
 
 Two people and captions (generation.own_study.dyad, speech; CONTRACTS §10):
 
@@ -83,7 +84,8 @@ TOP_KEYS = {
     "mismatched",
     "captions",
 }
-RENDER_KEYS = {"view", "framing", "style"}
+RENDER_KEYS = {"view", "framing", "style", "face"}
+FACES = ("mask", "none")  # the mesh style's face: a plain mask over it (GENEA 2026), or the mesh's own
 AUDIO_KEYS = {"folder", "loudness", "interlocutor", "channels"}
 CATCH_KEYS = {"make", "n", "folder"}
 SKELETON_KEYS = {"file", "units", "up", "hide", "thin", "feet", "fps", "smpl_model", "smpl_type"}
@@ -119,6 +121,7 @@ class StudySpec:
     view: object = None  # None: the built-in study's fixed camera; else a key of rendering.framing.VIEWS or degrees
     framing: str = "full"
     styles: list = field(default_factory=lambda: ["stick"])
+    face: str = "mask"
     sources: Path | None = None  # the table of where each item came from
     interlocutor: Path | None = None  # the real other person's folder: a two-person study
     placement: str = "facing"
@@ -319,6 +322,10 @@ def _render(path, table, spec):
     if not isinstance(styles, list) or not styles or not all(s in STYLES for s in styles):
         raise err(path, "[render] style", f"must be {' or '.join(STYLES)}, or a list of them, got {style!r}")
     spec.styles = list(dict.fromkeys(styles))
+    face = table.get("face", "mask")
+    if face not in FACES:
+        raise err(path, "[render] face", f"must be {' or '.join(FACES)}, got {face!r}")
+    spec.face = face
 
 
 def check_joint_names(spec, names, where):
