@@ -53,11 +53,33 @@ def _header(path):
     raise RenderError(f"{path}: not a WAV or FLAC file")
 
 
-def read_audio(path, max_seconds=MAX_SECONDS):
-    """Samples [N, channels] float32 at RATE Hz (mono or stereo kept as it is), at most `max_seconds` of them.
+def audio_seconds(path):
+    """The length of a WAV or FLAC file in seconds, from its header alone (None where the header does not say:
+    a streamed WAV, a FLAC without its sample count); RenderError naming the file for anything else."""
+    _header(path)
+    with open(path, "rb") as f:
+        head = f.read(1 << 16)
+    if head[:4] == b"fLaC":
+        total = int.from_bytes(head[18:26], "big") & ((1 << 36) - 1)
+        rate = int.from_bytes(head[18:21], "big") >> 4
+        return total / rate if total and rate else None
+    pos, byte_rate = 12, 0
+    while pos + 8 <= len(head):
+        cid, size = head[pos : pos + 4], struct.unpack("<I", head[pos + 4 : pos + 8])[0]
+        if cid == b"fmt " and pos + 20 <= len(head):
+            byte_rate = struct.unpack("<I", head[pos + 16 : pos + 20])[0]
+        if cid == b"data":
+            return size / byte_rate if byte_rate and size != 0xFFFFFFFF else None
+        pos += 8 + size + (size & 1)
+    return None
 
-    ffmpeg decodes only the first `max_seconds` (at most MAX_SECONDS), so a small FLAC or a WAV whose header
-    claims hours holds at most that much in memory; the caller asks for what it will play."""
+
+def read_audio(path, max_seconds=MAX_SECONDS, start_s=0.0):
+    """Samples [N, channels] float32 at RATE Hz (mono or stereo kept as it is), at most `max_seconds` of them from
+    `start_s` seconds into the file.
+
+    ffmpeg decodes only the first `max_seconds` (at most MAX_SECONDS) from there, so a small FLAC or a WAV whose
+    header claims hours holds at most that much in memory; the caller asks for what it will play."""
     channels, rate = _header(path)
     if rate <= 0:
         raise RenderError(f"{path}: the sample rate is {rate}; an audio file needs a positive one")
@@ -66,7 +88,9 @@ def read_audio(path, max_seconds=MAX_SECONDS):
     if channels not in (1, 2):
         raise RenderError(f"{path}: {channels} channels; give mono or stereo audio")
     seconds = f"{min(float(max_seconds), MAX_SECONDS):.3f}"
-    cmd = [_ffmpeg(), "-v", "error", "-i", str(path), "-t", seconds, "-f", "f32le", "-ac", str(channels)]
+    # -ss before -i seeks in the input: sample-exact for PCM and FLAC, and nothing before the span is decoded.
+    cmd = [_ffmpeg(), "-v", "error", "-ss", f"{max(float(start_s), 0.0):.6f}", "-i", str(path), "-t", seconds]
+    cmd += ["-f", "f32le", "-ac", str(channels)]
     out = subprocess.run([*cmd, "-ar", str(RATE), "-"], capture_output=True)
     if out.returncode != 0:
         msg = out.stderr.decode(errors="replace").strip().splitlines()
@@ -122,6 +146,44 @@ def normalise(samples, target_lufs):
         return samples
     gain = 10 ** ((target_lufs - level) / 20)
     return np.clip(samples * gain, -1.0, 1.0).astype(np.float32)
+
+
+SPEECH_FLOOR_LUFS = -50.0  # a voice quieter than this over an item says nothing there: it is never raised
+PAN = 0.6  # how far to its side each voice of a stereo mix is panned (1: hard left or right)
+
+
+def mix_voices(tracks, target_lufs, pans=None):
+    """One item's sound from each person's voice: the tracks [N, channels] float32 at RATE (of one length) each
+    made mono and normalised to `target_lufs` where it holds speech (a listener's near-silence, quieter than
+    SPEECH_FLOOR_LUFS, is kept as it is, never raised to speech level), then summed, and the sum normalised to
+    `target_lufs`. Mono [N, 1] with `pans` None; else stereo [N, 2], voice k panned to pans[k] (-1 left .. 1
+    right) at constant power."""
+    voices = []
+    for track in tracks:
+        mono = np.asarray(track, np.float32).mean(axis=1, keepdims=True)
+        if integrated_loudness(mono) > SPEECH_FLOOR_LUFS:
+            mono = normalise(mono, target_lufs)
+        voices.append(mono[:, 0])
+    if pans is None:
+        mixed = np.sum(voices, axis=0)[:, None]
+    else:
+        angle = (np.clip(np.asarray(pans, np.float64), -1, 1) + 1) * np.pi / 4
+        gains = np.stack([np.cos(angle), np.sin(angle)], 1) * np.sqrt(2)  # centred: each channel at unity
+        mixed = sum(v[:, None] * g[None].astype(np.float32) for v, g in zip(voices, gains))
+    return normalise(mixed.astype(np.float32), target_lufs)
+
+
+def write_wav(path, samples, rate=RATE):
+    """Float samples [N] or [N, channels] in [-1, 1] as a 16-bit PCM WAV file."""
+    import wave
+
+    samples = np.asarray(samples, np.float32)
+    samples = samples[:, None] if samples.ndim == 1 else samples
+    with wave.open(str(path), "wb") as w:
+        w.setnchannels(samples.shape[1])
+        w.setsampwidth(2)
+        w.setframerate(rate)
+        w.writeframes((np.clip(samples, -1, 1) * 32767).round().astype("<i2").tobytes())
 
 
 def rms_dbfs(samples):

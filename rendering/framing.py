@@ -79,7 +79,7 @@ def feet_still(clips, names, parents):
     return True
 
 
-def upper_camera(clips, names, parents, fps, base):
+def upper_camera(clips, names, parents, fps, base, room=0.0):
     """A camera that frames the body from the hips up: every joint but the legs' and the drawn head's top inside
     the frame in every frame of every clip, as large as that allows, through a nearly level camera at `base`'s
     azimuth that follows the root as `camera_targets` does. Each joint is padded by what is drawn around it
@@ -87,46 +87,68 @@ def upper_camera(clips, names, parents, fps, base):
     the frame ends at the head's top above and at the lowest fingertip below: hands hanging below the hips
     extend the frame downwards, and the hips-to-head share of the frame is what is left above them."""
     base = replace(base, elevation=UPPER_ELEVATION, fov=UPPER_FOV)
-    legs = set(leg_joints(names, parents))
-    below = legs | hips_ancestors(parents, legs)
-    keep = [j for j in range(len(names)) if j not in below] or list(range(len(names)))
-    head = head_joint(names)
-    rot = Projector(replace(base, distance=1.0), 2, 2).rot
     points, pads = [], []
     for joints in clips:
         joints = np.asarray(joints, dtype=np.float64)
         floor = camera_targets(joints, fps, base) * np.array([1.0, 0.0, 1.0])
-        rel = joints - floor[:, None]
-        if head is not None and parents[head] >= 0:
-            neck = rel[:, head] - rel[:, parents[head]]
-            top = rel[:, head] + HEAD_TOP * neck / np.maximum(np.linalg.norm(neck, axis=1, keepdims=True), 1e-6)
-        else:
-            top = rel[np.arange(len(rel)), rel[:, keep, 1].argmax(1)] + np.array([0.0, HEAD_ROOM, 0.0])
-        points += [rel[:, keep].reshape(-1, 3), top]
-        pad = [DETAIL_PAD if skeleton_names.is_detail(names[j]) else BODY_PAD for j in keep]
-        pads += [np.tile(pad, len(rel)), np.zeros(len(rel))]
-    points, pad = np.concatenate(points), np.concatenate(pads)
+        framed_points(joints - floor[:, None], names, parents, True, points, pads)
+    distance, height = _fit(np.concatenate(points), np.concatenate(pads), base, room)
+    return replace(base, distance=distance, height=height)
+
+
+def framed_points(rel, names, parents, upper, points, pads):
+    """Append to `points` and `pads` what a camera must frame of one clip (joints [T, J, 3] relative to the
+    look-at point on the floor): every joint (upper: but the legs' and the hips' ancestors), each padded by what
+    is drawn around it (BODY_PAD, DETAIL_PAD for fingers and face), and the drawn head's top (HEAD_TOP along the
+    neck), padded by nothing."""
+    below = set()
+    if upper:
+        legs = set(leg_joints(names, parents))
+        below = legs | hips_ancestors(parents, legs)
+    keep = [j for j in range(len(names)) if j not in below] or list(range(len(names)))
+    head = head_joint(names)
+    if head is not None and parents[head] >= 0:
+        neck = rel[:, head] - rel[:, parents[head]]
+        top = rel[:, head] + HEAD_TOP * neck / np.maximum(np.linalg.norm(neck, axis=1, keepdims=True), 1e-6)
+    else:
+        top = rel[np.arange(len(rel)), rel[:, keep, 1].argmax(1)] + np.array([0.0, HEAD_ROOM, 0.0])
+    points += [rel[:, keep].reshape(-1, 3), top]
+    pad = [DETAIL_PAD if skeleton_names.is_detail(names[j]) else BODY_PAD for j in keep]
+    pads += [np.tile(pad, len(rel)), np.zeros(len(rel))]
+
+
+def _fit(points, pad, base, room=0.0):
+    """(distance, look-at height) at which every point (relative to the look-at point on the floor [N, 3]), padded
+    by `pad` metres (one a point), is inside the frame of `base`'s view and field of view, as large as that allows,
+    with the lowest `room` of the frame's height kept free (for captions: the body is framed in the rest)."""
+    rot = Projector(replace(base, distance=1.0), 2, 2).rot
     q = points @ rot.T  # camera axes, relative to the target on the floor
     up = rot[:, 1]  # the camera-axis components of world up
     lim = (1 - UPPER_MARGIN) * np.tan(np.radians(base.fov) / 2)
+    lims = np.array([lim, (1 - room) * lim])
     height = float(points[:, 1].mean())
     for _ in range(4):  # fit the distance, then centre the look-at height on the framed span, and again
         p = q - height * up
-        distance = _distance(p, lim, pad)
+        distance = _distance(p, lims, pad)
         z = p[:, 2] + distance
         y_hi, y_lo = ((p[:, 1] + pad) / z).max(), ((p[:, 1] - pad) / z).min()
         height += float((y_hi + y_lo) / 2 * np.median(z)) / max(up[1], 1e-6)
-    distance = _distance(q - height * up, lim, pad)
-    return replace(base, distance=distance, height=height)
+    p = q - height * up
+    distance = _distance(p, lims, pad)
+    # The body fills the frame less `room`, centred; lowering the look-at point raises it into the top of the frame.
+    height -= float(room * lim * np.median(p[:, 2] + distance)) / max(up[1], 1e-6)
+    return distance, height
 
 
 def _distance(p, lim, pad):
     """The least camera distance at which every point p (camera axes, relative to the look-at point), padded by
-    `pad` metres (one a point), is inside the frame of half-width lim (the tangent of half the field of view)."""
-    return float(max(((np.abs(p[:, :2]).max(1) + pad) / lim - p[:, 2]).max(), NEAR + BODY_PAD - p[:, 2].min()))
+    `pad` metres (one a point), is inside the frame of half-width lim (the tangent of half the field of view; or
+    [across, up])."""
+    reach = ((np.abs(p[:, :2]) + pad[:, None]) / np.broadcast_to(lim, (2,))).max(1)
+    return float(max((reach - p[:, 2]).max(), NEAR + BODY_PAD - p[:, 2].min()))
 
 
-def item_camera(clips, names, parents, fps, view=None, framing="full"):
+def item_camera(clips, names, parents, fps, view=None, framing="full", room=0.0):
     """The camera of one item's clips (joints [T, J, 3], metres, Y up, placed).
 
     Parameters
@@ -141,6 +163,8 @@ def item_camera(clips, names, parents, fps, view=None, framing="full"):
         A key of VIEWS or degrees from the body's mean facing; None: the built-in study's fixed azimuth.
     framing : str
         "full", "upper" or "auto" (upper when the feet barely move: `feet_still`).
+    room : float
+        The share of the frame's height kept free of the body at the bottom (captions); upper framing only.
 
     Returns
     -------
@@ -153,5 +177,69 @@ def item_camera(clips, names, parents, fps, view=None, framing="full"):
     if framing == "auto":
         framing = "upper" if feet_still(clips, names, parents) else "full"
     if framing == "upper":
-        return upper_camera(clips, names, parents, fps, base)
+        return upper_camera(clips, names, parents, fps, base, room)
     return framing_camera(clips, base)
+
+
+# A two-person item's views, in degrees from the perpendicular of the two people's line towards the agent's front:
+# "three-quarter" (the default) sees an agent turned a little towards the camera (generation.own_study.placing) at
+# three-quarter and the other person nearly in profile.
+PAIR_VIEWS = {"side": 0.0, "three-quarter": 20.0, "front": 60.0}
+PAIR_FOV = 20.0  # degrees: two people side by side need a wider lens than one person's upper body
+PAIR_ELEVATION = 8.0  # degrees
+
+
+def pair_azimuth(agent_root, partner_root, agent_facing, view=None):
+    """The camera's azimuth (degrees, from +Z towards +X) for two people: on the side of the line between their
+    roots (x, z) that the agent faces (its mean facing, degrees), turned `view` (a key of PAIR_VIEWS or degrees;
+    None: three-quarter) from the perpendicular towards the agent's front."""
+    offset = PAIR_VIEWS[view or "three-quarter"] if not isinstance(view, (int, float)) else float(view)
+    line = np.asarray(partner_root, np.float64) - np.asarray(agent_root, np.float64)
+    line /= max(np.linalg.norm(line), 1e-9)
+    side = np.array([-line[1], line[0]])  # the line turned a quarter: one side's perpendicular (x, z)
+    facing = np.array([np.sin(np.radians(agent_facing)), np.cos(np.radians(agent_facing))])
+    if side @ facing < 0:
+        side = -side
+    a = np.radians(offset)
+    direction = np.cos(a) * side + np.sin(a) * line
+    return float(np.degrees(np.arctan2(direction[0], direction[1])) % 360.0)
+
+
+def pair_camera(clips, people, view=None, framing="upper", room=0.0):
+    """One fixed camera for a two-person item: (Camera, look-at point [3]).
+
+    Parameters
+    ----------
+    clips : sequence of ndarray
+        Every clip of the agent in the item (joints [T, J, 3], metres, Y up, placed beside the partner).
+    people : sequence of (names, parents, partner joints or None)
+        The agent's skeleton (partner None) and the partner's skeleton and joints [T, K, 3].
+    view : str or float or None
+        A key of PAIR_VIEWS or degrees from the perpendicular of their line towards the agent's front (the side
+        the agent faces); None: three-quarter.
+    framing : str
+        "upper" (hips up: the usual for people talking), "full", or "auto" (upper).
+    room : float
+        The share of the frame's height kept free of the bodies at the bottom (captions).
+
+    Returns
+    -------
+    (Camera, ndarray)
+        The camera (as close as framing both in every frame of every clip allows) and the point it looks at in
+        every frame: between the two, so that it never moves and the partner is the same pixels in every
+        condition's video.
+    """
+    (names, parents, _), (p_names, p_parents, partner) = people
+    roots = np.mean([np.asarray(c)[:, 0, [0, 2]].mean(0) for c in clips], 0)
+    partner_root = np.asarray(partner)[:, 0, [0, 2]].mean(0)
+    azimuth = pair_azimuth(roots, partner_root, mean_facing(clips, names), view)
+    upper = framing != "full"
+    base = replace(DEFAULT_CAMERA, azimuth=azimuth, fov=PAIR_FOV, elevation=PAIR_ELEVATION if upper else 12.0)
+    centre = (roots + partner_root) / 2
+    floor = np.array([centre[0], 0.0, centre[1]])
+    points, pads = [], []
+    for joints in clips:
+        framed_points(np.asarray(joints, np.float64) - floor, names, parents, upper, points, pads)
+    framed_points(np.asarray(partner, np.float64) - floor, p_names, p_parents, upper, points, pads)
+    distance, height = _fit(np.concatenate(points), np.concatenate(pads), base, room)
+    return replace(base, distance=distance, height=height), np.array([centre[0], height, centre[1]])

@@ -17,7 +17,7 @@ from test_app_api import TOKEN_HDR
 
 from rating_app import AppError, create_app
 from rating_app.pairing import active
-from rating_app.study.db import app_engine
+from rating_app.store.db import app_engine
 
 
 @pytest.fixture

@@ -15,8 +15,8 @@ from helpers.flags import video_flags
 from sqlalchemy import update
 from test_app_api import TOKEN_HDR, answer, clips_by_role, complete, export_rows, idle, nxt, start
 
-from rating_app.study.db import Trial, app_engine, utcnow
-from rating_app.study.manifest import AppError, load_manifest
+from rating_app.store.db import Trial, app_engine, utcnow
+from rating_app.store.manifest import AppError, load_manifest
 
 
 def at(app, i):

@@ -19,8 +19,8 @@ from sqlalchemy import update
 from test_app_api import TOKEN_HDR, idle
 
 from rating_app import create_app
-from rating_app.study.db import Trial, app_engine, utcnow
-from rating_app.study.manifest import AppError, load_manifest
+from rating_app.store.db import Trial, app_engine, utcnow
+from rating_app.store.manifest import AppError, load_manifest
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -17,9 +17,9 @@ from test_app_rounds import TOKEN_HDR, dump, folder_state, folders, stimulus_mp4
 
 from rating_app.__main__ import main
 from rating_app.operations import submission
-from rating_app.study import rounds
-from rating_app.study.db import app_engine, utcnow
-from rating_app.study.manifest import load_manifest
+from rating_app.store import rounds
+from rating_app.store.db import app_engine, utcnow
+from rating_app.store.manifest import load_manifest
 
 
 def sys_rows(manifest):

@@ -12,7 +12,7 @@ from test_app_api import TOKEN_HDR
 from test_app_browser import browser  # noqa: F401  (the fixture)
 from test_app_designs import shown, stimuli, value_for  # noqa: F401  (stimuli: a fixture)
 
-from rating_app.study.db import app_engine
+from rating_app.store.db import app_engine
 
 
 def fetch_full(c, url, size):
@@ -96,7 +96,7 @@ def test_a_range_request_records_its_bytes_once_covered(make, stimuli):  # noqa:
     """The stored ranges are merged; once the file is covered, later requests (replays) write nothing."""
     from sqlalchemy import event, select
 
-    from rating_app.study.db import Trial
+    from rating_app.store.db import Trial
 
     app = make(stimuli, "acr", ratings_per_clip=3)
     c = app.test_client()

@@ -10,7 +10,7 @@ from test_app_style_export import rate_everything
 
 from analysis import report
 from analysis.data.load import AnalysisError
-from rating_app.study.manifest import AppError, reference_name
+from rating_app.store.manifest import AppError, reference_name
 
 
 @pytest.fixture

@@ -13,8 +13,8 @@ from helpers.paths import ROOT
 from analysis import report
 from moglow_eval.core import user_files
 from moglow_eval.core.cli import UserError
-from rating_app.study.config import load_study_file
-from rating_app.study.manifest import AppError, load_manifest
+from rating_app.store.config import load_study_file
+from rating_app.store.manifest import AppError, load_manifest
 
 
 def run(module, *args, timeout=60):

@@ -12,10 +12,14 @@ from ..data.load import AnalysisError
 from .acr.design import Acr
 from .appropriateness.design import Appropriateness
 from .base import Design, Options
+from .dyadic.design import Dyadic
 from .pairwise.design import Pairwise
 from .parallel.design import Parallel
+from .semantic.design import Semantic
 
-DESIGNS: dict[str, Design] = {d.name: d for d in (Acr(), Pairwise(), Parallel(), Appropriateness())}
+DESIGNS: dict[str, Design] = {
+    d.name: d for d in (Acr(), Pairwise(), Parallel(), Appropriateness(), Dyadic(), Semantic())
+}
 assert tuple(DESIGNS) == study.DESIGNS, "moglow_eval.core.study.DESIGNS and the registry list the same designs"
 
 __all__ = ["DESIGNS", "Design", "Options", "design_of", "detect_design"]

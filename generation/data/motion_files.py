@@ -10,7 +10,9 @@ frame rate, resampled to the study's rate. Four formats:
 - `ITEM.npy`: joint positions [T, J, 3], as GENEA 2022 and HumanML3D exchange them, with the skeleton given once
   in a small JSON (`Skeleton.load`: names, and parents by index or by name); positions are resampled linearly.
 - `ITEM.npz`: a clip file (CONTRACTS §1), or an SMPL-family parameter file (poses, trans, betas), whose joints
-  come from the user's body model through smplx (generation.data.smpl_files), resampled linearly.
+  come from the user's body model through smplx (generation.data.smpl_files), resampled linearly; or a Seamless
+  Interaction participant file (`smplh:*` keys, generation.data.seamless_files), the same way, with its mask of
+  valid frames (`Motion.valid`).
 
 The up axis is read from the study file or detected (`detect_up`). Units are the study file's, or with "auto"
 the first that makes the standing body a person's height, the skeleton family's own unit tried first
@@ -37,9 +39,10 @@ from moglow_eval.core.clip import (
 )
 
 from ..motion.bvh import BvhError, forward_kinematics, header_fps, read_bvh
-from ..motion.resample import clean_fps, local_quaternions, quat_to_matrix, resample_local, resample_times
+from ..motion.resample import clean_fps, lerp_indices, local_quaternions, quat_to_matrix, resample_local, resample_times
+from . import seamless_files
 from .skeleton_families import UnitError, choose_unit
-from .smpl_files import FPS_KEYS, SmplError, is_smpl_file, smpl_positions
+from .smpl_files import FPS_KEYS, WHERE_TO_GET, SmplError, is_smpl_file, pose_joints, smpl_positions
 from .systems import resample_positions
 
 EXTENSIONS = (".bvh.gz", ".bvh", ".npy", ".npz")
@@ -61,6 +64,7 @@ class Motion:
     parents: np.ndarray  # [J] int64, -1 for roots
     fps: float
     path: str = ""
+    valid: np.ndarray | None = None  # [T] bool where the file marks frames invalid (Seamless Interaction); else None
 
     @property
     def seconds(self):
@@ -214,6 +218,45 @@ def _smpl_positions(path, fps, smpl_model, smpl_type, source_fps):
     return resample_positions(joints, native, fps), names, parents
 
 
+def _seamless_positions(path, fps, smpl_model, smpl_type, source_fps, up):
+    """A Seamless Interaction file's joints through the body model at the mean shape, turned upright, resampled
+    linearly to `fps` (positions, so an axis-angle flip near pi between frames moves nothing), and its validity
+    mask at `fps`: an output frame is valid where both frames it lies between are."""
+    if smpl_model is None:
+        raise MotionError(f"{path}: a Seamless Interaction file (smplh:* keys); {WHERE_TO_GET}")
+    m = seamless_files.read_seamless(path, source_fps)
+    joints, names, parents = pose_joints(m.poses, m.trans, np.zeros(0), smpl_model, smpl_type, path)
+    try:
+        native = check_fps(m.fps, path)
+    except ClipError as e:
+        raise MotionError(str(e)) from None
+    i0, i1, w = lerp_indices(len(joints), native, fps)  # bounded before the resampled copy (MAX_FRAMES)
+    valid = m.valid[i0] & (m.valid[i1] | (w < 1e-9))
+    joints = resample_positions(joints, native, fps)
+    joints = upright(joints, names) if up == "auto" else to_y_up(joints, up)
+    return joints, names, parents, valid
+
+
+def upright(joints, names):
+    """Joints turned so that the body's up (from the root to the head, the mean over frames) is +Y, by a rotation of
+    a multiple of 90 degrees about one axis (never a mirror): a person filmed in a camera's frame, Y down or Z up,
+    stands upright."""
+    head = next((j for j, n in enumerate(names) if n == "head"), len(names) - 1)
+    up = (joints[:, head] - joints[:, 0]).mean(0)
+    axis = int(np.argmax(np.abs(up)))
+    x, y, z = joints[..., 0], joints[..., 1], joints[..., 2]
+    positive = up[axis] > 0
+    turned = {
+        (0, True): (-y, x, z),
+        (0, False): (y, -x, z),
+        (1, True): (x, y, z),
+        (1, False): (x, -y, -z),
+        (2, True): (x, z, -y),
+        (2, False): (x, -z, y),
+    }[(axis, positive)]
+    return np.stack(turned, axis=-1)
+
+
 def native_fps(path, source_fps=None):
     """A motion file's own frame rate, read from its header (BVH's Frame Time, a clip's or an SMPL-family file's
     fps key) without reading its frames; `source_fps` ([skeleton] fps) for .npy, and for SMPL-family files that
@@ -234,6 +277,8 @@ def native_fps(path, source_fps=None):
 
 
 def _npz_fps(path, source_fps):
+    if seamless_files.is_seamless_file(path):
+        return source_fps or seamless_files.FPS
     keys = ("fps",) if not is_smpl_file(path) else FPS_KEYS
     names = npz_headers(path)
     key = next((k for k in keys if k in names), None)
@@ -244,26 +289,31 @@ def _npz_fps(path, source_fps):
 
 
 def _positions(path, fps, up, skeleton, source_fps, smpl):
-    """(joints [T, J, 3] Y up in file units, names, parents, metres per unit where the format fixes it)."""
+    """(joints [T, J, 3] Y up in file units, names, parents, metres per unit where the format fixes it, valid frames
+    or None)."""
     if path.name.endswith(".npz"):
+        if seamless_files.is_seamless_file(path):
+            joints, names, parents, valid = _seamless_positions(path, fps, *smpl, source_fps, up)
+            return joints, names, parents, 1.0, valid  # the body model's metres
         if is_smpl_file(path):
             joints, names, parents = _smpl_positions(path, fps, *smpl, source_fps)
-            return to_y_up(joints, detect_up(joints) if up == "auto" else up), names, parents, None
-        return (*_npz_positions(path, fps), 1.0)  # clips are in metres, Y up
+            return to_y_up(joints, detect_up(joints) if up == "auto" else up), names, parents, None, None
+        return (*_npz_positions(path, fps), 1.0, None)  # clips are in metres, Y up
     if path.name.endswith(".npy"):
         if source_fps is None:
             raise MotionError(f"{path}: a .npy file needs its frame rate: set [skeleton] fps in the study file")
         joints, names, parents = _npy_positions(path, skeleton, source_fps, fps)
     else:
         joints, names, parents = _bvh_positions(path, fps)
-    return to_y_up(joints, detect_up(joints) if up == "auto" else up), names, parents, None
+    return to_y_up(joints, detect_up(joints) if up == "auto" else up), names, parents, None, None
 
 
 def read_motion(path, fps, units="auto", up="auto", skeleton=None, source_fps=None, smpl_model=None, smpl_type=None):
     """One motion file as a Motion at `fps`, in metres, Y up.
 
-    Reads BVH of any skeleton (.bvh, .bvh.gz), joint-position arrays (.npy [T, J, 3]), clip .npz files and
-    SMPL-family parameter files (.npz with poses, trans and betas, through the body model `smpl_model`).
+    Reads BVH of any skeleton (.bvh, .bvh.gz), joint-position arrays (.npy [T, J, 3]), clip .npz files,
+    SMPL-family parameter files (.npz with poses, trans and betas, through the body model `smpl_model`) and
+    Seamless Interaction participant files (.npz with `smplh:*` keys, through an SMPL-H model at its mean shape).
 
     Parameters
     ----------
@@ -289,7 +339,7 @@ def read_motion(path, fps, units="auto", up="auto", skeleton=None, source_fps=No
     -------
     Motion
         joints [T, J, 3] float32 in metres, Y up; names [J]; parents [J] (-1 for the root, the first joint);
-        fps; path.
+        fps; path; valid [T] (bool) for a file that marks frames invalid (Seamless Interaction), else None.
 
     Raises
     ------
@@ -300,7 +350,7 @@ def read_motion(path, fps, units="auto", up="auto", skeleton=None, source_fps=No
     """
     path = Path(path)
     try:
-        joints, names, parents, scale = _positions(path, fps, up, skeleton, source_fps, (smpl_model, smpl_type))
+        joints, names, parents, scale, valid = _positions(path, fps, up, skeleton, source_fps, (smpl_model, smpl_type))
     except (BvhError, ClipError, SmplError) as e:
         raise MotionError(str(e)) from None
     if parents[0] != -1:
@@ -311,7 +361,7 @@ def read_motion(path, fps, units="auto", up="auto", skeleton=None, source_fps=No
         scale = _unit(joints, names, units, path)
     joints = joints * float(scale)
     check_height(joints, path)
-    return Motion(joints.astype(np.float32), names, np.asarray(parents, np.int64), float(fps), str(path))
+    return Motion(joints.astype(np.float32), names, np.asarray(parents, np.int64), float(fps), str(path), valid)
 
 
 def _unit(joints, names, units, path):

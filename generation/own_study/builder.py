@@ -53,6 +53,7 @@ from ..stimuli.render_pool import render_stimuli
 from ..stimuli.summary import blinding_warning
 from .inputs import (
     check_same_skeleton,
+    check_valid,
     folder_files,
     match_items,
     read_all,
@@ -60,6 +61,7 @@ from .inputs import (
     seconds_text,
     with_study_fps,
 )
+from .mesh_clips import check_mesh_inputs, mesh_spec, wants_mesh
 
 log = logging.getLogger(__name__)
 TEST, CATCH, TRAINING = study.ROLES
@@ -72,6 +74,7 @@ def cut_items(motions, spec):
         clips = [by_item[item] for by_item in motions.values()]
         n = int(round(spec.length_s * spec.fps)) if spec.length_s else min(len(m.joints) for m in clips)
         for m in clips:
+            check_valid(m, n)
             m.joints = m.joints[:n]
 
 
@@ -228,6 +231,7 @@ class StudyClip:
     joints: np.ndarray
     note: str = ""  # the manifest's seed column: the catch kind of a BAD clip
     motion_item: str = ""  # appropriateness: the other item whose motion a mismatched clip shows
+    start: int = 0  # the motion's frame the clip starts at (a catch copy's: 1)
 
 
 def mismatch_partners(motions, items, seed):
@@ -269,7 +273,7 @@ def build_clips(spec, motions, roles, catch_items, bad):
     for item in catch_items:
         for name, by_item in motions.items():
             joints = by_item[item].joints
-            clips.append(StudyClip(name, item, CATCH, np.concatenate([joints[1:], joints[-1:]])))
+            clips.append(StudyClip(name, item, CATCH, np.concatenate([joints[1:], joints[-1:]]), start=1))
         clips.append(StudyClip(study.CATCH, item, CATCH, bad[item][0], bad[item][1]))
     return clips
 
@@ -305,6 +309,8 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
         motion, video, sheet = clip_files(out, cid)
         save_clip(motion, joints, parents, names, spec.fps)
         job = dict(camera=cameras[item], style=STYLES[style], **options)
+        if STYLES[style].body == "mesh":
+            job["mesh"] = mesh_spec(c, joints, motions, spec)
         if sound:
             # Every clip of an item carries the same sound bytes, a catch copy (one frame late) too: an audio track
             # of its own would tell a catch copy from the item's test clip.
@@ -376,6 +382,8 @@ def build_study(spec, out, size, preset, workers, force, progress):
     motions = read_all(spec, files, progress)
     motions = {(study.NATURAL if n == spec.reference else n): m for n, m in motions.items()}
     cut_items(motions, spec)
+    if wants_mesh(spec):
+        check_mesh_inputs(spec, motions)  # before anything is written
     items = sorted(motions[study.NATURAL])
     roles, catch_items = assign_roles(items, spec, n_catch)
     if own_catch is not None:

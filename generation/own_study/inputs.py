@@ -115,6 +115,20 @@ def read_all(spec, files, progress):
     return motions
 
 
+def check_valid(m, n):
+    """StimuliError naming the file and the frames when the first n frames of a motion that marks frames invalid
+    (Seamless Interaction's `is_valid`) hold one: invalid frames never reach a rater."""
+    if m.valid is None or m.valid[:n].all():
+        return
+    from ..data.seamless_files import invalid_spans, spans_text
+
+    spans = invalid_spans(m.valid[:n])
+    raise StimuliError(
+        f"{m.path}: frames {spans_text(spans)} (at {m.fps:g} fps) are marked invalid (smplh:is_valid) within the "
+        f"clip's {n / m.fps:.2f} s; cut the item around them (python -m generation.own_study.conversations)"
+    )
+
+
 def check_same_skeleton(m, ref):
     """StimuliError naming both files and what differs: the joints each has that the other lacks, else the first
     joint whose place (order or parent) differs."""

@@ -29,7 +29,28 @@
     [render]                     # optional
     view = "front"               # "front", "three-quarter", "side" or degrees from the body's mean facing
     framing = "upper"            # "full" (the default), "upper" (hips up) or "auto" (upper when the feet stay)
-    style = ["stick", "solid"]   # "stick" (the default) or "solid", or a list: every clip drawn in each
+    style = ["stick", "mesh"]    # "stick" (the default), "solid", "mesh" (SMPL-family files), or a list of them
+    face = "mask"                # the mesh's face: a plain mask over it (the default), or "none"
+
+Two people and captions (generation.own_study.dyad, speech; CONTRACTS §10):
+
+    design = "dyadic"            # or "semantic"
+    sources = "items/sources.csv"  # optional: where each item came from (the cutter's table), kept beside the set
+    [interlocutor]               # the real other person of every item, in every condition's video
+    folder = "items/interlocutor"
+    placement = "facing"         # or "recorded"
+    distance = 1.4               # metres between the two (facing)
+    open = 25                    # degrees each is turned from the other towards the camera (facing)
+    colour = "#669970"           # the interlocutor's one colour
+    [mismatched]                 # dyadic: each condition's motion made for a mismatched interlocutor
+    SYS_A = "system_a_mismatched"
+    [audio]
+    interlocutor = "items/interlocutor_audio"  # the other person's voice, mixed in
+    channels = "mono"            # or "stereo": each voice on its person's side
+    [captions]
+    folder = "items/agent_transcript"          # the agent's words (ITEM.json, Seamless's layout, or ITEM.tsv)
+    interlocutor = "items/interlocutor_transcript"
+    keywords = "items/sources.csv"             # item, keyword[, keyword_start, keyword_end]: highlighted
 
 Relative paths are relative to the file. Command-line flags override the top-level keys. Every problem is one
 StudyFileError naming the file and key.
@@ -39,11 +60,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from moglow_eval.core import study, user_files
-from moglow_eval.core.cli import UserError
 
 from ..data.motion_files import UNITS, UPS
 from ..data.smpl_files import TYPES as SMPL_TYPES
 from ..stimuli.catch_kinds import KINDS as CATCH_KINDS
+from .study_keys import StudyFileError, err, folder, names, number, unknown
+from .study_people import STIMULUS_DESIGNS, check_needs, read_people
 
 TOP_KEYS = {
     "reference",
@@ -57,19 +79,19 @@ TOP_KEYS = {
     "skeleton",
     "audio",
     "render",
+    "sources",
+    "interlocutor",
+    "mismatched",
+    "captions",
 }
-RENDER_KEYS = {"view", "framing", "style"}
-STIMULUS_DESIGNS = ("appropriateness",)  # designs that need stimuli of their own (mismatched clips)
-AUDIO_KEYS = {"folder", "loudness"}
+RENDER_KEYS = {"view", "framing", "style", "face"}
+FACES = ("mask", "none")  # the mesh style's face: a plain mask over it (GENEA 2026), or the mesh's own
+AUDIO_KEYS = {"folder", "loudness", "interlocutor", "channels"}
 CATCH_KEYS = {"make", "n", "folder"}
 SKELETON_KEYS = {"file", "units", "up", "hide", "thin", "feet", "fps", "smpl_model", "smpl_type"}
 MAX_LENGTH_S = 600.0
 MAX_BYTES = 1 << 20  # a study file is a few dozen keys
 MAX_DEFAULT_FPS = 60.0  # without `fps`, clips keep the reference's frame rate, up to this (a video's usual most)
-
-
-class StudyFileError(UserError):
-    """A bad study file; the message names the file and the key."""
 
 
 @dataclass
@@ -99,43 +121,19 @@ class StudySpec:
     view: object = None  # None: the built-in study's fixed camera; else a key of rendering.framing.VIEWS or degrees
     framing: str = "full"
     styles: list = field(default_factory=lambda: ["stick"])
-
-
-def _err(path, key, message):
-    return StudyFileError(f"{path}: {key}: {message}")
-
-
-def _unknown(path, table, keys, allowed):
-    extra = sorted(set(keys) - allowed)
-    if extra:
-        where = f"[{table}] " if table else ""
-        raise _err(path, f"{where}{extra[0]}", f"unknown key (known: {', '.join(sorted(allowed))})")
-
-
-def _number(path, key, value, lo, hi, kind=float):
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-    if kind is int:
-        ok = ok and isinstance(value, int)
-    if not ok or not lo <= value <= hi:
-        raise _err(
-            path, key, f"must be {'an integer' if kind is int else 'a number'} from {lo:g} to {hi:g}, got {value!r}"
-        )
-    return kind(value)
-
-
-def _folder(path, key, value):
-    if not isinstance(value, str) or not value:
-        raise _err(path, key, f"must be a folder name, got {value!r}")
-    folder = (path.parent / value).resolve()
-    if not folder.is_dir():
-        raise _err(path, key, f"folder {folder} not found")
-    return folder
-
-
-def _names(path, key, value):
-    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-        raise _err(path, key, f"must be a list of joint names, got {value!r}")
-    return list(value)
+    face: str = "mask"
+    sources: Path | None = None  # the table of where each item came from
+    interlocutor: Path | None = None  # the real other person's folder: a two-person study
+    placement: str = "facing"
+    distance: float = 1.4
+    opened: float = 25.0
+    colour: tuple | None = None  # None: rendering.raster.PARTNER_COLOUR
+    mismatched: dict = field(default_factory=dict)  # condition -> folder of its motion for a mismatched interlocutor
+    interlocutor_audio: Path | None = None
+    stereo: bool = False
+    captions: Path | None = None  # the agent's transcripts
+    interlocutor_captions: Path | None = None
+    keywords: Path | None = None
 
 
 def read_study_file(path):
@@ -162,32 +160,32 @@ def read_study_file(path):
     """
     path = Path(path)
     data = user_files.read_toml(path, MAX_BYTES, StudyFileError, "study file")
-    _unknown(path, "", data, TOP_KEYS)
+    unknown(path, "", data, TOP_KEYS)
     conditions = _conditions(path, data.get("conditions"))
     reference = data.get("reference")
     if reference not in conditions:
-        raise _err(path, "reference", f"{reference!r} is not one of [conditions] ({', '.join(conditions)})")
+        raise err(path, "reference", f"{reference!r} is not one of [conditions] ({', '.join(conditions)})")
     if study.NATURAL in conditions and reference != study.NATURAL:
-        raise _err(
+        raise err(
             path,
             f"[conditions] {study.NATURAL}",
             f"{study.NATURAL} is the reference's name in the stimuli; rename this condition or make it the reference",
         )
     spec = StudySpec(path, reference, {reference: conditions.pop(reference), **conditions})
     if "seed" in data:
-        spec.seed = _number(path, "seed", data["seed"], 0, 2**31 - 1, int)
+        spec.seed = number(path, "seed", data["seed"], 0, 2**31 - 1, int)
     if "n_training" in data:
-        spec.n_training = _number(path, "n_training", data["n_training"], 0, 10_000, int)
+        spec.n_training = number(path, "n_training", data["n_training"], 0, 10_000, int)
     if "length_s" in data:
-        spec.length_s = _number(path, "length_s", data["length_s"], 0.5, MAX_LENGTH_S)
+        spec.length_s = number(path, "length_s", data["length_s"], 0.5, MAX_LENGTH_S)
     if "fps" in data:
-        spec.fps = _number(path, "fps", data["fps"], 5, 120)
+        spec.fps = number(path, "fps", data["fps"], 5, 120)
     if "design" in data:
         if data["design"] not in STIMULUS_DESIGNS:
-            raise _err(
+            raise err(
                 path,
                 "design",
-                f"must be {' or '.join(STIMULUS_DESIGNS)} (other designs need no stimuli of "
+                f"must be {', '.join(STIMULUS_DESIGNS)} (other designs need no stimuli of "
                 f"their own), got {data['design']!r}",
             )
         spec.design = data["design"]
@@ -195,76 +193,76 @@ def read_study_file(path):
     _skeleton(path, data.get("skeleton", {}), spec)
     _audio(path, data.get("audio"), spec)
     _render(path, data.get("render", {}), spec)
-    if spec.design == "appropriateness" and spec.audio_folder is None:
-        raise _err(path, "design", "appropriateness asks whether motion fits its speech: give the [audio] table")
+    read_people(path, data, spec)
+    check_needs(path, spec)
     return spec
 
 
 def _conditions(path, table):
     if not isinstance(table, dict) or not table:
-        raise _err(path, "[conditions]", 'must name at least two conditions, as NAME = "folder"')
+        raise err(path, "[conditions]", 'must name at least two conditions, as NAME = "folder"')
     if len(table) < 2:
-        raise _err(path, "[conditions]", "a study compares at least two conditions: the reference and a system")
+        raise err(path, "[conditions]", "a study compares at least two conditions: the reference and a system")
     out = {}
-    for name, folder in table.items():
+    for name, where in table.items():
         if not study.CONDITION_NAME.fullmatch(name):
-            raise _err(path, f"[conditions] {name}", "a name is a letter, then letters, digits, _ or - (at most 32)")
+            raise err(path, f"[conditions] {name}", "a name is a letter, then letters, digits, _ or - (at most 32)")
         if name.upper() == study.CATCH:
-            raise _err(path, f"[conditions] {name}", f"{study.CATCH} is the name of the catch clips")
-        out[name] = _folder(path, f"[conditions] {name}", folder)
+            raise err(path, f"[conditions] {name}", f"{study.CATCH} is the name of the catch clips")
+        out[name] = folder(path, f"[conditions] {name}", where)
     return out
 
 
 def _catch(path, table, spec):
     if not isinstance(table, dict):
-        raise _err(path, "[catch]", "must be a table")
-    _unknown(path, "catch", table, CATCH_KEYS)
+        raise err(path, "[catch]", "must be a table")
+    unknown(path, "catch", table, CATCH_KEYS)
     if "folder" in table and "make" in table:
-        raise _err(path, "[catch] folder", "give either folder (your own bad clips) or make, not both")
+        raise err(path, "[catch] folder", "give either folder (your own bad clips) or make, not both")
     if "folder" in table:
-        spec.catch_folder, spec.catch_make = _folder(path, "[catch] folder", table["folder"]), []
+        spec.catch_folder, spec.catch_make = folder(path, "[catch] folder", table["folder"]), []
     if "make" in table:
         make = table["make"]
         if not isinstance(make, list) or not make or not all(k in CATCH_KINDS for k in make):
-            raise _err(path, "[catch] make", f"must be a list of {', '.join(CATCH_KINDS)}, got {make!r}")
+            raise err(path, "[catch] make", f"must be a list of {', '.join(CATCH_KINDS)}, got {make!r}")
         spec.catch_make = list(dict.fromkeys(make))
     if "n" in table:
-        spec.catch_n = _number(path, "[catch] n", table["n"], 0, 10_000, int)
+        spec.catch_n = number(path, "[catch] n", table["n"], 0, 10_000, int)
 
 
 def _skeleton(path, table, spec):
     if not isinstance(table, dict):
-        raise _err(path, "[skeleton]", "must be a table")
-    _unknown(path, "skeleton", table, SKELETON_KEYS)
+        raise err(path, "[skeleton]", "must be a table")
+    unknown(path, "skeleton", table, SKELETON_KEYS)
     if "file" in table:
         f = table["file"]
         if not isinstance(f, str) or not (path.parent / f).is_file():
-            raise _err(path, "[skeleton] file", f"file {path.parent / str(f)} not found")
+            raise err(path, "[skeleton] file", f"file {path.parent / str(f)} not found")
         spec.skeleton_file = path.parent / f
     units = table.get("units", "auto")
     if isinstance(units, (int, float)) and not isinstance(units, bool):
-        spec.units = _number(path, "[skeleton] units", units, 1e-6, 1e3)
+        spec.units = number(path, "[skeleton] units", units, 1e-6, 1e3)
     elif units in ("auto", *UNITS):
         spec.units = units
     else:
-        raise _err(path, "[skeleton] units", f"must be auto, {', '.join(UNITS)} or metres per unit, got {units!r}")
+        raise err(path, "[skeleton] units", f"must be auto, {', '.join(UNITS)} or metres per unit, got {units!r}")
     up = table.get("up", "auto")
     if up not in ("auto", *UPS):
-        raise _err(path, "[skeleton] up", f"must be auto, {' or '.join(UPS)}, got {up!r}")
+        raise err(path, "[skeleton] up", f"must be auto, {' or '.join(UPS)}, got {up!r}")
     spec.up = up
-    spec.hide = _names(path, "[skeleton] hide", table.get("hide", []))
+    spec.hide = names(path, "[skeleton] hide", table.get("hide", []))
     for key in ("thin", "feet"):
         value = table.get(key, "auto")
-        setattr(spec, key, value if value == "auto" else _names(path, f"[skeleton] {key}", value))
+        setattr(spec, key, value if value == "auto" else names(path, f"[skeleton] {key}", value))
     if spec.feet != "auto" and len(spec.feet) not in (2, 4):
-        raise _err(
+        raise err(
             path,
             "[skeleton] feet",
             "name 2 joints (left foot, right foot) or 4 (left ankle, left toe, "
             f"right ankle, right toe), got {len(spec.feet)}",
         )
     if "fps" in table:
-        spec.source_fps = _number(path, "[skeleton] fps", table["fps"], 1, 1000)
+        spec.source_fps = number(path, "[skeleton] fps", table["fps"], 1, 1000)
     _smpl(path, table, spec)
 
 
@@ -273,11 +271,11 @@ def _smpl(path, table, spec):
     if "smpl_model" in table:
         f = table["smpl_model"]
         if not isinstance(f, str) or not (path.parent / f).is_file():
-            raise _err(path, "[skeleton] smpl_model", f"file {path.parent / str(f)} not found")
+            raise err(path, "[skeleton] smpl_model", f"file {path.parent / str(f)} not found")
         spec.smpl_model = path.parent / f
     if "smpl_type" in table:
         if table["smpl_type"] not in SMPL_TYPES:
-            raise _err(path, "[skeleton] smpl_type", f"must be {', '.join(SMPL_TYPES)}, got {table['smpl_type']!r}")
+            raise err(path, "[skeleton] smpl_type", f"must be {', '.join(SMPL_TYPES)}, got {table['smpl_type']!r}")
         spec.smpl_type = table["smpl_type"]
 
 
@@ -285,13 +283,19 @@ def _audio(path, table, spec):
     if table is None:
         return
     if not isinstance(table, dict):
-        raise _err(path, "[audio]", "must be a table")
-    _unknown(path, "audio", table, AUDIO_KEYS)
+        raise err(path, "[audio]", "must be a table")
+    unknown(path, "audio", table, AUDIO_KEYS)
     if "folder" not in table:
-        raise _err(path, "[audio] folder", "missing: the folder of ITEM.wav / ITEM.flac files")
-    spec.audio_folder = _folder(path, "[audio] folder", table["folder"])
+        raise err(path, "[audio] folder", "missing: the folder of ITEM.wav / ITEM.flac files")
+    spec.audio_folder = folder(path, "[audio] folder", table["folder"])
     if "loudness" in table:
-        spec.loudness = _number(path, "[audio] loudness", table["loudness"], -70, -5)
+        spec.loudness = number(path, "[audio] loudness", table["loudness"], -70, -5)
+    if "interlocutor" in table:
+        spec.interlocutor_audio = folder(path, "[audio] interlocutor", table["interlocutor"])
+    channels = table.get("channels", "mono")
+    if channels not in ("mono", "stereo"):
+        raise err(path, "[audio] channels", f"must be mono or stereo, got {channels!r}")
+    spec.stereo = channels == "stereo"
 
 
 def _render(path, table, spec):
@@ -300,24 +304,28 @@ def _render(path, table, spec):
     from rendering.raster import STYLES
 
     if not isinstance(table, dict):
-        raise _err(path, "[render]", "must be a table")
-    _unknown(path, "render", table, RENDER_KEYS)
+        raise err(path, "[render]", "must be a table")
+    unknown(path, "render", table, RENDER_KEYS)
     view = table.get("view")
     if isinstance(view, (int, float)) and not isinstance(view, bool):
-        spec.view = _number(path, "[render] view", view, -360, 360)
+        spec.view = number(path, "[render] view", view, -360, 360)
     elif view is None or view in VIEWS:
         spec.view = view
     else:
-        raise _err(path, "[render] view", f"must be {', '.join(VIEWS)} or an azimuth in degrees, got {view!r}")
+        raise err(path, "[render] view", f"must be {', '.join(VIEWS)} or an azimuth in degrees, got {view!r}")
     framing = table.get("framing", "full")
     if framing not in FRAMINGS:
-        raise _err(path, "[render] framing", f"must be {', '.join(FRAMINGS)}, got {framing!r}")
+        raise err(path, "[render] framing", f"must be {', '.join(FRAMINGS)}, got {framing!r}")
     spec.framing = framing
     style = table.get("style", "stick")
     styles = [style] if isinstance(style, str) else style
     if not isinstance(styles, list) or not styles or not all(s in STYLES for s in styles):
-        raise _err(path, "[render] style", f"must be {' or '.join(STYLES)}, or a list of them, got {style!r}")
+        raise err(path, "[render] style", f"must be {' or '.join(STYLES)}, or a list of them, got {style!r}")
     spec.styles = list(dict.fromkeys(styles))
+    face = table.get("face", "mask")
+    if face not in FACES:
+        raise err(path, "[render] face", f"must be {' or '.join(FACES)}, got {face!r}")
+    spec.face = face
 
 
 def check_joint_names(spec, names, where):
@@ -327,4 +335,4 @@ def check_joint_names(spec, names, where):
         value = getattr(spec, key)
         for name in [] if value == "auto" else value:
             if name not in known:
-                raise _err(spec.path, f"[skeleton] {key}", f"unknown joint name {name!r} (not in {where})")
+                raise err(spec.path, f"[skeleton] {key}", f"unknown joint name {name!r} (not in {where})")

@@ -22,7 +22,16 @@ CATCH_FAIL_AT = 3
 
 # The test designs (CONTRACTS §8), as the database, the API and the files name them; each part implements them
 # behind its own interface and lists them in its registry (rating_app.designs, analysis.designs).
-DESIGNS = ("acr", "pairwise", "parallel", "appropriateness")
+DESIGNS = ("acr", "pairwise", "parallel", "appropriateness", "dyadic", "semantic")
+# The designs that set a system's matched clip against its mismatched one (GENEA 2023's appropriateness, its
+# interlocutor test, GENEA 2026's semantic alignment), and the export column that names what the mismatched motion was
+# made for: another item's speech, another interlocutor, another utterance (CONTRACTS §8). The column tells the
+# analysis which design a file holds.
+MISMATCH_COLUMN = {
+    "appropriateness": "mismatched_item",
+    "dyadic": "mismatched_interlocutor",
+    "semantic": "mismatched_utterance",
+}
 DEFAULT_DESIGN = "acr"  # the paper's design: a study, a database or a file that names none
 
 # Clip ids are random, so a file or URL name tells a rater nothing about the condition (CONTRACTS §4).

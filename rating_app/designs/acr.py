@@ -12,7 +12,7 @@ from moglow_eval.core import study
 
 from ..guard.bodies import int_field
 from ..pairing.assign import NO_TARGET, StudyFull, claim, cover, n_catch_slots, short_or_full, slots
-from ..study.db import Clip, Cover, Rater, Rating, Trial
+from ..store.db import Clip, Cover, Rater, Rating, Trial
 from .base import Design, new_condition_row
 from .export_cells import RATER_EXTRA, TAIL, common
 

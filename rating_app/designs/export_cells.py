@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from sqlalchemy import select
 
-from ..study.db import Clip, Rater
+from ..store.db import Clip, Rater
 
 # The columns after a design's own, in every export (CONTRACTS §6, §8).
 TAIL = ("trial_index", "watched_ms", "submitted_at", "external_id", "study_id", "rater_completed", "flags")

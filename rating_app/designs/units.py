@@ -13,8 +13,8 @@ from sqlalchemy import func, select
 from moglow_eval.core import study
 
 from ..pairing.assign import NO_TARGET, claim, cover, n_catch_slots, short_or_full, slots
-from ..study.db import Clip, Trial
-from ..study.manifest import AppError
+from ..store.db import Clip, Trial
+from ..store.manifest import AppError
 from .base import Design, Unit
 
 

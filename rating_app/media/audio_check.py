@@ -21,8 +21,8 @@ from sqlalchemy import update
 from moglow_eval.core import user_files
 
 from ..guard.bodies import check_token, json_body
-from ..study.db import Rater, app_engine, utcnow
-from ..study.manifest import AppError
+from ..store.db import Rater, app_engine, utcnow
+from ..store.manifest import AppError
 
 bp = Blueprint("audio_check", __name__, url_prefix="/api")
 MAX_TRIES = 2

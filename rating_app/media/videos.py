@@ -20,7 +20,7 @@ from urllib.parse import quote
 
 from flask import abort, current_app, request, send_file
 
-from ..study.manifest import AppError
+from ..store.manifest import AppError
 
 CACHE_BYTES = int(os.environ.get("VIDEO_CACHE_MB", "512")) * 2**20  # per worker; beyond it, read per request
 ACCEL_PREFIX = "/_stimuli/"  # the proxy's internal location of the stimulus folder (deploy/, docs/hosting.md)

@@ -21,7 +21,7 @@ from moglow_eval.core.user_files import defuse
 
 from ..designs import get
 from ..designs.export_cells import EXCLUDED, clip_styles, row_style, with_flag
-from ..study.db import TARGET_RATERS, study_design, study_setting
+from ..store.db import TARGET_RATERS, study_design, study_setting
 
 # A CSV cell that no spreadsheet evaluates: the rule every CSV this project writes from a user's text follows.
 cell = defuse

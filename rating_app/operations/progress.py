@@ -13,7 +13,7 @@ from moglow_eval.core import study
 from ..designs import get
 from ..designs.export_cells import rater_flags
 from ..media import fetched
-from ..study.db import Event, Rater, Trial, TrialClip
+from ..store.db import Event, Rater, Trial, TrialClip
 
 
 def progress(engine: Engine, target: int, design: str | None = None, units=None) -> dict:

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from moglow_eval.core import clip, study, user_files
 
-from ..study.manifest import AppError, ManifestClip, clip_from_row, read_rows
+from ..store.manifest import AppError, ManifestClip, clip_from_row, read_rows
 
 PATH_COLUMNS = ("video", "motion")  # the manifest's columns that name a file beside it (CONTRACTS §4)
 MAX_BYTES = {"video": 256 << 20, "motion": clip.MAX_NPZ_BYTES}  # a stimulus video is a few MB

@@ -35,7 +35,7 @@ from sqlalchemy.orm import aliased
 
 from moglow_eval.core import ranking, study
 
-from ..study.db import Clip, Cover, Preference, Trial
+from ..store.db import Clip, Cover, Preference, Trial
 from .assign import claim
 
 REFRESH_S = 1.0

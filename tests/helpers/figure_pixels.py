@@ -15,6 +15,13 @@ def decode(path):
     return frames, float(meta["fps"])
 
 
+def yuv_rgb(frame, size):
+    """A yuv420p frame (flat uint8, as the rasteriser writes it) as RGB [size, size, 3] uint8."""
+    from rendering.raster import yuv_to_rgb
+
+    return yuv_to_rgb(frame, size)
+
+
 def classes(frame):
     """Boolean masks (trunk, left, right) of one RGB frame: the trunk's dark grey, the left's blue, the right's
     red (rendering.raster.Style), shaded or not. The floor, grid and shadow are lighter greys."""
@@ -41,3 +48,45 @@ def height_share(frame):
 def touches_edge(mask, border=1):
     """True where `mask` has pixels within `border` of the frame's left, right or top edge."""
     return bool(mask[:border].any() or mask[:, :border].any() or mask[:, -border:].any())
+
+
+def partner(frame):
+    """Boolean mask of the second person of a two-person video: one muted green (rendering.raster.PARTNER_COLOUR),
+    shaded or not; not the caption text tinted like it, which is far lighter."""
+    rgb = frame.astype(np.int16)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    return (g - r > 25) & (g - b > 15) & (g < 215) & (g > 60)
+
+
+def agent(frame):
+    """Boolean mask of the agent of a two-person video: its trunk, left and right colours."""
+    trunk, left, right = classes(frame)
+    return trunk | left | right
+
+
+def highlight(frame):
+    """Boolean mask of a caption's highlighted keyword: its yellow box (rendering.captions.KEY_FILL)."""
+    rgb = frame.astype(np.int16)
+    return (rgb[..., 0] > 200) & (rgb[..., 1] > 160) & (rgb[..., 2] < 90)
+
+
+def caption_rows(frame):
+    """Indices of the rows crossed by a caption's band: more than 40% of the row dark and grey (no body is that
+    wide)."""
+    rgb = frame.astype(np.int16)
+    dark = (rgb.max(-1) < 90) & (rgb.max(-1) - rgb.min(-1) < 25)
+    return np.flatnonzero(dark.mean(1) > 0.4)
+
+
+def caption_text(frame):
+    """Boolean mask of caption text: bright pixels on the rows of a caption's band, between its dark ends."""
+    rows = caption_rows(frame)
+    mask = np.zeros(frame.shape[:2], bool)
+    if len(rows):
+        band = frame[rows].astype(np.int16)
+        mask[rows] = band.min(-1) > 170
+        dark = (band.max(-1) < 90).any(0)
+        cols = np.flatnonzero(dark)
+        mask[:, : cols.min()] = False
+        mask[:, cols.max() + 1 :] = False
+    return mask

@@ -1,0 +1,88 @@
+"""A study file's second person, mismatched motion and captions (CONTRACTS §10): the keys of a two-person or
+captioned study, and what each design needs of the rest of the file."""
+
+import re
+
+from .placing import PLACEMENTS
+from .study_keys import err, file, folder, number, unknown
+
+# Designs that need stimuli of their own: mismatched clips (appropriateness, semantic: another item's motion;
+# dyadic: the motion made for a mismatched interlocutor), two people (dyadic), keyword captions (semantic).
+STIMULUS_DESIGNS = ("appropriateness", "dyadic", "semantic")
+INTERLOCUTOR_KEYS = {"folder", "placement", "distance", "open", "colour"}
+CAPTION_KEYS = {"folder", "interlocutor", "keywords"}
+
+
+def read_people(path, data, spec):
+    """sources, [interlocutor], [mismatched] and [captions]: the second person, the mismatched motion and the
+    captions of a two-person or captioned study."""
+    if "sources" in data:
+        spec.sources = file(path, "sources", data["sources"])
+    table = data.get("interlocutor")
+    if table is not None:
+        if not isinstance(table, dict):
+            raise err(path, "[interlocutor]", "must be a table")
+        unknown(path, "interlocutor", table, INTERLOCUTOR_KEYS)
+        if "folder" not in table:
+            raise err(path, "[interlocutor] folder", "missing: the folder of the real interlocutor's ITEM files")
+        spec.interlocutor = folder(path, "[interlocutor] folder", table["folder"])
+        spec.placement = table.get("placement", "facing")
+        if spec.placement not in PLACEMENTS:
+            raise err(path, "[interlocutor] placement", f"must be {' or '.join(PLACEMENTS)}, got {spec.placement!r}")
+        if "distance" in table:
+            spec.distance = number(path, "[interlocutor] distance", table["distance"], 0.3, 10)
+        if "open" in table:
+            spec.opened = number(path, "[interlocutor] open", table["open"], -60, 60)
+        if "colour" in table:
+            spec.colour = _colour(path, table["colour"])
+    table = data.get("mismatched", {})
+    if not isinstance(table, dict):
+        raise err(path, "[mismatched]", "must be a table of condition = folder")
+    for name, where in table.items():
+        if name not in spec.conditions:
+            raise err(path, f"[mismatched] {name}", f"not one of [conditions] ({', '.join(spec.conditions)})")
+        spec.mismatched[name] = folder(path, f"[mismatched] {name}", where)
+    _captions(path, data.get("captions"), spec)
+
+
+def _colour(path, value):
+    if not isinstance(value, str) or not re.fullmatch(r"#[0-9a-fA-F]{6}", value):
+        raise err(path, "[interlocutor] colour", f'must be "#RRGGBB", got {value!r}')
+    return tuple(int(value[k : k + 2], 16) / 255 for k in (1, 3, 5))
+
+
+def _captions(path, table, spec):
+    if table is None:
+        return
+    if not isinstance(table, dict):
+        raise err(path, "[captions]", "must be a table")
+    unknown(path, "captions", table, CAPTION_KEYS)
+    if "folder" not in table:
+        raise err(path, "[captions] folder", "missing: the folder of the agent's ITEM.json or ITEM.tsv transcripts")
+    spec.captions = folder(path, "[captions] folder", table["folder"])
+    if "interlocutor" in table:
+        spec.interlocutor_captions = folder(path, "[captions] interlocutor", table["interlocutor"])
+    if "keywords" in table:
+        spec.keywords = file(path, "[captions] keywords", table["keywords"])
+
+
+def check_needs(path, spec):
+    """What each design needs from the rest of the study file."""
+    if spec.design in STIMULUS_DESIGNS and spec.audio_folder is None:
+        raise err(path, "design", f"{spec.design} asks whether motion fits its speech: give the [audio] table")
+    if spec.design == "dyadic":
+        if spec.interlocutor is None:
+            raise err(path, "design", "dyadic shows the agent beside its interlocutor: give the [interlocutor] table")
+        lacking = [n for n in spec.conditions if n != spec.reference and n not in spec.mismatched]
+        if lacking:
+            raise err(
+                path,
+                f"[mismatched] {lacking[0]}",
+                "missing: dyadic needs each system's motion made for a mismatched interlocutor (a folder each)",
+            )
+    elif spec.mismatched:
+        raise err(path, "[mismatched]", 'only design = "dyadic" shows motion made for a mismatched interlocutor')
+    if spec.design == "semantic" and (spec.captions is None or spec.keywords is None):
+        raise err(path, "design", "semantic highlights a keyword in the captions: give [captions] folder and keywords")
+    if spec.interlocutor_audio is not None and spec.interlocutor is None:
+        raise err(path, "[audio] interlocutor", "the interlocutor's voice needs the [interlocutor] table")
