@@ -157,9 +157,17 @@ def test_a_settled_ranking_closes_the_study_to_new_raters_only(make, big_stimuli
     assert "closed to new raters" in page and 'id="ranking"' in page
 
 
+def toss_up(a, b, i):
+    """Each way in turn on a test pair; the NAT clip of a catch pair, always."""
+    if "BAD" in (a, b):
+        return 2 if RANK[a] > RANK[b] else -2
+    return 1 if i % 2 else -1
+
+
 def test_the_vote_cap_closes_the_study(make, stimuli):
     app = make(stimuli, "pairwise", ratings_per_clip=20, stop_when="settled", stop_max_votes=5)
-    votes, refused = crowd(app, 30, lambda a, b, i: 1 if i % 2 else -1)  # a toss-up: never settled
+    # A toss-up, never settled, from raters who pass their catch trials (so every test vote is trusted and counts).
+    votes, refused = crowd(app, 30, toss_up)
     assert refused.status_code == 409 and "all the votes" in refused.json["error"]
     p = app.test_client().get("/admin/progress.json", headers=TOKEN_HDR).json["ranking"]
     assert p["closed"] and not p["settled"] and p["votes"] == sum(votes.values()) >= 5 == p["max_votes"]
