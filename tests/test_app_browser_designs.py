@@ -16,6 +16,7 @@ from helpers.fake_stimuli import write_fake_stimuli
 from sqlalchemy import select
 from test_app_browser import browser  # noqa: F401  (the fixture)
 
+from moglow_eval.core import study
 from rating_app import create_app
 from rating_app.store.db import TrialClip, app_engine
 from rating_app.store.manifest import load_manifest
@@ -191,7 +192,13 @@ def test_pairwise_flow_in_a_real_browser(design_stimuli, app_db_url, browser):  
         (shown[t]["A"], shown[t]["B"]): v for t, v in given.items()
     }
     assert sum(row["role"] == "catch" for row in rows) == n_catch_pairs
-    assert all(row["flags"] == "" and row["item"] for row in rows)
+    # Every video fetched; failed_catch on every row exactly when the rater's random answers failed a catch pair.
+    failed = any(
+        study.pair_catch_failed(r["condition_a"], r["condition_b"], int(r["preference"]))
+        for r in rows
+        if r["role"] == "catch"
+    )
+    assert all(row["flags"] == ("failed_catch" if failed else "") and row["item"] for row in rows)
     phone = [(a, b) for kind, a, b in layouts if kind == "phone"]
     assert all(b[1] >= a[2] - 1 for a, b in phone), "on a phone B comes below A"
     wide = [(a, b) for kind, a, b in layouts if kind == "wide"]
@@ -240,10 +247,15 @@ def test_parallel_flow_in_a_real_browser(design_stimuli, app_db_url, browser):  
     assert code and n_training >= 1
     n_catch_pages = len({c.item for c in load_manifest(design_stimuli) if c.role == "catch"})
     assert len(given) == 3 + n_catch_pages
-    pages = {}
+    pages, catch = {}, {}
     for row in rows:
         pages.setdefault(row["page_id"], {})[row["clip_id"]] = int(row["rating"])
-        assert row["flags"] == "" and 0 <= int(row["rating"]) <= 100
+        if row["role"] == "catch":
+            catch.setdefault(row["page_id"], {}).setdefault(row["condition"], []).append(int(row["rating"]))
+        assert 0 <= int(row["rating"]) <= 100
+    # Every video fetched; failed_catch on every row exactly when a catch page rated its BAD clip at or above NAT.
+    failed = any(study.page_catch_failed(max(p[study.CATCH]), min(p[study.NATURAL])) for p in catch.values())
+    assert all(row["flags"] == ("failed_catch" if failed else "") for row in rows)
     assert sorted(map(sorted, (p.items() for p in pages.values()))) == sorted(
         map(sorted, (v.items() for v in given.values()))
     )
