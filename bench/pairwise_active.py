@@ -1,21 +1,23 @@
-"""Votes a pairwise ranking study needs, balanced against active pairing, with and without the stopping rule; and
-the stopping rule's error rate against its nominal level. Pure simulation against moglow_eval.core.ranking, no app.
+"""Votes a pairwise ranking study needs with the app's active pairing against round robin, on three truths; and the
+stopping rule's error rate. Pure simulation, no server, but the app's own rule: the pair order comes from
+moglow_eval.core.ranking.pick_order (what rating_app/pairing/active.py calls), its balanced share goes to the
+least-covered pair (the app's balanced claim), and the mean is refitted as the app refits it.
 
-    nice python bench/pairwise_active.py [--reps 100] [--max-votes 40000] [--error-reps 150] [--skip fixed,stop,error]
+    nice python bench/pairwise_active.py [--reps 40] [--truths evenly,leaderboard,near-ties] [--skip stop,error]
 
-The truth: Bradley-Terry log strengths of the 8 systems of the GENEA leaderboard's released realism votes
-(../shared/data/genea-leaderboard-votes/battles_elo.csv, read there, never copied; ties half to each side),
-fitted with ranking.fit under a flat-enough prior (sd 10). Each simulated vote goes to the pair the scheme
-picks and its winner is drawn from those strengths.
-- balanced: the pair with the fewest votes so far, ties at random (what the app's least-covered rule does);
-- active: with probability --random-share a pair at random, else the pair of highest ranking.gains, the mean
-  refitted as the app refits it (ranking.refit_due) and the covariance from the votes so far (ranking.with_counts).
-The votes needed: the smallest count from which on (checked every --step votes) at least 95% of replications rank
-the systems at Kendall tau >= 0.9 against the truth's order; the spread: the quantiles over replications of
-each one's first count at tau >= 0.9 for good. With the stopping rule: votes at the stop and the share of stopped
-studies at tau >= 0.9 and with every pair in the truth's order.
-The error table: studies stopped by the rule (separation only) on known strengths, the share that order some pair
-wrongly, against 1 - level.
+- The truths (log strengths): `evenly`, 8 systems 0.2 apart (35 Elo); `leaderboard`, the 8 systems of the GENEA
+  leaderboard's released realism votes (../shared/data/genea-leaderboard-votes/battles_elo.csv, read there, never
+  copied), fitted by ranking.fit under a flat-enough prior (sd 10); `near-ties`, 10 systems 0.25 apart but for
+  two pairs 0.02 apart (3.5 Elo: alike for any rater).
+- A vote: its outcome drawn from Bradley-Terry with Davidson's ties (ν = --nu; 0.35 gives 15% ties between
+  equals), a tie half to each side, as the app counts it.
+- round robin: the pair with the fewest votes so far, ties at random (the app's balanced pairing).
+- active: ranking.pick_order on the posterior the app holds (the last fit's mean, every vote so far in the
+  covariance), with --random-share and the indifference --margin; None: the least-covered pair. The app refits
+  whenever a vote came in, at most once a second: --votes-per-second votes between fits (1: before every vote).
+- Votes to tau >= 0.9 in --share of replications: the smallest count from which on (checked every --step votes)
+  that share of replications rank the systems at Kendall tau >= 0.9 against the truth; active / round robin, with
+  a percentile interval over replications (each scheme's replications resampled, 500 times).
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ from moglow_eval.core import ranking  # noqa: E402
 from moglow_eval.core.votes import battle_to_preference  # noqa: E402
 
 VOTES = ROOT.parent / "shared" / "data" / "genea-leaderboard-votes" / "battles_elo.csv"
+SCHEMES = ("balanced", "active")
 
 
 def leaderboard_truth(path=VOTES):
@@ -53,176 +56,173 @@ def leaderboard_truth(path=VOTES):
     return names, ranking.fit(w, prior_sd=10.0).mean
 
 
-class Study:
-    """One simulated study: its votes so far and the scheme that picks the next pair."""
+def truths(which):
+    """{name: (log strengths, the near-tie pairs as index pairs)}."""
+    out = {}
+    if "evenly" in which:
+        out["evenly"] = (0.2 * np.arange(8)[::-1], [])
+    if "leaderboard" in which:
+        out["leaderboard"] = (leaderboard_truth()[1], [])
+    if "near-ties" in which:
+        steps = np.array([0.25, 0.02, 0.25, 0.25, 0.25, 0.02, 0.25, 0.25, 0.25])
+        s = np.r_[0.0, -np.cumsum(steps)]
+        out["near-ties"] = (s, [(1, 2), (5, 6)])
+    return out
 
-    def __init__(self, truth, scheme, rng, random_share=0.2):
-        self.truth, self.scheme, self.rng, self.share = truth, scheme, rng, random_share
+
+class Study:
+    """One simulated study: its votes so far, and the scheme that picks the next pair."""
+
+    def __init__(self, truth, scheme, rng, a):
+        self.truth, self.scheme, self.rng, self.a = truth, scheme, rng, a
         k = len(truth)
         self.pr = ranking.pairs(k)
         self.wins = np.zeros((k, k))
         self.post = ranking.fit(self.wins)
-        self.at_fit = 0.0
+        self.since_fit = 0
 
     @property
     def votes(self):
         return float(self.wins.sum())
 
-    def current(self):
-        """The posterior as the app holds it: the last fit's mean, the covariance of every vote so far."""
-        if ranking.refit_due(self.at_fit, self.votes):
-            self.post, self.at_fit = ranking.fit(self.wins, start=self.post.mean), self.votes
-        return ranking.with_counts(self.post, self.wins + self.wins.T)
+    def least_covered(self):
+        n = (self.wins + self.wins.T)[self.pr[:, 0], self.pr[:, 1]]
+        return int(self.rng.choice(np.flatnonzero(n == n.min())))
 
     def next_pair(self):
-        n = (self.wins + self.wins.T)[self.pr[:, 0], self.pr[:, 1]]
         if self.scheme == "balanced":
-            best = np.flatnonzero(n == n.min())
-        elif self.rng.random() < self.share:
-            best = np.arange(len(self.pr))
-        else:
-            g = ranking.gains(self.current())
-            best = np.flatnonzero(g >= g.max() - 1e-12)
-        return self.pr[self.rng.choice(best)]
+            return self.pr[self.least_covered()]
+        if self.since_fit >= self.a.votes_per_second:  # the app: refit when votes came in, once a second at most
+            self.post, self.since_fit = ranking.fit(self.wins, start=self.post.mean), 0
+        held = ranking.with_counts(self.post, self.wins + self.wins.T)
+        order = ranking.pick_order(held, self.rng, self.a.random_share, self.a.margin)
+        return self.pr[self.least_covered() if order is None else order[0]]
 
     def vote(self):
         i, j = self.next_pair()
-        won = self.rng.random() < 1.0 / (1.0 + math.exp(self.truth[j] - self.truth[i]))
-        self.wins[(i, j) if won else (j, i)] += 1.0
+        pi, pj = math.exp(self.truth[i]), math.exp(self.truth[j])
+        tie = self.a.nu * math.sqrt(pi * pj)
+        u = self.rng.random() * (pi + pj + tie)
+        outcome = 1.0 if u < pi else 0.0 if u < pi + pj else 0.5
+        self.wins[i, j] += outcome
+        self.wins[j, i] += 1.0 - outcome
+        self.since_fit += 1
+        return i, j
 
-    def order_tau(self):
-        """Kendall tau of the current mean's order against the truth's."""
-        post = ranking.fit(self.wins, start=self.post.mean)
-        return kendalltau(post.mean, self.truth).statistic, post
+    def tau(self):
+        return kendalltau(ranking.fit(self.wins, start=self.post.mean).mean, self.truth).statistic
 
 
-def run_fixed(truth, scheme, reps, max_votes, step, seed, share):
-    """[reps, checkpoints] Kendall tau at every `step` votes."""
-    taus = np.zeros((reps, max_votes // step))
+def run(truth, near, scheme, a, reps, max_votes, seed):
+    """([reps, checkpoints] Kendall tau every a.step votes, the share of votes on the near-tie pairs)."""
+    taus = np.zeros((reps, max_votes // a.step))
+    on_near, total = 0, 0
+    near = {tuple(sorted(p)) for p in near}
     for r in range(reps):
-        s = Study(truth, scheme, np.random.default_rng([seed, r]), share)
+        s = Study(truth, scheme, np.random.default_rng([seed, r]), a)
         for c in range(taus.shape[1]):
-            for _ in range(step):
-                s.vote()
-            taus[r, c] = s.order_tau()[0]
-    return taus
+            for _ in range(a.step):
+                i, j = s.vote()
+                on_near += (min(i, j), max(i, j)) in near
+                total += 1
+            taus[r, c] = s.tau()
+    return taus, on_near / total
 
 
-def votes_needed(taus, step, tau=0.9, share=0.95):
-    """(votes from which on >= `share` of replications are at `tau`, per-replication first votes at tau for good)."""
-    ok = taus >= tau - 1e-12
-    good = ok.mean(axis=0) >= share
+def votes_needed(taus, step, share, tau=0.9):
+    """The votes from which on at least `share` of replications are at tau >= `tau`; None if never."""
+    good = (taus >= tau - 1e-12).mean(axis=0) >= share
     bad_after = np.flatnonzero(~good)
-    first_all = (bad_after[-1] + 2) * step if len(bad_after) else step
-    per_rep = []
-    for row in ok:
-        misses = np.flatnonzero(~row)
-        per_rep.append((misses[-1] + 2) * step if len(misses) else step)
-    return (first_all if first_all <= taus.shape[1] * step else None), np.array(per_rep)
+    first = (bad_after[-1] + 2) * step if len(bad_after) else step
+    return first if first <= taus.shape[1] * step else None
 
 
-def ratio_interval(taus, step, rng, n_boot=500):
-    """A percentile interval of active / balanced votes needed, replications resampled in each scheme."""
+def ratio_interval(taus, step, share, rng, n_boot=500):
     ratios = []
     for _ in range(n_boot):
-        got = []
-        for scheme in ("active", "balanced"):
-            t = taus[scheme]
-            got.append(votes_needed(t[rng.integers(len(t), size=len(t))], step)[0])
-        if all(got):
-            ratios.append(got[0] / got[1])
+        got = [votes_needed(taus[s][rng.integers(len(taus[s]), size=len(taus[s]))], step, share) for s in SCHEMES]
+        ratios.append(got[1] / got[0] if all(got) else np.inf)
     return np.percentile(ratios, 2.5), np.percentile(ratios, 97.5)
 
 
-def run_stopping(truth, scheme, reps, cap, seed, share, level, width=None, check=25):
-    """Per replication (votes at the stop, tau there, every pair right): the rule checked every `check` votes."""
+def fixed(a, t0):
+    rows = []
+    for name, (truth, near) in truths(a.truths.split(",")).items():
+        taus, shares, needed = {}, {}, {}
+        for scheme in SCHEMES:
+            cap = a.max_votes if scheme == "balanced" else int(a.max_votes * a.active_cap)
+            taus[scheme], shares[scheme] = run(truth, near, scheme, a, a.reps, cap, a.seed)
+            needed[scheme] = votes_needed(taus[scheme], a.step, a.share)
+            print(f"{name:12s} {scheme:9s} votes: {needed[scheme]}  near-tie share {shares[scheme]:.3f}  "
+                  f"({time.time() - t0:.0f} s)", flush=True)  # fmt: skip
+        lo, hi = ratio_interval(taus, a.step, a.share, np.random.default_rng(a.seed))
+        ratio = needed["active"] / needed["balanced"] if all(needed.values()) else float("nan")
+        rows.append((name, len(truth), needed["balanced"], needed["active"], ratio, lo, hi, shares))
+    print("| truth | systems | round robin | active | active / round robin | 95% interval | votes on near-ties "
+          "(round robin, active) |\n|---|---|---|---|---|---|---|")  # fmt: skip
+    for name, k, nb, na, ratio, lo, hi, sh in rows:
+        near = f"{sh['balanced']:.3f}, {sh['active']:.3f}" if name == "near-ties" else ""
+        print(f"| {name} | {k} | {nb} | {na} | {ratio:.2f} | {lo:.2f}-{hi:.2f} | {near} |")
+
+
+def run_stopping(truth, scheme, a, reps, level, seed, check=25):
+    """Per replication (votes at the stop, every adjacent pair of the claimed order right or tied within the
+    margin, reached the cap)."""
     out = []
-    right = np.argsort(-truth)
     for r in range(reps):
-        s = Study(truth, scheme, np.random.default_rng([seed, 7, r]), share)
+        s = Study(truth, scheme, np.random.default_rng([seed, 7, r]), a)
         while True:
             for _ in range(check):
                 s.vote()
-            tau, post = s.order_tau()
-            if ranking.settledness(post, level, width)["settled"] or s.votes >= cap:
+            post = ranking.fit(s.wins, start=s.post.mean)
+            st = ranking.settledness(post, level, None, a.margin)
+            if st["settled"] or s.votes >= a.cap:
                 break
-        order = np.argsort(-post.mean, kind="stable")
-        out.append((s.votes, tau, bool((order == right).all()), s.votes >= cap))
+        order, tied = st["order"], {tuple(p) for p in st["tied"]}
+        wrong = any(truth[x] < truth[y] and (x, y) not in tied for x, y in zip(order[:-1], order[1:]))
+        out.append((s.votes, not wrong, s.votes >= a.cap))
     return out
 
 
-def error_table(truths, reps, cap, seed, share, levels):
-    rows = []
-    for label, truth in truths.items():
-        for level in levels:
-            for scheme in ("balanced", "active"):
-                res = run_stopping(truth, scheme, reps, cap, seed, share, level)
-                stopped = [x for x in res if not x[3]]
-                wrong = sum(not x[2] for x in stopped)
-                rows.append((label, level, scheme, len(stopped), wrong, np.median([x[0] for x in stopped] or [0])))
-    return rows
+def error_table(a):
+    print("| truth | level | pairing | stopped | claimed a wrong order | nominal | median votes |")
+    print("|---|---|---|---|---|---|---|")
+    for name, (truth, _) in truths(a.truths.split(",")).items():
+        for level in (0.9, 0.95):
+            for scheme in SCHEMES:
+                res = run_stopping(truth, scheme, a, a.error_reps, level, a.seed)
+                stopped = [x for x in res if not x[2]]
+                wrong = sum(not x[1] for x in stopped)
+                med = np.median([x[0] for x in stopped] or [0])
+                print(f"| {name} | {level} | {scheme} | {len(stopped)} | {wrong} | {1 - level:.2f} | {med:.0f} |",
+                      flush=True)  # fmt: skip
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--reps", type=int, default=100)
-    ap.add_argument("--max-votes", type=int, default=40000)
-    ap.add_argument("--step", type=int, default=1000)
-    ap.add_argument("--error-reps", type=int, default=150)
+    ap.add_argument("--reps", type=int, default=40)
+    ap.add_argument("--truths", default="evenly,leaderboard,near-ties")
+    ap.add_argument("--max-votes", type=int, default=24000, help="round robin's votes per replication")
+    ap.add_argument("--active-cap", type=float, default=0.75, help="active's votes per replication, x --max-votes")
+    ap.add_argument("--step", type=int, default=500)
+    ap.add_argument("--share", type=float, default=0.9, help="the share of replications at tau >= 0.9")
+    ap.add_argument("--random-share", type=float, default=0.2, help="as the app's PAIRING_RANDOM")
+    ap.add_argument("--margin", type=float, default=ranking.INDIFFERENCE_ELO, help="as PAIRING_INDIFFERENCE")
+    ap.add_argument("--votes-per-second", type=int, default=1, help="votes between the app's refits")
+    ap.add_argument("--nu", type=float, default=0.35, help="Davidson's tie parameter of the simulated raters")
+    ap.add_argument("--error-reps", type=int, default=40)
     ap.add_argument("--cap", type=int, default=30000)
-    ap.add_argument("--stop-reps", type=int, default=60)
-    ap.add_argument("--width", type=float, default=50.0, help="the stopping rule's Elo width in the stop runs")
-    ap.add_argument("--random-share", type=float, default=0.2)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--skip", default="", help="comma-separated parts to skip: fixed, stop, error")
+    ap.add_argument("--skip", default="", help="comma-separated parts to skip: fixed, error")
     a = ap.parse_args(argv)
     skip = set(a.skip.split(","))
-    names, truth = leaderboard_truth()
-    elo = ranking.ELO_PER_LOG * (truth - truth.mean()) + ranking.ELO_ANCHOR
-    print(f"truth (Elo): {', '.join(f'{n} {e:.0f}' for n, e in sorted(zip(names, elo), key=lambda x: -x[1]))}")
-    print(f"Machine: {platform.processor() or platform.machine()}, load average {os.getloadavg()[0]:.2f}")
+    print(f"Machine: {platform.processor() or platform.machine()}, load average {os.getloadavg()[0]:.2f}; {vars(a)}")
     t0 = time.time()
     if "fixed" not in skip:
-        needed, taus = {}, {}
-        for scheme in ("balanced", "active"):
-            taus[scheme] = run_fixed(truth, scheme, a.reps, a.max_votes, a.step, a.seed, a.random_share)
-            n95, per_rep = votes_needed(taus[scheme], a.step)
-            needed[scheme] = n95
-            q = np.percentile(per_rep, [5, 25, 50, 75, 95])
-            print(
-                f"{scheme:9s} votes to tau>=0.9 in 95% of {a.reps} reps: {n95}; per replication "
-                f"5/25/50/75/95%: {' / '.join(f'{x:.0f}' for x in q)}  ({time.time() - t0:.0f} s)"
-            )
-        if needed["balanced"] and needed["active"]:
-            lo, hi = ratio_interval(taus, a.step, np.random.default_rng(a.seed))
-            print(
-                f"active / balanced: {needed['active'] / needed['balanced']:.2f} (bootstrap over replications, "
-                f"95%: {lo:.2f}-{hi:.2f})"
-            )
-    if "stop" not in skip:
-        for scheme in ("balanced", "active"):
-            res = run_stopping(truth, scheme, a.stop_reps, a.cap, a.seed, a.random_share, 0.95, a.width)
-            v = np.array([x[0] for x in res])
-            print(
-                f"{scheme:9s} stop (level 0.95, width {a.width}, cap {a.cap}): votes median {np.median(v):.0f}, 5-95% "
-                f"{np.percentile(v, 5):.0f}-{np.percentile(v, 95):.0f}; "
-                f"at tau>=0.9 {np.mean([x[1] >= 0.9 for x in res]):.3f}, "
-                f"every pair right {np.mean([x[2] for x in res]):.3f}, at the cap {np.mean([x[3] for x in res]):.3f}"
-                f"  ({time.time() - t0:.0f} s)"
-            )
+        fixed(a, t0)
     if "error" not in skip:
-        k = len(truth)
-        truths = {"8 evenly 0.3 apart": 0.3 * np.arange(k)[::-1], "8 evenly 0.2 apart": 0.2 * np.arange(k)[::-1]}
-        print(
-            "| strengths | level | scheme | studies stopped | ordered some pair wrongly | share | nominal "
-            "| median votes |"
-        )
-        for label, level, scheme, n, wrong, med in error_table(
-            truths, a.error_reps, a.cap, a.seed, a.random_share, (0.9, 0.95)
-        ):
-            share = wrong / n if n else float("nan")
-            print(f"| {label} | {level} | {scheme} | {n} | {wrong} | {share:.3f} | {1 - level:.2f} | {med:.0f} |")
-        print(f"({time.time() - t0:.0f} s)")
+        error_table(a)
+    print(f"({time.time() - t0:.0f} s; load average {os.getloadavg()[0]:.2f})")
 
 
 if __name__ == "__main__":

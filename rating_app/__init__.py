@@ -86,7 +86,8 @@ def _app_config(values) -> dict:
 
     return {
         **configure(design, values["VOTE_REASONS"], values["REASON_TEXT"]),
-        **{k: values[k] for k in ("PAIRING", "PAIRING_RANDOM", "STOP_WHEN", "STOP_LEVEL", "STOP_WIDTH")},
+        **{k: values[k] for k in ("PAIRING", "PAIRING_RANDOM", "PAIRING_INDIFFERENCE", "STOP_WHEN", "STOP_LEVEL")},
+        "STOP_WIDTH": values["STOP_WIDTH"],
         "STOP_MAX_VOTES": values["STOP_MAX_VOTES"],
         "RATINGS_PER_CLIP": values["RATINGS_PER_CLIP"],
         "CLIPS_PER_RATER": values["CLIPS_PER_RATER"] or None,  # 0: all clips still short of their target

@@ -13,6 +13,7 @@ import test_app_catch_pool as pool
 import test_app_designs as base
 from helpers.concurrent_raters import cover_mismatches
 from helpers.fake_stimuli import write_fake_stimuli
+from helpers.tiers import only_when_slow
 from test_app_api import TOKEN_HDR
 
 from rating_app import AppError, create_app
@@ -230,3 +231,28 @@ def test_a_trusted_rater_still_settles_the_study_beside_flagged_ones(make, big_s
     assert refused.status_code == 409
     k = app.test_client().get("/admin/progress.json", headers=TOKEN_HDR).json["ranking"]
     assert k["order"] == ["NAT", "MG", "FL"] and k["raters_excluded"] == 2
+
+
+# ---------------------------------------------------------------------------------- the indifference zone
+def nat_best_mg_fl_alike(a, b, i):
+    """NAT clearly best (and the catch pairs passed); MG and FL alike: no preference between them."""
+    if "NAT" in (a, b) or "BAD" in (a, b):
+        return 2 if RANK[a] > RANK[b] else -2
+    return 0
+
+
+@pytest.mark.parametrize("margin", [200.0, 0.0])
+def test_conditions_alike_are_tied_and_settle_the_study(make, big_stimuli, monkeypatch, margin, app_db_url, request):
+    if not margin and app_db_url.startswith("postgres"):
+        only_when_slow(request, "the control without a margin runs on SQLite in the short variant")
+    monkeypatch.setattr(active, "REFRESH_S", 0.0)
+    app = make(big_stimuli, "pairwise", ratings_per_clip=20, clips_per_rater=15, pairing="active",
+               stop_when="settled", pairing_indifference=margin, stop_max_votes=240)  # fmt: skip
+    votes, refused = crowd(app, 30, nat_best_mg_fl_alike)
+    k = app.test_client().get("/admin/progress.json", headers=TOKEN_HDR).json["ranking"]
+    assert refused.status_code == 409 and k["closed"] and k["order"][0] == "NAT"
+    if margin:  # settled with MG and FL tied, long before the cap
+        assert k["settled"] and sorted(k["tied"][0]) == ["FL", "MG"] and k["indifference"] == margin
+        assert k["votes"] < 240
+    else:  # no margin: an order of two alike conditions never settles; only the cap closes the study
+        assert not k["settled"] and k["tied"] == [] and k["votes"] >= 240

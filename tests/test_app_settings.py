@@ -33,6 +33,7 @@ FLAGS = {
     "--reason-text": "REASON_TEXT",
     "--pairing": "PAIRING",
     "--pairing-random": "PAIRING_RANDOM",
+    "--pairing-indifference": "PAIRING_INDIFFERENCE",  # added by issue 55
     "--stop-when": "STOP_WHEN",
     "--stop-level": "STOP_LEVEL",
     "--stop-width": "STOP_WIDTH",
@@ -51,6 +52,7 @@ DEFAULTS = {
     "STUDY_DESIGN": "acr",
     "PAIRING": "balanced",
     "PAIRING_RANDOM": 0.2,
+    "PAIRING_INDIFFERENCE": 25.0,
     "STOP_WHEN": "never",
     "STOP_LEVEL": 0.95,
     "STOP_WIDTH": 0.0,
@@ -60,7 +62,7 @@ ARGUMENTS = {  # create_app's keyword arguments before the table
     "manifest", "db_url", "ratings_per_clip", "clips_per_rater", "catch_per_rater", "admin_token", "slot_timeout_s",
     "completion_code", "completion_url", "secret_key", "min_view", "sessions_per_client", "design", "question",
     "config", "reasons", "reason_text", "pairing", "pairing_random", "stop_when", "stop_level", "stop_width",
-    "stop_max_votes", "upload_root",
+    "stop_max_votes", "upload_root", "pairing_indifference",
 }  # fmt: skip
 
 

@@ -22,6 +22,7 @@ STUDY = {  # every key a study file may hold, with a value other than its defaul
     "reason_text": 120,
     "pairing": "active",
     "pairing_random": 0.3,
+    "pairing_indifference": 40.0,
     "stop_when": "settled",
     "stop_level": 0.9,
     "stop_width": 80.0,

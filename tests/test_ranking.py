@@ -168,3 +168,38 @@ def test_not_settled_from_nothing_and_the_width_rule():
     s = ranking.settledness(post, 0.95, width=50.0)
     assert s["narrow"] and s["settled"] and not s["separated"] and s["widest"] < 50.0
     assert not ranking.settledness(post, 0.95, width=s["widest"] / 2)["settled"]
+
+
+# ------------------------------------------------------------------ the indifference zone (issue 55 item 8)
+def near_tie_posterior(n_tie=3000):
+    """Four conditions 0.5 apart, but the middle two alike: `n_tie` votes between them split evenly."""
+    rng = np.random.default_rng(6)
+    w = simulate(np.array([1.0, 0.5, 0.5, -0.5]), 2000, rng)
+    w[1, 2] += n_tie / 2
+    w[2, 1] += n_tie / 2
+    return ranking.fit(w)
+
+
+def test_a_pair_confidently_within_the_margin_is_tied_and_gets_no_active_vote():
+    post = near_tie_posterior()
+    at = {tuple(p): n for n, p in enumerate(ranking.pairs(4).tolist())}
+    tied = ranking.tied(post, ranking.INDIFFERENCE_ELO)
+    assert tied[at[(1, 2)]] and tied.sum() == 1
+    assert not ranking.tied(post, 0.0).any()  # no margin, no tie
+    g = ranking.gains(post, ranking.INDIFFERENCE_ELO)
+    assert g[at[(1, 2)]] == -1.0 and (np.delete(g, at[(1, 2)]) >= 0).all()
+    # without the margin, the alike pair is the one the order is least sure of: the votes would go on there
+    assert np.argmax(ranking.gains(post)) == at[(1, 2)]
+    for seed in range(20):  # the app's order of pairs to try: the tied pair last, whatever the draw
+        order = ranking.pick_order(post, np.random.default_rng(seed), 0.0, ranking.INDIFFERENCE_ELO)
+        assert order[-1] == at[(1, 2)]
+    assert ranking.pick_order(post, np.random.default_rng(0), 1.0) is None  # the balanced share
+
+
+def test_a_tied_adjacent_pair_counts_as_settled():
+    post = near_tie_posterior()
+    s = ranking.settledness(post, 0.95, margin_elo=ranking.INDIFFERENCE_ELO)
+    assert s["settled"] and s["tied"] in ([(1, 2)], [(2, 1)])
+    assert not ranking.settledness(post, 0.95)["settled"]  # without the margin, never
+    few = near_tie_posterior(n_tie=40)  # too few votes to be confident the two are alike
+    assert not ranking.settledness(few, 0.95, margin_elo=ranking.INDIFFERENCE_ELO)["settled"]

@@ -21,6 +21,11 @@ From it:
   1 - (1 - level) / (k - 1) each (a Bonferroni split of the error over the k - 1 adjacent pairs: if every adjacent
   pair of the estimated order is right, the whole order is), or every condition's Elo interval narrower than a
   width. Elo = 400 log10 of the odds, centred on 1000 (the GENEA leaderboard's scale, Nagy et al. 2025).
+- The indifference zone: a pair whose Elo difference is within a margin (INDIFFERENCE_ELO) with high probability
+  is tied (`tied`, `within`): no target of `gains`, no more active votes, and settled for the stopping rule.
+  Without it, two conditions that are truly alike keep drawing votes for an order no number of votes settles.
+- `pick_order`: the order in which the app tries pairs for a slot, the one function the app and the benchmark
+  both call.
 
 Pure numpy/scipy, no database: the app (rating_app/pairing/active.py) counts the votes and calls this; the benchmark
 (bench/pairwise_active.py) simulates studies against it.
@@ -38,6 +43,10 @@ from scipy.special import expit, ndtr, ndtri
 PRIOR_SD = 2.0  # log strengths: two systems a prior sd apart win 88% of their votes; a few dozen votes outweigh it
 ELO_PER_LOG = 400.0 / math.log(10.0)  # Elo points per unit of log strength (400 log10 odds)
 ELO_ANCHOR = 1000.0  # the mean condition's Elo
+# The indifference zone: two conditions whose Elo difference is, with probability TIE_CONFIDENCE, smaller than this
+# are tied. Their order is no longer worth a vote (gains), and the stopping rule takes them as settled.
+INDIFFERENCE_ELO = 25.0  # a 54% chance of winning between the two: no rater sees that in one vote
+TIE_CONFIDENCE = 0.95
 # Gauss-Hermite nodes (probabilists') for the expectation over where the posterior mean moves after one vote.
 _NODES, _WEIGHTS = np.polynomial.hermite_e.hermegauss(8)
 _WEIGHTS = _WEIGHTS / _WEIGHTS.sum()
@@ -112,12 +121,6 @@ def with_counts(post: Posterior, counts, prior_sd: float = PRIOR_SD) -> Posterio
     return Posterior(post.mean, covariance(post.mean, counts, prior_sd), float(np.triu(counts, 1).sum()))
 
 
-def refit_due(votes_at_fit: float, votes_now: float) -> bool:
-    """Whether the mean is refitted: the votes grew by a twentieth since the last fit (at least one), so that fits
-    stay rare in a big study while a small one follows every vote."""
-    return votes_now - votes_at_fit >= max(1.0, votes_at_fit / 20.0)
-
-
 def _laplacian(weights: np.ndarray) -> np.ndarray:
     """The graph Laplacian of symmetric pair weights: what the BT log-likelihood's Hessian is made of."""
     weights = weights - np.diag(np.diag(weights))
@@ -139,15 +142,41 @@ def _order_entropy(z: np.ndarray) -> np.ndarray:
     return -(q * np.log2(q) + (1.0 - q) * np.log2(1.0 - q))
 
 
-def gains(post: Posterior) -> np.ndarray:
+def within(post: Posterior, a, b, margin_elo: float) -> np.ndarray:
+    """P(|theta_a - theta_b| < the margin) for pairs of condition indices `a`, `b` (arrays) under the posterior."""
+    a, b = np.asarray(a), np.asarray(b)
+    m = margin_elo / ELO_PER_LOG
+    d = post.mean[a] - post.mean[b]
+    sd = np.sqrt(np.maximum(post.cov[a, a] + post.cov[b, b] - 2 * post.cov[a, b], 1e-300))
+    return ndtr((m - d) / sd) - ndtr((-m - d) / sd)
+
+
+def tied(post: Posterior, margin_elo: float, confidence: float = TIE_CONFIDENCE) -> np.ndarray:
+    """[P] in the order of `pairs(k)`: whether each pair is tied, its difference within `margin_elo` with
+    probability at least `confidence` (none without a margin)."""
+    pr = pairs(len(post.mean))
+    if not margin_elo or margin_elo <= 0:
+        return np.zeros(len(pr), bool)
+    return within(post, pr[:, 0], pr[:, 1], margin_elo) >= confidence
+
+
+def gains(post: Posterior, margin_elo: float = 0.0) -> np.ndarray:
     """The expected drop in the summed order entropy of the adjacent pairs of the posterior-mean order from one
     more vote on each pair, [P] in the order of `pairs(k)` (module docstring). Adjacent pairs only: the order of
-    two conditions farther apart follows from theirs, and the entropy of P(order) is then nearly zero anyway."""
+    two conditions farther apart follows from theirs, and the entropy of P(order) is then nearly zero anyway.
+    With an indifference margin, tied pairs (`tied`) are no target, and a vote on one gains nothing (-1, last)."""
     k = len(post.mean)
     pr = pairs(k)
     cov, mean = post.cov, post.mean
     order = np.argsort(-mean, kind="stable")
     ta, tb = order[:-1], order[1:]  # the targets: adjacent in the current order
+    is_tied = tied(post, margin_elo)
+    if is_tied.any():
+        at = {(int(i), int(j)): n for n, (i, j) in enumerate(pr)}
+        keep = ~is_tied[[at[tuple(sorted((int(x), int(y))))] for x, y in zip(ta, tb)]]
+        ta, tb = ta[keep], tb[keep]
+    if not len(ta):
+        return np.where(is_tied, -1.0, 0.0)
     a, b = pr[:, 0], pr[:, 1]
     d_cand = mean[a] - mean[b]
     var_cand = cov[a, a] + cov[b, b] - 2 * cov[a, b]
@@ -165,7 +194,19 @@ def gains(post: Posterior) -> np.ndarray:
     # The mean of each difference moves by N(0, shrink): integrate the entropy after over it.
     moved = d[None, :, None] + np.sqrt(shrink)[..., None] * _NODES
     after = (_order_entropy(moved / np.sqrt(var_after)[..., None]) @ _WEIGHTS).sum(axis=1)
-    return before - after
+    return np.where(is_tied, -1.0, before - after)
+
+
+def pick_order(post: Posterior, rng, random_share: float, margin_elo: float = 0.0):
+    """The pairs (indices into `pairs(k)`) in the order active pairing tries them for a slot, highest gain first,
+    ties broken at random; or None for the `random_share` of slots that keep the balanced rule (the least-covered
+    unit), so that a wrong model cannot starve a pair. `rng`: anything with .random() (random.Random or a numpy
+    Generator). The app (rating_app/pairing/active.py) and the benchmark (bench/pairwise_active.py) both call it."""
+    if rng.random() < random_share:
+        return None
+    g = gains(post, margin_elo)
+    noise = np.array([rng.random() for _ in g]) * 1e-9
+    return np.argsort(-(g + noise))
 
 
 def elo(post: Posterior) -> tuple[np.ndarray, np.ndarray]:
@@ -176,22 +217,25 @@ def elo(post: Posterior) -> tuple[np.ndarray, np.ndarray]:
     return ELO_ANCHOR + ELO_PER_LOG * (post.mean - post.mean.mean()), ELO_PER_LOG * sd
 
 
-def settledness(post: Posterior, level: float, width: float | None = None) -> dict:
-    """How far the ranking is from settled (module docstring).
+def settledness(post: Posterior, level: float, width: float | None = None, margin_elo: float = 0.0) -> dict:
+    """How far the ranking is from settled (module docstring). With an indifference margin, an adjacent pair whose
+    difference lies within it with the probability a pair needs is tied, and settled as it is.
 
-    -> {"order": condition indices best first, "weakest": the lowest P(order right) of an adjacent pair,
-    "needed": the P each adjacent pair needs, "widest": the widest Elo interval at `level` (points), "width",
-    "separated", "narrow", "settled"}."""
+    -> {"order": condition indices best first, "weakest": the lowest P(order right) of an adjacent pair not
+    tied, "needed": the P each adjacent pair needs, "tied": [(i, j)] adjacent pairs tied, "widest": the widest
+    Elo interval at `level` (points), "width", "separated", "narrow", "settled"}."""
     k = len(post.mean)
     order = np.argsort(-post.mean, kind="stable")
     if k < 2:
-        return {"order": order.tolist(), "weakest": 1.0, "needed": level, "widest": 0.0, "width": width,
+        return {"order": order.tolist(), "weakest": 1.0, "needed": level, "tied": [], "widest": 0.0, "width": width,
                 "separated": True, "narrow": True, "settled": True}  # fmt: skip
     a, b = order[:-1], order[1:]
     c = post.cov
     var = c[a, a] + c[b, b] - 2 * c[a, b]
-    weakest = float(ndtr((post.mean[a] - post.mean[b]) / np.sqrt(var)).min())
     needed = 1.0 - (1.0 - level) / (k - 1)
+    is_tied = within(post, a, b, margin_elo) >= needed if margin_elo and margin_elo > 0 else np.zeros(k - 1, bool)
+    sep = ndtr((post.mean[a] - post.mean[b]) / np.sqrt(var))
+    weakest = float(sep[~is_tied].min()) if (~is_tied).any() else 1.0
     _, se = elo(post)
     widest = float(2.0 * ndtri(1.0 - (1.0 - level) / 2.0) * se.max())
     separated = weakest >= needed
@@ -200,6 +244,7 @@ def settledness(post: Posterior, level: float, width: float | None = None) -> di
         "order": order.tolist(),
         "weakest": weakest,
         "needed": needed,
+        "tied": [(int(x), int(y)) for x, y, t in zip(a, b, is_tied) if t],
         "widest": widest,
         "width": width,
         "separated": bool(separated),

@@ -1,8 +1,9 @@
 """Active pairing and the stopping rule of a pairwise study (CONTRACTS §8, "Active pairing and the stopping rule").
 
 `--pairing active`: a test slot gets a unit of the pair of conditions whose next vote tells most about the ranking
-(moglow_eval.core.ranking.gains under the Bradley-Terry posterior of the test votes so far), except for a share
-of slots (PAIRING_RANDOM) that keep the balanced rule, so a wrong model cannot starve a pair. It only chooses
+(moglow_eval.core.ranking.pick_order: gains under the Bradley-Terry posterior of the test votes so far, pairs tied
+within PAIRING_INDIFFERENCE Elo left out), except for a share of slots (PAIRING_RANDOM) that keep the balanced
+rule, so a wrong model cannot starve a pair. It only chooses
 among the units the balanced rule could give this slot: the same claim (least-covered first, short of its target,
 not had by this rater, its Cover row locked and checked again) over the chosen pair's units; when none of the best
 pairs has one, the balanced claim over all units. Sides, catch slots, the plan, expiry and the targets are
@@ -127,13 +128,12 @@ class Ranking:
     # -------------------------------------------------------------------------------------------- pairing
     def pick(self, conn, rng, rater_pk: int, units, target: int, wait: bool):
         """A test unit of the most informative pair this slot can have, or None (then the balanced claim)."""
-        if rng.random() < self.cfg["PAIRING_RANDOM"]:
-            return None
         self.refresh(conn)
-        g = ranking.gains(self.posterior())
-        noise = np.array([rng.random() for _ in g]) * 1e-9  # ties at random
+        order = ranking.pick_order(self.posterior(), rng, self.cfg["PAIRING_RANDOM"], self.cfg["PAIRING_INDIFFERENCE"])
+        if order is None:
+            return None
         had = select(Trial.unit).where(Trial.rater_pk == rater_pk, Trial.unit.is_not(None))
-        for p in np.argsort(-(g + noise))[:TRIES]:
+        for p in order[:TRIES]:
             key = claim(conn, self.keys_of[p], had, target, wait) if self.keys_of[p] else None
             if key is not None:
                 i, j = self.pr[p]
@@ -149,7 +149,7 @@ class Ranking:
         cfg = self.cfg
         with self.lock:
             post, votes, (left_out, n_excluded) = self.post, self.votes, self.untrusted
-        s = ranking.settledness(post, cfg["STOP_LEVEL"], cfg["STOP_WIDTH"] or None)
+        s = ranking.settledness(post, cfg["STOP_LEVEL"], cfg["STOP_WIDTH"] or None, cfg["PAIRING_INDIFFERENCE"])
         elo, se = ranking.elo(post)
         cap = cfg["STOP_MAX_VOTES"]
         return {
@@ -160,6 +160,8 @@ class Ranking:
             "elo": {c: round(float(e), 1) for c, e in zip(self.conds, elo)},
             "elo_se": {c: round(float(e), 1) for c, e in zip(self.conds, se)},
             "weakest_separation": round(s["weakest"], 4),
+            "indifference": cfg["PAIRING_INDIFFERENCE"] or None,
+            "tied": [[self.conds[i], self.conds[j]] for i, j in s["tied"]],
             "separation_needed": round(s["needed"], 4),
             "widest_interval": round(s["widest"], 1),
             "width": cfg["STOP_WIDTH"] or None,

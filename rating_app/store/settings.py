@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass
 
-from moglow_eval.core import study, votes
+from moglow_eval.core import ranking, study, votes
 from moglow_eval.core.cli import number
 
 from .manifest import AppError
@@ -186,6 +186,16 @@ TABLE = (
         bounds=(0.0, 1.0),
         help="active pairing: the share of slots that keep the balanced rule, so that a wrong model cannot starve a "
         "pair",
+    ),
+    Setting(
+        "PAIRING_INDIFFERENCE",
+        float,
+        ranking.INDIFFERENCE_ELO,
+        arg="pairing_indifference",
+        flag="--pairing-indifference",
+        bounds=(0.0, 1000.0),
+        help="active pairing and the stopping rule: two conditions confidently closer than this many Elo points "
+        "are tied, get no more active votes and count as settled (0: off)",
     ),
     Setting(
         "STOP_WHEN",

@@ -55,12 +55,13 @@ def ranks(boot):
     return np.apply_along_axis(tied_ranks, 1, np.atleast_2d(boot))
 
 
-def groups(order, rank_low, rank_high):
+def groups(order, rank_low, rank_high, tied=()):
     """Group numbers (1 = best) for conditions in `order` (strongest first), merging neighbours while their rank
-    intervals overlap; `rank_low`/`rank_high` are dicts by condition."""
+    intervals overlap, or where a condition is `tied` with the one above it (within the indifference margin);
+    `rank_low`/`rank_high` are dicts by condition."""
     out, g, reach = {}, 0, -math.inf
     for c in order:
-        if rank_low[c] > reach:  # disjoint from every condition above: a new group starts
+        if rank_low[c] > reach and c not in tied:  # disjoint from every condition above: a new group starts
             g += 1
         out[c] = g
         reach = max(reach, rank_high[c])
@@ -82,7 +83,22 @@ def unbounded(pairs):
     return notes
 
 
-def rank_table(strengths, boot, conds, reference, level=0.95, notes=None):
+def tied_with_above(order, boot, conds, margin_elo, confidence=core_ranking.TIE_CONFIDENCE):
+    """The conditions of `order` (strongest first) whose Elo difference from the one above lies within
+    `margin_elo` in at least `confidence` of the bootstrap resamples: the app's indifference zone
+    (moglow_eval.core.ranking.tied), which the report groups."""
+    if not margin_elo or len(boot) == 0:
+        return set()
+    col = {c: k for k, c in enumerate(conds)}
+    m = margin_elo / ELO_PER_LOG
+    return {
+        c
+        for above, c in zip(order[:-1], order[1:])
+        if np.mean(np.abs(boot[:, col[above]] - boot[:, col[c]]) < m) >= confidence
+    }
+
+
+def rank_table(strengths, boot, conds, reference, level=0.95, notes=None, margin_elo=core_ranking.INDIFFERENCE_ELO):
     """One row per condition, strongest first.
 
     Parameters
@@ -97,13 +113,18 @@ def rank_table(strengths, boot, conds, reference, level=0.95, notes=None):
         The condition at ELO_ANCHOR.
     level : float
         The coverage of the intervals.
+    notes : dict or None
+        {condition: note} shown beside it (`unbounded`).
+    margin_elo : float
+        The indifference margin: a condition whose Elo lies within it of the one above in 95% of the resamples
+        shares its group (the app's PAIRING_INDIFFERENCE; 0: groups by rank intervals alone).
 
     Returns
     -------
     DataFrame
         condition, log_strength, elo, elo_low, elo_high, rank (of the point estimate), rank_low, rank_high,
-        group (1 = best; conditions in one group are not told apart), rank_range (e.g. "1-3"), note (`notes`'
-        entry, e.g. from `unbounded`, else empty).
+        group (1 = best; conditions in one group are not told apart, or are tied within the margin), rank_range
+        (e.g. "1-3"), note (`notes`' entry, e.g. from `unbounded`, else empty).
     """
     boot = np.asarray(boot, dtype=float).reshape(-1, len(conds))
     ref = strengths[reference]
@@ -128,10 +149,12 @@ def rank_table(strengths, boot, conds, reference, level=0.95, notes=None):
             }
         )
     table = pd.DataFrame(rows).sort_values(["elo", "condition"], ascending=[False, True], ignore_index=True)
+    order = list(table["condition"])
     g = groups(
-        list(table["condition"]),
+        order,
         dict(zip(table["condition"], table["rank_low"])),
         dict(zip(table["condition"], table["rank_high"])),
+        tied_with_above(order, boot, conds, margin_elo),
     )
     table["group"] = table["condition"].map(g)
     # A group's ranks are the places its members take in the order (equal strengths share a mean rank, 3 for
