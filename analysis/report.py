@@ -99,6 +99,7 @@ def build_report(
     ordinal_max_ratings=ORDINAL_MAX_RATINGS,
     reference_name=None,
     reference=None,
+    indifference=0.0,
 ):
     """Run the whole analysis of a ratings file, of whichever design it holds, and write the report.
 
@@ -140,6 +141,9 @@ def build_report(
         figures and its models then use this name.
     reference : str or None
         pairwise: the condition at log strength 0 and Elo 1000 (None: NAT, else the first by name).
+    indifference : float
+        pairwise: a condition whose Elo lies within this many points of the one above in 95% of the bootstrap
+        resamples shares its group (the app's PAIRING_INDIFFERENCE; 0: groups by rank intervals alone).
 
     Returns
     -------
@@ -164,6 +168,7 @@ def build_report(
         ordinal_max_ratings,
         reference_name,
         reference,
+        indifference,
     )
     design = design_of(ratings_path)
     data = design.prepare(ratings_path, options)
@@ -266,6 +271,14 @@ def build_parser():
         metavar="NAME",
         help="pairwise: the condition at log strength 0 and Elo 1000 (default: NAT, else the first by name)",
     )
+    ap.add_argument(
+        "--indifference",
+        type=cli.number(float, 0.0, 1000.0),
+        default=0.0,
+        metavar="ELO",
+        help="pairwise: conditions whose Elo lies within this of the one above in 95%% of the bootstrap resamples "
+        "share a group, as the app's --pairing-indifference ties them (default 0: off)",
+    )
     ap.add_argument("--study", help="the study file (STUDY.toml) the stimuli were built from: its reference's name")
     ap.add_argument("--quiet", action="store_true", help="no console summary or progress bar")
     return ap
@@ -294,6 +307,7 @@ def _main(argv):
         ordinal_max_ratings=args.ordinal_max_ratings,
         reference_name=reference,
         reference=args.reference,
+        indifference=args.indifference,
     )
     return 0
 

@@ -5,7 +5,7 @@ least-covered pair (the app's balanced claim), and the mean is refitted as the a
 
     nice python bench/pairwise_active.py [--reps 40] [--truths evenly,leaderboard,near-ties] [--skip stop,error]
 
-- The truths (log strengths): `evenly`, 8 systems 0.2 apart (35 Elo); `leaderboard`, the 8 systems of the GENEA
+- The truths (log strengths): `evenly`, 8 systems 0.15 apart (26 Elo); `leaderboard`, the 8 systems of the GENEA
   leaderboard's released realism votes (../shared/data/genea-leaderboard-votes/battles_elo.csv, read there, never
   copied), fitted by ranking.fit under a flat-enough prior (sd 10); `near-ties`, 10 systems 0.25 apart but for
   two pairs 0.02 apart (3.5 Elo: alike for any rater).
@@ -15,7 +15,7 @@ least-covered pair (the app's balanced claim), and the mean is refitted as the a
 - active: ranking.pick_order on the posterior the app holds (the last fit's mean, every vote so far in the
   covariance), with --random-share and the indifference --margin; None: the least-covered pair. The app refits
   whenever a vote came in, at most once a second: --votes-per-second votes between fits (1: before every vote).
-- Votes to tau >= 0.9 in --share of replications: the smallest count from which on (checked every --step votes)
+- Votes to tau >= 0.9 in --share of replications: the smallest count from which on (checked 40 times a run)
   that share of replications rank the systems at Kendall tau >= 0.9 against the truth; active / round robin, with
   a percentile interval over replications (each scheme's replications resampled, 500 times).
 """
@@ -56,11 +56,15 @@ def leaderboard_truth(path=VOTES):
     return names, ranking.fit(w, prior_sd=10.0).mean
 
 
+# Round robin's votes per replication on each truth (about 1.5x what it needs): active gets --active-cap of them.
+MAX_VOTES = {"evenly": 8000, "leaderboard": 19200, "near-ties": 6000}
+
+
 def truths(which):
     """{name: (log strengths, the near-tie pairs as index pairs)}."""
     out = {}
     if "evenly" in which:
-        out["evenly"] = (0.2 * np.arange(8)[::-1], [])
+        out["evenly"] = (0.15 * np.arange(8)[::-1], [])
     if "leaderboard" in which:
         out["leaderboard"] = (leaderboard_truth()[1], [])
     if "near-ties" in which:
@@ -113,15 +117,15 @@ class Study:
         return kendalltau(ranking.fit(self.wins, start=self.post.mean).mean, self.truth).statistic
 
 
-def run(truth, near, scheme, a, reps, max_votes, seed):
-    """([reps, checkpoints] Kendall tau every a.step votes, the share of votes on the near-tie pairs)."""
-    taus = np.zeros((reps, max_votes // a.step))
+def run(truth, near, scheme, a, reps, max_votes, step, seed):
+    """([reps, checkpoints] Kendall tau every `step` votes, the share of votes on the near-tie pairs)."""
+    taus = np.zeros((reps, max_votes // step))
     on_near, total = 0, 0
     near = {tuple(sorted(p)) for p in near}
     for r in range(reps):
         s = Study(truth, scheme, np.random.default_rng([seed, r]), a)
         for c in range(taus.shape[1]):
-            for _ in range(a.step):
+            for _ in range(step):
                 i, j = s.vote()
                 on_near += (min(i, j), max(i, j)) in near
                 total += 1
@@ -142,20 +146,25 @@ def ratio_interval(taus, step, share, rng, n_boot=500):
     for _ in range(n_boot):
         got = [votes_needed(taus[s][rng.integers(len(taus[s]), size=len(taus[s]))], step, share) for s in SCHEMES]
         ratios.append(got[1] / got[0] if all(got) else np.inf)
-    return np.percentile(ratios, 2.5), np.percentile(ratios, 97.5)
+    return np.percentile(ratios, 2.5, method="lower"), np.percentile(ratios, 97.5, method="higher")
 
 
 def fixed(a, t0):
     rows = []
     for name, (truth, near) in truths(a.truths.split(",")).items():
         taus, shares, needed = {}, {}, {}
+        most = int(MAX_VOTES[name] * a.scale)
+        step = most // 40
         for scheme in SCHEMES:
-            cap = a.max_votes if scheme == "balanced" else int(a.max_votes * a.active_cap)
-            taus[scheme], shares[scheme] = run(truth, near, scheme, a, a.reps, cap, a.seed)
-            needed[scheme] = votes_needed(taus[scheme], a.step, a.share)
+            if scheme not in a.schemes:
+                taus[scheme], shares[scheme], needed[scheme] = np.zeros((1, 1)), 0.0, None
+                continue
+            cap = most if scheme == "balanced" else int(most * a.active_cap) // step * step
+            taus[scheme], shares[scheme] = run(truth, near, scheme, a, a.reps, cap, step, a.seed)
+            needed[scheme] = votes_needed(taus[scheme], step, a.share)
             print(f"{name:12s} {scheme:9s} votes: {needed[scheme]}  near-tie share {shares[scheme]:.3f}  "
                   f"({time.time() - t0:.0f} s)", flush=True)  # fmt: skip
-        lo, hi = ratio_interval(taus, a.step, a.share, np.random.default_rng(a.seed))
+        lo, hi = ratio_interval(taus, step, a.share, np.random.default_rng(a.seed))
         ratio = needed["active"] / needed["balanced"] if all(needed.values()) else float("nan")
         rows.append((name, len(truth), needed["balanced"], needed["active"], ratio, lo, hi, shares))
     print("| truth | systems | round robin | active | active / round robin | 95% interval | votes on near-ties "
@@ -200,19 +209,25 @@ def error_table(a):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--reps", type=int, default=40)
+    ap.add_argument("--reps", type=int, default=50)
     ap.add_argument("--truths", default="evenly,leaderboard,near-ties")
-    ap.add_argument("--max-votes", type=int, default=24000, help="round robin's votes per replication")
-    ap.add_argument("--active-cap", type=float, default=0.75, help="active's votes per replication, x --max-votes")
-    ap.add_argument("--step", type=int, default=500)
+    ap.add_argument("--scale", type=float, default=1.0, help="x each truth's votes per replication (MAX_VOTES)")
+    ap.add_argument("--active-cap", type=float, default=0.75, help="active's votes per replication, x round robin's")
     ap.add_argument("--share", type=float, default=0.9, help="the share of replications at tau >= 0.9")
     ap.add_argument("--random-share", type=float, default=0.2, help="as the app's PAIRING_RANDOM")
     ap.add_argument("--margin", type=float, default=ranking.INDIFFERENCE_ELO, help="as PAIRING_INDIFFERENCE")
-    ap.add_argument("--votes-per-second", type=int, default=1, help="votes between the app's refits")
+    ap.add_argument(
+        "--votes-per-second",
+        type=int,
+        default=4,
+        help="votes between the app's refits (it refits at most once a second: 4 a second is about 100 raters at "
+        "once, each answering every 25 s)",
+    )
     ap.add_argument("--nu", type=float, default=0.35, help="Davidson's tie parameter of the simulated raters")
     ap.add_argument("--error-reps", type=int, default=40)
     ap.add_argument("--cap", type=int, default=30000)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--schemes", default="balanced,active", help="which schemes to run (a pilot: balanced alone)")
     ap.add_argument("--skip", default="", help="comma-separated parts to skip: fixed, error")
     a = ap.parse_args(argv)
     skip = set(a.skip.split(","))

@@ -263,15 +263,15 @@ def test_an_honest_crowd_has_no_partisans(tmp_path, seed):
 
 
 def test_conditions_confidently_within_the_indifference_margin_share_a_group():
-    """Two conditions 10 Elo apart, measured so precisely that their rank intervals are disjoint: within the app's
-    indifference margin (25 Elo) in every resample, the report groups them (issue 55 item 8)."""
+    """Two conditions 10 Elo apart, measured so precisely that their rank intervals are disjoint: within an
+    indifference margin of 25 Elo in every resample, the report groups them (issue 55 item 8)."""
     rng = np.random.default_rng(0)
     per_elo = 1 / ranking.ELO_PER_LOG
     centre = np.array([0.0, -10 * per_elo, -300 * per_elo])
     boot = centre + rng.normal(0, 2 * per_elo, (400, 3))
     strengths = dict(zip(["A", "B", "C"], centre))
-    table = ranking.rank_table(strengths, boot, ["A", "B", "C"], "A").set_index("condition")
+    table = ranking.rank_table(strengths, boot, ["A", "B", "C"], "A", margin_elo=25.0).set_index("condition")
     assert table.at["A", "rank_high"] < table.at["B", "rank_low"]  # the intervals alone would part them
     assert table.at["A", "group"] == table.at["B", "group"] != table.at["C", "group"]
-    apart = ranking.rank_table(strengths, boot, ["A", "B", "C"], "A", margin_elo=0).set_index("condition")
+    apart = ranking.rank_table(strengths, boot, ["A", "B", "C"], "A").set_index("condition")  # the default: off
     assert apart.at["A", "group"] != apart.at["B", "group"]

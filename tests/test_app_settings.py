@@ -52,7 +52,7 @@ DEFAULTS = {
     "STUDY_DESIGN": "acr",
     "PAIRING": "balanced",
     "PAIRING_RANDOM": 0.2,
-    "PAIRING_INDIFFERENCE": 25.0,
+    "PAIRING_INDIFFERENCE": 0.0,
     "STOP_WHEN": "never",
     "STOP_LEVEL": 0.95,
     "STOP_WIDTH": 0.0,

@@ -171,6 +171,9 @@ def test_not_settled_from_nothing_and_the_width_rule():
 
 
 # ------------------------------------------------------------------ the indifference zone (issue 55 item 8)
+MARGIN = 25.0  # Elo
+
+
 def near_tie_posterior(n_tie=3000):
     """Four conditions 0.5 apart, but the middle two alike: `n_tie` votes between them split evenly."""
     rng = np.random.default_rng(6)
@@ -183,23 +186,23 @@ def near_tie_posterior(n_tie=3000):
 def test_a_pair_confidently_within_the_margin_is_tied_and_gets_no_active_vote():
     post = near_tie_posterior()
     at = {tuple(p): n for n, p in enumerate(ranking.pairs(4).tolist())}
-    tied = ranking.tied(post, ranking.INDIFFERENCE_ELO)
+    tied = ranking.tied(post, MARGIN)
     assert tied[at[(1, 2)]] and tied.sum() == 1
     assert not ranking.tied(post, 0.0).any()  # no margin, no tie
-    g = ranking.gains(post, ranking.INDIFFERENCE_ELO)
+    g = ranking.gains(post, MARGIN)
     assert g[at[(1, 2)]] == -1.0 and (np.delete(g, at[(1, 2)]) >= 0).all()
     # without the margin, the alike pair is the one the order is least sure of: the votes would go on there
     assert np.argmax(ranking.gains(post)) == at[(1, 2)]
     for seed in range(20):  # the app's order of pairs to try: the tied pair last, whatever the draw
-        order = ranking.pick_order(post, np.random.default_rng(seed), 0.0, ranking.INDIFFERENCE_ELO)
+        order = ranking.pick_order(post, np.random.default_rng(seed), 0.0, MARGIN)
         assert order[-1] == at[(1, 2)]
     assert ranking.pick_order(post, np.random.default_rng(0), 1.0) is None  # the balanced share
 
 
 def test_a_tied_adjacent_pair_counts_as_settled():
     post = near_tie_posterior()
-    s = ranking.settledness(post, 0.95, margin_elo=ranking.INDIFFERENCE_ELO)
+    s = ranking.settledness(post, 0.95, margin_elo=MARGIN)
     assert s["settled"] and s["tied"] in ([(1, 2)], [(2, 1)])
     assert not ranking.settledness(post, 0.95)["settled"]  # without the margin, never
     few = near_tie_posterior(n_tie=40)  # too few votes to be confident the two are alike
-    assert not ranking.settledness(few, 0.95, margin_elo=ranking.INDIFFERENCE_ELO)["settled"]
+    assert not ranking.settledness(few, 0.95, margin_elo=MARGIN)["settled"]

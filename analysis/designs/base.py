@@ -32,6 +32,7 @@ class Options:
     ordinal_max_ratings: int
     reference_name: str | None = None  # the reference's own name for NAT (analysis.page.study_text)
     reference: str | None = None  # pairwise: the condition at strength 0 and Elo 1000 (default NAT, or the first)
+    indifference: float = 0.0  # pairwise: the Elo margin within which neighbours share a group (ranking.rank_table)
 
 
 @dataclass

@@ -21,8 +21,8 @@ From it:
   1 - (1 - level) / (k - 1) each (a Bonferroni split of the error over the k - 1 adjacent pairs: if every adjacent
   pair of the estimated order is right, the whole order is), or every condition's Elo interval narrower than a
   width. Elo = 400 log10 of the odds, centred on 1000 (the GENEA leaderboard's scale, Nagy et al. 2025).
-- The indifference zone: a pair whose Elo difference is within a margin (INDIFFERENCE_ELO) with high probability
-  is tied (`tied`, `within`): no target of `gains`, no more active votes, and settled for the stopping rule.
+- The indifference zone: a pair whose Elo difference is within a margin (the app's PAIRING_INDIFFERENCE) with high
+  probability is tied (`tied`, `within`): no target of `gains`, no more active votes, and settled for the stopping rule.
   Without it, two conditions that are truly alike keep drawing votes for an order no number of votes settles.
 - `pick_order`: the order in which the app tries pairs for a slot, the one function the app and the benchmark
   both call.
@@ -43,9 +43,12 @@ from scipy.special import expit, ndtr, ndtri
 PRIOR_SD = 2.0  # log strengths: two systems a prior sd apart win 88% of their votes; a few dozen votes outweigh it
 ELO_PER_LOG = 400.0 / math.log(10.0)  # Elo points per unit of log strength (400 log10 odds)
 ELO_ANCHOR = 1000.0  # the mean condition's Elo
-# The indifference zone: two conditions whose Elo difference is, with probability TIE_CONFIDENCE, smaller than this
-# are tied. Their order is no longer worth a vote (gains), and the stopping rule takes them as settled.
-INDIFFERENCE_ELO = 25.0  # a 54% chance of winning between the two: no rater sees that in one vote
+# The indifference zone: two conditions whose Elo difference is, with probability TIE_CONFIDENCE, smaller than a
+# margin are tied. Their order is no longer worth a vote (gains), and the stopping rule takes them as settled. Off
+# by default: a margin also stops the votes on pairs truly that close, whose order Kendall's tau still counts (the
+# leaderboard's neighbours 9-11 Elo apart needed 2x the votes with a 25-Elo margin; bench/RESULTS.md
+# pairwise-active). A study that need not order conditions closer than some Elo difference sets it to that.
+INDIFFERENCE_ELO = 0.0
 TIE_CONFIDENCE = 0.95
 # Gauss-Hermite nodes (probabilists') for the expectation over where the posterior mean moves after one vote.
 _NODES, _WEIGHTS = np.polynomial.hermite_e.hermegauss(8)

@@ -54,6 +54,7 @@ class Pairwise(FailedCatchDesign):
             seed=options.seed,
             alpha=options.alpha,
             reference=options.reference or _renamed_nat(df, options.reference_name),
+            margin_elo=options.indifference,
         )
 
     def figures(self, data, kept, everyone, folder):

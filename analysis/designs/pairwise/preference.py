@@ -345,7 +345,7 @@ def bradley_terry(o, n_boot=1000, seed=0, level=0.95, reference=None):
     }
 
 
-def analyse(df, n_boot=1000, seed=0, alpha=0.05, reference=None):
+def analyse(df, n_boot=1000, seed=0, alpha=0.05, reference=None, margin_elo=0.0):
     """All pairwise statistics of the test rows of `df` (catch rows never enter them).
 
     Parameters
@@ -360,6 +360,8 @@ def analyse(df, n_boot=1000, seed=0, alpha=0.05, reference=None):
         The level at which the Holm-corrected sign tests reject.
     reference : str or None
         The condition at strength 0 and Elo 1000; None: NAT, or else the first.
+    margin_elo : float
+        The indifference margin of the ranking's groups (ranking.rank_table; 0: off).
 
     Returns
     -------
@@ -393,7 +395,7 @@ def analyse(df, n_boot=1000, seed=0, alpha=0.05, reference=None):
         "pairs": counts,
         "bradley_terry": bt,
         "ranking": ranking.rank_table(
-            bt["strengths"], bt["boot"], conds, bt["reference"], bt["level"], ranking.unbounded(counts)
+            bt["strengths"], bt["boot"], conds, bt["reference"], bt["level"], ranking.unbounded(counts), margin_elo
         ),
         "reliability": ranking.split_half(bt["tables"], bt["pairs"], conds, fit, seed=seed),
     }

@@ -98,7 +98,7 @@ def tied_with_above(order, boot, conds, margin_elo, confidence=core_ranking.TIE_
     }
 
 
-def rank_table(strengths, boot, conds, reference, level=0.95, notes=None, margin_elo=core_ranking.INDIFFERENCE_ELO):
+def rank_table(strengths, boot, conds, reference, level=0.95, notes=None, margin_elo=0.0):
     """One row per condition, strongest first.
 
     Parameters
@@ -117,7 +117,7 @@ def rank_table(strengths, boot, conds, reference, level=0.95, notes=None, margin
         {condition: note} shown beside it (`unbounded`).
     margin_elo : float
         The indifference margin: a condition whose Elo lies within it of the one above in 95% of the resamples
-        shares its group (the app's PAIRING_INDIFFERENCE; 0: groups by rank intervals alone).
+        shares its group (the app's PAIRING_INDIFFERENCE, off by default; 0: groups by rank intervals alone).
 
     Returns
     -------
