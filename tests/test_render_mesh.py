@@ -199,3 +199,16 @@ def test_the_mesh_follows_its_clips_joints(take):
     hand = source.weights[:, 20] == 1.0
     shift = got - want
     assert np.allclose(shift[:, hand, 1], 0.2, atol=0.03) and np.abs(shift[:, ~hand]).max() < 0.03
+
+
+def test_the_mesh_and_the_joints_agree(tmp_path):
+    """The mesh is posed as the joints are: smplx's skinning gives the same joints as the reader, hand mean (a BEAT2
+    file) and SMPL-X expressions included."""
+    arrays = smpl_fixtures.body_model_arrays("smplx")
+    arrays["shapedirs"] = np.random.default_rng(0).normal(0, 0.002, arrays["shapedirs"].shape[:2] + (20,))
+    np.savez(tmp_path / "SMPLX.npz", **arrays)
+    motion = smpl_fixtures.motion_arrays("smplx", frames=12)
+    np.savez(tmp_path / "take.npz", **motion, expressions=np.random.default_rng(1).normal(0, 1, (12, 10)))
+    joints = smpl_positions(tmp_path / "take.npz", tmp_path / "SMPLX.npz")[0]
+    _, posed = smpl_mesh(tmp_path / "take.npz", tmp_path / "SMPLX.npz").posed(0, 12)
+    assert np.abs(posed - joints).max() < 1e-4

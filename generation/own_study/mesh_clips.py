@@ -37,4 +37,6 @@ def mesh_spec(c, joints, motions, spec):
         path = folder_files(study.CATCH, spec.catch_folder)[c.item] if own else motions[study.NATURAL][c.item].path
     else:
         path = motions[c.condition][c.motion_item or c.item].path
-    return MeshSpec(str(path), str(spec.smpl_model), spec.smpl_type, spec.face, joints, spec.fps, c.start)
+    return MeshSpec(
+        str(path), str(spec.smpl_model), spec.smpl_type, spec.face, joints, spec.fps, c.start, spec.hand_mean
+    )
