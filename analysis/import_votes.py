@@ -14,18 +14,19 @@ the same clip gets the same id in every vote and every import. Every row is a te
 carry no catch trials.
 """
 
+import contextlib
 import csv
 import hashlib
-import json
 import os
 import sys
 from pathlib import Path
 
-from moglow_eval.core import cli, votes
+from moglow_eval.core import cli, user_files, votes
 from moglow_eval.core.cli import UserError
 
 REQUIRED = ("user", "input_code", "model_a", "model_b", "winner")
 MAX_BYTES = 512 * 2**20  # a battle file of 16,000 votes is about 2 MB; far larger is not one
+MAX_CELL = 4096  # characters in a cell: the leaderboard's longest is a free text of a few hundred
 PAIRS = ("rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role")
 REASONS = (votes.REASONS_COLUMN, votes.REASON_TEXT_COLUMN)
 
@@ -41,13 +42,9 @@ def clip_id(item: str, model: str) -> str:
 
 def _reasons(raw: str, where: str) -> str:
     """juiceOptions (a JSON list of ids; `{}`, `[]` or empty for none) as ids joined by `;`."""
-    raw = raw.strip()
     if raw in ("", "{}", "[]"):
         return ""
-    try:
-        ids = json.loads(raw)
-    except ValueError:
-        raise VotesFileError(f"{where}: juiceOptions {raw[:40]!r} is not a JSON list") from None
+    ids = user_files.json_value(raw, f"{where}: juiceOptions", VotesFileError)
     if not isinstance(ids, list) or not all(isinstance(i, str) and i.isidentifier() for i in ids):
         raise VotesFileError(f"{where}: juiceOptions {raw[:40]!r} is not a list of reason ids")
     if any(len(i) > votes.REASON_ID_MAX for i in ids):
@@ -55,56 +52,37 @@ def _reasons(raw: str, where: str) -> str:
     return votes.REASON_SEPARATOR.join(dict.fromkeys(ids))
 
 
-def _text(raw: str) -> str:
+def _text(raw: str, where: str) -> str:
     """juiceOtherReason: JSON-quoted text in the leaderboard's files; kept as it is where it is not."""
-    raw = raw.strip()
     if len(raw) >= 2 and raw[0] == raw[-1] == '"':
-        try:
-            text = json.loads(raw)
+        with contextlib.suppress(VotesFileError):
+            text = user_files.json_value(raw, where, VotesFileError)
             if isinstance(text, str):
                 return text
-        except ValueError:
-            pass
     return raw
 
 
+@contextlib.contextmanager
 def _rows(path: Path):
-    """The battle file's votes as dicts, with their line numbers; VotesFileError on a file that is not one."""
-    try:
-        size = path.stat().st_size
-    except OSError as exc:
-        raise VotesFileError(f"{path}: cannot be read ({exc.strerror or exc})") from None
-    if size > MAX_BYTES:
-        raise VotesFileError(
-            f"{path}: {size / 2**20:.0f} MB is larger than a battle file can be ({MAX_BYTES >> 20} MB)"
-        )
-    try:
-        with open(path, newline="", encoding="utf-8-sig") as fh:
-            reader = csv.DictReader(fh)
-            missing = [c for c in REQUIRED if c not in (reader.fieldnames or ())]
-            if missing:
-                raise VotesFileError(f"{path}: not a battle file: no column {', '.join(missing)}")
-            rows = [(reader.line_num, r) for r in reader]
-    except UnicodeDecodeError:
-        raise VotesFileError(f"{path}: not UTF-8 text") from None
-    except csv.Error as exc:
-        raise VotesFileError(f"{path}: not a CSV file ({exc})") from None
-    if not rows:
-        raise VotesFileError(f"{path}: no votes")
-    return rows
+    """The battle file's votes as (line, {column: stripped cell}), read in a stream; VotesFileError, one line, on a
+    file that is not one."""
+    with user_files.csv_rows(path, MAX_BYTES, VotesFileError, "battle file", MAX_CELL) as (header, rows):
+        missing = [c for c in REQUIRED if c not in header]
+        if missing:
+            raise VotesFileError(f"{path}: not a battle file: no column {', '.join(missing)}")
+        yield rows
 
 
 def _vote(path, line, r):
     where = f"{path}:{line}"
-    item, a, b = (str(r.get(k) or "").strip() for k in ("input_code", "model_a", "model_b"))
-    user = str(r.get("user") or "").strip()
+    item, a, b, user = (r.get(k, "") for k in ("input_code", "model_a", "model_b", "user"))
     for name, value in (("user", user), ("input_code", item), ("model_a", a), ("model_b", b)):
         if not value:
             raise VotesFileError(f"{where}: empty {name}")
     if a == b:
         raise VotesFileError(f"{where}: model {a} on both sides of a vote")
     try:
-        pref = votes.battle_to_preference(str(r.get("winner") or "").strip(), str(r.get("is_strong") or ""))
+        pref = votes.battle_to_preference(r.get("winner", ""), r.get("is_strong", ""))
     except ValueError as exc:
         raise VotesFileError(f"{where}: {exc}") from None
     return {
@@ -116,30 +94,58 @@ def _vote(path, line, r):
         "condition_b": b,
         "preference": pref,
         "role": "test",
-        votes.REASONS_COLUMN: _reasons(str(r.get("juiceOptions") or ""), where),
-        votes.REASON_TEXT_COLUMN: _text(str(r.get("juiceOtherReason") or "")),
+        votes.REASONS_COLUMN: _reasons(r.get("juiceOptions", ""), where),
+        votes.REASON_TEXT_COLUMN: _text(r.get("juiceOtherReason", ""), where),
     }
 
 
-def _as_appropriateness(path, out):
-    """A speech-mismatch file's votes as appropriateness rows (both sides the system; `matched` the side that
-    showed the motion made for the speech heard), or None when the file is not such a study."""
+def _is_mismatch(v) -> bool:
     suffix = votes.MISMATCH_SUFFIX
-    if not any(v["condition_a"].endswith(suffix) or v["condition_b"].endswith(suffix) for _, v in out):
-        return None
-    rows = []
-    for line, v in out:
-        a, b = v["condition_a"], v["condition_b"]
-        if a == b + suffix:
-            system, matched = b, "b"
-        elif b == a + suffix:
-            system, matched = a, "a"
-        else:
-            raise VotesFileError(
-                f"{path}:{line}: {a} against {b}: a speech-mismatch file pairs each system X only with {'X' + suffix}"
-            )
-        rows.append({**v, "condition_a": system, "condition_b": system, "matched": matched, "mismatched_item": ""})
-    return rows
+    return v["condition_a"].endswith(suffix) or v["condition_b"].endswith(suffix)
+
+
+def _as_appropriateness(path, line, v):
+    """A speech-mismatch vote as an appropriateness row (both sides the system; `matched` the side that showed the
+    motion made for the speech heard)."""
+    suffix = votes.MISMATCH_SUFFIX
+    a, b = v["condition_a"], v["condition_b"]
+    if a == b + suffix:
+        system, matched = b, "b"
+    elif b == a + suffix:
+        system, matched = a, "a"
+    else:
+        raise VotesFileError(
+            f"{path}:{line}: {a} against {b}: a speech-mismatch file pairs each system X only with {'X' + suffix}"
+        )
+    return {**v, "condition_a": system, "condition_b": system, "matched": matched, "mismatched_item": ""}
+
+
+def _convert(path, rows, fh) -> dict:
+    """Write the votes of `rows` to the text file `fh` as pairs.csv, one at a time; the summary. The first vote
+    decides the design: a speech-mismatch vote makes the file an appropriateness export, in which every vote
+    must be one; a mismatch vote after plain ones is refused at the first plain one."""
+    w, design, first_plain, first_v = None, None, None, None
+    raters, conds, n = set(), set(), 0
+    for line, r in rows:
+        v = _vote(path, line, r)
+        if design is None:
+            design = "appropriateness" if _is_mismatch(v) else "pairwise"
+            extra = ("matched", "mismatched_item") if design == "appropriateness" else ()
+            w = csv.DictWriter(fh, fieldnames=[*PAIRS, *extra, *REASONS], lineterminator="\n")
+            w.writeheader()
+        if design == "appropriateness":
+            v = _as_appropriateness(path, line, v)
+        elif _is_mismatch(v):
+            _as_appropriateness(path, first_plain, first_v)  # raises, naming the first plain vote
+        elif first_plain is None:
+            first_plain, first_v = line, v
+        w.writerow({k: user_files.defuse(x) for k, x in v.items()})
+        raters.add(v["rater_id"])
+        conds.update((v["condition_a"], v["condition_b"]))
+        n += 1
+    if not n:
+        raise VotesFileError(f"{path}: no votes")
+    return {"design": design, "n_votes": n, "n_raters": len(raters), "conditions": sorted(conds)}
 
 
 def import_votes(path, out_path) -> dict:
@@ -149,9 +155,10 @@ def import_votes(path, out_path) -> dict:
     ----------
     path : str or Path
         The battle file (CSV with user, input_code, model_a, model_b, winner, is_strong, juiceOptions,
-        juiceOtherReason).
+        juiceOtherReason): a regular file, read in a stream.
     out_path : str or Path
-        Where to write pairs.csv; written whole or not at all.
+        Where to write pairs.csv; written whole or not at all. Text cells a spreadsheet would evaluate (starting
+        with = + - @, a tab or a carriage return) are written with a leading apostrophe, as the app's exports are.
 
     Returns
     -------
@@ -161,27 +168,21 @@ def import_votes(path, out_path) -> dict:
     Raises
     ------
     UserError
-        One line naming the file and line: a missing column, an empty field, an unknown winner, a strength that
-        is not True or False, reasons that are not a JSON list of ids, a mismatch file pairing other systems.
+        One line naming the file and line, at the first bad line: not a regular file, too large, not UTF-8, a
+        line or cell too long, a missing column, an empty field, an unknown winner, a strength that is not True or
+        False, reasons that are not a JSON list of ids (or nest too deep), a mismatch file pairing other systems.
     """
     path, out_path = Path(path), Path(out_path)
-    out = [(line, _vote(path, line, r)) for line, r in _rows(path)]
-    rows = _as_appropriateness(path, out)
-    design = "pairwise" if rows is None else "appropriateness"
-    rows = [v for _, v in out] if rows is None else rows
-    columns = [*PAIRS, *(("matched", "mismatched_item") if design == "appropriateness" else ()), *REASONS]
     tmp = out_path.with_name(out_path.name + ".part")
     try:
-        with open(tmp, "w", newline="", encoding="utf-8") as fh:
-            w = csv.DictWriter(fh, fieldnames=columns, lineterminator="\n")
-            w.writeheader()
-            w.writerows(rows)
+        with _rows(path) as rows, open(tmp, "w", newline="", encoding="utf-8") as fh:
+            summary = _convert(path, rows, fh)
         os.replace(tmp, out_path)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
         raise VotesFileError(f"{out_path}: cannot be written ({exc.strerror or exc})") from None
-    conds = sorted({r["condition_a"] for r in rows} | {r["condition_b"] for r in rows})
-    return {"design": design, "n_votes": len(rows), "n_raters": len({r["rater_id"] for r in rows}), "conditions": conds}
+    finally:
+        tmp.unlink(missing_ok=True)
+    return summary
 
 
 def build_parser():

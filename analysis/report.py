@@ -5,7 +5,6 @@ offline), and prints a summary. The file's design is told by its columns (design
 analyses and reports the rows, with the catch-trial rater exclusion and without it ("without_exclusion").
 """
 
-import csv
 import html
 import json
 import os
@@ -15,7 +14,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from moglow_eval.core import cli, study
+from moglow_eval.core import cli, study, tables, user_files
 
 from .data.filtering import DEFAULT_THRESHOLD
 from .data.load import AnalysisError
@@ -46,9 +45,9 @@ def _study_column(path, column) -> str | None:
     the export has no such column or it is empty."""
     # Read after the design's own reader accepted the file; a cell it could not decode only spoils this one column.
     try:
-        with open(path, newline="", encoding="utf-8-sig", errors="replace") as fh:
-            row = next(csv.DictReader(fh), None)
-    except (csv.Error, OSError):  # a cell over the csv module's size limit; a missing file the design's reader names
+        with user_files.csv_rows(path, tables.MAX_BYTES, AnalysisError) as (_, rows):
+            row = next((r for _, r in rows), None)
+    except AnalysisError:  # a bad cell (the design's reader names what it reads); a missing file, named there too
         return None
     raw = (row or {}).get(column)
     return None if raw is None or raw.strip() == "" else raw

@@ -36,7 +36,7 @@ from sqlalchemy import event  # noqa: E402
 from moglow_eval.core import cli  # noqa: E402
 from moglow_eval.core.study import DESIGNS  # noqa: E402
 from rating_app import create_app  # noqa: E402
-from rating_app.study.db import app_engine  # noqa: E402
+from rating_app.store.db import app_engine  # noqa: E402
 
 SAME_SITE = {"Sec-Fetch-Site": "same-origin"}
 
@@ -90,7 +90,7 @@ def main():
     )
     a = p.parse_args()
     if a.refresh is not None:
-        from rating_app import active
+        from rating_app.pairing import active
 
         active.REFRESH_S = a.refresh
     tmp = Path(tempfile.mkdtemp(prefix="app_cost_"))

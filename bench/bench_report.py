@@ -25,10 +25,11 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from analysis import bootstrap, rating_models  # noqa: E402
+from analysis import rating_models  # noqa: E402
 from analysis.data.filtering import exclude_raters, only_test_rows  # noqa: E402
 from analysis.data.load import load_ratings  # noqa: E402
 from analysis.report import build_report  # noqa: E402
+from analysis.stats import bootstrap  # noqa: E402
 
 spec = importlib.util.spec_from_file_location("make_ratings", ROOT / "tests/data/analysis/make_ratings.py")
 gen = importlib.util.module_from_spec(spec)

@@ -37,7 +37,7 @@ from pairwise_active import leaderboard_truth  # noqa: E402
 from rating_app import create_app  # noqa: E402
 from rating_app.simulate import run_simulation  # noqa: E402
 from rating_app.simulate.raters import BT_SCALE  # noqa: E402
-from rating_app.study.db import app_engine  # noqa: E402
+from rating_app.store.db import app_engine  # noqa: E402
 
 
 def one_study(manifest, quality, pairing, a):

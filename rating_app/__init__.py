@@ -23,8 +23,8 @@ from werkzeug.exceptions import HTTPException
 
 from moglow_eval.core import study
 
-from .study.manifest import AppError, load_manifest, reference_name
-from .study.settings import ARGS, SETTINGS, resolve
+from .store.manifest import AppError, load_manifest, reference_name
+from .store.settings import ARGS, SETTINGS, resolve
 
 __all__ = ["create_app", "AppError", "SETTINGS"]
 
@@ -34,7 +34,7 @@ def create_app(*, config=None, check_files=True, **given) -> Flask:
     is one of moglow_eval.core.study.DESIGNS, fixed for the life of the database; ratings_per_clip and
     clips_per_rater count the design's units: clips, pairs of conditions of an item, pages, ...), the others from
     the environment, the study file `config` and the defaults. `check_files`: read every video at the start."""
-    from .study.config import study_environment
+    from .store.config import study_environment
 
     unknown = sorted(set(given) - set(ARGS))
     if unknown:
@@ -82,7 +82,7 @@ def _app_config(values) -> dict:
     for env, plain in (("PAIRING", "balanced"), ("STOP_WHEN", "never")):
         if values[env] != plain and design.name != "pairwise":
             raise AppError(f"{env.lower()}: {values[env]} needs the pairwise design, not {design.name}")
-    from .study.reasons import configure
+    from .store.reasons import configure
 
     return {
         **configure(design, values["VOTE_REASONS"], values["REASON_TEXT"]),
@@ -109,7 +109,7 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
     from .media.audio_check import load_audio_check
     from .media.videos import VideoStore
     from .operations import health
-    from .study.db import make_read_engine
+    from .store.db import make_read_engine
 
     manifest = values["RATING_MANIFEST"]
     design = designs.get(app.config["STUDY_DESIGN"])
@@ -157,8 +157,8 @@ def _open_rounds(app: Flask) -> None:
     withdrawn condition's pairs never again."""
     from sqlalchemy.orm import Session
 
-    from .study import rounds
-    from .study.db import utcnow
+    from .store import rounds
+    from .store.db import utcnow
 
     ext = app.extensions["rating_app"]
     with Session(ext["engine"]) as s, s.begin():
@@ -201,8 +201,8 @@ def target_raters(test_units: int, config) -> int:
 def _open_database(db_url, pool_size, clips, design, cover_keys, n_raters, reference):
     """The engine, with the schema created and the manifest's clips and the design stored; AppError, one line,
     when the database cannot be opened."""
-    from . import rounds  # noqa: F401  (its tables, on db.Base, are part of the schema init_db creates)
-    from .study import db as dbm
+    from .store import db as dbm
+    from .store import rounds  # noqa: F401  (its tables, on db.Base, are part of the schema init_db creates)
 
     engine = dbm.make_engine(db_url, pool_size=pool_size)
     try:

@@ -11,8 +11,8 @@ import sys
 from moglow_eval.core import cli
 from moglow_eval.core.study import DESIGNS
 
-from .study.manifest import AppError
-from .study.settings import add_flags
+from .store.manifest import AppError
+from .store.settings import add_flags
 
 # Diagnostics (where the app runs, how many rows were exported) go to the log, on stderr; results to stdout.
 log = logging.getLogger("rating_app")
@@ -22,7 +22,7 @@ def _serve(a):
     from . import create_app
 
     app = create_app(**a.given)  # the settings given as flags; the rest from the environment and study file
-    from .study.db import app_engine
+    from .store.db import app_engine
 
     db = app_engine(app).url.render_as_string(hide_password=True)
     log.info(
@@ -52,7 +52,7 @@ def _export(a):
     from .designs import get
     from .operations.battles import export_battles
     from .operations.export import export_csv
-    from .study.db import check_url, make_engine, study_design
+    from .store.db import check_url, make_engine, study_design
 
     url = check_url(a.db)
     parsed = make_url(url)
@@ -155,7 +155,7 @@ def _open_db(db_url):
     from sqlalchemy import inspect
     from sqlalchemy.engine import make_url
 
-    from .study.db import check_url, make_engine
+    from .store.db import check_url, make_engine
 
     url = check_url(db_url)
     parsed = make_url(url)
@@ -201,7 +201,7 @@ def _withdraw_condition(a):
 
 
 def _rounds_parsers(sub, db):
-    """add-condition and withdraw-condition (conditions.py)."""
+    """add-condition and withdraw-condition (operations/conditions.py)."""
     c = sub.add_parser("add-condition", help="add a condition's clips to a running pairwise study (a new round)")
     c.add_argument("--db", default=None, help=db)
     c.add_argument("--manifest", required=True, help="the new condition's stimulus folder's manifest.csv")

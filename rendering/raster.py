@@ -19,6 +19,7 @@ from moglow_eval.core import skeleton_names
 
 from .camera import DEFAULT_CAMERA, NEAR, Projector, clip_to_frustum
 from .errors import RenderError
+from .mesh import MeshBody
 from .solid import SolidBody
 
 
@@ -37,16 +38,19 @@ class Style:
     bone_width: float = 1 / 150  # line width as a fraction of the frame height
     head_radius: float = 0.08  # metres
     thin: float = 0.45  # finger and face bones' line width, as a fraction of the others'
-    body: str = "stick"  # "stick": lines and a head disc; "solid": shaded capsules and a head sphere (solid.py)
+    body: str = "stick"  # "stick": lines and a head disc; "solid": shaded capsules and a head sphere (solid.py);
+    # "mesh": an SMPL-family body's skinned mesh, one plain colour, the face masked (mesh.py)
     trunk_radius: float = 0.07  # metres: the solid body's trunk capsules (the bones no side's name tells)
     limb_radius: float = 0.045  # metres: its arms and legs
     thin_radius: float = 0.011  # metres: its fingers and face
     sphere_radius: float = 0.1  # metres: its head
     solid_grid: int = 2  # frame pixels per pixel of the grid the solid body is rasterised on (solid.SolidBody)
+    mesh_colour: tuple = (0.42, 0.55, 0.78)  # the mesh body's one colour (a person's; the agent's in a dyadic video)
 
 
 DEFAULT_STYLE = Style()
-STYLES = {"stick": DEFAULT_STYLE, "solid": Style(body="solid")}  # a study file's [render] style, by name
+STYLES = {"stick": DEFAULT_STYLE, "solid": Style(body="solid"), "mesh": Style(body="mesh")}  # [render] style
+MESH_INPUTS = "SMPL-family parameter files (SMPL, SMPL-H, SMPL-X)"  # what the mesh style can draw
 # The second person of a two-person video (the real interlocutor) is one colour, no side told: a muted green that
 # no side colour, grey of the floor or caption shares.
 PARTNER_COLOUR = (0.40, 0.60, 0.44)
@@ -54,7 +58,7 @@ PARTNER_COLOUR = (0.40, 0.60, 0.44)
 
 def one_colour(style, colour=PARTNER_COLOUR):
     """`style` with every bone and the head in `colour`: the interlocutor's drawing in any style."""
-    return replace(style, centre=tuple(colour), left=tuple(colour), right=tuple(colour))
+    return replace(style, centre=tuple(colour), left=tuple(colour), right=tuple(colour), mesh_colour=tuple(colour))
 
 
 def _wu_lines(flat, width, a, b, value, alpha):
@@ -137,7 +141,16 @@ class FrameDrawer:
     """
 
     def __init__(
-        self, parents, joint_names, size, camera=DEFAULT_CAMERA, style=DEFAULT_STYLE, hide=(), thin=None, frame=None
+        self,
+        parents,
+        joint_names,
+        size,
+        camera=DEFAULT_CAMERA,
+        style=DEFAULT_STYLE,
+        hide=(),
+        thin=None,
+        frame=None,
+        meshes=None,
     ):
         if size % 2:
             raise RenderError(f"size must be even for yuv420p, got {size}")
@@ -190,6 +203,17 @@ class FrameDrawer:
         self.solid = SolidBody(size, self.proj.focal, style.solid_grid) if style.body == "solid" else None
         if self.solid:
             self._capsules()
+        self.mesh = None
+        if style.body == "mesh":
+            if not meshes:
+                raise RenderError(f"the mesh style draws {MESH_INPUTS}; other motion can use stick or solid")
+            self.mesh = MeshBody(meshes, size, self.proj.focal)
+
+    def close(self):
+        """Free what the drawer holds beyond memory (the mesh body's GL objects)."""
+        if self.mesh is not None:
+            self.mesh.release()
+            self.mesh = None
 
     def _capsules(self):
         """The solid body's capsules (self.bone_ends' bones, then the head's sphere): radii and colours."""
@@ -249,7 +273,7 @@ class FrameDrawer:
         """Agg display coordinates (y up) -> image (column, row)."""
         return xy * np.array([1.0, -1.0]) + np.array([0.0, self.size])
 
-    def _figure(self, joints, eye):
+    def _figure(self, joints, eye, vertices=None):
         """Draw shadow, bones and head with Agg (on the cleared buffer); returns the screen points drawn and
         the head radius."""
         r, t = self.renderer, IdentityTransform()
@@ -260,6 +284,8 @@ class FrameDrawer:
             seg = self.proj.to_screen(scam[self.bone_ends])
             r.draw_path(self.gcs["shadow"], Path(seg.reshape(-1, 2), self.codes), t)
             points.append(seg.reshape(-1, 2))
+        if self.mesh is not None:
+            return self._mesh_figure(vertices, eye, points)
         if self.solid is not None and (cam[:, 2] > NEAR).all():
             return self._solid_figure(joints, cam, eye, points)
         if (cam[:, 2] > NEAR).all():
@@ -315,10 +341,33 @@ class FrameDrawer:
             points.append(self._rows(np.array(box, np.float64)))
         return (np.concatenate(points) if points else np.zeros((0, 2))), 0.0
 
-    def draw(self, joints, target):
-        """Render one frame (joints [J, 3], look-at target [3]); returns the yuv420p frame (flat uint8 view)."""
+    def _mesh_figure(self, vertices, eye, points):
+        """The mesh body (rendering.mesh) over the shadow: each person's vertices [V, 3] (world) in their colour,
+        composited over the Agg buffer in the body's box. Returns what _figure does."""
+        people = [(self.proj.to_camera(np.asarray(v, np.float64), eye), self.style.mesh_colour) for v in vertices]
+        rgba, box = self.mesh.draw(people)
+        if rgba is None:
+            return (np.concatenate(points) if points else np.zeros((0, 2))), 0.0
+        c0, r0, c1, r1 = box
+        under = self.rgba[r0:r1, c0:c1]
+        drawn = rgba[..., 3] != 0
+        if not ((under[..., 3] != 0) & drawn).any():  # nothing under the body (the shadow is elsewhere): a copy
+            np.copyto(under, rgba, where=drawn[..., None])
+        else:  # over the shadow: "over" in straight alpha, on the body's pixels only
+            new, old = rgba[drawn], under[drawn]
+            am = new[:, 3:].astype(np.float32) * np.float32(1 / 255)
+            au = old[:, 3:].astype(np.float32) * np.float32(1 / 255) * (1 - am)
+            out_a = am + au
+            rgb = (new[:, :3] * am + old[:, :3] * au) / np.maximum(out_a, np.float32(1e-6))
+            under[drawn] = np.concatenate([rgb + np.float32(0.5), out_a * 255 + np.float32(0.5)], 1).astype(np.uint8)
+        points.append(self._rows(np.array([[c0, r0], [c1, r1]], np.float64)))
+        return np.concatenate(points), 0.0
+
+    def draw(self, joints, target, vertices=None):
+        """Render one frame (joints [J, 3], look-at target [3]; with the mesh style, `vertices`: the person's
+        [V, 3] in the joints' world, in a list); returns the yuv420p frame (flat uint8 view)."""
         self.background(target)
-        return self.add_figure(joints, target)
+        return self.add_figure(joints, target, vertices)
 
     def background(self, target):
         """Start a frame: the sky, the floor and its grid seen from the look-at point `target` [3]."""
@@ -331,13 +380,13 @@ class FrameDrawer:
         of two people is drawn first."""
         return float(self.proj.to_camera(joints.mean(0), target + self.proj.offset)[2])
 
-    def add_figure(self, joints, target):
-        """Draw the body (joints [J, 3]) over what the frame holds, seen from the look-at point `target` [3];
-        returns the yuv420p frame."""
+    def add_figure(self, joints, target, vertices=None):
+        """Draw the body (joints [J, 3]; with the mesh style also its vertices, as `draw` takes them) over what the
+        frame holds, seen from the look-at point `target` [3]; returns the yuv420p frame."""
         eye = target + self.proj.offset
         if self.solid is not None:
             self.solid.blocks = None  # (set by _figure where it draws the solid body on a grid of 2)
-        points, radius = self._figure(joints, eye)
+        points, radius = self._figure(joints, eye, vertices)
         if len(points):
             # The figure's bounding box in image rows/columns, on even pixels (for the 2x2 chroma blocks).
             pad = radius + self.width + 2

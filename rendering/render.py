@@ -8,6 +8,7 @@ pipe and x264.
 """
 
 import argparse
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -21,6 +22,7 @@ from .errors import RenderError
 from .raster import DEFAULT_STYLE, FrameDrawer, one_colour
 
 MIN_SIZE, MAX_SIZE = 32, 4096  # pixels; beyond 4096 x264's level limits and memory get in the way
+MESH_CHUNK = 64  # frames of a mesh's vertices skinned and held at once
 
 
 def size_flag(text):
@@ -56,6 +58,8 @@ def render_clip(
     partner_style=None,
     target=None,
     captions=None,
+    mesh=None,
+    partner_mesh=None,
 ):
     """Render a clip to an MP4 of a stick figure (or a solid body), with a second person and captions if asked.
 
@@ -102,6 +106,11 @@ def render_clip(
         the same pixels in every condition's video); None: the camera follows the clip's root.
     captions : sequence of captions.Phrase or None
         Phrases burned in at the bottom while they are on (rendering.captions).
+    mesh, partner_mesh : object or None
+        With `style.body == "mesh"`: the person's (and the partner's) skinned mesh, with `faces` [F, 3], `mask` [V]
+        (the face mask's vertices) and `vertices(a, b)` -> frames a..b's vertices [b - a, V, 3] in the joints'
+        world (generation.data.smpl_files.MeshSource), read a chunk at a time so that memory does not grow with
+        the clip.
 
     Returns
     -------
@@ -124,10 +133,10 @@ def render_clip(
         raise RenderError(f"{name}: joints must be [T >= 1, J, 3], got {joints.shape}")
     check_joints(joints, name)
     fps = check_fps(clip["fps"], name)
-    drawer = FrameDrawer(clip["parents"], list(clip["joint_names"]), size, camera, style, hide, thin)
-    people = [(drawer, joints)]
-    if partner is not None:
-        people.append(_partner(partner, len(joints), size, camera, partner_style or one_colour(style), drawer, name))
+    people, meshes = _people(
+        clip, joints, name, size, camera, style, hide, thin, (partner, partner_style), mesh, partner_mesh
+    )
+    drawer = people[0][0]
     if target is None:
         targets = camera_targets(joints, fps, camera)
     else:
@@ -136,14 +145,22 @@ def render_clip(
     keep = set(np.linspace(0, len(joints) - 1, sheet_frames).round().astype(int)) if sheet else set()
     kept = []
     proc = ffmpeg_writer(out_mp4, size, fps, preset, qp, crf, threads, frames=len(joints), seed=rate_seed)
+    chunks = _mesh_chunks([m if d.mesh is not None else None for (d, _), m in zip(people, meshes)], len(joints))
     try:
-        for t in range(len(joints)):
-            proc.stdin.write(compose(people, t, targets[t], layer, fps))
-            if t in keep:
-                kept.append((t, drawer.rgb()))
+        for t0, vertices in chunks:
+            for t in range(t0, min(len(joints), t0 + MESH_CHUNK)):
+                proc.stdin.write(
+                    compose(people, t, targets[t], layer, fps, [v if v is None else v[t - t0] for v in vertices])
+                )
+                if t in keep:
+                    kept.append((t, drawer.rgb()))
         proc.stdin.close()
     except BrokenPipeError:
         pass
+    finally:
+        chunks.close()
+        for d, _ in people:
+            d.close()
     err = proc.stderr.read().decode(errors="replace").strip()
     if proc.wait() != 0:
         raise RenderError(f"{out_mp4}: ffmpeg failed: {err.splitlines()[-1] if err else 'no message'}")
@@ -152,7 +169,23 @@ def render_clip(
     return len(joints)
 
 
-def _partner(partner, frames, size, camera, style, drawer, name):
+def _people(clip, joints, name, size, camera, style, hide, thin, partner, mesh, partner_mesh):
+    """([(drawer, joints [T, J, 3])], [each one's mesh or None]): the clip's person, and the partner (a clip and its
+    style, or None) drawing into the same frame."""
+    for m in (mesh, partner_mesh):
+        if m is not None and getattr(m, "n_frames", len(joints)) != len(joints):
+            raise RenderError(f"{name}: a mesh of {m.n_frames} frames for {len(joints)} frames of joints")
+    meshes = [mesh] if mesh is not None else None
+    drawer = FrameDrawer(clip["parents"], list(clip["joint_names"]), size, camera, style, hide, thin, meshes=meshes)
+    people, meshes = [(drawer, joints)], [mesh]
+    if partner[0] is not None:
+        second = partner[1] or one_colour(style)
+        people.append(_partner(partner[0], len(joints), size, camera, second, drawer, name, partner_mesh))
+        meshes.append(partner_mesh)
+    return people, meshes
+
+
+def _partner(partner, frames, size, camera, style, drawer, name, mesh=None):
     """(drawer, joints) of the second person, drawing into `drawer`'s frame; RenderError naming the clip when its
     joints are not [frames, J, 3]."""
     other = _as_clip(partner)
@@ -160,18 +193,46 @@ def _partner(partner, frames, size, camera, style, drawer, name):
     if joints.ndim != 3 or joints.shape[2] != 3 or len(joints) != frames:
         raise RenderError(f"{name}: the partner's joints must be [{frames}, J, 3] as the clip's, got {joints.shape}")
     check_joints(joints, name)
-    second = FrameDrawer(other["parents"], list(other["joint_names"]), size, camera, style, frame=drawer.frame)
+    meshes = [mesh] if mesh is not None else None
+    second = FrameDrawer(
+        other["parents"], list(other["joint_names"]), size, camera, style, frame=drawer.frame, meshes=meshes
+    )
     return second, joints
 
 
-def compose(people, t, target, layer=None, fps=1.0):
+def compose(people, t, target, layer=None, fps=1.0, vertices=None):
     """Frame t as yuv420p: the floor, then each person [(drawer, joints [T, J, 3])] from the farthest to the
-    nearest, then the captions on at t / fps."""
+    nearest (with the mesh style, `vertices`: each person's [V, 3] at t, or None), then the captions on at t / fps."""
     people[0][0].background(target)
-    for drawer, joints in sorted(people, key=lambda p: -p[0].depth(p[1][t], target)):
-        drawer.add_figure(joints[t], target)
+    vertices = vertices or [None] * len(people)
+    order = sorted(range(len(people)), key=lambda k: -people[k][0].depth(people[k][1][t], target))
+    for k in order:
+        drawer, joints = people[k]
+        drawer.add_figure(joints[t], target, None if vertices[k] is None else [vertices[k]])
     frame = people[0][0].frame
     return layer.apply(frame, t / fps) if layer is not None else frame
+
+
+def _mesh_chunks(meshes, n):
+    """(first frame, [each person's vertices of the chunk [<= MESH_CHUNK, V, 3], or None]) for each chunk of a clip
+    of n frames; the next chunk is skinned on a thread while this one is drawn (the skinning's torch and the
+    drawing's OpenGL both let go of the GIL), so at most two chunks are held at once."""
+    if all(m is None for m in meshes):
+        for t0 in range(0, n, MESH_CHUNK):
+            yield t0, [None] * len(meshes)
+        return
+
+    def skin(a):
+        b = min(n, a + MESH_CHUNK)
+        return [None if m is None else m.vertices(a, b) for m in meshes]
+
+    with ThreadPoolExecutor(1) as pool:
+        ahead = pool.submit(skin, 0)
+        for t0 in range(0, n, MESH_CHUNK):
+            chunk = ahead.result()
+            if t0 + MESH_CHUNK < n:
+                ahead = pool.submit(skin, t0 + MESH_CHUNK)
+            yield t0, chunk
 
 
 def contact_sheet(frames, fps, out_png, columns=4, thumb=240):

@@ -1,7 +1,9 @@
 #!/bin/sh
 # The system packages the tests need (README "Set up a fresh machine"): Debian's chromium and chromedriver (browser
 # tests), espeak-ng (speech of the sound tests), nginx and caddy (reverse-proxy tests) and the PostgreSQL 15 server
-# binaries (initdb, pg_ctl, pg_dump, pg_restore: the tests' own throwaway server, the restart and backup tests).
+# binaries (initdb, pg_ctl, pg_dump, pg_restore: the tests' own throwaway server, the restart and backup tests), and
+# Mesa's EGL and drivers (libegl1, libegl-mesa0, libgl1-mesa-dri: the mesh style's OpenGL without a display, on the
+# CPU through llvmpipe where there is no GPU).
 # Idempotent and quiet: it does nothing when all are there, installs what is missing with apt-get (through sudo when
 # not root), and without apt-get says what to install and exits 1.
 set -eu
@@ -15,6 +17,10 @@ have caddy || missing="$missing caddy"
 for tool in initdb pg_ctl pg_dump pg_restore; do
   [ -x "/usr/lib/postgresql/15/bin/$tool" ] || { missing="$missing postgresql-15"; break; }
 done
+egl_ok=1
+for lib in libEGL.so.1 libEGL_mesa.so.0; do ldconfig -p 2>/dev/null | grep -q "$lib" || egl_ok=0; done
+ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1 || egl_ok=0
+[ "$egl_ok" -eq 1 ] || missing="$missing libegl1 libegl-mesa0 libgl1-mesa-dri"
 [ -z "$missing" ] && exit 0
 if ! command -v apt-get >/dev/null 2>&1; then
   echo "error: no apt-get here: install these packages (Debian names) with your package manager:$missing" >&2

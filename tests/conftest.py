@@ -142,7 +142,7 @@ def app_db_url(request, tmp_path):
 def app(app_stimuli, app_db_url):
     """The app with target 3 and MIN_VIEW 0 (answers need no wait; tests of the viewing rule use `make_app`)."""
     from rating_app import create_app
-    from rating_app.study.db import app_engine
+    from rating_app.store.db import app_engine
 
     app = create_app(
         manifest=app_stimuli, db_url=app_db_url, admin_token=APP_ADMIN_TOKEN, ratings_per_clip=3, min_view=0
@@ -161,7 +161,7 @@ def client(app):
 def make_app(app_stimuli, app_db_url):
     """make_app(**settings) -> an app on this test's database; every engine is disposed at the end."""
     from rating_app import create_app
-    from rating_app.study.db import app_engine
+    from rating_app.store.db import app_engine
 
     made = []
 
@@ -239,7 +239,7 @@ def make(app_db_url):
     """build(manifest, design, **settings): create_app on the test database with test defaults (admin token, no
     viewing wait, no session limit); every app's engine is disposed afterwards."""
     from rating_app import create_app
-    from rating_app.study.db import app_engine
+    from rating_app.store.db import app_engine
 
     made = []
 

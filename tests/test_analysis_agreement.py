@@ -5,7 +5,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis import agreement, methods, report
+from analysis import report
+from analysis.page import methods
+from analysis.stats import agreement
 
 
 def panel(raters=12, clips=30, seed=0, missing=0.0, clip_sd=1.0, noise=0.8):

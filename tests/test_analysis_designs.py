@@ -15,9 +15,10 @@ import pandas as pd
 import pytest
 from scipy import stats as sps
 
-from analysis import pairwise, parallel
 from analysis.data.load import AnalysisError
 from analysis.designs import detect_design
+from analysis.designs.pairwise import preference as pairwise
+from analysis.designs.parallel import mushra as parallel
 from analysis.report import build_report
 
 ROOT = Path(__file__).resolve().parents[1]

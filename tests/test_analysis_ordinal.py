@@ -8,9 +8,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis import ordinal, rating_models
 from analysis.data.filtering import exclude_raters, only_test_rows
 from analysis.data.load import load_ratings
+from analysis.stats import ordinal, rating_models
 
 DATA = Path(__file__).parent / "data" / "analysis"
 R = json.loads((DATA / "r_reference.json").read_text())

@@ -8,8 +8,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis import report, study_text
+from analysis import report
 from analysis.data.load import AnalysisError
+from analysis.page import study_text
 
 PAPER = "of the paper"
 

@@ -13,7 +13,9 @@ import pytest
 import statsmodels.api as sm
 from helpers.paths import SHARED
 
-from analysis import pairwise, ranking, report
+from analysis import report
+from analysis.designs.pairwise import preference as pairwise
+from analysis.designs.pairwise import ranking
 from analysis.import_votes import import_votes
 
 BATTLES = SHARED / "data" / "genea-leaderboard-votes" / "battles_elo.csv"

@@ -12,7 +12,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from analysis import reasons, rounds
+from analysis.designs.pairwise import reasons, rounds
 from analysis.report import main as report_main
 from moglow_eval.core import votes
 

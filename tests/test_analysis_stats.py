@@ -9,9 +9,10 @@ import pandas as pd
 import pytest
 from reference.anova_exact import one_way_anova_exact
 
-from analysis import bootstrap, rating_models, stats
 from analysis.data.filtering import exclude_raters, only_test_rows
 from analysis.data.load import load_ratings
+from analysis.stats import anova as stats
+from analysis.stats import bootstrap, rating_models
 
 DATA = Path(__file__).parent / "data"
 NIST = sorted((DATA / "nist_anova").glob("*.dat"))

@@ -5,7 +5,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis import style
+from analysis.stats import style
 
 
 def synthetic(interaction, seed=0, n_raters=24, clips_per_cell=6):

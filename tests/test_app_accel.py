@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 import requests
 from helpers.fake_stimuli import free_port, write_fake_stimuli
+from helpers.flags import video_flags
 from helpers.proxies import caddy_accel, nginx_accel, nginx_head, nginx_temp_paths
 from helpers.servers import start_gunicorn, wait_for
 
@@ -128,7 +129,7 @@ def test_the_proxy_sends_the_bytes_blind(proxy, tmp_path):
         assert http.get(url + trial["video_url"], headers={"Range": "bytes=0-0"}).status_code == 206
         http.post(f"{url}/api/sessions/{token}/ratings", json={"trial_id": trial["trial_id"], "rating": 2})
         export = http.get(url + "/admin/export.csv", headers={"Authorization": "Bearer accel-token"}).text
-    flags = {row["rating"]: row["flags"] for row in csv.DictReader(io.StringIO(export))}
+    flags = {row["rating"]: video_flags(row["flags"]) for row in csv.DictReader(io.StringIO(export))}
     assert flags["4"] == "" and "partial_video" in flags["2"]
 
 
@@ -142,3 +143,40 @@ def test_no_video_in_a_workers_memory(tmp_path, monkeypatch):
     monkeypatch.setenv("VIDEO_ACCEL", "squid")
     with pytest.raises(Exception, match="VIDEO_ACCEL: 'squid' must be one of off, nginx, caddy"):
         create_app(manifest=stimuli, db_url=f"sqlite:///{tmp_path / 'r2.sqlite'}", admin_token="t")
+
+
+# Range headers that are not one satisfiable byte range (issue 55, failure 10): Caddy and nginx would send 1 byte, a
+# multipart body or a 416 for them; the app answers 416 itself, before any proxy sends a byte, and records nothing.
+NOT_ONE_RANGE = (
+    "bytes=0-0,",
+    "bytes=,0-0",
+    "bytes=+0-0",
+    "bytes=0-0,0-0",
+    "bytes=0-0;",
+    "bytes=0-0,5-9",
+    "bytes=99999999-",
+    "bytes=5-1",
+    "items=0-9",
+    "bytes=",
+    "",
+)
+
+
+@pytest.mark.parametrize("proxy", ["nginx", "caddy"])
+def test_a_range_that_is_not_one_satisfiable_range_is_refused_and_records_nothing(proxy, tmp_path):
+    stimuli = write_fake_stimuli(tmp_path / "stimuli", n_items=2, n_catch=1, n_training=0, n_frames=40)
+    with behind(proxy, tmp_path, stimuli) as (url, _):
+        http = requests.Session()
+        token = http.post(url + "/api/sessions", json={}).json()["session"]
+        trial = http.get(f"{url}/api/sessions/{token}/next").json()["trial"]
+        for header in NOT_ONE_RANGE:
+            r = http.get(url + trial["video_url"], headers={"Range": header})
+            assert r.status_code == 416 and len(r.content) < 200, (header, r.status_code, len(r.content))
+            assert r.headers["Content-Range"].startswith("bytes */"), header
+        answer = {"trial_id": trial["trial_id"], "rating": 3}
+        assert http.post(f"{url}/api/sessions/{token}/ratings", json=answer).status_code == 201
+        admin = {"Authorization": "Bearer accel-token"}
+        export = http.get(url + "/admin/export.csv", headers=admin).text
+        sent = http.get(url + "/admin/progress.json", headers=admin).json()["raters"][0]["bytes_sent"]
+    (row,) = csv.DictReader(io.StringIO(export))
+    assert video_flags(row["flags"]) == "no_video" and sent == 0

@@ -15,8 +15,9 @@ from helpers.concurrent_raters import cover_mismatches
 from helpers.fake_stimuli import write_fake_stimuli
 from test_app_api import TOKEN_HDR
 
-from rating_app import AppError, active, create_app
-from rating_app.study.db import app_engine
+from rating_app import AppError, create_app
+from rating_app.pairing import active
+from rating_app.store.db import app_engine
 
 
 @pytest.fixture
@@ -180,3 +181,44 @@ def test_the_defaults_change_nothing_and_bad_settings_stop_the_start(make, stimu
         with pytest.raises(AppError, match=needle) as e:
             create_app(manifest=stimuli, db_url=app_db_url, **kw)
         assert "\n" not in str(e.value)
+
+
+# ---------------------------------------------------------------------------------- only trusted votes
+def bot(a, b, i):
+    """A bot (issue 55, failure 1): prefers the bad example of every catch pair, votes a fixed order elsewhere."""
+    if "BAD" in (a, b):
+        return 2 if a == "BAD" else -2
+    return 2 if RANK[a] > RANK[b] else -2
+
+
+def test_raters_who_failed_catch_trials_neither_close_the_study_nor_move_its_pairs(make, big_stimuli, monkeypatch):
+    monkeypatch.setattr(active, "REFRESH_S", 0.0)
+    app = make(big_stimuli, "pairwise", ratings_per_clip=20, clips_per_rater=12, pairing="active", stop_when="settled")
+    votes, last = crowd(app, 2, bot)  # two whole bot sessions, each failing its catch trials
+    assert sum(votes.values()) == 24 and last.json["done"]
+    c = app.test_client()
+    assert c.post("/api/sessions", json={}).status_code == 201  # the study stays open to the next rater
+    p = c.get("/admin/progress.json", headers=TOKEN_HDR).json
+    k = p["ranking"]
+    assert not k["settled"] and not k["closed"]
+    assert k["votes"] == 0 and k["votes_excluded"] == 24 and k["raters_excluded"] == 2
+    assert set(k["elo"].values()) == {1000.0}  # the posterior the pairs are chosen from has not moved
+    ranking = active.of_app(app)
+    assert not ranking.post.mean.any() and not ranking.counts.any()
+    assert p["raters_excluded"] == 2 and [r["excluded"] for r in p["raters"]] == [True, True, False]
+    # The bots' votes are kept, every one flagged.
+    rows = base.export(c)[0]
+    assert len(rows) >= 24 and all("failed_catch" in r["flags"].split(";") for r in rows)
+    page = c.get("/admin", headers=TOKEN_HDR).get_data(as_text=True)
+    assert "24 more from 2 excluded raters" in page
+
+
+def test_a_trusted_rater_still_settles_the_study_beside_flagged_ones(make, big_stimuli, monkeypatch):
+    monkeypatch.setattr(active, "REFRESH_S", 0.0)
+    app = make(big_stimuli, "pairwise", ratings_per_clip=20, clips_per_rater=6, stop_when="settled")
+    # Two bots that fail their catch trials and vote the order upside down.
+    crowd(app, 2, lambda a, b, i: bot(a, b, i) if "BAD" in (a, b) else -bot(a, b, i))
+    _, refused = crowd(app, 30, lambda a, b, i: 2 if RANK[a] > RANK[b] else -2)
+    assert refused.status_code == 409
+    k = app.test_client().get("/admin/progress.json", headers=TOKEN_HDR).json["ranking"]
+    assert k["order"] == ["NAT", "MG", "FL"] and k["raters_excluded"] == 2

@@ -5,7 +5,7 @@ import csv
 import io
 import threading
 
-from rating_app.study.manifest import load_manifest
+from rating_app.store.manifest import load_manifest
 
 TOKEN_HDR = {"Authorization": "Bearer test-admin-token"}
 
@@ -216,7 +216,7 @@ def idle(app, token, hours=2):
 
     from sqlalchemy import update
 
-    from rating_app.study.db import Rater, app_engine, utcnow
+    from rating_app.store.db import Rater, app_engine, utcnow
 
     with app_engine(app).begin() as conn:
         past = utcnow() - dt.timedelta(hours=hours)

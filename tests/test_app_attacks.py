@@ -11,11 +11,12 @@ import os
 import pytest
 from helpers.concurrent_raters import run_raters
 from helpers.fake_stimuli import write_fake_stimuli
+from helpers.flags import video_flags
 from sqlalchemy import update
 from test_app_api import TOKEN_HDR, answer, clips_by_role, complete, export_rows, idle, nxt, start
 
-from rating_app.study.db import Trial, app_engine, utcnow
-from rating_app.study.manifest import AppError, load_manifest
+from rating_app.store.db import Trial, app_engine, utcnow
+from rating_app.store.manifest import AppError, load_manifest
 
 
 def at(app, i):
@@ -173,7 +174,7 @@ def test_answer_before_the_clip_could_play_is_refused_and_flagged(make_app, app_
         backdate_served(app, t["trial_id"])
         assert answer(c, honest, t).status_code == 201
     rows = export_rows(c)
-    flags = {(r["external_id"], r["flags"]) for r in rows}
+    flags = {(r["external_id"], video_flags(r["flags"])) for r in rows}
     assert flags == {("fast", "no_video;too_fast"), ("honest", "")}
     p = c.get("/admin/progress.json", headers=TOKEN_HDR).json
     assert p["raters_suspicious"] == 1 and p["min_view"] == 1.0

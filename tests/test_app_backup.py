@@ -18,7 +18,7 @@ from werkzeug.serving import make_server
 
 from rating_app import create_app
 from rating_app.simulate import run_simulation
-from rating_app.study.db import app_engine
+from rating_app.store.db import app_engine
 
 
 def cli(*args):

@@ -13,8 +13,8 @@ import pytest
 import requests
 
 from rating_app import create_app
-from rating_app.study.db import app_engine
-from rating_app.study.manifest import load_manifest
+from rating_app.store.db import app_engine
+from rating_app.store.manifest import load_manifest
 
 ROOT = Path(__file__).resolve().parents[1]
 CHROMIUM, CHROMEDRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
@@ -154,12 +154,16 @@ def test_rater_flow_in_a_real_browser(live_server, browser):
     rows = [row for row in csv.DictReader(io.StringIO(r.text)) if row["external_id"] == "browserpid1"]
     from sqlalchemy import select
 
-    from rating_app.study.db import Trial
+    from rating_app.store.db import Trial
 
     with app_engine(live_server_manifest[1]).connect() as conn:
         clip_of = dict(conn.execute(select(Trial.id, Trial.clip_id)).all())
     assert {row["clip_id"]: int(row["rating"]) for row in rows} == {clip_of[t]: v for t, v in clicked.items()}
-    assert all(row["flags"] == "" for row in rows)  # watched in full, video fetched
+    # Watched in full, video fetched: no flag but the failed catch trial's, on every row, where this rater's ratings
+    # (1 + index % 5) gave a BAD clip 3 or more (the app's and the report's exclusion, core.study.CATCH_FAIL_AT).
+    role = {c.clip_id: (c.role, c.condition) for c in clips}
+    failed = any(role[clip_of[t]] == ("catch", "BAD") and v >= 3 for t, v in clicked.items())
+    assert {row["flags"] for row in rows} == {"failed_catch" if failed else ""}
     assert all(int(row["watched_ms"]) > 0 for row in rows)
     p = requests.get(
         live_server + "/admin/progress.json", headers={"Authorization": "Bearer browser-token"}, timeout=10

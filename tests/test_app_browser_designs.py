@@ -17,8 +17,8 @@ from sqlalchemy import select
 from test_app_browser import browser  # noqa: F401  (the fixture)
 
 from rating_app import create_app
-from rating_app.study.db import TrialClip, app_engine
-from rating_app.study.manifest import load_manifest
+from rating_app.store.db import TrialClip, app_engine
+from rating_app.store.manifest import load_manifest
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.browser

@@ -14,7 +14,7 @@ from test_app_browser import browser  # noqa: F401  (the fixture)
 from test_app_browser_designs import _export, _run_flow, _screenshot, _shown, _trial_of, serve
 
 from moglow_eval.core import votes
-from rating_app.study.db import app_engine
+from rating_app.store.db import app_engine
 
 pytestmark = pytest.mark.browser
 

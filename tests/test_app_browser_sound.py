@@ -14,7 +14,7 @@ from test_app_browser import chrome
 
 from generation.make_stimuli import main as make_stimuli
 from rating_app import create_app
-from rating_app.study.db import app_engine
+from rating_app.store.db import app_engine
 
 pytestmark = pytest.mark.browser
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"  # SAVE_SCREENSHOTS=1 writes the pages there

@@ -12,7 +12,7 @@ from test_app_designs import shown, value_for
 
 from rating_app.designs import build_units
 from rating_app.operations.health import catch_pool_warning
-from rating_app.study.manifest import load_manifest
+from rating_app.store.manifest import load_manifest
 
 pytestmark = pytest.mark.full  # the full tier: crowds drawing from catch pools
 

@@ -19,8 +19,8 @@ from helpers.tiers import only_when_slow
 from moglow_eval.core.tables import read_metrics
 from rating_app import create_app
 from rating_app.simulate.raters import ClipInfo, load_clips, parse_quality, quality_from_metrics
-from rating_app.study.db import app_engine
-from rating_app.study.manifest import AppError, load_manifest
+from rating_app.store.db import app_engine
+from rating_app.store.manifest import AppError, load_manifest
 
 ROOT = Path(__file__).resolve().parents[1]
 

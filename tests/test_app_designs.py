@@ -19,8 +19,8 @@ from sqlalchemy import update
 from test_app_api import TOKEN_HDR, idle
 
 from rating_app import create_app
-from rating_app.study.db import Trial, app_engine, utcnow
-from rating_app.study.manifest import AppError, load_manifest
+from rating_app.store.db import Trial, app_engine, utcnow
+from rating_app.store.manifest import AppError, load_manifest
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -498,11 +498,13 @@ def test_simulated_crowd_answers_each_design_as_the_page_does(stimuli, app_db_ur
     )
     acked = collections.Counter(tuple(str(r[k]) for k in key) for r in summary["ratings"])
     assert acked == collections.Counter(tuple(r[k] for k in key) for r in rows) and max(acked.values()) == 1
-    assert all(r["flags"] == "" for r in rows)  # every video fetched, none too early
     failed = {r["rater_id"] for r in p["raters"] if r["catch_failures"]}
+    # Every video fetched, none too early; the excluded raters' rows carry their flag (issue 55 item 1).
+    assert all(r["flags"] == ("failed_catch" if r["rater_id"] in failed else "") for r in rows)
     assert failed and failed == set(summary["failed_catch_raters"]) and failed <= set(summary["careless_raters"])
     # the report excludes exactly the raters the dashboard lists as failing a catch trial
-    from analysis import pairwise, parallel
+    from analysis.designs.pairwise import preference as pairwise
+    from analysis.designs.parallel import mushra as parallel
 
     f = tmp_path / "export.csv"
     with open(f, "w", newline="") as fh:

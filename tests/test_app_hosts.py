@@ -24,7 +24,7 @@ from helpers.servers import crowd_env, kill9, start_gunicorn, stop
 
 from rating_app.designs.acr import iter_rows
 from rating_app.simulate import run_simulation
-from rating_app.study.db import make_engine
+from rating_app.store.db import make_engine
 
 pytestmark = pytest.mark.full  # the full tier: two hosts, proxies and PostgreSQL
 

@@ -18,7 +18,7 @@ from rating_app.designs.appropriateness import iter_fit_rows
 from rating_app.designs.pairwise import iter_pair_rows
 from rating_app.designs.parallel import iter_page_rows
 from rating_app.simulate import run_simulation
-from rating_app.study.db import make_engine
+from rating_app.store.db import make_engine
 
 pytestmark = pytest.mark.full  # the full tier: hundreds of raters against real servers
 
@@ -40,7 +40,7 @@ DESIGNS = {
     ),
     "appropriateness": (
         ("rater_id", "clip_a", "clip_b", "preference"),
-        iter_fit_rows,
+        lambda s: iter_fit_rows(s, "mismatched_item"),
         4,
         lambda r: (r["item"], r["condition_a"]),
     ),

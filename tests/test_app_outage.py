@@ -24,7 +24,7 @@ from test_app_browser import browser  # noqa: F401  (the fixture)
 from test_app_load import DESIGNS
 
 from rating_app.simulate import run_simulation
-from rating_app.study.db import make_engine
+from rating_app.store.db import make_engine
 
 pytestmark = pytest.mark.full  # the full tier: a PostgreSQL of its own, killed and restarted
 
@@ -132,7 +132,7 @@ def test_the_page_retries_an_answer_through_a_database_restart(cluster, app_stim
     from werkzeug.serving import make_server
 
     from rating_app import create_app
-    from rating_app.study.db import app_engine
+    from rating_app.store.db import app_engine
 
     app = create_app(manifest=app_stimuli, db_url=cluster.url, admin_token="outage-token", clips_per_rater=2)
     server = make_server("127.0.0.1", 0, app, threaded=True)
@@ -203,7 +203,7 @@ def test_a_full_disk_on_sqlite_is_a_clear_error_and_the_database_stays_readable(
 
     from sqlalchemy import event
 
-    from rating_app.study.db import app_engine
+    from rating_app.store.db import app_engine
 
     app = make_app(min_view=0, ratings_per_clip=50, sessions_per_client=0)
     c = app.test_client()

@@ -19,10 +19,10 @@ from helpers.cli import fails_with
 from helpers.fake_stimuli import write_fake_stimuli
 from sqlalchemy import MetaData, select
 
-from rating_app import rounds
 from rating_app.__main__ import main
-from rating_app.study.db import app_engine, utcnow
-from rating_app.study.manifest import load_manifest
+from rating_app.store import rounds
+from rating_app.store.db import app_engine, utcnow
+from rating_app.store.manifest import load_manifest
 
 ROOT = Path(__file__).resolve().parents[1]
 TOKEN_HDR = {"Authorization": "Bearer test-admin-token"}
@@ -287,7 +287,7 @@ def test_the_workers_of_a_running_gunicorn_learn_of_the_round(folders, app_db_ur
     from helpers.servers import crowd_env, start_gunicorn, stop
 
     from rating_app.simulate import run_simulation
-    from rating_app.study.db import make_engine
+    from rating_app.store.db import make_engine
 
     study, new = folders
     port = free_port()

@@ -1,4 +1,4 @@
-"""The app's settings table (rating_app/study/settings.py): the flags, the environment variables, the study file's keys,
+"""The app's settings table (rating_app/store/settings.py): the flags, the environment variables, the study file's keys,
 create_app's arguments and docs/hosting.md's table all come from it, and a flag that is not given leaves the
 variable its say."""
 
@@ -9,9 +9,9 @@ from helpers.paths import ROOT
 
 from rating_app import SETTINGS, create_app
 from rating_app.__main__ import build_parser
-from rating_app.study.config import known_keys
-from rating_app.study.db import app_engine
-from rating_app.study.settings import ARGS, TABLE
+from rating_app.store.config import known_keys
+from rating_app.store.db import app_engine
+from rating_app.store.settings import ARGS, TABLE
 
 # What the app answered to before the table: every name and default must keep working.
 FLAGS = {

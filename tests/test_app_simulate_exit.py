@@ -12,7 +12,7 @@ import pytest
 from helpers.fake_stimuli import free_port
 
 from rating_app import create_app
-from rating_app.study.db import app_engine
+from rating_app.store.db import app_engine
 
 pytestmark = pytest.mark.full  # the full tier: served apps and crowds that fall short
 

@@ -3,6 +3,7 @@ system's matched and mismatched clip, the export that says which is which, the o
 mismatched clips out, and the sound check that comes before the examples."""
 
 import csv
+import html
 import io
 import wave
 
@@ -12,9 +13,14 @@ from helpers.fake_stimuli import write_fake_stimuli
 from sqlalchemy import select
 from test_app_designs import complete, post, shown
 
+from analysis.designs import DESIGNS as DesignRegistry
+from analysis.designs import detect_design
 from analysis.designs.appropriateness.mas import analyse, load_answers
-from rating_app.study.db import Rater, app_engine
-from rating_app.study.manifest import AppError, load_manifest
+from analysis.report import build_report
+from moglow_eval.core import study
+from rating_app.designs import get
+from rating_app.store.db import Rater, app_engine
+from rating_app.store.manifest import AppError, load_manifest
 
 
 @pytest.fixture(scope="module")
@@ -54,12 +60,16 @@ def _export(c):
 
 
 # ---------------------------------------------------------------- appropriateness
-def test_appropriateness_units_export_and_analysis(make, fit_stimuli, tmp_path):
+@pytest.mark.parametrize("design", ["appropriateness", "dyadic", "semantic"])
+def test_appropriateness_units_export_and_analysis(make, fit_stimuli, tmp_path, design):
+    """The three designs of a matched and a mismatched clip (GENEA 2023's speech and interlocutor appropriateness,
+    GENEA 2026's semantic alignment): one unit per item and system, the export naming what the mismatched motion was
+    made for in the design's own column, which the report reads back as the same design."""
     clips = {c.clip_id: c for c in load_manifest(fit_stimuli)}
-    app = make(fit_stimuli, "appropriateness", ratings_per_clip=1)
+    app = make(fit_stimuli, design, ratings_per_clip=1)
     c = app.test_client()
     r = c.post("/api/sessions", json={})
-    assert r.status_code == 201 and r.json["design"] == "appropriateness"
+    assert r.status_code == 201 and r.json["design"] == design
     seen, _ = complete(c, r.json["session"], pref=lambda t: 2)
     rating = [t for t in seen if t["phase"] == "rating"]
     for t in rating:
@@ -75,7 +85,9 @@ def test_appropriateness_units_export_and_analysis(make, fit_stimuli, tmp_path):
     for row in test:
         matched = row["clip_a"] if row["matched"] == "a" else row["clip_b"]
         other = row["clip_b"] if row["matched"] == "a" else row["clip_a"]
-        assert not clips[matched].motion_item and clips[other].motion_item == row["mismatched_item"] != row["item"]
+        column = study.MISMATCH_COLUMN[design]
+        assert not clips[matched].motion_item and clips[other].motion_item == row[column] != row["item"]
+    assert [c for c in study.MISMATCH_COLUMN.values() if c in rows[0]] == [study.MISMATCH_COLUMN[design]]
     assert all(row["matched"] == "" for row in rows if row["role"] == "catch")
     path = tmp_path / "pairs.csv"
     path.write_text(text)
@@ -85,6 +97,26 @@ def test_appropriateness_units_export_and_analysis(make, fit_stimuli, tmp_path):
     assert sorted(df["score"].dropna().astype(int)) == sorted(want)
     table = analyse(df)["mas"]
     assert table["n"].sum() == len(test)
+    assert detect_design(path) == design
+    # "A clearly" everywhere fails the catch pairs that show BAD as A: the report reads the test answers alone.
+    lines = text.splitlines(keepends=True)
+    role = next(csv.reader(lines[:1])).index("role")
+    path.write_text("".join([lines[0], *(x for x in lines[1:] if next(csv.reader([x]))[role] == "test")]))
+    stats = build_report(path, tmp_path / "report", n_boot=50, quiet=True)
+    assert stats["design"] == design and sum(v["n"] for v in stats["mas"].values()) == len(test)
+    page = (tmp_path / "report" / "report.html").read_text()
+    assert DesignRegistry[design].heading in page
+
+
+@pytest.mark.parametrize("design", ["dyadic", "semantic"])
+def test_the_page_asks_the_designs_question(make, fit_stimuli, design):
+    """The rater's page of the dyadic and semantic designs: their own welcome and GENEA's question (or the study's)."""
+    app = make(fit_stimuli, design, ratings_per_clip=1)
+    page = app.test_client().get("/").get_data(as_text=True)
+    assert html.escape(get(design).question, quote=True) in page
+    assert {"dyadic": "two people in conversation", "semantic": "highlighted"}[design] in page
+    asked = make(fit_stimuli, design, ratings_per_clip=1, question="Who listens better?")
+    assert "Who listens better?" in asked.test_client().get("/").get_data(as_text=True)
 
 
 @pytest.mark.parametrize("design", ["acr", "pairwise", "parallel"])

@@ -10,8 +10,8 @@ from helpers.fake_stimuli import write_fake_stimuli
 from helpers.paths import ROOT
 
 from rating_app import SETTINGS, create_app
-from rating_app.study.config import known_keys
-from rating_app.study.db import app_engine
+from rating_app.store.config import known_keys
+from rating_app.store.db import app_engine
 
 STUDY = {  # every key a study file may hold, with a value other than its default
     "rating_manifest": "stimuli/manifest.csv",

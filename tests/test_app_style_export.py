@@ -7,7 +7,7 @@ import io
 import pytest
 from helpers.fake_stimuli import write_fake_stimuli
 
-from rating_app.study.manifest import load_manifest
+from rating_app.store.manifest import load_manifest
 
 TOKEN_HDR = {"Authorization": "Bearer test-admin-token"}
 

@@ -29,7 +29,7 @@ PARTS = tuple(ALLOWED)
 # part's top-level modules (its commands: the main job, the report, the app's factory) may import every room.
 ROOMS = {
     "generation": ("motion", "data", "metrics", "models", "training", "sampling", "stimuli", "own_study"),
-    "rating_app": ("study", "guard", "media", "pairing", "designs", "trials", "operations", "web", "simulate"),
+    "rating_app": ("store", "guard", "media", "pairing", "designs", "trials", "operations", "web", "simulate"),
     "analysis": ("data", "stats", "page", "designs"),
 }
 # The modules a part keeps at its top, beside its rooms (the one-line pointers of moved commands are checked apart).
@@ -276,7 +276,7 @@ def test_the_room_guard_sees_an_upward_import():
         ("generation.models.fl", "generation.stimuli.items"): "y:2",
         ("generation.motion.bvh", "generation.make_stimuli"): "z:3",
         ("generation.make_stimuli", "generation.own_study.builder"): "w:4",
-        ("rating_app.study.settings", "rating_app.media.videos"): "v:5",
+        ("rating_app.store.settings", "rating_app.media.videos"): "v:5",
         ("analysis.designs.base", "analysis.page.report_html"): "u:6",
     }
     wrong = []

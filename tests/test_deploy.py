@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from rating_app import SETTINGS
-from rating_app.study.config import load_study_file
+from rating_app.store.config import load_study_file
 
 pytestmark = pytest.mark.full  # the full tier: containers and system services
 

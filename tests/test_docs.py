@@ -139,9 +139,9 @@ def check_python(args):
 
 
 def app_settings():
-    """Every environment variable the rating app reads as a setting (rating_app.SETTINGS, rating_app.study.config)."""
+    """Every environment variable the rating app reads as a setting (rating_app.SETTINGS, rating_app.store.config)."""
     from rating_app import SETTINGS
-    from rating_app import study_config as s
+    from rating_app.store import config as s
 
     return {*SETTINGS, *s.SECRETS, "VIDEO_CACHE_MB"}
 

@@ -3,9 +3,13 @@ keeping the 5 levels and the reasons; bad files give one line and write nothing.
 
 import csv
 import json
+import os
+import subprocess
+import sys
+import tracemalloc
 
 import pytest
-from helpers.paths import SHARED
+from helpers.paths import ROOT, SHARED
 
 from analysis import import_votes as iv
 from analysis import report
@@ -95,7 +99,7 @@ def test_a_file_too_large_is_refused_before_reading(tmp_path, capsys, monkeypatc
     assert "larger than a battle file can be" in capsys.readouterr().err
 
 
-def test_free_text_is_unquoted_and_a_hostile_text_stays_a_text(tmp_path):
+def test_free_text_is_unquoted_and_a_hostile_text_stays_a_defused_text(tmp_path):
     body = (
         'u1,i1,A,B,model_a,True,"[""MotionSmoothness""]","""It\'s in the hands, <b>really</b>"""\n'
         'u2,i1,A,B,model_b,False,{},=HYPERLINK("x")\n'
@@ -104,7 +108,92 @@ def test_free_text_is_unquoted_and_a_hostile_text_stays_a_text(tmp_path):
     iv.import_votes(write(tmp_path, body), out)
     got = rows(out)
     assert got[0]["reasons"] == "MotionSmoothness" and got[0]["reason_text"] == "It's in the hands, <b>really</b>"
-    assert got[1]["reason_text"] == '=HYPERLINK("x")' and int(got[1]["preference"]) == -1
+    assert got[1]["reason_text"] == '\'=HYPERLINK("x")' and int(got[1]["preference"]) == -1
     doc = report.build_report(out, tmp_path / "rep", n_boot=20, progress=False, quiet=True)
     assert doc["design"] == "pairwise"
     assert "<b>really</b>" not in (tmp_path / "rep" / "report.html").read_text()
+
+
+# ---------------------------------------------------------------- hostile battle files (issue 55, failures 5-7)
+def test_formula_cells_are_defused_as_the_exports_defuse_them(tmp_path):
+    body = (
+        '"=HYPERLINK(""http://x"",""y"")",@SUM(1),A,B,model_a,True,{},+1+1\n-2,\tcmd,A,B,model_b,True,{},"""=1+1"""\n'
+    )
+    out = tmp_path / "pairs.csv"
+    iv.import_votes(write(tmp_path, body), out)
+    got = rows(out)
+    assert [(r["rater_id"], r["item"], r["reason_text"]) for r in got] == [
+        ('\'=HYPERLINK("http://x","y")', "'@SUM(1)", "'+1+1"),
+        ("'-2", "cmd", "'=1+1"),  # a cell is stripped of blanks first, as every reader strips it
+    ]
+    assert not any(v.startswith(("=", "+", "-", "@")) for r in got for k, v in r.items() if k != "preference")
+
+
+@pytest.mark.parametrize("depth", [1500, 50_000])
+def test_deep_nesting_is_one_line(tmp_path, capsys, depth):
+    path = write(tmp_path, f'u1,i1,A,B,model_a,True,"{"[" * depth}{"]" * depth}",\n')
+    assert iv.main([str(path), "--out", str(tmp_path / "p.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "battles.csv:2:" in err
+    assert ("nested deeper" if depth < iv.MAX_CELL else "a cell of") in err
+
+
+def test_a_huge_line_is_one_line(tmp_path, capsys):
+    path = tmp_path / "battles.csv"
+    path.write_bytes(HEAD.encode() + b"u1,i1,A,B,model_a,True,{}," + b"x" * (3 << 20))
+    assert iv.main([str(path), "--out", str(tmp_path / "p.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "battles.csv:2: line longer than" in err and len(err.splitlines()) == 1
+
+
+def test_a_large_file_is_read_in_a_stream_and_stops_at_its_first_bad_line(tmp_path, capsys):
+    path = tmp_path / "battles.csv"
+    good = "u1,i1,A,B,model_a,True,{},\n"
+    with open(path, "w") as fh:  # 25 MB: a good vote, then garbage rows
+        fh.write(HEAD + good + ("garbage," * 8 + "\n") * 400_000)
+    assert path.stat().st_size > 25e6
+    tracemalloc.start()
+    try:
+        assert iv.main([str(path), "--out", str(tmp_path / "p.csv")]) == 2
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert "battles.csv:3: 9 cells, the header has 8" in capsys.readouterr().err
+    assert peak < 4e6, peak  # a few lines at a time, not the file
+
+    # A large good file: memory stays flat as it is converted.
+    with open(path, "w") as fh:
+        fh.write(HEAD + "".join(f"u{i % 50},i{i % 40},A,B,model_a,True,{{}},\n" for i in range(200_000)))
+    tracemalloc.start()
+    try:
+        assert iv.import_votes(path, tmp_path / "p.csv")["n_votes"] == 200_000
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 4e6, peak
+
+
+def run_cli(path, tmp_path):
+    """The importer as a process, with a deadline: a file it would read without end fails the test, not the suite."""
+    try:
+        r = subprocess.run(
+            [sys.executable, "-m", "analysis.import_votes", str(path), "--out", str(tmp_path / "p.csv")],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env={**os.environ, "PYTHONPATH": str(ROOT)},
+            cwd=ROOT,
+        )
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"{path}: still reading after 60 s")
+    return r
+
+
+def test_anything_but_a_regular_file_is_refused(tmp_path):
+    fifo = tmp_path / "fifo.csv"
+    os.mkfifo(fifo)  # no writer: opening it to read would wait for ever
+    for path in ("/dev/zero", fifo, tmp_path):
+        r = run_cli(path, tmp_path)
+        assert r.returncode == 2 and r.stderr.count("\n") == 1, (path, r.stderr[-500:])
+        assert "not a regular battle file" in r.stderr
+    assert not (tmp_path / "p.csv").exists()

@@ -10,7 +10,7 @@ from test_app_style_export import rate_everything
 
 from analysis import report
 from analysis.data.load import AnalysisError
-from rating_app.study.manifest import AppError, reference_name
+from rating_app.store.manifest import AppError, reference_name
 
 
 @pytest.fixture
@@ -58,7 +58,7 @@ def test_without_study_json_there_is_no_column(make_app, stimuli):
         ({"other": 1}, "not a study names file"),
         ({"reference_name": "<b>x</b>"}, "must be a condition name"),
         ({"reference_name": 7}, "must be a condition name"),
-        ("x" * 5000, "larger than 4 KB"),
+        ("x" * 5000, r"larger than a study names file can be \(4 KB\)"),
     ],
 )
 def test_a_malformed_study_json_is_one_line(stimuli, doc, needle):

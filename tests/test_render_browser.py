@@ -118,7 +118,7 @@ def test_speaker_study_in_a_real_browser(app_stimuli, live_server, browser, tmp_
     from sqlalchemy import select
     from test_app_browser import live_server_manifest
 
-    from rating_app.study.db import Trial, app_engine
+    from rating_app.store.db import Trial, app_engine
 
     if request.node.callspec.params["app_db_url"] == "sqlite":
         only_when_slow(request, "the short variant serves the page from PostgreSQL")

@@ -12,9 +12,9 @@ DEFAULT_THRESHOLD = study.CATCH_FAIL_AT
 
 
 def failed_raters(df, threshold=DEFAULT_THRESHOLD):
-    """Sorted list of rater ids with at least one catch rating >= threshold."""
+    """Sorted list of the rater ids excluded (study.excluded_raters) for catch ratings >= threshold."""
     catch = df[df["role"] == "catch"]
-    return sorted(catch.loc[catch["rating"] >= threshold, "rater_id"].unique().tolist())
+    return study.excluded_raters(zip(catch["rater_id"].tolist(), (catch["rating"] >= threshold).tolist()))
 
 
 def exclude_raters(df, threshold=DEFAULT_THRESHOLD):

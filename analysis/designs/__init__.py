@@ -6,16 +6,20 @@ them.
 import csv
 from pathlib import Path
 
-from moglow_eval.core import study
+from moglow_eval.core import study, tables, user_files
 
 from ..data.load import AnalysisError
 from .acr.design import Acr
 from .appropriateness.design import Appropriateness
 from .base import Design, Options
+from .dyadic.design import Dyadic
 from .pairwise.design import Pairwise
 from .parallel.design import Parallel
+from .semantic.design import Semantic
 
-DESIGNS: dict[str, Design] = {d.name: d for d in (Acr(), Pairwise(), Parallel(), Appropriateness())}
+DESIGNS: dict[str, Design] = {
+    d.name: d for d in (Acr(), Pairwise(), Parallel(), Appropriateness(), Dyadic(), Semantic())
+}
 assert tuple(DESIGNS) == study.DESIGNS, "moglow_eval.core.study.DESIGNS and the registry list the same designs"
 
 __all__ = ["DESIGNS", "Design", "Options", "design_of", "detect_design"]
@@ -25,13 +29,11 @@ def design_of(path) -> Design:
     """The design of the CSV file at `path`, from its header (AnalysisError if it cannot be opened). A file that
     cannot be read as CSV goes to the default design (acr), whose loader names the problem."""
     path = Path(path)
-    try:
-        with open(path, newline="", encoding="utf-8-sig") as fh:
-            header = next(csv.reader(fh), [])
-    except FileNotFoundError:
-        raise AnalysisError(f"{path}: no such file") from None
-    except (UnicodeDecodeError, csv.Error):
-        return DESIGNS[study.DEFAULT_DESIGN]
+    with user_files.open_regular(path, tables.MAX_BYTES, AnalysisError) as fh:
+        try:
+            header = next(csv.reader(user_files.lines(fh, path, tables.MAX_BYTES, AnalysisError)), [])
+        except (AnalysisError, csv.Error):  # a header that is not text or CSV: the default design's reader names it
+            return DESIGNS[study.DEFAULT_DESIGN]
     columns = {c.strip() for c in header}
     return next(d for d in DESIGNS.values() if d.detects(columns))
 

@@ -1,11 +1,10 @@
 """What every test design (CONTRACTS §8) is to the analysis: one small interface, which each design implements.
 
 `python -m analysis.report FILE` (report.py) knows no design: it asks each one in the registry whether the file's
-columns are its own, then has that design prepare the rows, analyse them with and without the catch-trial
-exclusion, draw its figures, and write its stats.json keys, its report.html parts and its console summary. The
-statistics themselves are pure functions on the exported DataFrame (stats.py, pairwise.py, parallel.py,
-appropriateness.py); a design module adapts them to this interface.
-"""
+columns are its own, then has that design prepare the rows, analyse them with and without the catch-trial exclusion,
+draw its figures, and write its stats.json keys, its report.html parts and its console summary. The statistics
+themselves are pure functions on the exported DataFrame (stats/anova.py, designs/pairwise/preference.py,
+designs/parallel/mushra.py, designs/appropriateness/mas.py); a design module adapts them to this interface."""
 
 import html
 from dataclasses import dataclass

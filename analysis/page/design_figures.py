@@ -119,9 +119,10 @@ def parallel_boxplot(t, summary, path, title=None):
         return _save(fig, path)
 
 
-def mas_bars(table, path, title=None):
-    """Appropriateness: each system's MAS with its 95% interval (0 = chance), and beside it the shares of answers
-    preferring the matched motion, no preference and the mismatched one, as GENEA 2023 draws them."""
+def mas_bars(table, path, title=None, score="mean appropriateness score (MAS)"):
+    """Appropriateness (and the dyadic and semantic designs, whose `score` is named for what they ask): each
+    system's mean score with its 95% interval (0 = chance), and beside it the shares of answers preferring the
+    matched motion, no preference and the mismatched one, as GENEA 2023 draws them."""
     order = list(table["condition"])[::-1]
     col = colours(order)
     rows = table.set_index("condition")
@@ -139,7 +140,7 @@ def mas_bars(table, path, title=None):
         ax.set_yticks(range(len(order)))
         ax.set_yticklabels([text(c) for c in order])
         ax.axvline(0, color="black", lw=0.6, ls=":")
-        ax.set_xlabel("mean appropriateness score (MAS), 95% interval; 0 = chance")
+        ax.set_xlabel(f"{score}, 95% interval; 0 = chance")
         bx.set_xlim(0, 1)
         bx.axvline(0.5, color="black", lw=0.6, ls=":")
         bx.set_xlabel("share: matched preferred | no preference | mismatched preferred")

@@ -1,4 +1,4 @@
-"""Figures of the report, drawn from the tables in stats.py (no statistics computed here).
+"""Figures of the report, drawn from the tables in stats/anova.py (no statistics computed here).
 
 ratings_histogram: the paper's Fig. 5 (responses per scale point and condition, vertical lines at the means);
 per_clip_means: Fig. 6 (mean rating of every clip, sorted worst to best within each condition);

@@ -28,6 +28,16 @@ DESIGN_TEXT = {
         "watched a system's motion for the speech they heard and its motion for other speech, with the same "
         "audio, and chose the one that fitted the speech better on a five-level scale"
     ),
+    "dyadic": (
+        "watched two people in conversation, the same real interlocutor and the same audio in both videos, one with a "
+        "system's agent motion made for that interlocutor and one with the same system's motion made for another, "
+        "and chose the agent that responded more appropriately on a five-level scale"
+    ),
+    "semantic": (
+        "watched a system's motion for an utterance and its motion for another utterance, both with the utterance's "
+        "speech and captions and one word highlighted, and chose the motion that better showed the meaning of that "
+        "word on a five-level scale"
+    ),
 }
 CATCH_TEXT = {
     "acr": "rated a deliberately broken clip (BAD) at {threshold} or above",
@@ -47,6 +57,13 @@ STATS_TEXT = {
     "parallel": "Wilcoxon signed-rank tests on page-paired ratings, Holm-adjusted",
     "appropriateness": (
         "the mean appropriateness score with Student-t intervals and sign tests against chance, Holm-adjusted"
+    ),
+    "dyadic": (
+        "the mean interlocutor appropriateness score with Student-t intervals and sign tests against no preference, "
+        "Holm-adjusted"
+    ),
+    "semantic": (
+        "the mean semantic alignment score with Student-t intervals and sign tests against chance, Holm-adjusted"
     ),
 }
 
@@ -82,7 +99,7 @@ def answers_per_unit(design, test) -> tuple[str, int, int, float]:
         lo = np.minimum(test["condition_a"], test["condition_b"])
         hi = np.maximum(test["condition_a"], test["condition_b"])
         n, unit = test.groupby([lo, hi]).size(), "votes per pair of conditions"
-    elif design == "appropriateness":
+    elif design in study.MISMATCH_COLUMN:
         n, unit = test.groupby("condition_a").size(), "votes per system"
     else:
         n, unit = test.groupby("clip_id").size(), "ratings per clip"

@@ -13,14 +13,15 @@ captions that cite the paper only for the built-in study, and notes on the class
   clips, say).
 """
 
-import tomllib
 from pathlib import Path
 
 import pandas as pd
 
-from moglow_eval.core import study
+from moglow_eval.core import study, user_files
 
 from ..data.load import AnalysisError
+
+STUDY_FILE_BYTES = 1 << 20  # a study file is a few dozen keys
 
 C2ST_MIN_ITEMS = 10
 C2ST_LOW_AUC = 0.3
@@ -35,12 +36,7 @@ def is_builtin_study(conditions) -> bool:
 def reference_from_study_file(path) -> str:
     """The `reference` key of a study file (CONTRACTS §10), or AnalysisError naming the file."""
     path = Path(path)
-    try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise AnalysisError(f"{path}: no such file") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise AnalysisError(f"{path}: not a study file ({exc})") from None
+    doc = user_files.read_toml(path, STUDY_FILE_BYTES, AnalysisError, "study file")
     ref = doc.get("reference")
     if not isinstance(ref, str) or not ref.strip():
         raise AnalysisError(f"{path}: no 'reference' key naming the reference condition")

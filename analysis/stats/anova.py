@@ -2,7 +2,7 @@
 
 Every function takes the long table of ratings (one row per response) and the names of its columns, so the
 same code serves ratings.csv, the NIST reference data and R's PlantGrowth in the tests. Plotting lives in
-figures.py; file handling in load.py and report.py.
+page/figures.py; file handling in data/load.py and report.py.
 
 The cluster bootstrap of the means is in bootstrap.py, the mixed and ordinal models in rating_models.py.
 """

@@ -1,6 +1,6 @@
 """The cluster bootstrap of a rating test's condition means: raters and clips resampled together.
 
-A pure function on the long table of ratings (one row per response), as the rest of the statistics (stats.py).
+A pure function on the long table of ratings (one row per response), as the rest of the statistics (stats/anova.py).
 """
 
 import math

@@ -20,12 +20,12 @@ the first that makes the standing body a person's height, the skeleton family's 
 shapes) before anything is allocated. Every problem is a MotionError naming the file.
 """
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from moglow_eval.core import user_files
 from moglow_eval.core.cli import UserError
 from moglow_eval.core.clip import (
     MAX_FRAMES,
@@ -48,6 +48,7 @@ from .systems import resample_positions
 EXTENSIONS = (".bvh.gz", ".bvh", ".npy", ".npz")
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}  # metres per unit
 UPS = ("y", "z")
+SKELETON_BYTES = 4 << 20  # a skeleton file names a few hundred joints at most (MAX_JOINTS)
 BODY_HEIGHT_M = (0.5, 3.0)  # what a body's extent along the up axis may be, in metres (a child sitting .. a giant)
 END_SITE_MIN = 1e-6  # End Sites closer than this to their joint (in file units) are not joints of their own
 
@@ -82,12 +83,7 @@ class Skeleton:
         """{"names": [...], "parents": [...]} with parents as indices (-1 for the root) or names (null for the
         root); MotionError naming the file and key otherwise."""
         path = Path(path)
-        try:
-            spec = json.loads(path.read_text(encoding="utf-8"))
-        except OSError as e:
-            raise MotionError(f"{path}: cannot read the skeleton file ({e.strerror or e})") from None
-        except (ValueError, UnicodeDecodeError) as e:
-            raise MotionError(f"{path}: not valid JSON ({e})") from None
+        spec = user_files.read_json(path, SKELETON_BYTES, MotionError, "skeleton file")
         if not isinstance(spec, dict) or not isinstance(spec.get("names"), list) or "parents" not in spec:
             raise MotionError(f'{path}: expected {{"names": [...], "parents": [...]}}')
         names = spec["names"]

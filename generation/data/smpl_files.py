@@ -24,6 +24,8 @@ MOTION_KEYS = ("poses", "trans", "betas")
 FPS_KEYS = ("mocap_frame_rate", "mocap_framerate")
 MODEL_KEYS = ("v_template", "shapedirs", "posedirs", "J_regressor", "weights", "kintree_table", "f")
 BATCH = 2048  # frames per pass through the kinematics: bounds the rotation matrices held at once
+MESH_BATCH = 32  # frames per pass through the skinning: bounds the vertices held at once (32 x 10k x 3 floats)
+MAX_MESH_VERTICES = 200_000  # a body model's mesh (SMPL-X has 10,475 vertices); beyond it, one line
 
 _BODY = [
     "pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2", "left_ankle", "right_ankle",
@@ -100,6 +102,115 @@ def pose_joints(poses, trans, betas, model, smpl_type, where):
             posed, _ = batch_rigid_transform(rot, rest.expand(len(pose), -1, -1), tree, dtype=torch.float64)
             out[a : a + BATCH] = posed.numpy()
     return out + trans[:, None], list(JOINT_NAMES[kind]), parents.astype(np.int64)
+
+
+def smpl_mesh(path, model, smpl_type=None, source_fps=None, face="mask"):
+    """The skinned mesh of an SMPL-family parameter file (`style = "mesh"`): a MeshSource whose `vertices(a, b)`
+    gives frames a..b's vertices [n, V, 3] (metres, the model's axes, float32) through smplx's own skinning
+    (`smplx.lbs.lbs`: shape and pose blend shapes, then linear blend skinning) with the user's model file and the
+    motion's betas, a chunk at a time, so memory does not grow with the clip. `face`: "mask" (the face's vertices
+    flagged for the mask, rendering.mesh) or "none". SmplError naming the file otherwise."""
+    if model is None or not Path(model).is_file():
+        raise SmplError(f"{model or path}: no body model file for the mesh style; {WHERE_TO_GET}")
+    poses, trans, betas, fps = _read_motion(path, source_fps)
+    return mesh_source(poses, trans, betas, fps, model, smpl_type, face, path)
+
+
+def mesh_source(poses, trans, betas, fps, model, smpl_type, face, where):
+    """The MeshSource of poses [T, 3J], translations [T, 3] and `betas` (empty: the mean shape) at `fps`, through
+    the body model file `model` (smpl_mesh, and Seamless Interaction's files through seamless_files). SmplError
+    naming `where` or the model."""
+    if model is None or not Path(model).is_file():
+        raise SmplError(f"{model or where}: no body model file for the mesh style; {WHERE_TO_GET}")
+    template, shapedirs, regressor, parents, kind = _read_model(model, smpl_type)
+    if poses.shape[1] != 3 * len(parents):
+        raise SmplError(
+            f"{where}: 'poses' has {poses.shape[1]} values a frame; the {kind} model {model} takes {3 * len(parents)}"
+        )
+    skin = _read_skin(model, len(template), len(parents))
+    return MeshSource(where, poses, trans, betas, fps, template, shapedirs, regressor, parents, kind, skin, face)
+
+
+class MeshSource:
+    """An SMPL-family clip's mesh, skinned on demand (see smpl_mesh): what rendering.mesh draws (`faces` [F, 3],
+    `mask` [V]: the face mask's vertices), `fps`, `n_frames` and `vertices(a, b)`."""
+
+    def __init__(self, path, poses, trans, betas, fps, template, shapedirs, regressor, parents, kind, skin, face):
+        self.path, self.poses, self.trans, self.fps, self.kind = path, poses, trans, fps, kind
+        self.n_frames = len(poses)
+        n_shape = min(len(betas), _shape_components(kind, shapedirs.shape[2]))
+        self.betas = betas[:n_shape].astype(np.float32)
+        self.template, self.regressor = template.astype(np.float32), regressor.astype(np.float32)
+        self.shapedirs = shapedirs[:, :, :n_shape].astype(np.float32)
+        self.parents = parents
+        self.posedirs, self.weights, self.faces = skin
+        none = np.zeros(len(template), bool)
+        self.mask = face_vertices(self.shaped(), self.rest_joints()) if face == "mask" else none
+
+    def shaped(self):
+        """The rest vertices [V, 3] in this motion's shape."""
+        return self.template + self.shapedirs @ self.betas
+
+    def rest_joints(self):
+        return self.regressor @ self.shaped()
+
+    def vertices(self, a, b):
+        """Frames a..b's vertices [b - a, V, 3] float32, in metres, the root translation applied."""
+        return self.posed(a, b)[0]
+
+    def posed(self, a, b):
+        """(vertices [b - a, V, 3], joints [b - a, J, 3]) of frames a..b, float32, the root translation applied:
+        smplx's forward pass, a chunk of MESH_BATCH frames at a time."""
+        import torch
+        from smplx.lbs import lbs
+
+        verts = np.empty((b - a, len(self.template), 3), np.float32)
+        joints = np.empty((b - a, len(self.parents), 3), np.float32)
+        with torch.no_grad():
+            for s in range(a, b, MESH_BATCH):
+                e = min(b, s + MESH_BATCH)
+                v, j = lbs(
+                    torch.from_numpy(np.repeat(self.betas[None], e - s, 0)),
+                    torch.from_numpy(self.poses[s:e].astype(np.float32)),
+                    torch.from_numpy(self.template),
+                    torch.from_numpy(self.shapedirs),
+                    torch.from_numpy(self.posedirs),
+                    torch.from_numpy(self.regressor),
+                    torch.from_numpy(self.parents),
+                    torch.from_numpy(self.weights),
+                )
+                shift = self.trans[s:e, None].astype(np.float32)
+                verts[s - a : e - a] = v.numpy() + shift
+                joints[s - a : e - a] = j.numpy() + shift
+        return verts, joints
+
+
+def face_vertices(shaped, joints):
+    """Which rest vertices [V] the face mask covers: those within 15 cm of the head joint (15 in every SMPL layout),
+    in front of it (the models face +Z at rest) by more than 4 cm, and above the chin (7 cm below the joint)."""
+    r = shaped - joints[15]
+    return (np.linalg.norm(r, axis=1) < 0.15) & (r[:, 2] > 0.04) & (r[:, 1] > -0.07)
+
+
+def _read_skin(model, n_vertices, n_joints):
+    """(posedirs [(J-1)*9, V*3] as smplx's lbs takes them, weights [V, J], faces [F, 3] int64) of a body model,
+    refused with one line where they do not fit its vertices and joints."""
+    model = Path(model)
+    if n_vertices > MAX_MESH_VERTICES:
+        raise SmplError(f"{model}: {n_vertices} vertices, more than a body mesh has (at most {MAX_MESH_VERTICES})")
+    d = _load(model, ("posedirs", "weights", "f"), "a body model")
+    posedirs, weights, faces = np.asarray(d["posedirs"], np.float32), np.asarray(d["weights"], np.float32), d["f"]
+    if posedirs.shape != (n_vertices, 3, (n_joints - 1) * 9) or weights.shape != (n_vertices, n_joints):
+        raise SmplError(
+            f"{model}: posedirs {posedirs.shape} and weights {weights.shape} do not fit its {n_vertices} vertices and "
+            f"{n_joints} joints"
+        )
+    faces = np.asarray(faces)
+    if faces.ndim != 2 or faces.shape[1] != 3 or faces.dtype.kind not in "iu" or len(faces) == 0:
+        raise SmplError(f"{model}: 'f' must be integer triangles [F, 3], got {faces.shape} {faces.dtype}")
+    if faces.min() < 0 or faces.max() >= n_vertices:
+        raise SmplError(f"{model}: 'f' indexes vertices outside the model's {n_vertices}")
+    return posedirs.reshape(n_vertices * 3, -1).T.copy(), weights, faces.astype(np.int64)
 
 
 def _shape_components(kind, k):

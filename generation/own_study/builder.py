@@ -40,6 +40,7 @@ from moglow_eval.core import study
 from moglow_eval.core.clip import save_clip
 from moglow_eval.core.tables import C2ST_COLUMNS
 from rendering.captions import room as caption_room
+from rendering.raster import STYLES
 
 from ..data.motion_files import read_motion
 from ..metrics import c2st
@@ -60,6 +61,7 @@ from .inputs import (
     seconds_text,
     with_study_fps,
 )
+from .mesh_clips import check_mesh_inputs, mesh_spec, partner_mesh_spec, wants_mesh
 from .scene import stage
 from .speech import item_captions, prepare_audio, read_sources
 
@@ -177,6 +179,8 @@ class StudyClip:
     joints: np.ndarray
     note: str = ""  # the manifest's seed column: the catch kind of a BAD clip
     motion_item: str = ""  # appropriateness: the other item whose motion a mismatched clip shows
+    start: int = 0  # the motion's frame the clip starts at (a catch copy's: 1)
+    path: str = ""  # the file its motion came from, where no condition's folder of its item holds it (dyadic)
 
 
 def mismatch_partners(motions, items, seed):
@@ -212,7 +216,8 @@ def build_clips(spec, motions, roles, catch_items, bad, people=None):
         for item, role in roles.items():
             for name, by_item in people.mismatched.items():
                 made_for = people.made_for.get(item) or UNNAMED
-                clips.append(StudyClip(name, item, role, by_item[item].joints, motion_item=made_for))
+                motion = by_item[item]
+                clips.append(StudyClip(name, item, role, motion.joints, motion_item=made_for, path=motion.path))
     elif spec.design in ("appropriateness", "semantic"):
         partners = mismatch_partners(motions, sorted(roles), spec.seed)
         for item, role in roles.items():
@@ -224,7 +229,7 @@ def build_clips(spec, motions, roles, catch_items, bad, people=None):
     for item in catch_items:
         for name, by_item in motions.items():
             joints = by_item[item].joints
-            clips.append(StudyClip(name, item, CATCH, np.concatenate([joints[1:], joints[-1:]])))
+            clips.append(StudyClip(name, item, CATCH, np.concatenate([joints[1:], joints[-1:]]), start=1))
         clips.append(StudyClip(study.CATCH, item, CATCH, bad[item][0], bad[item][1]))
     return clips
 
@@ -257,6 +262,10 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
         job = dict(**scene.job(item, style), **options)
         if captions:
             job["captions"] = captions[item]  # the same phrases in every clip of the item
+        if STYLES[style].body == "mesh":
+            job["mesh"] = mesh_spec(c, joints, motions, spec)
+            if item in scene.partners:
+                job["partner_mesh"] = partner_mesh_spec(scene, item, spec)
         if sound:
             # Every clip of an item carries the same sound bytes, a catch copy (one frame late) too: an audio track
             # of its own would tell a catch copy from the item's test clip.
@@ -330,6 +339,8 @@ def build_study(spec, out, size, preset, workers, force, progress):
     sources = read_sources(spec, set(motions[study.NATURAL]))
     people = read_people(spec, motions[study.NATURAL], progress, sources[1])
     cut_items(motions, spec, people.extra())
+    if wants_mesh(spec):
+        check_mesh_inputs(spec, {**motions, **dict(enumerate(people.extra()))})  # before anything is written
     items = sorted(motions[study.NATURAL])
     roles, catch_items = assign_roles(items, spec, n_catch)
     if own_catch is not None:

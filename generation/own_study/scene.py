@@ -46,7 +46,9 @@ class Scene:
 
     cameras: dict = field(default_factory=dict)
     targets: dict = field(default_factory=dict)
-    partners: dict = field(default_factory=dict)
+    partners: dict = field(default_factory=dict)  # {item: the placed partner's clip file, for the render workers}
+    partner_sources: dict = field(default_factory=dict)  # {item: the partner's own motion file}
+    partner_joints: dict = field(default_factory=dict)  # {item: the placed partner's joints [T, J, 3]}
     sides: dict = field(default_factory=dict)
     colour: tuple = PARTNER_COLOUR
 
@@ -100,5 +102,6 @@ def stage(clips, skeleton, spec, partners, folder, room=0.0):
         scene.cameras[item], scene.targets[item] = camera, target
         scene.partners[item] = folder / f"partner_{len(scene.partners)}.npz"
         save_clip(scene.partners[item], partner, other.parents, other.names, spec.fps)
+        scene.partner_sources[item], scene.partner_joints[item] = other.path, partner
         scene.sides[item] = (_screen_x(camera, target, placed[0]), _screen_x(camera, target, partner))
     return scene

@@ -29,7 +29,8 @@
     [render]                     # optional
     view = "front"               # "front", "three-quarter", "side" or degrees from the body's mean facing
     framing = "upper"            # "full" (the default), "upper" (hips up) or "auto" (upper when the feet stay)
-    style = ["stick", "solid"]   # "stick" (the default) or "solid", or a list: every clip drawn in each
+    style = ["stick", "mesh"]    # "stick" (the default), "solid", "mesh" (SMPL-family files), or a list of them
+    face = "mask"                # the mesh's face: a plain mask over it (the default), or "none"
 
 Two people and captions (generation.own_study.dyad, speech; CONTRACTS §10):
 
@@ -55,11 +56,10 @@ Relative paths are relative to the file. Command-line flags override the top-lev
 StudyFileError naming the file and key.
 """
 
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from moglow_eval.core import study
+from moglow_eval.core import study, user_files
 
 from ..data.motion_files import UNITS, UPS
 from ..data.smpl_files import TYPES as SMPL_TYPES
@@ -84,11 +84,13 @@ TOP_KEYS = {
     "mismatched",
     "captions",
 }
-RENDER_KEYS = {"view", "framing", "style"}
+RENDER_KEYS = {"view", "framing", "style", "face"}
+FACES = ("mask", "none")  # the mesh style's face: a plain mask over it (GENEA 2026), or the mesh's own
 AUDIO_KEYS = {"folder", "loudness", "interlocutor", "channels"}
 CATCH_KEYS = {"make", "n", "folder"}
 SKELETON_KEYS = {"file", "units", "up", "hide", "thin", "feet", "fps", "smpl_model", "smpl_type"}
 MAX_LENGTH_S = 600.0
+MAX_BYTES = 1 << 20  # a study file is a few dozen keys
 MAX_DEFAULT_FPS = 60.0  # without `fps`, clips keep the reference's frame rate, up to this (a video's usual most)
 
 
@@ -119,6 +121,7 @@ class StudySpec:
     view: object = None  # None: the built-in study's fixed camera; else a key of rendering.framing.VIEWS or degrees
     framing: str | None = None  # None: "full" for one person, "upper" for two (study_people.check_needs)
     styles: list = field(default_factory=lambda: ["stick"])
+    face: str = "mask"
     sources: Path | None = None  # the table of where each item came from
     interlocutor: Path | None = None  # the real other person's folder: a two-person study
     placement: str = "facing"
@@ -156,12 +159,7 @@ def read_study_file(path):
         range, or a design that needs a table the file lacks.
     """
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise StudyFileError(f"{path}: cannot read the study file ({e.strerror or e})") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise StudyFileError(f"{path}: not valid TOML ({e})") from None
+    data = user_files.read_toml(path, MAX_BYTES, StudyFileError, "study file")
     unknown(path, "", data, TOP_KEYS)
     conditions = _conditions(path, data.get("conditions"))
     reference = data.get("reference")
@@ -324,6 +322,10 @@ def _render(path, table, spec):
     if not isinstance(styles, list) or not styles or not all(s in STYLES for s in styles):
         raise err(path, "[render] style", f"must be {' or '.join(STYLES)}, or a list of them, got {style!r}")
     spec.styles = list(dict.fromkeys(styles))
+    face = table.get("face", "mask")
+    if face not in FACES:
+        raise err(path, "[render] face", f"must be {' or '.join(FACES)}, got {face!r}")
+    spec.face = face
 
 
 def check_joint_names(spec, names, where):

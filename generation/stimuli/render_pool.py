@@ -29,6 +29,11 @@ def _render_job(job):
     motion, video, sheet, size, preset, *options = job
     options = dict(options[0]) if options else {}
     audio = options.pop("audio", None)
+    for key in ("mesh", "partner_mesh"):  # a mesh style's spec: the worker skins the file itself (torch, smplx)
+        if options.get(key) is not None:
+            from .mesh_track import track
+
+            options[key] = track(options[key])
     n = render_clip(motion, video, size=size, sheet=sheet, preset=preset, threads=1, **options)
     if audio is not None:
         samples, start, duration = audio

@@ -8,13 +8,13 @@ type, within the bounds in its metadata ("min", "max", "choices"); then the fiel
 Anything wrong is one line naming the file and the field.
 """
 
-import json
 import math
 import types
 import typing
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
+from moglow_eval.core import user_files
 from moglow_eval.core.cli import UserError
 
 from ..models import flows
@@ -22,6 +22,7 @@ from ..models.fl import FLConfig
 from ..models.moglow import MGConfig
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
+CONFIG_BYTES = 1 << 20  # a config is a few dozen fields
 _ZERO_UP, _ONE_UP = {"min": 0}, {"min": 1}
 
 
@@ -97,10 +98,7 @@ def load_config(model, config):
         path = CONFIG_DIR / f"{model}_{config}.json"
     if not path.is_file():
         raise TrainError(f"config '{config}' not found (tried {path})")
-    try:
-        values = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise TrainError(f"{path}:{e.lineno}: invalid JSON ({e.msg})") from None
+    values = user_files.read_json(path, CONFIG_BYTES, TrainError, "config file")
     if not isinstance(values, dict):
         raise TrainError(f"{path}: expected a JSON object of fields")
     return checked(model, values, str(path))

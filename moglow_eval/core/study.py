@@ -4,6 +4,7 @@ The parts exchange files, not code, so these names are also what the files hold:
 "NAT", a role column "catch", a clip id matches CLIP_ID.
 """
 
+import collections
 import re
 import secrets
 
@@ -21,7 +22,16 @@ CATCH_FAIL_AT = 3
 
 # The test designs (CONTRACTS §8), as the database, the API and the files name them; each part implements them
 # behind its own interface and lists them in its registry (rating_app.designs, analysis.designs).
-DESIGNS = ("acr", "pairwise", "parallel", "appropriateness")
+DESIGNS = ("acr", "pairwise", "parallel", "appropriateness", "dyadic", "semantic")
+# The designs that set a system's matched clip against its mismatched one (GENEA 2023's appropriateness, its
+# interlocutor test, GENEA 2026's semantic alignment), and the export column that names what the mismatched motion was
+# made for: another item's speech, another interlocutor, another utterance (CONTRACTS §8). The column tells the
+# analysis which design a file holds.
+MISMATCH_COLUMN = {
+    "appropriateness": "mismatched_item",
+    "dyadic": "mismatched_interlocutor",
+    "semantic": "mismatched_utterance",
+}
 DEFAULT_DESIGN = "acr"  # the paper's design: a study, a database or a file that names none
 
 # Clip ids are random, so a file or URL name tells a rater nothing about the condition (CONTRACTS §4).
@@ -78,3 +88,22 @@ def pair_catch_failed(condition_a, condition_b, preference):
 def page_catch_failed(bad_rating, natural_rating):
     """A parallel page rates its BAD clip at or above its NAT clip."""
     return bad_rating >= natural_rating
+
+
+# The rater exclusion (CONTRACTS §6, §8): a rater who fails this many catch trials, by the design's rule above, is
+# excluded. Their answers are kept and exported (flagged `failed_catch`), and none of them enters a statistic: not
+# the report's primary analysis, nor the app's ranking (the posterior behind active pairs, the stopping rule, the
+# dashboard's "how far from settled"). Both parts call `excluded_raters`, so they exclude the same raters.
+EXCLUDE_AT_FAILS = 1
+
+
+def excluded(n_failed: int) -> bool:
+    """Whether a rater who failed `n_failed` catch trials is excluded."""
+    return n_failed >= EXCLUDE_AT_FAILS
+
+
+def excluded_raters(catch_answers) -> list:
+    """The raters excluded, sorted, from (rater, failed) for each catch answer (any other answer may come too,
+    as failed False)."""
+    fails = collections.Counter(rater for rater, failed in catch_answers if bool(failed))
+    return sorted(rater for rater, n in fails.items() if excluded(n))

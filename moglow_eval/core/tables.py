@@ -9,8 +9,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from moglow_eval.core import study
+from moglow_eval.core import study, user_files
 from moglow_eval.core.cli import UserError
+
+MAX_BYTES = 4 << 30  # an export of every answer of a large study is a few hundred MB; a table is never this large
 
 
 class TableError(UserError):
@@ -18,19 +20,19 @@ class TableError(UserError):
 
 
 def read_csv(path, error=TableError):
-    """A CSV file as all-text columns, indexed by file line number (header = line 1); `error` names it."""
+    """A CSV file as all-text columns, indexed by file line number (header = line 1); `error` names it. Only a
+    regular file of at most MAX_BYTES is read (moglow_eval.core.user_files.open_regular)."""
     path = Path(path)
-    if not path.is_file():
-        raise error(f"{path}: no such file")
-    with open(path, "rb") as f:
-        head = f.read(4096)  # not read_bytes(): the whole file is read once, by pandas, below
-    if not head.strip():
-        raise error(f"{path}: file is empty (expected a CSV header and rows)")
     try:
-        # All text, no NA guessing: "NA" or "" stay visible so we can name the line that holds them.
-        df = pd.read_csv(
-            path, dtype=str, keep_default_na=False, na_filter=False, skip_blank_lines=False, encoding="utf-8-sig"
-        )
+        with user_files.open_regular(path, MAX_BYTES, error) as fh:
+            head = fh.read(4096)
+            if not head.strip():
+                raise error(f"{path}: file is empty (expected a CSV header and rows)")
+            fh.seek(0)
+            # All text, no NA guessing: "NA" or "" stay visible so we can name the line that holds them.
+            df = pd.read_csv(
+                fh, dtype=str, keep_default_na=False, na_filter=False, skip_blank_lines=False, encoding="utf-8-sig"
+            )
     except pd.errors.ParserError as exc:
         raise error(f"{path}: malformed CSV: {str(exc).strip().splitlines()[-1]}") from None
     except UnicodeDecodeError as exc:

@@ -8,14 +8,18 @@ from flask import current_app
 
 from moglow_eval.core import study
 
-from ..study.manifest import AppError
+from ..store.manifest import AppError
 from .acr import Acr
 from .appropriateness import Appropriateness
 from .base import LABELS, MAX_PAGE, Design, Unit
+from .dyadic import Dyadic
 from .pairwise import Pairwise
 from .parallel import Parallel
+from .semantic import Semantic
 
-DESIGNS: dict[str, Design] = {d.name: d for d in (Acr(), Pairwise(), Parallel(), Appropriateness())}
+DESIGNS: dict[str, Design] = {
+    d.name: d for d in (Acr(), Pairwise(), Parallel(), Appropriateness(), Dyadic(), Semantic())
+}
 assert tuple(DESIGNS) == study.DESIGNS, "moglow_eval.core.study.DESIGNS and the registry list the same designs"
 
 __all__ = ["DESIGNS", "LABELS", "MAX_PAGE", "Design", "Unit", "build_units", "get", "of_app"]

@@ -12,7 +12,7 @@ from moglow_eval.core import study
 
 from ..guard.bodies import int_field
 from ..pairing.assign import NO_TARGET, StudyFull, claim, cover, n_catch_slots, short_or_full, slots
-from ..study.db import Clip, Cover, Rater, Rating, Trial
+from ..store.db import Clip, Cover, Rater, Rating, Trial
 from .base import Design, new_condition_row
 from .export_cells import RATER_EXTRA, TAIL, common
 
@@ -115,6 +115,9 @@ class Acr(Design):
     # ---------------------------------------------------------------------------------- export, dashboard
     def export_rows(self, s):
         yield from iter_rows(s)
+
+    def catch_answers(self, rows):
+        return ((r["rater_id"], r["role"] == "catch" and study.acr_catch_failed(r["rating"])) for r in rows)
 
     def progress(self, s, target, units):
         return progress_tables(s, target)

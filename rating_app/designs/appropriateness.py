@@ -12,19 +12,19 @@ from __future__ import annotations
 
 from sqlalchemy import select
 
-from ..study.db import Clip
-from ..study.manifest import AppError
+from moglow_eval.core import study
+
+from ..store.db import Clip
+from ..store.manifest import AppError
 from .base import Unit
 from .pairwise import Pairwise, iter_pair_rows
-
-COLUMNS = (*Pairwise.columns, "matched", "mismatched_item")
 
 
 class Appropriateness(Pairwise):
     name = "appropriateness"
     question = "Which motion fits the speech better?"
     export_noun = "appropriateness answers"
-    columns = COLUMNS
+    columns = (*Pairwise.columns, "matched", study.MISMATCH_COLUMN["appropriateness"])
     default_reasons, default_reason_text = (), 0  # GENEA's reasons are about realism; set VOTE_REASONS to ask
     dashboard = {
         **Pairwise.dashboard,
@@ -42,14 +42,14 @@ class Appropriateness(Pairwise):
         mismatched = {(c.item, c.condition): c.clip_id for c in clips if c.role == "test" and c.motion_item}
         if not mismatched:
             raise AppError(
-                "appropriateness: the manifest has no mismatched clips (a motion_item column); build the stimuli "
-                'with design = "appropriateness" in the study file'
+                f"{self.name}: the manifest has no mismatched clips (a motion_item column); build the stimuli "
+                f'with design = "{self.name}" in the study file'
             )
         units = {}
         for item, by_cond in sorted(tests.items()):
             for cond, ids in sorted(by_cond.items()):
                 if (item, cond) not in mismatched:
-                    raise AppError(f"appropriateness: item {item!r} has no mismatched clip of condition {cond}")
+                    raise AppError(f"{self.name}: item {item!r} has no mismatched clip of condition {cond}")
                 key = f"fit:{item}:{cond}"
                 units[key] = Unit(key, "test", item, (ids[0], mismatched[(item, cond)]))
         return units
@@ -58,7 +58,7 @@ class Appropriateness(Pairwise):
         return sum(durations)
 
     def export_rows(self, s):
-        yield from iter_fit_rows(s)
+        yield from iter_fit_rows(s, study.MISMATCH_COLUMN[self.name])
 
     def signed(self, row, first):
         """The mean is the MAS, seen from the matched clip (a catch row: as pairwise)."""
@@ -71,12 +71,13 @@ class Appropriateness(Pairwise):
         return rater.prefer_fit(shown[0], shown[1]), watched
 
 
-def iter_fit_rows(s):
-    """pairs.csv's rows, with the matched side and the mismatched clip's item."""
+def iter_fit_rows(s, mismatch_column):
+    """pairs.csv's rows, with the matched side and, in `mismatch_column`, the item the mismatched motion was
+    made for."""
     motion = dict(s.execute(select(Clip.clip_id, Clip.motion_item)).all())
     for row in iter_pair_rows(s):
         ma, mb = motion.get(row["clip_a"]) or "", motion.get(row["clip_b"]) or ""
         test = row["role"] == "test"
         row["matched"] = ("b" if ma else "a") if test else ""
-        row["mismatched_item"] = (ma or mb) if test else ""
+        row[mismatch_column] = (ma or mb) if test else ""
         yield row

@@ -41,7 +41,7 @@ class Design:
     export_noun = ""  # what one export row is, for the export command's log line
     columns: tuple[str, ...] = ()  # the export's columns, in order
     several_clips = True  # a trial shows TrialClip rows (labelled A, B, ...) rather than one Trial.clip_id
-    # The reasons asked with a vote (reasons.py): whether the design can take them, and its defaults.
+    # The reasons asked with a vote (store/reasons.py): whether the design can take them, and its defaults.
     takes_reasons = False
     default_reasons: tuple[tuple[str, str], ...] = ()
     default_reason_text = 0
@@ -78,7 +78,7 @@ class Design:
         raise NotImplementedError
 
     def pool(self, clips, units) -> tuple[int, int]:
-        """(test units, catch units) that assignment draws from, for the catch-pool check (health.py)."""
+        """(test units, catch units) that assignment draws from, for the catch-pool check (operations/health.py)."""
         raise NotImplementedError
 
     def plan(self, conn, rng: random.Random, cfg, clips, units) -> list:
@@ -120,6 +120,11 @@ class Design:
     # ---------------------------------------------------------------------------------- export, dashboard
     def export_rows(self, s):
         """The export's rows (dicts keyed by `columns`), in rater and trial order."""
+        raise NotImplementedError
+
+    def catch_answers(self, rows):
+        """(rater_id, failed a catch trial) per answer of the export `rows`, by the design's catch rule in
+        moglow_eval.core.study: what study.excluded_raters takes."""
         raise NotImplementedError
 
     def progress(self, s, target: int, units) -> dict:

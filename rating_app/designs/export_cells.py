@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from sqlalchemy import select
 
-from ..study.db import Clip, Rater
+from ..store.db import Clip, Rater
 
 # The columns after a design's own, in every export (CONTRACTS §6, §8).
 TAIL = ("trial_index", "watched_ms", "submitted_at", "external_id", "study_id", "rater_completed", "flags")
@@ -16,7 +16,11 @@ FLAGS = {
     "no_video": "the server never sent this trial's video before the answer",
     "partial_video": "the server had sent only part of this trial's video before the answer (e.g. one byte)",
     "too_fast": "the session had answers refused as arriving before the clip could have played to the end",
+    # Every row of a rater whom moglow_eval.core.study.excluded_raters excludes: kept, and left out of every ranking.
+    "failed_catch": "the rater failed a catch trial: the report's primary analysis and the app's ranking leave out "
+    "every answer of theirs",
 }
+EXCLUDED = "failed_catch"
 RATER_EXTRA = (Rater.external_id, Rater.study_id, Rater.completed_at)  # selected beside an answer's own columns
 
 
@@ -25,6 +29,11 @@ def row_flags(answer_flags: str, n_early: int) -> str:
     if n_early:
         flags.add("too_fast")
     return ";".join(sorted(flags))
+
+
+def with_flag(flags: str, flag: str) -> str:
+    """A row's `flags` cell with `flag` added."""
+    return ";".join(sorted({*filter(None, flags.split(";")), flag}))
 
 
 def rater_flags(n_early, n_no_video, n_partial) -> list[str]:

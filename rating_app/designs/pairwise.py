@@ -16,9 +16,9 @@ from sqlalchemy.orm import aliased
 from moglow_eval.core import study, votes
 
 from ..guard.bodies import int_field
-from ..study.db import Clip, Preference, Rater, StudySetting, Trial
-from ..study.reasons import parse_answer as parse_reasons
-from ..study.rounds import ROUND
+from ..store.db import Clip, Preference, Rater, StudySetting, Trial
+from ..store.reasons import parse_answer as parse_reasons
+from ..store.rounds import ROUND
 from .base import Unit, new_condition_row
 from .export_cells import RATER_EXTRA, TAIL, common
 from .units import UnitDesign, check_comparable, record_head
@@ -41,7 +41,7 @@ COLUMNS = (
 
 
 class Vote(NamedTuple):
-    """A rating-phase answer: the preference and the reasons given with it (reasons.py)."""
+    """A rating-phase answer: the preference and the reasons given with it (store/reasons.py)."""
 
     preference: int
     reasons: str  # ids joined by ';'

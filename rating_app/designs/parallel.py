@@ -15,8 +15,8 @@ from sqlalchemy import insert, select
 from moglow_eval.core import study
 
 from ..guard.bodies import int_field
-from ..study.db import Clip, PageRating, Rater, Trial, TrialClip
-from ..study.manifest import AppError
+from ..store.db import Clip, PageRating, Rater, Trial, TrialClip
+from ..store.manifest import AppError
 from .base import MAX_PAGE, Unit, new_condition_row
 from .export_cells import RATER_EXTRA, TAIL, common
 from .units import UnitDesign, check_comparable, record_head

@@ -13,8 +13,8 @@ from sqlalchemy import func, select
 from moglow_eval.core import study
 
 from ..pairing.assign import NO_TARGET, claim, cover, n_catch_slots, short_or_full, slots
-from ..study.db import Clip, Trial
-from ..study.manifest import AppError
+from ..store.db import Clip, Trial
+from ..store.manifest import AppError
 from .base import Design, Unit
 
 
@@ -141,6 +141,9 @@ class UnitDesign(Design):
     def answers(self, rows):
         """(rater_id, failed a catch trial, flags) per answer, from the export rows."""
         raise NotImplementedError
+
+    def catch_answers(self, rows):
+        return ((rid, failed) for rid, failed, _ in self.answers(rows))
 
     def progress(self, s, target, units):
         conditions = dict(s.execute(select(Clip.clip_id, Clip.condition)).all())

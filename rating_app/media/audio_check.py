@@ -10,7 +10,6 @@ until the check is passed (CONTRACTS §5).
 
 from __future__ import annotations
 
-import csv
 import random
 import re
 import secrets
@@ -19,9 +18,11 @@ from pathlib import Path
 from flask import Blueprint, abort, current_app, jsonify, send_file
 from sqlalchemy import update
 
+from moglow_eval.core import user_files
+
 from ..guard.bodies import check_token, json_body
-from ..study.db import Rater, app_engine, utcnow
-from ..study.manifest import AppError
+from ..store.db import Rater, app_engine, utcnow
+from ..store.manifest import AppError
 
 bp = Blueprint("audio_check", __name__, url_prefix="/api")
 MAX_TRIES = 2
@@ -40,10 +41,10 @@ def load_audio_check(manifest) -> dict[str, tuple[Path, str]]:
     if not path.is_file():
         raise AppError(f"{path}: missing; a study with sound needs its audio check (generation.make_stimuli writes it)")
     out = {}
-    with open(path, newline="", encoding="utf-8") as f:
-        for line, row in enumerate(csv.DictReader(f), start=2):
-            wav = (base / (row.get("file") or "")).resolve()
-            answer = (row.get("answer") or "").strip()
+    with user_files.csv_rows(path, 1 << 20, AppError, "audio check file") as (_, rows):
+        for line, row in rows:
+            wav = (base / row.get("file", "")).resolve()
+            answer = row.get("answer", "")
             if not wav.is_relative_to(base) or not wav.is_file() or not answer.isdigit():
                 raise AppError(f"{path}:{line}: needs an existing file inside the stimulus folder and digits")
             out[wav.stem] = (wav, answer)

@@ -17,7 +17,7 @@ from urllib.parse import quote
 
 from flask import abort, current_app, request, send_file
 
-from ..study.manifest import AppError
+from ..store.manifest import AppError
 
 CACHE_BYTES = int(os.environ.get("VIDEO_CACHE_MB", "512")) * 2**20  # per worker; beyond it, read per request
 ACCEL_PREFIX = "/_stimuli/"  # the proxy's internal location of the stimulus folder (deploy/, docs/hosting.md)
@@ -70,7 +70,11 @@ class VideoStore:
         """(a response whose bytes the reverse proxy sends: an empty 200 with `X-Accel-Redirect` to the file under
         ACCEL_PREFIX, which nginx's internal location, or Caddy's handle_response, serves and never shows the
         client; the byte range that response will carry, from the request's Range header). No video is held in
-        memory."""
+        memory.
+
+        The app records the range before the proxy sends it, and proxies read a Range header each its own way
+        (Caddy sends one byte for `bytes=0-0,`, a multipart body for two ranges). So a Range header that is not
+        exactly one satisfiable byte range is answered 416 here, with nothing redirected and nothing recorded."""
         try:
             path = Path(os.path.realpath(self.paths[cid]))
             if not path.is_relative_to(self.root):
@@ -82,8 +86,12 @@ class VideoStore:
         resp = current_app.response_class(status=200, mimetype="video/mp4")
         resp.headers["X-Accel-Redirect"] = ACCEL_PREFIX + quote(path.relative_to(self.root).as_posix())
         resp.headers["Cache-Control"] = "private, max-age=3600"
-        wanted = request.range.range_for_length(size) if request.range is not None else (0, size)
-        return resp, (wanted if request.method == "GET" and wanted else None)
+        wanted = one_range(size)
+        if wanted is None:
+            resp = current_app.response_class(status=416)
+            resp.headers["Content-Range"] = f"bytes */{size}"
+            return resp, None
+        return resp, (wanted if request.method == "GET" else None)
 
     def response(self, cid: str):
         """The video as a conditional response (Range, If-None-Match), without any date."""
@@ -98,3 +106,14 @@ class VideoStore:
         )
         resp.headers["Cache-Control"] = "private, max-age=3600"
         return resp
+
+
+def one_range(size: int) -> tuple[int, int] | None:
+    """[start, stop) of the bytes the request's Range header asks for: the whole file without one; None unless it
+    is exactly one byte range that overlaps the file (Werkzeug's parse, which refuses trailing commas, signs,
+    parameters and other units, and gives several ranges no single span)."""
+    if "Range" not in request.headers:
+        return (0, size)
+    parsed = request.range
+    span = parsed.range_for_length(size) if parsed is not None else None
+    return span if span is not None and span[0] < span[1] else None

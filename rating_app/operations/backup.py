@@ -20,8 +20,8 @@ from sqlalchemy import inspect
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import SQLAlchemyError
 
-from ..study.db import check_url, make_engine
-from ..study.manifest import AppError
+from ..store.db import check_url, make_engine
+from ..store.manifest import AppError
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
 PG_DUMP_MAGIC = b"PGDMP"

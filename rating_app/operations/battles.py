@@ -20,8 +20,8 @@ from sqlalchemy.orm import Session
 from moglow_eval.core import votes
 
 from ..designs import get
-from ..study.db import study_design
-from ..study.manifest import AppError
+from ..store.db import study_design
+from ..store.manifest import AppError
 from .export import cell
 
 

@@ -26,9 +26,9 @@ from sqlalchemy.orm import Session
 
 from ..designs import get
 from ..pairing.assign import lock_assign
-from ..study import rounds
-from ..study.db import Clip, Cover, clip_row, study_design, utcnow
-from ..study.manifest import AppError, load_manifest
+from ..store import rounds
+from ..store.db import Clip, Cover, clip_row, study_design, utcnow
+from ..store.manifest import AppError, load_manifest
 
 
 def _study(s, study_manifest):

@@ -3,31 +3,28 @@
 The study's design (stored in the database) gives the columns and the rows (designs/). Every text cell that a
 spreadsheet would take for a formula (starting with = + - @, a tab or a carriage return) is written with a
 leading apostrophe, so opening the export can never run anything a rater typed. The `flags` column marks
-answers to look at before trusting them (export_cells.FLAGS).
+answers to look at before trusting them (export_cells.FLAGS); every row of a rater whom the exclusion rule
+(moglow_eval.core.study.excluded_raters) excludes carries `failed_catch`.
 """
 
 from __future__ import annotations
 
 import csv
 import io
+import itertools
 
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
 from moglow_eval.core import study
+from moglow_eval.core.user_files import defuse
 
 from ..designs import get
-from ..designs.export_cells import clip_styles, row_style
-from ..study.db import TARGET_RATERS, study_design, study_setting
+from ..designs.export_cells import EXCLUDED, clip_styles, row_style, with_flag
+from ..store.db import TARGET_RATERS, study_design, study_setting
 
-FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
-
-
-def cell(value):
-    """A CSV cell that no spreadsheet evaluates."""
-    if isinstance(value, str) and value.startswith(FORMULA_START):
-        return "'" + value
-    return value
+# A CSV cell that no spreadsheet evaluates: the rule every CSV this project writes from a user's text follows.
+cell = defuse
 
 
 def export_csv(engine: Engine, out=None) -> str | int:
@@ -49,9 +46,19 @@ def export_csv(engine: Engine, out=None) -> str | int:
         style_col = ["style"] if styles else []
         w = csv.DictWriter(buf, fieldnames=[*design.columns, *style_col, *extra], lineterminator="\n")
         w.writeheader()
-        for row in design.export_rows(s):
+        for row in flagged(design, design.export_rows(s)):
             if styles:
                 row = {**row, "style": row_style(row, styles)}
             w.writerow({k: cell(v) for k, v in {**row, **extra}.items()})
             n += 1
     return n if out is not None else buf.getvalue()
+
+
+def flagged(design, rows):
+    """The export rows with EXCLUDED added to every row of an excluded rater. The rows come rater by rater
+    (designs/ order them so), so one rater's rows are held at a time."""
+    for _, mine in itertools.groupby(rows, key=lambda r: r["rater_id"]):
+        mine = list(mine)
+        if study.excluded_raters(design.catch_answers(mine)):
+            mine = [{**r, "flags": with_flag(r["flags"], EXCLUDED)} for r in mine]
+        yield from mine

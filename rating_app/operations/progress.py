@@ -8,10 +8,12 @@ from sqlalchemy import func, select
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
+from moglow_eval.core import study
+
 from ..designs import get
 from ..designs.export_cells import rater_flags
 from ..media import fetched
-from ..study.db import Event, Rater, Trial, TrialClip
+from ..store.db import Event, Rater, Trial, TrialClip
 
 
 def progress(engine: Engine, target: int, design: str | None = None, units=None) -> dict:
@@ -40,6 +42,7 @@ def progress(engine: Engine, target: int, design: str | None = None, units=None)
                     "rated": p["answers"].get(r.rater_id, 0),
                     "of": n_trials.get(r.id, 0),
                     "catch_failures": p["fails"].get(r.rater_id, 0),
+                    "excluded": study.excluded(p["fails"].get(r.rater_id, 0)),
                     "early_answers": r.n_early,
                     "ratings_without_video": nv,
                     "ratings_partial_video": pv,
@@ -83,6 +86,7 @@ def _summary(target, per_clip, per_cond, raters, events):
         "raters": raters,
         "raters_completed": sum(r["completed"] for r in raters),
         "raters_failed_catch": sum(r["catch_failures"] > 0 for r in raters),
+        "raters_excluded": sum(r["excluded"] for r in raters),
         "raters_suspicious": sum(bool(r["flags"]) for r in raters),
         "raters_expired": sum(r["expired"] for r in raters),
         # what a rater downloads: the median over finished sessions of the video bytes sent to each

@@ -12,10 +12,16 @@ untouched.
 (ranking.settledness at STOP_LEVEL, or every Elo interval narrower than STOP_WIDTH) or the test votes reached
 STOP_MAX_VOTES; sessions already started finish.
 
+Only trusted votes move the ranking: the votes of a rater whom the exclusion rule excludes (failed catch trials,
+moglow_eval.core.study.excluded_raters, the report's rule too) are kept and exported with their flag, and enter
+neither the posterior that picks the pairs, nor the stop, nor the dashboard's figures. A rater who fails a catch
+trial after some test votes loses them at the next refit, which reads every vote again.
+
 Each worker keeps its own `Ranking`: the posterior mean of the last fit, refitted when the votes changed, at most
 every REFRESH_S seconds (a GET next) or at once (a new session, so the stop is decided on every vote in); and
-the votes per pair (answered and held, from the Cover rows at the last refresh, plus the slots this worker gave
-since), whose covariance lets a slot given now count before its answer, so concurrent raters spread over pairs.
+the votes per pair (the trusted answered ones at the last refresh, the held slots from the Cover rows, plus the
+slots this worker gave since), whose covariance lets a slot given now count before its answer, so concurrent
+raters spread over pairs.
 """
 
 from __future__ import annotations
@@ -27,9 +33,9 @@ import numpy as np
 from sqlalchemy import case, func, select
 from sqlalchemy.orm import aliased
 
-from moglow_eval.core import ranking
+from moglow_eval.core import ranking, study
 
-from ..study.db import Clip, Cover, Preference, Trial
+from ..store.db import Clip, Cover, Preference, Trial
 from .assign import claim
 
 REFRESH_S = 1.0
@@ -54,6 +60,7 @@ class Ranking:
         self.post = ranking.fit(np.zeros((k, k)))
         self.counts = np.zeros((k, k))
         self.votes = 0
+        self.untrusted = (0, 0)  # (test votes, raters) left out by the exclusion rule
         self.top_id = None
         self.checked = -float("inf")
 
@@ -67,43 +74,50 @@ class Ranking:
         self.checked = t
         if top == self.top_id:
             return
-        wins, votes = self._wins(conn)
-        counts = self._counts(conn)
+        excluded = excluded_raters(conn)
+        wins, votes, left_out = self._wins(conn, excluded)
+        counts = wins + wins.T + self._held(conn)
         with self.lock:
             self.post = ranking.fit(wins, start=self.post.mean)
             self.counts, self.votes, self.top_id = counts, votes, top
+            self.untrusted = (left_out, len(excluded))
 
-    def _wins(self, conn):
-        """The win matrix of the answered test votes (ties half to each side) and their number."""
+    def _wins(self, conn, excluded):
+        """(the win matrix of the trusted answered test votes (ties half to each side), their number, the number
+        of test votes of the `excluded` raters)."""
         ca, cb = aliased(Clip), aliased(Clip)
         sign = case((Preference.preference > 0, 1), (Preference.preference < 0, -1), else_=0)
+        keys = [ca.condition, cb.condition, sign]
+        keys += [Preference.rater_pk.in_(excluded)] if excluded else []
         q = (
-            select(ca.condition, cb.condition, sign, func.count())
+            select(func.count(), *keys)
             .join(Trial, Trial.id == Preference.trial_pk)
             .join(ca, ca.clip_id == Preference.clip_a)
             .join(cb, cb.clip_id == Preference.clip_b)
             .where(Trial.kind == "test")
-            .group_by(ca.condition, cb.condition, sign)
+            .group_by(*keys)
         )
         idx = {c: i for i, c in enumerate(self.conds)}
-        w, votes = np.zeros((len(idx), len(idx))), 0
-        for a, b, s, n in conn.execute(q):
-            if a in idx and b in idx:
+        w, votes, untrusted = np.zeros((len(idx), len(idx))), 0, 0
+        for n, a, b, s, *out in conn.execute(q):
+            if out and out[0]:
+                untrusted += n
+            elif a in idx and b in idx:
                 w[idx[a], idx[b]] += n * (1.0 if s > 0 else 0.0 if s < 0 else 0.5)
                 w[idx[b], idx[a]] += n * (0.0 if s > 0 else 1.0 if s < 0 else 0.5)
                 votes += n
-        return w, votes
+        return w, votes, untrusted
 
-    def _counts(self, conn):
-        """Votes per pair of conditions, answered or held, from the test units' Cover rows."""
+    def _held(self, conn):
+        """Slots held now (served, not yet answered) per pair of conditions, from the test units' Cover rows."""
         k = len(self.conds)
         n = np.zeros((k, k))
-        for key, answered, held in conn.execute(select(Cover.key, Cover.answered, Cover.held)):
+        for key, held in conn.execute(select(Cover.key, Cover.held).where(Cover.held > 0)):
             p = self.pair_of.get(key)
             if p is not None:
                 i, j = self.pr[p]
-                n[i, j] += answered + held
-                n[j, i] += answered + held
+                n[i, j] += held
+                n[j, i] += held
         return n
 
     def posterior(self):
@@ -134,7 +148,7 @@ class Ranking:
         """How far the study is from its stop (the dashboard's "ranking"; CONTRACTS §8)."""
         cfg = self.cfg
         with self.lock:
-            post, votes = self.post, self.votes
+            post, votes, (left_out, n_excluded) = self.post, self.votes, self.untrusted
         s = ranking.settledness(post, cfg["STOP_LEVEL"], cfg["STOP_WIDTH"] or None)
         elo, se = ranking.elo(post)
         cap = cfg["STOP_MAX_VOTES"]
@@ -150,6 +164,8 @@ class Ranking:
             "widest_interval": round(s["widest"], 1),
             "width": cfg["STOP_WIDTH"] or None,
             "votes": votes,
+            "votes_excluded": left_out,
+            "raters_excluded": n_excluded,
             "max_votes": cap or None,
             "settled": s["settled"],
             "closed": cfg["STOP_WHEN"] == "settled" and (s["settled"] or bool(cap and votes >= cap)),
@@ -165,6 +181,19 @@ class Ranking:
             return None
         why = "the ranking is settled" if st["settled"] else "it has all the votes it was to collect"
         return f"study closed: {why}. Thank you for your interest"
+
+
+def excluded_raters(conn) -> list[int]:
+    """The rater pks the exclusion rule (moglow_eval.core.study.excluded_raters) excludes, from their catch votes."""
+    ca, cb = aliased(Clip), aliased(Clip)
+    q = (
+        select(Preference.rater_pk, ca.condition, cb.condition, Preference.preference)
+        .join(Trial, Trial.id == Preference.trial_pk)
+        .join(ca, ca.clip_id == Preference.clip_a)
+        .join(cb, cb.clip_id == Preference.clip_b)
+        .where(Trial.kind == "catch")
+    )
+    return study.excluded_raters((r, study.pair_catch_failed(a, b, p)) for r, a, b, p in conn.execute(q))
 
 
 def of_app(app):

@@ -27,7 +27,7 @@ import datetime as dt
 
 from sqlalchemy import func, select, update
 
-from ..study.db import COVER_KEY, COVERED_KINDS, Cover, Lock, Rater, Trial
+from ..store.db import COVER_KEY, COVERED_KINDS, Cover, Lock, Rater, Trial
 
 
 class StudyFull(Exception):

@@ -15,7 +15,7 @@ import requests
 from moglow_eval.core import study
 
 from ..designs import get
-from ..study.manifest import AppError
+from ..store.manifest import AppError
 from .raters import ClipInfo, Rater, duration_ms
 
 REACH_S = 5.0  # how long a server that is still starting may take to answer before the crowd gives up

@@ -13,7 +13,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from ..study.manifest import AppError
+from ..store.manifest import AppError
 from .client import Client, Refused, Visit, check_design, probe
 from .raters import ClipInfo, Rater, duration_ms, load_audio_answers, load_clips, make_raters, set_qualities
 

@@ -25,7 +25,7 @@ import numpy as np
 from moglow_eval.core import study
 from moglow_eval.core.tables import read_metrics
 
-from ..study.manifest import AppError, load_manifest
+from ..store.manifest import AppError, load_manifest
 
 # The paper's order (MG above FL); a condition the metrics rank overrides these.
 DEFAULT_QUALITY = {study.NATURAL: 4.2, **dict(zip(study.GENERATED, (3.6, 2.6))), study.CATCH: 1.3}

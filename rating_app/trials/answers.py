@@ -19,9 +19,9 @@ from ..designs import of_app
 from ..guard.bodies import int_field, json_body
 from ..media import fetched
 from ..pairing.assign import answer, expire_idle
-from ..study.db import Rater, Trial, TrialClip, app_engine, utcnow
-from ..study.reasons import parse_answer as parse_reasons
-from ..study.rounds import know_clips
+from ..store.db import Rater, Trial, TrialClip, app_engine, utcnow
+from ..store.reasons import parse_answer as parse_reasons
+from ..store.rounds import know_clips
 from . import sessions
 from .sessions import OPEN, is_open
 

@@ -19,17 +19,19 @@ from sqlalchemy import insert, select, text, update
 from ..designs import LABELS, of_app
 from ..pairing import active
 from ..pairing.assign import expire_idle, hold, lock_assign
-from ..study.db import Rater, Trial, TrialClip, read_engine
-from ..study.rounds import current_units
+from ..store.db import Rater, Trial, TrialClip, read_engine
+from ..store.rounds import current_units
 from . import sessions
 
 
 def _assign(conn, rng, rater_pk, t, wait):
     """The clip id or Unit for trial `t`, or None."""
-    # As of the study's latest round and withdrawals (rounds.py); its revision was read with the trial ("0": none yet).
+    # As of the study's latest round and withdrawals (store/rounds.py); its revision was read with the trial ("0":
+    # none yet).
     units = current_units(conn, t.study_revision or "0")
     ext, cfg = current_app.extensions["rating_app"], current_app.config
-    if t.kind == "test" and cfg["PAIRING"] == "active":  # active.py: chooses among what the balanced rule allows
+    # pairing/active.py: chooses among what the balanced rule allows
+    if t.kind == "test" and cfg["PAIRING"] == "active":
         unit = active.for_units(ext, units).pick(conn, rng, rater_pk, units, cfg["RATINGS_PER_CLIP"], wait)
         if unit is not None:
             return unit

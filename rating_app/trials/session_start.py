@@ -23,8 +23,8 @@ from ..guard.bodies import ext_field, json_body
 from ..guard.limits import client_key
 from ..pairing.active import for_units
 from ..pairing.assign import StudyFull, expire_idle, lock_assign
-from ..study.db import Rater, Trial, TrialClip, app_engine, utcnow
-from ..study.rounds import refresh
+from ..store.db import Rater, Trial, TrialClip, app_engine, utcnow
+from ..store.rounds import refresh
 from . import sessions
 from .answers import TOLERANCE_MS
 
@@ -112,7 +112,7 @@ def start():
             ext = refresh(conn)  # a round begun or a condition withdrawn since this worker loaded the study
             ranking = for_units(ext, ext["units"])
             closed = ranking.closed(conn) if ranking is not None else None
-            if closed:  # the stopping rule (active.py): no new raters, started sessions finish
+            if closed:  # the stopping rule (pairing/active.py): no new raters, started sessions finish
                 return jsonify(error=closed, full=True, closed=True), 409
             rng = random.Random(secrets.randbits(64))
             try:

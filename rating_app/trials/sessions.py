@@ -14,8 +14,8 @@ from sqlalchemy import and_, bindparam, select, update
 from sqlalchemy.orm import aliased
 
 from ..guard.bodies import check_token
-from ..study.db import Rater, StudySetting, Trial
-from ..study.rounds import REVISION
+from ..store.db import Rater, StudySetting, Trial
+from ..store.rounds import REVISION
 
 TOUCH_EVERY_S = 30  # last_seen (shown on the dashboard) is refreshed at most this often
 RATER_COLS = (
@@ -51,7 +51,7 @@ def is_open(t=Trial):
     return and_(t.answered_at.is_(None), t.released.is_(False))
 
 
-# With the study's revision (rounds.py) read in the same statement, so that the worker that hands the trial a unit
+# With the study's revision (store/rounds.py) read in the same statement, so that the worker that hands the trial a unit
 # learns of a round begun or a condition withdrawn without a statement of its own.
 _REVISION = select(StudySetting.value).where(StudySetting.name == REVISION).scalar_subquery().label("study_revision")
 _CURRENT = (

@@ -1,5 +1,5 @@
 """The videos of a served trial, sent by the URLs the page plays: the bytes each response carries are recorded
-(fetched.py), so an answer before a clip's whole file was sent is flagged.
+(media/fetched.py), so an answer before a clip's whole file was sent is flagged.
 
 A video request reads the session, the trial and (a trial of several clips) the clip in one statement: the page
 fetches every clip of every trial, so these are the app's most frequent requests.
@@ -12,8 +12,8 @@ from sqlalchemy import bindparam, func, select, update
 
 from ..guard.bodies import check_token
 from ..media import fetched
-from ..study.db import Rater, Trial, TrialClip, app_engine, read_engine, utcnow
-from ..study.rounds import know_clips
+from ..store.db import Rater, Trial, TrialClip, app_engine, read_engine, utcnow
+from ..store.rounds import know_clips
 from . import sessions
 
 TRIAL_VIDEO = (
@@ -41,11 +41,11 @@ def video_row(stmt, token, **params):
 
 def send_video(table, row):
     """The video of `row` (a Trial or TrialClip), with the bytes this response carries added to the row's
-    `video_ranges` (fetched.py) unless those already cover the file. The ranges are swapped in only if the row
+    `video_ranges` (media/fetched.py) unless those already cover the file. The ranges are swapped in only if the row
     still holds the ones read, so two concurrent range requests never drop each other's bytes: the loser reads
     again and retries."""
     videos = current_app.extensions["rating_app"]["videos"]
-    if row.clip_id not in videos.paths:  # a clip of a round this worker has not loaded yet (rounds.py)
+    if row.clip_id not in videos.paths:  # a clip of a round this worker has not loaded yet (store/rounds.py)
         with read_engine().connect() as conn:
             know_clips(conn, [row.clip_id])
     size = videos.size(row.clip_id)

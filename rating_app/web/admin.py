@@ -35,10 +35,10 @@ from ..operations import health
 from ..operations.export import export_csv
 from ..operations.progress import progress
 from ..pairing.active import for_units
-from ..study.db import AdminLogin, LoginFailure, app_engine, utcnow
-from ..study.manifest import AppError
-from ..study.reasons import latest_texts
-from ..study.rounds import current_units, refresh
+from ..store.db import AdminLogin, LoginFailure, app_engine, utcnow
+from ..store.manifest import AppError
+from ..store.reasons import latest_texts
+from ..store.rounds import current_units, refresh
 
 bp = Blueprint("admin", __name__, url_prefix="/admin")
 
@@ -117,7 +117,7 @@ def dashboard():
 def _conditions():
     """The study's conditions and rounds (a design that grows round by round), or None."""
     from ..operations.conditions import conditions_table
-    from ..study.rounds import GROWS
+    from ..store.rounds import GROWS
 
     if current_app.config["STUDY_DESIGN"] not in GROWS:
         return None
@@ -219,7 +219,7 @@ def logout():
 @bp.get("/export.csv")
 def export():
     require_admin()
-    if request.args.get("format") == "battles":  # the leaderboard's battle format (battles.py)
+    if request.args.get("format") == "battles":  # the leaderboard's battle format (operations/battles.py)
         from ..operations.battles import export_battles
 
         try:

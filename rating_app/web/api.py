@@ -1,11 +1,10 @@
 """The rater JSON API (CONTRACTS §5, §8): its endpoints. The page uses it; so do the simulated crowd and the load
 tests.
 
-Each endpoint is a thin door into the module that does the work: starting a session (session_start.py), serving
-a trial (serving.py), its videos (trial_videos.py), storing an answer (answers.py), on a session's row
-(sessions.py). Every design (designs/) takes the same path: a trial is a slot served with a clip or a unit of
-several clips, and answered with the design's value.
-"""
+Each endpoint is a thin door into the module that does the work: starting a session (trials/session_start.py), serving a
+trial (trials/serving.py), its videos (trials/trial_videos.py), storing an answer (trials/answers.py), on a session's
+row (trials/sessions.py). Every design (designs/) takes the same path: a trial is a slot served with a clip or a unit of
+several clips, and answered with the design's value."""
 
 from __future__ import annotations
 
@@ -15,7 +14,7 @@ from sqlalchemy import func, insert, select, update
 from ..guard.bodies import int_field, json_body
 from ..guard.limits import escape_text, same_site_only
 from ..pairing.assign import expire_idle
-from ..study.db import Event, Rater, Trial, TrialClip, app_engine, read_engine, utcnow
+from ..store.db import Event, Rater, Trial, TrialClip, app_engine, read_engine, utcnow
 from ..trials import answers, session_start, sessions
 from ..trials.serving import serve, trial_reply
 from ..trials.trial_videos import CLIP_VIDEO, TRIAL_VIDEO, send_video, video_row

@@ -12,8 +12,8 @@ from moglow_eval.core import study
 
 from ..guard.bodies import EXTERNAL
 from ..operations import health
-from ..study.db import app_engine
-from ..study.rounds import refresh
+from ..store.db import app_engine
+from ..store.rounds import refresh
 
 bp = Blueprint("pages", __name__)
 
@@ -51,7 +51,7 @@ def index():
         answer_field=design.answer_field,
         question=cfg["STUDY_QUESTION"],
         sound=cfg["STUDY_SOUND"],
-        reasons=cfg["VOTE_REASONS"],  # the boxes shown with a vote, and the free text's limit (reasons.py)
+        reasons=cfg["VOTE_REASONS"],  # the boxes shown with a vote, and the free text's limit (store/reasons.py)
         reason_text=cfg["REASON_TEXT"],
     )
 

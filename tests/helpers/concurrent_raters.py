@@ -34,11 +34,11 @@ def run_raters(app, answer, n=8, timeout=300):
 
 
 def cover_mismatches(engine):
-    """{key: (Cover row, count from the trials)} wherever the app's running counts (rating_app.study.db.Cover) differ
+    """{key: (Cover row, count from the trials)} wherever the app's running counts (rating_app.store.db.Cover) differ
     from counting the trials; {} when they agree, as they must after any crowd, crash or expiry."""
     from sqlalchemy import select
 
-    from rating_app.study.db import Cover, trial_cover
+    from rating_app.store.db import Cover, trial_cover
 
     with engine.connect() as conn:
         rows = {k: (a, h) for k, a, h in conn.execute(select(Cover.key, Cover.answered, Cover.held))}

@@ -85,3 +85,93 @@ def motion_arrays(kind, frames=60, fps=30.0, seed=0):
 def write_motion(path, kind, **kw):
     np.savez(path, **motion_arrays(kind, **kw))
     return path
+
+
+# -------------------------------------------------------------------------------- a body-shaped mesh
+def _radius(kind, j):
+    """A tube's radius for the bone that ends at joint j: the trunk thick, the limbs thinner, the fingers thin."""
+    if j >= 22:
+        return 0.009  # fingers (and SMPL-X's jaw and eyes, drawn as small tubes too)
+    return {3: 0.11, 6: 0.12, 9: 0.12, 12: 0.05, 13: 0.06, 14: 0.06, 1: 0.08, 2: 0.08}.get(j, 0.045)
+
+
+class _MeshBuilder:
+    """Vertices, the joint each is skinned to, and triangles, grown a part at a time."""
+
+    def __init__(self, rest, segments):
+        self.verts, self.joint, self.faces = [p for p in rest], list(range(len(rest))), []
+        self.around = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+
+    def ring_faces(self, start, rows, flip=False):
+        """Two triangles per quad between consecutive rings of `len(around)` vertices from `start`."""
+        s_n = len(self.around)
+        for k in range(rows - 1):
+            for s in range(s_n):
+                p, q = start + k * s_n + s, start + k * s_n + (s + 1) % s_n
+                tri = [(p, q, q + s_n), (p, q + s_n, p + s_n)]
+                self.faces.extend([(a, c, b) for a, b, c in tri] if flip else tri)
+
+    def tube(self, a, b, radius, joint, rings):
+        """A closed tube from a to b, every vertex skinned to `joint`."""
+        axis = b - a
+        d = axis / max(np.linalg.norm(axis), 1e-9)
+        u = np.cross(d, [0.0, 0.0, 1.0] if abs(d[2]) < 0.9 else [1.0, 0.0, 0.0])
+        u /= np.linalg.norm(u)
+        w = np.cross(d, u)
+        start, s_n = len(self.verts), len(self.around)
+        for k in range(rings):
+            centre = a + axis * k / (rings - 1)
+            self.verts += [centre + radius * (np.cos(t) * u + np.sin(t) * w) for t in self.around]
+        self.joint += [joint] * (rings * s_n)
+        self.ring_faces(start, rings)
+        for end, sign in ((0, -1), (rings - 1, 1)):  # the caps: a fan around a tip
+            tip = len(self.verts)
+            self.verts.append((a if end == 0 else b) + sign * d * radius * 0.5)
+            self.joint.append(joint)
+            for s in range(s_n):
+                p, q = start + end * s_n + s, start + end * s_n + (s + 1) % s_n
+                self.faces.append((tip, q, p) if end == 0 else (tip, p, q))
+
+    def sphere(self, centre, radius, joint, rings):
+        lat = np.linspace(0.1, np.pi - 0.1, rings)
+        start = len(self.verts)
+        for phi in lat:
+            self.verts += [centre + radius * np.array([np.sin(phi) * np.sin(t), np.cos(phi), np.sin(phi) * np.cos(t)])
+                           for t in self.around]  # fmt: skip
+        self.joint += [joint] * (rings * len(self.around))
+        self.ring_faces(start, rings, flip=True)
+
+
+def body_model_arrays(kind, rings=4, segments=12, head_rings=10, seed=0):
+    """A synthetic model of the smplx layout whose mesh is a body: one closed tube around each bone (its vertices
+    skinned to the bone's parent joint, as a limb's are in SMPL) and a sphere around the head joint, the head's
+    vertices on its front (+Z, where SMPL faces) making up the face. The first J vertices are the rest joints, which
+    J_regressor picks, as in `model_arrays`. `rings` and `segments` set the vertex count (the real SMPL-H has 6890)."""
+    arrays = model_arrays(kind, seed=seed)
+    parents, rest = tree(kind)
+    n = len(parents)
+    mesh = _MeshBuilder(rest, segments)
+    for j in range(1, n):
+        if j != 15:  # the head: a sphere
+            mesh.tube(rest[parents[j]], rest[j], _radius(kind, j), parents[j], rings)
+    mesh.sphere(rest[15] + (0, 0.05, 0), 0.1, 15, head_rings)
+    v = len(mesh.verts)
+    weights = np.zeros((v, n), np.float32)
+    weights[np.arange(v), mesh.joint] = 1.0
+    regressor = np.zeros((n, v), np.float32)
+    regressor[np.arange(n), np.arange(n)] = 1.0
+    rng = np.random.default_rng(seed)
+    arrays.update(
+        v_template=np.array(mesh.verts, np.float32),
+        shapedirs=rng.normal(0, 0.002, (v, 3, 10)).astype(np.float32),
+        posedirs=np.zeros((v, 3, (n - 1) * 9), np.float32),
+        J_regressor=regressor,
+        weights=weights,
+        f=np.array(mesh.faces, np.int64),
+    )
+    return arrays
+
+
+def write_body_model(path, kind, **kw):
+    np.savez(path, **body_model_arrays(kind, **kw))
+    return path

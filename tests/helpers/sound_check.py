@@ -8,7 +8,7 @@ def pass_sound_check(driver, wait, app, screenshot=None):
     from selenium.webdriver.support import expected_conditions as EC
     from sqlalchemy import select
 
-    from rating_app.study.db import Rater, app_engine
+    from rating_app.store.db import Rater, app_engine
 
     wait.until(EC.visibility_of_element_located((By.ID, "audio-check")))
     wait.until(EC.element_to_be_clickable((By.ID, "audio-play"))).click()

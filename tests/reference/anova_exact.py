@@ -9,7 +9,7 @@ from fractions import Fraction
 
 import pandas as pd
 
-from analysis import stats
+from analysis.stats import anova as stats
 
 
 def one_way_anova_exact(df, dv, between):

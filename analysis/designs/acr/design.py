@@ -3,7 +3,8 @@
 Every statistic is computed on the kept test rows (after the catch-trial rater exclusion: a rater who rated a
 bad example at or above the threshold) and again on all test rows ("without_exclusion"): ANOVA, Tukey HSD,
 Kruskal-Wallis and Mann-Whitney, a cluster bootstrap over raters and clips, a linear and an ordinal mixed
-model (bootstrap.py, rating_models.py), and the objective metrics' correlations. Its report parts are in sections.py.
+model (stats/bootstrap.py, stats/rating_models.py), and the objective metrics' correlations. Its report parts
+are in sections.py.
 """
 
 from functools import partial

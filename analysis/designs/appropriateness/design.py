@@ -1,6 +1,8 @@
 """appropriateness (CONTRACTS §8, GENEA 2023): pairs.csv with `matched`; the mean appropriateness score per system
 with its interval, shares and sign test (analysis/designs/appropriateness/mas.py), and its bar figure."""
 
+from moglow_eval.core import study
+
 from ...page import design_figures
 from ...page.report_html import table
 from ..base import FailedCatchDesign
@@ -8,10 +10,20 @@ from . import mas
 
 
 class Appropriateness(FailedCatchDesign):
+    """Also the base of the dyadic and semantic designs: the same answers and statistics, each named for its
+    question (`score`, `heading`) and told apart by the column naming what the mismatched motion was made for
+    (moglow_eval.core.study.MISMATCH_COLUMN)."""
+
     name = "appropriateness"
+    score = "mean appropriateness score (MAS)"
+    heading = (
+        "Mean appropriateness score (MAS: +2 = the matched motion clearly preferred, -2 = the mismatched "
+        "one; 0 = chance)"
+    )
 
     def detects(self, columns):
-        return "preference" in columns and mas.MATCHED in columns
+        others = [c for d, c in study.MISMATCH_COLUMN.items() if d != self.name]
+        return "preference" in columns and mas.MATCHED in columns and not any(c in columns for c in others)
 
     def load(self, path):
         return mas.load_answers(path)
@@ -23,7 +35,7 @@ class Appropriateness(FailedCatchDesign):
         return mas.analyse(df, alpha=options.alpha)
 
     def figures(self, data, kept, everyone, folder):
-        return {"mas": design_figures.mas_bars(kept["mas"], folder / "mas.png")}
+        return {"mas": design_figures.mas_bars(kept["mas"], folder / "mas.png", score=self.score)}
 
     def section_json(self, res):
         t = res["mas"].set_index("condition")
@@ -37,9 +49,8 @@ class Appropriateness(FailedCatchDesign):
     def section_html(self, res):
         return [
             f"<p>{res['n_test_answers']} test answers from {res['n_raters']} raters on {res['n_items']} "
-            "items.</p><h3>Mean appropriateness score (MAS: +2 = the matched motion clearly preferred, -2 = the "
-            "mismatched one; 0 = chance), 95% Student-t interval, shares of preferences, sign test against "
-            "chance (ties dropped), Holm</h3>",
+            f"items.</p><h3>{self.heading}, 95% Student-t interval, shares of preferences, sign test against chance "
+            "(ties dropped), Holm</h3>",
             table(res["mas"], ("p", "p_holm")),
         ]
 

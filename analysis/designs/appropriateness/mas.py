@@ -53,10 +53,10 @@ def load_answers(path):
 
 
 def failed_raters(df):
-    """Raters who preferred the BAD clip of a catch pair, at either level."""
+    """Raters excluded (study.excluded_raters) for preferring the BAD clip of catch pairs, at either level."""
     c = df[df["role"] == "catch"]
     fail = study.pair_catch_failed(c["condition_a"], c["condition_b"], c["preference"])
-    return sorted(c.loc[fail, "rater_id"].unique())
+    return study.excluded_raters(zip(c["rater_id"].tolist(), fail.tolist()))
 
 
 def mas_table(df, alpha=0.05):

@@ -100,10 +100,10 @@ def read_preferences(path, required):
 
 # ---------------------------------------------------------------------------------------------- exclusion
 def failed_raters(df):
-    """Raters who preferred the BAD clip of any catch pair (either level)."""
+    """Raters excluded (study.excluded_raters) for preferring the BAD clip of catch pairs (either level)."""
     c = df[df["role"] == "catch"]
     fail = study.pair_catch_failed(c["condition_a"], c["condition_b"], c["preference"])
-    return sorted(c.loc[fail, "rater_id"].unique().tolist())
+    return study.excluded_raters(zip(c["rater_id"].tolist(), fail.tolist()))
 
 
 # ---------------------------------------------------------------------------------------------- counts

@@ -70,15 +70,15 @@ def load_pages(path):
 
 
 def failed_raters(df):
-    """Raters who rated a BAD clip at or above the NAT clip of the same catch page."""
+    """Raters excluded (study.excluded_raters) for rating a BAD clip at or above the NAT clip of its catch page."""
     c = df[df["role"] == "catch"]
     wide = c.pivot_table(
         index=["rater_id", "page_id"], columns="condition", values="rating", aggfunc="max", observed=True
     )
     if BAD not in wide.columns or REFERENCE not in wide.columns:
         return []
-    fail = study.page_catch_failed(wide[BAD], wide[REFERENCE])
-    return sorted(wide.index[fail.fillna(False).to_numpy()].get_level_values("rater_id").unique().tolist())
+    fail = study.page_catch_failed(wide[BAD], wide[REFERENCE]).fillna(False)
+    return study.excluded_raters(zip(wide.index.get_level_values("rater_id").tolist(), fail.tolist()))
 
 
 def condition_summary(t, n_boot=1000, seed=0, level=0.95):

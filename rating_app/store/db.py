@@ -95,7 +95,7 @@ class Rater(Base):
     client: Mapped[str] = mapped_column(String(32), index=True, default="")  # keyed hash of the address
     resume_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)  # sha256 of the resume cookie
     n_early: Mapped[int] = mapped_column(Integer, default=0)  # answers refused as too early
-    # The audio check of a study with sound (audio_check.py): the sample being played, failed tries, passed when.
+    # The audio check of a study with sound (media/audio_check.py): the sample being played, failed tries, passed when.
     audio_sample: Mapped[str | None] = mapped_column(String(64), nullable=True)
     audio_tries: Mapped[int | None] = mapped_column(Integer, nullable=True, default=0)
     audio_passed_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
@@ -117,7 +117,7 @@ class Trial(Base):
     index: Mapped[int] = mapped_column(Integer)  # 1.. within the phase
     served_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)  # first GET next
     video_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)  # first bytes of the video sent
-    video_ranges: Mapped[str | None] = mapped_column(String(400), nullable=True)  # bytes sent (fetched.py)
+    video_ranges: Mapped[str | None] = mapped_column(String(400), nullable=True)  # bytes sent (media/fetched.py)
     answered_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
     # An expired session's unanswered slots, and a slot no clip was left for, are released: never served
     # and never answerable again.
@@ -137,7 +137,7 @@ class TrialClip(Base):
     label: Mapped[str] = mapped_column(String(4))
     clip_id: Mapped[str] = mapped_column(ForeignKey("clips.clip_id"))
     video_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)  # first bytes of the video sent
-    video_ranges: Mapped[str | None] = mapped_column(String(400), nullable=True)  # bytes sent (fetched.py)
+    video_ranges: Mapped[str | None] = mapped_column(String(400), nullable=True)  # bytes sent (media/fetched.py)
 
 
 class Rating(Base):

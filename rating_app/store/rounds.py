@@ -1,7 +1,7 @@
 """A study that grows round by round (CONTRACTS §8, *Rounds*): which conditions it has, since which round, which
 are withdrawn, and how every worker of a running app learns of a change.
 
-The start is round 1. `add-condition` (conditions.py) adds a condition's clips and begins the next round;
+The start is round 1. `add-condition` (operations/conditions.py) adds a condition's clips and begins the next round;
 `withdraw-condition` stops serving the pairs of a condition. Each of them bumps the study's `revision` (a
 StudySetting); a worker compares it with the one it loaded before it hands out a unit, starts a session or meets a
 clip it does not know, and reloads the study's manifest (to which add-condition appended the new clips) when it

@@ -3,16 +3,15 @@ core.tables.read_metrics."""
 
 from __future__ import annotations
 
-import csv
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from moglow_eval.core import study
+from moglow_eval.core import study, user_files
 from moglow_eval.core.cli import UserError
 
 REQUIRED = ("clip_id", "condition", "role", "item", "video")
+MAX_BYTES = 64 << 20  # a manifest row is about 200 bytes: 300,000 clips
 
 
 class AppError(UserError):
@@ -51,30 +50,31 @@ def _number(value: str, kind, where: str, field: str):
     return x
 
 
+def read_rows(path):
+    """``with read_rows(path) as (header, rows)``: a manifest (or metrics.csv beside one) read as a user's file
+    (moglow_eval.core.user_files.csv_rows): rows of (line, {column: cell stripped once}), every reader of it then
+    using the same stripped cells."""
+    return user_files.csv_rows(path, MAX_BYTES, AppError, "manifest")
+
+
 def load_manifest(path, check_files: bool = True) -> list[ManifestClip]:
     """The clips of manifest.csv; AppError naming the file and line for the first row that breaks CONTRACTS §4.
     `check_files`: also require every video to exist (the server does; the simulated crowd, elsewhere, does not)."""
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise AppError(f"{path}: manifest not found")
     base = path.resolve().parent
     clips, seen = [], set()
-    try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            reader = csv.DictReader(fh)
-            missing = [c for c in REQUIRED if c not in (reader.fieldnames or [])]
-            if missing:
-                raise AppError(f"{path}:1: missing column(s) {', '.join(missing)}")
-            for line, row in enumerate(reader, start=2):
-                clip = _clip(row, f"{path}:{line}", base, check_files)
-                if clip.clip_id in seen:
-                    raise AppError(f"{path}:{line}: duplicate clip_id {clip.clip_id}")
-                seen.add(clip.clip_id)
-                clips.append(clip)
-    except UnicodeDecodeError as e:
-        raise AppError(f"{path}: not UTF-8 ({e.reason})") from None
-    except csv.Error as e:
-        raise AppError(f"{path}: bad CSV ({e})") from None
+    with read_rows(path) as (header, rows):
+        missing = [c for c in REQUIRED if c not in header]
+        if missing:
+            raise AppError(f"{path}:1: missing column(s) {', '.join(missing)}")
+        for line, row in rows:
+            clip = _clip(row, f"{path}:{line}", base, check_files)
+            if clip.clip_id in seen:
+                raise AppError(f"{path}:{line}: duplicate clip_id {clip.clip_id}")
+            seen.add(clip.clip_id)
+            clips.append(clip)
     if not clips:
         raise AppError(f"{path}: no clips")
     return clips
@@ -114,15 +114,13 @@ def reference_name(manifest) -> str | None:
     """The reference condition's own name from study.json beside the manifest (a study of your own motion,
     CONTRACTS §4), None where there is no such file or it names NAT; AppError, one line, on a malformed file."""
     path = Path(manifest).resolve().parent / study.STUDY_NAMES_FILE
-    if not path.is_file():
+    if not path.exists():
         return None
-    try:
-        if path.stat().st_size > 4096:  # a few names: anything larger is not this file
-            raise ValueError("larger than 4 KB")
-        doc = json.loads(path.read_text(encoding="utf-8"))
-        name = doc[study.REFERENCE_NAME] if isinstance(doc, dict) else None
-    except (OSError, ValueError, KeyError) as exc:
-        raise AppError(f"{path}: not a study names file ({exc})") from None
+    text = user_files.read_text(path, 4096, AppError, "study names file")  # a few names: larger is not this file
+    doc = user_files.json_value(text, f"{path}: not a study names file", AppError)
+    name = doc.get(study.REFERENCE_NAME) if isinstance(doc, dict) else None
+    if name is None:
+        raise AppError(f"{path}: not a study names file (no {study.REFERENCE_NAME!r} key)")
     if not isinstance(name, str) or not study.CONDITION_NAME.fullmatch(name):
         raise AppError(
             f"{path}: {study.REFERENCE_NAME} must be a condition name (a letter, then letters, digits, _ or -)"

@@ -1,5 +1,5 @@
 """The app's settings, in one typed table: from it come `create_app`'s keyword arguments, the environment variables
-(gunicorn), the study file's keys (their names in lower case, study_config.py), `serve`'s flags and their help.
+(gunicorn), the study file's keys (their names in lower case, store/config.py), `serve`'s flags and their help.
 
 A setting given to `create_app` (or as a flag) wins over its environment variable, which wins over the study file,
 which wins over the default. Every value is checked where it is read, so a bad one stops the start with one line
@@ -131,7 +131,7 @@ TABLE = (
         "VIDEO_ACCEL",
         default="off",
         choices=ACCEL,
-        help="the reverse proxy that sends the videos' bytes (nginx or caddy: an internal redirect, videos.py)",
+        help="the reverse proxy that sends the videos' bytes (nginx or caddy: an internal redirect, media/videos.py)",
     ),
     Setting(
         "RATINGS_PER_CLIP",

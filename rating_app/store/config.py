@@ -15,11 +15,12 @@ the admin token and the cookie key are given in the environment, the database pa
 from __future__ import annotations
 
 import os
-import tomllib
 from pathlib import Path
 
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError
+
+from moglow_eval.core import user_files
 
 from .manifest import AppError
 from .settings import SETTINGS
@@ -29,6 +30,7 @@ TEXT_KEYS = tuple(s.env for s in SETTINGS.values() if s.kind is str and s.in_fil
 FLAG_KEYS = tuple(s.env for s in SETTINGS.values() if s.kind is bool)
 # Never in the file: the app's secrets, and the database password libpq would read (PGPASSWORD or ~/.pgpass).
 SECRETS = (*(s.env for s in SETTINGS.values() if s.secret), "PGPASSWORD", "DATABASE_PASSWORD")
+MAX_BYTES = 1 << 20  # a study file is a few dozen keys
 
 
 def known_keys(settings=SETTINGS) -> list[str]:
@@ -40,15 +42,7 @@ def load_study_file(path, settings=SETTINGS) -> dict[str, str]:
     """{ENVIRONMENT_NAME: value as the environment would hold it} from the study file at `path`; AppError, one line
     naming the file and the key, for anything wrong in it. `settings`: rating_app.SETTINGS (the settings table)."""
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            table = tomllib.load(fh)
-    except FileNotFoundError:
-        raise AppError(f"{path}: no such study file") from None
-    except IsADirectoryError:
-        raise AppError(f"{path}: is a folder, not a study file") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise AppError(f"{path}: not a TOML file: {e}") from None
+    table = user_files.read_toml(path, MAX_BYTES, AppError, "study file")
     values = {}
     for key, value in table.items():
         name = key.upper()

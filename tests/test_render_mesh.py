@@ -1,0 +1,201 @@
+"""The mesh body (issue 54): an SMPL-H clip drawn as its skinned mesh through a synthetic body model of smplx's
+layout (tests/helpers/smpl_fixtures.py), checked against the joints' projection in the decoded video: the
+silhouette covers the wrists, elbows and head, both hands are in frame, the face mask sits over the head, and the
+body's colour is not the background's. Front and upper framing; the one-line errors of the inputs it cannot draw."""
+
+import csv
+
+import numpy as np
+import pytest
+from helpers import smpl_fixtures
+from helpers.bvh_fixtures import write_zeroeggs
+from helpers.figure_pixels import decode
+
+from generation.data.smpl_files import MeshSource, SmplError, smpl_mesh, smpl_positions
+from generation.make_stimuli import main as make_stimuli
+from generation.stimuli.mesh_track import MeshTrack
+from rendering.camera import Projector, camera_targets
+from rendering.errors import RenderError
+from rendering.framing import item_camera
+from rendering.raster import STYLES, FrameDrawer
+from rendering.render import MESH_CHUNK, render_clip
+
+SIZE = 640
+WRISTS, ELBOWS, HEAD = (20, 21), (18, 19), 15
+
+
+@pytest.fixture(scope="module")
+def take(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("mesh")
+    model = smpl_fixtures.write_body_model(folder / "SMPLH_NEUTRAL.npz", "smplh")
+    motion = smpl_fixtures.write_motion(folder / "take.npz", "smplh", frames=40, fps=30.0)
+    joints, names, parents, fps = smpl_positions(motion, model)
+    return folder, model, motion, dict(joints=joints, parents=parents, joint_names=names, fps=fps)
+
+
+def body_pixels(frame):
+    """The mesh's colour (a blue, shaded), and the mask's (a light warm tone), in a decoded RGB frame."""
+    rgb = frame.astype(np.int16)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    body = (b - r > 40) & (b > g)
+    mask = (r - b > 35) & (r - g > 12) & (r > 150)
+    return body, mask
+
+
+def projected(clip, camera, t):
+    """The joints of frame t in image (column, row), and their depth."""
+    proj = Projector(camera, SIZE, SIZE)
+    target = camera_targets(clip["joints"], clip["fps"], camera)[t]
+    cam = proj.to_camera(clip["joints"][t], target + proj.offset)
+    xy = proj.to_screen(cam)
+    return np.stack([xy[:, 0], SIZE - xy[:, 1]], 1), cam[:, 2], proj.focal
+
+
+def near(mask, point, radius=4):
+    c, r = np.round(point).astype(int)
+    return bool(mask[max(r - radius, 0) : r + radius + 1, max(c - radius, 0) : c + radius + 1].any())
+
+
+@pytest.mark.parametrize("framing", ["full", "upper"])
+def test_the_mesh_covers_the_joints_and_masks_the_face(take, tmp_path, framing):
+    folder, model, motion, clip = take
+    camera = item_camera([clip["joints"]], clip["joint_names"], clip["parents"], clip["fps"], "front", framing)
+    out = tmp_path / f"{framing}.mp4"
+    n = render_clip(clip, out, size=SIZE, camera=camera, style=STYLES["mesh"], mesh=smpl_mesh(motion, model))
+    frames, fps = decode(out)
+    assert n == len(frames) == 40 and fps == 30
+    background = frames[0][5, 5].astype(int)
+    for t in (0, 20, 39):
+        body, mask = body_pixels(frames[t])
+        xy, depth, focal = projected(clip, camera, t)
+        assert body.mean() > 0.02, f"frame {t}: no body"
+        assert np.abs(frames[t][body].mean(0) - background).max() > 60  # the body's colour is not the background's
+        for j in (*WRISTS, *ELBOWS):
+            assert 0 <= xy[j, 0] < SIZE and 0 <= xy[j, 1] < SIZE, f"frame {t}: joint {j} out of frame"
+            assert near(body | mask, xy[j]), f"frame {t}: joint {j} at {xy[j]} not covered"
+        # The face mask: over the head, facing this camera; its pixels lie within the head's radius of the joint.
+        head_px = 0.2 * focal / depth[HEAD]
+        rows, cols = np.nonzero(mask)
+        assert len(rows) > 0.2 * head_px**2, f"frame {t}: {len(rows)} mask pixels"
+        dist = np.hypot(cols - xy[HEAD, 0], rows - xy[HEAD, 1])
+        assert np.quantile(dist, 0.95) < 1.2 * head_px
+        # Nothing of the mask below the chin (a stray pixel or two: the encoder's ringing at the body's edge).
+        assert mask[int(xy[HEAD, 1] + 1.5 * head_px) :].sum() < 0.01 * len(rows)
+
+
+def test_the_mesh_is_skinned_a_chunk_at_a_time(take, tmp_path):
+    """Rendering memory does not grow with the clip: the vertices are asked for at most MESH_CHUNK frames at once."""
+    folder, model, motion, clip = take
+    source = smpl_mesh(motion, model)
+    asked = []
+
+    class Spy:
+        faces, mask, n_frames = source.faces, source.mask, source.n_frames
+
+        def vertices(self, a, b):
+            asked.append((a, b))
+            return source.vertices(a, b)
+
+    render_clip(clip, tmp_path / "x.mp4", size=64, style=STYLES["mesh"], mesh=Spy())
+    assert asked and max(b - a for a, b in asked) <= MESH_CHUNK and asked[-1][1] == 40
+
+
+def test_other_motion_cannot_take_the_mesh_style(take):
+    folder, model, motion, clip = take
+    with pytest.raises(RenderError, match="SMPL-family parameter files.*stick or solid"):
+        FrameDrawer(clip["parents"], clip["joint_names"], 64, style=STYLES["mesh"])
+
+
+def test_a_model_that_does_not_fit_is_one_line(take, tmp_path):
+    folder, model, motion, clip = take
+    arrays = dict(np.load(model))
+    arrays["f"] = arrays["f"] + len(arrays["v_template"])
+    np.savez(tmp_path / "bad_faces.npz", **arrays)
+    arrays = dict(np.load(model))
+    arrays["weights"] = arrays["weights"][:-5]
+    np.savez(tmp_path / "bad_weights.npz", **arrays)
+    for name, needle in (("bad_faces", "indexes vertices outside"), ("bad_weights", "do not fit its")):
+        with pytest.raises(SmplError, match=needle) as e:
+            smpl_mesh(motion, tmp_path / f"{name}.npz")
+        assert f"{name}.npz" in str(e.value) and "\n" not in str(e.value)
+    with pytest.raises(SmplError, match="no body model file") as e:
+        smpl_mesh(motion, tmp_path / "missing.npz")
+    assert "missing.npz" in str(e.value)
+    assert isinstance(smpl_mesh(motion, model), MeshSource)
+
+
+def _rows(path):
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def smpl_study(root, style='["stick", "mesh"]', model_kind="smplh"):
+    """A study of two conditions of three SMPL-H items each, the body model named in the study file."""
+    for sub, seed in (("real", 0), ("sys", 1)):
+        (root / sub).mkdir(parents=True)
+        for k in range(3):
+            smpl_fixtures.write_motion(root / sub / f"i{k}.npz", "smplh", frames=36, fps=30.0, seed=seed + 10 * k)
+    (root / "models").mkdir()
+    smpl_fixtures.write_body_model(root / "models" / "SMPLH_NEUTRAL.npz", model_kind)
+    (root / "study.toml").write_text(
+        'reference = "real"\nn_training = 1\n[conditions]\nreal = "real"\nSYS = "sys"\n[catch]\nn = 1\n'
+        '[skeleton]\nsmpl_model = "models/SMPLH_NEUTRAL.npz"\n'
+        f'[render]\nview = "front"\nframing = "upper"\nstyle = {style}\n'
+    )
+    return root / "study.toml"
+
+
+def test_a_study_draws_every_clip_as_stick_and_mesh(tmp_path):
+    """`[render] style = ["stick", "mesh"]`: every clip in both styles, the mesh ones skinned from their files (the
+    BAD clip's broken with its joints), with the style column; the mesh videos show the body in its colour."""
+    study_file = smpl_study(tmp_path / "s")
+    assert make_stimuli(["--study", str(study_file), "--out", str(tmp_path / "o"), "--size", "128", "--quiet"]) == 0
+    rows = _rows(tmp_path / "o" / "manifest.csv")
+    assert {r["style"] for r in rows} == {"stick", "mesh"}
+    by_style = {
+        s: sorted((r["condition"], r["item"], r["role"]) for r in rows if r["style"] == s) for s in ("stick", "mesh")
+    }
+    assert by_style["stick"] == by_style["mesh"] and any(c == "BAD" for c, _, _ in by_style["mesh"])
+    for r in rows:
+        frames, _ = decode(tmp_path / "o" / r["video"])
+        body, _ = body_pixels(frames[len(frames) // 2])
+        assert (body.mean() > 0.04) == (r["style"] == "mesh"), (
+            r["style"],
+            r["condition"],
+            body.mean(),
+        )  # a body, not lines
+
+
+def test_the_mesh_style_refuses_other_motion_in_one_line(tmp_path, capsys):
+    root = tmp_path / "s"
+    for sub in ("real", "sys"):
+        (root / sub).mkdir(parents=True)
+        for k in range(3):
+            write_zeroeggs(root / sub / f"i{k}.bvh", frames=30, seed=k)
+    (root / "study.toml").write_text(
+        'reference = "real"\nn_training = 1\n[conditions]\nreal = "real"\nSYS = "sys"\n[render]\nstyle = "mesh"\n'
+    )
+    assert make_stimuli(["--study", str(root / "study.toml"), "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "i0.bvh: the mesh style draws SMPL-family parameter files" in err[0]
+    assert "can use stick or solid" in err[0] and not (tmp_path / "o").exists()
+
+
+def test_the_mesh_follows_its_clips_joints(take):
+    """MeshTrack: a clip that is its file turned, scaled and moved gets the file's mesh turned, scaled and moved
+    exactly; a joint moved on its own (a catch clip's break) moves the vertices it skins by as much."""
+    folder, model, motion, clip = take
+    source = smpl_mesh(motion, model)
+    verts, joints = source.posed(0, 10)
+    yaw = np.radians(70)
+    rot = np.array([[np.cos(yaw), 0, np.sin(yaw)], [0, 1, 0], [-np.sin(yaw), 0, np.cos(yaw)]])
+    moved = 0.9 * joints.astype(np.float64) @ rot.T + np.array([0.3, -0.1, 2.0])
+    got = MeshTrack(source, moved, np.arange(10)).vertices(0, 10)
+    want = 0.9 * verts.astype(np.float64) @ rot.T + np.array([0.3, -0.1, 2.0])
+    assert np.abs(got - want).max() < 1e-4
+    broken = moved.copy()
+    broken[:, 20] += (0.0, 0.2, 0.0)  # the left wrist raised 20 cm: the hand's vertices follow it
+    got = MeshTrack(source, broken, np.arange(10)).vertices(0, 10)
+    hand = source.weights[:, 20] == 1.0
+    shift = got - want
+    assert np.allclose(shift[:, hand, 1], 0.2, atol=0.03) and np.abs(shift[:, ~hand]).max() < 0.03
