@@ -36,7 +36,10 @@ def _build(root, design, size=SIZE, **kw):
 
 @pytest.fixture(scope="module")
 def dyadic(tmp_path_factory):
-    return _build(tmp_path_factory.mktemp("dyadic"), "dyadic")
+    # Solid bodies: a stick figure's lines, one or two pixels wide at this size, come out of the encoder too unlike
+    # from one video to the next to compare the interlocutor by its pixels (before encoding they are the same:
+    # tests/test_two_people.py).
+    return _build(tmp_path_factory.mktemp("dyadic"), "dyadic", style="solid")
 
 
 @pytest.fixture(scope="module")
@@ -102,9 +105,7 @@ def test_both_videos_of_a_unit_show_the_same_interlocutor_and_sound(dyadic):
     for t in (15, 60, 105):
         pa, pb = figure_pixels.partner(fa[t]), figure_pixels.partner(fb[t])
         assert figure_pixels.agent(fa[t]).sum() > 60 and pa.sum() > 60  # two figures
-        # where it stands, less what the encoder blurs of its thin lines (the pixels before encoding are the same:
-        # tests/test_two_people.py)
-        assert min(figure_pixels.near_share(pa, pb), figure_pixels.near_share(pb, pa)) > 0.8
+        assert min(figure_pixels.near_share(pa, pb), figure_pixels.near_share(pb, pa)) > 0.9  # where it stands
         both = pa & pb
         assert np.abs(fa[t][both].mean(0) - fb[t][both].mean(0)).max() < 4  # in the same colour
 
@@ -257,3 +258,37 @@ def json_words(path):
     import json
 
     return [(w["start"], w["end"]) for seg in json.loads(path.read_text())["metadata:transcript"] for w in seg["words"]]
+
+
+def test_a_genea_2023_pair_of_bvh_files_builds(tmp_path):
+    """GENEA 2023's layout: the main agent and its interlocutor as BVH (Talking With Hands' skeleton), a system's
+    motion for each and for a mismatched interlocutor as BVH, the words as TSV: both people in every video, the
+    captions on, the manifest in the dyadic shape."""
+    from helpers.bvh_fixtures import SPEAKER, write_family
+
+    folders = ("main", "inter", "sys", "sys_mis", "audio_main", "audio_inter", "tsv")
+    for sub in folders:
+        (tmp_path / sub).mkdir()
+    for k in range(4):
+        item = f"seg{k:02d}"
+        for sub, seed in (("main", k), ("inter", 50 + k), ("sys", 100 + k), ("sys_mis", 150 + k)):
+            write_family(tmp_path / sub / f"{item}.bvh", "genea", 90, 30.0, seed, turns=SPEAKER, degrees=8.0)
+        for sub, who in (("audio_main", 0), ("audio_inter", 1)):
+            seamless_fixtures.write_wav(tmp_path / sub / f"{item}.wav", seamless_fixtures.voice(who, 3.5))
+        (tmp_path / "tsv" / f"{item}.tsv").write_text("0.6\t0.9\tso\n1.0\t1.4\tthe\n1.5\t2.0\tbridge\n")
+    (tmp_path / "study.toml").write_text(
+        'reference = "NA"\ndesign = "dyadic"\nn_training = 1\n[conditions]\nNA = "main"\nSYS = "sys"\n'
+        '[mismatched]\nSYS = "sys_mis"\n[interlocutor]\nfolder = "inter"\n[catch]\nn = 1\n'
+        '[audio]\nfolder = "audio_main"\ninterlocutor = "audio_inter"\n[captions]\nfolder = "tsv"\n'
+    )
+    argv = ["--study", str(tmp_path / "study.toml"), "--out", str(tmp_path / "out"), "--size", "192", "--quiet"]
+    assert make_stimuli([*argv, "--workers", "1"]) == 0
+    with open(tmp_path / "out" / "manifest.csv", newline="") as f:
+        manifest = list(csv.DictReader(f))
+    item = next(r["item"] for r in manifest if r["role"] == "test")
+    matched, mismatched = _unit(manifest, item, "SYS")
+    assert mismatched["motion_item"] == "?"  # the study file does not say whose interlocutor it had
+    frames = figure_pixels.decode(tmp_path / "out" / matched["video"])[0]
+    t = int(1.2 * 30)
+    assert figure_pixels.agent(frames[t]).sum() > 60 and figure_pixels.partner(frames[t]).sum() > 60
+    assert len(figure_pixels.caption_rows(frames[t])) > 0.04 * SIZE

@@ -209,7 +209,7 @@ def _system_file(src, dst, sd, seed):
     np.savez(dst, **arrays)
 
 
-def write_study(root, design="dyadic", length_s=4.0, stereo=False, per_interaction=2):
+def write_study(root, design="dyadic", length_s=4.0, stereo=False, per_interaction=2, style="stick"):
     """A two-person study from two conversations in Seamless Interaction's layout, cut by the cutter
     (generation.own_study.conversations) and written as a study file; returns its path.
 
@@ -217,7 +217,8 @@ def write_study(root, design="dyadic", length_s=4.0, stereo=False, per_interacti
     agent's poses with noise for its own item, and for the item its mismatched interlocutor came from as its
     motion "for a mismatched interlocutor" (`[mismatched]`). design "semantic": `keyword` items around "bridge",
     the keyword highlighted (`[captions] keywords` is the cutter's sources.csv). Both show the real interlocutor,
-    both voices (mono, or `stereo`) and both people's captions; the body model is the synthetic SMPL-H."""
+    both voices (mono, or `stereo`) and both people's captions, drawn in `style`; the body model is the synthetic
+    SMPL-H."""
     import csv
 
     from generation.own_study.conversations import cut_conversations
@@ -269,6 +270,8 @@ channels = "{"stereo" if stereo else "mono"}"
 folder = "items/agent_transcript"
 interlocutor = "items/interlocutor_transcript"
 {'keywords = "items/sources.csv"' if design == "semantic" else ""}
+[render]
+style = "{style}"
 """
     (root / "study.toml").write_text(text)
     return root / "study.toml"
