@@ -164,3 +164,14 @@ def test_two_voices_mixed_each_heard_at_the_target_loudness():
     assert np.sqrt(np.mean(left**2)) > 2 * np.sqrt(np.mean(right**2))  # the first voice on its side
     quiet = mix_voices([low[:, None], 1e-5 * np.sin(2 * np.pi * 235 * t)[:, None]], -23.0)
     assert _band(quiet[:, 0], 235) < 1e-3 * _band(quiet[:, 0], 140)  # a listener's near-silence is never raised
+
+
+def test_a_video_that_came_out_a_size_off_is_found(pair, tmp_path):
+    """The videos a build encodes again (generation.stimuli.render_pool): those whose sizes differ from the
+    item's most common, here one encoded at a constant quantiser among two at the default rate control."""
+    from rendering.blinding import odd_ones
+
+    paths = [tmp_path / f"{k}.mp4" for k in range(3)]
+    for k, path in enumerate(paths):
+        render_clip(_clip(pair["agents"][k % 2], pair["a"]), path, 64, camera=pair["camera"], qp=20 if k == 1 else None)
+    assert odd_ones(paths) == [1] and odd_ones([paths[0], paths[2]]) == []

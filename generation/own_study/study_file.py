@@ -121,7 +121,7 @@ class StudySpec:
     audio_folder: Path | None = None
     loudness: float = -23.0
     view: object = None  # None: the built-in study's fixed camera; else a key of rendering.framing.VIEWS or degrees
-    framing: str = "full"
+    framing: str | None = None  # None: "full" for one person, "upper" for two (study_people.check_needs)
     styles: list = field(default_factory=lambda: ["stick"])
     face: str = "mask"
     sources: Path | None = None  # the table of where each item came from
@@ -319,8 +319,8 @@ def _render(path, table, spec):
         spec.view = view
     else:
         raise err(path, "[render] view", f"must be {', '.join(VIEWS)} or an azimuth in degrees, got {view!r}")
-    framing = table.get("framing", "full")
-    if framing not in FRAMINGS:
+    framing = table.get("framing")
+    if framing is not None and framing not in FRAMINGS:
         raise err(path, "[render] framing", f"must be {', '.join(FRAMINGS)}, got {framing!r}")
     spec.framing = framing
     style = table.get("style", "stick")
