@@ -40,21 +40,18 @@ def built(request, tmp_path_factory):
     return request.param, root / "out", sources
 
 
+def study_app(out, design, db, **settings):
+    """The app on the set in `out`, a fresh SQLite database `db`, two answers a unit, no limit per address."""
+    return create_app(manifest=out / "manifest.csv", db_url=f"sqlite:///{db}", admin_token="browser-token",
+                      design=design, ratings_per_clip=2, sessions_per_client=0, **settings)  # fmt: skip
+
+
 @pytest.fixture
 def served(built, tmp_path):
     from werkzeug.serving import make_server
 
     design, out, sources = built
-    app = create_app(
-        manifest=out / "manifest.csv",
-        db_url=f"sqlite:///{tmp_path / 'r.sqlite'}",
-        admin_token="browser-token",
-        design=design,
-        ratings_per_clip=2,
-        clips_per_rater=3,
-        min_view=0.5,
-        sessions_per_client=0,
-    )
+    app = study_app(out, design, tmp_path / "r.sqlite", clips_per_rater=3, min_view=0.5)
     server = make_server("127.0.0.1", 0, app, threaded=True)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
@@ -141,15 +138,7 @@ def test_the_crowd_fills_it_and_the_report_is_the_designs(built, tmp_path):
     pair, preferring the matched motion; the export names the design's mismatch column and the report is the
     design's."""
     design, out, _ = built
-    app = create_app(
-        manifest=out / "manifest.csv",
-        db_url=f"sqlite:///{tmp_path / 'crowd.sqlite'}",
-        admin_token="browser-token",
-        design=design,
-        ratings_per_clip=2,
-        min_view=0,
-        sessions_per_client=0,
-    )
+    app = study_app(out, design, tmp_path / "crowd.sqlite", min_view=0)
     client = app.test_client()
     digits = audio_check_answers(out / "manifest.csv")
     with open(out / "manifest.csv", newline="") as f:
