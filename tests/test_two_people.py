@@ -80,7 +80,9 @@ def test_two_figures_the_partner_the_same_in_both_videos(pair, tmp_path, style):
         near = min(figure_pixels.near_share(partner, other), figure_pixels.near_share(other, partner))
         assert near > 0.85, (t, near)  # the same partner, less the encoder's noise at its edges
         both = partner & other
-        assert np.abs(first[t][both].astype(int).mean(0) - second[t][both].astype(int).mean(0)).max() < 3
+        assert (
+            np.abs(first[t][both].astype(int).mean(0) - second[t][both].astype(int).mean(0)).max() < 6
+        )  # the encoder's noise, not another colour (35 and more)
         assert np.abs(first[t][both].astype(int).mean(0) - np.array([102, 153, 112])).max() < 35  # its one colour
         assert (
             np.abs(first[t][agent].astype(int).mean(0) - second[t][figure_pixels.agent(second[t])].mean(0)).max() < 40

@@ -39,10 +39,13 @@ def mesh_spec(c, joints, motions, spec):
         path = folder_files(study.CATCH, spec.catch_folder)[c.item] if own else motions[study.NATURAL][c.item].path
     else:
         path = motions[c.condition][c.motion_item or c.item].path
-    return MeshSpec(str(path), str(spec.smpl_model), spec.smpl_type, spec.face, joints, spec.fps, c.start)
+    return MeshSpec(
+        str(path), str(spec.smpl_model), spec.smpl_type, spec.face, joints, spec.fps, c.start, spec.hand_mean
+    )
 
 
 def partner_mesh_spec(scene, item, spec):
     """The MeshSpec of an item's interlocutor (own_study.scene.Scene): its file, drawn as placed."""
     joints = scene.partner_joints[item]
-    return MeshSpec(str(scene.partner_sources[item]), str(spec.smpl_model), spec.smpl_type, spec.face, joints, spec.fps)
+    path = str(scene.partner_sources[item])
+    return MeshSpec(path, str(spec.smpl_model), spec.smpl_type, spec.face, joints, spec.fps, 0, spec.hand_mean)
