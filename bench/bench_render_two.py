@@ -3,8 +3,9 @@
 
 Two takes of ../shared's Bandai-Namco actions stand face to face (generation.own_study.placing), one fixed camera
 frames both from the hips up (rendering.framing.pair_camera); the one-person clip is the agent alone through its
-own upper-body camera. Each style is timed in turns, one, two, two with captions, for --repeats rounds in one
-process; prints the medians, the ratios two / one, and the load average beside them.
+own upper-body camera (as a one-person item is built: the body larger in the frame), and through the pair's camera
+(the same body, only the second person missing). Each style is timed in turns, for --repeats rounds in one
+process; prints the medians, the ratios against both, and the load average beside them.
 
     PYTHONPATH=$PWD python bench/bench_render_two.py [--size 640] [--frames 150] [--repeats 3]
 """
@@ -72,6 +73,9 @@ def main():
             for style in ("stick", "solid"):
                 runs = {
                     "one": lambda s=STYLES[style]: render_clip(clip, out, args.size, one_camera, s, threads=1),
+                    "one, pair camera": lambda s=STYLES[style]: render_clip(
+                        pair, out, args.size, two_camera, s, threads=1, target=target
+                    ),
                     "two": lambda s=STYLES[style]: render_clip(
                         pair, out, args.size, two_camera, s, threads=1, partner=other, target=target
                     ),
@@ -87,9 +91,10 @@ def main():
     print(f"{n} frames at {args.size}x{args.size}, {args.repeats} rounds; load average {os.getloadavg()[0]:.1f}")
     for style in ("stick", "solid"):
         one = float(np.median(times[(style, "one")]))
-        for name in ("one", "two", "two + captions"):
+        same = float(np.median(times[(style, "one, pair camera")]))
+        for name in ("one", "one, pair camera", "two", "two + captions"):
             t = float(np.median(times[(style, name)]))
-            print(f"{style:<6} {name:<15} {t:6.2f} s   / one = {t / one:.2f}")
+            print(f"{style:<6} {name:<17} {t:6.2f} s   / one = {t / one:.2f}   / one, pair camera = {t / same:.2f}")
 
 
 if __name__ == "__main__":

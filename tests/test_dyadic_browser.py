@@ -14,11 +14,11 @@ import pytest
 import requests
 from helpers import figure_pixels, seamless_fixtures
 from helpers.sound_check import pass_sound_check
+from helpers.voices import decoded_audio, ffmpeg_loudness, voice_energy
 from test_app_browser import chrome
 from test_app_browser_sound import STATE
 from test_app_designs import complete
 from test_app_sound import _sample_of
-from test_dyadic_study import decoded_audio, ffmpeg_loudness, voice_energy
 
 from analysis.report import build_report
 from generation.make_stimuli import main as make_stimuli

@@ -5,21 +5,18 @@ interlocutor, sound and byte size across a unit, both voices heard at -23 LUFS, 
 highlighted in both clips of a semantic unit; and bad study files as one line. The fast tier."""
 
 import csv
-import re
-import subprocess
 from pathlib import Path
 
-import imageio_ffmpeg
 import numpy as np
 import pytest
 from helpers import figure_pixels, seamless_fixtures
 from helpers.cli import fails_with
+from helpers.voices import decoded_audio, ffmpeg_loudness, voice_energy
 
 from generation.make_stimuli import main as make_stimuli
 from rendering.audio import RATE
 from rendering.blinding import check_one_size
 
-FFMPEG = imageio_ffmpeg.get_ffmpeg_exe()
 SIZE = 192
 
 
@@ -53,30 +50,6 @@ def _unit(manifest, item, condition):
     return next(r for r in rows if not r["motion_item"]), next(r for r in rows if r["motion_item"])
 
 
-def decoded_audio(mp4, channels=1):
-    out = subprocess.run(
-        [FFMPEG, "-v", "error", "-i", str(mp4), "-map", "0:a", "-ac", str(channels), "-ar", str(RATE),
-         "-f", "f32le", "-"],
-        capture_output=True, check=True,
-    )  # fmt: skip
-    return np.frombuffer(out.stdout, "<f4").reshape(-1, channels)
-
-
-def ffmpeg_loudness(mp4):
-    err = subprocess.run(
-        [FFMPEG, "-nostats", "-i", str(mp4), "-map", "0:a", "-af", "ebur128", "-f", "null", "-"],
-        capture_output=True, text=True,
-    ).stderr  # fmt: skip
-    return float(re.findall(r"I:\s+(-?[\d.]+) LUFS", err)[-1])
-
-
-def voice_energy(x, f0):
-    """The energy of x [N] around the first three harmonics of a voice's pitch f0."""
-    spec = np.abs(np.fft.rfft(x)) ** 2
-    freqs = np.fft.rfftfreq(len(x), 1 / RATE)
-    return sum(spec[(freqs > k * f0 - 6) & (freqs < k * f0 + 6)].sum() for k in (1, 2, 3))
-
-
 def test_a_dyadic_set_has_the_appropriateness_shape(dyadic):
     out, manifest, sources = dyadic
     tests = {r["item"] for r in manifest if r["role"] == "test"}
@@ -105,7 +78,7 @@ def test_both_videos_of_a_unit_show_the_same_interlocutor_and_sound(dyadic):
     for t in (15, 60, 105):
         pa, pb = figure_pixels.partner(fa[t]), figure_pixels.partner(fb[t])
         assert figure_pixels.agent(fa[t]).sum() > 60 and pa.sum() > 60  # two figures
-        assert min(figure_pixels.near_share(pa, pb), figure_pixels.near_share(pb, pa)) > 0.9  # where it stands
+        assert min(figure_pixels.near_share(pa, pb), figure_pixels.near_share(pb, pa)) > 0.85  # where it stands
         both = pa & pb
         assert np.abs(fa[t][both].mean(0) - fb[t][both].mean(0)).max() < 4  # in the same colour
 

@@ -75,7 +75,7 @@ def prepare_audio(spec, lengths, folder, pans=None):
                 )
             sound = audio.normalise(sound, spec.loudness)
         else:
-            side = (pans or {}).get(item, (-1.0, 1.0))
+            side = (pans or {}).get(item, (0.0, 0.0))  # one person, or no screen sides: centred
             sound = audio.mix_voices(tracks, spec.loudness, [audio.PAN * np.sign(p) for p in side[: len(tracks)]]
                                      if spec.stereo else None)  # fmt: skip
             if audio.rms_dbfs(sound) < audio.SILENCE_DBFS:
