@@ -7,13 +7,15 @@ Every stage is a real process talking through the files and HTTP API of CONTRACT
 researcher would run them by hand. Everything started here is stopped at the end, also on Ctrl-C or error.
 
     python -m analysis.demo [--out demo/] [--db postgresql://127.0.0.1:5432/test] [--raters 60]
-                            [--design acr|pairwise|parallel|appropriateness] [--sound]
+                            [--design acr|pairwise|parallel|appropriateness|dyadic|semantic] [--sound]
 
-With --design pairwise, parallel or appropriateness the app runs that test design (CONTRACTS §8), the crowd answers
-it, the export is pairs.csv (pairwise, appropriateness) or the parallel ratings.csv, and the report is that
+With another --design the app runs that test design (CONTRACTS §8), the crowd answers it, the export is pairs.csv
+(pairwise and the three matched-against-mismatched designs) or the parallel ratings.csv, and the report is that
 design's. With --sound (implied by appropriateness) the stimuli are a study of your own motion with speech
 (generation.own_study.demo_study: real non-locomotion mocap, two made-up systems, speech synthesised by espeak-ng), the
-videos carry it, and every simulated rater passes the sound check first.
+videos carry it, and every simulated rater passes the sound check first. With dyadic or semantic they are a study of
+two people talking (generation.own_study.demo_dyad: two real takes an item, a voice for each, captions; semantic
+highlights the answer's keyword).
 
 Each run replaces what an earlier one left in --out (its database would refuse another design, and make_stimuli an
 existing set), so the designs can be tried one after the other in the default folder; a folder the demo did not
@@ -36,7 +38,7 @@ import urllib.error
 import urllib.request
 from pathlib import Path
 
-from moglow_eval.core import cli
+from moglow_eval.core import cli, study
 from moglow_eval.core.study import DESIGNS
 
 
@@ -167,7 +169,12 @@ def make_stimuli(procs: "Processes", out: Path, s: dict) -> Path:
     --quick (its tiny models in `runs`, default out/runs, trained once and reused by later runs)."""
     seed, design, sound = s["seed"], s["design"], s["sound"]
     py, stimuli = sys.executable, out / "stimuli"
-    if sound:
+    if design in ("dyadic", "semantic"):
+        _stage(f"1/5 a study of two people talking (generation.own_study.demo_dyad) → {stimuli}")
+        cmd = ["--out", str(out / "study"), "--seed", str(seed), "--design", design]
+        procs.run([py, "-m", "generation.own_study.demo_dyad", *cmd], "generation.own_study.demo_dyad")
+        cmd = ["--study", str(out / "study" / "study.toml"), "--size", "320"]
+    elif sound:
         _stage(f"1/5 a study with sound (generation.own_study.demo_study) → {stimuli}")
         procs.run(
             [py, "-m", "generation.own_study.demo_study", "--out", str(out / "study"), "--seed", str(seed)]
@@ -265,7 +272,7 @@ def run_demo(
     """Run the study; returns paths and the crowd's summary. `stimuli` reuses an existing folder. What an earlier
     run left in `out` is replaced (clear_earlier_run)."""
     out = Path(out)
-    sound = sound or design == "appropriateness"
+    sound = sound or design in study.MISMATCH_COLUMN  # the matched-against-mismatched designs are about speech
     settings = dict(locals())
     clear_earlier_run(out, stimuli is None)
     (out / "logs").mkdir(parents=True, exist_ok=True)
@@ -337,13 +344,15 @@ def build_parser():
         choices=DESIGNS,
         default="acr",
         help="test design: acr (one clip, 1-5; default), pairwise (two clips, a preference), parallel "
-        "(every condition of an item on one page, 0-100) or appropriateness (a system's motion for the speech heard "
-        "against its motion for other speech); targets count pairs or pages",
+        "(every condition of an item on one page, 0-100), appropriateness (a system's motion for the speech heard "
+        "against its motion for other speech), dyadic (two people talking: the agent's motion for this interlocutor "
+        "against its motion for another) or semantic (the motion for this utterance against another's, the keyword "
+        "highlighted); targets count pairs or pages",
     )
     p.add_argument(
         "--sound",
         action="store_true",
-        help="a study with speech in every video (implied by --design appropriateness): see above",
+        help="a study with speech in every video (implied by appropriateness, dyadic and semantic): see above",
     )
     return p
 

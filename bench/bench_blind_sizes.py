@@ -4,9 +4,10 @@
 
 Sizes: every size a parser reads from a video without decoding it (`rendering.mp4_layout.size_signals`: the
 file, each box, the frame-size table, each frame's NAL units other than filler), as the AUC of BAD catch clips
-against test clips and of each pair of NAT, MG and FL test clips (0.5: the signal tells nothing; 0 or 1: it
-separates the two perfectly). A signal equal for every video has AUC 0.5 exactly; the table lists the others,
-then the worst AUC of each family. Issue 37 asks for every AUC in [0.25, 0.75].
+against test clips, of the matched against the mismatched test clips where a set has them (the two clips of an
+appropriateness, dyadic or semantic trial), and of each pair of conditions' test clips (0.5: the signal tells
+nothing; 0 or 1: it separates the two perfectly). A signal equal for every video has AUC 0.5 exactly; the table
+lists the others, then the worst AUC of each family. Issue 37 asks for every AUC in [0.25, 0.75].
 
 Quality (--quality N, default 20; 0 skips): the first N test clips of the manifest, drawn again at the set's size
 (or --size), encoded the way they were before issue 37 (ultrafast, constant quantiser 17) and with today's
@@ -39,18 +40,29 @@ LOW, HIGH = SIZE_AUC_BAND  # the AUC every size signal must stay within
 
 
 def groups(rows):
-    """{name: clip ids}: BAD catch clips, test clips, and the test clips of each built-in condition."""
+    """{name: clip ids}: BAD catch clips, test clips, the test clips of each condition (a study's mismatched clips
+    left out), and, where the set has mismatched clips (appropriateness, dyadic, semantic), the matched and the
+    mismatched test clips: the two clips of a trial."""
     out = {study.CATCH: [r["clip_id"] for r in rows if r["condition"] == study.CATCH and r["role"] == "catch"]}
     out["test"] = [r["clip_id"] for r in rows if r["role"] == "test"]
-    for cond in study.BUILTIN:
-        out[cond] = [r["clip_id"] for r in rows if r["role"] == "test" and r["condition"] == cond]
+    conditions = dict.fromkeys(r["condition"] for r in rows if r["role"] == "test")
+    order = [c for c in study.BUILTIN if c in conditions] + sorted(c for c in conditions if c not in study.BUILTIN)
+    for cond in order:
+        out[cond] = [
+            r["clip_id"] for r in rows if r["role"] == "test" and r["condition"] == cond and not r.get("motion_item")
+        ]
+    if any(r.get("motion_item") for r in rows):
+        out["matched"] = [r["clip_id"] for r in rows if r["role"] == "test" and not r.get("motion_item")]
+        out["mismatched"] = [r["clip_id"] for r in rows if r["role"] == "test" and r.get("motion_item")]
     return out
 
 
 def comparisons(g):
-    nat, mg, fl = study.BUILTIN
-    pairs = [(study.CATCH, "test"), (nat, mg), (nat, fl), (mg, fl)]
-    return [(a, b) for a, b in pairs if g[a] and g[b]]
+    """BAD against test, matched against mismatched, and each pair of conditions."""
+    pairs = [(study.CATCH, "test"), ("matched", "mismatched")]
+    conditions = [k for k in g if k not in (study.CATCH, "test", "matched", "mismatched")]
+    pairs += [(a, b) for i, a in enumerate(conditions) for b in conditions[i + 1 :]]
+    return [(a, b) for a, b in pairs if g.get(a) and g.get(b)]
 
 
 def family(name):

@@ -10,7 +10,9 @@ smplx layout with about the real SMPL-H's 6890 vertices, 8 s at 30 fps, 640 px, 
   numpy only, the same fragment scheme as rendering.solid), drawing alone per frame;
 
 and the peak memory of a whole mesh clip of 8 s and of 64 s (in fresh processes), which the chunked skinning keeps
-flat. Prints medians over repeats, each time with the load average beside it.
+flat (`--memory`), and what the mesh clip costs a rater (`--quality`): its bitrate at the default rate control and
+its PSNR and SSIM against the drawn frames (a lossless reference; bench_blind_sizes' encoder and measures). Prints
+medians over repeats, each time with the load average beside it.
 
     PYTHONPATH=$PWD python bench/bench_render_mesh.py [--repeats 3] [--pyrender-python /tmp/pyr/bin/python]
 """
@@ -160,12 +162,31 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
     return float(out.stdout.strip().splitlines()[-1]) if out.returncode == 0 else f"failed: {out.stderr[-200:]}"
 
 
+def mesh_quality(source, clip, camera, folder):
+    """(PSNR dB, SSIM, Mb/s) of the mesh clip's drawn frames encoded at the default rate control."""
+    from bench_blind_sizes import _encode, _psnr_ssim
+
+    from rendering.raster import FrameDrawer
+
+    drawer = FrameDrawer(clip["parents"], clip["joint_names"], SIZE, camera, STYLES["mesh"], meshes=[source])
+    targets = camera_targets(clip["joints"], clip["fps"], camera)
+    verts = source.vertices(0, len(clip["joints"]))
+    raw = b"".join(bytes(drawer.draw(clip["joints"][t], targets[t], [verts[t]])) for t in range(len(verts)))
+    drawer.close()
+    (folder / "raw.yuv").write_bytes(raw)
+    _encode(raw, folder / "q.mp4", SIZE, clip["fps"])
+    psnr, ssim = _psnr_ssim(folder / "raw.yuv", folder / "q.mp4", SIZE, clip["fps"])
+    return psnr, ssim, (folder / "q.mp4").stat().st_size * 8 / (len(verts) / clip["fps"]) / 1e6
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--seconds", type=float, default=8.0)
     ap.add_argument("--pyrender-python", help="a Python with pyrender, for the OSMesa candidate")
     ap.add_argument("--memory", action="store_true", help="also the peak memory of 8-s and 64-s mesh clips")
+    ap.add_argument("--quality", action="store_true", help="also the mesh clip's bitrate, PSNR and SSIM")
+    ap.add_argument("--skip-times", action="store_true", help="measure no time (with --quality or --memory)")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
@@ -174,6 +195,13 @@ def main():
         source = smpl_mesh(motion, model)
         frames = len(clip["joints"])
         print(f"{frames} frames at {SIZE}x{SIZE}, {len(source.mask)} vertices, {len(source.faces)} faces")
+        if args.quality:
+            psnr, ssim, rate = mesh_quality(source, clip, camera, folder)
+            print(f"mesh clip at the default rate control: {rate:.2f} Mb/s, PSNR {psnr:.2f} dB, SSIM {ssim:.5f}")
+        if args.skip_times:
+            for seconds in (8, 64) if args.memory else ():
+                print(f"peak memory, a {seconds}-s mesh clip: {peak_memory(seconds, folder)} MB")
+            return
         clips = {}
         for _ in range(args.repeats):  # whole clips, in turn
             for name in ("stick", "mesh"):

@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from helpers.bvh_fixtures import SPEAKER, write_zeroeggs  # noqa: E402
 
 from generation.data.motion_files import read_motion  # noqa: E402
-from generation.own_study.builder import place  # noqa: E402
+from generation.own_study.scene import place  # noqa: E402
 from rendering.framing import item_camera  # noqa: E402
 from rendering.raster import STYLES  # noqa: E402
 from rendering.render import render_clip  # noqa: E402

@@ -55,6 +55,15 @@ def check_one_size(videos):
     return first["file size"]
 
 
+def odd_ones(videos):
+    """The indices of the videos in `videos` whose sizes (file, boxes, frames) differ from the most common: the
+    ones to encode again when the encoder overshot a frame's size by a byte or two (it can, on a frame dense with
+    edges at a small size), which changes the sample-size table and so every box above it."""
+    shapes = [repr(sorted(_shape(p).items())) for p in videos]
+    common = max(set(shapes), key=shapes.count)
+    return [k for k, shape in enumerate(shapes) if shape != common]
+
+
 def same_mtime(paths, mtime):
     """Give every file in `paths` the access and modification time `mtime` (seconds since the epoch)."""
     for path in paths:

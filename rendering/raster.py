@@ -46,6 +46,7 @@ class Style:
     sphere_radius: float = 0.1  # metres: its head
     solid_grid: int = 2  # frame pixels per pixel of the grid the solid body is rasterised on (solid.SolidBody)
     mesh_colour: tuple = (0.42, 0.55, 0.78)  # the mesh body's one colour (a person's; the agent's in a dyadic video)
+    mesh_grid: int = 2  # frame pixels per pixel of the grid the mesh is drawn on (as solid_grid; 1: every pixel)
 
 
 DEFAULT_STYLE = Style()
@@ -207,7 +208,9 @@ class FrameDrawer:
         if style.body == "mesh":
             if not meshes:
                 raise RenderError(f"the mesh style draws {MESH_INPUTS}; other motion can use stick or solid")
-            self.mesh = MeshBody(meshes, size, self.proj.focal)
+            # On a grid of 2 a quarter of the pixels are drawn, each one 2x2 block of the frame (as the solid body's).
+            self.mesh = MeshBody(meshes, size // style.mesh_grid, self.proj.focal / style.mesh_grid)
+        self.mesh_blocks = None  # (set by _mesh_figure on a grid of 2: the body's blocks, colours and cover)
 
     def close(self):
         """Free what the drawer holds beyond memory (the mesh body's GL objects)."""
@@ -348,6 +351,12 @@ class FrameDrawer:
         rgba, box = self.mesh.draw(people)
         if rgba is None:
             return (np.concatenate(points) if points else np.zeros((0, 2))), 0.0
+        if self.style.mesh_grid == 2:  # each drawn grid pixel a 2x2 block, written straight into the planes
+            rows, cols = np.nonzero(rgba[..., 3])
+            cover = rgba[rows, cols, 3].astype(np.float32) * np.float32(1 / 255)
+            blocks = (rows + box[1]) * (self.size // 2) + (cols + box[0])
+            self.mesh_blocks = blocks, rgba[rows, cols, :3].astype(np.float32), np.repeat(cover[:, None], 4, 1)
+            return (np.concatenate(points) if points else np.zeros((0, 2))), 0.0
         c0, r0, c1, r1 = box
         under = self.rgba[r0:r1, c0:c1]
         drawn = rgba[..., 3] != 0
@@ -386,6 +395,7 @@ class FrameDrawer:
         eye = target + self.proj.offset
         if self.solid is not None:
             self.solid.blocks = None  # (set by _figure where it draws the solid body on a grid of 2)
+        self.mesh_blocks = None
         points, radius = self._figure(joints, eye, vertices)
         if len(points):
             # The figure's bounding box in image rows/columns, on even pixels (for the 2x2 chroma blocks).
@@ -397,6 +407,8 @@ class FrameDrawer:
                 self._blend(r0, r1, c0, c1)
         if self.solid is not None and self.solid.blocks is not None:
             self._blend_blocks(*self.solid.blocks)
+        if self.mesh_blocks is not None:
+            self._blend_blocks(*self.mesh_blocks)
         return self.frame
 
     def _blend_blocks(self, blocks, rgb, cover):

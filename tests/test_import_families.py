@@ -222,3 +222,45 @@ def _npy_header(shape, dtype="<f8"):
     buf = io.BytesIO()
     np.lib.format.write_array_header_1_0(buf, dict(descr=dtype, fortran_order=False, shape=shape))
     return buf.getvalue()  # the magic string and the header, no data
+
+
+def test_the_hands_rest_pose_follows_the_files_layout(tmp_path):
+    """BEAT2's files (mocap_frame_rate) are read as its loaders call smplx (flat_hand_mean=False: the model's mean
+    hand pose added to the stored rotations), AMASS's (mocap_framerate) as stored; `hand_mean` overrides either."""
+    model = smpl_fixtures.write_model(tmp_path / "SMPLH.npz", "smplh")
+    arrays = smpl_fixtures.motion_arrays("smplh", frames=20)
+    beat2 = dict(arrays)
+    amass = {k: v for k, v in arrays.items() if k != "mocap_frame_rate"} | {"mocap_framerate": np.float64(30.0)}
+    np.savez(tmp_path / "beat2.npz", **beat2)
+    np.savez(tmp_path / "amass.npz", **amass)
+    mean = np.concatenate([np.load(model)["hands_meanl"], np.load(model)["hands_meanr"]])
+    added = dict(amass, poses=arrays["poses"].copy())
+    added["poses"][:, 66:156] += mean
+    np.savez(tmp_path / "added.npz", **added)
+    j_beat2, j_amass, j_added = (smpl_positions(tmp_path / f"{n}.npz", model)[0] for n in ("beat2", "amass", "added"))
+    fingers = slice(22, 52)
+    assert np.allclose(j_beat2, j_added, atol=1e-9) and np.abs(j_beat2 - j_amass)[:, fingers].max() > 1e-3
+    assert np.allclose(j_beat2[:, :22], j_amass[:, :22])  # the body is the same; the fingers differ
+    assert np.allclose(smpl_positions(tmp_path / "beat2.npz", model, hand_mean=False)[0], j_amass)
+
+
+def test_smplx_expressions_shape_the_heads_rest_joints(tmp_path):
+    """An SMPL-X file's expression coefficients move the rest joints as smplx's forward pass does: the shape
+    directions after the body's (10 of 20 here) times each frame's coefficients."""
+    arrays = smpl_fixtures.model_arrays("smplx", n_betas=20)
+    np.savez(tmp_path / "SMPLX.npz", **arrays)
+    motion = smpl_fixtures.motion_arrays("smplx", frames=6)
+    motion["poses"][:] = 0.0
+    motion["trans"][:] = 0.0
+    expr = np.random.default_rng(3).normal(0, 1, (6, 10))
+    np.savez(tmp_path / "plain.npz", **motion)
+    np.savez(tmp_path / "face.npz", **motion, expressions=expr)
+    plain = smpl_positions(tmp_path / "plain.npz", tmp_path / "SMPLX.npz", hand_mean=False)[0]
+    face = smpl_positions(tmp_path / "face.npz", tmp_path / "SMPLX.npz", hand_mean=False)[0]
+    dirs = arrays["shapedirs"].astype(np.float64)
+    shape = arrays["v_template"] + dirs[:, :, :10] @ motion["betas"]
+    n = face.shape[1]
+    for t in range(6):  # at zero pose every joint is its rest joint, the regressor's vertex
+        want = (shape + dirs[:, :, 10:20] @ expr[t])[:n]
+        assert np.allclose(face[t], want, atol=1e-6)
+    assert np.abs(face - plain).max() > 1e-3

@@ -10,6 +10,7 @@ import pytest
 from helpers import smpl_fixtures
 from helpers.bvh_fixtures import write_zeroeggs
 from helpers.figure_pixels import decode
+from helpers.paths import ROOT
 
 from generation.data.smpl_files import MeshSource, SmplError, smpl_mesh, smpl_positions
 from generation.make_stimuli import main as make_stimuli
@@ -199,3 +200,121 @@ def test_the_mesh_follows_its_clips_joints(take):
     hand = source.weights[:, 20] == 1.0
     shift = got - want
     assert np.allclose(shift[:, hand, 1], 0.2, atol=0.03) and np.abs(shift[:, ~hand]).max() < 0.03
+
+
+def test_the_mesh_and_the_joints_agree(tmp_path):
+    """The mesh is posed as the joints are: smplx's skinning gives the same joints as the reader, hand mean (a BEAT2
+    file) and SMPL-X expressions included."""
+    arrays = smpl_fixtures.body_model_arrays("smplx")
+    arrays["shapedirs"] = np.random.default_rng(0).normal(0, 0.002, arrays["shapedirs"].shape[:2] + (20,))
+    np.savez(tmp_path / "SMPLX.npz", **arrays)
+    motion = smpl_fixtures.motion_arrays("smplx", frames=12)
+    np.savez(tmp_path / "take.npz", **motion, expressions=np.random.default_rng(1).normal(0, 1, (12, 10)))
+    joints = smpl_positions(tmp_path / "take.npz", tmp_path / "SMPLX.npz")[0]
+    _, posed = smpl_mesh(tmp_path / "take.npz", tmp_path / "SMPLX.npz").posed(0, 12)
+    assert np.abs(posed - joints).max() < 1e-4
+
+
+@pytest.fixture(scope="module")
+def two_style_set(tmp_path_factory):
+    """A study of SMPL-H clips drawn stick and mesh (3 items, 2 conditions), from the front, hips up, at 320 px."""
+    root = tmp_path_factory.mktemp("two_style")
+    study_file = smpl_study(root / "s")
+    assert make_stimuli(["--study", str(study_file), "--out", str(root / "o"), "--size", "320", "--quiet"]) == 0
+    return root / "o" / "manifest.csv"
+
+
+@pytest.mark.browser
+def test_a_stick_and_mesh_study_in_a_real_browser_reports_the_style(two_style_set, tmp_path):
+    """Debian's chromium rates clips of both styles (the mesh videos play and show the body); a crowd fills the
+    study through the API; the report of the export has the condition x style analysis with both styles.
+    SAVE_SCREENSHOTS=1 writes docs/img/mesh_trial.png (the page showing a mesh clip)."""
+    import os
+    import shutil
+    import threading
+
+    from PIL import Image
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support import expected_conditions as EC
+    from selenium.webdriver.support.ui import WebDriverWait
+    from test_app_browser import chrome
+    from test_app_browser_sound import STATE
+    from test_app_designs import post
+    from werkzeug.serving import make_server
+
+    from analysis.report import build_report
+    from rating_app import create_app
+    from rating_app.store.db import app_engine
+
+    styles = {r["clip_id"]: r["style"] for r in _rows(two_style_set)}
+    db = f"sqlite:///{tmp_path / 'r.sqlite'}"
+    settings = dict(admin_token="t", design="acr", ratings_per_clip=2, clips_per_rater=6, sessions_per_client=0)
+    app = create_app(manifest=two_style_set, db_url=db, min_view=0.3, **settings)
+    server = make_server("127.0.0.1", 0, app, threaded=True)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    url = f"http://127.0.0.1:{server.server_port}"
+    browser = chrome(tmp_path, "1280,900")
+    seen, meshes = set(), 0
+    try:
+        wait = WebDriverWait(browser, 60)
+        browser.get(url + "/?PROLIFIC_PID=meshpid1")
+        browser.find_element(By.ID, "consent").click()
+        wait.until(EC.element_to_be_clickable((By.ID, "start"))).click()
+        wait.until(EC.visibility_of_element_located((By.ID, "intro")))
+        browser.find_element(By.ID, "intro-go").click()
+        for _ in range(14):
+            wait.until(lambda d: d.execute_script(STATE)["section"] in ("trial", "rating-intro", "done"))
+            s = browser.execute_script(STATE)
+            if s["section"] == "done":
+                break
+            if s["section"] == "rating-intro":
+                browser.find_element(By.ID, "rating-go").click()
+                wait.until(lambda d: d.execute_script(STATE)["section"] != "rating-intro")
+                continue
+            wait.until(lambda d: all(d.execute_script(STATE)["ended"]))
+            seen.add(browser.find_element(By.CSS_SELECTOR, "#trial video").get_attribute("src"))
+            shot = tmp_path / f"shot{len(seen)}.png"
+            browser.save_screenshot(str(shot))
+            body, mask = body_pixels(np.asarray(Image.open(shot).convert("RGB")))
+            meshes += body.mean() > 0.01 and mask.sum() > 20  # a skinned body, masked, on the page
+            if meshes == 1 and os.environ.get("SAVE_SCREENSHOTS") == "1":
+                shutil.copy(shot, ROOT / "docs" / "img" / "mesh_trial.png")
+            button = (
+                (By.ID, "continue") if s["label"] == "Example" else (By.CSS_SELECTOR, "button.rate[data-rating='4']")
+            )
+            wait.until(EC.element_to_be_clickable(button)).click()
+            key = (s["section"], s["label"], s["count"])
+            wait.until(lambda d: (lambda t: (t["section"], t["label"], t["count"]) != key)(d.execute_script(STATE)))
+        assert len(seen) >= 3 and meshes >= 1
+        assert not [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+    finally:
+        browser.quit()
+        server.shutdown()
+    app_engine(app).dispose()
+    app = create_app(manifest=two_style_set, db_url=db, min_view=0, **settings)  # the API crowd waits for nothing
+    client = app.test_client()
+    bad = {cid for cid, r in ((r["clip_id"], r) for r in _rows(two_style_set)) if r["condition"] == "BAD"}
+    for _ in range(30):  # raters who rate BAD 1 (they pass the catch trials), the mesh 4-5 and the stick figure 2-3
+        r = client.post("/api/sessions", json={})
+        if r.status_code == 409:
+            break
+        token = r.json["session"]
+        while "trial" in (r := client.get(f"/api/sessions/{token}/next")).json:
+            trial = r.json["trial"]
+            assert client.get(trial["video_url"]).status_code == 200
+            cid = trial["clip_id"]
+            spread = (ord(cid[0]) + len(token)) % 2  # some spread within each cell
+            rating = (
+                None
+                if trial["phase"] == "training"
+                else 1
+                if cid in bad
+                else spread + (4 if styles[cid] == "mesh" else 2)
+            )
+            assert post(client, token, trial, rating=rating).status_code == 201
+    export = client.get("/admin/export.csv", headers={"Authorization": "Bearer t"}).get_data(as_text=True)
+    app_engine(app).dispose()
+    (tmp_path / "ratings.csv").write_text(export)
+    stats = build_report(tmp_path / "ratings.csv", tmp_path / "report", n_boot=50, quiet=True)
+    assert stats["style"]["styles"] == ["stick", "mesh"]
+    assert "condition:style" in stats["style"]["anova"]["terms"]

@@ -8,7 +8,7 @@ from helpers.paths import TEST_DATA
 
 from generation.data.motion_files import read_motion
 from generation.motion.features import rotate_y
-from generation.own_study.builder import place
+from generation.own_study.scene import place
 from generation.own_study.study_file import StudyFileError, read_study_file
 from rendering.camera import DEFAULT_CAMERA, Projector, camera_targets
 from rendering.framing import HEAD_TOP, hips_ancestors, item_camera, leg_joints, mean_facing

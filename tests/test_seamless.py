@@ -62,7 +62,9 @@ def test_flat_and_per_joint_layouts_give_the_same_joints(conversation, tmp_path)
 def test_no_betas_means_the_mean_shape(conversation, tmp_path):
     """The joints are the model's at zero shape: as a poses/trans file with zero betas gives them."""
     m = read_seamless(conversation.files["P0301B"]["motion"])
-    np.savez(tmp_path / "plain.npz", poses=m.poses, trans=m.trans, betas=np.zeros(10), mocap_frame_rate=30.0)
+    np.savez(
+        tmp_path / "plain.npz", poses=m.poses, trans=m.trans, betas=np.zeros(10), mocap_framerate=30.0
+    )  # AMASS layout: no hand mean, as Seamless
     plain = read_motion(tmp_path / "plain.npz", 30.0, smpl_model=conversation.model, up="y")
     seamless = read_motion(conversation.files["P0301B"]["motion"], 30.0, smpl_model=conversation.model, up="y")
     assert np.allclose(plain.joints, seamless.joints, atol=1e-5)

@@ -77,10 +77,12 @@ def test_two_figures_the_partner_the_same_in_both_videos(pair, tmp_path, style):
         cols = lambda m: np.nonzero(m)[1].mean()  # noqa: E731
         assert abs(cols(agent) - cols(partner)) > 0.12 * SIZE  # side by side, not one over the other
         other = figure_pixels.partner(second[t])
-        overlap = (partner & other).sum() / max((partner | other).sum(), 1)
-        assert overlap > 0.8, (t, overlap)  # the same partner (less the encoder's noise at its edges)
+        near = min(figure_pixels.near_share(partner, other), figure_pixels.near_share(other, partner))
+        assert near > 0.85, (t, near)  # the same partner, less the encoder's noise at its edges
         both = partner & other
-        assert np.abs(first[t][both].astype(int).mean(0) - second[t][both].astype(int).mean(0)).max() < 3
+        assert (
+            np.abs(first[t][both].astype(int).mean(0) - second[t][both].astype(int).mean(0)).max() < 6
+        )  # the encoder's noise, not another colour (35 and more)
         assert np.abs(first[t][both].astype(int).mean(0) - np.array([102, 153, 112])).max() < 35  # its one colour
         assert (
             np.abs(first[t][agent].astype(int).mean(0) - second[t][figure_pixels.agent(second[t])].mean(0)).max() < 40
@@ -162,3 +164,14 @@ def test_two_voices_mixed_each_heard_at_the_target_loudness():
     assert np.sqrt(np.mean(left**2)) > 2 * np.sqrt(np.mean(right**2))  # the first voice on its side
     quiet = mix_voices([low[:, None], 1e-5 * np.sin(2 * np.pi * 235 * t)[:, None]], -23.0)
     assert _band(quiet[:, 0], 235) < 1e-3 * _band(quiet[:, 0], 140)  # a listener's near-silence is never raised
+
+
+def test_a_video_that_came_out_a_size_off_is_found(pair, tmp_path):
+    """The videos a build encodes again (generation.stimuli.render_pool): those whose sizes differ from the
+    item's most common, here one encoded at a constant quantiser among two at the default rate control."""
+    from rendering.blinding import odd_ones
+
+    paths = [tmp_path / f"{k}.mp4" for k in range(3)]
+    for k, path in enumerate(paths):
+        render_clip(_clip(pair["agents"][k % 2], pair["a"]), path, 64, camera=pair["camera"], qp=20 if k == 1 else None)
+    assert odd_ones(paths) == [1] and odd_ones([paths[0], paths[2]]) == []

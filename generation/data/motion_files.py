@@ -42,7 +42,7 @@ from ..motion.bvh import BvhError, forward_kinematics, header_fps, read_bvh
 from ..motion.resample import clean_fps, lerp_indices, local_quaternions, quat_to_matrix, resample_local, resample_times
 from . import seamless_files
 from .skeleton_families import UnitError, choose_unit
-from .smpl_files import FPS_KEYS, WHERE_TO_GET, SmplError, is_smpl_file, pose_joints, smpl_positions
+from .smpl_files import FPS_KEYS, WHERE_TO_GET, SmplError, is_smpl_file, pose_joints, smpl_positions, with_hand_mean
 from .systems import resample_positions
 
 EXTENSIONS = (".bvh.gz", ".bvh", ".npy", ".npz")
@@ -207,9 +207,9 @@ def _npz_positions(path, fps):
     return joints, list(clip["joint_names"]), np.asarray(clip["parents"], np.int64)
 
 
-def _smpl_positions(path, fps, smpl_model, smpl_type, source_fps):
+def _smpl_positions(path, fps, smpl_model, smpl_type, hand_mean, source_fps):
     """An SMPL-family parameter file's joints (generation.data.smpl_files), resampled linearly to `fps`."""
-    joints, names, parents, native = smpl_positions(path, smpl_model, smpl_type, source_fps)
+    joints, names, parents, native = smpl_positions(path, smpl_model, smpl_type, source_fps, hand_mean)
     try:
         native = check_fps(native, path)
     except ClipError as e:
@@ -218,14 +218,15 @@ def _smpl_positions(path, fps, smpl_model, smpl_type, source_fps):
     return resample_positions(joints, native, fps), names, parents
 
 
-def _seamless_positions(path, fps, smpl_model, smpl_type, source_fps, up):
+def _seamless_positions(path, fps, smpl_model, smpl_type, hand_mean, source_fps, up):
     """A Seamless Interaction file's joints through the body model at the mean shape, turned upright, resampled
     linearly to `fps` (positions, so an axis-angle flip near pi between frames moves nothing), and its validity
     mask at `fps`: an output frame is valid where both frames it lies between are."""
     if smpl_model is None:
         raise MotionError(f"{path}: a Seamless Interaction file (smplh:* keys); {WHERE_TO_GET}")
     m = seamless_files.read_seamless(path, source_fps)
-    joints, names, parents = pose_joints(m.poses, m.trans, np.zeros(0), smpl_model, smpl_type, path)
+    poses = with_hand_mean(m.poses, smpl_model, smpl_type, hand_mean is True, path)  # stored as full rotations
+    joints, names, parents = pose_joints(poses, m.trans, np.zeros(0), smpl_model, smpl_type, path)
     try:
         native = check_fps(m.fps, path)
     except ClipError as e:
@@ -308,7 +309,17 @@ def _positions(path, fps, up, skeleton, source_fps, smpl):
     return to_y_up(joints, detect_up(joints) if up == "auto" else up), names, parents, None, None
 
 
-def read_motion(path, fps, units="auto", up="auto", skeleton=None, source_fps=None, smpl_model=None, smpl_type=None):
+def read_motion(
+    path,
+    fps,
+    units="auto",
+    up="auto",
+    skeleton=None,
+    source_fps=None,
+    smpl_model=None,
+    smpl_type=None,
+    hand_mean="auto",
+):
     """One motion file as a Motion at `fps`, in metres, Y up.
 
     Reads BVH of any skeleton (.bvh, .bvh.gz), joint-position arrays (.npy [T, J, 3]), clip .npz files,
@@ -334,6 +345,9 @@ def read_motion(path, fps, units="auto", up="auto", skeleton=None, source_fps=No
         The SMPL, SMPL-H or SMPL-X body model (.npz) for SMPL-family files; they cannot be read without one.
     smpl_type : str or None
         "smpl", "smplh" or "smplx"; None to tell it from the model's joint count.
+    hand_mean : bool or "auto"
+        Whether the body model's mean hand pose is added to the stored hand rotations; "auto": as the file's layout
+        does (BEAT2 adds it, AMASS and Seamless Interaction store full rotations; smpl_files.HAND_MEAN_LAYOUTS).
 
     Returns
     -------
@@ -350,7 +364,9 @@ def read_motion(path, fps, units="auto", up="auto", skeleton=None, source_fps=No
     """
     path = Path(path)
     try:
-        joints, names, parents, scale, valid = _positions(path, fps, up, skeleton, source_fps, (smpl_model, smpl_type))
+        joints, names, parents, scale, valid = _positions(
+            path, fps, up, skeleton, source_fps, (smpl_model, smpl_type, hand_mean)
+        )
     except (BvhError, ClipError, SmplError) as e:
         raise MotionError(str(e)) from None
     if parents[0] != -1:

@@ -22,6 +22,13 @@ from moglow_eval.core.clip import MAX_FRAMES, NPZ_READ_ERRORS, ClipError, check_
 
 MOTION_KEYS = ("poses", "trans", "betas")
 FPS_KEYS = ("mocap_frame_rate", "mocap_framerate")
+EXPRESSION_KEYS = ("expressions", "expression")  # SMPL-X's expression coefficients per frame (BEAT2: expressions)
+HAND_MEAN_KEYS = ("hands_meanl", "hands_meanr")  # a SMPL-H or SMPL-X model's mean hand pose (MANO's), 45 values each
+# The hands' rest pose, per layout (docs/own-study.md#smpl-family-files): BEAT2's files name their rate
+# mocap_frame_rate, and its loaders call smplx with flat_hand_mean=False (smplx's default), which adds the model's mean
+# hand pose to the stored rotations; AMASS's (mocap_framerate) store full rotations, as does anything else read here.
+HAND_MEAN_LAYOUTS = {"mocap_frame_rate": True, "mocap_framerate": False}
+HAND_FIRST = {"smplh": 22, "smplx": 25}  # the first hand joint in the poses (SMPL-X's jaw and eyes come before)
 MODEL_KEYS = ("v_template", "shapedirs", "posedirs", "J_regressor", "weights", "kintree_table", "f")
 BATCH = 2048  # frames per pass through the kinematics: bounds the rotation matrices held at once
 MESH_BATCH = 32  # frames per pass through the skinning: bounds the vertices held at once (32 x 10k x 3 floats)
@@ -60,17 +67,79 @@ def is_smpl_file(path):
     return {"poses", "trans"} <= names and "joints" not in names
 
 
-def smpl_positions(path, model, smpl_type=None, source_fps=None):
+def smpl_positions(path, model, smpl_type=None, source_fps=None, hand_mean="auto"):
     """(joints [T, J, 3] float64 in metres, in the model's axes; names; parents; frame rate) of an SMPL-family
-    parameter file, through the body model file `model` (.npz). SmplError naming the file otherwise."""
+    parameter file, through the body model file `model` (.npz). `hand_mean`: add the model's mean hand pose to the
+    stored hand rotations (True), not (False), or as the file's layout does ("auto": HAND_MEAN_LAYOUTS). SMPL-X
+    expression coefficients, where the file has them, shape the head's rest joints as in smplx's forward pass.
+    SmplError naming the file otherwise."""
     if model is None:
         raise SmplError(f"{path}: an SMPL-family parameter file (poses, trans, betas); {WHERE_TO_GET}")
     poses, trans, betas, fps = _read_motion(path, source_fps)
-    joints, names, parents = pose_joints(poses, trans, betas, model, smpl_type, path)
+    poses = with_hand_mean(poses, model, smpl_type, hand_mean_of(path, hand_mean), path)
+    expression = _read_expression(path, len(poses))
+    joints, names, parents = pose_joints(poses, trans, betas, model, smpl_type, path, expression)
     return joints, names, parents, fps
 
 
-def pose_joints(poses, trans, betas, model, smpl_type, where):
+def hand_mean_of(path, hand_mean):
+    """Whether the hand mean is added for the file at `path`: `hand_mean` if a bool, else its layout's."""
+    if isinstance(hand_mean, bool):
+        return hand_mean
+    headers = npz_headers(path)
+    return next((HAND_MEAN_LAYOUTS[k] for k in FPS_KEYS if k in headers), False)
+
+
+def with_hand_mean(poses, model, smpl_type, add, where):
+    """`poses` with the model's mean hand pose added to both hands' rotations where `add` (and the model has hands);
+    SmplError naming the model when it was asked for and the model has no hand mean."""
+    if not add:
+        return poses
+    kind = smpl_type or next((k for k, n in JOINT_NAMES.items() if 3 * len(n) == poses.shape[1]), None)
+    if kind not in HAND_FIRST:
+        return poses  # SMPL: no finger joints
+    headers = npz_headers(model)
+    if any(k not in headers for k in HAND_MEAN_KEYS):
+        raise SmplError(f"{model}: no hands_meanl / hands_meanr, which hand_mean for {where} needs (set it false)")
+    d = _load(model, HAND_MEAN_KEYS, "a body model")
+    mean = np.concatenate([np.asarray(d[k], np.float64).reshape(-1) for k in HAND_MEAN_KEYS])
+    if mean.shape != (90,):
+        raise SmplError(f"{model}: hands_meanl and hands_meanr must hold 45 values each, got {mean.shape[0]} in all")
+    out = poses.copy()
+    first = 3 * HAND_FIRST[kind]
+    out[:, first : first + 90] += mean
+    return out
+
+
+def _read_expression(path, frames):
+    """SMPL-X expression coefficients [T, E] of an SMPL-family file, or None where it has none."""
+    headers = npz_headers(path)
+    key = next((k for k in EXPRESSION_KEYS if k in headers), None)
+    if key is None:
+        return None
+    e = np.asarray(_load(path, (key,), "an SMPL-family file")[key], np.float64)
+    if e.ndim != 2 or len(e) != frames or not np.isfinite(e).all():
+        raise SmplError(f"{path}: '{key}' must be finite [{frames}, E], one row per frame, got {e.shape}")
+    return e
+
+
+def _shape_and_expression(kind, shapedirs, betas, expression):
+    """(shape directions [V, 3, K], coefficients [T or 1, K]): the body shape's, then SMPL-X's expression's, as
+    smplx's forward pass puts them together; the model's mean shape where `betas` is empty."""
+    n_shape = min(len(betas), _shape_components(kind, shapedirs.shape[2]))
+    dirs, coef = shapedirs[:, :, :n_shape], np.asarray(betas[:n_shape], np.float64)[None]
+    if expression is None or kind != "smplx":
+        return dirs, coef
+    first = _shape_components(kind, shapedirs.shape[2])
+    n_expr = min(expression.shape[1], shapedirs.shape[2] - first)
+    if n_expr <= 0:
+        return dirs, coef
+    dirs = np.concatenate([dirs, shapedirs[:, :, first : first + n_expr]], 2)
+    coef = np.concatenate([np.repeat(coef, len(expression), 0), expression[:, :n_expr]], 1)
+    return dirs, coef
+
+
+def pose_joints(poses, trans, betas, model, smpl_type, where, expression=None):
     """(joints [T, J, 3] float64, names, parents) of axis-angle poses [T, 3J] (the root first), translations
     [T, 3] and shape `betas` [B] (empty: the model's mean shape) through the body model file `model`, with smplx's
     kinematics. Every frame is posed from its own rotations: nothing is interpolated between frames here, so a
@@ -87,36 +156,39 @@ def pose_joints(poses, trans, betas, model, smpl_type, where):
         from smplx.lbs import batch_rigid_transform, batch_rodrigues, blend_shapes, vertices2joints
     except ImportError:
         raise SmplError(f"{where}: reading SMPL-family files needs smplx: pip install 'moglow-eval[smpl]'") from None
-    n_shape = min(len(betas), _shape_components(kind, shapedirs.shape[2]))
+    dirs, coef = _shape_and_expression(kind, shapedirs, betas, expression)
     with torch.no_grad():
-        shaped = torch.from_numpy(template)[None]
-        if n_shape:
-            shape = torch.from_numpy(np.asarray(betas[:n_shape], np.float64))[None]
-            shaped = shaped + blend_shapes(shape, torch.from_numpy(shapedirs[:, :, :n_shape]))
-        rest = vertices2joints(torch.from_numpy(regressor), shaped)  # [1, J, 3]
+        template, dirs, regressor = (torch.from_numpy(x) for x in (template, dirs, regressor))
         tree = torch.from_numpy(parents)
         out = np.empty((len(poses), n, 3))
         for a in range(0, len(poses), BATCH):
             pose = torch.from_numpy(np.ascontiguousarray(poses[a : a + BATCH], np.float64))
+            # The rest joints of the shape (and, for SMPL-X with expressions, of each frame's face).
+            c = torch.from_numpy(coef if len(coef) == 1 else coef[a : a + BATCH])
+            shaped = template[None] + (blend_shapes(c, dirs) if dirs.shape[2] else 0)
+            rest = vertices2joints(regressor, shaped).expand(len(pose), -1, -1)
             rot = batch_rodrigues(pose.reshape(-1, 3)).reshape(len(pose), n, 3, 3)
-            posed, _ = batch_rigid_transform(rot, rest.expand(len(pose), -1, -1), tree, dtype=torch.float64)
+            posed, _ = batch_rigid_transform(rot, rest, tree, dtype=torch.float64)
             out[a : a + BATCH] = posed.numpy()
     return out + trans[:, None], list(JOINT_NAMES[kind]), parents.astype(np.int64)
 
 
-def smpl_mesh(path, model, smpl_type=None, source_fps=None, face="mask"):
+def smpl_mesh(path, model, smpl_type=None, source_fps=None, face="mask", hand_mean="auto"):
     """The skinned mesh of an SMPL-family parameter file (`style = "mesh"`): a MeshSource whose `vertices(a, b)`
     gives frames a..b's vertices [n, V, 3] (metres, the model's axes, float32) through smplx's own skinning
     (`smplx.lbs.lbs`: shape and pose blend shapes, then linear blend skinning) with the user's model file and the
     motion's betas, a chunk at a time, so memory does not grow with the clip. `face`: "mask" (the face's vertices
-    flagged for the mask, rendering.mesh) or "none". SmplError naming the file otherwise."""
+    flagged for the mask, rendering.mesh) or "none"; `hand_mean` as smpl_positions takes it, and the file's SMPL-X
+    expressions, so that the mesh and the joints agree. SmplError naming the file otherwise."""
     if model is None or not Path(model).is_file():
         raise SmplError(f"{model or path}: no body model file for the mesh style; {WHERE_TO_GET}")
     poses, trans, betas, fps = _read_motion(path, source_fps)
-    return mesh_source(poses, trans, betas, fps, model, smpl_type, face, path)
+    poses = with_hand_mean(poses, model, smpl_type, hand_mean_of(path, hand_mean), path)
+    expression = _read_expression(path, len(poses))
+    return mesh_source(poses, trans, betas, fps, model, smpl_type, face, path, expression)
 
 
-def mesh_source(poses, trans, betas, fps, model, smpl_type, face, where):
+def mesh_source(poses, trans, betas, fps, model, smpl_type, face, where, expression=None):
     """The MeshSource of poses [T, 3J], translations [T, 3] and `betas` (empty: the mean shape) at `fps`, through
     the body model file `model` (smpl_mesh, and Seamless Interaction's files through seamless_files). SmplError
     naming `where` or the model."""
@@ -128,7 +200,10 @@ def mesh_source(poses, trans, betas, fps, model, smpl_type, face, where):
             f"{where}: 'poses' has {poses.shape[1]} values a frame; the {kind} model {model} takes {3 * len(parents)}"
         )
     skin = _read_skin(model, len(template), len(parents))
-    return MeshSource(where, poses, trans, betas, fps, template, shapedirs, regressor, parents, kind, skin, face)
+    source = MeshSource(where, poses, trans, betas, fps, template, shapedirs, regressor, parents, kind, skin, face)
+    if expression is not None and kind == "smplx":
+        source.expression_dirs, source.expression = _shape_and_expression(kind, shapedirs, np.zeros(0), expression)
+    return source
 
 
 class MeshSource:
@@ -146,6 +221,7 @@ class MeshSource:
         self.posedirs, self.weights, self.faces = skin
         none = np.zeros(len(template), bool)
         self.mask = face_vertices(self.shaped(), self.rest_joints()) if face == "mask" else none
+        self.expression_dirs, self.expression = None, None  # SMPL-X's, set by mesh_source where the file has them
 
     def shaped(self):
         """The rest vertices [V, 3] in this motion's shape."""
@@ -169,11 +245,15 @@ class MeshSource:
         with torch.no_grad():
             for s in range(a, b, MESH_BATCH):
                 e = min(b, s + MESH_BATCH)
+                coef, dirs = np.repeat(self.betas[None], e - s, 0), self.shapedirs
+                if self.expression is not None:  # the face's expression: more shape directions, per frame
+                    coef = np.concatenate([coef, self.expression[s:e].astype(np.float32)], 1)
+                    dirs = np.concatenate([dirs, self.expression_dirs.astype(np.float32)], 2)
                 v, j = lbs(
-                    torch.from_numpy(np.repeat(self.betas[None], e - s, 0)),
+                    torch.from_numpy(coef),
                     torch.from_numpy(self.poses[s:e].astype(np.float32)),
                     torch.from_numpy(self.template),
-                    torch.from_numpy(self.shapedirs),
+                    torch.from_numpy(dirs),
                     torch.from_numpy(self.posedirs),
                     torch.from_numpy(self.regressor),
                     torch.from_numpy(self.parents),

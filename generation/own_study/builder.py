@@ -39,18 +39,18 @@ from tqdm import tqdm
 from moglow_eval.core import study
 from moglow_eval.core.clip import save_clip
 from moglow_eval.core.tables import C2ST_COLUMNS
-from rendering.framing import item_camera
+from rendering.captions import room as caption_room
 from rendering.raster import STYLES
 
 from ..data.motion_files import read_motion
 from ..metrics import c2st
 from ..metrics.c2st_features import FEATURE_COLUMNS, feature_table, feature_text
 from ..metrics.objective import any_clip_metrics, find_feet
-from ..motion.features import rotate_y
 from ..stimuli.catch_kinds import make_catch
 from ..stimuli.files import StimuliError, clip_files, manifest_row, prepare_out, summary_text, write_csv, write_tables
 from ..stimuli.render_pool import render_stimuli
 from ..stimuli.summary import blinding_warning
+from .dyad import UNNAMED, read_people
 from .inputs import (
     check_same_skeleton,
     check_valid,
@@ -61,79 +61,27 @@ from .inputs import (
     seconds_text,
     with_study_fps,
 )
-from .mesh_clips import check_mesh_inputs, mesh_spec, wants_mesh
+from .mesh_clips import check_mesh_inputs, mesh_spec, partner_mesh_spec, wants_mesh
+from .scene import stage
+from .speech import item_captions, prepare_audio, read_sources
 
 log = logging.getLogger(__name__)
 TEST, CATCH, TRAINING = study.ROLES
 ITEM_COLUMNS = ["item", "role", "frames", "fps", "catch"]
 
 
-def cut_items(motions, spec):
-    """Every clip of an item cut to length_s, or to the item's shortest clip."""
+def cut_items(motions, spec, extra=()):
+    """Every clip of an item cut to length_s, or to the item's shortest clip; `extra` [{item: Motion}] cut alike
+    (the interlocutor, the mismatched motion). StimuliError naming a clip that would show an invalid frame."""
     for item in motions[study.NATURAL]:
-        clips = [by_item[item] for by_item in motions.values()]
+        clips = [by_item[item] for by_item in [*motions.values(), *extra] if item in by_item]
         n = int(round(spec.length_s * spec.fps)) if spec.length_s else min(len(m.joints) for m in clips)
         for m in clips:
             check_valid(m, n)
             m.joints = m.joints[:n]
 
 
-def place(joints, names):
-    """A clip with its root at the origin on the floor at frame 0, turned to face +Z where the names tell the
-    left joints from the right (else only moved): no start position or heading tells a condition."""
-    from moglow_eval.core.skeleton_names import side
-
-    out = np.asarray(joints, dtype=np.float64).copy()
-    out[..., [0, 2]] -= out[0, 0, [0, 2]]
-    left = [j for j, n in enumerate(names) if side(n) == "left"]
-    right = [j for j, n in enumerate(names) if side(n) == "right"]
-    if left and right:
-        across = out[0, left].mean(0) - out[0, right].mean(0)
-        yaw = np.arctan2(-across[2], across[0])  # facing = across x up, as features.root_trajectory
-        out = rotate_y(out, -yaw)
-    return out.astype(np.float32)
-
-
 # ---------------------------------------------------------------- sound
-AUDIO_EXTENSIONS = (".wav", ".flac")
-
-
-def prepare_audio(spec, motions, folder):
-    """{item: path of its normalised samples (.npy, float32 at rendering.audio.RATE)} for a study with [audio]:
-    one ITEM.wav or ITEM.flac per item, at least as long as the item's clips and not silent over them, the whole
-    set normalised to the study's loudness over what is played. StimuliError naming the file otherwise."""
-    from rendering import audio
-    from rendering.errors import RenderError
-
-    if spec.audio_folder is None:
-        return {}
-    files = {}
-    for p in sorted(spec.audio_folder.iterdir()):
-        if p.suffix.lower() in AUDIO_EXTENSIONS and p.is_file():
-            files[p.stem] = p
-    out = {}
-    for item, m in motions[study.NATURAL].items():
-        path = files.get(item)
-        if path is None:
-            raise StimuliError(f"{spec.audio_folder}: no audio for item {item} (expected {item}.wav or {item}.flac)")
-        need = len(m.joints) / spec.fps
-        try:
-            samples = audio.read_audio(path, max_seconds=need + 1.0)  # no more is played: no more is decoded
-        except RenderError as e:
-            raise StimuliError(str(e)) from None
-        have = len(samples) / audio.RATE
-        if have + 0.5 / spec.fps < need:
-            raise StimuliError(
-                f"{path}: the audio is {seconds_text(have)}, shorter than the item's clips ({need:.2f} s)"
-            )
-        span = samples[: int(round(need * audio.RATE))].astype(np.float32)
-        if audio.rms_dbfs(span) < audio.SILENCE_DBFS:
-            raise StimuliError(f"{path}: silent over the clip's {need:.2f} s, where the study needs speech or music")
-        out[item] = folder / f"{item}.npy"
-        np.save(out[item], audio.normalise(span, spec.loudness))
-    return out
-
-
 AUDIO_CHECK_SAMPLES = 6  # spoken digit sequences for the raters' audio check (ITU-T P.808 style)
 AUDIO_CHECK_DIGITS = 3
 AUDIO_CHECK_COLUMNS = ["file", "answer"]
@@ -232,6 +180,7 @@ class StudyClip:
     note: str = ""  # the manifest's seed column: the catch kind of a BAD clip
     motion_item: str = ""  # appropriateness: the other item whose motion a mismatched clip shows
     start: int = 0  # the motion's frame the clip starts at (a catch copy's: 1)
+    path: str = ""  # the file its motion came from, where no condition's folder of its item holds it (dyadic)
 
 
 def mismatch_partners(motions, items, seed):
@@ -252,17 +201,24 @@ def _fit(joints, n):
     return joints[:n] if len(joints) >= n else np.concatenate([joints, np.repeat(joints[-1:], n - len(joints), 0)])
 
 
-def build_clips(spec, motions, roles, catch_items, bad):
+def build_clips(spec, motions, roles, catch_items, bad, people=None):
     """Every clip: each item in every condition with its role; per catch item its BAD clip and copies of its clips
     in every condition with role catch; and, for the appropriateness design, each condition's mismatched clip of
-    every item (the motion it made for the partner item, with this item's sound). A catch copy starts one frame
+    every item (the motion it made for the partner item, with this item's sound; semantic alike; dyadic: the motion
+    it made for a mismatched interlocutor, from `people`, shown with this item's). A catch copy starts one frame
     later (its last frame held), so that no two videos of the set are the same bytes (a repeated content hash
     would point at the catch trial)."""
     clips = []
     for item, role in roles.items():
         for name, by_item in motions.items():
             clips.append(StudyClip(name, item, role, by_item[item].joints))
-    if spec.design == "appropriateness":
+    if spec.design == "dyadic":
+        for item, role in roles.items():
+            for name, by_item in people.mismatched.items():
+                made_for = people.made_for.get(item) or UNNAMED
+                motion = by_item[item]
+                clips.append(StudyClip(name, item, role, motion.joints, motion_item=made_for, path=motion.path))
+    elif spec.design in ("appropriateness", "semantic"):
         partners = mismatch_partners(motions, sorted(roles), spec.seed)
         for item, role in roles.items():
             n = len(motions[study.NATURAL][item].joints)
@@ -284,19 +240,14 @@ def skeleton_of(motions):
     return any_ref.names, any_ref.parents
 
 
-def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=None):
-    """Clip files (random order and ids), manifest and metrics rows, render jobs, and C2ST features."""
+def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=None, scene=None, captions=None):
+    """Clip files (random order and ids), manifest and metrics rows, render jobs, and C2ST features; the clips
+    placed and each item's camera (and other person) in `scene` (generation.own_study.scene.stage)."""
     rng = np.random.default_rng(spec.seed)
     names, parents = skeleton_of(motions)
     feet = find_feet(names) if spec.feet == "auto" else [names.index(n) for n in spec.feet]
     if feet is not None and len(feet) == 2:  # one joint per foot: it is both the foot's ankle and its toe
         feet = [feet[0], feet[0], feet[1], feet[1]]
-    for c in clips:
-        c.joints = place(c.joints, names)
-    by_item = {}
-    for c in clips:
-        by_item.setdefault(c.item, []).append(c.joints)
-    cameras = {item: item_camera(js, names, parents, spec.fps, spec.view, spec.framing) for item, js in by_item.items()}
     taken, manifest, metrics_rows, jobs, groups, feats = set(), [], [], [], [], {}
     forbidden = [*study.RESERVED, *spec.conditions]
     options = dict(hide=tuple(spec.hide), thin=None if spec.thin == "auto" else tuple(spec.thin))
@@ -308,9 +259,13 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
         cid = study.new_clip_id(taken, forbidden)
         motion, video, sheet = clip_files(out, cid)
         save_clip(motion, joints, parents, names, spec.fps)
-        job = dict(camera=cameras[item], style=STYLES[style], **options)
+        job = dict(**scene.job(item, style), **options)
+        if captions:
+            job["captions"] = captions[item]  # the same phrases in every clip of the item
         if STYLES[style].body == "mesh":
             job["mesh"] = mesh_spec(c, joints, motions, spec)
+            if item in scene.partners:
+                job["partner_mesh"] = partner_mesh_spec(scene, item, spec)
         if sound:
             # Every clip of an item carries the same sound bytes, a catch copy (one frame late) too: an audio track
             # of its own would tell a catch copy from the item's test clip.
@@ -381,9 +336,11 @@ def build_study(spec, out, size, preset, workers, force, progress):
     n_catch, own_catch = _catch_items(spec, files[spec.reference])
     motions = read_all(spec, files, progress)
     motions = {(study.NATURAL if n == spec.reference else n): m for n, m in motions.items()}
-    cut_items(motions, spec)
+    sources = read_sources(spec, set(motions[study.NATURAL]))
+    people = read_people(spec, motions[study.NATURAL], progress, sources[1])
+    cut_items(motions, spec, people.extra())
     if wants_mesh(spec):
-        check_mesh_inputs(spec, motions)  # before anything is written
+        check_mesh_inputs(spec, {**motions, **dict(enumerate(people.extra()))})  # before anything is written
     items = sorted(motions[study.NATURAL])
     roles, catch_items = assign_roles(items, spec, n_catch)
     if own_catch is not None:
@@ -392,11 +349,16 @@ def build_study(spec, out, size, preset, workers, force, progress):
     if spec.reference != study.NATURAL:
         log.info(f"study: the reference condition {spec.reference} is written as {study.NATURAL} in the manifest")
     with tempfile.TemporaryDirectory() as tmp:
-        sound = prepare_audio(spec, motions, Path(tmp))  # checked before anything is written
+        # Everything is placed, framed, heard and captioned before anything is written.
+        clips = build_clips(spec, motions, roles, catch_items, bad, people)
+        lengths = {i: len(m.joints) for i, m in motions[study.NATURAL].items()}
+        captions = item_captions(spec, lengths, size)
+        room = caption_room(size) if captions else 0.0
+        scene = stage(clips, skeleton_of(motions), spec, people.partners, Path(tmp), room)
+        sound = prepare_audio(spec, lengths, Path(tmp), scene.sides)
         out = prepare_out(out, force)
-        clips = build_clips(spec, motions, roles, catch_items, bad)
         manifest, metrics_rows, jobs, groups, feats = write_study_clips(
-            out, clips, motions, spec, size, preset, progress, sound
+            out, clips, motions, spec, size, preset, progress, sound, scene, captions
         )
         render_stimuli(jobs, workers, progress, groups)
         if sound:
@@ -418,6 +380,8 @@ def build_study(spec, out, size, preset, workers, force, progress):
             for i in items
         ],
     )
+    if sources[0]:
+        write_csv(out / "sources.csv", sources[0], sources[1])  # where each item came from (CONTRACTS §10)
     # The reference's own name for the app's export and the report (CONTRACTS §4); the manifest calls it NAT.
     (out / study.STUDY_NAMES_FILE).write_text(json.dumps({study.REFERENCE_NAME: spec.reference}) + "\n")
     write_tables(out, manifest, metrics_rows, [])  # manifest.csv last: a folder without one is no stimulus set

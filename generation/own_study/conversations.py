@@ -39,7 +39,7 @@ from tqdm import tqdm
 
 from moglow_eval.core import cli
 
-from ..data.seamless_files import FPS, parse_name, read_seamless, write_cut
+from ..data.seamless_files import parse_name, read_seamless, write_cut
 from ..data.smpl_files import SmplError
 from ..data.transcripts import TranscriptError, read_transcript, write_transcript
 from .cuts import MODES, Speaker, choose_items, keyword_table
@@ -132,7 +132,7 @@ def write_items(out, items, speakers, mismatched, progress):
     by_name = {c.item: c for c in items}
     rows = []
     for c in tqdm(items, desc="cut", unit="item", file=sys.stderr, disable=not progress):
-        seconds = c.frames / FPS
+        seconds = c.frames / c.fps
         for role, who in (("agent", c.agent), ("interlocutor", c.interlocutor)):
             _write_person(out, role, c.item, speakers[c.interaction][who], c.start_frame, c.frames, c.start, seconds)
         if mismatched:

@@ -52,6 +52,7 @@ def read_options(spec):
         source_fps=spec.source_fps,
         smpl_model=spec.smpl_model,
         smpl_type=spec.smpl_type,
+        hand_mean=spec.hand_mean,
     )
 
 

@@ -32,9 +32,20 @@ def mesh_spec(c, joints, motions, spec):
     """The MeshSpec of a study clip (builder.StudyClip) drawn as `joints`: the file its motion came from (a
     mismatched clip's: its motion item's; a tool-made BAD clip's: the reference's, which it breaks; a BAD clip of the
     user's own: that file), from the frame it starts at."""
-    if c.condition == study.CATCH:
+    if c.path:  # a dyadic mismatched clip: its condition's motion for a mismatched interlocutor
+        path = c.path
+    elif c.condition == study.CATCH:
         own = c.note == "own"
         path = folder_files(study.CATCH, spec.catch_folder)[c.item] if own else motions[study.NATURAL][c.item].path
     else:
         path = motions[c.condition][c.motion_item or c.item].path
-    return MeshSpec(str(path), str(spec.smpl_model), spec.smpl_type, spec.face, joints, spec.fps, c.start)
+    return MeshSpec(
+        str(path), str(spec.smpl_model), spec.smpl_type, spec.face, joints, spec.fps, c.start, spec.hand_mean
+    )
+
+
+def partner_mesh_spec(scene, item, spec):
+    """The MeshSpec of an item's interlocutor (own_study.scene.Scene): its file, drawn as placed."""
+    joints = scene.partner_joints[item]
+    path = str(scene.partner_sources[item])
+    return MeshSpec(path, str(spec.smpl_model), spec.smpl_type, spec.face, joints, spec.fps, 0, spec.hand_mean)

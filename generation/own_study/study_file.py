@@ -26,6 +26,7 @@
     fps = 30                     # the frame rate of .npy arrays (BVH and .npz files carry their own)
     smpl_model = "models/SMPLX_NEUTRAL.npz"  # the body model for SMPL-family .npz files (poses, trans, betas)
     smpl_type = "smplx"          # optional: smpl, smplh or smplx (else told from the model's joints)
+    hand_mean = "auto"           # add the model's mean hand pose: true, false, or as the layout does (BEAT2 adds it)
     [render]                     # optional
     view = "front"               # "front", "three-quarter", "side" or degrees from the body's mean facing
     framing = "upper"            # "full" (the default), "upper" (hips up) or "auto" (upper when the feet stay)
@@ -88,7 +89,7 @@ RENDER_KEYS = {"view", "framing", "style", "face"}
 FACES = ("mask", "none")  # the mesh style's face: a plain mask over it (GENEA 2026), or the mesh's own
 AUDIO_KEYS = {"folder", "loudness", "interlocutor", "channels"}
 CATCH_KEYS = {"make", "n", "folder"}
-SKELETON_KEYS = {"file", "units", "up", "hide", "thin", "feet", "fps", "smpl_model", "smpl_type"}
+SKELETON_KEYS = {"file", "units", "up", "hide", "thin", "feet", "fps", "smpl_model", "smpl_type", "hand_mean"}
 MAX_LENGTH_S = 600.0
 MAX_BYTES = 1 << 20  # a study file is a few dozen keys
 MAX_DEFAULT_FPS = 60.0  # without `fps`, clips keep the reference's frame rate, up to this (a video's usual most)
@@ -115,11 +116,12 @@ class StudySpec:
     source_fps: float | None = None
     smpl_model: Path | None = None
     smpl_type: str | None = None
+    hand_mean: bool | str = "auto"  # the hands' rest pose: smpl_files.HAND_MEAN_LAYOUTS
     design: str | None = None
     audio_folder: Path | None = None
     loudness: float = -23.0
     view: object = None  # None: the built-in study's fixed camera; else a key of rendering.framing.VIEWS or degrees
-    framing: str = "full"
+    framing: str | None = None  # None: "full" for one person, "upper" for two (study_people.check_needs)
     styles: list = field(default_factory=lambda: ["stick"])
     face: str = "mask"
     sources: Path | None = None  # the table of where each item came from
@@ -277,6 +279,10 @@ def _smpl(path, table, spec):
         if table["smpl_type"] not in SMPL_TYPES:
             raise err(path, "[skeleton] smpl_type", f"must be {', '.join(SMPL_TYPES)}, got {table['smpl_type']!r}")
         spec.smpl_type = table["smpl_type"]
+    hand_mean = table.get("hand_mean", "auto")
+    if hand_mean != "auto" and not isinstance(hand_mean, bool):
+        raise err(path, "[skeleton] hand_mean", f'must be true, false or "auto", got {hand_mean!r}')
+    spec.hand_mean = hand_mean
 
 
 def _audio(path, table, spec):
@@ -313,8 +319,8 @@ def _render(path, table, spec):
         spec.view = view
     else:
         raise err(path, "[render] view", f"must be {', '.join(VIEWS)} or an azimuth in degrees, got {view!r}")
-    framing = table.get("framing", "full")
-    if framing not in FRAMINGS:
+    framing = table.get("framing")
+    if framing is not None and framing not in FRAMINGS:
         raise err(path, "[render] framing", f"must be {', '.join(FRAMINGS)}, got {framing!r}")
     spec.framing = framing
     style = table.get("style", "stick")

@@ -67,7 +67,9 @@ def _captions(path, table, spec):
 
 
 def check_needs(path, spec):
-    """What each design needs from the rest of the study file."""
+    """What each design needs from the rest of the study file; the framing's default (two people: upper)."""
+    if spec.framing is None:
+        spec.framing = "upper" if spec.interlocutor is not None else "full"
     if spec.design in STIMULUS_DESIGNS and spec.audio_folder is None:
         raise err(path, "design", f"{spec.design} asks whether motion fits its speech: give the [audio] table")
     if spec.design == "dyadic":

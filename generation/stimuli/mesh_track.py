@@ -28,23 +28,26 @@ class MeshSpec:
     joints: np.ndarray  # [T, J, 3] the clip's joints, as drawn
     fps: float  # the clip's frame rate: its frame t is the file's time (start + t) / fps (resampled, cut or held)
     start: int = 0  # the clip's first frame in the file, at the clip's rate (a catch copy starts one late)
+    hand_mean: bool | str = "auto"  # as the joints were read (generation.data.smpl_files.HAND_MEAN_LAYOUTS)
 
 
 @functools.lru_cache(maxsize=4)
-def source(path, model, smpl_type, face):
-    """The file's MeshSource (generation.data.smpl_files), read once per process and file."""
+def source(path, model, smpl_type, face, hand_mean="auto"):
+    """The file's MeshSource (generation.data.smpl_files), read once per process and file, its hands as its joints'
+    (the Seamless reader's rule: full rotations unless hand_mean is true)."""
     from ..data import seamless_files
-    from ..data.smpl_files import mesh_source, smpl_mesh
+    from ..data.smpl_files import mesh_source, smpl_mesh, with_hand_mean
 
     if seamless_files.is_seamless_file(path):
         m = seamless_files.read_seamless(path)
-        return mesh_source(m.poses, m.trans, np.zeros(0), m.fps, model, smpl_type, face, path)
-    return smpl_mesh(path, model, smpl_type, face=face)
+        poses = with_hand_mean(m.poses, model, smpl_type, hand_mean is True, path)
+        return mesh_source(poses, m.trans, np.zeros(0), m.fps, model, smpl_type, face, path)
+    return smpl_mesh(path, model, smpl_type, face=face, hand_mean=hand_mean)
 
 
 def track(spec):
     """The MeshTrack of a MeshSpec: the clip's frame t is the file's frame (start + t) * (its rate / the clip's)."""
-    src = source(spec.path, spec.model, spec.smpl_type, spec.face)
+    src = source(spec.path, spec.model, spec.smpl_type, spec.face, spec.hand_mean)
     frames = (spec.start + np.arange(len(spec.joints))) * (src.fps / spec.fps)
     return MeshTrack(src, spec.joints, frames)
 

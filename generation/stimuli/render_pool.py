@@ -16,10 +16,11 @@ import numpy as np
 from tqdm import tqdm
 
 from rendering.audio import mux_audio
-from rendering.blinding import check_one_size, same_mtime
+from rendering.blinding import check_one_size, odd_ones, same_mtime
 from rendering.render import render_clip
 
 log = logging.getLogger(__name__)
+RETRIES = 3  # times a video that came out a size off is encoded again (each time with a fresh random rate dither)
 
 
 def _render_job(job):
@@ -68,7 +69,16 @@ def render_stimuli(jobs, workers, progress=True, groups=None):
     render_all(jobs, workers, progress=progress)
     by_group = {}
     for k, job in enumerate(jobs):
-        by_group.setdefault(None if groups is None else groups[k], []).append(job[1])
+        by_group.setdefault(None if groups is None else groups[k], []).append(k)
+    for _ in range(RETRIES):
+        odd = [ks[i] for ks in by_group.values() if len(ks) > 2 for i in odd_ones([jobs[k][1] for k in ks])]
+        if not odd:
+            break
+        # x264 can overshoot one frame's budget by a byte on a frame dense with edges (captions at a small size):
+        # a fresh random share of the rate per frame puts the frames elsewhere, and the video comes out one size.
+        log.info(f"render: {len(odd)} video(s) came out a frame size off the others of their item; encoding again")
+        render_all([jobs[k] for k in odd], min(workers, len(odd)), progress=False)
+    by_group = {g: [jobs[k][1] for k in ks] for g, ks in by_group.items()}
     sizes = {check_one_size(videos) for videos in by_group.values()}
     same_mtime([p for job in jobs for p in job[:3]], time.time())
     what = f"{sizes.pop()} bytes" if len(sizes) == 1 else f"one size per item ({len(sizes)} sizes)"

@@ -90,3 +90,13 @@ def caption_text(frame):
         mask[:, : cols.min()] = False
         mask[:, cols.max() + 1 :] = False
     return mask
+
+
+def near_share(a, b, pixels=2):
+    """The share of mask a's pixels within `pixels` of one of mask b's: near 1 where two videos show the same
+    drawing, whatever the encoder did to its thin edges."""
+    from scipy.ndimage import binary_dilation
+
+    if not a.any():
+        return 0.0
+    return float((a & binary_dilation(b, iterations=pixels)).sum() / a.sum())

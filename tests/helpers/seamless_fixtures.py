@@ -195,3 +195,83 @@ def write_conversation(
     for who, participant in enumerate(participants):
         conv.files[participant] = write_participant(folder, who, participant, frames, interaction, invalid, turns)
     return conv
+
+
+# ---------------------------------------------------------------- a whole study
+SYSTEMS = {"JITTERY": 0.08, "CALM": 0.02}  # made-up systems: the real agent's body pose plus noise of this sd (rad)
+
+
+def _system_file(src, dst, sd, seed):
+    arrays = dict(np.load(src))
+    rng = np.random.default_rng(seed)
+    pose = arrays["smplh:body_pose"]
+    arrays["smplh:body_pose"] = (pose + rng.normal(0, sd, pose.shape)).astype(pose.dtype)
+    np.savez(dst, **arrays)
+
+
+def write_study(root, design="dyadic", length_s=4.0, stereo=False, per_interaction=2, style="stick"):
+    """A two-person study from two conversations in Seamless Interaction's layout, cut by the cutter
+    (generation.own_study.conversations) and written as a study file; returns its path.
+
+    design "dyadic": `listening` items with mismatched interlocutors; each made-up system (SYSTEMS) gives the real
+    agent's poses with noise for its own item, and for the item its mismatched interlocutor came from as its
+    motion "for a mismatched interlocutor" (`[mismatched]`). design "semantic": `keyword` items around "bridge",
+    the keyword highlighted (`[captions] keywords` is the cutter's sources.csv). Both show the real interlocutor,
+    both voices (mono, or `stereo`) and both people's captions, drawn in `style`; the body model is the synthetic
+    SMPL-H."""
+    import csv
+
+    from generation.own_study.conversations import cut_conversations
+
+    root = Path(root)
+    conv = write_conversation(root / "raw" / "a")
+    write_conversation(root / "raw" / "b", interaction="V00_S0001_I00000002", model=False)
+    mode = "listening" if design == "dyadic" else "keyword"
+    keywords = None
+    if mode == "keyword":
+        keywords = root / "keywords.csv"
+        keywords.write_text("interaction,keyword\nV00_S0001_I00000001,bridge\nV00_S0001_I00000002,bridge\n")
+    cut_conversations([root / "raw"], root / "items", mode, length_s, per_interaction=per_interaction,
+                      keywords=keywords, mismatched=design == "dyadic", progress=False)  # fmt: skip
+    with open(root / "items" / "sources.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    for k, (name, sd) in enumerate(SYSTEMS.items()):
+        for sub in (name.lower(), *([f"{name.lower()}_mismatched"] if design == "dyadic" else [])):
+            (root / sub).mkdir()
+        for r in rows:
+            agent = root / "items" / "agent"
+            _system_file(agent / f"{r['item']}.npz", root / name.lower() / f"{r['item']}.npz", sd, k)
+            if design == "dyadic":
+                mismatched = root / f"{name.lower()}_mismatched" / f"{r['item']}.npz"
+                _system_file(agent / f"{r['mismatched']}.npz", mismatched, sd, k + 10)
+    systems = "\n".join(f'{name} = "{name.lower()}"' for name in SYSTEMS)
+    table = "\n".join(f'{name} = "{name.lower()}_mismatched"' for name in SYSTEMS)
+    text = f"""reference = "real"
+design = "{design}"
+seed = 1
+n_training = 1
+sources = "items/sources.csv"
+[conditions]
+real = "items/agent"
+{systems}
+{"[mismatched]" + chr(10) + table if design == "dyadic" else ""}
+[interlocutor]
+folder = "items/interlocutor"
+[catch]
+make = ["jitter", "freeze", "swap"]
+n = 3
+[skeleton]
+smpl_model = "{conv.model}"
+[audio]
+folder = "items/agent_audio"
+interlocutor = "items/interlocutor_audio"
+channels = "{"stereo" if stereo else "mono"}"
+[captions]
+folder = "items/agent_transcript"
+interlocutor = "items/interlocutor_transcript"
+{'keywords = "items/sources.csv"' if design == "semantic" else ""}
+[render]
+style = "{style}"
+"""
+    (root / "study.toml").write_text(text)
+    return root / "study.toml"

@@ -51,7 +51,11 @@ def model_arrays(kind, n_vertices=None, n_betas=10, seed=0):
     weights[np.arange(v), np.minimum(np.arange(v), n - 1)] = 1.0
     kintree = np.stack([parents, np.arange(n)]).astype(np.int64)
     kintree[0, 0] = 2**32 - 1  # as the published files mark the root
+    hands = {}
+    if kind != "smpl":  # SMPL-H and SMPL-X files carry MANO's mean hand pose, which flat_hand_mean=False adds
+        hands = dict(hands_meanl=rng.normal(0, 0.1, 45).astype(np.float32), hands_meanr=rng.normal(0, 0.1, 45))
     return dict(
+        **hands,
         v_template=template,
         shapedirs=rng.normal(0, 0.01, (v, 3, n_betas)).astype(np.float32),
         posedirs=np.zeros((v, 3, (n - 1) * 9), np.float32),

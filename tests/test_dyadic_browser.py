@@ -1,0 +1,179 @@
+"""Issue 52 end to end: a two-person study from a conversation in Seamless Interaction's layout that the test writes
+(tests/helpers/seamless_fixtures.py: SMPL-H through a synthetic body model, invalid frames, two WAV tracks, word
+times), cut into `listening` items (dyadic) or `keyword` items (semantic), rendered with both people and captions,
+served in the dyadic or semantic design to Debian's chromium. The rater passes the sound check and answers a pair;
+the two videos the page played are then read back from the app: two figures, the interlocutor in one colour and the
+same in both, the captions on (the keyword highlighted in semantic), both voices heard at -23 LUFS. A small crowd
+then fills the study through the API and the report of the export is the design's."""
+
+import csv
+import io
+import threading
+
+import pytest
+import requests
+from helpers import figure_pixels, seamless_fixtures
+from helpers.sound_check import pass_sound_check
+from helpers.voices import decoded_audio, ffmpeg_loudness, voice_energy
+from test_app_browser import chrome
+from test_app_browser_sound import STATE
+from test_app_designs import complete
+from test_app_sound import _sample_of
+
+from analysis.report import build_report
+from generation.make_stimuli import main as make_stimuli
+from rating_app import create_app
+from rating_app.store.db import app_engine
+
+pytestmark = pytest.mark.browser
+SIZE = 192
+
+
+@pytest.fixture(scope="module", params=["dyadic", "semantic"])
+def built(request, tmp_path_factory):
+    root = tmp_path_factory.mktemp(request.param)
+    study = seamless_fixtures.write_study(root, request.param, length_s=2.0, style="solid")
+    argv = ["--study", str(study), "--out", str(root / "out"), "--size", str(SIZE), "--quiet", "--workers", "1"]
+    assert make_stimuli(argv) == 0
+    with open(root / "items" / "sources.csv", newline="") as f:
+        sources = {r["item"]: r for r in csv.DictReader(f)}
+    return request.param, root / "out", sources
+
+
+def study_app(out, design, db, **settings):
+    """The app on the set in `out`, a fresh SQLite database `db`, two answers a unit, no limit per address."""
+    return create_app(manifest=out / "manifest.csv", db_url=f"sqlite:///{db}", admin_token="browser-token",
+                      design=design, ratings_per_clip=2, sessions_per_client=0, **settings)  # fmt: skip
+
+
+@pytest.fixture
+def served(built, tmp_path):
+    from werkzeug.serving import make_server
+
+    design, out, sources = built
+    app = study_app(out, design, tmp_path / "r.sqlite", clips_per_rater=3, min_view=0.5)
+    server = make_server("127.0.0.1", 0, app, threaded=True)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    yield design, app, f"http://127.0.0.1:{server.server_port}", sources
+    server.shutdown()
+    thread.join(5)
+    app_engine(app).dispose()
+
+
+def answer_a_pair(browser, wait, url, app):
+    """Consent, the sound check, the introduction, then pairs until the first test pair is answered; returns the
+    URLs of that pair's two videos."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support import expected_conditions as EC
+
+    browser.get(url + "/?PROLIFIC_PID=dyadpid1")
+    browser.find_element(By.ID, "consent").click()
+    wait.until(EC.element_to_be_clickable((By.ID, "start"))).click()
+    pass_sound_check(browser, wait, app)
+    wait.until(EC.visibility_of_element_located((By.ID, "intro")))
+    browser.find_element(By.ID, "intro-go").click()
+    for _ in range(12):
+        wait.until(lambda d: d.execute_script(STATE)["section"] in ("pair", "rating-intro"))
+        s = browser.execute_script(STATE)
+        if s["section"] == "rating-intro":
+            browser.find_element(By.ID, "rating-go").click()
+            wait.until(lambda d: d.execute_script(STATE)["section"] != "rating-intro")
+            continue
+        assert s["unmuted"]
+        srcs = [browser.find_element(By.ID, v).get_attribute("src") for v in ("video-a", "video-b")]
+        browser.find_element(By.ID, "video-a").click()  # with sound nothing plays by itself: a tap
+        wait.until(lambda d: all(d.execute_script(STATE)["ended"]))
+        assert all(n > 0 for n in browser.execute_script(STATE)["decoded"])  # their sound was decoded
+        if s["label"] == "Example":
+            wait.until(EC.element_to_be_clickable((By.ID, "pair-continue"))).click()
+        else:
+            wait.until(EC.element_to_be_clickable((By.CSS_SELECTOR, "button.pref[data-preference='1']"))).click()
+            return srcs
+        key = (s["section"], s["label"], s["count"])
+        wait.until(lambda d: (lambda t: (t["section"], t["label"], t["count"]) != key)(d.execute_script(STATE)))
+    raise AssertionError("never reached a test pair")
+
+
+def test_a_two_person_study_in_a_real_browser(served, tmp_path):
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    design, app, url, sources = served
+    browser = chrome(tmp_path, "1280,900")
+    try:
+        srcs = answer_a_pair(browser, WebDriverWait(browser, 90), url, app)
+        cookies = {c["name"]: c["value"] for c in browser.get_cookies()}
+        errors = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+        assert not errors, errors
+    finally:
+        browser.quit()
+    videos = []
+    for k, src in enumerate(srcs):  # the bytes the page was sent, read back
+        r = requests.get(src, cookies=cookies, timeout=30)
+        assert r.status_code == 200, (src, r.status_code)
+        (tmp_path / f"{k}.mp4").write_bytes(r.content)
+        videos.append(tmp_path / f"{k}.mp4")
+    assert videos[0].stat().st_size == videos[1].stat().st_size  # one size: the bytes tell nothing
+    frames = [figure_pixels.decode(v)[0] for v in videos]
+    for t in range(0, len(frames[0]), 10):
+        pa, pb = (figure_pixels.partner(f[t]) for f in frames)
+        assert figure_pixels.agent(frames[0][t]).sum() > 60 and pa.sum() > 60, t  # two figures
+        both = pa & pb
+        assert abs(frames[0][t][both].mean(0) - frames[1][t][both].mean(0)).max() < 6  # the interlocutor's one colour
+    # The captions are on while words are said (the same in both videos: their rows alike).
+    text = [figure_pixels.caption_text(f).sum() for f in frames[0]]
+    assert max(text) > 40, max(text)
+    if design == "semantic":
+        assert max(figure_pixels.highlight(f).sum() for f in frames[0]) > 20  # the keyword highlighted
+    sounds = [decoded_audio(v)[:, 0] for v in videos]
+    assert (sounds[0] == sounds[1]).all()  # the same sound in both
+    assert abs(ffmpeg_loudness(videos[0]) - (-23.0)) <= 1.0
+    voices = [voice_energy(sounds[0], f0) for f0 in seamless_fixtures.VOICE_HZ]
+    noise = voice_energy(0 * sounds[0] + 1e-3, seamless_fixtures.VOICE_HZ[0])
+    assert max(voices) > 100 * max(noise, 1e-12) and min(voices) > 0  # both people's voices are in the mix
+
+
+def test_the_crowd_fills_it_and_the_report_is_the_designs(built, tmp_path):
+    """API raters (no viewing wait) pass the sound check (the sample's digits from audio_check.csv) and answer every
+    pair, preferring the matched motion; the export names the design's mismatch column and the report is the
+    design's."""
+    design, out, _ = built
+    app = study_app(out, design, tmp_path / "crowd.sqlite", min_view=0)
+    client = app.test_client()
+    digits = audio_check_answers(out / "manifest.csv")
+    with open(out / "manifest.csv", newline="") as f:
+        worse = {r["clip_id"] for r in csv.DictReader(f) if r["condition"] == "BAD" or r["motion_item"]}
+
+    def prefer(trial):  # the matched motion over the mismatched, the real one over the broken catch clip
+        return -1 if trial["a"]["clip_id"] in worse else 1
+
+    n = 0
+    for _ in range(40):
+        r = client.post("/api/sessions", json={})
+        if r.status_code == 409:
+            break
+        token = r.json["session"]
+        assert client.get(f"/api/sessions/{token}/audio-check.wav").status_code == 200  # its sample is drawn
+        answer = digits[_sample_of(app, token)]
+        assert client.post(f"/api/sessions/{token}/audio-check", json={"answer": answer}).json == {"passed": True}
+        complete(client, token, pref=prefer)
+        n += 1
+    assert n >= 2
+    export = client.get("/admin/export.csv", headers={"Authorization": "Bearer browser-token"})
+    assert export.status_code == 200
+    text = export.get_data(as_text=True)
+    app_engine(app).dispose()
+    rows = list(csv.DictReader(io.StringIO(text)))
+    column = {"dyadic": "mismatched_interlocutor", "semantic": "mismatched_utterance"}[design]
+    assert rows and column in rows[0] and "mismatched_item" not in rows[0]
+    (tmp_path / "pairs.csv").write_text(text)
+    stats = build_report(tmp_path / "pairs.csv", tmp_path / "report", n_boot=50, quiet=True)
+    assert stats["design"] == design and stats["mas"]
+    assert all(v["mas"] == 1.0 for v in stats["mas"].values())  # every answer preferred the matched motion
+
+
+def audio_check_answers(manifest):
+    """{sample stem: digits} of the set's audio_check.csv (beside the manifest)."""
+    path = manifest.parent / "audio_check.csv"
+    with open(path, newline="") as f:
+        return {row["file"].split("/")[1][:-4]: row["answer"] for row in csv.DictReader(f)}
