@@ -2,7 +2,7 @@
 the test writes and cuts (tests/helpers/seamless_fixtures.py: write_study): the appropriateness folder's shape
 (a mismatched clip per system and item, marked by motion_item), two people in every video with the same
 interlocutor, sound and byte size across a unit, both voices heard at -23 LUFS, captions on, the keyword
-highlighted in both clips of a semantic unit; and bad study files as one line. The fast tier."""
+highlighted in both clips of a semantic unit; and bad study files as one line. The full tier."""
 
 import csv
 from pathlib import Path

@@ -146,6 +146,7 @@ def smpl_study(root, style='["stick", "mesh"]', model_kind="smplh"):
     return root / "study.toml"
 
 
+@pytest.mark.full  # a whole study built and rendered twice over
 def test_a_study_draws_every_clip_as_stick_and_mesh(tmp_path):
     """`[render] style = ["stick", "mesh"]`: every clip in both styles, the mesh ones skinned from their files (the
     BAD clip's broken with its joints), with the style column; the mesh videos show the body in its colour."""
