@@ -17,6 +17,7 @@ from generation.make_stimuli import main as make_stimuli
 from rendering.audio import RATE
 from rendering.blinding import check_one_size
 
+pytestmark = pytest.mark.full  # three sets built and rendered: the full tier (the fast tier stays near two minutes)
 SIZE = 192
 
 
