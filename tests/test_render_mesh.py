@@ -319,3 +319,32 @@ def test_a_stick_and_mesh_study_in_a_real_browser_reports_the_style(two_style_se
     stats = build_report(tmp_path / "ratings.csv", tmp_path / "report", n_boot=50, quiet=True)
     assert stats["style"]["styles"] == ["stick", "mesh"]
     assert "condition:style" in stats["style"]["anova"]["terms"]
+
+
+def test_two_people_as_meshes(take, tmp_path):
+    """A two-person video in the mesh style: the agent's mesh in its colour, the interlocutor's (placed facing it,
+    1.6 m away) in the partner's one neutral colour, both faces masked, both in frame through the pair's camera."""
+    from helpers import figure_pixels
+
+    from rendering.framing import pair_camera
+
+    folder, model, motion, clip = take
+    other = smpl_fixtures.write_motion(folder / "other.npz", "smplh", frames=40, fps=30.0, seed=5)
+    raw, names, parents, fps = smpl_positions(other, model)
+    turn = np.diag([-1.0, 1.0, -1.0])  # half a turn about Y: facing the agent
+    placed = raw @ turn.T + np.array([0.0, 0.0, 1.6])
+    partner_mesh = MeshTrack(smpl_mesh(other, model), placed, np.arange(40))
+    partner = dict(joints=placed, parents=parents, joint_names=names, fps=fps)
+    people = [(clip["joint_names"], clip["parents"], None), (names, parents, placed)]
+    camera, target = pair_camera([clip["joints"]], people)
+    out = tmp_path / "two.mp4"
+    render_clip(clip, out, size=SIZE, camera=camera, target=target, style=STYLES["mesh"],
+                mesh=smpl_mesh(motion, model), partner=partner, partner_mesh=partner_mesh)  # fmt: skip
+    frames, _ = decode(out)
+    for t in (0, 20, 39):
+        body, mask = body_pixels(frames[t])
+        green = figure_pixels.partner(frames[t])
+        assert body.mean() > 0.01 and green.mean() > 0.01, t  # two bodies, each in its own colour
+        cols = lambda m: np.nonzero(m)[1].mean()  # noqa: E731
+        assert abs(cols(body) - cols(green)) > 0.1 * SIZE  # side by side
+        assert mask.sum() > 50  # faces masked
