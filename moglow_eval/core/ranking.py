@@ -46,8 +46,8 @@ ELO_ANCHOR = 1000.0  # the mean condition's Elo
 # The indifference zone: two conditions whose Elo difference is, with probability TIE_CONFIDENCE, smaller than a
 # margin are tied. Their order is no longer worth a vote (gains), and the stopping rule takes them as settled. Off
 # by default: a margin also stops the votes on pairs truly that close, whose order Kendall's tau still counts (the
-# leaderboard's neighbours 9-11 Elo apart needed 2x the votes with a 25-Elo margin; bench/RESULTS.md
-# pairwise-active). A study that need not order conditions closer than some Elo difference sets it to that.
+# leaderboard's close neighbours needed far more votes with one; bench/RESULTS.md pairwise-active). A study that
+# need not order conditions closer than some Elo difference sets it to that.
 INDIFFERENCE_ELO = 0.0
 TIE_CONFIDENCE = 0.95
 # Gauss-Hermite nodes (probabilists') for the expectation over where the posterior mean moves after one vote.

@@ -1,4 +1,4 @@
-"""Raters whose votes favour one condition far beyond the crowd's (issue 55: a system's submitter who votes for it
+"""Raters whose votes favour one condition far beyond the crowd's (for example a system's submitter who votes for it
 whenever it is shown, and "no preference" elsewhere, passes every catch trial and can move the ranking).
 
 **The rule.** For each rater r and condition c with at least MIN_VOTES of r's test votes on pairs with c: c's share

@@ -33,7 +33,7 @@ def elo(theta, reference_theta=0.0):
 
 
 # Log strengths closer than this are one strength when ranked: the fit is far more precise, and conditions the votes
-# treat alike (ties among them, the same wins and losses) come out equal only to rounding (issue 55).
+# treat alike (ties among them, the same wins and losses) come out equal only to rounding.
 SAME_STRENGTH = 1e-3  # 0.07 Elo points
 
 

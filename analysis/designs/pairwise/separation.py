@@ -1,5 +1,5 @@
 """When the Bradley-Terry-Davidson fit has no maximum likelihood: separated votes and a tie parameter the data
-cannot estimate (issue 55: one system that won every vote gave a "converged" fit with ν = 4.3e5).
+cannot estimate (one system that won every vote once gave a "converged" fit with a tie parameter in the 100,000s).
 
 - **Separation.** Draw an arrow from i to j whenever i beat or tied j in some vote. Conditions that reach each
   other along arrows form a component; between two components every vote went one way, so no finite difference
