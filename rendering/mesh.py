@@ -280,3 +280,28 @@ class MeshBody:
         self.quad.render(ctx.TRIANGLE_STRIP)
         raw = out.read(viewport=(0, 0, w, h), components=4, alignment=1)
         return np.frombuffer(raw, np.uint8).reshape(h, w, 4)[::-1], box  # straight alpha, rows from the top
+
+
+def grid_blocks(rgba, box, row):
+    """(blocks, rgb [M, 3] 0-255, cover [M, 4]) of the body drawn on a grid of 2 (rgba [h, w, 4] at the box's
+    (column, row) in grid pixels, rows of `row` grid pixels): each drawn grid pixel is one 2x2 block of the frame,
+    as FrameDrawer._blend_blocks writes the solid body's."""
+    rows, cols = np.nonzero(rgba[..., 3])
+    cover = rgba[rows, cols, 3].astype(np.float32) * np.float32(1 / 255)
+    blocks = (rows + box[1]) * row + (cols + box[0])
+    return blocks, rgba[rows, cols, :3].astype(np.float32), np.repeat(cover[:, None], 4, 1)
+
+
+def over(under, rgba):
+    """Composite the body (straight-alpha rgba) over `under` (the same box of Agg's straight-alpha buffer, where
+    the shadow may be), in place: a copy where nothing lies under it, "over" on the body's pixels elsewhere."""
+    drawn = rgba[..., 3] != 0
+    if not ((under[..., 3] != 0) & drawn).any():
+        np.copyto(under, rgba, where=drawn[..., None])
+        return
+    new, old = rgba[drawn], under[drawn]
+    am = new[:, 3:].astype(np.float32) * np.float32(1 / 255)
+    au = old[:, 3:].astype(np.float32) * np.float32(1 / 255) * (1 - am)
+    out_a = am + au
+    rgb = (new[:, :3] * am + old[:, :3] * au) / np.maximum(out_a, np.float32(1e-6))
+    under[drawn] = np.concatenate([rgb + np.float32(0.5), out_a * 255 + np.float32(0.5)], 1).astype(np.uint8)

@@ -19,7 +19,7 @@ from moglow_eval.core import skeleton_names
 
 from .camera import DEFAULT_CAMERA, NEAR, Projector, clip_to_frustum
 from .errors import RenderError
-from .mesh import MeshBody
+from .mesh import MeshBody, grid_blocks, over
 from .solid import SolidBody
 
 
@@ -352,23 +352,10 @@ class FrameDrawer:
         if rgba is None:
             return (np.concatenate(points) if points else np.zeros((0, 2))), 0.0
         if self.style.mesh_grid == 2:  # each drawn grid pixel a 2x2 block, written straight into the planes
-            rows, cols = np.nonzero(rgba[..., 3])
-            cover = rgba[rows, cols, 3].astype(np.float32) * np.float32(1 / 255)
-            blocks = (rows + box[1]) * (self.size // 2) + (cols + box[0])
-            self.mesh_blocks = blocks, rgba[rows, cols, :3].astype(np.float32), np.repeat(cover[:, None], 4, 1)
+            self.mesh_blocks = grid_blocks(rgba, box, self.size // 2)
             return (np.concatenate(points) if points else np.zeros((0, 2))), 0.0
         c0, r0, c1, r1 = box
-        under = self.rgba[r0:r1, c0:c1]
-        drawn = rgba[..., 3] != 0
-        if not ((under[..., 3] != 0) & drawn).any():  # nothing under the body (the shadow is elsewhere): a copy
-            np.copyto(under, rgba, where=drawn[..., None])
-        else:  # over the shadow: "over" in straight alpha, on the body's pixels only
-            new, old = rgba[drawn], under[drawn]
-            am = new[:, 3:].astype(np.float32) * np.float32(1 / 255)
-            au = old[:, 3:].astype(np.float32) * np.float32(1 / 255) * (1 - am)
-            out_a = am + au
-            rgb = (new[:, :3] * am + old[:, :3] * au) / np.maximum(out_a, np.float32(1e-6))
-            under[drawn] = np.concatenate([rgb + np.float32(0.5), out_a * 255 + np.float32(0.5)], 1).astype(np.uint8)
+        over(self.rgba[r0:r1, c0:c1], rgba)
         points.append(self._rows(np.array([[c0, r0], [c1, r1]], np.float64)))
         return np.concatenate(points), 0.0
 

@@ -348,3 +348,23 @@ def test_two_people_as_meshes(take, tmp_path):
         cols = lambda m: np.nonzero(m)[1].mean()  # noqa: E731
         assert abs(cols(body) - cols(green)) > 0.1 * SIZE  # side by side
         assert mask.sum() > 50  # faces masked
+
+
+def test_the_mesh_on_every_pixel_draws_the_same_body(take):
+    """Style.mesh_grid = 1 (every frame pixel, through Agg's buffer over the shadow) and 2 (the default: 2x2 blocks)
+    draw the body in the same place and colour."""
+    from dataclasses import replace
+
+    folder, model, motion, clip = take
+    source = smpl_mesh(motion, model)
+    camera = item_camera([clip["joints"]], clip["joint_names"], clip["parents"], clip["fps"], "front", "upper")
+    target = camera_targets(clip["joints"], clip["fps"], camera)[10]
+    verts = source.vertices(10, 11)
+    drawn = []
+    for grid in (1, 2):
+        drawer = FrameDrawer(clip["parents"], clip["joint_names"], 256, camera, replace(STYLES["mesh"], mesh_grid=grid),
+                             meshes=[source])  # fmt: skip
+        drawer.draw(clip["joints"][10], target, [verts[0]])
+        drawn.append(body_pixels(drawer.rgb())[0])
+        drawer.close()
+    assert drawn[0].mean() > 0.02 and (drawn[0] & drawn[1]).sum() > 0.85 * drawn[0].sum()
