@@ -100,7 +100,9 @@ def test_a_configured_list_is_shown_escaped(make, stimuli):
     app = make(stimuli, "pairwise", reasons="Jerky=Jerky <b>motion</b>, Feet=Feet slide", reason_text=50)
     assert app.config["VOTE_REASONS"] == (("Jerky", "Jerky <b>motion</b>"), ("Feet", "Feet slide"))
     page = app.test_client().get("/").get_data(as_text=True)
-    assert 'value="Jerky"' in page and "Jerky &lt;b&gt;motion&lt;/b&gt;" in page and 'maxlength="50"' in page
+    assert (
+        'value="Jerky"' in page and "Jerky &lt;b&gt;motion&lt;/b&gt;" in page and 'data-max-chars="50"' in page
+    )  # characters, as the server counts
 
 
 @pytest.mark.parametrize("app_db_url", ["sqlite"], indirect=True)
