@@ -241,6 +241,7 @@ def nat_best_mg_fl_alike(a, b, i):
     return 0
 
 
+@pytest.mark.full  # crowds until settled: the full tier
 @pytest.mark.parametrize("margin", [200.0, 0.0])
 def test_conditions_alike_are_tied_and_settle_the_study(make, big_stimuli, monkeypatch, margin, app_db_url, request):
     if not margin and app_db_url.startswith("postgres"):

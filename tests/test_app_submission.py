@@ -21,6 +21,8 @@ from rating_app.store import rounds
 from rating_app.store.db import app_engine, utcnow
 from rating_app.store.manifest import load_manifest
 
+pytestmark = pytest.mark.full  # add-condition's copies and encodes: the full tier
+
 
 def sys_rows(manifest):
     return [r for r in csv.DictReader(open(manifest)) if r["condition"] == "SYS" and r["role"] == "test"]

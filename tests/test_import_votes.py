@@ -146,6 +146,7 @@ def test_a_huge_line_is_one_line(tmp_path, capsys):
     assert "battles.csv:2: line longer than" in err and len(err.splitlines()) == 1
 
 
+@pytest.mark.full  # a large file written and read: the full tier
 def test_a_large_file_is_read_in_a_stream_and_stops_at_its_first_bad_line(tmp_path, capsys):
     path = tmp_path / "battles.csv"
     good = "u1,i1,A,B,model_a,True,{},\n"

@@ -218,6 +218,7 @@ def test_a_huge_transcript_is_refused_from_its_size(tmp_path):
     assert peak < FLAT
 
 
+@pytest.mark.full  # a study built: the full tier
 def test_a_study_refuses_a_clip_with_invalid_frames_naming_them(conversation, tmp_path, capsys):
     """Seamless files straight into a study of one person: an item whose span crosses invalid frames is one line
     naming the file and the frames, and no stimulus set is written; cut shorter, it builds."""

@@ -95,6 +95,7 @@ def test_json_nesting_and_formula_cells():
     ]
 
 
+@pytest.mark.full  # the report as a process: the full tier
 def test_the_report_refuses_what_is_not_a_regular_file(tmp_path, fifo):
     for path in ("/dev/zero", fifo):
         r = run("analysis.report", path, "--out", tmp_path / "rep", "--quiet")
