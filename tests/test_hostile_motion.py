@@ -8,7 +8,6 @@ import gzip
 import io
 import json
 import subprocess
-import tracemalloc
 import zipfile
 import zlib
 
@@ -16,6 +15,7 @@ import numpy as np
 import pytest
 from helpers.bvh_fixtures import write_family, write_family_study
 from helpers.cli import fails_with
+from helpers.memory import peak as _peak
 
 from generation.data.motion_files import Motion, MotionError, Skeleton, read_motion
 from generation.make_stimuli import main as make_stimuli
@@ -29,20 +29,6 @@ FLAT = 64 << 20  # the most a refused file may make the reader hold (bytes), far
 
 def _fails(argv, capsys, needle):
     return fails_with(make_stimuli, argv, capsys, needle)
-
-
-def _peak(fn, *args, **kw):
-    """(the exception fn raised, the peak of traced memory while it ran)."""
-    tracemalloc.start()
-    try:
-        fn(*args, **kw)
-    except Exception as e:  # noqa: BLE001 - the caller checks what was raised
-        raised = e
-    else:
-        raised = None
-    peak = tracemalloc.get_traced_memory()[1]
-    tracemalloc.stop()
-    return raised, peak
 
 
 # ---------------------------------------------------------------- messages

@@ -6,12 +6,12 @@ smpl_fixtures.py): the fast tier."""
 
 import io
 import json
-import tracemalloc
 import zipfile
 
 import numpy as np
 import pytest
 from helpers import seamless_fixtures, smpl_fixtures
+from helpers.memory import peak as _peak
 
 from generation.data.motion_files import MotionError, read_motion
 from generation.data.seamless_files import invalid_spans, parse_name, read_seamless, spans_text
@@ -23,19 +23,6 @@ FLAT = 64 << 20
 @pytest.fixture(scope="module")
 def conversation(tmp_path_factory):
     return seamless_fixtures.write_conversation(tmp_path_factory.mktemp("seamless") / "raw")
-
-
-def _peak(fn, *args, **kw):
-    tracemalloc.start()
-    try:
-        fn(*args, **kw)
-    except Exception as e:  # noqa: BLE001 - the caller checks what was raised
-        raised = e
-    else:
-        raised = None
-    peak = tracemalloc.get_traced_memory()[1]
-    tracemalloc.stop()
-    return raised, peak
 
 
 def test_names_tell_the_interaction_and_a_participant_ending_in_a_letter():
