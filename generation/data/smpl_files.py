@@ -161,12 +161,16 @@ def pose_joints(poses, trans, betas, model, smpl_type, where, expression=None):
         template, dirs, regressor = (torch.from_numpy(x) for x in (template, dirs, regressor))
         tree = torch.from_numpy(parents)
         out = np.empty((len(poses), n, 3))
+
+        def rest_joints(c):  # the rest joints of the shape (and, for SMPL-X with expressions, of each frame's face)
+            shaped = template[None] + (blend_shapes(torch.from_numpy(c), dirs) if dirs.shape[2] else 0)
+            return vertices2joints(regressor, shaped)
+
+        rest_all = rest_joints(coef) if len(coef) == 1 else None
         for a in range(0, len(poses), BATCH):
             pose = torch.from_numpy(np.ascontiguousarray(poses[a : a + BATCH], np.float64))
-            # The rest joints of the shape (and, for SMPL-X with expressions, of each frame's face).
-            c = torch.from_numpy(coef if len(coef) == 1 else coef[a : a + BATCH])
-            shaped = template[None] + (blend_shapes(c, dirs) if dirs.shape[2] else 0)
-            rest = vertices2joints(regressor, shaped).expand(len(pose), -1, -1)
+            rest = rest_all if rest_all is not None else rest_joints(coef[a : a + BATCH])
+            rest = rest.expand(len(pose), -1, -1)
             rot = batch_rodrigues(pose.reshape(-1, 3)).reshape(len(pose), n, 3, 3)
             posed, _ = batch_rigid_transform(rot, rest, tree, dtype=torch.float64)
             out[a : a + BATCH] = posed.numpy()
@@ -180,7 +184,7 @@ def smpl_mesh(path, model, smpl_type=None, source_fps=None, face="mask", hand_me
     motion's betas, a chunk at a time, so memory does not grow with the clip. `face`: "mask" (the face's vertices
     flagged for the mask, rendering.mesh) or "none"; `hand_mean` as smpl_positions takes it, and the file's SMPL-X
     expressions, so that the mesh and the joints agree. SmplError naming the file otherwise."""
-    if model is None or not Path(model).is_file():
+    if model is None or not Path(model).is_file():  # before the hand mean reads it
         raise SmplError(f"{model or path}: no body model file for the mesh style; {WHERE_TO_GET}")
     poses, trans, betas, fps = _read_motion(path, source_fps)
     poses = with_hand_mean(poses, model, smpl_type, hand_mean_of(path, hand_mean), path)
@@ -200,32 +204,32 @@ def mesh_source(poses, trans, betas, fps, model, smpl_type, face, where, express
             f"{where}: 'poses' has {poses.shape[1]} values a frame; the {kind} model {model} takes {3 * len(parents)}"
         )
     skin = _read_skin(model, len(template), len(parents))
-    source = MeshSource(where, poses, trans, betas, fps, template, shapedirs, regressor, parents, kind, skin, face)
-    if expression is not None and kind == "smplx":
-        source.expression_dirs, source.expression = _shape_and_expression(kind, shapedirs, np.zeros(0), expression)
-    return source
+    n_shape = min(len(betas), _shape_components(kind, shapedirs.shape[2]))
+    shape = (*_shape_and_expression(kind, shapedirs, betas, expression), n_shape)
+    return MeshSource(where, poses, trans, fps, template, shape, regressor, parents, kind, skin, face)
 
 
 class MeshSource:
     """An SMPL-family clip's mesh, skinned on demand (see smpl_mesh): what rendering.mesh draws (`faces` [F, 3],
     `mask` [V]: the face mask's vertices), `fps`, `n_frames` and `vertices(a, b)`."""
 
-    def __init__(self, path, poses, trans, betas, fps, template, shapedirs, regressor, parents, kind, skin, face):
+    def __init__(self, path, poses, trans, fps, template, shape, regressor, parents, kind, skin, face):
+        """`shape`: (directions [V, 3, K], coefficients [1 or T, K], how many of them are the body's shape) as
+        _shape_and_expression gives them: the body shape's, then, per frame, SMPL-X's expression's."""
         self.path, self.poses, self.trans, self.fps, self.kind = path, poses, trans, fps, kind
         self.n_frames = len(poses)
-        n_shape = min(len(betas), _shape_components(kind, shapedirs.shape[2]))
-        self.betas = betas[:n_shape].astype(np.float32)
         self.template, self.regressor = template.astype(np.float32), regressor.astype(np.float32)
-        self.shapedirs = shapedirs[:, :, :n_shape].astype(np.float32)
+        self.shapedirs, self.coef = (x.astype(np.float32) for x in shape[:2])
+        self.n_shape = shape[2]
         self.parents = parents
         self.posedirs, self.weights, self.faces = skin
         none = np.zeros(len(template), bool)
         self.mask = face_vertices(self.shaped(), self.rest_joints()) if face == "mask" else none
-        self.expression_dirs, self.expression = None, None  # SMPL-X's, set by mesh_source where the file has them
 
     def shaped(self):
         """The rest vertices [V, 3] in this motion's shape."""
-        return self.template + self.shapedirs @ self.betas
+        k = self.n_shape
+        return self.template + self.shapedirs[:, :, :k] @ self.coef[0, :k]
 
     def rest_joints(self):
         return self.regressor @ self.shaped()
@@ -245,15 +249,12 @@ class MeshSource:
         with torch.no_grad():
             for s in range(a, b, MESH_BATCH):
                 e = min(b, s + MESH_BATCH)
-                coef, dirs = np.repeat(self.betas[None], e - s, 0), self.shapedirs
-                if self.expression is not None:  # the face's expression: more shape directions, per frame
-                    coef = np.concatenate([coef, self.expression[s:e].astype(np.float32)], 1)
-                    dirs = np.concatenate([dirs, self.expression_dirs.astype(np.float32)], 2)
+                coef = np.repeat(self.coef, e - s, 0) if len(self.coef) == 1 else self.coef[s:e]
                 v, j = lbs(
                     torch.from_numpy(coef),
                     torch.from_numpy(self.poses[s:e].astype(np.float32)),
                     torch.from_numpy(self.template),
-                    torch.from_numpy(dirs),
+                    torch.from_numpy(self.shapedirs),
                     torch.from_numpy(self.posedirs),
                     torch.from_numpy(self.regressor),
                     torch.from_numpy(self.parents),
