@@ -45,14 +45,20 @@ class Appropriateness(Pairwise):
                 f"{self.name}: the manifest has no mismatched clips (a motion_item column); build the stimuli "
                 f'with design = "{self.name}" in the study file'
             )
+        systems = sorted({cond for _, cond in mismatched})
         units = {}
         for item, by_cond in sorted(tests.items()):
-            for cond, ids in sorted(by_cond.items()):
-                if (item, cond) not in mismatched:
+            for cond in self.tested(by_cond, systems):
+                if (item, cond) not in mismatched or cond not in by_cond:
                     raise AppError(f"{self.name}: item {item!r} has no mismatched clip of condition {cond}")
                 key = f"fit:{item}:{cond}"
-                units[key] = Unit(key, "test", item, (ids[0], mismatched[(item, cond)]))
+                units[key] = Unit(key, "test", item, (by_cond[cond][0], mismatched[(item, cond)]))
         return units
+
+    def tested(self, by_cond, systems):
+        """The conditions of an item's test units: every condition of the item (`systems`: those with any
+        mismatched clip)."""
+        return sorted(by_cond)
 
     def required_ms(self, durations):
         return sum(durations)

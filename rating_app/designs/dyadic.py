@@ -15,9 +15,7 @@ from __future__ import annotations
 
 from moglow_eval.core import study
 
-from ..store.manifest import AppError
 from .appropriateness import Appropriateness
-from .base import Unit
 from .pairwise import Pairwise
 
 
@@ -33,18 +31,7 @@ class Dyadic(Appropriateness):
         "mean": "mean interlocutor appropriateness score",
     }
 
-    def test_units(self, tests, clips):
-        """One unit per test item and system that has mismatched clips: a system with some items' but not all is
-        refused, naming the item; one with none is not tested."""
-        mismatched = {(c.item, c.condition): c.clip_id for c in clips if c.role == "test" and c.motion_item}
-        systems = sorted({cond for _, cond in mismatched})
-        if not systems:
-            return super().test_units(tests, clips)  # its one-line error: no mismatched clips at all
-        units = {}
-        for item, by_cond in sorted(tests.items()):
-            for cond in systems:
-                if (item, cond) not in mismatched or cond not in by_cond:
-                    raise AppError(f"dyadic: item {item!r} has no mismatched clip of condition {cond}")
-                key = f"fit:{item}:{cond}"
-                units[key] = Unit(key, "test", item, (by_cond[cond][0], mismatched[(item, cond)]))
-        return units
+    def tested(self, by_cond, systems):
+        """Only the systems that gave motion for a mismatched interlocutor: one with some items' but not all is
+        refused by test_units, naming the item; one with none is not tested."""
+        return systems
