@@ -3,7 +3,7 @@ smplx layout with about the real SMPL-H's 6890 vertices, 8 s at 30 fps, 640 px, 
 
 - the stick figure, the baseline of the target (a mesh clip within 3 times a stick clip's time, whole clips to MP4);
 - `mesh`: the project's renderer (rendering.mesh: moderngl over headless EGL, Mesa's llvmpipe on this CPU), whole
-  clips to MP4, and its drawing alone per frame;
+  clips to MP4, and its drawing alone per frame (with its edge pass, on every pixel of the frame, as pyrender's);
 - pyrender over OSMesa, what the field's visualisers use, drawing alone per frame (`--pyrender-python`: a Python
   with pyrender and PyOpenGL >= 3.1.4, e.g. a virtual environment; not a dependency of the project);
 - the project's own software rasteriser extended to triangles (`triangles_numpy` below: flat shading, a z-buffer,
@@ -36,7 +36,7 @@ from helpers import smpl_fixtures  # noqa: E402
 from generation.data.smpl_files import smpl_mesh, smpl_positions  # noqa: E402
 from rendering.camera import Projector, camera_targets  # noqa: E402
 from rendering.framing import item_camera  # noqa: E402
-from rendering.mesh import MeshBody  # noqa: E402
+from rendering.mesh import MeshBody, straight  # noqa: E402
 from rendering.raster import STYLES  # noqa: E402
 from rendering.render import render_clip  # noqa: E402
 
@@ -213,11 +213,13 @@ def main():
                 clips.setdefault(name, []).append(time.perf_counter() - t0)
         load = os.getloadavg()[0]
         stick, mesh = (float(np.median(clips[k])) for k in ("stick", "mesh"))
-        print(f"whole clip, load {load:.1f}: stick {stick:.2f} s, mesh {mesh:.2f} s, mesh / stick = {mesh / stick:.2f}")
+        ratios = np.array(clips["mesh"]) / np.array(clips["stick"])  # each repeat's pair, run one after the other
+        print(f"whole clip, load {load:.1f}: stick {stick:.2f} s, mesh {mesh:.2f} s, mesh / stick = {mesh / stick:.2f} "
+              f"(each repeat's: median {np.median(ratios):.2f}, {ratios.min():.2f}-{ratios.max():.2f})")  # fmt: skip
         n = min(frames, 90)
         cams, proj = camera_vertices(source, clip, camera, n)
         body = MeshBody([source], SIZE, proj.focal)
-        ours = per_frame(lambda t: body.draw([(cams[t], (0.42, 0.55, 0.78))]), n, args.repeats)
+        ours = per_frame(lambda t: straight(body.draw([(cams[t], (0.42, 0.55, 0.78))])[0]), n, args.repeats)
         body.release()
         faces = np.asarray(source.faces)
         numpy_ms = per_frame(lambda t: triangles_numpy(cams[t], faces, proj.focal, SIZE), min(n, 20), 1)

@@ -9,8 +9,8 @@ rasterises on the CPU's cores; where a GPU driver is installed, the same code ru
 measured it against pyrender over OSMesa and against the project's own rasteriser extended to triangles (RESULTS
 `mesh-body`). Per frame the vertices (camera coordinates) and their normals (the mean of the faces' around each
 vertex, one sparse product) are uploaded, drawn with a depth test into a window the size of the body's box, its
-silhouette antialiased by an edge pass (_EDGES), and read back as straight-alpha RGBA for FrameDrawer to composite
-over the floor.
+silhouette antialiased by an edge pass (antialias) on the read-back box, for FrameDrawer to composite over the
+floor.
 
 The shading is the solid body's (rendering.solid: Lambert from a light above, left and in front, over an ambient
 term), so an arm in front of the chest is lit apart from it and drawn in front of it by the depth test. Vertices
@@ -19,6 +19,7 @@ flagged `mask` take the mask's plain colour, unlit but for a faint shade, so the
 
 from __future__ import annotations
 
+import os
 import threading
 from dataclasses import dataclass
 
@@ -72,38 +73,10 @@ void main() {
 """
 
 
-# The edge pass: the body drawn once per pixel (multisampling costs llvmpipe two to three times the whole draw), then
-# each pixel's coverage is its 3x3 neighbourhood's (weights 1 2 1 / 2 4 2 / 1 2 1), and a pixel just outside takes its
-# covered neighbours' colour: the silhouette is antialiased over about a pixel, as the solid body's and Agg's are.
-_QUAD = """
-#version 330
-in vec2 in_xy;
-void main() { gl_Position = vec4(in_xy, 0.0, 1.0); }
-"""
-
-_EDGES = """
-#version 330
-uniform sampler2D body;
-out vec4 out_colour;
-void main() {
-    ivec2 p = ivec2(gl_FragCoord.xy);
-    ivec2 last = textureSize(body, 0) - 1;
-    vec4 here = texelFetch(body, p, 0);
-    float cover = 0.0, weight = 0.0;
-    vec3 sum = vec3(0.0);
-    for (int dy = -1; dy <= 1; dy++) {
-        for (int dx = -1; dx <= 1; dx++) {
-            float w = float((2 - abs(dx)) * (2 - abs(dy))) / 16.0;
-            vec4 s = texelFetch(body, clamp(p + ivec2(dx, dy), ivec2(0), last), 0);
-            cover += w * s.a;
-            sum += w * s.a * s.rgb;
-            weight += w * s.a;
-        }
-    }
-    vec3 rgb = here.a > 0.0 ? here.rgb : (weight > 0.0 ? sum / weight : vec3(0.0));
-    out_colour = vec4(rgb, cover);
-}
-"""
+# The edge pass (antialias): the body drawn once per pixel (multisampling costs llvmpipe two to three times the
+# whole draw), then each pixel's coverage is its 3x3 neighbourhood's (weights 1 2 1 / 2 4 2 / 1 2 1), and a pixel just
+# outside takes its covered neighbours' colour: the silhouette is antialiased over about a pixel, as the solid body's
+# and Agg's are. In numpy on the read-back box: as a second GL pass over the box it cost llvmpipe more than the body.
 
 
 @dataclass(frozen=True)
@@ -129,6 +102,10 @@ def gl_context():
         import moderngl
     except ImportError:
         raise RenderError('the mesh style needs moderngl: pip install -e "." (it is a dependency)') from None
+    # Mesa's llvmpipe rasterises on as many threads as there are cores unless told otherwise; here the other cores
+    # already skin, compose and encode (and a render pool runs a process per core), and drawing in the calling
+    # thread made whole clips faster on 2 cores (RESULTS mesh-body). A GPU driver ignores it; a user's setting wins.
+    os.environ.setdefault("LP_NUM_THREADS", "0")
     errors = []
     for kw in ({"backend": "egl"}, {}):
         try:
@@ -145,6 +122,41 @@ def gl_context():
     return ctx
 
 
+def closed(faces):
+    """Whether a mesh is closed and consistently wound: every edge a -> b of a face is b -> a in exactly one other.
+    Only then can its back faces be culled (about half the triangles: llvmpipe drew a frame in 0.6 of the time)
+    without opening a hole where its inside shows."""
+    f = np.asarray(faces, np.int64)
+    a = f.reshape(-1)
+    b = f[:, [1, 2, 0]].reshape(-1)
+    n = int(f.max()) + 1
+    forward, backward = np.sort(a * n + b), np.sort(b * n + a)
+    return bool(len(np.unique(forward)) == len(forward) and np.array_equal(forward, backward))
+
+
+def signed_volume(vertices, faces):
+    """The mesh's signed volume (positive when its faces wind counter-clockwise seen from outside in a right-handed
+    frame): which of its faces' sides is the front."""
+    a, b, c = (vertices[faces[:, k]].astype(np.float64) for k in range(3))
+    return float(np.einsum("ij,ij->", a, np.cross(b, c))) / 6.0
+
+
+def vertex_normals(vertices, faces, op):
+    """Vertex normals [T, V, 3] float32 (unnormalised: the shader normalises) of frames of vertices [T, V, 3]: the
+    area-weighted sum of the faces' around each vertex, outward for faces wound counter-clockwise seen from
+    outside. A chunk of frames at once, vertex-major (each face's corners gathered once for every frame, one sparse
+    product): a tenth of the time of a frame at a time. Computed beside the drawing, where the skinning is."""
+    v = np.ascontiguousarray(np.swapaxes(np.asarray(vertices, np.float32), 0, 1))  # [V, T, 3]
+    a = v[faces[:, 0]]
+    e1, e2 = v[faces[:, 1]] - a, v[faces[:, 2]] - a
+    n = np.empty_like(e1)  # e1 x e2, written out: np.cross copies its inputs
+    n[..., 0] = e1[..., 1] * e2[..., 2] - e1[..., 2] * e2[..., 1]
+    n[..., 1] = e1[..., 2] * e2[..., 0] - e1[..., 0] * e2[..., 2]
+    n[..., 2] = e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]
+    summed = np.asarray(op @ n.reshape(len(faces), -1), np.float32).reshape(len(v), -1, 3)  # [V, T, 3]
+    return np.swapaxes(summed, 0, 1)
+
+
 def vertex_normals_operator(faces, n_vertices):
     """A sparse [V, F] matrix that sums each vertex's faces' (area-weighted) normals: normals = op @ face_normals."""
     from scipy.sparse import csr_matrix
@@ -158,9 +170,11 @@ class MeshBody:
     """Draws one or more people's meshes into a frame of `size` pixels square seen through a pinhole of `focal`
     pixels (rendering.camera.Projector's), each person in one plain colour.
 
-    `draw(people)`: people is a list of (camera-space vertices [V, 3], colour rgb 0..1); returns (rgba, box) where
-    rgba is [h, w, 4] uint8 straight alpha of the frame's box (column0, row0, column1, row1), or (None, None) when
-    no person is in front of the camera."""
+    `draw(people)`: people is a list of (camera-space vertices [V, 3], colour rgb 0..1[, their normals [V, 3] in
+    camera axes: vertex_normals' rotated into the camera's; computed here when not given]); returns (rgba, box)
+    where rgba is [h, w, 4] uint8 of the frame's box (column0, row0, column1, row1), alpha 255 where the body is
+    drawn and all 0 elsewhere, for grid_blocks or straight to antialias; or (None, None) when no person is in front
+    of the camera."""
 
     def __init__(self, meshes, size, focal):
         for m in meshes:
@@ -190,12 +204,9 @@ class MeshBody:
                 [(pos, "3f", "in_pos"), (nrm, "3f", "in_normal"), (col, "4f", "in_colour")],
                 index_buffer=ctx.buffer(faces.tobytes()),
             )
-            self.people.append((m, faces, vertex_normals_operator(faces, len(m.mask)), pos, nrm, col, vao, [None]))
-        self.edges = ctx.program(vertex_shader=_QUAD, fragment_shader=_EDGES)
-        quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], np.float32).tobytes())
-        self.quad = ctx.vertex_array(self.edges, [(quad, "2f", "in_xy")])
-        self.quad_buffer = quad
-        self.windows = {}  # (width, height) -> (the body's framebuffer, its colour texture, the edge pass's)
+            state = {"colour": None, "closed": closed(faces), "front": None}
+            self.people.append((m, faces, vertex_normals_operator(faces, len(m.mask)), pos, nrm, col, vao, state))
+        self.windows = {}  # (width, height) -> the body's framebuffer
 
     def window(self, w, h):
         """The framebuffers the body's box is drawn in, of at least w x h pixels (rounded up to WINDOW_STEP, so
@@ -204,10 +215,9 @@ class MeshBody:
         key = (-(-w // WINDOW_STEP) * WINDOW_STEP, -(-h // WINDOW_STEP) * WINDOW_STEP)
         if key not in self.windows:
             ctx = self.ctx
-            tex = ctx.texture(key, 4)
-            tex.filter = (ctx.NEAREST, ctx.NEAREST)
-            body = ctx.framebuffer(color_attachments=[tex], depth_attachment=ctx.depth_renderbuffer(key))
-            self.windows[key] = (body, tex, ctx.framebuffer(color_attachments=[ctx.renderbuffer(key, 4)]))
+            self.windows[key] = ctx.framebuffer(
+                color_attachments=[ctx.renderbuffer(key, 4)], depth_attachment=ctx.depth_renderbuffer(key)
+            )
         return key, self.windows[key]
 
     def release(self):
@@ -215,26 +225,26 @@ class MeshBody:
         for _, _, _, pos, nrm, col, vao, _ in self.people:
             for obj in (vao, pos, nrm, col):
                 obj.release()
-        for body, tex, out in self.windows.values():
-            for obj in (body, tex, out):
-                obj.release()
-        for obj in (self.quad, self.quad_buffer, self.edges, self.prog):
-            obj.release()
+        for body in self.windows.values():
+            body.release()
+        self.prog.release()
 
     def box(self, cams):
         """The frame's pixel box (column0, row0, column1, row1; even, clipped) the people's vertices project into,
         or None."""
-        pts = []
+        lo, hi = [], []
         for cam in cams:
-            front = cam[cam[:, 2] > NEAR_PLANE]
+            front = cam if (cam[:, 2] > NEAR_PLANE).all() else cam[cam[:, 2] > NEAR_PLANE]
             if len(front):
-                pts.append(front[:, :2] * (self.focal / front[:, 2:3]))
-        if not pts:
+                q = front[:, :2] / front[:, 2:3]
+                lo.append(q.min(0))
+                hi.append(q.max(0))
+        if not lo:
             return None
-        xy = np.concatenate(pts)
+        xy = self.focal * np.array([np.min(lo, 0), np.max(hi, 0)], np.float64)  # [[x, y] least, [x, y] most]
         half = self.size / 2
-        c0, c1 = xy[:, 0].min() + half, xy[:, 0].max() + half
-        r0, r1 = half - xy[:, 1].max(), half - xy[:, 1].min()  # rows grow downwards
+        c0, c1 = xy[0, 0] + half, xy[1, 0] + half
+        r0, r1 = half - xy[1, 1], half - xy[0, 1]  # rows grow downwards
         lo = np.floor(np.array([c0, r0]) / 2 - 1) * 2
         hi = np.ceil(np.array([c1, r1]) / 2 + 1) * 2
         c0, r0 = np.clip(lo, 0, self.size).astype(int)
@@ -242,14 +252,14 @@ class MeshBody:
         return (c0, r0, c1, r1) if c1 > c0 and r1 > r0 else None
 
     def draw(self, people):
-        cams = [np.asarray(v, np.float32) for v, _ in people]
+        cams = [np.asarray(person[0], np.float32) for person in people]
         box = self.box(cams)
         if box is None:
             return None, None
         ctx = self.ctx
         c0, r0, c1, r1 = box
         w, h = c1 - c0, r1 - r0
-        (ww, wh), (body, tex, out) = self.window(w, h)
+        (ww, wh), body = self.window(w, h)
         # The window's pixel (0, 0) is the box's bottom-left corner (GL counts rows from the bottom): a camera
         # point at frame pixel (column, row) lands at window pixel (column - c0, size - row - (size - r1)).
         half = self.size / 2
@@ -258,38 +268,91 @@ class MeshBody:
         body.use()
         ctx.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         ctx.enable(ctx.DEPTH_TEST)
-        for (m, faces, op, pos, nrm, col, vao, last), cam, (_, colour) in zip(self.people, cams, people):
+        for (m, faces, op, pos, nrm, col, vao, state), cam, person in zip(self.people, cams, people):
+            colour, normals = person[1], (person[2] if len(person) > 2 else None)
             if cam.shape != (len(m.mask), 3):
                 raise RenderError(f"a person's vertices are {cam.shape}, their mesh has {len(m.mask)}")
-            a, b, c = cam[faces[:, 0]], cam[faces[:, 1]], cam[faces[:, 2]]
-            # Camera axes are a mirror of the world's (x right, y up, z away), so the outward normal of a face
-            # wound counter-clockwise in the world is (c - a) x (b - a) here.
-            normals = np.asarray(op @ np.cross(c - a, b - a), np.float32)
+            if normals is None:
+                # Camera axes are a mirror of the world's (x right, y up, z away), so the outward normal of a face
+                # wound counter-clockwise in the world is (c - a) x (b - a) here.
+                a, b, c = cam[faces[:, 0]], cam[faces[:, 1]], cam[faces[:, 2]]
+                normals = op @ np.cross(c - a, b - a)
             pos.write(np.ascontiguousarray(cam))
-            nrm.write(np.ascontiguousarray(normals))
-            if last[0] != tuple(colour):  # the colours change only with the person's colour
+            nrm.write(np.ascontiguousarray(normals, np.float32))
+            if state["colour"] != tuple(colour):  # the colours change only with the person's colour
                 rgba = np.empty((len(m.mask), 4), np.float32)
                 rgba[:, :3] = colour
                 rgba[:, 3] = m.mask
                 col.write(rgba.tobytes())
-                last[0] = tuple(colour)
+                state["colour"] = tuple(colour)
+            if state["closed"] and state["front"] is None:
+                # Which winding faces the camera, from the mesh's signed volume in camera axes (a mirror of the
+                # world's: a mesh wound counter-clockwise outside has a negative one here, and its front faces
+                # wind counter-clockwise on the screen). Left undecided while the mesh has no volume.
+                volume = signed_volume(cam, faces)
+                if abs(volume) > 1e-9:
+                    state["front"] = "ccw" if volume < 0 else "cw"
+            if state["front"] is not None:
+                ctx.front_face = state["front"]
+                ctx.enable(ctx.CULL_FACE)
             vao.render()
+            ctx.disable(ctx.CULL_FACE)
         ctx.disable(ctx.DEPTH_TEST)
-        out.use()
-        tex.use(0)
-        self.quad.render(ctx.TRIANGLE_STRIP)
-        raw = out.read(viewport=(0, 0, w, h), components=4, alignment=1)
-        return np.frombuffer(raw, np.uint8).reshape(h, w, 4)[::-1], box  # straight alpha, rows from the top
+        raw = body.read(viewport=(0, 0, w, h), components=4, alignment=1)
+        return np.frombuffer(raw, np.uint8).reshape(h, w, 4)[::-1], box  # drawn (alpha 255) or not; rows from the top
+
+
+def antialias(body):
+    """The edge pass (see above) of a body drawn once per pixel (rgba [h, w, 4] uint8: alpha 255 where drawn, all 0
+    elsewhere) -> (rows, columns, rgb [M, 3] float32 0-255, cover [M] float32 0-1) of the pixels it covers at all:
+    each pixel's cover its 3x3 neighbourhood's weighted coverage, a pixel outside taking the weighted mean colour of
+    its drawn neighbours. Beyond the box's sides the pixels repeat the side's (empty, or the frame's edge cutting
+    the body, which stays covered there). Pixels as one word each, found and gathered by flat index: numpy's
+    fastest."""
+    h, w = body.shape[:2]
+    words = np.empty((h + 2, w + 2), np.uint32)  # the pixels, a word each, the sides repeated around them
+    words[1:-1, 1:-1] = np.ascontiguousarray(body).view(np.uint32)[..., 0]
+    words[0, 1:-1], words[-1, 1:-1] = words[1, 1:-1], words[-2, 1:-1]
+    words[:, 0], words[:, -1] = words[:, 1], words[:, -2]
+    p = (words != 0).view(np.uint8)
+    across = p[:, :-2] + 2 * p[:, 1:-1] + p[:, 2:]
+    cover = across[:-2] + 2 * across[1:-1] + across[2:]  # sixteenths, 0-16
+    flat_at = np.flatnonzero(cover)
+    rows = flat_at // w
+    cols = flat_at - rows * w
+    sixteenths = cover.reshape(-1)[flat_at].astype(np.float32)
+    at = flat_at + 2 * rows + w + 3  # in `words`, flat: (rows + 1) * (w + 2) + cols + 1
+    flat = words.reshape(-1)
+    here = flat[at]
+    rgb = here.view(np.uint8).reshape(-1, 4).astype(np.float32)[:, :3]  # all four bytes: ten times faster
+    ring = np.flatnonzero(here == 0)  # just outside: the drawn neighbours' colour
+    if len(ring):
+        acc = np.zeros((len(ring), 4), np.float32)
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                near = flat[at[ring] + dy * (w + 2) + dx].view(np.uint8).reshape(-1, 4)  # 0 where not drawn
+                acc += (2 - abs(dx)) * (2 - abs(dy)) * near.astype(np.float32)
+        rgb[ring] = acc[:, :3] / sixteenths[ring, None]
+    return rows, cols, rgb, sixteenths * np.float32(1 / 16)
 
 
 def grid_blocks(rgba, box, row):
-    """(blocks, rgb [M, 3] 0-255, cover [M, 4]) of the body drawn on a grid of 2 (rgba [h, w, 4] at the box's
-    (column, row) in grid pixels, rows of `row` grid pixels): each drawn grid pixel is one 2x2 block of the frame,
-    as FrameDrawer._blend_blocks writes the solid body's."""
-    rows, cols = np.nonzero(rgba[..., 3])
-    cover = rgba[rows, cols, 3].astype(np.float32) * np.float32(1 / 255)
+    """(blocks, rgb [M, 3] 0-255, cover [M]: the whole block's) of a body drawn once per grid pixel on a grid of 2
+    (rgba [h, w, 4] as MeshBody.draw gives it, at the box's (column, row) in grid pixels, rows of `row` grid
+    pixels), antialiased: each grid pixel is one 2x2 block of the frame, as FrameDrawer._blend_blocks writes the
+    solid body's."""
+    rows, cols, rgb, cover = antialias(rgba)
     blocks = (rows + box[1]) * row + (cols + box[0])
-    return blocks, rgba[rows, cols, :3].astype(np.float32), np.repeat(cover[:, None], 4, 1)
+    return blocks, rgb, cover
+
+
+def straight(rgba):
+    """A body drawn once per pixel (as MeshBody.draw gives it), antialiased, as straight-alpha rgba [h, w, 4]."""
+    rows, cols, rgb, cover = antialias(rgba)
+    out = np.zeros_like(rgba)
+    out[rows, cols, :3] = (rgb + np.float32(0.5)).astype(np.uint8)
+    out[rows, cols, 3] = (cover * 255 + np.float32(0.5)).astype(np.uint8)
+    return out
 
 
 def over(under, rgba):
@@ -305,3 +368,45 @@ def over(under, rgba):
     out_a = am + au
     rgb = (new[:, :3] * am + old[:, :3] * au) / np.maximum(out_a, np.float32(1e-6))
     under[drawn] = np.concatenate([rgb + np.float32(0.5), out_a * 255 + np.float32(0.5)], 1).astype(np.uint8)
+
+
+@dataclass(frozen=True)
+class Painted:
+    """One person's mesh drawn and antialiased for one frame, as FrameDrawer composites it: on a grid of 2 the
+    frame's 2x2 blocks (grid_blocks' triple); on a grid of 1 the box's straight-alpha rgba and the box; all None when
+    nothing of the body is in front of the camera."""
+
+    blocks: tuple | None
+    rgba: np.ndarray | None
+    box: tuple | None
+
+
+class MeshPainter:
+    """Draws one person's mesh frame by frame (Painted), seen through `proj` (rendering.camera.Projector) in a frame
+    of `size` pixels, on a grid of `grid` frame pixels per drawn pixel.
+
+    An OpenGL context belongs to a thread, so a painter is used in the thread that made it: rendering.render makes
+    one on its skinning thread, where the drawing and its edge pass run beside the frame's floor, blending and
+    encoding."""
+
+    def __init__(self, mesh, size, proj, colour, grid):
+        self.body = MeshBody([mesh], size // grid, proj.focal / grid)
+        self.proj, self.colour, self.grid, self.row = proj, tuple(colour), grid, size // 2
+        self.rot = proj.rot.T.astype(np.float32)  # into camera axes, as Projector.to_camera turns points
+
+    def __call__(self, vertices, normals, eye):
+        """The person's vertices [V, 3] (world) and their normals (vertex_normals, world axes; None: computed from
+        the vertices) seen from `eye` [3] -> Painted."""
+        cam = (
+            np.asarray(vertices, np.float32) - np.asarray(eye, np.float32)
+        ) @ self.rot  # Projector.to_camera, in GL's float32
+        person = (cam, self.colour) if normals is None else (cam, self.colour, normals @ self.rot)
+        rgba, box = self.body.draw([person])
+        if rgba is None:
+            return Painted(None, None, None)
+        if self.grid == 2:  # each drawn grid pixel a 2x2 block, written straight into the planes
+            return Painted(grid_blocks(rgba, box, self.row), None, box)
+        return Painted(None, straight(rgba), box)
+
+    def release(self):
+        self.body.release()

@@ -19,7 +19,7 @@ from moglow_eval.core import skeleton_names
 
 from .camera import DEFAULT_CAMERA, NEAR, Projector, clip_to_frustum
 from .errors import RenderError
-from .mesh import MeshBody, grid_blocks, over
+from .mesh import MeshPainter, Painted, over
 from .solid import SolidBody
 
 
@@ -204,13 +204,17 @@ class FrameDrawer:
         self.solid = SolidBody(size, self.proj.focal, style.solid_grid) if style.body == "solid" else None
         if self.solid:
             self._capsules()
-        self.mesh = None
-        if style.body == "mesh":
-            if not meshes:
-                raise RenderError(f"the mesh style draws {MESH_INPUTS}; other motion can use stick or solid")
-            # On a grid of 2 a quarter of the pixels are drawn, each one 2x2 block of the frame (as the solid body's).
-            self.mesh = MeshBody(meshes, size // style.mesh_grid, self.proj.focal / style.mesh_grid)
+        self.mesh = None  # the mesh style's MeshPainter, made when this thread first draws vertices
+        self.meshes = meshes
+        if style.body == "mesh" and not meshes:
+            raise RenderError(f"the mesh style draws {MESH_INPUTS}; other motion can use stick or solid")
         self.mesh_blocks = None  # (set by _mesh_figure on a grid of 2: the body's blocks, colours and cover)
+
+    def mesh_painter(self):
+        """A MeshPainter for this drawer's person, for the calling thread (rendering.render's skinning thread draws
+        the next frames' meshes with one while this drawer composes the frame before)."""
+        # On a grid of 2 a quarter of the pixels are drawn, each one 2x2 block of the frame (as the solid body's).
+        return MeshPainter(self.meshes[0], self.size, self.proj, self.style.mesh_colour, self.style.mesh_grid)
 
     def close(self):
         """Free what the drawer holds beyond memory (the mesh body's GL objects)."""
@@ -287,8 +291,8 @@ class FrameDrawer:
             seg = self.proj.to_screen(scam[self.bone_ends])
             r.draw_path(self.gcs["shadow"], Path(seg.reshape(-1, 2), self.codes), t)
             points.append(seg.reshape(-1, 2))
-        if self.mesh is not None:
-            return self._mesh_figure(vertices, eye, points)
+        if self.style.body == "mesh":
+            return self._mesh_figure(vertices[0], eye, points)
         if self.solid is not None and (cam[:, 2] > NEAR).all():
             return self._solid_figure(joints, cam, eye, points)
         if (cam[:, 2] > NEAR).all():
@@ -344,24 +348,26 @@ class FrameDrawer:
             points.append(self._rows(np.array(box, np.float64)))
         return (np.concatenate(points) if points else np.zeros((0, 2))), 0.0
 
-    def _mesh_figure(self, vertices, eye, points):
-        """The mesh body (rendering.mesh) over the shadow: each person's vertices [V, 3] (world) in their colour,
-        composited over the Agg buffer in the body's box. Returns what _figure does."""
-        people = [(self.proj.to_camera(np.asarray(v, np.float64), eye), self.style.mesh_colour) for v in vertices]
-        rgba, box = self.mesh.draw(people)
-        if rgba is None:
-            return (np.concatenate(points) if points else np.zeros((0, 2))), 0.0
-        if self.style.mesh_grid == 2:  # each drawn grid pixel a 2x2 block, written straight into the planes
-            self.mesh_blocks = grid_blocks(rgba, box, self.size // 2)
-            return (np.concatenate(points) if points else np.zeros((0, 2))), 0.0
-        c0, r0, c1, r1 = box
-        over(self.rgba[r0:r1, c0:c1], rgba)
-        points.append(self._rows(np.array([[c0, r0], [c1, r1]], np.float64)))
-        return np.concatenate(points), 0.0
+    def _mesh_figure(self, person, eye, points):
+        """The mesh body (rendering.mesh) over the shadow: the person's vertices [V, 3] (world) in the style's
+        colour, or their Painted frame (drawn ahead on another thread), composited over the Agg buffer in the body's
+        box. Returns what _figure does."""
+        if not isinstance(person, Painted):
+            if self.mesh is None:
+                self.mesh = self.mesh_painter()
+            person = self.mesh(person, None, eye)
+        if person.blocks is not None:  # on a grid of 2: blocks written straight into the planes (_blend_blocks)
+            self.mesh_blocks = person.blocks
+        elif person.rgba is not None:
+            c0, r0, c1, r1 = person.box
+            over(self.rgba[r0:r1, c0:c1], person.rgba)
+            points.append(self._rows(np.array([[c0, r0], [c1, r1]], np.float64)))
+        return (np.concatenate(points) if points else np.zeros((0, 2))), 0.0
 
     def draw(self, joints, target, vertices=None):
         """Render one frame (joints [J, 3], look-at target [3]; with the mesh style, `vertices`: the person's
-        [V, 3] in the joints' world, in a list); returns the yuv420p frame (flat uint8 view)."""
+        [V, 3] in the joints' world, or their Painted frame, in a list); returns the yuv420p frame (flat uint8
+        view)."""
         self.background(target)
         return self.add_figure(joints, target, vertices)
 
@@ -399,25 +405,29 @@ class FrameDrawer:
         return self.frame
 
     def _blend_blocks(self, blocks, rgb, cover):
-        """Composite the solid body drawn on a grid of 2 over the planes: each of its pixels [M] (a 2x2 block's
-        index, as the chroma planes count them) of colour `rgb` [M, 3] (0-255) and its frame pixels' coverage
-        `cover` [M, 4] (in self.quad's order)."""
+        """Composite a body drawn on a grid of 2 over the planes: each of its pixels [M] (a 2x2 block's index, as the
+        chroma planes count them) of colour `rgb` [M, 3] (0-255) and its frame pixels' coverage `cover` [M, 4] (in
+        self.quad's order; the solid body's), or [M] (one for the whole block: the mesh body's)."""
         br, bc = np.divmod(blocks, self.size // 2)
         luma = rgb @ _TO_Y + np.float32(16.5)
-        c0, c1, c2, c3 = cover.T  # (an axis-1 reduction over 4 is slow in numpy)
-        whole = np.minimum(np.minimum(c0, c1), np.minimum(c2, c3)) >= 1
+        if cover.ndim == 1:
+            whole, block_cover = cover >= 1, cover
+        else:
+            c0, c1, c2, c3 = cover.T  # (an axis-1 reduction over 4 is slow in numpy)
+            whole = np.minimum(np.minimum(c0, c1), np.minimum(c2, c3)) >= 1
+            block_cover = (c0 + c1 + c2 + c3) * np.float32(0.25)
         pairs = self.y_flat.view(np.uint16)  # a block's two pixels in a row are one word
         top = (self.size * br + bc)[whole]
         pairs[top] = pairs[top + self.size // 2] = luma[whole].astype(np.uint16) * 257
         part = np.flatnonzero(~whole)
         idx = (2 * self.size * br[part] + 2 * bc[part])[:, None] + self.quad
         y = self.y_flat[idx].astype(np.float32)
-        blend = y + cover[part] * (luma[part, None] - np.float32(0.5) - y) + np.float32(0.5)
+        part_cover = cover[part, None] if cover.ndim == 1 else cover[part]
+        blend = y + part_cover * (luma[part, None] - np.float32(0.5) - y) + np.float32(0.5)
         self.y_flat[idx] = blend.astype(np.uint8)
-        cover = (c0 + c1 + c2 + c3) * np.float32(0.25)
         for plane, to in ((self.u_flat, _TO_U), (self.v_flat, _TO_V)):
             old = plane[blocks].astype(np.float32)
-            plane[blocks] = (old + cover * (rgb @ to + 128 - old) + np.float32(0.5)).astype(np.uint8)
+            plane[blocks] = (old + block_cover * (rgb @ to + 128 - old) + np.float32(0.5)).astype(np.uint8)
 
     def _blend(self, r0, r1, c0, c1):
         """Composite the Agg figure (straight alpha) over the planes in the 2x2 blocks it touched inside rows

@@ -8,6 +8,8 @@ pipe and x264.
 """
 
 import argparse
+import queue
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -19,10 +21,12 @@ from .camera import DEFAULT_CAMERA, camera_targets
 from .captions import CaptionLayer
 from .encode import ffmpeg_writer
 from .errors import RenderError
+from .mesh import vertex_normals, vertex_normals_operator
 from .raster import DEFAULT_STYLE, FrameDrawer, one_colour
 
 MIN_SIZE, MAX_SIZE = 32, 4096  # pixels; beyond 4096 x264's level limits and memory get in the way
 MESH_CHUNK = 64  # frames of a mesh's vertices skinned and held at once
+MESH_AHEAD = 8  # frames of drawn meshes the skinning thread keeps ready ahead of the frame being composed
 
 
 def size_flag(text):
@@ -145,20 +149,17 @@ def render_clip(
     keep = set(np.linspace(0, len(joints) - 1, sheet_frames).round().astype(int)) if sheet else set()
     kept = []
     proc = ffmpeg_writer(out_mp4, size, fps, preset, qp, crf, threads, frames=len(joints), seed=rate_seed)
-    chunks = _mesh_chunks([m if d.mesh is not None else None for (d, _), m in zip(people, meshes)], len(joints))
+    painted = _painted(people, [m if d.style.body == "mesh" else None for (d, _), m in zip(people, meshes)], targets)
     try:
-        for t0, vertices in chunks:
-            for t in range(t0, min(len(joints), t0 + MESH_CHUNK)):
-                proc.stdin.write(
-                    compose(people, t, targets[t], layer, fps, [v if v is None else v[t - t0] for v in vertices])
-                )
-                if t in keep:
-                    kept.append((t, drawer.rgb()))
+        for t, meshes_t in enumerate(painted):
+            proc.stdin.write(compose(people, t, targets[t], layer, fps, meshes_t))
+            if t in keep:
+                kept.append((t, drawer.rgb()))
         proc.stdin.close()
     except BrokenPipeError:
         pass
     finally:
-        chunks.close()
+        painted.close()
         for d, _ in people:
             d.close()
     err = proc.stderr.read().decode(errors="replace").strip()
@@ -202,7 +203,8 @@ def _partner(partner, frames, size, camera, style, drawer, name, mesh=None):
 
 def compose(people, t, target, layer=None, fps=1.0, vertices=None):
     """Frame t as yuv420p: the floor, then each person [(drawer, joints [T, J, 3])] from the farthest to the
-    nearest (with the mesh style, `vertices`: each person's [V, 3] at t, or None), then the captions on at t / fps."""
+    nearest (with the mesh style, `vertices`: each person's [V, 3] at t, or their rendering.mesh.Painted, or None),
+    then the captions on at t / fps."""
     people[0][0].background(target)
     vertices = vertices or [None] * len(people)
     order = sorted(range(len(people)), key=lambda k: -people[k][0].depth(people[k][1][t], target))
@@ -213,26 +215,76 @@ def compose(people, t, target, layer=None, fps=1.0, vertices=None):
     return layer.apply(frame, t / fps) if layer is not None else frame
 
 
-def _mesh_chunks(meshes, n):
-    """(first frame, [each person's vertices of the chunk [<= MESH_CHUNK, V, 3], or None]) for each chunk of a clip
-    of n frames; the next chunk is skinned on a thread while this one is drawn (the skinning's torch and the
-    drawing's OpenGL both let go of the GIL), so at most two chunks are held at once."""
+def _painted(people, meshes, targets):
+    """Each frame's [each person's mesh drawn (rendering.mesh.Painted), or None where the person is no mesh].
+
+    One thread (_mesh_thread) skins a chunk of frames at a time (MESH_CHUNK; a short first one, so that the first
+    frame is not kept waiting), sums their normals, and draws each frame's mesh with its own painters (an OpenGL
+    context is a thread's), MESH_AHEAD frames ahead of the frame being composed: the skinning's torch, the sparse
+    product and the drawing all let go of the GIL, so the mesh is drawn on one core while the floor, the blending
+    and x264 use the other. What it holds is bounded by the chunk, whatever the clip's length; an error there is
+    raised here."""
+    n = len(targets)
     if all(m is None for m in meshes):
-        for t0 in range(0, n, MESH_CHUNK):
-            yield t0, [None] * len(meshes)
+        yield from ([None] * len(meshes) for _ in range(n))
         return
+    ready = queue.Queue(maxsize=MESH_AHEAD)
+    stop = threading.Event()
+    job = _mesh_thread().submit(_paint, people, meshes, targets, ready, stop)
+    try:
+        for _ in range(n):
+            item = ready.get()
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        while not job.done():  # take what it still puts, so that it sees the stop
+            try:
+                ready.get(timeout=0.05)
+            except queue.Empty:
+                pass
 
-    def skin(a):
-        b = min(n, a + MESH_CHUNK)
-        return [None if m is None else m.vertices(a, b) for m in meshes]
 
-    with ThreadPoolExecutor(1) as pool:
-        ahead = pool.submit(skin, 0)
-        for t0 in range(0, n, MESH_CHUNK):
-            chunk = ahead.result()
-            if t0 + MESH_CHUNK < n:
-                ahead = pool.submit(skin, t0 + MESH_CHUNK)
-            yield t0, chunk
+_MESH_THREAD = []
+
+
+def _mesh_thread():
+    """The one thread that skins and draws meshes, for every clip this process renders: its OpenGL context and
+    compiled shaders (rendering.mesh.gl_context, a thread's) are made once, not once a clip."""
+    if not _MESH_THREAD:
+        _MESH_THREAD.append(ThreadPoolExecutor(1, thread_name_prefix="mesh"))
+    return _MESH_THREAD[0]
+
+
+def _paint(people, meshes, targets, ready, stop):
+    """_painted's thread: skins, sums the normals and draws, putting each frame's Painted list (or the error) on
+    `ready` until the clip ends or `stop` is set."""
+    painters = []
+    try:
+        painters = [None if m is None else d.mesh_painter() for (d, _), m in zip(people, meshes)]
+        ops = [None if m is None else vertex_normals_operator(m.faces, len(m.mask)) for m in meshes]
+        a, size, n = 0, 8, len(targets)
+        while a < n and not stop.is_set():
+            b = min(n, a + size)
+            skinned = []
+            for m, op in zip(meshes, ops):
+                v = None if m is None else m.vertices(a, b)
+                skinned.append(None if m is None else (v, vertex_normals(v, np.asarray(m.faces), op)))
+            for t in range(a, b):
+                if stop.is_set():
+                    return
+                eyes = [targets[t] + d.proj.offset for d, _ in people]
+                ready.put(
+                    [None if p is None else p(x[0][t - a], x[1][t - a], e) for p, x, e in zip(painters, skinned, eyes)]
+                )
+            a, size = b, MESH_CHUNK
+    except BaseException as e:  # noqa: BLE001 -- raised again in the composing thread, which reports it
+        ready.put(e)
+    finally:
+        for p in painters:
+            if p is not None:
+                p.release()
 
 
 def contact_sheet(frames, fps, out_png, columns=4, thumb=240):

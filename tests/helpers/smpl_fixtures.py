@@ -144,11 +144,19 @@ class _MeshBuilder:
                            for t in self.around]  # fmt: skip
         self.joint += [joint] * (rings * len(self.around))
         self.ring_faces(start, rings, flip=True)
+        s_n = len(self.around)
+        for end, y in ((0, 1.0), (rings - 1, -1.0)):  # the poles: closed, as SMPL's head is
+            pole = len(self.verts)
+            self.verts.append(centre + (0.0, y * radius, 0.0))
+            self.joint.append(joint)
+            for s in range(s_n):
+                p, q = start + end * s_n + s, start + end * s_n + (s + 1) % s_n
+                self.faces.append((pole, p, q) if end == 0 else (pole, q, p))
 
 
 def body_model_arrays(kind, rings=4, segments=12, head_rings=10, seed=0):
     """A synthetic model of the smplx layout whose mesh is a body: one closed tube around each bone (its vertices
-    skinned to the bone's parent joint, as a limb's are in SMPL) and a sphere around the head joint, the head's
+    skinned to the bone's parent joint, as a limb's are in SMPL) and a closed sphere around the head joint, the head's
     vertices on its front (+Z, where SMPL faces) making up the face. The first J vertices are the rest joints, which
     J_regressor picks, as in `model_arrays`. `rings` and `segments` set the vertex count (the real SMPL-H has 6890)."""
     arrays = model_arrays(kind, seed=seed)
