@@ -15,7 +15,7 @@ least-covered pair (the app's balanced claim), and the mean is refitted as the a
 - active: ranking.pick_order on the posterior the app holds (the last fit's mean, every vote so far in the
   covariance), with --random-share and the indifference --margin; None: the least-covered pair. The app refits
   whenever a vote came in, at most once a second: --votes-per-second votes between fits (1: before every vote).
-- Votes to tau >= 0.9 in --share of replications: the smallest count from which on (checked 40 times a run)
+- Votes to tau >= 0.9 in --share of replications: the smallest count from which on (checked --checks times a run)
   that share of replications rank the systems at Kendall tau >= 0.9 against the truth; active / round robin, with
   a percentile interval over replications (each scheme's replications resampled, 500 times).
 """
@@ -154,7 +154,7 @@ def fixed(a, t0):
     for name, (truth, near) in truths(a.truths.split(",")).items():
         taus, shares, needed = {}, {}, {}
         most = int(MAX_VOTES[name] * a.scale)
-        step = most // 40
+        step = most // a.checks
         for scheme in SCHEMES:
             if scheme not in a.schemes:
                 taus[scheme], shares[scheme], needed[scheme] = np.zeros((1, 1)), 0.0, None
@@ -209,7 +209,8 @@ def error_table(a):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--reps", type=int, default=50)
+    ap.add_argument("--reps", type=int, default=100)
+    ap.add_argument("--checks", type=int, default=80, help="checkpoints per replication at which tau is computed")
     ap.add_argument("--truths", default="evenly,leaderboard,near-ties")
     ap.add_argument("--scale", type=float, default=1.0, help="x each truth's votes per replication (MAX_VOTES)")
     ap.add_argument("--active-cap", type=float, default=0.75, help="active's votes per replication, x round robin's")

@@ -204,8 +204,7 @@ class FrameDrawer:
         self.solid = SolidBody(size, self.proj.focal, style.solid_grid) if style.body == "solid" else None
         if self.solid:
             self._capsules()
-        self.mesh = None  # the mesh style's MeshPainter, made when this thread first draws vertices
-        self.meshes = meshes
+        self.mesh, self.meshes = None, meshes  # (mesh: a MeshPainter, made when this thread first draws vertices)
         if style.body == "mesh" and not meshes:
             raise RenderError(f"the mesh style draws {MESH_INPUTS}; other motion can use stick or solid")
         self.mesh_blocks = None  # (set by _mesh_figure on a grid of 2: the body's blocks, colours and cover)

@@ -83,13 +83,13 @@ def test_the_elo_scale_is_400_log10_odds_around_1000():
 
 
 def exact_gain(post, wins, a, b):
-    """The expected drop of the adjacent-order entropy from one vote on (a, b), by refitting on each outcome."""
-    order = np.argsort(-post.mean, kind="stable")
-    pairs = list(zip(order[:-1], order[1:]))
+    """The expected drop of every pair's order entropy from one vote on (a, b), by refitting on each outcome."""
+    pairs = ranking.pairs(len(post.mean))
 
     def entropy(p):
-        z = [(p.mean[i] - p.mean[j]) / math.sqrt(p.cov[i, i] + p.cov[j, j] - 2 * p.cov[i, j]) for i, j in pairs]
-        return ranking._order_entropy(np.array(z)).sum()
+        i, j = pairs[:, 0], pairs[:, 1]
+        z = (p.mean[i] - p.mean[j]) / np.sqrt(p.cov[i, i] + p.cov[j, j] - 2 * p.cov[i, j])
+        return ranking._order_entropy(z).sum()
 
     v = post.cov[a, a] + post.cov[b, b] - 2 * post.cov[a, b]
     p_a = expit((post.mean[a] - post.mean[b]) / math.sqrt(1 + math.pi * v / 8))

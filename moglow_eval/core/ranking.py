@@ -9,14 +9,18 @@ that the posterior exists from zero votes on. The posterior is approximated by a
 
 From it:
 - `gains`: the expected information one more vote on each pair of conditions brings about the ranking, measured as the
-  expected drop in the summed binary entropy of the order of each adjacent pair of the posterior-mean order (P(theta_i
-  > theta_j) under the posterior). The expectation is over the vote's outcome, through the preposterior: one vote on
-  pair (a, b) adds w x x' to the precision (x = e_a - e_b, w = p (1 - p) the vote's Fisher information), which shrinks
-  the variance of every difference theta_i - theta_j by a known amount, and the mean of that difference moves by a
-  normal amount whose variance is exactly that shrinkage (the law of total variance). This follows ASAP (Mikhailiuk et
-  al. 2020, "Active sampling for pairwise comparisons via approximate message passing and information gain
-  maximization", ICPR), which picks the pair of highest expected information gain under a Gaussian posterior; here the
-  information is about the order, which is what a ranking study reports.
+  expected drop in the summed binary entropy of the order of every pair of conditions (P(theta_i > theta_j) under the
+  posterior): Kendall's tau counts every pair's order. The expectation is over the vote's outcome, through the
+  preposterior: one vote on pair (a, b) adds w x x' to the precision (x = e_a - e_b, w = p (1 - p) the vote's Fisher
+  information), which shrinks the variance of every difference theta_i - theta_j by a known amount, and the mean of
+  that difference moves by a normal amount whose variance is exactly that shrinkage (the law of total variance). This
+  follows ASAP (Mikhailiuk et al. 2020, "Active sampling for pairwise comparisons via approximate message passing and
+  information gain maximization", ICPR), which picks the pair of highest expected information gain under a Gaussian
+  posterior; here the information is about the order, which is what a ranking study reports. The entropy of the
+  adjacent pairs alone spent more votes (0.76 of round robin's against 0.65 on evenly spaced conditions;
+  bench/RESULTS.md pairwise-active). The chance of a wrong order itself, min(P, 1 - P), is no measure for one vote:
+  P is a martingale, so one vote changes its expectation only where the order may flip, and the gains of most pairs
+  vanish into rounding.
 - `settledness`: every adjacent pair in the posterior-mean order separated, P(order right) at least
   1 - (1 - level) / (k - 1) each (a Bonferroni split of the error over the k - 1 adjacent pairs: if every adjacent
   pair of the estimated order is right, the whole order is), or every condition's Elo interval narrower than a
@@ -164,38 +168,30 @@ def tied(post: Posterior, margin_elo: float, confidence: float = TIE_CONFIDENCE)
 
 
 def gains(post: Posterior, margin_elo: float = 0.0) -> np.ndarray:
-    """The expected drop in the summed order entropy of the adjacent pairs of the posterior-mean order from one
-    more vote on each pair, [P] in the order of `pairs(k)` (module docstring). Adjacent pairs only: the order of
-    two conditions farther apart follows from theirs, and the entropy of P(order) is then nearly zero anyway.
-    With an indifference margin, tied pairs (`tied`) are no target, and a vote on one gains nothing (-1, last)."""
-    k = len(post.mean)
-    pr = pairs(k)
+    """The expected drop in the summed order entropy of every pair from one more vote on each pair, [P] in the
+    order of `pairs(k)` (module docstring). With an indifference margin, tied pairs (`tied`) count for nothing, and
+    a vote on one gains nothing (-1, last)."""
+    pr = pairs(len(post.mean))
     cov, mean = post.cov, post.mean
-    order = np.argsort(-mean, kind="stable")
-    ta, tb = order[:-1], order[1:]  # the targets: adjacent in the current order
     is_tied = tied(post, margin_elo)
-    if is_tied.any():
-        at = {(int(i), int(j)): n for n, (i, j) in enumerate(pr)}
-        keep = ~is_tied[[at[tuple(sorted((int(x), int(y))))] for x, y in zip(ta, tb)]]
-        ta, tb = ta[keep], tb[keep]
-    if not len(ta):
-        return np.where(is_tied, -1.0, 0.0)
+    if is_tied.all():
+        return np.full(len(pr), -1.0)
     a, b = pr[:, 0], pr[:, 1]
-    d_cand = mean[a] - mean[b]
-    var_cand = cov[a, a] + cov[b, b] - 2 * cov[a, b]
-    d = mean[ta] - mean[tb]
-    var = cov[ta, ta] + cov[tb, tb] - 2 * cov[ta, tb]
+    d = mean[a] - mean[b]
+    var = cov[a, a] + cov[b, b] - 2 * cov[a, b]
+    ta, tb = a[~is_tied], b[~is_tied]  # the targets: every pair not tied
+    d_t, var_t = d[~is_tied], var[~is_tied]
     cross = cov[a][:, ta] - cov[a][:, tb] - cov[b][:, ta] + cov[b][:, tb]  # [candidate, target]
     # The predictive win probability of each candidate pair (the probit approximation of the logistic-normal
     # integral), and so the Fisher information of one vote on it.
-    p = expit(d_cand / np.sqrt(1.0 + math.pi * var_cand / 8.0))
+    p = expit(d / np.sqrt(1.0 + math.pi * var / 8.0))
     info = p * (1.0 - p)
     # Rank-one update: var' of target y after a vote on candidate c = var_y - info_c cov_cy^2 / (1 + info_c var_c).
-    shrink = info[:, None] * cross**2 / (1.0 + info * var_cand)[:, None]
-    var_after = np.maximum(var[None, :] - shrink, 1e-12)
-    before = _order_entropy(d / np.sqrt(var)).sum()
+    shrink = info[:, None] * cross**2 / (1.0 + info * var)[:, None]
+    var_after = np.maximum(var_t[None, :] - shrink, 1e-12)
+    before = _order_entropy(d_t / np.sqrt(var_t)).sum()
     # The mean of each difference moves by N(0, shrink): integrate the entropy after over it.
-    moved = d[None, :, None] + np.sqrt(shrink)[..., None] * _NODES
+    moved = d_t[None, :, None] + np.sqrt(shrink)[..., None] * _NODES
     after = (_order_entropy(moved / np.sqrt(var_after)[..., None]) @ _WEIGHTS).sum(axis=1)
     return np.where(is_tied, -1.0, before - after)
 
