@@ -8,6 +8,7 @@ pipe and x264.
 """
 
 import argparse
+import os
 import queue
 import threading
 from concurrent.futures import ThreadPoolExecutor
@@ -247,6 +248,7 @@ def _painted(people, meshes, targets):
 
 
 _MESH_THREAD = []
+os.register_at_fork(after_in_child=_MESH_THREAD.clear)  # a forked child has no such thread: it makes its own
 
 
 def _mesh_thread():

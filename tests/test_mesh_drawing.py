@@ -127,3 +127,32 @@ def test_the_mesh_thread_reports_errors_and_serves_clip_after_clip(take, tmp_pat
         render_clip(clip, tmp_path / f"ok{k}.mp4", size=64, style=STYLES["mesh"], mesh=Spy())
         assert (tmp_path / f"ok{k}.mp4").stat().st_size > 0
     assert threads and len(set(threads)) == 1 and threads[0] != threading.current_thread().name
+
+
+def test_a_forked_child_renders_meshes_too(take, tmp_path):
+    """The mesh thread is the process's: a child forked after a mesh clip (a pool with the fork start method) makes
+    its own, where it would otherwise hand its clip to a thread that does not exist there and wait for ever."""
+    import os
+    import time
+
+    source, clip = take
+    render_clip(clip, tmp_path / "parent.mp4", size=64, style=STYLES["mesh"], mesh=source)
+    pid = os.fork()
+    if pid == 0:  # the child: render, and leave without pytest's teardown
+        try:
+            render_clip(clip, tmp_path / "child.mp4", size=64, style=STYLES["mesh"], mesh=source)
+            os._exit(0)
+        except BaseException:  # noqa: BLE001 -- any failure is the child's exit status
+            os._exit(3)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            break
+        time.sleep(0.05)
+    else:
+        os.kill(pid, 9)
+        os.waitpid(pid, 0)
+        pytest.fail("the forked child's mesh clip never finished")
+    assert os.waitstatus_to_exitcode(status) == 0
+    assert (tmp_path / "child.mp4").stat().st_size > 0
