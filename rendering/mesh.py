@@ -131,7 +131,7 @@ def closed(faces):
     b = f[:, [1, 2, 0]].reshape(-1)
     n = int(f.max()) + 1
     forward, backward = np.sort(a * n + b), np.sort(b * n + a)
-    return bool(len(np.unique(forward)) == len(forward) and np.array_equal(forward, backward))
+    return bool((np.diff(forward) > 0).all() and np.array_equal(forward, backward))
 
 
 def signed_volume(vertices, faces):
@@ -274,9 +274,8 @@ class MeshBody:
                 raise RenderError(f"a person's vertices are {cam.shape}, their mesh has {len(m.mask)}")
             if normals is None:
                 # Camera axes are a mirror of the world's (x right, y up, z away), so the outward normal of a face
-                # wound counter-clockwise in the world is (c - a) x (b - a) here.
-                a, b, c = cam[faces[:, 0]], cam[faces[:, 1]], cam[faces[:, 2]]
-                normals = op @ np.cross(c - a, b - a)
+                # wound counter-clockwise in the world is (c - a) x (b - a) here: vertex_normals' reversed.
+                normals = -vertex_normals(cam[None], faces, op)[0]
             pos.write(np.ascontiguousarray(cam))
             nrm.write(np.ascontiguousarray(normals, np.float32))
             if state["colour"] != tuple(colour):  # the colours change only with the person's colour
@@ -393,6 +392,13 @@ class MeshPainter:
         self.body = MeshBody([mesh], size // grid, proj.focal / grid)
         self.proj, self.colour, self.grid, self.row = proj, tuple(colour), grid, size // 2
         self.rot = proj.rot.T.astype(np.float32)  # into camera axes, as Projector.to_camera turns points
+
+    def skin(self, a, b):
+        """Frames a..b of the person's mesh (its source's `vertices`) and their normals (vertex_normals, with the
+        body's own operator), both [b - a, V, 3] in world axes, for __call__ a frame at a time."""
+        mesh, faces, op = self.body.people[0][:3]
+        vertices = mesh.vertices(a, b)
+        return vertices, vertex_normals(vertices, faces, op)
 
     def __call__(self, vertices, normals, eye):
         """The person's vertices [V, 3] (world) and their normals (vertex_normals, world axes; None: computed from

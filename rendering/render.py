@@ -22,7 +22,6 @@ from .camera import DEFAULT_CAMERA, camera_targets
 from .captions import CaptionLayer
 from .encode import ffmpeg_writer
 from .errors import RenderError
-from .mesh import vertex_normals, vertex_normals_operator
 from .raster import DEFAULT_STYLE, FrameDrawer, one_colour
 
 MIN_SIZE, MAX_SIZE = 32, 4096  # pixels; beyond 4096 x264's level limits and memory get in the way
@@ -252,8 +251,8 @@ os.register_at_fork(after_in_child=_MESH_THREAD.clear)  # a forked child has no 
 
 
 def _mesh_thread():
-    """The one thread that skins and draws meshes, for every clip this process renders: its OpenGL context and
-    compiled shaders (rendering.mesh.gl_context, a thread's) are made once, not once a clip."""
+    """The one thread that skins and draws meshes, for every clip this process renders: its OpenGL context
+    (rendering.mesh.gl_context, a thread's) is made once, not once a clip."""
     if not _MESH_THREAD:
         _MESH_THREAD.append(ThreadPoolExecutor(1, thread_name_prefix="mesh"))
     return _MESH_THREAD[0]
@@ -265,14 +264,10 @@ def _paint(people, meshes, targets, ready, stop):
     painters = []
     try:
         painters = [None if m is None else d.mesh_painter() for (d, _), m in zip(people, meshes)]
-        ops = [None if m is None else vertex_normals_operator(m.faces, len(m.mask)) for m in meshes]
-        a, size, n = 0, 8, len(targets)
+        a, size, n = 0, MESH_AHEAD, len(targets)
         while a < n and not stop.is_set():
             b = min(n, a + size)
-            skinned = []
-            for m, op in zip(meshes, ops):
-                v = None if m is None else m.vertices(a, b)
-                skinned.append(None if m is None else (v, vertex_normals(v, np.asarray(m.faces), op)))
+            skinned = [None if p is None else p.skin(a, b) for p in painters]
             for t in range(a, b):
                 if stop.is_set():
                     return

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from helpers import smpl_fixtures
 
-from generation.data.smpl_files import smpl_mesh, smpl_positions
+from generation.data.smpl_files import smpl_mesh
 from rendering.camera import Projector, camera_targets
 from rendering.errors import RenderError
 from rendering.framing import item_camera
@@ -19,11 +19,7 @@ from rendering.render import render_clip
 
 @pytest.fixture(scope="module")
 def take(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("mesh-drawing")
-    model = smpl_fixtures.write_body_model(folder / "SMPLH_NEUTRAL.npz", "smplh")
-    motion = smpl_fixtures.write_motion(folder / "take.npz", "smplh", frames=20, fps=30.0)
-    joints, names, parents, fps = smpl_positions(motion, model)
-    clip = dict(joints=joints, parents=parents, joint_names=names, fps=fps)
+    model, motion, clip = smpl_fixtures.smplh_take(tmp_path_factory.mktemp("mesh-drawing"), frames=20)
     return smpl_mesh(motion, model), clip
 
 

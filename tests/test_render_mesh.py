@@ -28,10 +28,8 @@ WRISTS, ELBOWS, HEAD = (20, 21), (18, 19), 15
 @pytest.fixture(scope="module")
 def take(tmp_path_factory):
     folder = tmp_path_factory.mktemp("mesh")
-    model = smpl_fixtures.write_body_model(folder / "SMPLH_NEUTRAL.npz", "smplh")
-    motion = smpl_fixtures.write_motion(folder / "take.npz", "smplh", frames=40, fps=30.0)
-    joints, names, parents, fps = smpl_positions(motion, model)
-    return folder, model, motion, dict(joints=joints, parents=parents, joint_names=names, fps=fps)
+    model, motion, clip = smpl_fixtures.smplh_take(folder, frames=40)
+    return folder, model, motion, clip
 
 
 def body_pixels(frame):

@@ -187,3 +187,14 @@ def body_model_arrays(kind, rings=4, segments=12, head_rings=10, seed=0):
 def write_body_model(path, kind, **kw):
     np.savez(path, **body_model_arrays(kind, **kw))
     return path
+
+
+def smplh_take(folder, frames, fps=30.0):
+    """(model, motion, clip) written into `folder`: the synthetic SMPL-H body model, a take of `frames` frames, and
+    its joints as a clip dict (joints, parents, joint_names, fps), as the mesh tests render them."""
+    from generation.data.smpl_files import smpl_positions
+
+    model = write_body_model(folder / "SMPLH_NEUTRAL.npz", "smplh")
+    motion = write_motion(folder / "take.npz", "smplh", frames=frames, fps=fps)
+    joints, names, parents, fps = smpl_positions(motion, model)
+    return model, motion, dict(joints=joints, parents=parents, joint_names=names, fps=fps)
