@@ -71,14 +71,21 @@ def test_two_figures_the_partner_the_same_in_both_videos(pair, tmp_path, style):
     first = _render(pair, 0, tmp_path / "a.mp4", style)
     second = _render(pair, 1, tmp_path / "b.mp4", style)
     assert check_one_size([tmp_path / "a.mp4", tmp_path / "b.mp4"])  # one byte size, boxes and frame sizes
+    # The same partner in both, less the encoder's noise at its edges. Each clip draws its own random rate per
+    # frame (rendering.encode.rate_dither), so one frame of a thin stick figure can lose a sixth of its pixels to
+    # the colour test (0.83 seen); the mean over the clip stays above 0.91 (six pairs of seeds), and the exact
+    # pixels before encoding are test_the_partner_and_the_captions_are_the_same_pixels_whatever_the_agent_does's.
+    near = [
+        min(figure_pixels.near_share(x, y), figure_pixels.near_share(y, x))
+        for x, y in ((figure_pixels.partner(first[t]), figure_pixels.partner(second[t])) for t in range(0, 84, 6))
+    ]
+    assert np.mean(near) > 0.88, near
     for t in (10, 45, 80):
         agent, partner = figure_pixels.agent(first[t]), figure_pixels.partner(first[t])
         assert agent.sum() > 150 and partner.sum() > 150, t  # two figures
         cols = lambda m: np.nonzero(m)[1].mean()  # noqa: E731
         assert abs(cols(agent) - cols(partner)) > 0.12 * SIZE  # side by side, not one over the other
         other = figure_pixels.partner(second[t])
-        near = min(figure_pixels.near_share(partner, other), figure_pixels.near_share(other, partner))
-        assert near > 0.85, (t, near)  # the same partner, less the encoder's noise at its edges
         both = partner & other
         assert (
             np.abs(first[t][both].astype(int).mean(0) - second[t][both].astype(int).mean(0)).max() < 6
