@@ -76,10 +76,17 @@ def test_both_videos_of_a_unit_show_the_same_interlocutor_and_sound(dyadic):
     assert a.stat().st_size == b.stat().st_size
     assert np.array_equal(decoded_audio(a), decoded_audio(b))
     fa, fb = figure_pixels.decode(a)[0], figure_pixels.decode(b)[0]
+    # Where it stands: the same pixels less the encoder's noise at its edges, over the clip, since each video draws
+    # its own random rate per frame and one frame of a thin figure can lose much of its edge to the colour test
+    # (test_two_people's partner test says more).
+    near = [
+        min(figure_pixels.near_share(x, y), figure_pixels.near_share(y, x))
+        for x, y in ((figure_pixels.partner(fa[t]), figure_pixels.partner(fb[t])) for t in range(0, len(fa), 6))
+    ]
+    assert np.mean(near) > 0.9, near  # 0.96 seen; single frames down to 0.79
     for t in (15, 60, 105):
         pa, pb = figure_pixels.partner(fa[t]), figure_pixels.partner(fb[t])
         assert figure_pixels.agent(fa[t]).sum() > 60 and pa.sum() > 60  # two figures
-        assert min(figure_pixels.near_share(pa, pb), figure_pixels.near_share(pb, pa)) > 0.85  # where it stands
         both = pa & pb
         assert np.abs(fa[t][both].mean(0) - fb[t][both].mean(0)).max() < 4  # in the same colour
 
