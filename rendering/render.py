@@ -263,7 +263,8 @@ def _paint(people, meshes, targets, ready, stop):
     `ready` until the clip ends or `stop` is set."""
     painters = []
     try:
-        painters = [None if m is None else d.mesh_painter() for (d, _), m in zip(people, meshes)]
+        for (d, _), m in zip(people, meshes):  # one by one: those made are released if a later one fails
+            painters.append(None if m is None else d.mesh_painter())
         a, size, n = 0, MESH_AHEAD, len(targets)
         while a < n and not stop.is_set():
             b = min(n, a + size)

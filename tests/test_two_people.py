@@ -75,10 +75,7 @@ def test_two_figures_the_partner_the_same_in_both_videos(pair, tmp_path, style):
     # frame (rendering.encode.rate_dither), so one frame of a thin stick figure can lose a sixth of its pixels to
     # the colour test (0.83 seen); the mean over the clip stays above 0.91 (six pairs of seeds), and the exact
     # pixels before encoding are test_the_partner_and_the_captions_are_the_same_pixels_whatever_the_agent_does's.
-    near = [
-        min(figure_pixels.near_share(x, y), figure_pixels.near_share(y, x))
-        for x, y in ((figure_pixels.partner(first[t]), figure_pixels.partner(second[t])) for t in range(0, 84, 6))
-    ]
+    near = figure_pixels.partner_near(first, second, range(0, 84, 6))
     assert np.mean(near) > 0.88, near
     for t in (10, 45, 80):
         agent, partner = figure_pixels.agent(first[t]), figure_pixels.partner(first[t])

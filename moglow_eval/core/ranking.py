@@ -181,7 +181,8 @@ def gains(post: Posterior, margin_elo: float = 0.0) -> np.ndarray:
     var = cov[a, a] + cov[b, b] - 2 * cov[a, b]
     ta, tb = a[~is_tied], b[~is_tied]  # the targets: every pair not tied
     d_t, var_t = d[~is_tied], var[~is_tied]
-    cross = cov[a][:, ta] - cov[a][:, tb] - cov[b][:, ta] + cov[b][:, tb]  # [candidate, target]
+    x = cov[a] - cov[b]  # [candidate, k]: cov(theta_a - theta_b, theta_m) for every m
+    cross = x[:, ta] - x[:, tb]  # [candidate, target]: cov(candidate's difference, target's)
     # The predictive win probability of each candidate pair (the probit approximation of the logistic-normal
     # integral), and so the Fisher information of one vote on it.
     p = expit(d / np.sqrt(1.0 + math.pi * var / 8.0))

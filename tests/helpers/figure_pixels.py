@@ -100,3 +100,14 @@ def near_share(a, b, pixels=2):
     if not a.any():
         return 0.0
     return float((a & binary_dilation(b, iterations=pixels)).sum() / a.sum())
+
+
+def partner_near(first, second, frames):
+    """[near share of the two videos' partners, the smaller of either way] at each of `frames`: the same second
+    person in both wherever the values are near 1. One frame's thin edges can lose much to the random rate per
+    frame (rendering.encode.rate_dither), so the tests take the mean over a clip."""
+    out = []
+    for t in frames:
+        a, b = partner(first[t]), partner(second[t])
+        out.append(min(near_share(a, b), near_share(b, a)))
+    return out
