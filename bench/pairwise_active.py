@@ -215,7 +215,7 @@ def main(argv=None):
     ap.add_argument("--scale", type=float, default=1.0, help="x each truth's votes per replication (MAX_VOTES)")
     ap.add_argument("--active-cap", type=float, default=0.75, help="active's votes per replication, x round robin's")
     ap.add_argument("--share", type=float, default=0.9, help="the share of replications at tau >= 0.9")
-    ap.add_argument("--random-share", type=float, default=0.2, help="as the app's PAIRING_RANDOM")
+    ap.add_argument("--random-share", type=float, default=ranking.RANDOM_SHARE, help="as PAIRING_RANDOM")
     ap.add_argument("--margin", type=float, default=ranking.INDIFFERENCE_ELO, help="as PAIRING_INDIFFERENCE")
     ap.add_argument(
         "--votes-per-second",

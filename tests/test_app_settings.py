@@ -51,7 +51,7 @@ DEFAULTS = {
     "VIDEO_ACCEL": "off",
     "STUDY_DESIGN": "acr",
     "PAIRING": "balanced",
-    "PAIRING_RANDOM": 0.2,
+    "PAIRING_RANDOM": 0.1,
     "PAIRING_INDIFFERENCE": 0.0,
     "STOP_WHEN": "never",
     "STOP_LEVEL": 0.95,

@@ -1,8 +1,8 @@
 """moglow_eval.core.ranking (CONTRACTS §8, "Active pairing and the stopping rule") against references: the
 posterior mean against analysis.designs.pairwise.preference's independent maximum-likelihood
 fit, the covariance against a numerical
-Hessian, the Elo scale against the two-condition closed form, the information gain against refitting on each
-outcome, and the stopping rule on simulated studies with known strengths."""
+Hessian, the Elo scale against the two-condition closed form, the evidence for an order against the exact
+Bradley-Terry likelihood ratio, and the stopping rule on simulated studies with known strengths."""
 
 import math
 
@@ -82,49 +82,65 @@ def test_the_elo_scale_is_400_log10_odds_around_1000():
     assert se[0] == pytest.approx(ranking.ELO_PER_LOG * math.sqrt(1 / 30 + 1 / 10) / 2, rel=1e-4)
 
 
-def exact_gain(post, wins, a, b):
-    """The expected drop of every pair's order entropy from one vote on (a, b), by refitting on each outcome."""
-    pairs = ranking.pairs(len(post.mean))
-
-    def entropy(p):
-        i, j = pairs[:, 0], pairs[:, 1]
-        z = (p.mean[i] - p.mean[j]) / np.sqrt(p.cov[i, i] + p.cov[j, j] - 2 * p.cov[i, j])
-        return ranking._order_entropy(z).sum()
-
-    v = post.cov[a, a] + post.cov[b, b] - 2 * post.cov[a, b]
-    p_a = expit((post.mean[a] - post.mean[b]) / math.sqrt(1 + math.pi * v / 8))
-    after = 0.0
-    for won, prob in (((a, b), p_a), ((b, a), 1 - p_a)):
-        w = wins.copy()
-        w[won] += 1
-        after += prob * entropy(ranking.fit(w, start=post.mean))
-    return entropy(post) - after
+def test_the_evidence_for_two_conditions_is_the_likelihood_ratio_of_their_order():
+    # Bradley-Terry's log likelihood ratio of "A ahead by delta" against "B ahead by delta" is delta x (A's wins -
+    # B's wins), whatever delta; the evidence is that ratio over 2 delta, so half the net wins near even odds.
+    for a_wins, b_wins in ((260, 240), (230, 270), (520, 480), (101, 99)):
+        post = ranking.fit(np.array([[0.0, a_wins], [b_wins, 0.0]]), prior_sd=1e3)
+        assert ranking.evidence(post)[0] == pytest.approx(abs(a_wins - b_wins) / 2, rel=0.01)
 
 
-def test_the_information_gain_ranks_pairs_as_refitting_on_each_outcome_does():
+def test_at_the_same_p_of_order_the_pair_with_fewer_votes_is_asked_first():
+    # Both pairs' orders hold with the same probability (z = 1.5); the sequential test asks about the one whose
+    # estimate rests on fewer votes, where a z-score would see no difference.
+    k, w = 4, np.zeros((4, 4))
+    for (i, j), n in (((0, 1), 100), ((2, 3), 1600)):
+        d = 1.5 / math.sqrt(n / 4)  # z = d / sd, sd = 1 / sqrt(n p (1 - p)) at p about 1/2
+        w[i, j], w[j, i] = n * expit(d), n * expit(-d)
+    post = ranking.fit(w, prior_sd=1e3)
+    at = {tuple(p): n for n, p in enumerate(ranking.pairs(k).tolist())}
+    (i, j), (m, n) = (0, 1), (2, 3)
+    z = [(post.mean[x] - post.mean[y]) / math.sqrt(post.cov[x, x] + post.cov[y, y] - 2 * post.cov[x, y])
+         for x, y in ((i, j), (m, n))]  # fmt: skip
+    assert z[0] == pytest.approx(z[1], rel=0.02)
+    e = ranking.evidence(post)
+    assert e[at[(0, 1)]] < e[at[(2, 3)]] / 3
+
+
+def test_a_pair_one_condition_wins_every_time_is_not_asked_again():
+    # A beat B in all 30 votes; B against C is 15 to 15. At the fitted odds A over B's information p (1 - p) would
+    # vanish and its order look the less certain; at even odds, where the evidence weighs it, it is the clear one.
+    post = ranking.fit(np.array([[0.0, 30.0, 0.0], [0.0, 0.0, 15.0], [0.0, 15.0, 0.0]]))
+    e = ranking.evidence(post)
+    assert np.argmin(e) == 2 and e[0] > 10  # pairs(3): (0, 1), (0, 2), (1, 2)
+
+
+def test_the_pair_the_order_is_least_sure_of_is_asked_first():
     rng = np.random.default_rng(3)
     truth = np.array([1.0, 0.3, 0.25, -0.4, -1.5])
-    w = simulate(truth, 150, rng)
-    post = ranking.fit(w)
-    g = ranking.gains(post)
-    ref = np.array([exact_gain(post, w, a, b) for a, b in ranking.pairs(5)])
-    assert np.argmax(g) == np.argmax(ref)
-    assert np.corrcoef(g, ref)[0, 1] > 0.9, (g, ref)
-    # the closest adjacent pair, the one the order is least sure of, is the one to ask about
-    i, j = ranking.pairs(5)[np.argmax(g)]
-    assert {i, j} == {1, 2}
+    post = ranking.fit(simulate(truth, 150, rng))
+    i, j = ranking.pairs(5)[np.argmin(ranking.evidence(post))]
+    assert {i, j} == {1, 2}  # the closest adjacent pair
+    for seed in range(10):  # and the app's order of pairs starts there
+        assert ranking.pick_order(post, np.random.default_rng(seed), 0.0)[0] == np.argmin(ranking.evidence(post))
 
 
 def test_held_votes_move_the_next_choice_on():
     w = simulate(np.array([0.4, 0.0, -0.4]), 60, np.random.default_rng(4))
     post = ranking.fit(w)
-    best = np.argmax(ranking.gains(post))
+    first = np.argmin(ranking.evidence(post))
     assert np.allclose(ranking.with_counts(post, w + w.T).cov, post.cov)
-    i, j = ranking.pairs(3)[best]
+    i, j = ranking.pairs(3)[first]
     held = w + w.T
     held[i, j] += 200  # many slots of that pair given out, not yet answered
     held[j, i] += 200
-    assert np.argmax(ranking.gains(ranking.with_counts(post, held))) != best
+    assert np.argmin(ranking.evidence(ranking.with_counts(post, held))) != first
+
+
+def test_with_no_votes_every_pair_is_as_likely_to_be_asked_first():
+    post = ranking.fit(np.zeros((4, 4)))
+    firsts = {int(ranking.pick_order(post, np.random.default_rng(s), 0.0)[0]) for s in range(60)}
+    assert firsts == set(range(6))
 
 
 def run_study(truth, level, rng, cap=4000, check=20, width=None):
@@ -189,10 +205,10 @@ def test_a_pair_confidently_within_the_margin_is_tied_and_gets_no_active_vote():
     tied = ranking.tied(post, MARGIN)
     assert tied[at[(1, 2)]] and tied.sum() == 1
     assert not ranking.tied(post, 0.0).any()  # no margin, no tie
-    g = ranking.gains(post, MARGIN)
-    assert g[at[(1, 2)]] == -1.0 and (np.delete(g, at[(1, 2)]) >= 0).all()
+    e = ranking.evidence(post, MARGIN)
+    assert e[at[(1, 2)]] == np.inf and np.isfinite(np.delete(e, at[(1, 2)])).all()
     # without the margin, the alike pair is the one the order is least sure of: the votes would go on there
-    assert np.argmax(ranking.gains(post)) == at[(1, 2)]
+    assert np.argmin(ranking.evidence(post)) == at[(1, 2)]
     for seed in range(20):  # the app's order of pairs to try: the tied pair last, whatever the draw
         order = ranking.pick_order(post, np.random.default_rng(seed), 0.0, MARGIN)
         assert order[-1] == at[(1, 2)]

@@ -8,25 +8,28 @@ that the posterior exists from zero votes on. The posterior is approximated by a
 (Laplace): mean = the MAP log strengths, covariance = the inverse of the negative log posterior's Hessian.
 
 From it:
-- `gains`: the expected information one more vote on each pair of conditions brings about the ranking, measured as the
-  expected drop in the summed binary entropy of the order of every pair of conditions (P(theta_i > theta_j) under the
-  posterior): Kendall's tau counts every pair's order. The expectation is over the vote's outcome, through the
-  preposterior: one vote on pair (a, b) adds w x x' to the precision (x = e_a - e_b, w = p (1 - p) the vote's Fisher
-  information), which shrinks the variance of every difference theta_i - theta_j by a known amount, and the mean of
-  that difference moves by a normal amount whose variance is exactly that shrinkage (the law of total variance). This
-  follows ASAP (Mikhailiuk et al. 2020, "Active sampling for pairwise comparisons via approximate message passing and
-  information gain maximization", ICPR), which picks the pair of highest expected information gain under a Gaussian
-  posterior; here the information is about the order, which is what a ranking study reports. The entropy of the
-  adjacent pairs alone spent more votes (0.76 of round robin's against 0.65 on evenly spaced conditions;
-  bench/RESULTS.md pairwise-active). The chance of a wrong order itself, min(P, 1 - P), is no measure for one vote:
-  P is a martingale, so one vote changes its expectation only where the order may flip, and the gains of most pairs
-  vanish into rounding.
+- `evidence`: how strongly the votes so far back each pair's order, |d| / v, with d the posterior mean of the difference
+  of the pair's log strengths and v its posterior variance at even odds; a slot goes to the pair whose order has the
+  weakest evidence. Why this statistic: were the difference either +delta or -delta, the log likelihood ratio of the
+  two, given an estimate d of variance v, would be 2 delta d / v, whatever delta is. So voting where |d| / v is least
+  runs Wald's sequential probability ratio test (Wald 1945) on every pair at once, each pair drawing votes until its
+  evidence matches the others' (the indifference-zone view of ranking and selection, Bechhofer 1954). For two conditions
+  near even odds it is close to half their net wins (the Bradley-Terry log likelihood ratio of +delta against -delta is
+  exactly delta times the net wins). The evidence of a real difference grows with its votes n, that of two alike
+  conditions only with sqrt(n), and a pair whose order happens to look clear early stops drawing votes: that is what
+  saves votes when every neighbour is equally hard. The variance is taken at even odds, where the two orders meet and
+  the test's two hypotheses are told apart (a vote's Fisher information p (1 - p) at p = 1/2): at the fitted odds, a
+  pair that one condition wins every time would look ever less certain, its information vanishing as p -> 1. P(order)
+  itself (the z-score d / sqrt(v)) and the expected drop of the order entropy from one vote (after ASAP, Mikhailiuk et
+  al. 2020, the rule until 2026-11-28) both keep asking about a pair while its estimate sits near zero, however many
+  votes it had: the entropy spent 0.72 of round robin's votes on evenly spaced conditions, where the evidence spends
+  0.57 (bench/RESULTS.md pairwise-active).
 - `settledness`: every adjacent pair in the posterior-mean order separated, P(order right) at least
   1 - (1 - level) / (k - 1) each (a Bonferroni split of the error over the k - 1 adjacent pairs: if every adjacent
   pair of the estimated order is right, the whole order is), or every condition's Elo interval narrower than a
   width. Elo = 400 log10 of the odds, centred on 1000 (the GENEA leaderboard's scale, Nagy et al. 2025).
 - The indifference zone: a pair whose Elo difference is within a margin (the app's PAIRING_INDIFFERENCE) with high
-  probability is tied (`tied`, `within`): no target of `gains`, no more active votes, and settled for the stopping rule.
+  probability is tied (`tied`, `within`): no more active votes, and settled for the stopping rule.
   Without it, two conditions that are truly alike keep drawing votes for an order no number of votes settles.
 - `pick_order`: the order in which the app tries pairs for a slot, the one function the app and the benchmark
   both call.
@@ -48,24 +51,27 @@ PRIOR_SD = 2.0  # log strengths: two systems a prior sd apart win 88% of their v
 ELO_PER_LOG = 400.0 / math.log(10.0)  # Elo points per unit of log strength (400 log10 odds)
 ELO_ANCHOR = 1000.0  # the mean condition's Elo
 # The indifference zone: two conditions whose Elo difference is, with probability TIE_CONFIDENCE, smaller than a
-# margin are tied. Their order is no longer worth a vote (gains), and the stopping rule takes them as settled. Off
+# margin are tied. Their order is no longer worth a vote (evidence), and the stopping rule takes them as settled. Off
 # by default: a margin also stops the votes on pairs truly that close, whose order Kendall's tau still counts (the
 # leaderboard's close neighbours needed far more votes with one; bench/RESULTS.md pairwise-active). A study that
 # need not order conditions closer than some Elo difference sets it to that.
 INDIFFERENCE_ELO = 0.0
 TIE_CONFIDENCE = 0.95
-# Gauss-Hermite nodes (probabilists') for the expectation over where the posterior mean moves after one vote.
-_NODES, _WEIGHTS = np.polynomial.hermite_e.hermegauss(8)
-_WEIGHTS = _WEIGHTS / _WEIGHTS.sum()
+# The share of active slots that keep the balanced rule (the app's PAIRING_RANDOM), so that a wrong model cannot
+# starve a pair. The evidence never starves one by itself (every other pair's grows until a neglected pair's is
+# the weakest again), so a tenth is enough; a fifth cost evenly spaced conditions about 0.04 of round robin's votes.
+RANDOM_SHARE = 0.1
 
 
 @dataclass(frozen=True)
 class Posterior:
-    """The Laplace posterior of k log strengths: `mean` [k] (the MAP), `cov` [k, k], from `votes` votes."""
+    """The Laplace posterior of k log strengths: `mean` [k] (the MAP), `cov` [k, k], from `votes` votes; and
+    `cov_even`, the covariance the same votes would give at even odds, which `evidence` weighs."""
 
     mean: np.ndarray
     cov: np.ndarray
     votes: float
+    cov_even: np.ndarray
 
 
 def win_matrix(k: int, firsts, seconds, outcomes) -> np.ndarray:
@@ -109,7 +115,7 @@ def fit(wins, prior_sd: float = PRIOR_SD, start=None, tol: float = 1e-9) -> Post
         theta, f = new, f_new
         if np.max(np.abs(step)) * t < tol:
             break
-    return Posterior(theta, covariance(theta, n, prior_sd), float(w.sum()))
+    return Posterior(theta, covariance(theta, n, prior_sd), float(w.sum()), covariance(np.zeros(k), n, prior_sd))
 
 
 def covariance(mean, counts, prior_sd: float = PRIOR_SD) -> np.ndarray:
@@ -125,7 +131,8 @@ def with_counts(post: Posterior, counts, prior_sd: float = PRIOR_SD) -> Posterio
     """`post`'s mean with the covariance of `counts` votes (covariance): between two fits, each vote asked for
     shrinks its pair's uncertainty at once, so the next choice moves on to another pair."""
     counts = np.asarray(counts, float)
-    return Posterior(post.mean, covariance(post.mean, counts, prior_sd), float(np.triu(counts, 1).sum()))
+    even = covariance(np.zeros(len(post.mean)), counts, prior_sd)
+    return Posterior(post.mean, covariance(post.mean, counts, prior_sd), float(np.triu(counts, 1).sum()), even)
 
 
 def _laplacian(weights: np.ndarray) -> np.ndarray:
@@ -141,12 +148,6 @@ def pairs(k: int) -> np.ndarray:
     out = np.stack([i, j], axis=1)
     out.flags.writeable = False
     return out
-
-
-def _order_entropy(z: np.ndarray) -> np.ndarray:
-    """Binary entropy (bits) of an order that holds with probability Phi(z)."""
-    q = np.clip(ndtr(-np.abs(z)), 1e-300, 0.5)
-    return -(q * np.log2(q) + (1.0 - q) * np.log2(1.0 - q))
 
 
 def within(post: Posterior, a, b, margin_elo: float) -> np.ndarray:
@@ -167,46 +168,27 @@ def tied(post: Posterior, margin_elo: float, confidence: float = TIE_CONFIDENCE)
     return within(post, pr[:, 0], pr[:, 1], margin_elo) >= confidence
 
 
-def gains(post: Posterior, margin_elo: float = 0.0) -> np.ndarray:
-    """The expected drop in the summed order entropy of every pair from one more vote on each pair, [P] in the
-    order of `pairs(k)` (module docstring). With an indifference margin, tied pairs (`tied`) count for nothing, and
-    a vote on one gains nothing (-1, last)."""
+def evidence(post: Posterior, margin_elo: float = 0.0) -> np.ndarray:
+    """[P] in the order of `pairs(k)`: the weight of evidence for each pair's order, |d| / v (module docstring); inf
+    for a pair tied within the indifference margin (`tied`), whose order needs no more votes."""
     pr = pairs(len(post.mean))
-    cov, mean = post.cov, post.mean
-    is_tied = tied(post, margin_elo)
-    if is_tied.all():
-        return np.full(len(pr), -1.0)
     a, b = pr[:, 0], pr[:, 1]
-    d = mean[a] - mean[b]
-    var = cov[a, a] + cov[b, b] - 2 * cov[a, b]
-    ta, tb = a[~is_tied], b[~is_tied]  # the targets: every pair not tied
-    d_t, var_t = d[~is_tied], var[~is_tied]
-    x = cov[a] - cov[b]  # [candidate, k]: cov(theta_a - theta_b, theta_m) for every m
-    cross = x[:, ta] - x[:, tb]  # [candidate, target]: cov(candidate's difference, target's)
-    # The predictive win probability of each candidate pair (the probit approximation of the logistic-normal
-    # integral), and so the Fisher information of one vote on it.
-    p = expit(d / np.sqrt(1.0 + math.pi * var / 8.0))
-    info = p * (1.0 - p)
-    # Rank-one update: var' of target y after a vote on candidate c = var_y - info_c cov_cy^2 / (1 + info_c var_c).
-    shrink = info[:, None] * cross**2 / (1.0 + info * var)[:, None]
-    var_after = np.maximum(var_t[None, :] - shrink, 1e-12)
-    before = _order_entropy(d_t / np.sqrt(var_t)).sum()
-    # The mean of each difference moves by N(0, shrink): integrate the entropy after over it.
-    moved = d_t[None, :, None] + np.sqrt(shrink)[..., None] * _NODES
-    after = (_order_entropy(moved / np.sqrt(var_after)[..., None]) @ _WEIGHTS).sum(axis=1)
-    return np.where(is_tied, -1.0, before - after)
+    c = post.cov_even
+    var = c[a, a] + c[b, b] - 2 * c[a, b]
+    weight = np.abs(post.mean[a] - post.mean[b]) / np.maximum(var, 1e-300)
+    return np.where(tied(post, margin_elo), np.inf, weight)
 
 
 def pick_order(post: Posterior, rng, random_share: float, margin_elo: float = 0.0):
-    """The pairs (indices into `pairs(k)`) in the order active pairing tries them for a slot, highest gain first,
-    ties broken at random; or None for the `random_share` of slots that keep the balanced rule (the least-covered
+    """The pairs (indices into `pairs(k)`) in the order active pairing tries them for a slot, weakest evidence
+    first, ties broken at random; or None for the `random_share` of slots that keep the balanced rule (the least-covered
     unit), so that a wrong model cannot starve a pair. `rng`: anything with .random() (random.Random or a numpy
     Generator). The app (rating_app/pairing/active.py) and the benchmark (bench/pairwise_active.py) both call it."""
     if rng.random() < random_share:
         return None
-    g = gains(post, margin_elo)
-    noise = np.array([rng.random() for _ in g]) * 1e-9
-    return np.argsort(-(g + noise))
+    e = evidence(post, margin_elo)
+    draw = np.array([rng.random() for _ in e])
+    return np.lexsort((draw, e))  # by evidence, equal evidence (none yet, or tied) in a random order
 
 
 def elo(post: Posterior) -> tuple[np.ndarray, np.ndarray]:

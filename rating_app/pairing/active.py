@@ -1,8 +1,9 @@
 """Active pairing and the stopping rule of a pairwise study (CONTRACTS §8, "Active pairing and the stopping rule").
 
-`--pairing active`: a test slot gets a unit of the pair of conditions whose next vote tells most about the ranking
-(moglow_eval.core.ranking.pick_order: gains under the Bradley-Terry posterior of the test votes so far, pairs tied
-within PAIRING_INDIFFERENCE Elo left out), except for a share of slots (PAIRING_RANDOM) that keep the balanced
+`--pairing active`: a test slot gets a unit of the pair of conditions whose order the votes so far back least
+(moglow_eval.core.ranking.pick_order: the weakest evidence under the Bradley-Terry posterior of the test votes so
+far, a sequential probability ratio test on every pair at once; pairs tied within PAIRING_INDIFFERENCE Elo left
+out), except for a share of slots (PAIRING_RANDOM) that keep the balanced
 rule, so a wrong model cannot starve a pair. It only chooses
 among the units the balanced rule could give this slot: the same claim (least-covered first, short of its target,
 not had by this rater, its Cover row locked and checked again) over the chosen pair's units; when none of the best
@@ -40,7 +41,7 @@ from ..store.db import Clip, Cover, Preference, Trial
 from .assign import claim
 
 REFRESH_S = 1.0
-TRIES = 3  # pairs tried in gain order before the balanced claim
+TRIES = 3  # pairs tried in pick_order's order before the balanced claim
 
 
 class Ranking:
@@ -127,7 +128,7 @@ class Ranking:
 
     # -------------------------------------------------------------------------------------------- pairing
     def pick(self, conn, rng, rater_pk: int, units, target: int, wait: bool):
-        """A test unit of the most informative pair this slot can have, or None (then the balanced claim)."""
+        """A test unit of the pair with the weakest evidence this slot can have, or None (then the balanced claim)."""
         self.refresh(conn)
         order = ranking.pick_order(self.posterior(), rng, self.cfg["PAIRING_RANDOM"], self.cfg["PAIRING_INDIFFERENCE"])
         if order is None:

@@ -175,12 +175,12 @@ TABLE = (
         flag="--pairing",
         choices=("balanced", "active"),
         help="pairwise: how a slot's pair of conditions is chosen: balanced (least-covered unit) or active (the pair "
-        "whose vote tells most about the ranking, under the Bradley-Terry posterior of the votes so far)",
+        "whose order the votes so far back least, under the Bradley-Terry posterior of the votes so far)",
     ),
     Setting(
         "PAIRING_RANDOM",
         float,
-        0.2,
+        ranking.RANDOM_SHARE,
         arg="pairing_random",
         flag="--pairing-random",
         bounds=(0.0, 1.0),
