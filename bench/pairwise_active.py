@@ -18,6 +18,8 @@ least-covered pair (the app's balanced claim), and the mean is refitted as the a
 - Votes to tau >= 0.9 in --share of replications: the smallest count from which on (checked --checks times a run)
   that share of replications rank the systems at Kendall tau >= 0.9 against the truth; active / round robin, with
   a percentile interval over replications (each scheme's replications resampled, 500 times).
+- The stopping rule (`error`): studies run until ranking.settledness at each of --levels (with --width, the Elo
+  width too) or --cap votes; how many claimed a wrong order, their median votes and Kendall tau at the stop.
 """
 
 from __future__ import annotations
@@ -176,7 +178,7 @@ def fixed(a, t0):
 
 def run_stopping(truth, scheme, a, reps, level, seed, check=25):
     """Per replication (votes at the stop, every adjacent pair of the claimed order right or tied within the
-    margin, reached the cap)."""
+    margin, reached the cap, Kendall tau at the stop)."""
     out = []
     for r in range(reps):
         s = Study(truth, scheme, np.random.default_rng([seed, 7, r]), a)
@@ -184,27 +186,28 @@ def run_stopping(truth, scheme, a, reps, level, seed, check=25):
             for _ in range(check):
                 s.vote()
             post = ranking.fit(s.wins, start=s.post.mean)
-            st = ranking.settledness(post, level, None, a.margin)
+            st = ranking.settledness(post, level, a.width, a.margin)
             if st["settled"] or s.votes >= a.cap:
                 break
         order, tied = st["order"], {tuple(p) for p in st["tied"]}
         wrong = any(truth[x] < truth[y] and (x, y) not in tied for x, y in zip(order[:-1], order[1:]))
-        out.append((s.votes, not wrong, s.votes >= a.cap))
+        out.append((s.votes, not wrong, s.votes >= a.cap, kendalltau(post.mean, truth).statistic))
     return out
 
 
 def error_table(a):
-    print("| truth | level | pairing | stopped | claimed a wrong order | nominal | median votes |")
-    print("|---|---|---|---|---|---|---|")
+    print("| truth | level | width | pairing | stopped | claimed a wrong order | nominal | median votes | mean tau |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for name, (truth, _) in truths(a.truths.split(",")).items():
-        for level in (0.9, 0.95):
+        for level in map(float, a.levels.split(",")):
             for scheme in SCHEMES:
                 res = run_stopping(truth, scheme, a, a.error_reps, level, a.seed)
                 stopped = [x for x in res if not x[2]]
                 wrong = sum(not x[1] for x in stopped)
                 med = np.median([x[0] for x in stopped] or [0])
-                print(f"| {name} | {level} | {scheme} | {len(stopped)} | {wrong} | {1 - level:.2f} | {med:.0f} |",
-                      flush=True)  # fmt: skip
+                tau = np.mean([x[3] for x in stopped] or [np.nan])
+                print(f"| {name} | {level} | {a.width} | {scheme} | {len(stopped)} | {wrong} | {1 - level:.2f} | "
+                      f"{med:.0f} | {tau:.3f} |", flush=True)  # fmt: skip
 
 
 def main(argv=None):
@@ -227,6 +230,8 @@ def main(argv=None):
     ap.add_argument("--nu", type=float, default=0.35, help="Davidson's tie parameter of the simulated raters")
     ap.add_argument("--error-reps", type=int, default=40)
     ap.add_argument("--cap", type=int, default=30000)
+    ap.add_argument("--levels", default="0.9,0.95", help="the stopping rule's levels, comma-separated")
+    ap.add_argument("--width", type=float, default=None, help="the stopping rule's Elo width (--stop-width)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--schemes", default="balanced,active", help="which schemes to run (a pilot: balanced alone)")
     ap.add_argument("--skip", default="", help="comma-separated parts to skip: fixed, error")

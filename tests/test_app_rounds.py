@@ -86,9 +86,9 @@ def folder_state(manifest: Path) -> dict:
     }
 
 
-def complete(c, reasons=None, bad=()):
-    """A new rater through the whole session, preferring A but never a clip of `bad` (catch clips' ids, so that
-    it passes its catch trials); its rater id."""
+def complete(c, reasons=None, bad=(), prefer=None):
+    """A new rater through the whole session, preferring A (or as `prefer(clip_a, clip_b)` says) but never a clip
+    of `bad` (catch clips' ids, so that it passes its catch trials); its rater id."""
     r = c.post("/api/sessions", json={})
     assert r.status_code == 201, r.json
     token, rater_id = r.json["session"], r.json["rater_id"]
@@ -100,7 +100,8 @@ def complete(c, reasons=None, bad=()):
         t = r.json["trial"]
         for x in (t["a"], t["b"]):
             assert c.get(x["video_url"]).status_code == 200  # the new clips' videos are served too
-        body = {"trial_id": t["trial_id"], "preference": None if t["phase"] == "training" else 1}
+        chosen = prefer(t["a"]["clip_id"], t["b"]["clip_id"]) if prefer else 1
+        body = {"trial_id": t["trial_id"], "preference": None if t["phase"] == "training" else chosen}
         if t["phase"] != "training" and t["a"]["clip_id"] in bad:
             body["preference"] = -1
         if reasons and t["phase"] != "training":
@@ -337,20 +338,29 @@ def test_the_workers_of_a_running_gunicorn_learn_of_the_round(folders, app_db_ur
 
 
 def test_active_pairing_takes_in_a_new_condition_and_lets_a_withdrawn_one_go(make, folders, app_db_url):
-    """With `--pairing active` the running app's ranking grows with the round: the new system, with no votes yet,
-    is the most uncertain, so a new rater's test pairs go to it first; withdrawn, it leaves the ranking."""
+    """With `--pairing active` the running app's ranking grows with the round: the new system's pairs, with no votes
+    yet, have the weakest evidence for their order once the first three's order is backed by votes, so a new
+    rater's test pairs go to it; withdrawn, it leaves the ranking."""
     study, new = folders
     app = make(study, "pairwise", ratings_per_clip=6, pairing="active", pairing_random=0.0, clips_per_rater=3)
     c = app.test_client()
-    bad = {x.clip_id for x in load_manifest(study) if x.condition == "BAD"}
-    for _ in range(2):
-        complete(c, bad=bad)  # trusted raters: their votes make the ranking of the first three
+    condition = {x.clip_id: x.condition for x in load_manifest(study)}
+    bad = {k for k, v in condition.items() if v == "BAD"}
+    rank = {"NAT": 3, "MG": 2, "FL": 1, "BAD": 0}
+
+    def by_rank(a, b):
+        return 2 if rank[condition[a]] > rank[condition[b]] else -2
+
+    for _ in range(6):  # trusted raters, of one mind: their votes back the order of the first three
+        complete(c, bad=bad, prefer=by_rank)
     ranking = c.get("/admin/progress.json", headers=TOKEN_HDR).json["ranking"]
     assert set(ranking["order"]) == {"NAT", "MG", "FL"}
     assert main(["add-condition", "--db", app_db_url, "--manifest", str(new)]) == 0
     rater = complete(c)
-    test = [r for r in export(c) if r["rater_id"] == rater and r["role"] == "test"]
-    assert test and all("SYS" in (r["condition_a"], r["condition_b"]) for r in test)
+    test = sorted(
+        (r for r in export(c) if r["rater_id"] == rater and r["role"] == "test"), key=lambda r: int(r["trial_index"])
+    )
+    assert len(test) == 3 and all("SYS" in (r["condition_a"], r["condition_b"]) for r in test), test
     assert set(c.get("/admin/progress.json", headers=TOKEN_HDR).json["ranking"]["order"]) == {"NAT", "MG", "FL", "SYS"}
     assert c.post("/admin/conditions/withdraw", data={"condition": "SYS"}, headers=TOKEN_HDR).status_code == 200
     assert set(c.get("/admin/progress.json", headers=TOKEN_HDR).json["ranking"]["order"]) == {"NAT", "MG", "FL"}
