@@ -21,10 +21,11 @@ From it:
   the test's two hypotheses are told apart (a vote's Fisher information p (1 - p) at p = 1/2): at the fitted odds, a
   pair that one condition wins every time would look ever less certain, its information vanishing as p -> 1. The prior
   stays in the variance: without it, every pair with a vote or two would look as open as one never asked about, and
-  evenly spaced conditions needed 0.63 of round robin's votes, not 0.57. P(order) itself (the z-score d / sqrt(v)) and
-  the expected drop of the order entropy from one vote (after ASAP, Mikhailiuk et al. 2020, the rule until 2026-11-28)
-  both keep asking about a pair while its estimate sits near zero, however many votes it had: the entropy spent 0.72 of
-  round robin's votes on evenly spaced conditions, where the evidence spends 0.57 (bench/RESULTS.md pairwise-active).
+  evenly spaced conditions needed 0.63 of round robin's votes, not 0.57, on the same replications. P(order) itself (the
+  z-score d / sqrt(v)) and the expected drop of the order entropy from one vote (after ASAP, Mikhailiuk et al. 2020, the
+  rule until 2026-11-28) both keep asking about a pair while its estimate sits near zero, however many votes it had: the
+  entropy spent 0.72 of round robin's votes on evenly spaced conditions, where the evidence spends about 0.6
+  (bench/RESULTS.md pairwise-active).
 - `settledness`: every adjacent pair in the posterior-mean order separated, P(order right) at least
   1 - (1 - level) / (k - 1) each (a Bonferroni split of the error over the k - 1 adjacent pairs: if every adjacent
   pair of the estimated order is right, the whole order is), or every condition's Elo interval narrower than a
