@@ -99,9 +99,8 @@ def test_at_the_same_p_of_order_the_pair_with_fewer_votes_is_asked_first():
         w[i, j], w[j, i] = n * expit(d), n * expit(-d)
     post = ranking.fit(w, prior_sd=1e3)
     at = {tuple(p): n for n, p in enumerate(ranking.pairs(k).tolist())}
-    (i, j), (m, n) = (0, 1), (2, 3)
     z = [(post.mean[x] - post.mean[y]) / math.sqrt(post.cov[x, x] + post.cov[y, y] - 2 * post.cov[x, y])
-         for x, y in ((i, j), (m, n))]  # fmt: skip
+         for x, y in ((0, 1), (2, 3))]  # fmt: skip
     assert z[0] == pytest.approx(z[1], rel=0.02)
     e = ranking.evidence(post)
     assert e[at[(0, 1)]] < e[at[(2, 3)]] / 3

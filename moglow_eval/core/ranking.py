@@ -152,12 +152,17 @@ def pairs(k: int) -> np.ndarray:
     return out
 
 
+def _difference_var(cov: np.ndarray, a, b) -> np.ndarray:
+    """Var(theta_a - theta_b) under covariance `cov`, for pairs of condition indices `a`, `b` (arrays)."""
+    return cov[a, a] + cov[b, b] - 2 * cov[a, b]
+
+
 def within(post: Posterior, a, b, margin_elo: float) -> np.ndarray:
     """P(|theta_a - theta_b| < the margin) for pairs of condition indices `a`, `b` (arrays) under the posterior."""
     a, b = np.asarray(a), np.asarray(b)
     m = margin_elo / ELO_PER_LOG
     d = post.mean[a] - post.mean[b]
-    sd = np.sqrt(np.maximum(post.cov[a, a] + post.cov[b, b] - 2 * post.cov[a, b], 1e-300))
+    sd = np.sqrt(np.maximum(_difference_var(post.cov, a, b), 1e-300))
     return ndtr((m - d) / sd) - ndtr((-m - d) / sd)
 
 
@@ -175,8 +180,7 @@ def evidence(post: Posterior, margin_elo: float = 0.0) -> np.ndarray:
     for a pair tied within the indifference margin (`tied`), whose order needs no more votes."""
     pr = pairs(len(post.mean))
     a, b = pr[:, 0], pr[:, 1]
-    c = post.cov_even
-    var = c[a, a] + c[b, b] - 2 * c[a, b]
+    var = _difference_var(post.cov_even, a, b)
     weight = np.abs(post.mean[a] - post.mean[b]) / np.maximum(var, 1e-300)
     return np.where(tied(post, margin_elo), np.inf, weight)
 
@@ -214,8 +218,7 @@ def settledness(post: Posterior, level: float, width: float | None = None, margi
         return {"order": order.tolist(), "weakest": 1.0, "needed": level, "tied": [], "widest": 0.0, "width": width,
                 "separated": True, "narrow": True, "settled": True}  # fmt: skip
     a, b = order[:-1], order[1:]
-    c = post.cov
-    var = c[a, a] + c[b, b] - 2 * c[a, b]
+    var = _difference_var(post.cov, a, b)
     needed = 1.0 - (1.0 - level) / (k - 1)
     is_tied = within(post, a, b, margin_elo) >= needed if margin_elo and margin_elo > 0 else np.zeros(k - 1, bool)
     sep = ndtr((post.mean[a] - post.mean[b]) / np.sqrt(var))

@@ -3,12 +3,11 @@
 `--pairing active`: a test slot gets a unit of the pair of conditions whose order the votes so far back least
 (moglow_eval.core.ranking.pick_order: the weakest evidence under the Bradley-Terry posterior of the test votes so
 far, a sequential probability ratio test on every pair at once; pairs tied within PAIRING_INDIFFERENCE Elo left
-out), except for a share of slots (PAIRING_RANDOM) that keep the balanced
-rule, so a wrong model cannot starve a pair. It only chooses
-among the units the balanced rule could give this slot: the same claim (least-covered first, short of its target,
-not had by this rater, its Cover row locked and checked again) over the chosen pair's units; when none of the best
-pairs has one, the balanced claim over all units. Sides, catch slots, the plan, expiry and the targets are
-untouched.
+out), except for a share of slots (PAIRING_RANDOM) that keep the balanced rule, so a wrong model cannot starve a
+pair. It only chooses among the units the balanced rule could give this slot: the same claim (least-covered first,
+short of its target, not had by this rater, its Cover row locked and checked again) over the chosen pair's units;
+when none of the best pairs has one, the balanced claim over all units. Sides, catch slots, the plan, expiry and the
+targets are untouched.
 
 `--stop-when settled`: a new session is refused (409, as a full study) once the ranking is settled
 (ranking.settledness at STOP_LEVEL, or every Elo interval narrower than STOP_WIDTH) or the test votes reached
