@@ -82,12 +82,42 @@ def test_the_elo_scale_is_400_log10_odds_around_1000():
     assert se[0] == pytest.approx(ranking.ELO_PER_LOG * math.sqrt(1 / 30 + 1 / 10) / 2, rel=1e-4)
 
 
-def test_the_evidence_for_two_conditions_is_the_likelihood_ratio_of_their_order():
+def test_the_evidence_for_two_conditions_is_the_likelihood_ratio_of_their_order(monkeypatch):
     # Bradley-Terry's log likelihood ratio of "A ahead by delta" against "B ahead by delta" is delta x (A's wins -
-    # B's wins), whatever delta; the evidence is that ratio over 2 delta, so half the net wins near even odds.
+    # B's wins), whatever delta; the evidence is that ratio over 2 delta, so half the net wins near even odds, plus
+    # the floor, ALIKE_FLOOR x the median neighbour gap: with two conditions, their own gap.
     for a_wins, b_wins in ((260, 240), (230, 270), (520, 480), (101, 99)):
         post = ranking.fit(np.array([[0.0, a_wins], [b_wins, 0.0]]), prior_sd=1e3)
-        assert ranking.evidence(post)[0] == pytest.approx(abs(a_wins - b_wins) / 2, rel=0.01)
+        net = abs(a_wins - b_wins) / 2
+        assert ranking.evidence(post)[0] == pytest.approx(net * (1 + ranking.ALIKE_FLOOR), rel=0.01)
+        with monkeypatch.context() as m:
+            m.setattr(ranking, "ALIKE_FLOOR", 0.0)
+            assert ranking.evidence(post)[0] == pytest.approx(net, rel=0.01)
+
+
+def chain_posterior(n_alike, n_step=200):
+    """Five conditions, the middle pair alike and the rest 0.5 apart: `n_step` votes on each pair 0.5 apart
+    (won as the odds say), `n_alike` split evenly between the alike two."""
+    truth = np.array([1.0, 0.5, 0.5, 0.0, -0.5])
+    w = np.zeros((5, 5))
+    for i, j in ((0, 1), (2, 3), (3, 4)):
+        w[i, j], w[j, i] = n_step * expit(truth[i] - truth[j]), n_step * expit(truth[j] - truth[i])
+    w[1, 2] = w[2, 1] = n_alike / 2
+    return ranking.fit(w)
+
+
+def test_an_alike_pair_stops_drawing_votes_at_about_three_times_a_neighbours(monkeypatch):
+    # Every vote counts as evidence of at least half the median neighbour gap (0.25 here), so the alike pair's
+    # evidence stays below a neighbouring pair's while it has fewer than about (0.5 + 0.25) / 0.25 = 3 times that
+    # pair's 200 votes, and is above it after.
+    at = {tuple(p): n for n, p in enumerate(ranking.pairs(5).tolist())}
+    assert np.argmin(ranking.evidence(chain_posterior(200))) == at[(1, 2)]
+    for n, below in ((500, True), (700, False), (2000, False)):
+        e = ranking.evidence(chain_posterior(n))
+        assert (e[at[(1, 2)]] < min(e[at[(0, 1)]], e[at[(3, 4)]])) == below
+    # without the floor it would go on drawing votes: its |d| stays near 0 however many it has
+    monkeypatch.setattr(ranking, "ALIKE_FLOOR", 0.0)
+    assert np.argmin(ranking.evidence(chain_posterior(8000))) == at[(1, 2)]
 
 
 def test_at_the_same_p_of_order_the_pair_with_fewer_votes_is_asked_first():
@@ -206,8 +236,8 @@ def test_a_pair_confidently_within_the_margin_is_tied_and_gets_no_active_vote():
     assert not ranking.tied(post, 0.0).any()  # no margin, no tie
     e = ranking.evidence(post, MARGIN)
     assert e[at[(1, 2)]] == np.inf and np.isfinite(np.delete(e, at[(1, 2)])).all()
-    # without the margin, the alike pair is the one the order is least sure of: the votes would go on there
-    assert np.argmin(ranking.evidence(post)) == at[(1, 2)]
+    # without the margin, it is the weakest while it has had no more votes than its neighbours
+    assert np.argmin(ranking.evidence(near_tie_posterior(n_tie=100))) == at[(1, 2)]
     for seed in range(20):  # the app's order of pairs to try: the tied pair last, whatever the draw
         order = ranking.pick_order(post, np.random.default_rng(seed), 0.0, MARGIN)
         assert order[-1] == at[(1, 2)]

@@ -8,24 +8,32 @@ that the posterior exists from zero votes on. The posterior is approximated by a
 (Laplace): mean = the MAP log strengths, covariance = the inverse of the negative log posterior's Hessian.
 
 From it:
-- `evidence`: how strongly the votes so far back each pair's order, |d| / v, with d the posterior mean of the difference
-  of the pair's log strengths and v its posterior variance at even odds; a slot goes to the pair whose order has the
-  weakest evidence. Why this statistic: were the difference either +delta or -delta, the log likelihood ratio of the
-  two, given an estimate d of variance v, would be 2 delta d / v, whatever delta is. So voting where |d| / v is least
-  runs Wald's sequential probability ratio test (Wald 1945) on every pair at once, each pair drawing votes until its
-  evidence matches the others' (the indifference-zone view of ranking and selection, Bechhofer 1954). For two conditions
-  near even odds it is close to half their net wins (the Bradley-Terry log likelihood ratio of +delta against -delta is
-  exactly delta times the net wins). The evidence of a real difference grows with its votes n, that of two alike
-  conditions only with sqrt(n), and a pair whose order happens to look clear early stops drawing votes: that is what
-  saves votes when every neighbour is equally hard. The variance is taken at even odds, where the two orders meet and
-  the test's two hypotheses are told apart (a vote's Fisher information p (1 - p) at p = 1/2): at the fitted odds, a
-  pair that one condition wins every time would look ever less certain, its information vanishing as p -> 1. The prior
-  stays in the variance: without it, every pair with a vote or two would look as open as one never asked about, and
-  evenly spaced conditions needed 0.63 of round robin's votes, not 0.57, on the same replications. P(order) itself (the
-  z-score d / sqrt(v)) and the expected drop of the order entropy from one vote (after ASAP, Mikhailiuk et al. 2020, the
-  rule until 2026-11-28) both keep asking about a pair while its estimate sits near zero, however many votes it had: the
-  entropy spent 0.72 of round robin's votes on evenly spaced conditions, where the evidence spends about 0.6
-  (bench/RESULTS.md pairwise-active).
+- `evidence`: how strongly the votes so far back each pair's order, (|d| + kappa) / v, with d the posterior mean of the
+  difference of the pair's log strengths, v its posterior variance at even odds, and kappa a floor (below); a slot
+  goes to the pair whose order has the weakest evidence. Why |d| / v: were the difference either +delta or -delta,
+  the log likelihood ratio of the two, given an estimate d of variance v, would be 2 delta d / v, whatever delta is.
+  So voting where |d| / v is least runs Wald's sequential probability ratio test (Wald 1945) on every pair at once,
+  each pair drawing votes until its evidence matches the others' (the indifference-zone view of ranking and
+  selection, Bechhofer 1954). For two conditions near even odds it is close to half their net wins (the
+  Bradley-Terry log likelihood ratio of +delta against -delta is exactly delta times the net wins). A pair whose
+  order happens to look clear early stops drawing votes: that is what saves votes when every neighbour is equally
+  hard. The variance is taken at even odds, where the two orders meet and the test's two hypotheses are told apart
+  (a vote's Fisher information p (1 - p) at p = 1/2): at the fitted odds, a pair that one condition wins every time
+  would look ever less certain, its information vanishing as p -> 1. The prior stays in the variance: without it,
+  every pair with a vote or two would look as open as one never asked about (evenly spaced conditions needed 0.63 of
+  round robin's votes, not 0.57, on the same replications).
+  The floor, kappa = ALIKE_FLOOR x the median gap between neighbours in the posterior-mean order, is for two
+  conditions that are alike. The evidence of a real difference grows with a pair's votes n, but that of two alike
+  conditions only with sqrt(n), so without a floor they drew 45% of the votes of a study with two such pairs among
+  ten conditions, for an order no budget settles and Kendall's tau forgives. With it every vote counts as evidence
+  of at least a difference kappa: an alike pair stops drawing votes at about (gap + kappa) / kappa = three times
+  what a typical neighbouring pair draws (32% of that study's votes; more of its replications reached tau >= 0.9
+  at every budget), while pairs a typical gap apart are as before (evenly spaced conditions unchanged within the
+  noise). The floor scales with the conditions' own spread, so it needs no setting; at no votes it is 0.
+  P(order) itself (the z-score d / sqrt(v)) and the expected drop of the order entropy from one vote (after ASAP,
+  Mikhailiuk et al. 2020, the rule until 2026-11-28) keep asking about a pair while its estimate sits near zero,
+  however many votes it had: the entropy spent 0.72 of round robin's votes on evenly spaced conditions, where the
+  evidence spends about 0.6 (bench/RESULTS.md pairwise-active).
 - `settledness`: every adjacent pair in the posterior-mean order separated, P(order right) at least
   1 - (1 - level) / (k - 1) each (a Bonferroni split of the error over the k - 1 adjacent pairs: if every adjacent
   pair of the estimated order is right, the whole order is), or every condition's Elo interval narrower than a
@@ -63,6 +71,11 @@ TIE_CONFIDENCE = 0.95
 # starve a pair. The evidence never starves one by itself (every other pair's grows until a neglected pair's is
 # the weakest again), so a tenth is enough; a fifth cost evenly spaced conditions about 0.05 of round robin's votes.
 RANDOM_SHARE = 0.1
+# The evidence's floor, as a share of the median gap between neighbouring conditions (module docstring): an alike pair
+# draws at most about (1 + ALIKE_FLOOR) / ALIKE_FLOOR times a typical neighbouring pair's votes. A quarter or a whole
+# gap helped near-ties less, or cost evenly spaced conditions votes
+# (bench/notes/2026-11-28-pairwise-active-evidence-no-floor.md).
+ALIKE_FLOOR = 0.5
 
 
 @dataclass(frozen=True)
@@ -176,12 +189,14 @@ def tied(post: Posterior, margin_elo: float, confidence: float = TIE_CONFIDENCE)
 
 
 def evidence(post: Posterior, margin_elo: float = 0.0) -> np.ndarray:
-    """[P] in the order of `pairs(k)`: the weight of evidence for each pair's order, |d| / v (module docstring); inf
-    for a pair tied within the indifference margin (`tied`), whose order needs no more votes."""
+    """[P] in the order of `pairs(k)`: the weight of evidence for each pair's order, (|d| + kappa) / v (module
+    docstring); inf for a pair tied within the indifference margin (`tied`), whose order needs no more votes."""
     pr = pairs(len(post.mean))
     a, b = pr[:, 0], pr[:, 1]
     var = _difference_var(post.cov_even, a, b)
-    weight = np.abs(post.mean[a] - post.mean[b]) / np.maximum(var, 1e-300)
+    gaps = np.diff(np.sort(post.mean))
+    kappa = ALIKE_FLOOR * float(np.median(gaps)) if len(gaps) else 0.0
+    weight = (np.abs(post.mean[a] - post.mean[b]) + kappa) / np.maximum(var, 1e-300)
     return np.where(tied(post, margin_elo), np.inf, weight)
 
 
