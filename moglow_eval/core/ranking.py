@@ -29,7 +29,8 @@ From it:
   of at least a difference kappa: an alike pair stops drawing votes at about (gap + kappa) / kappa = three times
   what a typical neighbouring pair draws (32% of that study's votes; more of its replications reached tau >= 0.9
   at most budgets, on two seeds), while pairs a typical gap apart are as before (evenly spaced conditions and the
-  leaderboard's strengths unchanged within the noise). The floor scales with the conditions' own spread, so it needs no setting; at no votes it is 0.
+  leaderboard's strengths unchanged within the noise). The floor scales with the conditions' own spread, so it
+  needs no setting; at no votes it is 0.
   P(order) itself (the z-score d / sqrt(v)) and the expected drop of the order entropy from one vote (after ASAP,
   Mikhailiuk et al. 2020, the rule until 2026-11-28) keep asking about a pair while its estimate sits near zero,
   however many votes it had: the entropy spent 0.72 of round robin's votes on evenly spaced conditions, where the
