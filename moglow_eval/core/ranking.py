@@ -17,7 +17,10 @@ From it:
   selection, Bechhofer 1954). For two conditions near even odds it is close to half their net wins (the
   Bradley-Terry log likelihood ratio of +delta against -delta is exactly delta times the net wins). A pair whose
   order happens to look clear early stops drawing votes: that is what saves votes when every neighbour is equally
-  hard. The variance is taken at even odds, where the two orders meet and the test's two hypotheses are told apart
+  hard. Every pair, not the neighbours alone: Kendall's tau counts each discordant pair, and the same tests on the
+  true neighbours alone needed 0.9-1.0 of round robin's votes, a wrong neighbour taking its own neighbours along
+  (bench/notes/2026-11-28-pairwise-active-neighbours-only.md).
+  The variance is taken at even odds, where the two orders meet and the test's two hypotheses are told apart
   (a vote's Fisher information p (1 - p) at p = 1/2): at the fitted odds, a pair that one condition wins every time
   would look ever less certain, its information vanishing as p -> 1. The prior stays in the variance: without it,
   every pair with a vote or two would look as open as one never asked about (evenly spaced conditions needed 0.63 of
