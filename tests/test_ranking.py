@@ -95,6 +95,11 @@ def test_the_evidence_for_two_conditions_is_the_likelihood_ratio_of_their_order(
             assert ranking.evidence(post)[0] == pytest.approx(net, rel=0.01)
 
 
+def pair_index(k):
+    """{(i, j): the pair's index in the order of ranking.pairs(k)}, to read a pair's entry of `evidence` or `tied`."""
+    return {tuple(p): n for n, p in enumerate(ranking.pairs(k).tolist())}
+
+
 def chain_posterior(n_alike, n_step=200):
     """Five conditions, the middle pair alike and the rest 0.5 apart: `n_step` votes on each pair 0.5 apart
     (won as the odds say), `n_alike` split evenly between the alike two."""
@@ -110,7 +115,7 @@ def test_an_alike_pair_stops_drawing_votes_at_about_three_times_a_neighbours(mon
     # Every vote counts as evidence of at least half the median neighbour gap (0.25 here), so the alike pair's
     # evidence stays below a neighbouring pair's while it has fewer than about (0.5 + 0.25) / 0.25 = 3 times that
     # pair's 200 votes, and is above it after.
-    at = {tuple(p): n for n, p in enumerate(ranking.pairs(5).tolist())}
+    at = pair_index(5)
     assert np.argmin(ranking.evidence(chain_posterior(200))) == at[(1, 2)]
     for n, below in ((500, True), (700, False), (2000, False)):
         e = ranking.evidence(chain_posterior(n))
@@ -128,7 +133,7 @@ def test_at_the_same_p_of_order_the_pair_with_fewer_votes_is_asked_first():
         d = 1.5 / math.sqrt(n / 4)  # z = d / sd, sd = 1 / sqrt(n p (1 - p)) at p about 1/2
         w[i, j], w[j, i] = n * expit(d), n * expit(-d)
     post = ranking.fit(w, prior_sd=1e3)
-    at = {tuple(p): n for n, p in enumerate(ranking.pairs(k).tolist())}
+    at = pair_index(k)
     z = [(post.mean[x] - post.mean[y]) / math.sqrt(post.cov[x, x] + post.cov[y, y] - 2 * post.cov[x, y])
          for x, y in ((0, 1), (2, 3))]  # fmt: skip
     assert z[0] == pytest.approx(z[1], rel=0.02)
@@ -230,7 +235,7 @@ def near_tie_posterior(n_tie=3000):
 
 def test_a_pair_confidently_within_the_margin_is_tied_and_gets_no_active_vote():
     post = near_tie_posterior()
-    at = {tuple(p): n for n, p in enumerate(ranking.pairs(4).tolist())}
+    at = pair_index(4)
     tied = ranking.tied(post, MARGIN)
     assert tied[at[(1, 2)]] and tied.sum() == 1
     assert not ranking.tied(post, 0.0).any()  # no margin, no tie
