@@ -4,6 +4,7 @@ moglow_eval.core.ranking.pick_order (what rating_app/pairing/active.py calls), i
 least-covered pair (the app's balanced claim), and the mean is refitted as the app refits it.
 
     nice python bench/pairwise_active.py [--reps 40] [--truths evenly,leaderboard,near-ties] [--skip stop,error]
+        [--figure bench/figures/pairwise_active.png]
 
 - The truths (log strengths): `evenly`, 8 systems 0.15 apart (26 Elo); `leaderboard`, the 8 systems of the GENEA
   leaderboard's released realism votes (../shared/data/genea-leaderboard-votes/battles_elo.csv, read there, never
@@ -152,7 +153,7 @@ def ratio_interval(taus, step, share, rng, n_boot=500):
 
 
 def fixed(a, t0):
-    rows = []
+    rows, curves = [], {}
     for name, (truth, near) in truths(a.truths.split(",")).items():
         taus, shares, needed = {}, {}, {}
         most = int(MAX_VOTES[name] * a.scale)
@@ -169,11 +170,39 @@ def fixed(a, t0):
         lo, hi = ratio_interval(taus, step, a.share, np.random.default_rng(a.seed))
         ratio = needed["active"] / needed["balanced"] if all(needed.values()) else float("nan")
         rows.append((name, len(truth), needed["balanced"], needed["active"], ratio, lo, hi, shares))
+        curves[name] = (step, {s: (taus[s] >= 0.9 - 1e-12).mean(axis=0) for s in a.schemes.split(",")}, needed)
     print("| truth | systems | round robin | active | active / round robin | 95% interval | votes on near-ties "
           "(round robin, active) |\n|---|---|---|---|---|---|---|")  # fmt: skip
     for name, k, nb, na, ratio, lo, hi, sh in rows:
         near = f"{sh['balanced']:.3f}, {sh['active']:.3f}" if name == "near-ties" else ""
         print(f"| {name} | {k} | {nb} | {na} | {ratio:.2f} | {lo:.2f}-{hi:.2f} | {near} |")
+    if a.figure:
+        plot(curves, a.figure, a.share)
+
+
+def plot(curves, path, share):
+    """One panel a truth: the share of replications at tau >= 0.9 against the votes so far, each pairing, with the
+    line at `share` and where each pairing stays above it (votes_needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(curves), figsize=(4.2 * len(curves), 3.4), squeeze=False)
+    for ax, (name, (step, by_scheme, needed)) in zip(axes[0], curves.items()):
+        for scheme, good in by_scheme.items():
+            line = ax.plot(step * np.arange(1, len(good) + 1), good, label="round robin" if scheme == "balanced"
+                           else "active")[0]  # fmt: skip
+            if needed.get(scheme):
+                ax.axvline(needed[scheme], color=line.get_color(), ls=":", lw=1)
+        ax.axhline(share, color="grey", lw=0.8)
+        ax.set(title=name, xlabel="votes", ylim=(0, 1.01))
+    axes[0][0].set_ylabel("share of replications at Kendall tau >= 0.9")
+    axes[0][0].legend(loc="lower right")
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    print(f"figure: {path}")
 
 
 def run_stopping(truth, scheme, a, reps, level, seed, check=25):
@@ -235,6 +264,7 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--schemes", default="balanced,active", help="which schemes to run (a pilot: balanced alone)")
     ap.add_argument("--skip", default="", help="comma-separated parts to skip: fixed, error")
+    ap.add_argument("--figure", default=None, help="a PNG of the share at tau >= 0.9 by votes, a panel a truth")
     a = ap.parse_args(argv)
     skip = set(a.skip.split(","))
     print(f"Machine: {platform.processor() or platform.machine()}, load average {os.getloadavg()[0]:.2f}; {vars(a)}")
