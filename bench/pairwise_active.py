@@ -136,9 +136,14 @@ def run(truth, near, scheme, a, reps, max_votes, step, seed):
     return taus, on_near / total
 
 
+def share_at(taus, tau=0.9):
+    """[checkpoints] the share of replications at Kendall tau >= `tau` (a hair below: tau is a ratio of counts)."""
+    return (taus >= tau - 1e-12).mean(axis=0)
+
+
 def votes_needed(taus, step, share, tau=0.9):
     """The votes from which on at least `share` of replications are at tau >= `tau`; None if never."""
-    good = (taus >= tau - 1e-12).mean(axis=0) >= share
+    good = share_at(taus, tau) >= share
     bad_after = np.flatnonzero(~good)
     first = (bad_after[-1] + 2) * step if len(bad_after) else step
     return first if first <= taus.shape[1] * step else None
@@ -170,7 +175,7 @@ def fixed(a, t0):
         lo, hi = ratio_interval(taus, step, a.share, np.random.default_rng(a.seed))
         ratio = needed["active"] / needed["balanced"] if all(needed.values()) else float("nan")
         rows.append((name, len(truth), needed["balanced"], needed["active"], ratio, lo, hi, shares))
-        curves[name] = (step, {s: (taus[s] >= 0.9 - 1e-12).mean(axis=0) for s in a.schemes.split(",")}, needed)
+        curves[name] = (step, {s: share_at(taus[s]) for s in a.schemes.split(",")}, needed)
     print("| truth | systems | round robin | active | active / round robin | 95% interval | votes on near-ties "
           "(round robin, active) |\n|---|---|---|---|---|---|---|")  # fmt: skip
     for name, k, nb, na, ratio, lo, hi, sh in rows:
