@@ -31,21 +31,33 @@ def _ffmpeg():
     return imageio_ffmpeg.get_ffmpeg_exe()
 
 
-def _header(path):
-    """(channels, sample rate) from a WAV or FLAC header; RenderError naming the file otherwise."""
+def _head(path):
+    """The first 64 KB of an audio file, where its header is; RenderError naming the file when it cannot be read."""
     try:
         with open(path, "rb") as f:
-            head = f.read(1 << 16)
+            return f.read(1 << 16)
     except OSError as e:
         raise RenderError(f"{path}: cannot read the audio file ({e.strerror or e})") from None
+
+
+def _wav_chunks(head):
+    """(id, offset of its body, declared size) of each RIFF chunk whose 8-byte header lies in `head`, in order: the
+    one walk of a WAV's chunks (each padded to an even length)."""
+    pos = 12
+    while pos + 8 <= len(head):
+        size = struct.unpack("<I", head[pos + 4 : pos + 8])[0]
+        yield head[pos : pos + 4], pos + 8, size
+        pos += 8 + size + (size & 1)
+
+
+def _header(path, head=None):
+    """(channels, sample rate) from a WAV or FLAC header; RenderError naming the file otherwise."""
+    head = _head(path) if head is None else head
     if head[:4] == b"RIFF" and head[8:12] == b"WAVE":
-        pos = 12
-        while pos + 8 <= len(head):
-            cid, size = head[pos : pos + 4], struct.unpack("<I", head[pos + 4 : pos + 8])[0]
-            if cid == b"fmt " and pos + 16 <= len(head):
-                channels, rate = struct.unpack("<HI", head[pos + 10 : pos + 16])
+        for cid, at, _ in _wav_chunks(head):
+            if cid == b"fmt " and at + 8 <= len(head):
+                channels, rate = struct.unpack("<HI", head[at + 2 : at + 8])
                 return channels, rate
-            pos += 8 + size + (size & 1)
         raise RenderError(f"{path}: a WAV file without a 'fmt ' chunk")
     if head[:4] == b"fLaC" and len(head) >= 8 + 18:
         info = int.from_bytes(head[18:21], "big")  # STREAMINFO: 20 bits of rate, 3 of channels - 1, ...
@@ -56,21 +68,18 @@ def _header(path):
 def audio_seconds(path):
     """The length of a WAV or FLAC file in seconds, from its header alone (None where the header does not say:
     a streamed WAV, a FLAC without its sample count); RenderError naming the file for anything else."""
-    _header(path)
-    with open(path, "rb") as f:
-        head = f.read(1 << 16)
+    head = _head(path)
+    _header(path, head)
     if head[:4] == b"fLaC":
         total = int.from_bytes(head[18:26], "big") & ((1 << 36) - 1)
         rate = int.from_bytes(head[18:21], "big") >> 4
         return total / rate if total and rate else None
-    pos, byte_rate = 12, 0
-    while pos + 8 <= len(head):
-        cid, size = head[pos : pos + 4], struct.unpack("<I", head[pos + 4 : pos + 8])[0]
-        if cid == b"fmt " and pos + 20 <= len(head):
-            byte_rate = struct.unpack("<I", head[pos + 16 : pos + 20])[0]
+    byte_rate = 0
+    for cid, at, size in _wav_chunks(head):
+        if cid == b"fmt " and at + 12 <= len(head):
+            byte_rate = struct.unpack("<I", head[at + 8 : at + 12])[0]
         if cid == b"data":
             return size / byte_rate if byte_rate and size != 0xFFFFFFFF else None
-        pos += 8 + size + (size & 1)
     return None
 
 

@@ -25,13 +25,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from moglow_eval.core.clip import MAX_MESH_VERTICES
+
 from .errors import RenderError
 from .solid import AMBIENT, DIFFUSE, LIGHT
 
 NEAR_PLANE, FAR_PLANE = 0.05, 100.0  # metres: the depth range of the mesh's projection
 WINDOW_STEP = 64  # pixels: the drawn window's sides are multiples of this
 MASK_COLOUR = (0.93, 0.84, 0.72)  # a plain light mask over the face, as GENEA 2026 covers it: no features
-MAX_VERTICES = 200_000  # a bound on one person's mesh (SMPL-X has 10,475 vertices): beyond it, one line
 
 _VERTEX = """
 #version 330
@@ -178,8 +179,10 @@ class MeshBody:
 
     def __init__(self, meshes, size, focal):
         for m in meshes:
-            if len(m.mask) > MAX_VERTICES or not len(m.faces):
-                raise RenderError(f"a mesh of {len(m.mask)} vertices and {len(m.faces)} faces (at most {MAX_VERTICES})")
+            if len(m.mask) > MAX_MESH_VERTICES or not len(m.faces):
+                raise RenderError(
+                    f"a mesh of {len(m.mask)} vertices and {len(m.faces)} faces (at most {MAX_MESH_VERTICES})"
+                )
             if m.faces.min() < 0 or m.faces.max() >= len(m.mask):
                 raise RenderError(f"a mesh's faces index vertices outside its {len(m.mask)}")
         self.size, self.focal = size, float(focal)

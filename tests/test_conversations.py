@@ -134,7 +134,7 @@ def test_an_interaction_with_too_few_valid_frames_is_passed_over(raw, tmp_path, 
     [
         (lambda f: f.with_suffix(".wav").unlink(), "no V00_S0001_I00000001_P0299A.wav beside it"),
         (lambda f: f.unlink(), "1 participant(s)"),
-        (lambda f: f.with_suffix(".json").write_text("[" * 100_000), "nested too deep"),
+        (lambda f: f.with_suffix(".json").write_text("[" * 100_000), "JSON nested deeper than"),
         (lambda f: f.with_suffix(".json").write_text('{"metadata:transcript": 3}'), "transcript: must be a list"),
         (lambda f: seamless_fixtures.write_wav(f.with_suffix(".wav"), np.zeros(RATE)), "ends at 1.00 s, before its"),
     ],

@@ -6,6 +6,7 @@ smpl_fixtures.py): the fast tier."""
 
 import io
 import json
+import os
 import zipfile
 
 import numpy as np
@@ -13,9 +14,12 @@ import pytest
 from helpers import seamless_fixtures, smpl_fixtures
 from helpers.memory import peak as _peak
 
+from generation.data import transcripts
 from generation.data.motion_files import MotionError, read_motion
 from generation.data.seamless_files import invalid_spans, parse_name, read_seamless, spans_text
 from generation.data.transcripts import TranscriptError, read_transcript
+from moglow_eval.core import user_files
+from moglow_eval.core.cli import UserError
 
 FLAT = 64 << 20
 
@@ -183,7 +187,7 @@ def test_a_transcript_has_its_words_and_vad(conversation, tmp_path):
          "metadata:transcript[0].words[0].start: a time must be"),
         ('{"metadata:transcript": [], "metadata:vad": [{"start": 2, "end": 1}]}', "metadata:vad[0]: ends"),
         ('{"metadata:transcript": {"a": 1}}', "metadata:transcript: must be a list"),
-        ("[" * 200_000 + "]" * 200_000, "nested too deep"),
+        ("[" * 200_000 + "]" * 200_000, "JSON nested deeper than 8 levels"),
         ('{"metadata:transcript": [1e999]}', "must be an object"),
     ],
 )  # fmt: skip
@@ -201,8 +205,33 @@ def test_a_huge_transcript_is_refused_from_its_size(tmp_path):
         f.write(json.dumps({"metadata:transcript": []}).encode())
         f.truncate(4 << 30)  # sparse: 4 GB that take no disk
     raised, peak = _peak(read_transcript, path)
-    assert isinstance(raised, TranscriptError) and "huge.json: 4096 MiB, over the limit" in str(raised)
+    assert isinstance(raised, TranscriptError) and "huge.json: 4096.0 MB is larger than a transcript" in str(raised)
     assert peak < FLAT
+
+
+@pytest.mark.parametrize("kind", ["fifo", "link to a device", "deep", "grows"])
+def test_a_transcript_is_refused_as_every_user_json_is(tmp_path, monkeypatch, kind):
+    """A transcript goes through moglow_eval.core.user_files like any other user JSON, so it meets the checks on the
+    open descriptor and on a file that grows while read: the same one line as read_json's, and never a wait."""
+    path = tmp_path / "t.json"
+    if kind == "fifo":
+        os.mkfifo(path)  # no writer: opening it to read would wait for ever
+    elif kind == "link to a device":
+        path.symlink_to("/dev/zero")  # a regular name, an endless device behind it
+    elif kind == "deep":
+        path.write_text('{"metadata:transcript": ' + "[" * 9 + "]" * 9 + "}")
+    else:
+        # /proc reports a size of 0 and then reads more: a file that grows between the check and the read
+        monkeypatch.setattr(transcripts, "MAX_BYTES", 16)
+        path.symlink_to("/proc/self/environ")
+    with pytest.raises(TranscriptError) as got:
+        read_transcript(path)
+    with pytest.raises(UserError) as expected:
+        user_files.read_json(path, transcripts.MAX_BYTES, what="transcript")
+    assert str(got.value) == str(expected.value) and "\n" not in str(got.value)
+    needle = {"fifo": "not a regular transcript", "link to a device": "not a regular transcript"}
+    needle |= {"deep": "JSON nested deeper than 8 levels", "grows": "grew past 16 bytes while it was read"}
+    assert str(got.value).startswith(f"{path}: {needle[kind]}"), got.value
 
 
 @pytest.mark.full  # a study built: the full tier

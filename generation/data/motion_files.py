@@ -42,7 +42,7 @@ from ..motion.bvh import BvhError, forward_kinematics, header_fps, read_bvh
 from ..motion.resample import clean_fps, lerp_indices, local_quaternions, quat_to_matrix, resample_local, resample_times
 from . import seamless_files
 from .skeleton_families import UnitError, choose_unit
-from .smpl_files import FPS_KEYS, WHERE_TO_GET, SmplError, is_smpl_file, pose_joints, smpl_positions, with_hand_mean
+from .smpl_files import FPS_KEYS, WHERE_TO_GET, SmplError, apply_hand_mean, is_smpl_file, pose_joints, smpl_positions
 from .systems import resample_positions
 
 EXTENSIONS = (".bvh.gz", ".bvh", ".npy", ".npz")
@@ -225,7 +225,7 @@ def _seamless_positions(path, fps, smpl_model, smpl_type, hand_mean, source_fps,
     if smpl_model is None:
         raise MotionError(f"{path}: a Seamless Interaction file (smplh:* keys); {WHERE_TO_GET}")
     m = seamless_files.read_seamless(path, source_fps)
-    poses = with_hand_mean(m.poses, smpl_model, smpl_type, hand_mean is True, path)  # stored as full rotations
+    poses = apply_hand_mean(m.poses, smpl_model, smpl_type, path, hand_mean)
     joints, names, parents = pose_joints(poses, m.trans, np.zeros(0), smpl_model, smpl_type, path)
     try:
         native = check_fps(m.fps, path)

@@ -18,7 +18,15 @@ from pathlib import Path
 import numpy as np
 
 from moglow_eval.core.cli import UserError
-from moglow_eval.core.clip import MAX_FRAMES, NPZ_READ_ERRORS, ClipError, check_skeleton, first_line, npz_headers
+from moglow_eval.core.clip import (
+    MAX_FRAMES,
+    MAX_MESH_VERTICES,
+    NPZ_READ_ERRORS,
+    ClipError,
+    check_skeleton,
+    first_line,
+    npz_headers,
+)
 
 MOTION_KEYS = ("poses", "trans", "betas")
 FPS_KEYS = ("mocap_frame_rate", "mocap_framerate")
@@ -32,7 +40,6 @@ HAND_FIRST = {"smplh": 22, "smplx": 25}  # the first hand joint in the poses (SM
 MODEL_KEYS = ("v_template", "shapedirs", "posedirs", "J_regressor", "weights", "kintree_table", "f")
 BATCH = 2048  # frames per pass through the kinematics: bounds the rotation matrices held at once
 MESH_BATCH = 32  # frames per pass through the skinning: bounds the vertices held at once (32 x 10k x 3 floats)
-MAX_MESH_VERTICES = 200_000  # a body model's mesh (SMPL-X has 10,475 vertices); beyond it, one line
 
 _BODY = [
     "pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2", "left_ankle", "right_ankle",
@@ -76,17 +83,25 @@ def smpl_positions(path, model, smpl_type=None, source_fps=None, hand_mean="auto
     if model is None:
         raise SmplError(f"{path}: an SMPL-family parameter file (poses, trans, betas); {WHERE_TO_GET}")
     poses, trans, betas, fps = _read_motion(path, source_fps)
-    poses = with_hand_mean(poses, model, smpl_type, hand_mean_of(path, hand_mean), path)
+    poses = apply_hand_mean(poses, model, smpl_type, path, hand_mean)
     expression = _read_expression(path, len(poses))
     joints, names, parents = pose_joints(poses, trans, betas, model, smpl_type, path, expression)
     return joints, names, parents, fps
+
+
+def apply_hand_mean(poses, model, smpl_type, path, hand_mean):
+    """The one hand rule, for the joints and the mesh alike (so that they agree), for any file read through a body
+    model: `poses` of the file at `path` with the model's mean hand pose added where `hand_mean` is True, or, for
+    "auto", where the file's layout adds it (HAND_MEAN_LAYOUTS: BEAT2's; AMASS's and Seamless Interaction's,
+    which name no such rate, store full rotations)."""
+    return with_hand_mean(poses, model, smpl_type, hand_mean_of(path, hand_mean), path)
 
 
 def hand_mean_of(path, hand_mean):
     """Whether the hand mean is added for the file at `path`: `hand_mean` if a bool, else its layout's."""
     if isinstance(hand_mean, bool):
         return hand_mean
-    headers = npz_headers(path)
+    headers = npz_headers(path, limit=None)  # the names alone: the readers bound what they load
     return next((HAND_MEAN_LAYOUTS[k] for k in FPS_KEYS if k in headers), False)
 
 
@@ -187,7 +202,7 @@ def smpl_mesh(path, model, smpl_type=None, source_fps=None, face="mask", hand_me
     if model is None or not Path(model).is_file():  # before the hand mean reads it
         raise SmplError(f"{model or path}: no body model file for the mesh style; {WHERE_TO_GET}")
     poses, trans, betas, fps = _read_motion(path, source_fps)
-    poses = with_hand_mean(poses, model, smpl_type, hand_mean_of(path, hand_mean), path)
+    poses = apply_hand_mean(poses, model, smpl_type, path, hand_mean)
     expression = _read_expression(path, len(poses))
     return mesh_source(poses, trans, betas, fps, model, smpl_type, face, path, expression)
 

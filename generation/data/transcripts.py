@@ -10,10 +10,11 @@ apart), and the speech intervals (the VAD's where the file has them, else the wo
 to a span and shifted (`Transcript.cut`) and written back in Seamless's layout, so an item cut from a
 conversation carries its own transcript.
 
-Bounds: a file over MAX_BYTES is refused from its size before it is read, JSON nested too deep (Python's parser
-stops at its recursion limit) is one line, and so is any value of the wrong type, a time that is negative, not
-finite or beyond MAX_TIME_S, a word longer than MAX_WORD_CHARS, or more than MAX_WORDS words. Each problem names
-the file and the field.
+Bounds: the file is read as every user's file is (moglow_eval.core.user_files): only a regular file, refused from
+its size over MAX_BYTES before it is read and cut off should it grow past it while read; JSON nested deeper than
+user_files.MAX_JSON_DEPTH is one line before any parser recurses, and so is any value of the wrong type, a time
+that is negative, not finite or beyond MAX_TIME_S, a word longer than MAX_WORD_CHARS, or more than MAX_WORDS
+words. Each problem names the file and the field.
 """
 
 import json
@@ -21,6 +22,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from moglow_eval.core import user_files
 from moglow_eval.core.cli import UserError
 
 MAX_BYTES = 32 << 20  # a transcript of hours of speech is a few MB
@@ -92,19 +94,9 @@ class Transcript:
 
 
 def _text(path):
-    path = Path(path)
-    try:
-        size = path.stat().st_size
-    except OSError as e:
-        raise TranscriptError(f"{path}: cannot read the transcript ({e.strerror or e})") from None
-    if size > MAX_BYTES:
-        raise TranscriptError(f"{path}: {size >> 20} MiB, over the limit of {MAX_BYTES >> 20} MiB for a transcript")
-    try:
-        return path.read_text(encoding="utf-8-sig")
-    except OSError as e:
-        raise TranscriptError(f"{path}: cannot read the transcript ({e.strerror or e})") from None
-    except UnicodeDecodeError as e:
-        raise TranscriptError(f"{path}: not UTF-8 text ({e.reason} at byte {e.start})") from None
+    """The file's text, read as every user's file is (moglow_eval.core.user_files: a regular file only, checked on
+    the open descriptor, its size capped before and while it is read)."""
+    return user_files.read_text(path, MAX_BYTES, TranscriptError, "transcript")
 
 
 def _time(path, where, value):
@@ -139,13 +131,7 @@ def _list(path, where, value):
 
 def read_seamless_json(path):
     """A Seamless Interaction participant's `.json` as a Transcript (its words and its VAD)."""
-    text = _text(path)
-    try:
-        data = json.loads(text)
-    except RecursionError:
-        raise TranscriptError(f"{path}: not a transcript: JSON nested too deep") from None
-    except ValueError as e:
-        raise TranscriptError(f"{path}: not valid JSON ({e})") from None
+    data = user_files.read_json(path, MAX_BYTES, TranscriptError, "transcript")
     if not isinstance(data, dict):
         raise TranscriptError(f"{path}: must be a JSON object with '{TRANSCRIPT_KEY}', got {type(data).__name__}")
     if TRANSCRIPT_KEY not in data:

@@ -27,7 +27,6 @@ interlocutor in the dyadic design; `sources.csv`'s `mismatched` names that item.
 written in a folder beside ITEMS, which takes its name only when complete: a failed run leaves nothing.
 """
 
-import csv
 import logging
 import shutil
 import sys
@@ -42,13 +41,9 @@ from moglow_eval.core import cli
 from ..data.seamless_files import parse_name, read_seamless, write_cut
 from ..data.smpl_files import SmplError
 from ..data.transcripts import TranscriptError, read_transcript, write_transcript
-from .cuts import MODES, Speaker, choose_items, keyword_table
+from .cuts import MODES, Speaker, choose_items, keyword_table, write_sources
 
 log = logging.getLogger(__name__)
-SOURCE_COLUMNS = [
-    "item", "mode", "interaction", "agent", "interlocutor", "start", "end", "keyword", "keyword_start",
-    "keyword_end", "mismatched",
-]  # fmt: skip
 PEOPLE = ("agent", "interlocutor")
 
 
@@ -142,10 +137,7 @@ def write_items(out, items, speakers, mismatched, progress):
                 out, "mismatched_interlocutor", c.item, speaker, other.start_frame, c.frames, other.start, seconds
             )
         rows.append(c.row(mismatched.get(c.item, "") if mismatched else ""))
-    with open(out / "sources.csv", "w", newline="", encoding="utf-8") as f:
-        w = csv.DictWriter(f, SOURCE_COLUMNS)
-        w.writeheader()
-        w.writerows(rows)
+    write_sources(out / "sources.csv", rows)
 
 
 def mismatch_items(items, seed):

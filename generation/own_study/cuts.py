@@ -13,6 +13,7 @@ A proposal is kept only where both people's motion is valid over the item and `m
 the recording. The best are taken first, at most N an interaction, none overlapping another in time.
 """
 
+import csv
 import math
 import re
 from dataclasses import dataclass
@@ -58,12 +59,34 @@ class Cut:
 
     def row(self, mismatched=""):
         """The item's row of sources.csv."""
-        k = [f"{t:.3f}" for t in self.keyword_span] or ["", ""]
-        return dict(
-            item=self.item, mode=self.mode, interaction=self.interaction, agent=self.agent,
-            interlocutor=self.interlocutor, start=f"{self.start:.3f}", end=f"{self.end:.3f}", keyword=self.keyword,
-            keyword_start=k[0], keyword_end=k[1], mismatched=mismatched,
+        return source_row(
+            self.item, self.mode, self.interaction, (self.agent, self.interlocutor), (self.start, self.end),
+            self.keyword, self.keyword_span, mismatched,
         )  # fmt: skip
+
+
+# sources.csv (CONTRACTS §10): where each item was cut from, its keyword and span, and the item whose interlocutor
+# is its mismatched one. The cutter and the two-person demo both write it through write_sources.
+SOURCE_COLUMNS = (
+    "item", "mode", "interaction", "agent", "interlocutor", "start", "end", "keyword", "keyword_start",
+    "keyword_end", "mismatched",
+)  # fmt: skip
+
+
+def source_row(item, mode, interaction, people, span, keyword="", keyword_span=(), mismatched=""):
+    """An item's row of sources.csv: `people` (agent, interlocutor) as named in the recording, `span` (start, end)
+    and `keyword_span` (start, end; empty for none) in seconds, written to the millisecond."""
+    times = [f"{t:.3f}" for t in span]
+    key = [f"{t:.3f}" for t in keyword_span] or ["", ""]
+    return dict(zip(SOURCE_COLUMNS, (item, mode, interaction, *people, *times, keyword, *key, mismatched)))
+
+
+def write_sources(path, rows):
+    """sources.csv at `path`, rows from source_row."""
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        w = csv.DictWriter(f, SOURCE_COLUMNS)
+        w.writeheader()
+        w.writerows(rows)
 
 
 def share(intervals, a, b):

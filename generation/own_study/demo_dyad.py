@@ -20,7 +20,6 @@ The takes have no sound of their own: the study shows the mechanics of the dyadi
 conversation.
 """
 
-import csv
 import io
 import json
 import shutil
@@ -35,6 +34,7 @@ from moglow_eval.core import cli
 
 from ..data.motion_files import read_motion
 from ..data.transcripts import Transcript, Word, write_transcript
+from .cuts import source_row, write_sources
 from .demo_study import FPS, actions_dir
 
 # (the interlocutor's question, the agent's answer, the answer's keyword)
@@ -53,8 +53,6 @@ DIALOGUES = (
 MIN_SECONDS = 4.0  # a take long enough for a question and its answer
 VOICES = {"interlocutor": ("-p", "72", "-s", "200"), "agent": ("-p", "38", "-s", "190")}
 GAP_S = 0.06  # between two words
-SOURCE_COLUMNS = ["item", "mode", "interaction", "agent", "interlocutor", "start", "end", "keyword", "keyword_start",
-                  "keyword_end", "mismatched"]  # fmt: skip
 
 
 def _word_samples(word, voice):
@@ -155,15 +153,11 @@ def build(out, n_items=8, design="dyadic", seed=0):
             shutil.copyfile(agents[partner][0], out / "real_mismatched" / f"{item}.bvh.gz")
             for name, joints in made[partner].items():
                 np.save(out / f"{name}_mismatched" / f"{item}.npy", joints.astype(np.float32))
-        rows.append(dict(item=item, mode="demo", interaction=f"demo{k:02d}", agent=take.name.split(".")[0],
-                         interlocutor=other.name.split(".")[0], start="0.000", end=f"{seconds:.3f}",
-                         keyword=keyword if key else "", keyword_start=f"{key.start:.3f}" if key else "",
-                         keyword_end=f"{key.end:.3f}" if key else "",
-                         mismatched=f"item{partner:02d}" if design == "dyadic" else ""))  # fmt: skip
-    with open(out / "sources.csv", "w", newline="", encoding="utf-8") as f:
-        w = csv.DictWriter(f, SOURCE_COLUMNS)
-        w.writeheader()
-        w.writerows(rows)
+        people = (take.name.split(".")[0], other.name.split(".")[0])
+        rows.append(source_row(item, "demo", f"demo{k:02d}", people, (0.0, seconds), keyword if key else "",
+                               (key.start, key.end) if key else (),
+                               f"item{partner:02d}" if design == "dyadic" else ""))  # fmt: skip
+    write_sources(out / "sources.csv", rows)
     (out / "skeleton.json").write_text(
         json.dumps(dict(names=agents[0][1].names, parents=[int(p) for p in agents[0][1].parents]))
     )

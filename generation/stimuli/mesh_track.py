@@ -34,13 +34,13 @@ class MeshSpec:
 @functools.lru_cache(maxsize=4)
 def source(path, model, smpl_type, face, hand_mean="auto"):
     """The file's MeshSource (generation.data.smpl_files), read once per process and file, its hands as its joints'
-    (the Seamless reader's rule: full rotations unless hand_mean is true)."""
+    (smpl_files.apply_hand_mean, the one rule for both)."""
     from ..data import seamless_files
-    from ..data.smpl_files import mesh_source, smpl_mesh, with_hand_mean
+    from ..data.smpl_files import apply_hand_mean, mesh_source, smpl_mesh
 
     if seamless_files.is_seamless_file(path):
         m = seamless_files.read_seamless(path)
-        poses = with_hand_mean(m.poses, model, smpl_type, hand_mean is True, path)
+        poses = apply_hand_mean(m.poses, model, smpl_type, path, hand_mean)
         return mesh_source(poses, m.trans, np.zeros(0), m.fps, model, smpl_type, face, path)
     return smpl_mesh(path, model, smpl_type, face=face, hand_mean=hand_mean)
 

@@ -21,6 +21,9 @@ MAX_FRAMES = 500_000  # about 7 hours at 20 fps
 MAX_JOINTS = 1000
 MAX_COORD_M = 1e5  # |coordinate| in metres
 MAX_NPZ_BYTES = 1 << 30  # what the arrays of one .npz (or one .npy) may hold, 1 GiB, judged from their headers
+# One person's mesh for the mesh style (SMPL-X has 10,475 vertices): its body model is refused beyond it when read
+# (generation.data) and its mesh when drawn (rendering.mesh), one line each.
+MAX_MESH_VERTICES = 200_000
 
 
 # What numpy and zipfile raise on a damaged archive: its own types do not cover deflate and header errors.

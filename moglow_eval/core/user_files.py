@@ -5,8 +5,9 @@
 - A size cap, checked before reading and enforced while reading (a file that grows is cut off with an error).
 - Lines are read one at a time with a cap on each, and decoded on their own (a UTF-8 sequence never holds a
   newline byte): memory stays flat whatever the file's size, and a bad line stops the reading there.
-- JSON is parsed only when its nesting is shallow (`json_value`, `read_json`): deep brackets would reach Python's
-  recursion limit, and a cell of them is refused with one line; so is TOML that nests too deep (`read_toml`).
+- JSON is parsed only when its nesting is shallow (`json_value`, `read_json`; `too_deep` is the one scan, which
+  the app's request bodies go through too): deep brackets would reach Python's recursion limit, and a cell of them
+  is refused with one line; so is TOML that nests too deep (`read_toml`).
 - A text cell written back out to a CSV that a spreadsheet may open is defused (`defuse`): the app's exports and
   the importers write the same way.
 
@@ -129,11 +130,13 @@ def csv_rows(path, max_bytes: int, error=UserError, what: str = "CSV file", max_
         yield header, rows()
 
 
-def json_value(text: str, where: str, error=UserError, max_depth: int = MAX_JSON_DEPTH, file: bool = False):
-    """`text` parsed as JSON when its brackets nest at most `max_depth` deep; `error` naming `where` (and, for a
-    whole `file`, the line) for text that is not JSON or nests deeper (checked on the text before parsing, so
-    no recursion)."""
-    depth, deepest, in_string, escaped = 0, 0, False, False
+def too_deep(text: str | bytes, max_depth: int = MAX_JSON_DEPTH) -> bool:
+    """Whether JSON `text` nests its brackets deeper than `max_depth`, found by one scan before any parser recurses
+    (brackets inside strings do not count). Bytes are scanned as Latin-1: every byte one character, and UTF-8 never
+    puts a quote, a backslash or a bracket inside a longer sequence, so the bytes nest as their text does."""
+    if isinstance(text, bytes):
+        text = text.decode("latin-1")
+    depth, in_string, escaped = 0, False, False
     for ch in text:
         if in_string:
             if escaped:
@@ -146,11 +149,19 @@ def json_value(text: str, where: str, error=UserError, max_depth: int = MAX_JSON
             in_string = True
         elif ch in "[{":
             depth += 1
-            deepest = max(deepest, depth)
-            if deepest > max_depth:
-                raise error(f"{where}: JSON nested deeper than {max_depth} levels")
+            if depth > max_depth:
+                return True
         elif ch in "]}":
             depth -= 1
+    return False
+
+
+def json_value(text: str, where: str, error=UserError, max_depth: int = MAX_JSON_DEPTH, file: bool = False):
+    """`text` parsed as JSON when its brackets nest at most `max_depth` deep; `error` naming `where` (and, for a
+    whole `file`, the line) for text that is not JSON or nests deeper (checked on the text before parsing, so
+    no recursion)."""
+    if too_deep(text, max_depth):
+        raise error(f"{where}: JSON nested deeper than {max_depth} levels")
     try:
         return json.loads(text)
     except json.JSONDecodeError as exc:

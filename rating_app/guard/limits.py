@@ -11,7 +11,9 @@ from urllib.parse import urlsplit
 
 from flask import abort, current_app, request
 
-MAX_JSON_DEPTH = 8  # the API's bodies are flat objects; deep nesting only serves to exhaust the parser
+# The API's bodies are flat objects; deep nesting only serves to exhaust the parser. The bound and the scan are
+# every user JSON's (moglow_eval.core.user_files).
+from moglow_eval.core.user_files import MAX_JSON_DEPTH, too_deep
 
 
 def client_key() -> str:
@@ -36,23 +38,8 @@ def same_site_only() -> None:
 
 def check_depth(raw: bytes, limit: int = MAX_JSON_DEPTH) -> None:
     """400 for JSON nested deeper than `limit`, found by one scan of the bytes before any parser recurses."""
-    depth, in_str, escaped = 0, False, False
-    for b in raw:
-        if in_str:
-            if escaped:
-                escaped = False
-            elif b == 0x5C:  # backslash
-                escaped = True
-            elif b == 0x22:  # closing quote
-                in_str = False
-        elif b == 0x22:
-            in_str = True
-        elif b in (0x5B, 0x7B):  # [ {
-            depth += 1
-            if depth > limit:
-                abort(400, f"JSON nested deeper than {limit} levels")
-        elif b in (0x5D, 0x7D):
-            depth -= 1
+    if too_deep(raw, limit):
+        abort(400, f"JSON nested deeper than {limit} levels")
 
 
 def escape_text(text: str) -> str:
