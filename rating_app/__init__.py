@@ -23,7 +23,7 @@ from werkzeug.exceptions import HTTPException
 
 from moglow_eval.core import study
 
-from .store.manifest import AppError, load_manifest, reference_name
+from .store.manifest import AppError, interlocutor_colour, load_manifest, reference_name
 from .store.settings import ARGS, SETTINGS, resolve
 
 __all__ = ["create_app", "AppError", "SETTINGS"]
@@ -118,6 +118,10 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
     clips = design.serving_clips(load_manifest(manifest, check_files=check_files))
     units = design.build_units(clips)
     app.config["STUDY_SOUND"] = any(c.audio for c in clips)  # the page plays sound and checks the rater hears
+    # The interlocutor's colour as the renderer drew it (study.json), which the rater's page names; None: unnamed.
+    app.config["INTERLOCUTOR_COLOUR"] = interlocutor_colour(manifest)
+    # The page says "stick figure" only where every video draws one (the manifest's style; empty: the stick).
+    app.config["FIGURE"] = "stick figure" if {c.style or "stick" for c in clips} == {"stick"} else "figure"
     engine = _open_database(
         values["DATABASE_URL"],
         values["DB_POOL_SIZE"],

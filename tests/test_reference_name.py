@@ -10,7 +10,8 @@ from test_app_style_export import rate_everything
 
 from analysis import report
 from analysis.data.load import AnalysisError
-from rating_app.store.manifest import AppError, reference_name
+from moglow_eval.core import colours
+from rating_app.store.manifest import AppError, interlocutor_colour, reference_name
 
 
 @pytest.fixture
@@ -73,3 +74,34 @@ def test_a_hostile_reference_name_in_an_export_is_refused(tmp_path):
     path.write_text("rater_id,clip_id,condition,rating,role,item,reference_name\nr1,c1,NAT,3,test,i1,=cmd()\n")
     with pytest.raises(AnalysisError, match="reference_name"):
         report.study_reference(path)
+
+
+def test_the_interlocutors_colour_reaches_the_raters_page_from_study_json(make_app, tmp_path):
+    stimuli = write_fake_stimuli(tmp_path / "dyadic", n_items=3, n_training=1, mismatched=True, catch_nat=True)
+    # The page names the colour the renderer drew (the study's), not a fixed word: here a study that drew its
+    # interlocutor orange; without the key the page names no colour.
+    name_it(stimuli, {"reference_name": "NAT", "interlocutor_colour": "#E08A1E"})
+    assert interlocutor_colour(stimuli) == "#e08a1e"
+    page = make_app(manifest=stimuli, design="dyadic", min_view=0).test_client().get("/").get_data(as_text=True)
+    assert 'fill="#e08a1e"' in page and ">orange</strong>" in page and "grey" not in page
+    name_it(stimuli, {"reference_name": "NAT"})
+    page = make_app(manifest=stimuli, design="dyadic", min_view=0).test_client().get("/").get_data(as_text=True)
+    assert "swatch" not in page and "the person who stays the\n    same" in page
+
+
+@pytest.mark.parametrize("value", ["green", "#12345", 7, "#GGGGGG"])
+def test_a_bad_interlocutor_colour_is_one_line(stimuli, value):
+    name_it(stimuli, {"reference_name": "NAT", "interlocutor_colour": value})
+    with pytest.raises(AppError, match='interlocutor_colour must be "#RRGGBB"') as e:
+        interlocutor_colour(stimuli)
+    assert "study.json" in str(e.value) and "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize(
+    "rgb, name",
+    [((0.40, 0.60, 0.44), "green"), ((0.42, 0.55, 0.78), "blue"), ((0.75, 0.25, 0.15), "red"),
+     ((0.5, 0.5, 0.52), "grey"), ((0.88, 0.54, 0.12), "orange"), ((0.02, 0.02, 0.02), "black")],
+)  # fmt: skip
+def test_colour_names(rgb, name):
+    assert colours.colour_name(rgb) == name
+    assert colours.from_hex(colours.to_hex(rgb)) == pytest.approx(rgb, abs=1 / 255)

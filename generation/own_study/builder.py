@@ -36,11 +36,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from moglow_eval.core import study
+from moglow_eval.core import colours, study
 from moglow_eval.core.clip import save_clip
 from moglow_eval.core.tables import C2ST_COLUMNS
 from rendering.captions import room as caption_room
-from rendering.raster import STYLES
+from rendering.raster import PARTNER_COLOUR, STYLES
 
 from ..data.motion_files import read_motion
 from ..metrics import c2st
@@ -382,8 +382,12 @@ def build_study(spec, out, size, preset, workers, force, progress):
     )
     if sources[0]:
         write_csv(out / "sources.csv", sources[0], sources[1])  # where each item came from (CONTRACTS §10)
-    # The reference's own name for the app's export and the report (CONTRACTS §4); the manifest calls it NAT.
-    (out / study.STUDY_NAMES_FILE).write_text(json.dumps({study.REFERENCE_NAME: spec.reference}) + "\n")
+    # The reference's own name for the app's export and the report (CONTRACTS §4); the manifest calls it NAT. A
+    # two-person study adds the interlocutor's colour as the renderer draws it, which the rater's page names.
+    names = {study.REFERENCE_NAME: spec.reference}
+    if spec.interlocutor is not None:
+        names[study.INTERLOCUTOR_COLOUR] = colours.to_hex(spec.colour or PARTNER_COLOUR)
+    (out / study.STUDY_NAMES_FILE).write_text(json.dumps(names) + "\n")
     write_tables(out, manifest, metrics_rows, [])  # manifest.csv last: a folder without one is no stimulus set
     print_study_summary(out, manifest, metrics_rows, c2st_table, time.perf_counter() - t0)
     warning = blinding_warning(out, manifest)

@@ -1,7 +1,7 @@
 """A study file's second person, mismatched motion and captions (CONTRACTS §10): the keys of a two-person or
 captioned study, and what each design needs of the rest of the file."""
 
-import re
+from moglow_eval.core import colours
 
 from .placing import PLACEMENTS
 from .study_keys import err, file, folder, number, unknown
@@ -46,9 +46,10 @@ def read_people(path, data, spec):
 
 
 def _colour(path, value):
-    if not isinstance(value, str) or not re.fullmatch(r"#[0-9a-fA-F]{6}", value):
-        raise err(path, "[interlocutor] colour", f'must be "#RRGGBB", got {value!r}')
-    return tuple(int(value[k : k + 2], 16) / 255 for k in (1, 3, 5))
+    try:
+        return colours.from_hex(value)
+    except ValueError as e:
+        raise err(path, "[interlocutor] colour", str(e)) from None
 
 
 def _captions(path, table, spec):

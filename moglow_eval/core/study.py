@@ -49,6 +49,9 @@ METRIC_KEYS = ("clip_id", "condition", "role", "item")  # the columns of metrics
 # report's tables and figures.
 STUDY_NAMES_FILE = "study.json"
 REFERENCE_NAME = "reference_name"
+# A two-person study's study.json also gives the interlocutor's drawing colour, "#RRGGBB" (core.colours), so that
+# the rater's page names the colour the videos show.
+INTERLOCUTOR_COLOUR = "interlocutor_colour"
 # A condition's name as a user gives it (an imported system, a study file's condition): short, and safe in a file
 # name, a CSV cell, an HTML page and a figure label. Always fullmatch.
 CONDITION_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,31}")

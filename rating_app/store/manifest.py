@@ -7,7 +7,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from moglow_eval.core import study, user_files
+from moglow_eval.core import colours, study, user_files
 from moglow_eval.core.cli import UserError
 
 REQUIRED = ("clip_id", "condition", "role", "item", "video")
@@ -110,19 +110,42 @@ def clip_from_row(row: dict, where: str, base: Path, check_files: bool) -> Manif
     )
 
 
+def _study_names(manifest) -> tuple[Path, dict | None]:
+    """study.json beside the manifest (CONTRACTS §4) as its path and its object, None where there is no such file;
+    AppError, one line, on a file that is not one."""
+    path = Path(manifest).resolve().parent / study.STUDY_NAMES_FILE
+    if not path.exists():
+        return path, None
+    text = user_files.read_text(path, 4096, AppError, "study names file")  # a few names: larger is not this file
+    doc = user_files.json_value(text, f"{path}: not a study names file", AppError)
+    if not isinstance(doc, dict) or study.REFERENCE_NAME not in doc:
+        raise AppError(f"{path}: not a study names file (no {study.REFERENCE_NAME!r} key)")
+    return path, doc
+
+
 def reference_name(manifest) -> str | None:
     """The reference condition's own name from study.json beside the manifest (a study of your own motion,
     CONTRACTS §4), None where there is no such file or it names NAT; AppError, one line, on a malformed file."""
-    path = Path(manifest).resolve().parent / study.STUDY_NAMES_FILE
-    if not path.exists():
+    path, doc = _study_names(manifest)
+    if doc is None:
         return None
-    text = user_files.read_text(path, 4096, AppError, "study names file")  # a few names: larger is not this file
-    doc = user_files.json_value(text, f"{path}: not a study names file", AppError)
-    name = doc.get(study.REFERENCE_NAME) if isinstance(doc, dict) else None
-    if name is None:
-        raise AppError(f"{path}: not a study names file (no {study.REFERENCE_NAME!r} key)")
+    name = doc[study.REFERENCE_NAME]
     if not isinstance(name, str) or not study.CONDITION_NAME.fullmatch(name):
         raise AppError(
             f"{path}: {study.REFERENCE_NAME} must be a condition name (a letter, then letters, digits, _ or -)"
         )
     return None if name == study.NATURAL else name
+
+
+def interlocutor_colour(manifest) -> str | None:
+    """The interlocutor's drawing colour, "#rrggbb", from study.json beside the manifest (a two-person study,
+    CONTRACTS §4); None where the file or the key is absent (stimuli made by another tool): the rater's page then
+    names no colour. AppError, one line, on a value that is not a colour."""
+    path, doc = _study_names(manifest)
+    value = None if doc is None else doc.get(study.INTERLOCUTOR_COLOUR)
+    if value is None:
+        return None
+    try:
+        return colours.to_hex(colours.from_hex(value))
+    except ValueError as e:
+        raise AppError(f"{path}: {study.INTERLOCUTOR_COLOUR} {e}") from None

@@ -8,7 +8,7 @@ import re
 from flask import Blueprint, abort, current_app, jsonify, render_template, request
 from sqlalchemy.orm import Session
 
-from moglow_eval.core import study
+from moglow_eval.core import colours, study
 
 from ..guard.bodies import EXTERNAL
 from ..operations import health
@@ -51,9 +51,18 @@ def index():
         answer_field=design.answer_field,
         question=cfg["STUDY_QUESTION"],
         sound=cfg["STUDY_SOUND"],
+        interlocutor=_named_colour(cfg.get("INTERLOCUTOR_COLOUR")),  # two people: the one drawn the same in both
+        figure=cfg.get("FIGURE", "stick figure"),  # the page's word for what the videos draw
         reasons=cfg["VOTE_REASONS"],  # the boxes shown with a vote, and the free text's limit (store/reasons.py)
         reason_text=cfg["REASON_TEXT"],
     )
+
+
+def _named_colour(hex_colour):
+    """{"hex", "name"} of the interlocutor's colour for the page's words and swatch; None where the study gave none."""
+    if not hex_colour:
+        return None
+    return {"hex": hex_colour, "name": colours.colour_name(colours.from_hex(hex_colour))}
 
 
 @bp.get("/videos/<name>")
