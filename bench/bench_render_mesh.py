@@ -33,7 +33,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from helpers import smpl_fixtures  # noqa: E402
 
-from generation.data.smpl_files import smpl_mesh, smpl_positions  # noqa: E402
+from generation.data.skinning import smpl_mesh  # noqa: E402
+from generation.data.smpl_files import smpl_positions  # noqa: E402
 from rendering.camera import Projector, camera_targets  # noqa: E402
 from rendering.framing import item_camera  # noqa: E402
 from rendering.mesh import MeshBody, straight  # noqa: E402

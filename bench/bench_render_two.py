@@ -25,7 +25,7 @@ from generation.data.motion_files import read_motion  # noqa: E402
 from generation.own_study.demo_study import actions_dir  # noqa: E402
 from generation.own_study.placing import place_pair  # noqa: E402
 from generation.own_study.scene import place  # noqa: E402
-from rendering.captions import phrases, room  # noqa: E402
+from rendering.captions import ROOM, phrases  # noqa: E402
 from rendering.framing import item_camera, pair_camera  # noqa: E402
 from rendering.raster import STYLES  # noqa: E402
 from rendering.render import render_clip  # noqa: E402
@@ -60,7 +60,7 @@ def main():
     (agents, partner) = place_pair([a.joints[:n]], names, b.joints[:n], list(b.names))
     two_camera, target = pair_camera(agents, [(names, parents, None), (list(b.names), b.parents, partner)])
     cap_camera, cap_target = pair_camera(agents, [(names, parents, None), (list(b.names), b.parents, partner)],
-                                         room=room(args.size))  # fmt: skip
+                                         room=ROOM)  # fmt: skip
     words = [(0.2 + 0.3 * k, 0.2 + 0.3 * k + 0.25, w, w == "bridge") for k, w in enumerate(WORDS)]
     captions = phrases(words, args.size)
     clip = dict(joints=alone, parents=parents, joint_names=names, fps=30.0)

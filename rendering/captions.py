@@ -36,10 +36,15 @@ class Phrase:
     speaker: int = 0  # 0: the agent (or the one person), 1: the interlocutor
 
 
-def room(size):
-    """The share of the frame's height the captions may take from the bottom (LINES lines, their band, the
-    margin): the framing leaves it free of the body (rendering.framing)."""
-    return (LINES * 1.25 * TEXT_SHARE + 2 * 0.35 * TEXT_SHARE + BOTTOM_SHARE) + 0.01
+# The share of the frame's height the captions may take from the bottom (LINES lines, their band, the margin): the
+# framing leaves it free of the body (rendering.framing). Every part of it is a share of the frame, so it is one
+# share at every video size.
+ROOM = (LINES * 1.25 * TEXT_SHARE + 2 * 0.35 * TEXT_SHARE + BOTTOM_SHARE) + 0.01
+
+
+def room(size=None):
+    """ROOM under its old name, for scripts that call it: the size it took never changed the share."""
+    return ROOM
 
 
 @functools.lru_cache(maxsize=4)

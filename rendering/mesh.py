@@ -2,7 +2,7 @@
 
 GENEA's studies show raters a skinned body, not a stick figure (the 2026 challenge renders the SMPL-H mesh with a
 plain mask over the face, since its data has no facial animation). The vertices come from the body model's own
-skinning (generation.data.smpl_files); this module draws them.
+skinning (generation.data.skinning); this module draws them.
 
 It draws with OpenGL through moderngl on a headless EGL context: on a machine without a GPU, Mesa's llvmpipe
 rasterises on the CPU's cores; where a GPU driver is installed, the same code runs on it. bench/bench_render_mesh.py
@@ -84,7 +84,7 @@ void main() {
 class Mesh:
     """What the mesh body needs of a person's body model: its triangles [F, 3] (vertex indices) and which of its
     vertices the face mask covers [V] (bool; none for face = "none"). Any object with these two attributes will do
-    (generation.data.smpl_files.MeshSource is one)."""
+    (generation.data.skinning.MeshSource is one)."""
 
     faces: np.ndarray
     mask: np.ndarray
@@ -396,9 +396,10 @@ class MeshPainter:
         self.proj, self.colour, self.grid, self.row = proj, tuple(colour), grid, size // 2
         self.rot = proj.rot.T.astype(np.float32)  # into camera axes, as Projector.to_camera turns points
 
-    def skin(self, a, b):
-        """Frames a..b of the person's mesh (its source's `vertices`) and their normals (vertex_normals, with the
-        body's own operator), both [b - a, V, 3] in world axes, for __call__ a frame at a time."""
+    def vertices_and_normals(self, a, b):
+        """Frames a..b of the person's mesh, as its source gives them (`vertices`: skinned there, not here), and
+        their normals (vertex_normals, with the body's own operator), both [b - a, V, 3] in world axes, for
+        __call__ a frame at a time."""
         mesh, faces, op = self.body.people[0][:3]
         vertices = mesh.vertices(a, b)
         return vertices, vertex_normals(vertices, faces, op)

@@ -113,7 +113,7 @@ def render_clip(
     mesh, partner_mesh : object or None
         With `style.body == "mesh"`: the person's (and the partner's) skinned mesh, with `faces` [F, 3], `mask` [V]
         (the face mask's vertices) and `vertices(a, b)` -> frames a..b's vertices [b - a, V, 3] in the joints'
-        world (generation.data.smpl_files.MeshSource), read a chunk at a time so that memory does not grow with
+        world (generation.data.skinning.MeshSource), read a chunk at a time so that memory does not grow with
         the clip.
 
     Returns
@@ -268,7 +268,7 @@ def _paint(people, meshes, targets, ready, stop):
         a, size, n = 0, MESH_AHEAD, len(targets)
         while a < n and not stop.is_set():
             b = min(n, a + size)
-            skinned = [None if p is None else p.skin(a, b) for p in painters]
+            skinned = [None if p is None else p.vertices_and_normals(a, b) for p in painters]
             for t in range(a, b):
                 if stop.is_set():
                     return

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from helpers import smpl_fixtures
 
-from generation.data.smpl_files import smpl_mesh
+from generation.data.skinning import smpl_mesh
 from rendering.camera import Projector, camera_targets
 from rendering.errors import RenderError
 from rendering.framing import item_camera

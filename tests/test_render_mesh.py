@@ -12,7 +12,8 @@ from helpers.bvh_fixtures import write_zeroeggs
 from helpers.figure_pixels import decode
 from helpers.paths import ROOT
 
-from generation.data.smpl_files import MeshSource, SmplError, smpl_mesh, smpl_positions
+from generation.data.skinning import MeshSource, smpl_mesh
+from generation.data.smpl_files import SmplError, smpl_positions
 from generation.make_stimuli import main as make_stimuli
 from generation.stimuli.mesh_track import MeshTrack
 from rendering.camera import Projector, camera_targets

@@ -14,7 +14,7 @@ from generation.own_study.placing import place_pair
 from rendering.audio import RATE, integrated_loudness, mix_voices
 from rendering.blinding import check_one_size
 from rendering.camera import Projector
-from rendering.captions import CaptionLayer, phrases, room
+from rendering.captions import ROOM, CaptionLayer, phrases
 from rendering.framing import pair_camera
 from rendering.raster import STYLES, FrameDrawer, one_colour
 from rendering.render import compose, render_clip
@@ -29,7 +29,7 @@ def pair(tmp_path_factory):
     agent, partner = a.joints[START : START + FRAMES], b.joints[START : START + FRAMES]
     other = a.joints[START + 180 : START + 180 + FRAMES]  # the agent's motion from elsewhere: another condition
     (agents, placed) = place_pair([agent, other], a.names, partner, b.names)
-    cam, target = pair_camera(agents, [(a.names, a.parents, None), (b.names, b.parents, placed)], room=room(SIZE))
+    cam, target = pair_camera(agents, [(a.names, a.parents, None), (b.names, b.parents, placed)], room=ROOM)
     words = []
     for who, p in enumerate(seamless_fixtures.PARTICIPANTS):
         t = read_transcript(conv.files[p]["transcript"]).cut(START / 30, (START + FRAMES) / 30)
@@ -101,7 +101,7 @@ def test_the_pair_camera_frames_both_and_keeps_the_captions_room_free(pair):
     for joints in (*pair["agents"], pair["partner"]):
         xy = proj.to_screen(proj.to_camera(joints[:, keep].reshape(-1, 3), target + proj.offset))
         assert (xy > 0).all() and (xy[:, 0] < SIZE).all() and (xy[:, 1] < SIZE).all()  # in the frame
-        assert (xy[:, 1] > room(SIZE) * SIZE).all()  # above the captions' room (y counts up from the bottom)
+        assert (xy[:, 1] > ROOM * SIZE).all()  # above the captions' room (y counts up from the bottom)
 
 
 def test_captions_show_the_current_phrase_and_the_keyword(pair, tmp_path):

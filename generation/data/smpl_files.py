@@ -20,7 +20,6 @@ import numpy as np
 from moglow_eval.core.cli import UserError
 from moglow_eval.core.clip import (
     MAX_FRAMES,
-    MAX_MESH_VERTICES,
     NPZ_READ_ERRORS,
     ClipError,
     check_skeleton,
@@ -39,7 +38,6 @@ HAND_MEAN_LAYOUTS = {"mocap_frame_rate": True, "mocap_framerate": False}
 HAND_FIRST = {"smplh": 22, "smplx": 25}  # the first hand joint in the poses (SMPL-X's jaw and eyes come before)
 MODEL_KEYS = ("v_template", "shapedirs", "posedirs", "J_regressor", "weights", "kintree_table", "f")
 BATCH = 2048  # frames per pass through the kinematics: bounds the rotation matrices held at once
-MESH_BATCH = 32  # frames per pass through the skinning: bounds the vertices held at once (32 x 10k x 3 floats)
 
 _BODY = [
     "pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2", "left_ankle", "right_ankle",
@@ -82,9 +80,9 @@ def smpl_positions(path, model, smpl_type=None, source_fps=None, hand_mean="auto
     SmplError naming the file otherwise."""
     if model is None:
         raise SmplError(f"{path}: an SMPL-family parameter file (poses, trans, betas); {WHERE_TO_GET}")
-    poses, trans, betas, fps = _read_motion(path, source_fps)
+    poses, trans, betas, fps = read_parameters(path, source_fps)
     poses = apply_hand_mean(poses, model, smpl_type, path, hand_mean)
-    expression = _read_expression(path, len(poses))
+    expression = read_expression(path, len(poses))
     joints, names, parents = pose_joints(poses, trans, betas, model, smpl_type, path, expression)
     return joints, names, parents, fps
 
@@ -116,7 +114,7 @@ def with_hand_mean(poses, model, smpl_type, add, where):
     headers = npz_headers(model)
     if any(k not in headers for k in HAND_MEAN_KEYS):
         raise SmplError(f"{model}: no hands_meanl / hands_meanr, which hand_mean for {where} needs (set it false)")
-    d = _load(model, HAND_MEAN_KEYS, "a body model")
+    d = load_arrays(model, HAND_MEAN_KEYS, "a body model")
     mean = np.concatenate([np.asarray(d[k], np.float64).reshape(-1) for k in HAND_MEAN_KEYS])
     if mean.shape != (90,):
         raise SmplError(f"{model}: hands_meanl and hands_meanr must hold 45 values each, got {mean.shape[0]} in all")
@@ -126,26 +124,26 @@ def with_hand_mean(poses, model, smpl_type, add, where):
     return out
 
 
-def _read_expression(path, frames):
+def read_expression(path, frames):
     """SMPL-X expression coefficients [T, E] of an SMPL-family file, or None where it has none."""
     headers = npz_headers(path)
     key = next((k for k in EXPRESSION_KEYS if k in headers), None)
     if key is None:
         return None
-    e = np.asarray(_load(path, (key,), "an SMPL-family file")[key], np.float64)
+    e = np.asarray(load_arrays(path, (key,), "an SMPL-family file")[key], np.float64)
     if e.ndim != 2 or len(e) != frames or not np.isfinite(e).all():
         raise SmplError(f"{path}: '{key}' must be finite [{frames}, E], one row per frame, got {e.shape}")
     return e
 
 
-def _shape_and_expression(kind, shapedirs, betas, expression):
+def shape_and_expression(kind, shapedirs, betas, expression):
     """(shape directions [V, 3, K], coefficients [T or 1, K]): the body shape's, then SMPL-X's expression's, as
     smplx's forward pass puts them together; the model's mean shape where `betas` is empty."""
-    n_shape = min(len(betas), _shape_components(kind, shapedirs.shape[2]))
+    n_shape = min(len(betas), shape_components(kind, shapedirs.shape[2]))
     dirs, coef = shapedirs[:, :, :n_shape], np.asarray(betas[:n_shape], np.float64)[None]
     if expression is None or kind != "smplx":
         return dirs, coef
-    first = _shape_components(kind, shapedirs.shape[2])
+    first = shape_components(kind, shapedirs.shape[2])
     n_expr = min(expression.shape[1], shapedirs.shape[2] - first)
     if n_expr <= 0:
         return dirs, coef
@@ -159,7 +157,7 @@ def pose_joints(poses, trans, betas, model, smpl_type, where, expression=None):
     [T, 3] and shape `betas` [B] (empty: the model's mean shape) through the body model file `model`, with smplx's
     kinematics. Every frame is posed from its own rotations: nothing is interpolated between frames here, so a
     rotation's axis-angle flipping near pi between two frames moves no joint. SmplError naming `where`."""
-    template, shapedirs, regressor, parents, kind = _read_model(model, smpl_type)
+    template, shapedirs, regressor, parents, kind = read_model(model, smpl_type)
     n = len(parents)
     if poses.shape[1] != 3 * n:
         raise SmplError(
@@ -171,7 +169,7 @@ def pose_joints(poses, trans, betas, model, smpl_type, where, expression=None):
         from smplx.lbs import batch_rigid_transform, batch_rodrigues, blend_shapes, vertices2joints
     except ImportError:
         raise SmplError(f"{where}: reading SMPL-family files needs smplx: pip install 'moglow-eval[smpl]'") from None
-    dirs, coef = _shape_and_expression(kind, shapedirs, betas, expression)
+    dirs, coef = shape_and_expression(kind, shapedirs, betas, expression)
     with torch.no_grad():
         template, dirs, regressor = (torch.from_numpy(x) for x in (template, dirs, regressor))
         tree = torch.from_numpy(parents)
@@ -192,124 +190,7 @@ def pose_joints(poses, trans, betas, model, smpl_type, where, expression=None):
     return out + trans[:, None], list(JOINT_NAMES[kind]), parents.astype(np.int64)
 
 
-def smpl_mesh(path, model, smpl_type=None, source_fps=None, face="mask", hand_mean="auto"):
-    """The skinned mesh of an SMPL-family parameter file (`style = "mesh"`): a MeshSource whose `vertices(a, b)`
-    gives frames a..b's vertices [n, V, 3] (metres, the model's axes, float32) through smplx's own skinning
-    (`smplx.lbs.lbs`: shape and pose blend shapes, then linear blend skinning) with the user's model file and the
-    motion's betas, a chunk at a time, so memory does not grow with the clip. `face`: "mask" (the face's vertices
-    flagged for the mask, rendering.mesh) or "none"; `hand_mean` as smpl_positions takes it, and the file's SMPL-X
-    expressions, so that the mesh and the joints agree. SmplError naming the file otherwise."""
-    if model is None or not Path(model).is_file():  # before the hand mean reads it
-        raise SmplError(f"{model or path}: no body model file for the mesh style; {WHERE_TO_GET}")
-    poses, trans, betas, fps = _read_motion(path, source_fps)
-    poses = apply_hand_mean(poses, model, smpl_type, path, hand_mean)
-    expression = _read_expression(path, len(poses))
-    return mesh_source(poses, trans, betas, fps, model, smpl_type, face, path, expression)
-
-
-def mesh_source(poses, trans, betas, fps, model, smpl_type, face, where, expression=None):
-    """The MeshSource of poses [T, 3J], translations [T, 3] and `betas` (empty: the mean shape) at `fps`, through
-    the body model file `model` (smpl_mesh, and Seamless Interaction's files through seamless_files). SmplError
-    naming `where` or the model."""
-    if model is None or not Path(model).is_file():
-        raise SmplError(f"{model or where}: no body model file for the mesh style; {WHERE_TO_GET}")
-    template, shapedirs, regressor, parents, kind = _read_model(model, smpl_type)
-    if poses.shape[1] != 3 * len(parents):
-        raise SmplError(
-            f"{where}: 'poses' has {poses.shape[1]} values a frame; the {kind} model {model} takes {3 * len(parents)}"
-        )
-    skin = _read_skin(model, len(template), len(parents))
-    n_shape = min(len(betas), _shape_components(kind, shapedirs.shape[2]))
-    shape = (*_shape_and_expression(kind, shapedirs, betas, expression), n_shape)
-    return MeshSource(where, poses, trans, fps, template, shape, regressor, parents, kind, skin, face)
-
-
-class MeshSource:
-    """An SMPL-family clip's mesh, skinned on demand (see smpl_mesh): what rendering.mesh draws (`faces` [F, 3],
-    `mask` [V]: the face mask's vertices), `fps`, `n_frames` and `vertices(a, b)`."""
-
-    def __init__(self, path, poses, trans, fps, template, shape, regressor, parents, kind, skin, face):
-        """`shape`: (directions [V, 3, K], coefficients [1 or T, K], how many of them are the body's shape) as
-        _shape_and_expression gives them: the body shape's, then, per frame, SMPL-X's expression's."""
-        self.path, self.poses, self.trans, self.fps, self.kind = path, poses, trans, fps, kind
-        self.n_frames = len(poses)
-        self.template, self.regressor = template.astype(np.float32), regressor.astype(np.float32)
-        self.shapedirs, self.coef = (x.astype(np.float32) for x in shape[:2])
-        self.n_shape = shape[2]
-        self.parents = parents
-        self.posedirs, self.weights, self.faces = skin
-        none = np.zeros(len(template), bool)
-        self.mask = face_vertices(self.shaped(), self.rest_joints()) if face == "mask" else none
-
-    def shaped(self):
-        """The rest vertices [V, 3] in this motion's shape."""
-        k = self.n_shape
-        return self.template + self.shapedirs[:, :, :k] @ self.coef[0, :k]
-
-    def rest_joints(self):
-        return self.regressor @ self.shaped()
-
-    def vertices(self, a, b):
-        """Frames a..b's vertices [b - a, V, 3] float32, in metres, the root translation applied."""
-        return self.posed(a, b)[0]
-
-    def posed(self, a, b):
-        """(vertices [b - a, V, 3], joints [b - a, J, 3]) of frames a..b, float32, the root translation applied:
-        smplx's forward pass, a chunk of MESH_BATCH frames at a time."""
-        import torch
-        from smplx.lbs import lbs
-
-        verts = np.empty((b - a, len(self.template), 3), np.float32)
-        joints = np.empty((b - a, len(self.parents), 3), np.float32)
-        with torch.no_grad():
-            for s in range(a, b, MESH_BATCH):
-                e = min(b, s + MESH_BATCH)
-                coef = np.repeat(self.coef, e - s, 0) if len(self.coef) == 1 else self.coef[s:e]
-                v, j = lbs(
-                    torch.from_numpy(coef),
-                    torch.from_numpy(self.poses[s:e].astype(np.float32)),
-                    torch.from_numpy(self.template),
-                    torch.from_numpy(self.shapedirs),
-                    torch.from_numpy(self.posedirs),
-                    torch.from_numpy(self.regressor),
-                    torch.from_numpy(self.parents),
-                    torch.from_numpy(self.weights),
-                )
-                shift = self.trans[s:e, None].astype(np.float32)
-                verts[s - a : e - a] = v.numpy() + shift
-                joints[s - a : e - a] = j.numpy() + shift
-        return verts, joints
-
-
-def face_vertices(shaped, joints):
-    """Which rest vertices [V] the face mask covers: those within 15 cm of the head joint (15 in every SMPL layout),
-    in front of it (the models face +Z at rest) by more than 4 cm, and above the chin (7 cm below the joint)."""
-    r = shaped - joints[15]
-    return (np.linalg.norm(r, axis=1) < 0.15) & (r[:, 2] > 0.04) & (r[:, 1] > -0.07)
-
-
-def _read_skin(model, n_vertices, n_joints):
-    """(posedirs [(J-1)*9, V*3] as smplx's lbs takes them, weights [V, J], faces [F, 3] int64) of a body model,
-    refused with one line where they do not fit its vertices and joints."""
-    model = Path(model)
-    if n_vertices > MAX_MESH_VERTICES:
-        raise SmplError(f"{model}: {n_vertices} vertices, more than a body mesh has (at most {MAX_MESH_VERTICES})")
-    d = _load(model, ("posedirs", "weights", "f"), "a body model")
-    posedirs, weights, faces = np.asarray(d["posedirs"], np.float32), np.asarray(d["weights"], np.float32), d["f"]
-    if posedirs.shape != (n_vertices, 3, (n_joints - 1) * 9) or weights.shape != (n_vertices, n_joints):
-        raise SmplError(
-            f"{model}: posedirs {posedirs.shape} and weights {weights.shape} do not fit its {n_vertices} vertices and "
-            f"{n_joints} joints"
-        )
-    faces = np.asarray(faces)
-    if faces.ndim != 2 or faces.shape[1] != 3 or faces.dtype.kind not in "iu" or len(faces) == 0:
-        raise SmplError(f"{model}: 'f' must be integer triangles [F, 3], got {faces.shape} {faces.dtype}")
-    if faces.min() < 0 or faces.max() >= n_vertices:
-        raise SmplError(f"{model}: 'f' indexes vertices outside the model's {n_vertices}")
-    return posedirs.reshape(n_vertices * 3, -1).T.copy(), weights, faces.astype(np.int64)
-
-
-def _shape_components(kind, k):
+def shape_components(kind, k):
     """How many of a model's shapedirs are body shape, as smplx reads them: all for SMPL and SMPL-H; for SMPL-X
     300 of 400 (the rest are expressions), or 10 of a smaller set (10 shape, then 10 expression)."""
     if kind != "smplx":
@@ -317,7 +198,7 @@ def _shape_components(kind, k):
     return 300 if k >= 400 else min(k, 10)
 
 
-def _load(path, keys, what):
+def load_arrays(path, keys, what):
     """{key: array} of the named members of an .npz, each checked to exist, read without pickles."""
     headers = npz_headers(path)  # refuses an archive whose headers ask for more than the limit, before reading
     missing = [k for k in keys if k not in headers]
@@ -330,13 +211,13 @@ def _load(path, keys, what):
         raise SmplError(f"{path}: unreadable {what} ({first_line(e)})") from None
 
 
-def _read_motion(path, source_fps):
+def read_parameters(path, source_fps):
     headers = npz_headers(path)
     shape = headers.get("poses", ((),))[0]
     if len(shape) != 2 or shape[0] < 2 or shape[0] > MAX_FRAMES:
         raise SmplError(f"{path}: 'poses' must be [T, 3 x joints] with 2 to {MAX_FRAMES} frames, got {shape}")
     fps_key = next((k for k in FPS_KEYS if k in headers), None)
-    d = _load(path, (*MOTION_KEYS, *([fps_key] if fps_key else [])), "an SMPL-family file")
+    d = load_arrays(path, (*MOTION_KEYS, *([fps_key] if fps_key else [])), "an SMPL-family file")
     poses, trans, betas = (np.asarray(d[k], np.float64) for k in MOTION_KEYS)
     if trans.shape != (len(poses), 3):
         raise SmplError(f"{path}: 'trans' must be [{len(poses)}, 3], one per frame of 'poses', got {trans.shape}")
@@ -353,12 +234,12 @@ def _read_motion(path, source_fps):
     return poses, trans, betas.reshape(-1), fps
 
 
-def _read_model(model, smpl_type):
+def read_model(model, smpl_type):
     """(v_template [V, 3], shapedirs [V, 3, K], J_regressor [J, V], parents [J], model type) of a body model."""
     model = Path(model)
     if model.suffix != ".npz":
         raise SmplError(f"{model}: give the body model as .npz (the SMPL-X downloads include .npz files)")
-    d = _load(model, MODEL_KEYS, "a body model")
+    d = load_arrays(model, MODEL_KEYS, "a body model")
     template, shapedirs, regressor = (np.asarray(d[k], np.float64) for k in ("v_template", "shapedirs", "J_regressor"))
     kintree = np.asarray(d["kintree_table"])
     if kintree.ndim != 2 or kintree.shape[0] != 2 or kintree.dtype.kind not in "iu":

@@ -39,7 +39,7 @@ from tqdm import tqdm
 from moglow_eval.core import colours, study
 from moglow_eval.core.clip import save_clip
 from moglow_eval.core.tables import C2ST_COLUMNS
-from rendering.captions import room as caption_room
+from rendering.captions import ROOM as CAPTION_ROOM
 from rendering.raster import PARTNER_COLOUR, STYLES
 
 from ..data.motion_files import read_motion
@@ -353,7 +353,7 @@ def build_study(spec, out, size, preset, workers, force, progress):
         clips = build_clips(spec, motions, roles, catch_items, bad, people)
         lengths = {i: len(m.joints) for i, m in motions[study.NATURAL].items()}
         captions = item_captions(spec, lengths, size)
-        room = caption_room(size) if captions else 0.0
+        room = CAPTION_ROOM if captions else 0.0
         scene = stage(clips, skeleton_of(motions), spec, people.partners, Path(tmp), room)
         sound = prepare_audio(spec, lengths, Path(tmp), scene.sides)
         out = prepare_out(out, force)

@@ -4,7 +4,7 @@ A study turns a motion file into a clip's joints by steps that know nothing of a
 resampling to the study's frame rate, standing the clip at the origin facing +Z (own_study.builder.place), cutting it
 to its item's length or holding its last pose, and, for a catch clip, breaking it (stimuli.catch_kinds). Rather than
 mirror each step, a MeshTrack follows the clip's joints: for each of its frames it skins the file's frame at the same
-time (generation.data.smpl_files, smplx's own skinning), moves that mesh by the similarity (scale, rotation,
+time (generation.data.skinning, smplx's own skinning), moves that mesh by the similarity (scale, rotation,
 translation: Umeyama's least-squares fit) that best takes the file's joints onto the clip's, and adds what is left of
 each joint's move to the vertices that joint skins, by their skinning weights. For a clip that is its file moved
 about, nothing is left; for a catch clip, what is left is the break, and the mesh breaks with it.
@@ -33,10 +33,11 @@ class MeshSpec:
 
 @functools.lru_cache(maxsize=4)
 def source(path, model, smpl_type, face, hand_mean="auto"):
-    """The file's MeshSource (generation.data.smpl_files), read once per process and file, its hands as its joints'
+    """The file's MeshSource (generation.data.skinning), read once per process and file, its hands as its joints'
     (smpl_files.apply_hand_mean, the one rule for both)."""
     from ..data import seamless_files
-    from ..data.smpl_files import apply_hand_mean, mesh_source, smpl_mesh
+    from ..data.skinning import mesh_source, smpl_mesh
+    from ..data.smpl_files import apply_hand_mean
 
     if seamless_files.is_seamless_file(path):
         m = seamless_files.read_seamless(path)

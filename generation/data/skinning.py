@@ -1,0 +1,149 @@
+"""The mesh of an SMPL-family motion, skinned on demand (`style = "mesh"`): smplx's own skinning with the user's body
+model, a chunk of frames at a time.
+
+`smpl_mesh` reads an SMPL-family parameter file as smpl_files reads it for its joints (the same hand rule,
+smpl_files.apply_hand_mean, and the same SMPL-X expressions), so the mesh and the joints agree; `mesh_source` takes
+poses already read (Seamless Interaction's files, generation.data.seamless_files). A MeshSource gives frames a..b's
+vertices through `smplx.lbs.lbs` (shape and pose blend shapes, then linear blend skinning) and which vertices the
+face mask covers; rendering.mesh draws them, and generation.stimuli.mesh_track carries them onto a clip's joints.
+Beyond the four arrays the joints need, the skinning reads the model's posedirs, weights and faces, each checked
+against its vertices and joints, and refuses a model of more than MAX_MESH_VERTICES vertices before it loads them.
+torch and smplx are imported only when frames are skinned.
+"""
+
+from pathlib import Path
+
+import numpy as np
+
+from moglow_eval.core.clip import MAX_MESH_VERTICES
+
+from .smpl_files import (
+    WHERE_TO_GET,
+    SmplError,
+    apply_hand_mean,
+    load_arrays,
+    read_expression,
+    read_model,
+    read_parameters,
+    shape_and_expression,
+    shape_components,
+)
+
+MESH_BATCH = 32  # frames per pass through the skinning: bounds the vertices held at once (32 x 10k x 3 floats)
+
+
+def smpl_mesh(path, model, smpl_type=None, source_fps=None, face="mask", hand_mean="auto"):
+    """The skinned mesh of an SMPL-family parameter file (`style = "mesh"`): a MeshSource whose `vertices(a, b)`
+    gives frames a..b's vertices [n, V, 3] (metres, the model's axes, float32) through smplx's own skinning
+    (`smplx.lbs.lbs`: shape and pose blend shapes, then linear blend skinning) with the user's model file and the
+    motion's betas, a chunk at a time, so memory does not grow with the clip. `face`: "mask" (the face's vertices
+    flagged for the mask, rendering.mesh) or "none"; `hand_mean` as smpl_positions takes it, and the file's SMPL-X
+    expressions, so that the mesh and the joints agree. SmplError naming the file otherwise."""
+    if model is None or not Path(model).is_file():  # before the hand mean reads it
+        raise SmplError(f"{model or path}: no body model file for the mesh style; {WHERE_TO_GET}")
+    poses, trans, betas, fps = read_parameters(path, source_fps)
+    poses = apply_hand_mean(poses, model, smpl_type, path, hand_mean)
+    expression = read_expression(path, len(poses))
+    return mesh_source(poses, trans, betas, fps, model, smpl_type, face, path, expression)
+
+
+def mesh_source(poses, trans, betas, fps, model, smpl_type, face, where, expression=None):
+    """The MeshSource of poses [T, 3J], translations [T, 3] and `betas` (empty: the mean shape) at `fps`, through
+    the body model file `model` (smpl_mesh; Seamless Interaction's files through generation.stimuli.mesh_track).
+    SmplError naming `where` or the model."""
+    if model is None or not Path(model).is_file():
+        raise SmplError(f"{model or where}: no body model file for the mesh style; {WHERE_TO_GET}")
+    template, shapedirs, regressor, parents, kind = read_model(model, smpl_type)
+    if poses.shape[1] != 3 * len(parents):
+        raise SmplError(
+            f"{where}: 'poses' has {poses.shape[1]} values a frame; the {kind} model {model} takes {3 * len(parents)}"
+        )
+    skin = _read_skin(model, len(template), len(parents))
+    n_shape = min(len(betas), shape_components(kind, shapedirs.shape[2]))
+    shape = (*shape_and_expression(kind, shapedirs, betas, expression), n_shape)
+    return MeshSource(where, poses, trans, fps, template, shape, regressor, parents, kind, skin, face)
+
+
+class MeshSource:
+    """An SMPL-family clip's mesh, skinned on demand (see smpl_mesh): what rendering.mesh draws (`faces` [F, 3],
+    `mask` [V]: the face mask's vertices), `fps`, `n_frames` and `vertices(a, b)`."""
+
+    def __init__(self, path, poses, trans, fps, template, shape, regressor, parents, kind, skin, face):
+        """`shape`: (directions [V, 3, K], coefficients [1 or T, K], how many of them are the body's shape) as
+        shape_and_expression gives them: the body shape's, then, per frame, SMPL-X's expression's."""
+        self.path, self.poses, self.trans, self.fps, self.kind = path, poses, trans, fps, kind
+        self.n_frames = len(poses)
+        self.template, self.regressor = template.astype(np.float32), regressor.astype(np.float32)
+        self.shapedirs, self.coef = (x.astype(np.float32) for x in shape[:2])
+        self.n_shape = shape[2]
+        self.parents = parents
+        self.posedirs, self.weights, self.faces = skin
+        none = np.zeros(len(template), bool)
+        self.mask = face_vertices(self.shaped(), self.rest_joints()) if face == "mask" else none
+
+    def shaped(self):
+        """The rest vertices [V, 3] in this motion's shape."""
+        k = self.n_shape
+        return self.template + self.shapedirs[:, :, :k] @ self.coef[0, :k]
+
+    def rest_joints(self):
+        return self.regressor @ self.shaped()
+
+    def vertices(self, a, b):
+        """Frames a..b's vertices [b - a, V, 3] float32, in metres, the root translation applied."""
+        return self.posed(a, b)[0]
+
+    def posed(self, a, b):
+        """(vertices [b - a, V, 3], joints [b - a, J, 3]) of frames a..b, float32, the root translation applied:
+        smplx's forward pass, a chunk of MESH_BATCH frames at a time."""
+        import torch
+        from smplx.lbs import lbs
+
+        verts = np.empty((b - a, len(self.template), 3), np.float32)
+        joints = np.empty((b - a, len(self.parents), 3), np.float32)
+        with torch.no_grad():
+            for s in range(a, b, MESH_BATCH):
+                e = min(b, s + MESH_BATCH)
+                coef = np.repeat(self.coef, e - s, 0) if len(self.coef) == 1 else self.coef[s:e]
+                v, j = lbs(
+                    torch.from_numpy(coef),
+                    torch.from_numpy(self.poses[s:e].astype(np.float32)),
+                    torch.from_numpy(self.template),
+                    torch.from_numpy(self.shapedirs),
+                    torch.from_numpy(self.posedirs),
+                    torch.from_numpy(self.regressor),
+                    torch.from_numpy(self.parents),
+                    torch.from_numpy(self.weights),
+                )
+                shift = self.trans[s:e, None].astype(np.float32)
+                verts[s - a : e - a] = v.numpy() + shift
+                joints[s - a : e - a] = j.numpy() + shift
+        return verts, joints
+
+
+def face_vertices(shaped, joints):
+    """Which rest vertices [V] the face mask covers: those within 15 cm of the head joint (15 in every SMPL layout),
+    in front of it (the models face +Z at rest) by more than 4 cm, and above the chin (7 cm below the joint)."""
+    r = shaped - joints[15]
+    return (np.linalg.norm(r, axis=1) < 0.15) & (r[:, 2] > 0.04) & (r[:, 1] > -0.07)
+
+
+def _read_skin(model, n_vertices, n_joints):
+    """(posedirs [(J-1)*9, V*3] as smplx's lbs takes them, weights [V, J], faces [F, 3] int64) of a body model,
+    refused with one line where they do not fit its vertices and joints."""
+    model = Path(model)
+    if n_vertices > MAX_MESH_VERTICES:
+        raise SmplError(f"{model}: {n_vertices} vertices, more than a body mesh has (at most {MAX_MESH_VERTICES})")
+    d = load_arrays(model, ("posedirs", "weights", "f"), "a body model")
+    posedirs, weights, faces = np.asarray(d["posedirs"], np.float32), np.asarray(d["weights"], np.float32), d["f"]
+    if posedirs.shape != (n_vertices, 3, (n_joints - 1) * 9) or weights.shape != (n_vertices, n_joints):
+        raise SmplError(
+            f"{model}: posedirs {posedirs.shape} and weights {weights.shape} do not fit its {n_vertices} vertices and "
+            f"{n_joints} joints"
+        )
+    faces = np.asarray(faces)
+    if faces.ndim != 2 or faces.shape[1] != 3 or faces.dtype.kind not in "iu" or len(faces) == 0:
+        raise SmplError(f"{model}: 'f' must be integer triangles [F, 3], got {faces.shape} {faces.dtype}")
+    if faces.min() < 0 or faces.max() >= n_vertices:
+        raise SmplError(f"{model}: 'f' indexes vertices outside the model's {n_vertices}")
+    return posedirs.reshape(n_vertices * 3, -1).T.copy(), weights, faces.astype(np.int64)
