@@ -148,6 +148,8 @@ def test_a_settled_ranking_closes_the_study_to_new_raters_only(make, big_stimuli
     assert "ranking is settled" in refused.json["error"]
     p = c.get("/admin/progress.json", headers=TOKEN_HDR).json["ranking"]
     assert p["closed"] and p["settled"] and p["order"] == ["NAT", "MG", "FL"]
+    # one Elo anchor with the report's (issue 63): the reference at 1000, the others below it as they lost
+    assert p["elo_anchor"] == "NAT" and p["elo"]["NAT"] == 1000.0 and p["elo"]["FL"] < p["elo"]["MG"] < 1000.0
     assert p["weakest_separation"] >= p["separation_needed"] == pytest.approx(1 - 0.05 / 2)
     assert p["votes"] == sum(votes.values()) < 20 * 90  # long before the targets
     trials, done = base.complete(
@@ -155,7 +157,7 @@ def test_a_settled_ranking_closes_the_study_to_new_raters_only(make, big_stimuli
     )
     assert done["done"] and trials
     page = c.get("/admin", headers=TOKEN_HDR).get_data(as_text=True)
-    assert "closed to new raters" in page and 'id="ranking"' in page
+    assert "closed to new raters" in page and 'id="ranking"' in page and '<strong id="elo-anchor">NAT</strong>' in page
 
 
 def toss_up(a, b, i):

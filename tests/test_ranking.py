@@ -72,14 +72,33 @@ def test_the_covariance_is_the_inverse_hessian_of_the_log_posterior():
     assert np.allclose(ranking.covariance(post.mean, w + w.T), post.cov)
 
 
-def test_the_elo_scale_is_400_log10_odds_around_1000():
+def test_the_elo_scale_is_400_log10_odds_with_the_reference_at_1000():
     # two conditions, 30 to 10: the maximum-likelihood log odds is log 3
     post = ranking.fit(np.array([[0.0, 30.0], [10.0, 0.0]]), prior_sd=1e3)
-    e, se = ranking.elo(post)
-    assert e[0] - e[1] == pytest.approx(400 * math.log10(3), abs=1e-4)
-    assert e.mean() == pytest.approx(1000.0)
-    # the s.e. of the difference is sqrt(1/30 + 1/10) log units; each centred condition carries half of it
-    assert se[0] == pytest.approx(ranking.ELO_PER_LOG * math.sqrt(1 / 30 + 1 / 10) / 2, rel=1e-4)
+    for ref in (0, 1):
+        e, se = ranking.elo(post, ref)
+        assert e[0] - e[1] == pytest.approx(400 * math.log10(3), abs=1e-4)
+        assert e[ref] == pytest.approx(1000.0)
+        # the s.e. is of the difference from the reference: sqrt(1/30 + 1/10) log units, 0 for the reference
+        assert se[ref] == pytest.approx(0.0, abs=1e-9)
+        assert se[1 - ref] == pytest.approx(ranking.ELO_PER_LOG * math.sqrt(1 / 30 + 1 / 10), rel=1e-4)
+
+
+def test_the_dashboard_and_the_report_put_one_condition_at_1000():
+    # One anchor (issue 63): NAT where it is, else the first by name; the report's default reference is the same.
+    import pandas as pd
+
+    from analysis.designs.pairwise.preference import bradley_terry
+
+    assert ranking.elo_reference(["S2", "NAT", "S1"]) == "NAT"
+    assert ranking.elo_reference(["S2", "S1"]) == "S1"
+    rng = np.random.default_rng(3)
+    pairs = [("S1", "S2"), ("S1", "S3"), ("S2", "S3")] * 40
+    o = pd.DataFrame([{"rater_id": f"r{k % 7}", "item": "i", "first": a, "second": b, "pref": int(rng.integers(-2, 3))}
+                      for k, (a, b) in enumerate(pairs)])  # fmt: skip
+    bt = bradley_terry(o, n_boot=5)
+    conds = ["S2", "S1", "S3"]
+    assert bt["reference"] == ranking.elo_reference(conds) == "S1"
 
 
 def test_the_evidence_for_two_conditions_is_the_likelihood_ratio_of_their_order(monkeypatch):

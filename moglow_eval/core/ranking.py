@@ -41,7 +41,8 @@ From it:
 - `settledness`: every adjacent pair in the posterior-mean order separated, P(order right) at least
   1 - (1 - level) / (k - 1) each (a Bonferroni split of the error over the k - 1 adjacent pairs: if every adjacent
   pair of the estimated order is right, the whole order is), or every condition's Elo interval narrower than a
-  width. Elo = 400 log10 of the odds, centred on 1000 (the GENEA leaderboard's scale, Nagy et al. 2025).
+  width (each condition's interval about the mean condition). Elo = 400 log10 of the odds (the GENEA leaderboard's
+  scale, Nagy et al. 2025), the reference condition at 1000 (`elo_reference`), on the dashboard and in the report.
 - The indifference zone: a pair whose Elo difference is within a margin (the app's PAIRING_INDIFFERENCE) with high
   probability is tied (`tied`, `within`): no more active votes, and settled for the stopping rule.
   Without it, two conditions that are truly alike keep drawing votes for an order no number of votes settles.
@@ -61,9 +62,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import expit, ndtr, ndtri
 
+from . import study
+
 PRIOR_SD = 2.0  # log strengths: two systems a prior sd apart win 88% of their votes; a few dozen votes outweigh it
 ELO_PER_LOG = 400.0 / math.log(10.0)  # Elo points per unit of log strength (400 log10 odds)
-ELO_ANCHOR = 1000.0  # the mean condition's Elo
+ELO_ANCHOR = 1000.0  # the Elo of the reference condition (elo_reference)
 # The indifference zone: two conditions whose Elo difference is, with probability TIE_CONFIDENCE, smaller than a
 # margin are tied. Their order is no longer worth a vote (evidence), and the stopping rule takes them as settled. Off
 # by default: a margin also stops the votes on pairs truly that close, whose order Kendall's tau still counts (the
@@ -216,12 +219,31 @@ def pick_order(post: Posterior, rng, random_share: float, margin_elo: float = 0.
     return np.lexsort((draw, e))  # by evidence, equal evidence (none yet, or tied) in a random order
 
 
-def elo(post: Posterior) -> tuple[np.ndarray, np.ndarray]:
-    """(Elo of each condition, its standard error): 400 log10 odds, the mean condition at ELO_ANCHOR."""
+def elo_reference(conds) -> str:
+    """The condition at ELO_ANCHOR, the same on the dashboard and in the report: the reference (NAT) where the
+    study has one, else the first condition in name order. A reference keeps its 1000 as systems join a growing
+    study, where the mean condition's would move with every newcomer."""
+    conds = sorted(conds)
+    return study.NATURAL if study.NATURAL in conds else conds[0]
+
+
+def elo(post: Posterior, reference: int) -> tuple[np.ndarray, np.ndarray]:
+    """(Elo of each condition, its standard error): 400 log10 odds, condition `reference` (an index; see
+    elo_reference) at ELO_ANCHOR, as the report's ranking puts it; a standard error is of the
+    difference from the reference (the reference's own is 0), as the report's intervals are."""
+    k = len(post.mean)
+    to_ref = np.eye(k)
+    to_ref[:, reference] -= 1.0
+    sd = np.sqrt(np.maximum(np.diag(to_ref @ post.cov @ to_ref.T), 0.0))
+    return ELO_ANCHOR + ELO_PER_LOG * (post.mean - post.mean[reference]), ELO_PER_LOG * sd
+
+
+def _centred_se(post: Posterior) -> np.ndarray:
+    """Each condition's Elo standard error about the mean condition: the stopping rule's interval width, which
+    asks how precisely every condition is placed, whichever one is the anchor."""
     k = len(post.mean)
     centre = np.eye(k) - 1.0 / k
-    sd = np.sqrt(np.maximum(np.diag(centre @ post.cov @ centre), 0.0))
-    return ELO_ANCHOR + ELO_PER_LOG * (post.mean - post.mean.mean()), ELO_PER_LOG * sd
+    return ELO_PER_LOG * np.sqrt(np.maximum(np.diag(centre @ post.cov @ centre), 0.0))
 
 
 def settledness(post: Posterior, level: float, width: float | None = None, margin_elo: float = 0.0) -> dict:
@@ -242,7 +264,7 @@ def settledness(post: Posterior, level: float, width: float | None = None, margi
     is_tied = within(post, a, b, margin_elo) >= needed if margin_elo and margin_elo > 0 else np.zeros(k - 1, bool)
     sep = ndtr((post.mean[a] - post.mean[b]) / np.sqrt(var))
     weakest = float(sep[~is_tied].min()) if (~is_tied).any() else 1.0
-    _, se = elo(post)
+    se = _centred_se(post)
     widest = float(2.0 * ndtri(1.0 - (1.0 - level) / 2.0) * se.max())
     separated = weakest >= needed
     narrow = width is not None and width > 0 and widest <= width

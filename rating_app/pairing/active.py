@@ -150,13 +150,15 @@ class Ranking:
         with self.lock:
             post, votes, (left_out, n_excluded) = self.post, self.votes, self.untrusted
         s = ranking.settledness(post, cfg["STOP_LEVEL"], cfg["STOP_WIDTH"] or None, cfg["PAIRING_INDIFFERENCE"])
-        elo, se = ranking.elo(post)
+        anchor = ranking.elo_reference(self.conds)
+        elo, se = ranking.elo(post, self.conds.index(anchor))
         cap = cfg["STOP_MAX_VOTES"]
         return {
             "pairing": cfg["PAIRING"],
             "stop_when": cfg["STOP_WHEN"],
             "level": cfg["STOP_LEVEL"],
             "order": [self.conds[i] for i in s["order"]],
+            "elo_anchor": anchor,  # the condition at 1000, as in the report
             "elo": {c: round(float(e), 1) for c, e in zip(self.conds, elo)},
             "elo_se": {c: round(float(e), 1) for c, e in zip(self.conds, se)},
             "weakest_separation": round(s["weakest"], 4),

@@ -22,6 +22,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats as sps
 
+from moglow_eval.core import ranking as core_ranking
 from moglow_eval.core import study
 
 from ...data.load import AnalysisError, read_export
@@ -30,7 +31,7 @@ from . import ranking, separation
 REQUIRED = ("rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role")
 ROLES = ("test", "catch")
 LEVELS = (2, 1, 0, -1, -2)
-BAD, REFERENCE = study.CATCH, study.NATURAL
+BAD = study.CATCH
 RIDGE = 1e-6  # on the log strengths: a condition that never wins stays finite (about -15)
 
 
@@ -305,7 +306,7 @@ def bradley_terry(o, n_boot=1000, seed=0, level=0.95, reference=None):
     conds = sorted(set(o["first"]) | set(o["second"]))
     if reference is not None and reference not in conds:
         raise AnalysisError(f"--reference {reference}: no such condition in the test rows ({', '.join(conds)})")
-    reference = reference or (REFERENCE if REFERENCE in conds else conds[0])
+    reference = reference or core_ranking.elo_reference(conds)  # the dashboard's anchor too
     tables, pairs = _tables(o, conds)
     total = tables.sum(axis=0)
     ties = bool(total[:, 2].sum() > 0)
