@@ -35,6 +35,7 @@ from tqdm import tqdm
 from moglow_eval.core import cli, study
 from moglow_eval.core.clip import save_clip
 from moglow_eval.core.tables import C2ST_COLUMNS
+from rendering.mesh import set_gl_environment
 from rendering.render import size_flag
 
 from .data.dataset import read_heldout
@@ -472,6 +473,7 @@ def _main(argv):
 
 
 def main(argv=None):
+    set_gl_environment()  # the process's own setting: the mesh style draws here, or in workers that inherit it
     return cli.run(_main, argv)
 
 

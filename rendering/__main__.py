@@ -5,6 +5,7 @@ from pathlib import Path
 
 from moglow_eval.core import cli
 from rendering.errors import RenderError
+from rendering.mesh import set_gl_environment
 from rendering.render import MAX_SIZE, MIN_SIZE, render_clip, size_flag
 
 PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower", "veryslow")
@@ -45,6 +46,7 @@ def _main(argv):
 
 
 def main(argv=None):
+    set_gl_environment()  # the process's own setting, so here and not in the library
     return cli.run(_main, argv)
 
 

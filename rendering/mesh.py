@@ -33,6 +33,12 @@ from .solid import AMBIENT, DIFFUSE, LIGHT
 NEAR_PLANE, FAR_PLANE = 0.05, 100.0  # metres: the depth range of the mesh's projection
 WINDOW_STEP = 64  # pixels: the drawn window's sides are multiples of this
 MASK_COLOUR = (0.93, 0.84, 0.72)  # a plain light mask over the face, as GENEA 2026 covers it: no features
+# Mesa's llvmpipe rasterises on as many threads as there are cores unless told otherwise; here the other cores
+# already skin, compose and encode (and a render pool runs a process per core), and drawing in the calling thread
+# made whole clips faster on 2 cores (RESULTS mesh-body). A GPU driver ignores it. Library code sets no environment
+# variable: the commands that draw (python -m rendering, generation.make_stimuli) and the render workers'
+# initialiser set these before any context is made (set_gl_environment), and a user's own setting wins.
+GL_ENVIRONMENT = {"LP_NUM_THREADS": "0"}
 
 _VERTEX = """
 #version 330
@@ -103,10 +109,6 @@ def gl_context():
         import moderngl
     except ImportError:
         raise RenderError('the mesh style needs moderngl: pip install -e "." (it is a dependency)') from None
-    # Mesa's llvmpipe rasterises on as many threads as there are cores unless told otherwise; here the other cores
-    # already skin, compose and encode (and a render pool runs a process per core), and drawing in the calling
-    # thread made whole clips faster on 2 cores (RESULTS mesh-body). A GPU driver ignores it; a user's setting wins.
-    os.environ.setdefault("LP_NUM_THREADS", "0")
     errors = []
     for kw in ({"backend": "egl"}, {}):
         try:
@@ -121,6 +123,13 @@ def gl_context():
         )
     _CONTEXT.ctx = ctx
     return ctx
+
+
+def set_gl_environment():
+    """GL_ENVIRONMENT into this process's environment, where the user has not set them: for a command's `main` or a
+    worker process's initialiser only, never from a library call."""
+    for name, value in GL_ENVIRONMENT.items():
+        os.environ.setdefault(name, value)
 
 
 def closed(faces):

@@ -246,16 +246,19 @@ def _painted(people, meshes, targets):
                 pass
 
 
-_MESH_THREAD = []
-os.register_at_fork(after_in_child=_MESH_THREAD.clear)  # a forked child has no such thread: it makes its own
+_MESH_THREAD = {}  # {process id: its mesh thread}, empty until a process first draws a mesh
 
 
 def _mesh_thread():
     """The one thread that skins and draws meshes, for every clip this process renders: its OpenGL context
-    (rendering.mesh.gl_context, a thread's) is made once, not once a clip."""
-    if not _MESH_THREAD:
-        _MESH_THREAD.append(ThreadPoolExecutor(1, thread_name_prefix="mesh"))
-    return _MESH_THREAD[0]
+    (rendering.mesh.gl_context, a thread's) is made once, not once a clip. Made on first use, so that importing
+    rendering starts nothing; keyed by the process, so that a forked child, which inherits the parent's entry but
+    not its thread, makes its own (no fork hook needed)."""
+    pid = os.getpid()
+    if pid not in _MESH_THREAD:
+        _MESH_THREAD.clear()
+        _MESH_THREAD[pid] = ThreadPoolExecutor(1, thread_name_prefix="mesh")
+    return _MESH_THREAD[pid]
 
 
 def _paint(people, meshes, targets, ready, stop):

@@ -17,6 +17,8 @@ import pytest
 from helpers.once import built_once
 from helpers.paths import BANDAI, ROOT, SHARED, small_take_names
 
+from rendering.mesh import set_gl_environment
+
 # Fixtures that need the full machine: ../shared, PostgreSQL, or a real run of the pipeline.
 FULL_FIXTURES = {"shared_dir", "small_dataset", "tiny_runs", "quick_stimuli", "pg_server", "pg_database"}
 FULL_MARKERS = ("full", "slow", "postgres", "browser")
@@ -45,6 +47,11 @@ def pytest_configure(config):
     # caching in the user's cache folder. The suite samples in float32 on every host, as its figures were made, and
     # leaves that cache alone; tests/test_sampler_precision.py tests the pick with measurements it gives it.
     os.environ.setdefault("MOGLOW_SAMPLER_PRECISION", "float32")
+    # The suite's process draws meshes as a command's does, so it sets what a command's main sets before its first GL
+    # context (rendering.mesh.GL_ENVIRONMENT: the library sets no environment variable); without it llvmpipe's
+    # rasteriser threads, which a forked child does not inherit, would leave tests/test_mesh_drawing.py's child
+    # waiting for ever.
+    set_gl_environment()
 
 
 @pytest.fixture(scope="session")

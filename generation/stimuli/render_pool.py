@@ -17,6 +17,7 @@ from tqdm import tqdm
 
 from rendering.audio import mux_audio
 from rendering.blinding import check_one_size, odd_ones, same_mtime
+from rendering.mesh import set_gl_environment
 from rendering.render import render_clip
 
 log = logging.getLogger(__name__)
@@ -50,7 +51,8 @@ def render_all(jobs, workers, progress=True):
                 _render_job(job)
                 bar.update()
             return
-        pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"))
+        # A worker is a process of its own: its initialiser sets what its GL drawing wants, as a command's main does.
+        pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=set_gl_environment)
         try:
             for fut in as_completed([pool.submit(_render_job, job) for job in jobs]):
                 fut.result()  # a worker's RenderError is raised here
