@@ -146,7 +146,8 @@ MARK = "demo.json"  # written first by every run: what tells a demo's folder fro
 RUN_OUTPUTS = ("logs", "report", "ratings.csv", "pairs.csv", "crowd_summary.json", MARK)
 STIMULI_OUTPUTS = ("stimuli", "study")  # made anew unless --stimuli is given (runs/ keeps the tiny models: reused)
 DB_NAME = "ratings.sqlite"
-ENV_NAMES = {"design": "STUDY_DESIGN"}  # the app's variable of each serve setting: its name in upper case, or this
+# The app's variable of each serve setting: RATING_ and its name in upper case, or this (rating_app/store/settings.py).
+ENV_NAMES = {"design": "RATING_STUDY_DESIGN"}
 
 
 def clear_earlier_run(out: Path, new_stimuli: bool) -> None:
@@ -193,8 +194,8 @@ def serve_command(manifest: Path, db: str, port: int, opts: dict, gunicorn: bool
     """The app's command line (or gunicorn's, with the settings in `env`) for the settings `opts`."""
     py = sys.executable
     if gunicorn:
-        env.update(RATING_MANIFEST=str(manifest), DATABASE_URL=db)
-        env.update({ENV_NAMES.get(k, k.upper()): str(v) for k, v in opts.items()})
+        env.update(RATING_MANIFEST=str(manifest), RATING_DATABASE_URL=db)
+        env.update({ENV_NAMES.get(k, "RATING_" + k.upper()): str(v) for k, v in opts.items()})
         return [py, "-m", "gunicorn", "-w", "2", "--threads", "4", "-b", f"127.0.0.1:{port}", "rating_app.wsgi:app"]
     flags = [x for k, v in opts.items() for x in (f"--{k.replace('_', '-')}", str(v))]
     return [py, "-m", "rating_app", "serve", "--manifest", str(manifest), "--db", db, "--port", str(port), *flags]
@@ -205,7 +206,7 @@ def start_app(procs: "Processes", out: Path, manifest: Path, db: str, s: dict) -
     token."""
     port = _free_port()
     url = f"http://127.0.0.1:{port}"
-    env = dict(os.environ, ADMIN_TOKEN=secrets.token_hex(16))
+    env = dict(os.environ, RATING_ADMIN_TOKEN=secrets.token_hex(16))
     _stage(f"2/5 rating app at {url} (database {db.split('@')[-1]})")
     # The crowd runs on loopback (one address) and should not take 4 s per clip: lift the per-address session
     # limit and lower the minimum viewing time (the dashboard says so); the crowd still waits as required.
@@ -291,7 +292,7 @@ def run_demo(
         url, env = start_app(procs, out, manifest, db, settings)
         summary = run_crowd(procs, out, url, env, manifest, settings, timeout_s - (time.monotonic() - t0))
         _stage("4/5 export")
-        ratings = _export(url, env["ADMIN_TOKEN"], out)
+        ratings = _export(url, env["RATING_ADMIN_TOKEN"], out)
         print(f"  {ratings}", flush=True)
         procs.stop_all()
         report(procs, out, ratings, stimuli)
@@ -337,7 +338,7 @@ def build_parser():
         "--min-view",
         type=cli.number(float, 0, 1),
         default=0.01,
-        help="the app's MIN_VIEW: share of each clip the crowd must wait before answering (default 0.01)",
+        help="the app's RATING_MIN_VIEW: share of each clip the crowd must wait before answering (default 0.01)",
     )
     p.add_argument(
         "--design",

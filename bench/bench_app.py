@@ -10,15 +10,15 @@ training clips, real MP4s of --clip-frames frames at 20 fps, 4 s like the paper'
 (or SQLite file). Each simulated rater keeps one keep-alive connection and loops, as the page does:
 
 - `--pace app` (default): GET next -> GET every video of the trial -> wait until the clips can have played to the
-  end (the app's own rule, MIN_VIEW=1, its default: the clip in acr, the longer clip in pairwise, the sum of a
+  end (the app's own rule, RATING_MIN_VIEW=1, its default: the clip in acr, the longer clip in pairwise, the sum of a
   parallel page's clips) -> a decision pause (exponential, mean --think, default 1 s) -> POST the answer. This is
   the fastest a rater can go: the app refuses an earlier answer.
-- `--pace stress`: the app's viewing rule off (MIN_VIEW=0), no video fetches, and a pause of mean --think
+- `--pace stress`: the app's viewing rule off (RATING_MIN_VIEW=0), no video fetches, and a pause of mean --think
   (default 2 s) between GET and POST: more answers per second than raters could give (the earlier benchmark).
 
 --behind caddy (issue 33): the raters reach --hosts gunicorn hosts (each --workers x --threads) sharing the database
-through Caddy over HTTPS with its own CA, and Caddy sends the videos (VIDEO_ACCEL=caddy); the target is then p99 <=
-150 ms, and the largest worker's resident memory is reported (it holds no video).
+through Caddy over HTTPS with its own CA, and Caddy sends the videos (RATING_VIDEO_ACCEL=caddy); the target is then
+p99 <= 150 ms, and the largest worker's resident memory is reported (it holds no video).
 
 Latencies are client-side wall times (http.client, no retries); the first --warmup seconds are discarded.
 Target: p99 <= 100 ms for the answer POST and the next-trial GET, 0 errors.
@@ -296,11 +296,11 @@ def main():
         choices=("none", "caddy"),
         default="none",
         help="caddy: the raters reach --hosts app hosts through Caddy over HTTPS (its own CA), Caddy sending the "
-        "videos (VIDEO_ACCEL=caddy); target p99 <= 150 ms",
+        "videos (RATING_VIDEO_ACCEL=caddy); target p99 <= 150 ms",
     )
     p.add_argument("--hosts", type=int, default=2, help="app hosts (gunicorn processes) behind the proxy (2)")
-    p.add_argument("--pairing", choices=("balanced", "active"), default="balanced", help="pairwise: PAIRING")
-    p.add_argument("--stop-when", choices=("never", "settled"), default="never", help="pairwise: STOP_WHEN")
+    p.add_argument("--pairing", choices=("balanced", "active"), default="balanced", help="pairwise: RATING_PAIRING")
+    p.add_argument("--stop-when", choices=("never", "settled"), default="never", help="pairwise: RATING_STOP_WHEN")
     a = p.parse_args()
     if a.think is None:
         a.think = 1.0 if a.pace == "app" else 2.0
@@ -324,19 +324,19 @@ def main():
     env = dict(
         os.environ,
         RATING_MANIFEST=str(manifest),
-        DATABASE_URL=url,
-        ADMIN_TOKEN="bench",
-        RATINGS_PER_CLIP="100000",
-        MIN_VIEW="1" if a.pace == "app" else "0",
-        SESSIONS_PER_CLIENT="0",  # every rater is on loopback
-        STUDY_DESIGN=a.design,
-        PAIRING=a.pairing,
-        STOP_WHEN=a.stop_when,
+        RATING_DATABASE_URL=url,
+        RATING_ADMIN_TOKEN="bench",
+        RATING_RATINGS_PER_CLIP="100000",
+        RATING_MIN_VIEW="1" if a.pace == "app" else "0",
+        RATING_SESSIONS_PER_CLIENT="0",  # every rater is on loopback
+        RATING_STUDY_DESIGN=a.design,
+        RATING_PAIRING=a.pairing,
+        RATING_STOP_WHEN=a.stop_when,
     )
     log = open(tmp / "gunicorn.log", "w")
     tls, procs = None, []
     if a.behind == "caddy":
-        env["VIDEO_ACCEL"], env["PROXY_COUNT"] = "caddy", "1"
+        env["RATING_VIDEO_ACCEL"], env["RATING_PROXY_COUNT"] = "caddy", "1"
         ports = [free_port() for _ in range(a.hosts)]
         procs = [start_server(q, env, a.workers, a.threads, log) for q in ports]
         caddy, tls = start_caddy(port, ports, stim, tmp, log)

@@ -33,7 +33,7 @@ from generation.motion import skeleton  # noqa: E402
 from generation.motion.features import load_take  # noqa: E402
 from rendering.camera import camera_targets  # noqa: E402
 from rendering.raster import FrameDrawer, _background  # noqa: E402
-from rendering.render import render_clip  # noqa: E402
+from rendering.render import RenderOptions, render_clip  # noqa: E402
 
 WALK = (
     Path(__file__).resolve().parents[2]
@@ -108,13 +108,14 @@ def main(argv=None):
     ]
     rows = []
     for label, kw, preset in configs:
-        ours = measure(lambda: render_clip(clip, tmp / "ours.mp4", size=args.size, threads=1, **kw), args.repeats)
+        options = RenderOptions(args.size, threads=1, **kw)
+        ours = measure(lambda o=options: render_clip(clip, tmp / "ours.mp4", o), args.repeats)
         base = measure(lambda: baseline(joints, str(tmp / "base.mp4"), args.size, preset), args.repeats)
         rows.append((label, ours, base))
 
     def cold():  # the first clip of a process also computes the cached blank floor / grid fade maps
         _background.cache_clear()
-        render_clip(clip, tmp / "cold.mp4", size=args.size, threads=1)
+        render_clip(clip, tmp / "cold.mp4", RenderOptions(args.size, threads=1))
 
     first = measure(cold, 1)
 
@@ -124,8 +125,8 @@ def main(argv=None):
             drawer.draw(joints[t], target)
 
     draw = measure(draw_only, args.repeats)
-    ours640 = measure(lambda: render_clip(clip, tmp / "o640.mp4", size=640, threads=1), args.repeats)
-    qp640 = measure(lambda: render_clip(clip, tmp / "q640.mp4", size=640, threads=1, qp=17), args.repeats)
+    ours640 = measure(lambda: render_clip(clip, tmp / "o640.mp4", RenderOptions(640, threads=1)), args.repeats)
+    qp640 = measure(lambda: render_clip(clip, tmp / "q640.mp4", RenderOptions(640, threads=1, qp=17)), args.repeats)
     load = os.getloadavg()[0]
     print(
         f"80-frame clip, {args.size}x{args.size}, one core (#{args.core}), best of {args.repeats}; "

@@ -39,7 +39,7 @@ from rendering.camera import Projector, camera_targets  # noqa: E402
 from rendering.framing import item_camera  # noqa: E402
 from rendering.mesh import MeshBody, straight  # noqa: E402
 from rendering.raster import STYLES  # noqa: E402
-from rendering.render import render_clip  # noqa: E402
+from rendering.render import RenderOptions, render_clip  # noqa: E402
 
 SIZE, FPS = 640, 30.0
 
@@ -154,8 +154,8 @@ from pathlib import Path
 import bench_render_mesh as b
 model, motion = b.make_take(Path({str(folder)!r}), {seconds})
 clip, camera = b.scene(model, motion)
-b.render_clip(clip, Path({str(folder)!r}) / "m.mp4", b.SIZE, camera, b.STYLES["mesh"], threads=1, rate_seed=0,
-              mesh=b.smpl_mesh(motion, model))
+options = b.RenderOptions(b.SIZE, camera, b.STYLES["mesh"], threads=1, rate_seed=0)
+b.render_clip(clip, Path({str(folder)!r}) / "m.mp4", options, mesh=b.smpl_mesh(motion, model))
 print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
 """
     env = {**os.environ, "PYTHONPATH": f"{ROOT}:{ROOT / 'bench'}"}
@@ -207,10 +207,8 @@ def main():
         for _ in range(args.repeats):  # whole clips, in turn
             for name in ("stick", "mesh"):
                 t0 = time.perf_counter()
-                render_clip(
-                    clip, folder / f"{name}.mp4", SIZE, camera, STYLES[name], threads=1, rate_seed=0,
-                    mesh=source if name == "mesh" else None,
-                )  # fmt: skip
+                options = RenderOptions(SIZE, camera, STYLES[name], threads=1, rate_seed=0)
+                render_clip(clip, folder / f"{name}.mp4", options, mesh=source if name == "mesh" else None)
                 clips.setdefault(name, []).append(time.perf_counter() - t0)
         load = os.getloadavg()[0]
         stick, mesh = (float(np.median(clips[k])) for k in ("stick", "mesh"))

@@ -24,7 +24,7 @@ from generation.data.motion_files import read_motion  # noqa: E402
 from generation.own_study.scene import place  # noqa: E402
 from rendering.framing import item_camera  # noqa: E402
 from rendering.raster import STYLES  # noqa: E402
-from rendering.render import render_clip  # noqa: E402
+from rendering.render import RenderOptions, render_clip  # noqa: E402
 
 
 def main():
@@ -45,7 +45,8 @@ def main():
         for _ in range(args.repeats):
             for name, style in styles.items():
                 t0 = time.perf_counter()
-                render_clip(clip, Path(tmp) / "clip.mp4", args.size, camera, style, threads=1, rate_seed=0)
+                options = RenderOptions(args.size, camera, style, threads=1, rate_seed=0)
+                render_clip(clip, Path(tmp) / "clip.mp4", options)
                 times.setdefault(name, []).append(time.perf_counter() - t0)
     median = {name: float(np.median(t)) for name, t in times.items()}
     print(f"{args.frames} frames at {args.size}x{args.size}, load {os.getloadavg()[0]:.1f}")

@@ -28,7 +28,7 @@ from generation.own_study.scene import place  # noqa: E402
 from rendering.captions import ROOM, phrases  # noqa: E402
 from rendering.framing import item_camera, pair_camera  # noqa: E402
 from rendering.raster import STYLES  # noqa: E402
-from rendering.render import render_clip  # noqa: E402
+from rendering.render import RenderOptions, render_clip  # noqa: E402
 
 WORDS = "so the plan is to cross the old bridge before noon and then we wait for the morning light".split()
 
@@ -71,19 +71,16 @@ def main():
         out = Path(tmp) / "clip.mp4"
         for _ in range(args.repeats):
             for style in ("stick", "solid"):
+                s = STYLES[style]
+                one = RenderOptions(args.size, one_camera, s, threads=1)
+                two = RenderOptions(args.size, two_camera, s, threads=1, target=target)
+                cap = RenderOptions(args.size, cap_camera, s, threads=1, target=cap_target)
                 runs = {
-                    "one": lambda s=STYLES[style]: render_clip(clip, out, args.size, one_camera, s, threads=1),
-                    "one, pair camera": lambda s=STYLES[style]: render_clip(
-                        pair, out, args.size, two_camera, s, threads=1, target=target
-                    ),
-                    "two": lambda s=STYLES[style]: render_clip(
-                        pair, out, args.size, two_camera, s, threads=1, partner=other, target=target
-                    ),
-                    "two + captions": lambda s=STYLES[style]: render_clip(
-                        pair, out, args.size, cap_camera, s, threads=1, partner=other, target=cap_target,
-                        captions=captions,
-                    ),
-                }  # fmt: skip
+                    "one": lambda o=one: render_clip(clip, out, o),
+                    "one, pair camera": lambda o=two: render_clip(pair, out, o),
+                    "two": lambda o=two: render_clip(pair, out, o, partner=other),
+                    "two + captions": lambda o=cap: render_clip(pair, out, o, partner=other, captions=captions),
+                }
                 for name, run in runs.items():
                     t0 = time.perf_counter()
                     run()

@@ -2,11 +2,11 @@
 
     app = create_app(manifest="stimuli/manifest.csv", db_url="postgresql://...", ratings_per_clip=20)
 
-The settings are one table (settings.py): each is a keyword argument here, an environment variable (how
-`rating_app.wsgi:app` is configured under gunicorn), a key of the study file (`config`, or RATING_CONFIG;
-study_config.py) and, most of them, a flag of `serve`. An argument left as None is read from the environment,
-then the study file, then the default. Every setting is checked here, so a bad one stops the start with one line
-instead of failing on each request.
+The settings are one table (settings.py): each is a keyword argument here, an environment variable under the
+prefix RATING_ (how `rating_app.wsgi:app` is configured under gunicorn), a key of the study file (`config`, or
+RATING_CONFIG; store/config.py) and, most of them, a flag of `serve`. An argument left as None is read from the
+environment, then the study file, then the default. Every setting is checked here, so a bad one stops the start
+with one line instead of failing on each request.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ def create_app(*, config=None, check_files=True, **given) -> Flask:
     unknown = sorted(set(given) - set(ARGS))
     if unknown:
         raise TypeError(f"create_app() got an unexpected keyword argument {unknown[0]!r}")
-    env = study_environment(config or os.environ.get("RATING_CONFIG") or None, SETTINGS)
+    env = study_environment(config, SETTINGS)
     values = resolve(given, env)
     if not values["RATING_MANIFEST"]:
         raise AppError(
@@ -141,6 +141,7 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
             clips,
             Path(manifest).resolve().parent,
             preload=check_files and values["VIDEO_ACCEL"] == "off",
+            cache_bytes=values["VIDEO_CACHE_MB"] * 2**20,
             key=hashlib.sha256(b"video-etag:" + app.secret_key.encode()).digest(),
         ),
         "design": design,
@@ -211,7 +212,6 @@ def _open_database(db_url, pool_size, clips, design, cover_keys, n_raters, refer
     """The engine, with the schema created and the manifest's clips and the design stored; AppError, one line,
     when the database cannot be opened."""
     from .store import db as dbm
-    from .store import rounds  # noqa: F401  (its tables, on db.Base, are part of the schema init_db creates)
 
     engine = dbm.make_engine(db_url, pool_size=pool_size)
     try:

@@ -11,6 +11,7 @@ import sys
 from moglow_eval.core import cli
 from moglow_eval.core.study import DESIGNS
 
+from .store.config import environment
 from .store.manifest import AppError
 from .store.settings import add_flags
 
@@ -31,7 +32,7 @@ def _serve(a):
         a.port,
         app.config["STUDY_DESIGN"],
         db,
-        "" if app.config["ADMIN_TOKEN"] else " disabled: set ADMIN_TOKEN",
+        "" if app.config["ADMIN_TOKEN"] else " disabled: set RATING_ADMIN_TOKEN",
     )
     if app.config["MIN_VIEW"] < 1:
         log.warning(
@@ -223,7 +224,7 @@ def build_parser():
     p = cli.ArgumentParser(prog="python -m rating_app", description=__doc__)
     sub = p.add_subparsers(dest="cmd", required=True, parser_class=cli.ArgumentParser)
     _serve_parser(sub)
-    db = "database URL (default $DATABASE_URL or sqlite:///ratings.sqlite)"
+    db = "database URL (default $RATING_DATABASE_URL or sqlite:///ratings.sqlite)"
     e = sub.add_parser("export", help="write ratings.csv from the database")
     e.add_argument("--db", default=None, help=db)
     e.add_argument("--out", default="ratings.csv", help="output file, '-' for stdout")
@@ -298,6 +299,8 @@ def _simulate_parser(sub):
 
 def _main(argv):
     a = build_parser().parse_args(argv)
+    if getattr(a, "db", "") is None:  # export, backup and the rounds' commands without --db: the study's variable
+        a.db = environment().get("DATABASE_URL")
     return a.fn(a)
 
 

@@ -1,11 +1,11 @@
 """gunicorn entry point, configured by environment variables (see rating_app.create_app):
 
-    RATING_MANIFEST=stimuli/manifest.csv DATABASE_URL=postgresql://USER@HOST/DB ADMIN_TOKEN=... \\
+    RATING_MANIFEST=stimuli/manifest.csv RATING_DATABASE_URL=postgresql://USER@HOST/DB RATING_ADMIN_TOKEN=... \\
         gunicorn -w 4 -k gthread --threads 8 -b 0.0.0.0:8000 rating_app.wsgi:app
 
-A bad setting (no RATING_MANIFEST, a bad number, an unreachable database) prints one line and exits with
-gunicorn's "app failed to load" code (4): gunicorn then stops instead of respawning the worker forever, as it
-does for any other exit code.
+A bad setting (no RATING_MANIFEST, a bad number, an unreachable database, a variable named as before the RATING_
+prefix) prints one line and exits with gunicorn's "app failed to load" code (4): gunicorn then stops instead of
+respawning the worker forever, as it does for any other exit code.
 """
 
 import sys

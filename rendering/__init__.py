@@ -7,6 +7,6 @@
 from rendering.camera import DEFAULT_CAMERA, Camera
 from rendering.errors import RenderError
 from rendering.raster import Style
-from rendering.render import contact_sheet, render_clip
+from rendering.render import RenderOptions, contact_sheet, render_clip
 
-__all__ = ["Camera", "DEFAULT_CAMERA", "RenderError", "Style", "contact_sheet", "render_clip"]
+__all__ = ["Camera", "DEFAULT_CAMERA", "RenderError", "RenderOptions", "Style", "contact_sheet", "render_clip"]

@@ -6,7 +6,7 @@ from pathlib import Path
 from moglow_eval.core import cli
 from rendering.errors import RenderError
 from rendering.mesh import set_gl_environment
-from rendering.render import MAX_SIZE, MIN_SIZE, render_clip, size_flag
+from rendering.render import MAX_SIZE, MIN_SIZE, RenderOptions, render_clip, size_flag
 
 PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower", "veryslow")
 
@@ -41,7 +41,8 @@ def _main(argv):
     for flag, path in (("OUT", args.out), ("--sheet", args.sheet)):
         if path is not None and not Path(path).parent.is_dir():
             raise RenderError(f"{flag} {path}: folder {Path(path).parent} does not exist")
-    n = render_clip(args.clip, args.out, size=args.size, sheet=args.sheet, preset=args.preset, qp=args.qp, crf=args.crf)
+    options = RenderOptions(size=args.size, preset=args.preset, qp=args.qp, crf=args.crf)
+    n = render_clip(args.clip, args.out, options, sheet=args.sheet)
     print(f"wrote {args.out} ({n} frames, {args.size}x{args.size})")
 
 

@@ -12,17 +12,18 @@ import os
 import queue
 import threading
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 
 import numpy as np
 
 from moglow_eval.core import cli
 from moglow_eval.core.clip import check_fps, check_joints, load_clip
 
-from .camera import DEFAULT_CAMERA, camera_targets
+from .camera import DEFAULT_CAMERA, Camera, camera_targets
 from .captions import CaptionLayer
 from .encode import ffmpeg_writer
 from .errors import RenderError
-from .raster import DEFAULT_STYLE, FrameDrawer, one_colour
+from .raster import DEFAULT_STYLE, FrameDrawer, Style, one_colour
 
 MIN_SIZE, MAX_SIZE = 32, 4096  # pixels; beyond 4096 x264's level limits and memory get in the way
 MESH_CHUNK = 64  # frames of a mesh's vertices skinned and held at once
@@ -43,46 +44,30 @@ def _as_clip(clip_or_path):
     return load_clip(clip_or_path)
 
 
-def render_clip(
-    clip_or_path,
-    out_mp4,
-    size=640,
-    camera=DEFAULT_CAMERA,
-    style=DEFAULT_STYLE,
-    sheet=None,
-    sheet_frames=8,
-    preset="ultrafast",
-    qp=None,
-    crf=None,
-    threads=None,
-    hide=(),
-    thin=None,
-    rate_seed=None,
-    partner=None,
-    partner_style=None,
-    target=None,
-    captions=None,
-    mesh=None,
-    partner_mesh=None,
-):
-    """Render a clip to an MP4 of a stick figure (or a solid body), with a second person and captions if asked.
+@dataclass(frozen=True)
+class RenderOptions:
+    """How render_clip draws and encodes a clip: plain data, one field per setting, so that a render job carries it
+    to a worker process as it is. `dataclasses.replace(options, size=480)` makes a variant.
 
-    Parameters
+    Attributes
     ----------
-    clip_or_path : str or Path or dict
-        A clip .npz, or a clip dict as `moglow_eval.core.clip.load_clip` returns it.
-    out_mp4 : str or Path
-        The video to write.
     size : int
         Width = height in pixels: even, 32-4096 (H.264 yuv420p).
     camera : Camera
-        The camera (rendering.camera); it follows the root.
+        The camera (rendering.camera); it follows the root unless `target` is given.
     style : Style
-        Colours and line widths (rendering.raster).
-    sheet : str or Path or None
-        A PNG to write a contact sheet of `sheet_frames` evenly spaced frames to; None: no sheet.
+        Colours and line widths, and the body drawn: stick, solid or mesh (rendering.raster).
+    partner_style : Style or None
+        A second person's drawing; None: `style` in one neutral colour (raster.one_colour).
+    target : sequence of float or None
+        A fixed look-at point [3] for every frame (a two-person video's camera stays put, so that the partner is
+        the same pixels in every condition's video); None: the camera follows the clip's root.
+    hide : sequence of str
+        Joint names not drawn.
+    thin : sequence of str or None
+        Joint names drawn thinner (None: finger and face joints, by name); see raster.FrameDrawer.
     sheet_frames : int
-        The frames on the contact sheet.
+        The frames on the contact sheet, when one is asked for.
     preset : str
         The x264 speed preset. ultrafast is the fastest and, for these drawings, loses nothing visible (it
         skips deblocking and CABAC).
@@ -93,28 +78,50 @@ def render_clip(
         content, for a video that is not a stimulus.
     threads : int or None
         ffmpeg/x264 threads (None: ffmpeg's choice; 1 for one-core rendering in a process pool).
-    hide : sequence of str
-        Joint names not drawn.
-    thin : sequence of str or None
-        Joint names drawn thinner (None: finger and face joints, by name); see raster.FrameDrawer.
     rate_seed : int or None
         The seed of the default rate control's random share of the rate per frame (None: fresh randomness, so
         the bytes differ from one render to the next; the pixels hardly do).
+    """
+
+    size: int = 640
+    camera: Camera = DEFAULT_CAMERA
+    style: Style = DEFAULT_STYLE
+    partner_style: Style | None = None
+    target: tuple | None = None
+    hide: tuple = ()
+    thin: tuple | None = None
+    sheet_frames: int = 8
+    preset: str = "ultrafast"
+    qp: int | None = None
+    crf: int | None = None
+    threads: int | None = None
+    rate_seed: int | None = None
+
+
+def render_clip(clip_or_path, out_mp4, options=None, *, sheet=None, partner=None, captions=None, mesh=None,
+                partner_mesh=None):  # fmt: skip
+    """Render a clip to an MP4 of a stick figure, a solid body or a mesh, with a second person and captions if asked.
+
+    Parameters
+    ----------
+    clip_or_path : str or Path or dict
+        A clip .npz, or a clip dict as `moglow_eval.core.clip.load_clip` returns it.
+    out_mp4 : str or Path
+        The video to write.
+    options : RenderOptions or None
+        How it is drawn and encoded (size, camera, style, rate control, ...); None: RenderOptions().
+    sheet : str or Path or None
+        A PNG to write a contact sheet of `options.sheet_frames` evenly spaced frames to; None: no sheet.
     partner : str or Path or dict or None
         A second person (a clip .npz or dict of as many frames, any skeleton) drawn in the same frame: the real
         interlocutor of a two-person video. The farther of the two is drawn first in every frame.
-    partner_style : Style or None
-        The second person's drawing; None: `style` in one neutral colour (raster.one_colour).
-    target : sequence of float or None
-        A fixed look-at point [3] for every frame (a two-person video's camera stays put, so that the partner is
-        the same pixels in every condition's video); None: the camera follows the clip's root.
     captions : sequence of captions.Phrase or None
         Phrases burned in at the bottom while they are on (rendering.captions).
     mesh, partner_mesh : object or None
-        With `style.body == "mesh"`: the person's (and the partner's) skinned mesh, with `faces` [F, 3], `mask` [V]
-        (the face mask's vertices) and `vertices(a, b)` -> frames a..b's vertices [b - a, V, 3] in the joints'
-        world (generation.data.skinning.MeshSource), read a chunk at a time so that memory does not grow with
-        the clip.
+        With `options.style.body == "mesh"`: the person's (and the partner's) skinned mesh, with `faces` [F, 3],
+        `mask` [V] (the face mask's vertices) and `vertices(a, b)` -> frames a..b's vertices [b - a, V, 3] in the
+        joints' world (generation.data.skinning.MeshSource), read a chunk at a time so that memory does not grow
+        with the clip.
 
     Returns
     -------
@@ -127,7 +134,15 @@ def render_clip(
         One line naming the file: a bad size, joints that are not [T >= 1, J, 3], or ffmpeg failing.
     ClipError
         An unreadable clip file, or implausible joints or frame rate.
+
+    Examples
+    --------
+    >>> from rendering.render import RenderOptions
+    >>> RenderOptions(size=480).preset
+    'ultrafast'
     """
+    o = RenderOptions() if options is None else options
+    size = o.size
     clip = _as_clip(clip_or_path)
     name = str(clip_or_path) if not isinstance(clip_or_path, dict) else str(out_mp4)
     if size % 2 or not MIN_SIZE <= size <= MAX_SIZE:
@@ -137,18 +152,16 @@ def render_clip(
         raise RenderError(f"{name}: joints must be [T >= 1, J, 3], got {joints.shape}")
     check_joints(joints, name)
     fps = check_fps(clip["fps"], name)
-    people, meshes = _people(
-        clip, joints, name, size, camera, style, hide, thin, (partner, partner_style), mesh, partner_mesh
-    )
+    people, meshes = _people(clip, joints, name, o, partner, mesh, partner_mesh)
     drawer = people[0][0]
-    if target is None:
-        targets = camera_targets(joints, fps, camera)
+    if o.target is None:
+        targets = camera_targets(joints, fps, o.camera)
     else:
-        targets = np.tile(np.asarray(target, np.float64), (len(joints), 1))
+        targets = np.tile(np.asarray(o.target, np.float64), (len(joints), 1))
     layer = CaptionLayer(captions, size) if captions else None
-    keep = set(np.linspace(0, len(joints) - 1, sheet_frames).round().astype(int)) if sheet else set()
+    keep = set(np.linspace(0, len(joints) - 1, o.sheet_frames).round().astype(int)) if sheet else set()
     kept = []
-    proc = ffmpeg_writer(out_mp4, size, fps, preset, qp, crf, threads, frames=len(joints), seed=rate_seed)
+    proc = ffmpeg_writer(out_mp4, size, fps, o.preset, o.qp, o.crf, o.threads, frames=len(joints), seed=o.rate_seed)
     painted = _painted(people, [m if d.style.body == "mesh" else None for (d, _), m in zip(people, meshes)], targets)
     try:
         for t, meshes_t in enumerate(painted):
@@ -170,18 +183,19 @@ def render_clip(
     return len(joints)
 
 
-def _people(clip, joints, name, size, camera, style, hide, thin, partner, mesh, partner_mesh):
-    """([(drawer, joints [T, J, 3])], [each one's mesh or None]): the clip's person, and the partner (a clip and its
-    style, or None) drawing into the same frame."""
+def _people(clip, joints, name, o, partner, mesh, partner_mesh):
+    """([(drawer, joints [T, J, 3])], [each one's mesh or None]): the clip's person, and the partner (a clip, or
+    None) drawing into the same frame, as RenderOptions `o` says."""
     for m in (mesh, partner_mesh):
         if m is not None and getattr(m, "n_frames", len(joints)) != len(joints):
             raise RenderError(f"{name}: a mesh of {m.n_frames} frames for {len(joints)} frames of joints")
     meshes = [mesh] if mesh is not None else None
-    drawer = FrameDrawer(clip["parents"], list(clip["joint_names"]), size, camera, style, hide, thin, meshes=meshes)
+    names = list(clip["joint_names"])
+    drawer = FrameDrawer(clip["parents"], names, o.size, o.camera, o.style, o.hide, o.thin, meshes=meshes)
     people, meshes = [(drawer, joints)], [mesh]
-    if partner[0] is not None:
-        second = partner[1] or one_colour(style)
-        people.append(_partner(partner[0], len(joints), size, camera, second, drawer, name, partner_mesh))
+    if partner is not None:
+        second = o.partner_style or one_colour(o.style)
+        people.append(_partner(partner, len(joints), o.size, o.camera, second, drawer, name, partner_mesh))
         meshes.append(partner_mesh)
     return people, meshes
 

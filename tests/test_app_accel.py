@@ -60,12 +60,12 @@ def behind(proxy, tmp_path, stimuli):
     env = dict(
         os.environ,
         RATING_MANIFEST=str(stimuli),
-        DATABASE_URL=f"sqlite:///{tmp_path / 'r.sqlite'}",
-        ADMIN_TOKEN="accel-token",
-        VIDEO_ACCEL=proxy,
-        PROXY_COUNT="1",
-        MIN_VIEW="0",
-        SESSIONS_PER_CLIENT="0",
+        RATING_DATABASE_URL=f"sqlite:///{tmp_path / 'r.sqlite'}",
+        RATING_ADMIN_TOKEN="accel-token",
+        RATING_VIDEO_ACCEL=proxy,
+        RATING_PROXY_COUNT="1",
+        RATING_MIN_VIEW="0",
+        RATING_SESSIONS_PER_CLIENT="0",
     )
     conf = tmp_path / f"{proxy}.conf"
     text = NGINX_ACCEL if proxy == "nginx" else CADDY_ACCEL
@@ -137,11 +137,11 @@ def test_no_video_in_a_workers_memory(tmp_path, monkeypatch):
     from rating_app import create_app
 
     stimuli = write_fake_stimuli(tmp_path / "stimuli", n_items=2, n_catch=1)
-    monkeypatch.setenv("VIDEO_ACCEL", "nginx")
+    monkeypatch.setenv("RATING_VIDEO_ACCEL", "nginx")
     app = create_app(manifest=stimuli, db_url=f"sqlite:///{tmp_path / 'r.sqlite'}", admin_token="t")
     assert app.extensions["rating_app"]["videos"].videos == {}  # nothing read at start-up
-    monkeypatch.setenv("VIDEO_ACCEL", "squid")
-    with pytest.raises(Exception, match="VIDEO_ACCEL: 'squid' must be one of off, nginx, caddy"):
+    monkeypatch.setenv("RATING_VIDEO_ACCEL", "squid")
+    with pytest.raises(Exception, match="RATING_VIDEO_ACCEL: 'squid' must be one of off, nginx, caddy"):
         create_app(manifest=stimuli, db_url=f"sqlite:///{tmp_path / 'r2.sqlite'}", admin_token="t")
 
 

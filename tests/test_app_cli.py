@@ -294,10 +294,15 @@ def test_bad_database_is_one_line(app_stimuli, tmp_path, db, needle):
         (("--slot-timeout", "-5"), {}, "--slot-timeout"),
         (("--port", "99999"), {}, "--port"),
         (("--min-view", "2"), {}, "--min-view"),
-        ((), {"SLOT_TIMEOUT": "nan"}, "SLOT_TIMEOUT"),
-        ((), {"RATINGS_PER_CLIP": "0"}, "RATINGS_PER_CLIP"),
+        ((), {"RATING_SLOT_TIMEOUT": "nan"}, "RATING_SLOT_TIMEOUT"),
+        ((), {"RATING_RATINGS_PER_CLIP": "0"}, "RATING_RATINGS_PER_CLIP"),
         (("--catch-per-rater", "-1"), {}, "--catch-per-rater"),
-        ((), {"CATCH_PER_RATER": "two"}, "CATCH_PER_RATER"),
+        ((), {"RATING_CATCH_PER_RATER": "two"}, "RATING_CATCH_PER_RATER"),
+        ((), {"RATING_VIDEO_CACHE_MB": "lots"}, "RATING_VIDEO_CACHE_MB: expected an integer"),
+        ((), {"RATING_VIDEO_CACHE_MB": "-1"}, "RATING_VIDEO_CACHE_MB"),
+        ((), {"RATING_DB_POOL_SIZE": "0"}, "RATING_DB_POOL_SIZE"),
+        # A variable from before the prefix is refused with its new name, not dropped (nor obeyed).
+        ((), {"PAIRING": "active"}, "PAIRING is set, but the app reads RATING_PAIRING now"),
     ],
 )
 def test_bad_settings_stop_the_start(app_stimuli, tmp_path, args, env, needle):
@@ -315,10 +320,18 @@ def test_bad_settings_stop_the_start(app_stimuli, tmp_path, args, env, needle):
 
 
 @pytest.mark.parametrize(
-    "env,needle", [({"RATING_MANIFEST": ""}, "no stimulus manifest"), ({"SLOT_TIMEOUT": "nan"}, "SLOT_TIMEOUT")]
+    "env,needle",
+    [
+        ({"RATING_MANIFEST": ""}, "no stimulus manifest"),
+        ({"RATING_SLOT_TIMEOUT": "nan"}, "RATING_SLOT_TIMEOUT"),
+        (
+            {"ADMIN_TOKEN": "x", "SECRET_KEY": "y"},
+            "ADMIN_TOKEN, SECRET_KEY are set, but the app reads RATING_ADMIN_TOKEN",
+        ),
+    ],
 )
 def test_gunicorn_with_a_bad_environment_stops(app_stimuli, tmp_path, env, needle):
-    base = dict(os.environ, RATING_MANIFEST=str(app_stimuli), DATABASE_URL=f"sqlite:///{tmp_path}/r.sqlite")
+    base = dict(os.environ, RATING_MANIFEST=str(app_stimuli), RATING_DATABASE_URL=f"sqlite:///{tmp_path}/r.sqlite")
     # One worker: with two, gunicorn halting on the first one's load error may interrupt the second one's import,
     # and that interrupted import's traceback is gunicorn's shutdown, not our error line.
     r = subprocess.run(
@@ -331,3 +344,13 @@ def test_gunicorn_with_a_bad_environment_stops(app_stimuli, tmp_path, env, needl
     )  # respawning forever would run into the timeout
     assert r.returncode != 0 and f"error: {needle}" in r.stderr and needle in r.stderr
     assert "Traceback" not in r.stderr
+
+
+def test_a_stale_database_variable_is_refused_by_the_commands_that_default_to_it(tmp_path):
+    """export, backup and the rounds' commands take RATING_DATABASE_URL for want of --db: an old DATABASE_URL stops
+    them with one line naming the new variable, instead of their reading the default SQLite file."""
+    env = {k: v for k, v in os.environ.items() if k != "RATING_DATABASE_URL"}
+    env["DATABASE_URL"] = f"sqlite:///{tmp_path / 'study.sqlite'}"
+    for args in (("export", "--out", tmp_path / "x.csv"), ("withdraw-condition", "--condition", "MG")):
+        r = cli(*args, env=env, timeout=60)
+        _one_line_error(r, "DATABASE_URL is set, but the app reads RATING_DATABASE_URL now")

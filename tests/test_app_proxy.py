@@ -114,10 +114,10 @@ def readme_recipe() -> dict[str, str]:
 @pytest.mark.parametrize("app_db_url", ["postgres", "sqlite"], indirect=True)
 def test_readme_recipe_behind_nginx_admits_50_raters_and_keeps_the_admin_in(app_stimuli, app_db_url, tmp_path):
     recipe = readme_recipe()
-    assert recipe["CLIPS_PER_RATER"] == "30"  # the parser found the recipe
-    env = {**os.environ, **recipe, "RATING_MANIFEST": str(app_stimuli), "DATABASE_URL": app_db_url}
-    env["ADMIN_TOKEN"] = TOKEN
-    env.pop("SESSIONS_PER_CLIENT", None)  # the default, 10 an hour
+    assert recipe["RATING_CLIPS_PER_RATER"] == "30"  # the parser found the recipe
+    env = {**os.environ, **recipe, "RATING_MANIFEST": str(app_stimuli), "RATING_DATABASE_URL": app_db_url}
+    env["RATING_ADMIN_TOKEN"] = TOKEN
+    env.pop("RATING_SESSIONS_PER_CLIENT", None)  # the default, 10 an hour
     with gunicorn_behind_nginx(tmp_path, env) as (proxy, _, log_path, _):
         statuses = [call(proxy, "POST", "/api/sessions", f"127.0.0.{2 + i}", {})[0] for i in range(50)]
         assert statuses == [201] * 50, statuses
@@ -138,8 +138,8 @@ def test_readme_recipe_behind_nginx_admits_50_raters_and_keeps_the_admin_in(app_
 
 @pytest.mark.parametrize("app_db_url", ["sqlite"], indirect=True)
 def test_an_untrusted_proxy_is_one_warning_and_no_error(app_stimuli, app_db_url, tmp_path):
-    env = dict(os.environ, RATING_MANIFEST=str(app_stimuli), DATABASE_URL=app_db_url, ADMIN_TOKEN=TOKEN)
-    env.pop("PROXY_COUNT", None)
+    env = dict(os.environ, RATING_MANIFEST=str(app_stimuli), RATING_DATABASE_URL=app_db_url, RATING_ADMIN_TOKEN=TOKEN)
+    env.pop("RATING_PROXY_COUNT", None)
     with gunicorn_behind_nginx(tmp_path, env, workers=1) as (proxy, direct, log_path, before):
         assert before["warnings"] == []  # no proxy yet
         assert requests.post(direct + "/api/sessions", json={}, timeout=10).status_code == 201
@@ -148,10 +148,10 @@ def test_an_untrusted_proxy_is_one_warning_and_no_error(app_stimuli, app_db_url,
         health = requests.get(proxy + "/healthz", timeout=10)
         assert health.status_code == 200
         (warning,) = health.json()["warnings"]
-        assert "PROXY_COUNT" in warning and "X-Forwarded-For" in warning
+        assert "RATING_PROXY_COUNT" in warning and "X-Forwarded-For" in warning
         assert requests.get(direct + "/healthz", timeout=10).json()["warnings"] == [warning]
         page = requests.get(proxy + "/admin", headers={"Authorization": f"Bearer {TOKEN}"}, timeout=10).text
-        assert 'id="warnings"' in page and "PROXY_COUNT is 0" in page
+        assert 'id="warnings"' in page and "RATING_PROXY_COUNT is 0" in page
     log = log_path.read_text()
     assert len(re.findall(r"warning: requests come through a reverse proxy", log)) == 1, log[-2000:]
     assert "Traceback" not in log and "ERROR" not in log
@@ -167,9 +167,9 @@ def test_only_a_local_peer_with_forwarded_for_is_taken_for_a_proxy(make_app):
     assert c.get("/healthz", environ_base={"REMOTE_ADDR": "10.1.2.3"}).json["warnings"] == []
     (w,) = c.get("/healthz", headers=fwd, environ_base={"REMOTE_ADDR": "10.1.2.3"}).json["warnings"]
     assert "from 10.1.2.3" in w
-    os.environ["PROXY_COUNT"] = "1"
+    os.environ["RATING_PROXY_COUNT"] = "1"
     try:
         trusted = make_app().test_client()
     finally:
-        del os.environ["PROXY_COUNT"]
+        del os.environ["RATING_PROXY_COUNT"]
     assert trusted.get("/healthz", headers=fwd, environ_base={"REMOTE_ADDR": "127.0.0.1"}).json["warnings"] == []

@@ -118,7 +118,7 @@ def test_bad_reason_settings_stop_the_start(stimuli, app_db_url, monkeypatch):
     ):
         with pytest.raises(AppError, match=words):
             start(**kw)
-    monkeypatch.setenv("VOTE_REASONS", "Env=From the environment")
+    monkeypatch.setenv("RATING_VOTE_REASONS", "Env=From the environment")
     assert create_app(manifest=stimuli, db_url=app_db_url, design="pairwise").config["VOTE_REASONS"] == (
         ("Env", "From the environment"),
     )

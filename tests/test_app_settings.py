@@ -3,17 +3,20 @@ create_app's arguments and docs/hosting.md's table all come from it, and a flag 
 variable its say."""
 
 import re
+import subprocess
+import sys
 
 import pytest
 from helpers.paths import ROOT
 
-from rating_app import SETTINGS, create_app
+from rating_app import SETTINGS, AppError, create_app
 from rating_app.__main__ import build_parser
-from rating_app.store.config import known_keys
-from rating_app.store.db import app_engine
+from rating_app.store.config import environment, known_keys
+from rating_app.store.db import Base, app_engine, make_engine
 from rating_app.store.settings import ARGS, TABLE
 
-# What the app answered to before the table: every name and default must keep working.
+# What the app answered to before the table: every flag, setting name (the study file's key in lower case) and
+# default must keep working; the environment variables are the names under the prefix RATING_ (issue 63).
 FLAGS = {
     "--config": "RATING_CONFIG",
     "--manifest": "RATING_MANIFEST",
@@ -72,10 +75,64 @@ def serve_parser():
 
 
 def test_every_name_and_default_is_kept():
-    assert {s.flag: s.env for s in TABLE if s.flag} == FLAGS
-    assert {env: SETTINGS[env].default for env in DEFAULTS} == DEFAULTS
+    assert {s.flag: s.name for s in TABLE if s.flag} == FLAGS
+    assert {name: SETTINGS[name].default for name in DEFAULTS} == DEFAULTS
     assert set(ARGS) == ARGUMENTS
     assert len({s.env for s in TABLE}) == len(TABLE) and len(set(known_keys())) == len(known_keys())
+
+
+def test_every_variable_has_the_one_prefix():
+    assert {s.name: s.env for s in TABLE if s.name in ("DATABASE_URL", "RATING_MANIFEST", "RATINGS_PER_CLIP")} == {
+        "DATABASE_URL": "RATING_DATABASE_URL",
+        "RATING_MANIFEST": "RATING_MANIFEST",
+        "RATINGS_PER_CLIP": "RATING_RATINGS_PER_CLIP",
+    }
+    assert all(s.env.startswith("RATING_") for s in TABLE)
+    assert "database_url" in known_keys() and "rating_manifest" in known_keys()  # the study file's keys as before
+
+
+def test_only_the_tables_variables_are_read():
+    environ = {"RATING_PAIRING": "active", "RATING_PAIRINGS": "x", "RATING_TEST_PG": "postgresql://x", "HOME": "/h"}
+    assert environment(environ=environ) == {"PAIRING": "active"}
+    assert environment(environ={"DATABASE_URL": "", "RATING_MIN_VIEW": ""}) == {}  # empty: unset
+    with pytest.raises(AppError, match="^DATABASE_URL is set, but the app reads RATING_DATABASE_URL now: rename"):
+        environment(environ={"DATABASE_URL": "sqlite:///x.sqlite", "RATING_DATABASE_URL": "sqlite:///y.sqlite"})
+
+
+def test_the_pool_size_is_bounded_where_the_engine_is_made():
+    url = "postgresql://nobody@127.0.0.1:1/none"  # never connected to: the pool is made before any connection
+    assert make_engine(url).pool.size() == SETTINGS["DB_POOL_SIZE"].default == 10
+    assert make_engine(url, pool_size=3).pool.size() == 3
+    for bad in (0, 1001, -1):
+        with pytest.raises(AppError, match=f"pool_size: must be >= 1 and <= 1000, got '{bad}'"):
+            make_engine(url, pool_size=bad)
+
+
+def test_the_video_cache_is_a_setting(make_app, monkeypatch):
+    """The bytes of videos a worker keeps come from RATING_VIDEO_CACHE_MB, read with the other settings (a bad value
+    is one line: test_app_cli), not from the environment at import."""
+    assert make_app().extensions["rating_app"]["videos"].cache_bytes == 512 * 2**20
+    monkeypatch.setenv("RATING_VIDEO_CACHE_MB", "0")
+    videos = make_app().extensions["rating_app"]["videos"]
+    assert videos.cache_bytes == 0 and videos.cached == 0 and all(v.data is None for v in videos.videos.values())
+
+
+def test_the_schema_is_whole_after_importing_only_the_store(tmp_path):
+    """Every table is defined in store/db.py: init_db in a fresh process that imported nothing else of the app
+    creates the tables the whole app knows."""
+    code = (
+        "import sys; from sqlalchemy import inspect; from rating_app.store import db; "
+        "e = db.make_engine('sqlite:///' + sys.argv[1]); db.init_db(e); "
+        "assert 'rating_app.store.rounds' not in sys.modules, 'rounds was imported'; "
+        "print(' '.join(sorted(inspect(e).get_table_names())))"
+    )
+    db = str(tmp_path / "s.sqlite")
+    r = subprocess.run([sys.executable, "-c", code, db], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    import rating_app.store.rounds  # noqa: F401  (here: the module that once held two of the tables)
+
+    assert r.stdout.split() == sorted(Base.metadata.tables)
+    assert {"study_conditions", "study_manifest"} <= set(r.stdout.split())
 
 
 def test_the_help_shows_each_flags_variable_and_default():
@@ -89,8 +146,8 @@ def test_the_help_shows_each_flags_variable_and_default():
 def test_a_flag_not_given_leaves_the_variable_its_say(app_stimuli, app_db_url, monkeypatch):
     """The parser's defaults are the table's (for the help), but only the flags given reach create_app: the
     environment still overrides the default, and a flag overrides the environment."""
-    monkeypatch.setenv("RATINGS_PER_CLIP", "7")
-    monkeypatch.setenv("SLOT_TIMEOUT", "60")
+    monkeypatch.setenv("RATING_RATINGS_PER_CLIP", "7")
+    monkeypatch.setenv("RATING_SLOT_TIMEOUT", "60")
     base = ["serve", "--manifest", str(app_stimuli), "--db", app_db_url]
     plain = build_parser().parse_args(base)
     assert plain.ratings_per_clip == 20 and set(plain.given) == {"manifest", "db_url"}

@@ -9,7 +9,7 @@ import pytest
 from helpers.fake_stimuli import write_fake_stimuli
 from helpers.paths import ROOT
 
-from rating_app import SETTINGS, create_app
+from rating_app import SETTINGS, AppError, create_app
 from rating_app.store.config import known_keys
 from rating_app.store.db import app_engine
 
@@ -40,6 +40,7 @@ STUDY = {  # every key a study file may hold, with a value other than its defaul
     "cookie_secure": True,
     "video_accel": "nginx",
     "upload_root": "uploads",
+    "video_cache_mb": 64,
 }
 
 
@@ -53,9 +54,9 @@ def toml(values):
 @pytest.fixture
 def study_dir(tmp_path, monkeypatch):
     """A study folder: study.toml beside a copy of the stimuli; no setting in the environment but the token."""
-    for key in known_keys(SETTINGS) + ["rating_config"]:
-        monkeypatch.delenv(key.upper(), raising=False)
-    monkeypatch.setenv("ADMIN_TOKEN", "study-file-token")
+    for s in SETTINGS.values():
+        monkeypatch.delenv(s.env, raising=False)
+    monkeypatch.setenv("RATING_ADMIN_TOKEN", "study-file-token")
     write_fake_stimuli(tmp_path / "stimuli", catch_nat=True)  # pairwise: each catch item has its NAT clip
     (tmp_path / "db").mkdir()
     (tmp_path / "study.toml").write_text(toml(STUDY))
@@ -81,7 +82,7 @@ def test_the_file_and_the_environment_give_the_same_app(study_dir, monkeypatch):
             "upload_root": study_dir / "uploads",  # relative to the file, as the manifest is
         }.get(key, value)
         value = f"sqlite:///{study_dir}/db/ratings.sqlite" if key == "database_url" else value
-        monkeypatch.setenv(key.upper(), str(value))
+        monkeypatch.setenv(SETTINGS[key.upper()].env, str(value))
     from_env = made()
     assert dict(from_file.config) == dict(from_env.config)
     assert str(app_engine(from_file).url) == str(app_engine(from_env).url) == f"sqlite:///{study_dir}/db/ratings.sqlite"
@@ -90,11 +91,30 @@ def test_the_file_and_the_environment_give_the_same_app(study_dir, monkeypatch):
 
 
 def test_the_environment_overrides_the_file_and_flags_override_both(study_dir, monkeypatch):
-    monkeypatch.setenv("RATINGS_PER_CLIP", "11")
+    monkeypatch.setenv("RATING_RATINGS_PER_CLIP", "11")
     monkeypatch.setenv("RATING_CONFIG", str(study_dir / "study.toml"))  # as gunicorn is given it
     app = made()
     assert (app.config["RATINGS_PER_CLIP"], app.config["CLIPS_PER_RATER"]) == (11, 5)
     assert made(ratings_per_clip=13).config["RATINGS_PER_CLIP"] == 13
+
+
+def test_a_stale_variable_does_not_change_the_study(study_dir, monkeypatch):
+    """A shell's variable under a setting's name from before the prefix is refused with one line naming the new
+    variable: obeyed, it would change a study from outside its file; dropped, a deployment would lose its database."""
+    config = study_dir / "study.toml"
+    assert made(config=config).config["PAIRING"] == "active"
+    for name, value in (("PAIRING", "balanced"), ("DATABASE_URL", f"sqlite:///{study_dir}/other.sqlite")):
+        monkeypatch.setenv(name, value)
+        with pytest.raises(AppError) as refused:
+            made(config=config)
+        assert (
+            str(refused.value)
+            == f"{name} is set, but the app reads RATING_{name} now: rename the variable (or unset it)"
+        )
+        monkeypatch.delenv(name)
+    assert not (study_dir / "other.sqlite").exists()
+    monkeypatch.setenv("RATING_PAIRING_RANDOMNESS", "0.9")  # under the prefix but no setting's: read by nothing
+    assert made(config=config).config["PAIRING_RANDOM"] == 0.3
 
 
 def test_gunicorns_entry_point_reads_rating_config(study_dir):
@@ -113,8 +133,8 @@ BAD = [
     ("ratings_per_klip = 20\n", "ratings_per_klip: unknown key (known: rating_manifest, database_url"),
     ("RATINGS_PER_CLIP = 20\n", "RATINGS_PER_CLIP: unknown key"),
     ("[design]\nname = 1\n", "design: unknown key"),
-    ('admin_token = "s3cret"\n', "admin_token: a secret stays out of the study file; set ADMIN_TOKEN in the"),
-    ('secret_key = "k"\n', "secret_key: a secret stays out of the study file; set SECRET_KEY"),
+    ('admin_token = "s3cret"\n', "admin_token: a secret stays out of the study file; set RATING_ADMIN_TOKEN in the"),
+    ('secret_key = "k"\n', "secret_key: a secret stays out of the study file; set RATING_SECRET_KEY"),
     ('database_url = "postgresql://u:pw@127.0.0.1/x"\n', "database_url: holds a password; a secret stays out"),
     ('database_url = "nonsense"\n', "database_url: not a database URL"),
     ("cookie_secure = 1\n", "cookie_secure: expected true or false, got 1"),

@@ -162,7 +162,7 @@ def test_the_dashboard_reads_only_under_its_upload_root(make, folders, tmp_path)
     uploads.mkdir()
     off = make(study, "pairwise").test_client()
     r = off.post("/admin/conditions", data={"manifest": str(new)}, headers=TOKEN_HDR)
-    assert r.status_code == 400 and "UPLOAD_ROOT, which is not set" in r.json["error"]
+    assert r.status_code == 400 and "RATING_UPLOAD_ROOT, which is not set" in r.json["error"]
     c = make(study, "pairwise", upload_root=str(uploads)).test_client()
     (uploads / "link").symlink_to(new.parent)  # a link out of the root is followed, and refused
     for path in (str(new), "../new/manifest.csv", "link/manifest.csv", "/proc/self/environ"):

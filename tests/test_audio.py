@@ -14,7 +14,7 @@ from helpers.own_study_data import action_takes, make_study, speech
 from generation.data.motion_files import read_motion
 from generation.make_stimuli import main as make_stimuli
 from rendering.audio import RATE, integrated_loudness, mux_audio, read_audio
-from rendering.render import render_clip
+from rendering.render import RenderOptions, render_clip
 
 pytestmark = pytest.mark.full  # the full tier: studies built from the real actions in ../shared
 
@@ -56,7 +56,7 @@ def test_click_at_a_known_frame_is_heard_at_that_frame(tmp_path):
     at = int(frame / 20.0 * RATE)
     samples[at : at + 48] = 0.9  # a 1-ms click
     video = tmp_path / "clip.mp4"
-    render_clip(clip, video, size=96)
+    render_clip(clip, video, RenderOptions(size=96))
     mux_audio(video, samples[:, None], 0.0, len(joints) / 20.0)
     heard = np.argmax(np.abs(_decoded_audio(video))) / RATE
     assert abs(heard - frame / 20.0) <= 1 / 20.0

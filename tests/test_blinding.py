@@ -15,7 +15,7 @@ from scipy.stats import mannwhitneyu
 
 from generation.motion import skeleton
 from generation.motion.features import load_take
-from rendering import RenderError, render_clip
+from rendering import RenderError, RenderOptions, render_clip
 from rendering.blinding import check_one_size
 from rendering.mp4_layout import FILLER, content_signal, non_filler_sizes, read_layout, size_signals
 
@@ -50,7 +50,7 @@ def small_set(tmp_path_factory):
     for k, (role, clip) in enumerate(clips()):
         for label, rate in (("default", {"rate_seed": k}), ("qp17", {"qp": 17})):
             path = tmp / f"{label}_{k}.mp4"
-            render_clip(clip, path, size=SIZE, threads=1, **rate)
+            render_clip(clip, path, RenderOptions(size=SIZE, threads=1, **rate))
             sets[label].append((role, path))
     return sets
 

@@ -34,9 +34,11 @@ def test_compose_has_the_app_postgres_and_caddy(compose):
         "/healthz" in " ".join(app["healthcheck"]["test"]) and app["depends_on"]["db"]["condition"] == "service_healthy"
     )
     env = app["environment"]
-    assert env["PROXY_COUNT"] == "1" and env["COOKIE_SECURE"] == "1"  # one trusted proxy (issue 37), HTTPS only
-    assert env["VIDEO_ACCEL"] == "caddy" and "../stimuli:/srv/stimuli:ro" in proxy["volumes"]  # Caddy sends videos
-    assert "ADMIN_TOKEN" in env and "password" not in env["DATABASE_URL"].lower()
+    assert env["RATING_PROXY_COUNT"] == "1" and env["RATING_COOKIE_SECURE"] == "1"  # one trusted proxy, HTTPS only
+    assert env["RATING_VIDEO_ACCEL"] == "caddy" and "../stimuli:/srv/stimuli:ro" in proxy["volumes"]  # Caddy's videos
+    assert "RATING_ADMIN_TOKEN" in env and "password" not in env["RATING_DATABASE_URL"].lower()
+    # Only the settings' variables (and libpq's password): a name the app does not read would be dropped unseen.
+    assert set(env) - {s.env for s in SETTINGS.values()} == {"PGPASSWORD"}
     assert "app" not in {p.split(":")[0] for p in app.get("ports", [])}  # only the proxy is published
     assert {"80:80", "443:443"} <= set(proxy["ports"]) and "./Caddyfile:/etc/caddy/Caddyfile:ro" in proxy["volumes"]
     assert (DEPLOY / app["build"]["dockerfile"].removeprefix("deploy/")).is_file()
@@ -130,9 +132,9 @@ def test_image_builds_and_serves(tmp_path):
         "-e",
         "RATING_MANIFEST=/srv/stimuli/manifest.csv",
         "-e",
-        "DATABASE_URL=sqlite:////data/r.sqlite",
+        "RATING_DATABASE_URL=sqlite:////data/r.sqlite",
         "-e",
-        "ADMIN_TOKEN=x",
+        "RATING_ADMIN_TOKEN=x",
         "moglow-eval-app",
         "gunicorn",
         "-w",

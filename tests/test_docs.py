@@ -139,11 +139,10 @@ def check_python(args):
 
 
 def app_settings():
-    """Every environment variable the rating app reads as a setting (rating_app.SETTINGS, rating_app.store.config)."""
+    """Every environment variable the rating app reads: its settings' (rating_app.SETTINGS), and libpq's password."""
     from rating_app import SETTINGS
-    from rating_app.store import config as s
 
-    return {*SETTINGS, *s.SECRETS, "VIDEO_CACHE_MB"}
+    return {s.env for s in SETTINGS.values()} | {"PGPASSWORD"}
 
 
 def check_settings(args):

@@ -14,7 +14,9 @@ from rendering.errors import RenderError
 from rendering.framing import item_camera
 from rendering.mesh import MeshBody, antialias, closed, straight, vertex_normals, vertex_normals_operator
 from rendering.raster import STYLES
-from rendering.render import render_clip
+from rendering.render import RenderOptions, render_clip
+
+MESH_64 = RenderOptions(size=64, style=STYLES["mesh"])
 
 
 @pytest.fixture(scope="module")
@@ -118,9 +120,9 @@ def test_the_mesh_thread_reports_errors_and_serves_clip_after_clip(take, tmp_pat
             return source.vertices(a, b)
 
     with pytest.raises(RenderError, match="a broken chunk"):
-        render_clip(clip, tmp_path / "broken.mp4", size=64, style=STYLES["mesh"], mesh=Broken())
+        render_clip(clip, tmp_path / "broken.mp4", MESH_64, mesh=Broken())
     for k in range(2):
-        render_clip(clip, tmp_path / f"ok{k}.mp4", size=64, style=STYLES["mesh"], mesh=Spy())
+        render_clip(clip, tmp_path / f"ok{k}.mp4", MESH_64, mesh=Spy())
         assert (tmp_path / f"ok{k}.mp4").stat().st_size > 0
     assert threads and len(set(threads)) == 1 and threads[0] != threading.current_thread().name
 
@@ -132,11 +134,11 @@ def test_a_forked_child_renders_meshes_too(take, tmp_path):
     import time
 
     source, clip = take
-    render_clip(clip, tmp_path / "parent.mp4", size=64, style=STYLES["mesh"], mesh=source)
+    render_clip(clip, tmp_path / "parent.mp4", MESH_64, mesh=source)
     pid = os.fork()
     if pid == 0:  # the child: render, and leave without pytest's teardown
         try:
-            render_clip(clip, tmp_path / "child.mp4", size=64, style=STYLES["mesh"], mesh=source)
+            render_clip(clip, tmp_path / "child.mp4", MESH_64, mesh=source)
             os._exit(0)
         except BaseException:  # noqa: BLE001 -- any failure is the child's exit status
             os._exit(3)

@@ -99,7 +99,7 @@ def run(argv, env, cwd, timeout):
 def study_in_five_commands(folder: Path, quick_stimuli: Path | None):
     cmds = by_role(readme_commands())
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    env.pop("DATABASE_URL", None), env.pop("RATING_MANIFEST", None)  # a newcomer's shell sets neither
+    env.pop("RATING_DATABASE_URL", None), env.pop("RATING_MANIFEST", None)  # a newcomer's shell sets neither
     stim_env, stim = cmds["stimuli"]
     if quick_stimuli is None:
         r = run(stim, {**env, **stim_env}, folder, 900)
@@ -164,7 +164,7 @@ def test_the_readme_names_five_commands_that_parse():
     # a local trial with the simulated crowd: one address, so no per-address limit, and a short viewing rule;
     # the production defaults (10 sessions an hour per address, the whole clip) stay as they are
     assert serve.sessions_per_client == 0 and serve.min_view < 1
-    assert "ADMIN_TOKEN" in cmds["serve"][0]
+    assert "RATING_ADMIN_TOKEN" in cmds["serve"][0]
     simulate = app_parser().parse_args(cmds["simulate"][1][3:])
     assert simulate.manifest == serve.manifest
     export = app_parser().parse_args(cmds["export"][1][3:])

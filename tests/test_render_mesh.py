@@ -20,7 +20,7 @@ from rendering.camera import Projector, camera_targets
 from rendering.errors import RenderError
 from rendering.framing import item_camera
 from rendering.raster import STYLES, FrameDrawer
-from rendering.render import MESH_CHUNK, render_clip
+from rendering.render import MESH_CHUNK, RenderOptions, render_clip
 
 SIZE = 640
 WRISTS, ELBOWS, HEAD = (20, 21), (18, 19), 15
@@ -61,7 +61,7 @@ def test_the_mesh_covers_the_joints_and_masks_the_face(take, tmp_path, framing):
     folder, model, motion, clip = take
     camera = item_camera([clip["joints"]], clip["joint_names"], clip["parents"], clip["fps"], "front", framing)
     out = tmp_path / f"{framing}.mp4"
-    n = render_clip(clip, out, size=SIZE, camera=camera, style=STYLES["mesh"], mesh=smpl_mesh(motion, model))
+    n = render_clip(clip, out, RenderOptions(SIZE, camera, STYLES["mesh"]), mesh=smpl_mesh(motion, model))
     frames, fps = decode(out)
     assert n == len(frames) == 40 and fps == 30
     background = frames[0][5, 5].astype(int)
@@ -96,7 +96,7 @@ def test_the_mesh_is_skinned_a_chunk_at_a_time(take, tmp_path):
             asked.append((a, b))
             return source.vertices(a, b)
 
-    render_clip(clip, tmp_path / "x.mp4", size=64, style=STYLES["mesh"], mesh=Spy())
+    render_clip(clip, tmp_path / "x.mp4", RenderOptions(size=64, style=STYLES["mesh"]), mesh=Spy())
     assert asked and max(b - a for a, b in asked) <= MESH_CHUNK and asked[-1][1] == 40
 
 
@@ -337,8 +337,8 @@ def test_two_people_as_meshes(take, tmp_path):
     people = [(clip["joint_names"], clip["parents"], None), (names, parents, placed)]
     camera, target = pair_camera([clip["joints"]], people)
     out = tmp_path / "two.mp4"
-    render_clip(clip, out, size=SIZE, camera=camera, target=target, style=STYLES["mesh"],
-                mesh=smpl_mesh(motion, model), partner=partner, partner_mesh=partner_mesh)  # fmt: skip
+    options = RenderOptions(SIZE, camera, STYLES["mesh"], target=target)
+    render_clip(clip, out, options, mesh=smpl_mesh(motion, model), partner=partner, partner_mesh=partner_mesh)
     frames, _ = decode(out)
     for t in (0, 20, 39):
         body, mask = body_pixels(frames[t])

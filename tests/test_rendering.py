@@ -13,7 +13,7 @@ from PIL import Image
 from generation.motion import skeleton
 from generation.motion.features import load_take
 from moglow_eval.core.clip import ClipError, save_clip
-from rendering import Camera, RenderError, render_clip
+from rendering import Camera, RenderError, RenderOptions, render_clip
 from rendering.camera import camera_targets
 from rendering.raster import FrameDrawer, yuv_to_rgb
 
@@ -50,7 +50,7 @@ def walk_clip(tmp_path_factory):
 
 def test_render_real_clip_to_h264_mp4_and_contact_sheet(walk_clip, tmp_path):
     path, joints = walk_clip
-    n = render_clip(path, tmp_path / "walk.mp4", size=320, sheet=tmp_path / "walk.png")
+    n = render_clip(path, tmp_path / "walk.mp4", RenderOptions(size=320), sheet=tmp_path / "walk.png")
     assert n == len(joints) == 40
     p = probe(tmp_path / "walk.mp4")
     assert p == dict(frames=40, width=320, height=320, pix_fmt="yuv420p", codec="h264", audio=False, faststart=True)
@@ -71,7 +71,7 @@ def test_every_frame_is_one_whole_byte_size_at_any_frame_rate(tmp_path, fps):
     joints = load_take(WALK, fps)[:24]
     clip = tmp_path / "walk.npz"
     save_clip(clip, joints, skeleton.PARENTS, skeleton.JOINT_NAMES, fps)
-    render_clip(clip, tmp_path / "walk.mp4", size=size)
+    render_clip(clip, tmp_path / "walk.mp4", RenderOptions(size=size))
     sizes = set(read_layout(tmp_path / "walk.mp4").sample_sizes)
     assert len(sizes) == 1 and 0 <= sizes.pop() - bits // 8 <= 16, sizes  # the budget, and a few framing bytes
 
@@ -151,7 +151,7 @@ def test_render_rejects_bad_clips(tmp_path):
         render_clip(clip, tmp_path / "x.mp4")
     clip["joints"] = np.zeros((10, skeleton.N_JOINTS, 3), np.float32)
     with pytest.raises(RenderError, match="even"):
-        render_clip(clip, tmp_path / "x.mp4", size=101)
+        render_clip(clip, tmp_path / "x.mp4", RenderOptions(size=101))
 
 
 def test_render_cli(walk_clip, tmp_path):

@@ -17,7 +17,7 @@ from rendering.camera import Projector
 from rendering.captions import ROOM, CaptionLayer, phrases
 from rendering.framing import pair_camera
 from rendering.raster import STYLES, FrameDrawer, one_colour
-from rendering.render import compose, render_clip
+from rendering.render import RenderOptions, compose, render_clip
 
 SIZE, START, FRAMES = 320, 135, 90  # frames 135..225 at 30 fps: the second person speaks, the first listens
 
@@ -42,9 +42,9 @@ def _clip(joints, m):
 
 
 def _render(pair, k, out, style="stick", captions=True):
+    options = RenderOptions(SIZE, pair["camera"], STYLES[style], target=pair["target"])
     render_clip(
-        _clip(pair["agents"][k], pair["a"]), out, SIZE, camera=pair["camera"], style=STYLES[style],
-        partner=_clip(pair["partner"], pair["b"]), target=pair["target"],
+        _clip(pair["agents"][k], pair["a"]), out, options, partner=_clip(pair["partner"], pair["b"]),
         captions=pair["captions"] if captions else None,
     )  # fmt: skip
     return figure_pixels.decode(out)[0]
@@ -177,5 +177,6 @@ def test_a_video_that_came_out_a_size_off_is_found(pair, tmp_path):
 
     paths = [tmp_path / f"{k}.mp4" for k in range(3)]
     for k, path in enumerate(paths):
-        render_clip(_clip(pair["agents"][k % 2], pair["a"]), path, 64, camera=pair["camera"], qp=20 if k == 1 else None)
+        options = RenderOptions(64, pair["camera"], qp=20 if k == 1 else None)
+        render_clip(_clip(pair["agents"][k % 2], pair["a"]), path, options)
     assert odd_ones(paths) == [1] and odd_ones([paths[0], paths[2]]) == []

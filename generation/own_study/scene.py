@@ -53,7 +53,8 @@ class Scene:
     colour: tuple = PARTNER_COLOUR
 
     def job(self, item, style):
-        """render_clip's keywords for a clip of `item` drawn in `style` (a key of rendering.raster.STYLES)."""
+        """A render job's keywords (generation.stimuli.render_pool: RenderOptions' fields and render_clip's
+        `partner`) for a clip of `item` drawn in `style` (a key of rendering.raster.STYLES)."""
         out = dict(camera=self.cameras[item], style=STYLES[style])
         if item in self.partners:
             out.update(partner=str(self.partners[item]), target=self.targets[item])

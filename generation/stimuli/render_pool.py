@@ -10,6 +10,7 @@ import logging
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import fields
 from multiprocessing import get_context
 
 import numpy as np
@@ -18,24 +19,28 @@ from tqdm import tqdm
 from rendering.audio import mux_audio
 from rendering.blinding import check_one_size, odd_ones, same_mtime
 from rendering.mesh import set_gl_environment
-from rendering.render import render_clip
+from rendering.render import RenderOptions, render_clip
 
 log = logging.getLogger(__name__)
+SETTINGS = frozenset(f.name for f in fields(RenderOptions))  # a job's keywords that are RenderOptions'
 RETRIES = 3  # times a video that came out a size off is encoded again (each time with a fresh random rate dither)
 
 
 def _render_job(job):
-    """Render one clip; options: render_clip's keywords (camera, hide, thin), and `audio`: (normalised samples
-    .npy, start s, duration s) to mux into the video."""
-    motion, video, sheet, size, preset, *options = job
-    options = dict(options[0]) if options else {}
-    audio = options.pop("audio", None)
+    """Render one clip; its keywords: RenderOptions' fields (camera, style, hide, thin, ...), render_clip's own
+    (partner, captions, and a MeshSpec for mesh and partner_mesh), and `audio`: (normalised samples .npy, start s,
+    duration s) to mux into the video."""
+    motion, video, sheet, size, preset, *keywords = job
+    keywords = dict(keywords[0]) if keywords else {}
+    audio = keywords.pop("audio", None)
+    settings = {k: keywords.pop(k) for k in SETTINGS & set(keywords)}
+    options = RenderOptions(size=size, preset=preset, threads=1, **settings)
     for key in ("mesh", "partner_mesh"):  # a mesh style's spec: the worker skins the file itself (torch, smplx)
-        if options.get(key) is not None:
+        if keywords.get(key) is not None:
             from .mesh_track import track
 
-            options[key] = track(options[key])
-    n = render_clip(motion, video, size=size, sheet=sheet, preset=preset, threads=1, **options)
+            keywords[key] = track(keywords[key])
+    n = render_clip(motion, video, options, sheet=sheet, **keywords)
     if audio is not None:
         samples, start, duration = audio
         mux_audio(video, np.load(samples), start, duration)
@@ -43,7 +48,7 @@ def _render_job(job):
 
 
 def render_all(jobs, workers, progress=True):
-    """Render (motion, video, sheet, size, preset[, render_clip keywords]) jobs on `workers` processes, with a
+    """Render (motion, video, sheet, size, preset[, keywords: _render_job's]) jobs on `workers` processes, with a
     progress bar."""
     with tqdm(total=len(jobs), desc="render", unit="clip", file=sys.stderr, disable=not progress) as bar:
         if workers <= 1:

@@ -21,8 +21,8 @@ from urllib.parse import quote
 from flask import abort, current_app, request, send_file
 
 from ..store.manifest import AppError
+from ..store.settings import SETTINGS
 
-CACHE_BYTES = int(os.environ.get("VIDEO_CACHE_MB", "512")) * 2**20  # per worker; beyond it, read per request
 ACCEL_PREFIX = "/_stimuli/"  # the proxy's internal location of the stimulus folder (deploy/, docs/hosting.md)
 
 
@@ -34,11 +34,13 @@ class Video:
 
 
 class VideoStore:
-    """clip_id -> Video; each path is checked to lie inside the stimulus folder when it is read."""
+    """clip_id -> Video; each path is checked to lie inside the stimulus folder when it is read. `cache_bytes`: how
+    many bytes of videos this worker keeps in memory (RATING_VIDEO_CACHE_MB); the others are read per request."""
 
-    def __init__(self, clips, root: Path, preload: bool = True, key: bytes = b""):
+    def __init__(self, clips, root: Path, preload: bool = True, key: bytes = b"", cache_bytes: int | None = None):
         self.root = Path(root).resolve()
         self.key = key
+        self.cache_bytes = SETTINGS["VIDEO_CACHE_MB"].default * 2**20 if cache_bytes is None else cache_bytes
         self.paths = {c.clip_id: c.video for c in clips}
         self.videos: dict[str, Video] = {}
         self.cached = 0
@@ -54,7 +56,7 @@ class VideoStore:
 
     def _load(self, cid: str) -> Video:
         data = self._read(cid)
-        keep = self.cached + len(data) <= CACHE_BYTES
+        keep = self.cached + len(data) <= self.cache_bytes
         self.cached += len(data) if keep else 0
         etag = hmac.new(self.key, data, hashlib.sha256).hexdigest()[:32]
         v = Video(self.paths[cid], etag, data if keep else None)

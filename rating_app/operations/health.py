@@ -56,7 +56,7 @@ def catch_pool_warning(design, clips, units, clips_per_rater, catch_per_rater) -
     return (
         f"catch pool too small: each of the {pool} catch units reaches {catch_share:.0%} of the raters, a test unit "
         f"{test_share:.0%}, so the clips two sessions share point at the catch trials. Make about {need} catch "
-        f"units (e.g. more catch items in generation.make_stimuli) or lower CATCH_PER_RATER ({n_catch} now)"
+        f"units (e.g. more catch items in generation.make_stimuli) or lower RATING_CATCH_PER_RATER ({n_catch} now)"
     )
 
 
@@ -82,7 +82,8 @@ def note_untrusted_proxy() -> None:
     if _local(peer):
         of_app().add(
             "proxy",
-            f"requests come through a reverse proxy (X-Forwarded-For, from {peer or 'a unix socket'}) but PROXY_COUNT "
-            "is 0: every rater has the proxy's address, so SESSIONS_PER_CLIENT and the admin lockout count all "
-            "raters as one client. Set PROXY_COUNT to the number of proxies in front of the app",
+            f"requests come through a reverse proxy (X-Forwarded-For, from {peer or 'a unix socket'}) but "
+            "RATING_PROXY_COUNT is 0: every rater has the proxy's address, so RATING_SESSIONS_PER_CLIENT and the "
+            "admin lockout count all raters as one client. Set RATING_PROXY_COUNT to the number of proxies in front "
+            "of the app",
         )

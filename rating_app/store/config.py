@@ -1,9 +1,12 @@
-"""The study file: the app's settings in one TOML file (`serve --config study.toml`, gunicorn `RATING_CONFIG`).
+"""The study file and the environment: the app's settings in one TOML file (`serve --config study.toml`, gunicorn
+`RATING_CONFIG`), overridden by the settings' environment variables.
 
-Its keys are the environment variables of the settings in lower case (`ratings_per_clip = 20` is
-`RATINGS_PER_CLIP=20`), and an environment variable that is set overrides its key. Secrets stay out of the file:
-the admin token and the cookie key are given in the environment, the database password in `PGPASSWORD` or
-`~/.pgpass` (libpq reads both), so the file can be kept with the study and shared. Relative paths in the file
+The file's keys are the settings' names in lower case (`ratings_per_clip = 20` is `RATING_RATINGS_PER_CLIP=20`,
+`rating_manifest` is `RATING_MANIFEST`), and an environment variable that is set overrides its key. Of the
+environment the app reads only the variables of the settings table, each under the prefix `RATING_`; a variable
+named as before the prefix (`DATABASE_URL`) stops the start with one line naming its new name. Secrets stay out of
+the file: the admin token and the cookie key are given in the environment, the database password in `PGPASSWORD`
+or `~/.pgpass` (libpq reads both), so the file can be kept with the study and shared. Relative paths in the file
 (`rating_manifest`, `upload_root`, an SQLite `database_url`) are relative to the file.
 
     rating_manifest = "stimuli/manifest.csv"
@@ -25,11 +28,11 @@ from moglow_eval.core import user_files
 from .manifest import AppError
 from .settings import SETTINGS
 
-# The study file's keys, by kind, as the environment variables they stand for (settings.TABLE holds them all).
-TEXT_KEYS = tuple(s.env for s in SETTINGS.values() if s.kind is str and s.in_file and not s.secret)
-FLAG_KEYS = tuple(s.env for s in SETTINGS.values() if s.kind is bool)
+# The study file's keys, by kind, as the settings' names (settings.TABLE holds them all).
+TEXT_KEYS = tuple(s.name for s in SETTINGS.values() if s.kind is str and s.in_file and not s.secret)
+FLAG_KEYS = tuple(s.name for s in SETTINGS.values() if s.kind is bool)
 # Never in the file: the app's secrets, and the database password libpq would read (PGPASSWORD or ~/.pgpass).
-SECRETS = (*(s.env for s in SETTINGS.values() if s.secret), "PGPASSWORD", "DATABASE_PASSWORD")
+SECRETS = (*(s.name for s in SETTINGS.values() if s.secret), "PGPASSWORD", "DATABASE_PASSWORD")
 MAX_BYTES = 1 << 20  # a study file is a few dozen keys
 
 
@@ -48,7 +51,8 @@ def load_study_file(path, settings=SETTINGS) -> dict[str, str]:
         name = key.upper()
         where = f"{path}: {key}"
         if name in SECRETS:
-            raise AppError(f"{where}: a secret stays out of the study file; set {name} in the environment instead")
+            variable = settings[name].env if name in settings else name
+            raise AppError(f"{where}: a secret stays out of the study file; set {variable} in the environment instead")
         if key != key.lower() or key not in known_keys(settings):
             raise AppError(f"{where}: unknown key (known: {', '.join(known_keys(settings))})")
         values[name] = _as_environment(where, value, settings[name])
@@ -88,15 +92,40 @@ def _resolve_paths(path: Path, values: dict) -> dict:
         if url.password is not None:
             raise AppError(
                 f"{path}: database_url: holds a password; a secret stays out of the study file: give it in "
-                "PGPASSWORD or ~/.pgpass (or the whole URL in DATABASE_URL)"
+                "PGPASSWORD or ~/.pgpass (or the whole URL in RATING_DATABASE_URL)"
             )
         if url.get_backend_name() == "sqlite" and url.database and url.database != ":memory:":
             values["DATABASE_URL"] = url.set(database=str(home / url.database)).render_as_string(hide_password=False)
     return values
 
 
-def study_environment(config_path, settings=SETTINGS) -> dict[str, str]:
-    """The settings as the app reads them: the study file's (if any), overridden by the environment variables that
-    are set (an empty variable counts as unset, as everywhere in the app)."""
+def stale_variables(settings=SETTINGS, environ=None) -> None:
+    """AppError, one line, when a variable is set under a setting's name from before the RATING_ prefix
+    (`DATABASE_URL`): ignored, it would drop a deployment's database or token without a word, so it stops the
+    start instead, naming the new variable."""
+    environ = os.environ if environ is None else environ
+    stale = [(s.name, s.env) for s in settings.values() if s.env != s.name and environ.get(s.name)]
+    if not stale:
+        return
+    old, new = (", ".join(names) for names in zip(*stale))
+    if len(stale) == 1:
+        raise AppError(f"{old} is set, but the app reads {new} now: rename the variable (or unset it)")
+    raise AppError(f"{old} are set, but the app reads {new} now: rename the variables (or unset them)")
+
+
+def environment(settings=SETTINGS, environ=None) -> dict[str, str]:
+    """{NAME: value} of the settings whose variable (NAME under the RATING_ prefix) is set, and nothing else of the
+    environment (an empty variable counts as unset, as everywhere in the app); AppError, one line, for a variable
+    named as before the prefix (stale_variables)."""
+    environ = os.environ if environ is None else environ
+    stale_variables(settings, environ)
+    return {s.name: environ[s.env] for s in settings.values() if environ.get(s.env)}
+
+
+def study_environment(config_path=None, settings=SETTINGS) -> dict[str, str]:
+    """{NAME: value} of the settings as the app reads them: the study file's (`config_path`, else RATING_CONFIG's,
+    if any), overridden by the settings' variables that are set (environment)."""
+    env = environment(settings)
+    config_path = config_path or env.get("RATING_CONFIG")
     values = load_study_file(config_path, settings) if config_path else {}
-    return {**values, **{k: v for k, v in os.environ.items() if v}}
+    return {**values, **env}

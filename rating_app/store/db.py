@@ -1,15 +1,16 @@
 """The store: SQLAlchemy models and engine set-up (SQLite file with WAL by default, PostgreSQL by URL).
 
-One row per rater session (`Rater`), one per planned trial (`Trial`), one per stored rating (`Rating`,
-unique per trial so a repeated submission can never be counted twice), plus playback events and the
-clip table copied from the manifest (so an export needs only the database). Pairwise and parallel trials show
-several clips (`TrialClip`) and store a `Preference` or one `PageRating` per clip; the study's design is a
-`StudySetting` row, so a restart can never mix designs in one database. The admin's logins and failed
-token guesses are rows too, so that every gunicorn worker sees a logout and a lockout at once.
+One row per rater session (`Rater`), one per planned trial (`Trial`), one per stored rating (`Rating`, unique per
+trial so a repeated submission can never be counted twice), plus playback events and the clip table copied from the
+manifest (so an export needs only the database). Pairwise and parallel trials show several clips (`TrialClip`) and
+store a `Preference` or one `PageRating` per clip; the study's design is a `StudySetting` row, so a restart can never
+mix designs in one database. The admin's logins and failed token guesses are rows too, so that every gunicorn worker
+sees a logout and a lockout at once. Every table is here, a growing study's too (rounds.py), so that the schema
+`init_db` creates never depends on which modules were imported.
 
-At about 450 lines it is longer than the house's 400: the models, the schema's additions for databases made by
-earlier versions, and the engine set-up are one concept (what the database is), kept together so that a change to
-a table and to its migration are made side by side.
+At about 500 lines it is longer than the house's 400: the models, their additions for databases made by earlier
+versions and the engine set-up are one concept (what the database is), kept together so that a table and its
+migration change side by side.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from sqlalchemy import (
     create_engine,
     event,
     func,
+    inspect,
     select,
     text,
 )
@@ -46,6 +48,7 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 from moglow_eval.core import study
 
 from .manifest import AppError
+from .settings import SETTINGS
 
 DEFAULT_DB = "sqlite:///ratings.sqlite"
 
@@ -205,6 +208,24 @@ class StudySetting(Base):
     value: Mapped[str] = mapped_column(String(200))
 
 
+class StudyCondition(Base):
+    """A test condition of a growing study (rounds.py): the round it joined in, when it was withdrawn (NULL: served)."""
+
+    __tablename__ = "study_conditions"
+    name: Mapped[str] = mapped_column(String(64), primary_key=True)
+    round: Mapped[int] = mapped_column(Integer)
+    added_at: Mapped[dt.datetime] = mapped_column(DateTime)
+    withdrawn_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
+
+
+class StudyManifest(Base):
+    """Where the study's manifest lies, as the app was last started: add-condition appends to it (rounds.py)."""
+
+    __tablename__ = "study_manifest"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)  # always 1
+    path: Mapped[str] = mapped_column(Text)
+
+
 class Event(Base):
     """Client-reported problems (failed playback, ...), also written to the server log."""
 
@@ -272,7 +293,7 @@ class Lock(Base):
 
 
 def normalise_url(url: str | None) -> str:
-    url = url or os.environ.get("DATABASE_URL") or DEFAULT_DB
+    url = url or DEFAULT_DB
     if url.startswith("postgres://"):
         url = "postgresql://" + url[len("postgres://") :]
     if url.startswith("postgresql://"):
@@ -281,8 +302,8 @@ def normalise_url(url: str | None) -> str:
 
 
 def check_url(url: str | None) -> str:
-    """The normalised URL, or an AppError naming what is wrong with it: not a URL, a database other than
-    SQLite or PostgreSQL, or an SQLite path that is an existing file but no SQLite database."""
+    """The normalised URL, or an AppError naming what is wrong: not a URL, a database other than SQLite or
+    PostgreSQL, or an SQLite path that is an existing file but no SQLite database."""
     url = normalise_url(url)
     try:
         parsed = make_url(url)
@@ -328,7 +349,9 @@ def make_read_engine(engine: Engine) -> Engine:
     return engine.execution_options(isolation_level="AUTOCOMMIT")
 
 
-def make_engine(url: str | None = None, pool_size=None) -> Engine:
+def make_engine(url: str | None = None, pool_size: int = SETTINGS["DB_POOL_SIZE"].default) -> Engine:
+    """The engine of `url` (check_url); PostgreSQL's pool `pool_size` a process, within the bounds of DB_POOL_SIZE."""
+    pool = SETTINGS["DB_POOL_SIZE"].parse(pool_size, "pool_size")  # create_app's: RATING_DB_POOL_SIZE, read once
     url = check_url(url)
     if url.startswith("sqlite"):
         engine = create_engine(url, connect_args={"timeout": 30, "check_same_thread": False})
@@ -353,7 +376,6 @@ def make_engine(url: str | None = None, pool_size=None) -> Engine:
 
         return engine
     # Per process; keep workers x (pool_size + max_overflow) under the server's max_connections (100 by default).
-    pool = int(pool_size or os.environ.get("DB_POOL_SIZE") or "10")
     return create_engine(url, pool_size=pool, max_overflow=pool, pool_recycle=1800)
 
 
@@ -399,8 +421,6 @@ ADDED_COLUMNS = (
 
 def _add_missing_columns(engine: Engine) -> None:
     """Add the ADDED_COLUMNS a database made before them lacks."""
-    from sqlalchemy import inspect
-
     insp = inspect(engine)
     have = {t: {c["name"] for c in insp.get_columns(t)} for t in {t for t, _, _ in ADDED_COLUMNS}}
     for table, column, kind in ADDED_COLUMNS:
@@ -431,18 +451,12 @@ def _add_cover_rows(session, keys) -> None:
         session.add_all(Cover(key=k, answered=counts.get(k, (0, 0))[0], held=counts.get(k, (0, 0))[1]) for k in missing)
 
 
+CLIP_COLUMNS = ("clip_id", "condition", "role", "item", "frames", "fps", "motion_item", "style")  # from the manifest
+
+
 def clip_row(c) -> Clip:
     """The Clip row of a manifest clip (manifest.ManifestClip)."""
-    return Clip(
-        clip_id=c.clip_id,
-        condition=c.condition,
-        role=c.role,
-        item=c.item,
-        frames=c.frames,
-        fps=c.fps,
-        motion_item=c.motion_item,
-        style=c.style,
-    )
+    return Clip(**{k: getattr(c, k) for k in CLIP_COLUMNS})
 
 
 def init_db(engine: Engine, clips=None, design: str | None = None, cover_keys=None, settings=None) -> None:
@@ -477,9 +491,8 @@ def init_db(engine: Engine, clips=None, design: str | None = None, cover_keys=No
                     if row is None:
                         s.add(clip_row(c))
                     else:
-                        row.condition, row.role, row.item = c.condition, c.role, c.item
-                        row.frames, row.fps, row.motion_item = c.frames, c.fps, c.motion_item
-                        row.style = c.style
+                        for k in CLIP_COLUMNS[1:]:
+                            setattr(row, k, getattr(c, k))
             if cover_keys:
                 _add_cover_rows(s, cover_keys)
             for name, value in (settings or {}).items():

@@ -11,39 +11,19 @@ withdrawn condition's votes stay in the export.
 
 from __future__ import annotations
 
-import datetime as dt
 import threading
 
 from flask import current_app
-from sqlalchemy import DateTime, Integer, String, Text, select
-from sqlalchemy.orm import Mapped, mapped_column
+from sqlalchemy import select
 
-from .db import Base, StudySetting, study_setting
+# Its tables are db.py's, with the rest of the schema, so that the schema never depends on which modules were imported.
+from .db import StudyCondition, StudyManifest, StudySetting, study_setting
 from .manifest import AppError, load_manifest
 
 GROWS = ("pairwise",)  # the designs whose units a new condition only adds to (a parallel page would change)
 ROUND = "round"  # StudySetting: the study's round now (absent: 1); designs/pairwise.py reads it with each vote
 REVISION = "revision"  # StudySetting: bumped by every add and withdrawal, so that workers reload
 _reload_lock = threading.Lock()
-
-
-class StudyCondition(Base):
-    """A test condition of the study: the round it joined in, and when it was withdrawn (NULL: served)."""
-
-    __tablename__ = "study_conditions"
-    name: Mapped[str] = mapped_column(String(64), primary_key=True)
-    round: Mapped[int] = mapped_column(Integer)
-    added_at: Mapped[dt.datetime] = mapped_column(DateTime)
-    withdrawn_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
-
-
-class StudyManifest(Base):
-    """Where the study's manifest lies (absolute path, as the app was last started): add-condition appends to it
-    and copies the new videos beside it."""
-
-    __tablename__ = "study_manifest"
-    id: Mapped[int] = mapped_column(Integer, primary_key=True)  # always 1
-    path: Mapped[str] = mapped_column(Text)
 
 
 def current_round(conn) -> int:

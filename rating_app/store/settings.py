@@ -1,5 +1,11 @@
 """The app's settings, in one typed table: from it come `create_app`'s keyword arguments, the environment variables
-(gunicorn), the study file's keys (their names in lower case, store/config.py), `serve`'s flags and their help.
+(gunicorn), the study file's keys (store/config.py), `serve`'s flags and their help.
+
+Each setting has a name (`DATABASE_URL`); its study-file key is the name in lower case (`database_url`) and its
+environment variable the name under the one prefix `RATING_` (`RATING_DATABASE_URL`; a name that has the prefix
+already, `RATING_MANIFEST`, keeps it once). The app reads no other variable of the environment, so a shell's
+unrelated `DATABASE_URL` or `SECRET_KEY` cannot change a study (store/config.py refuses the names from before the
+prefix).
 
 A setting given to `create_app` (or as a flag) wins over its environment variable, which wins over the study file,
 which wins over the default. Every value is checked where it is read, so a bad one stops the start with one line
@@ -16,18 +22,20 @@ from moglow_eval.core.cli import number
 
 from .manifest import AppError
 
+PREFIX = "RATING_"  # of every environment variable the app reads as a setting
 # VIDEO_ACCEL: the reverse proxy that sends the bytes itself (an internal redirect); off: the app sends them.
 ACCEL = ("off", "nginx", "caddy")
 
 
 @dataclass(frozen=True)
 class Setting:
-    """One setting. `kind`: str, int, float or bool (bool: "1" in the environment, true or false in the study file).
-    `arg`: create_app's keyword argument (None: the environment and the study file only); `flag`: serve's flag
-    (None: none); `bounds`: a number's (lo, hi, lo_open), as cli.number takes them; `secret`: given in the
-    environment only, refused in the study file; `in_file`: a key of the study file."""
+    """One setting. `name`: what the code calls it (create_app's values, the study file's key in lower case);
+    `kind`: str, int, float or bool (bool: "1" in the environment, true or false in the study file). `arg`:
+    create_app's keyword argument (None: the environment and the study file only); `flag`: serve's flag (None:
+    none); `bounds`: a number's (lo, hi, lo_open), as cli.number takes them; `secret`: given in the environment
+    only, refused in the study file; `in_file`: a key of the study file."""
 
-    env: str
+    name: str
     kind: type = str
     default: object = None
     help: str = ""
@@ -39,9 +47,14 @@ class Setting:
     in_file: bool = True
 
     @property
+    def env(self) -> str:
+        """Its environment variable: the name under PREFIX."""
+        return self.name if self.name.startswith(PREFIX) else PREFIX + self.name
+
+    @property
     def key(self) -> str:
         """Its key in the study file."""
-        return self.env.lower()
+        return self.name.lower()
 
     def parse(self, raw, where):
         """`raw` (a string from the environment or the study file, or a value given to create_app) as this
@@ -74,8 +87,8 @@ TABLE = (
         arg="config",
         flag="--config",
         in_file=False,
-        help="study file (TOML): the settings below in lower case, e.g. ratings_per_clip = 20; flags and set "
-        "environment variables override it",
+        help="study file (TOML): a key per setting below, its variable in lower case less RATING_ (rating_manifest "
+        "keeps it), e.g. ratings_per_clip = 20; flags and set environment variables override it",
     ),
     Setting("RATING_MANIFEST", arg="manifest", flag="--manifest", help="stimuli/manifest.csv"),
     Setting(
@@ -271,25 +284,34 @@ TABLE = (
         help="trusted reverse proxies in front, whose X-Forwarded-For names the client",
     ),
     Setting("DB_POOL_SIZE", int, 10, bounds=(1, 1000), help="database connections per worker (and as many overflow)"),
+    Setting(
+        "VIDEO_CACHE_MB",
+        int,
+        512,
+        bounds=(0, 1_000_000),
+        help="megabytes of videos each worker keeps in memory, read at the start; the others are read per request "
+        "(0: none kept)",
+    ),
     Setting("COOKIE_SECURE", bool, False, help="1: the admin cookie over HTTPS only"),
     Setting("ADMIN_TOKEN", arg="admin_token", secret=True, help="opens /admin; unset: no admin"),
-    Setting("SECRET_KEY", arg="secret_key", secret=True, help="the cookie key; unset: derived from ADMIN_TOKEN"),
+    Setting("SECRET_KEY", arg="secret_key", secret=True, help="the cookie key; unset: derived from RATING_ADMIN_TOKEN"),
 )
-SETTINGS = {s.env: s for s in TABLE}
+SETTINGS = {s.name: s for s in TABLE}
 ARGS = {s.arg: s for s in TABLE if s.arg}
 
 
 def resolve(given: dict, env: dict) -> dict:
-    """{ENVIRONMENT_NAME: value} of every setting but RATING_CONFIG: the value `given` for its argument, else its
-    (non-empty) variable in `env`, else its default; each checked (AppError naming the argument or variable)."""
+    """{NAME: value} of every setting but RATING_CONFIG: the value `given` for its argument, else its (non-empty)
+    value in `env` ({NAME: raw}, store/config.study_environment), else its default; each checked (AppError naming
+    the argument or the variable)."""
     values = {}
     for s in TABLE:
-        if s.env == "RATING_CONFIG":
+        if s.name == "RATING_CONFIG":
             continue
         raw, where = given.get(s.arg) if s.arg else None, s.key
         if raw is None:
-            raw, where = env.get(s.env) or None, s.env
-        values[s.env] = s.default if raw is None else s.parse(raw, where)
+            raw, where = env.get(s.name) or None, s.env
+        values[s.name] = s.default if raw is None else s.parse(raw, where)
     return values
 
 

@@ -90,9 +90,9 @@ def authorised() -> bool:
 
 def require_admin():
     if not current_app.config["ADMIN_TOKEN"]:
-        abort(401, "admin is disabled: start the server with ADMIN_TOKEN set")
+        abort(401, "admin is disabled: start the server with RATING_ADMIN_TOKEN set")
     if not authorised():
-        abort(401, "admin token required (Authorization: Bearer ADMIN_TOKEN)")
+        abort(401, "admin token required (Authorization: Bearer RATING_ADMIN_TOKEN)")
 
 
 @bp.get("")
@@ -173,7 +173,7 @@ def _under_upload_root(manifest: str) -> str:
     own files (its environment, its database) into the study folder."""
     root = current_app.config["UPLOAD_ROOT"]
     if not root:
-        abort(400, "the dashboard adds conditions only from under UPLOAD_ROOT, which is not set; set it, or run "
+        abort(400, "the dashboard adds conditions only from under RATING_UPLOAD_ROOT, which is not set; set it, or run "
               "python -m rating_app add-condition on the server")  # fmt: skip
     root = os.path.realpath(root)
     path = os.path.realpath(os.path.join(root, manifest))

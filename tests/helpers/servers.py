@@ -38,6 +38,16 @@ def start_gunicorn(port, env, log, workers=3, threads=16):
     return proc
 
 
+def warm_up(url, n):
+    """`n` concurrent requests to `url`/healthz, each answered: every worker of a server started moments ago has
+    imported the app and answers before a crowd arrives."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(n) as pool:
+        codes = list(pool.map(lambda _: requests.get(url + "/healthz", timeout=60).status_code, range(n)))
+    assert codes == [200] * n, codes
+
+
 def kill9(proc):
     os.killpg(proc.pid, signal.SIGKILL)  # master and workers at once, no clean shutdown
     proc.wait(10)
@@ -53,15 +63,16 @@ def stop(procs):
 
 def crowd_env(stimuli, database_url, token, **settings):
     """The environment of an app under a simulated crowd: targets that never fill, two test trials a rater, no
-    viewing time, no per-client session limit (every rater is on loopback), and `settings` on top."""
+    viewing time, no per-client session limit (every rater is on loopback), and `settings` on top, by their names
+    (STUDY_DESIGN="pairwise": the variable RATING_STUDY_DESIGN)."""
     return dict(
         os.environ,
         RATING_MANIFEST=str(stimuli),
-        DATABASE_URL=database_url,
-        ADMIN_TOKEN=token,
-        RATINGS_PER_CLIP="1000",
-        CLIPS_PER_RATER="2",
-        MIN_VIEW="0",
-        SESSIONS_PER_CLIENT="0",
-        **settings,
+        RATING_DATABASE_URL=database_url,
+        RATING_ADMIN_TOKEN=token,
+        RATING_RATINGS_PER_CLIP="1000",
+        RATING_CLIPS_PER_RATER="2",
+        RATING_MIN_VIEW="0",
+        RATING_SESSIONS_PER_CLIENT="0",
+        **{"RATING_" + name: value for name, value in settings.items()},
     )
