@@ -1,4 +1,5 @@
-"""Stick-figure videos of motion clips: one fixed camera, bones as lines, a floor grid, H.264 MP4.
+"""Videos of motion clips: one fixed camera, a stick figure, a solid body or a mesh (RenderOptions.style) over a
+floor grid, H.264 MP4.
 
 `render_clip` composes the three parts: the camera (`camera`: where it looks in each frame), the rasteriser
 (`raster`: each frame drawn as yuv420p) and the encoder (`encode`: ffmpeg, libx264 ultrafast with a rate control

@@ -7,10 +7,15 @@ whose files are licensed and not shipped: the study file names the user's (`[ske
 
 The joints are what smplx's forward pass gives as its first J joints, computed with smplx's own kinematics
 (`smplx.lbs`: the rest joints regressed from the shaped template, then the rigid transform of the kinematic
-tree) without skinning the mesh, which the joints do not depend on. So only four arrays of the model are read
-(v_template, shapedirs, J_regressor, kintree_table), never its pickled parts; the file must still hold the whole
-layout smplx's loaders read (`MODEL_KEYS`). The poses are taken as full rotations (flat hands), as AMASS and
-BEAT2 store them. torch and smplx are imported only here, only when such a file is read.
+tree); the mesh, which the joints do not depend on, is skinned elsewhere (generation.data.skinning, the mesh
+style), from the same poses. The model's arrays are read without pickles: the seven of smplx's layout
+(`MODEL_KEYS`) are loaded and checked, so a file smplx's loaders would refuse is refused here, though the joints
+use four of them (v_template, shapedirs, J_regressor, kintree_table); the skinning uses the other three; and the
+hand means (`hands_meanl`, `hands_meanr`) where they are added. The hands' rest pose follows each layout's own
+loader (`apply_hand_mean`, `HAND_MEAN_LAYOUTS`): BEAT2's loaders add the model's mean hand pose to the stored
+rotations, AMASS and Seamless Interaction store full rotations; `[skeleton] hand_mean` overrides it, for the joints
+and the mesh alike. SMPL-X expression coefficients shape the head's rest joints. torch and smplx are imported only
+when such a file is read.
 """
 
 from pathlib import Path
