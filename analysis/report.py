@@ -198,7 +198,7 @@ def build_report(
         "figures": {k: str(Path(v).relative_to(out)) for k, v in figs.items()},
     }
     note = shortfall_note(data.counts["n_raters_total"], target)
-    methods = methods_paragraph(design.name, data.rows, data.kept, data.counts, options)
+    methods = methods_paragraph(design, data.rows, data.kept, data.counts, options)
     (out / "methods.txt").write_text(methods + "\n", encoding="utf-8")
     body = design.html(meta, data.counts, kept, everyone, figs)
     body.append(f"<h2>Methods, for a paper</h2><p class=methods>{html.escape(methods)}</p>")

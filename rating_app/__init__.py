@@ -80,12 +80,13 @@ def _app_config(values) -> dict:
     if completion_url and not completion_url.startswith(("https://", "http://")):
         raise AppError(f"completion URL must start with https:// or http://, got {completion_url!r}")
     for env, plain in (("PAIRING", "balanced"), ("STOP_WHEN", "never")):
-        if values[env] != plain and design.name != "pairwise":
-            raise AppError(f"{env.lower()}: {values[env]} needs the pairwise design, not {design.name}")
+        if values[env] != plain and not design.ranks_conditions:
+            ranking = " or ".join(d.name for d in designs.DESIGNS.values() if d.ranks_conditions)
+            raise AppError(f"{env.lower()}: {values[env]} needs the {ranking} design, not {design.name}")
     from .store.reasons import configure
 
     return {
-        **configure(design, values["VOTE_REASONS"], values["REASON_TEXT"]),
+        **configure(design, values["VOTE_REASONS"], values["REASON_TEXT"], designs.taking_reasons()),
         **{k: values[k] for k in ("PAIRING", "PAIRING_RANDOM", "PAIRING_INDIFFERENCE", "STOP_WHEN", "STOP_LEVEL")},
         "STOP_WIDTH": values["STOP_WIDTH"],
         "STOP_MAX_VOTES": values["STOP_MAX_VOTES"],

@@ -11,7 +11,7 @@ from helpers.tiers import only_when_slow
 from test_app_designs import shown, value_for
 
 from moglow_eval.core import study
-from rating_app.designs import build_units
+from rating_app.designs import build_units, get
 from rating_app.operations.health import catch_pool_warning
 from rating_app.store.manifest import load_manifest
 
@@ -132,6 +132,7 @@ def test_a_pool_too_small_is_a_warning_and_the_cap_keeps_every_rater_equal(make,
     # the production pool, in every design: no warning
     clips = load_manifest(pool_stimuli)
     for design, per_rater in PRODUCTION.items():
-        units = build_units(design, clips)
-        assert catch_pool_warning(design, clips, units, per_rater, CATCH_PER_RATER) is None
-        assert catch_pool_warning(design, clips, units, per_rater, 12) is not None  # every catch unit to everyone
+        served = get(design).serving_clips(clips)  # as the app serves them: the mismatched clips in their designs
+        units = build_units(design, served)
+        assert catch_pool_warning(design, served, units, per_rater, CATCH_PER_RATER) is None
+        assert catch_pool_warning(design, served, units, per_rater, 12) is not None  # every catch unit to everyone

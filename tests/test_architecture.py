@@ -326,3 +326,50 @@ def test_the_size_guard_sees_a_long_function(tmp_path):
     assert oversized([tmp_path / "long.py", tmp_path / "short.py"], tmp_path) == [
         f"long.py:1 long: {1 + MAX_FUNCTION_LINES} lines"
     ]
+
+
+# ------------------------------------------------------------------------------- designs as plug-ins
+# Where a design may be named: where the names are defined, each part's design modules and their registries.
+DESIGN_HOMES = (
+    "moglow_eval/core/study.py",
+    "rating_app/designs/",
+    "analysis/designs/",
+    "generation/own_study/designs/",
+)
+# Modules that are about named designs by purpose, not composites: the demos build a chosen design's study, and the
+# importer writes the export of the design a leaderboard's votes become.
+NAMES_A_DESIGN = {
+    "analysis/demo.py": "runs the demo of the design it is asked for",
+    "generation/own_study/demo_dyad.py": "builds the dyadic or semantic demo study",
+    "analysis/import_votes.py": "writes a pairwise or appropriateness export from another tool's votes",
+}
+
+
+def design_names_in(paths, root=ROOT):
+    """'file:line: name' for each string constant that is a design's name (moglow_eval.core.study.DESIGNS)."""
+    from moglow_eval.core import study
+
+    found = []
+    for path in paths:
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in study.DESIGNS:
+                found.append(f"{path.relative_to(root)}:{node.lineno}: {node.value!r}")
+    return found
+
+
+def test_no_shared_module_names_a_design():
+    """A composite asks the study's design object (its growth rule, its battles, its methods text, its stimuli's
+    needs), never its name: a new design then touches only the files ARCHITECTURE's checklist lists."""
+    paths = [
+        p
+        for part in PARTS
+        for p in part_files(part)
+        if not str(p.relative_to(ROOT)).startswith(DESIGN_HOMES) and str(p.relative_to(ROOT)) not in NAMES_A_DESIGN
+    ]
+    assert not (found := design_names_in(paths)), "\n".join(found)
+
+
+def test_the_design_guard_sees_a_name(tmp_path):
+    (tmp_path / "shared.py").write_text('def grows(design):\n    return design.name == "pairwise"\n')
+    (tmp_path / "fine.py").write_text('def grows(design):\n    return design.grows  # "pairwise" in a comment\n')
+    assert design_names_in([tmp_path / "shared.py", tmp_path / "fine.py"], tmp_path) == ["shared.py:2: 'pairwise'"]

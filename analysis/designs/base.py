@@ -48,6 +48,16 @@ class Prepared:
 class Design:
     name = ""  # as moglow_eval.core.study.DESIGNS spells it
     steps = 0  # progress-bar steps of one report (0: no bar)
+    # The methods paragraph's words for this design (analysis.page.methods): what a rater did ("Raters ..."), what
+    # failing a catch trial means ("excluded because they ..."; {threshold}: the report's), and the statistics.
+    methods_task = ""
+    methods_catch = "preferred a deliberately broken clip (BAD) to the real motion"
+    methods_stats = ""
+
+    def answers_per_unit(self, test) -> tuple[str, pd.Series]:
+        """(what a unit of the methods paragraph's count is, the kept test answers per unit): ratings per clip
+        unless the design counts otherwise."""
+        return "ratings per clip", test.groupby("clip_id").size()
 
     def detects(self, columns: set[str]) -> bool:
         """Whether a CSV file with these header columns is this design's export (exactly one design says so)."""

@@ -50,7 +50,9 @@ from ..stimuli.catch_kinds import make_catch
 from ..stimuli.files import StimuliError, clip_files, manifest_row, prepare_out, summary_text, write_csv, write_tables
 from ..stimuli.render_pool import render_stimuli
 from ..stimuli.summary import blinding_warning
-from .dyad import UNNAMED, read_people
+from . import designs
+from .designs import mismatch_partners  # noqa: F401  (its home before the designs had theirs; tests import it)
+from .dyad import read_people
 from .inputs import (
     check_same_skeleton,
     check_valid,
@@ -183,49 +185,18 @@ class StudyClip:
     path: str = ""  # the file its motion came from, where no condition's folder of its item holds it (dyadic)
 
 
-def mismatch_partners(motions, items, seed):
-    """{item: partner}: for each item, another item whose motion is shown with its speech in the appropriateness
-    design. Seeded; never the item itself; a partner at least as long as the item where one exists (its motion is
-    cut to the item's length), else the longest other item (its last pose held to the item's length)."""
-    rng = np.random.default_rng(seed + 7919)
-    length = {i: len(motions[study.NATURAL][i].joints) for i in items}
-    out = {}
-    for i in items:
-        longer = [j for j in items if j != i and length[j] >= length[i]]
-        out[i] = str(rng.choice(longer)) if longer else max((j for j in items if j != i), key=length.get)
-    return out
-
-
-def _fit(joints, n):
-    """joints cut, or held at their last frame, to n frames."""
-    return joints[:n] if len(joints) >= n else np.concatenate([joints, np.repeat(joints[-1:], n - len(joints), 0)])
-
-
 def build_clips(spec, motions, roles, catch_items, bad, people=None):
     """Every clip: each item in every condition with its role; per catch item its BAD clip and copies of its clips
-    in every condition with role catch; and, for the appropriateness design, each condition's mismatched clip of
-    every item (the motion it made for the partner item, with this item's sound; semantic alike; dyadic: the motion
-    it made for a mismatched interlocutor, from `people`, shown with this item's). A catch copy starts one frame
+    in every condition with role catch; and the design's mismatched clips (designs/: appropriateness and semantic,
+    each condition's motion for a partner item with this item's sound; dyadic, the motion it made for a mismatched
+    interlocutor, from `people`, shown with this item's). A catch copy starts one frame
     later (its last frame held), so that no two videos of the set are the same bytes (a repeated content hash
     would point at the catch trial)."""
     clips = []
     for item, role in roles.items():
         for name, by_item in motions.items():
             clips.append(StudyClip(name, item, role, by_item[item].joints))
-    if spec.design == "dyadic":
-        for item, role in roles.items():
-            for name, by_item in people.mismatched.items():
-                made_for = people.made_for.get(item) or UNNAMED
-                motion = by_item[item]
-                clips.append(StudyClip(name, item, role, motion.joints, motion_item=made_for, path=motion.path))
-    elif spec.design in ("appropriateness", "semantic"):
-        partners = mismatch_partners(motions, sorted(roles), spec.seed)
-        for item, role in roles.items():
-            n = len(motions[study.NATURAL][item].joints)
-            for name, by_item in motions.items():
-                clips.append(
-                    StudyClip(name, item, role, _fit(by_item[partners[item]].joints, n), motion_item=partners[item])
-                )
+    clips += [StudyClip(**c) for c in designs.get(spec.design).mismatched_clips(spec, motions, roles, people)]
     for item in catch_items:
         for name, by_item in motions.items():
             joints = by_item[item].joints

@@ -8,7 +8,7 @@ item's agent speech with another person's behaviour as its interlocutor (GENEA 2
 same skeleton as the condition's own, every item. Each is read and checked like a condition's files (one line
 naming the file), and cut with the item (generation.own_study.builder.cut_items). The manifest's `motion_item`
 of a dyadic mismatched clip is the item whose interlocutor that motion was made for, from the sources table's
-`mismatched` column (the cutter's), else UNNAMED.
+`mismatched` column (the cutter's), else designs.dyadic.UNNAMED.
 """
 
 import sys
@@ -21,8 +21,6 @@ from moglow_eval.core import study
 from ..data.motion_files import read_motion
 from ..stimuli.files import StimuliError
 from .inputs import check_same_skeleton, folder_files, read_options
-
-UNNAMED = "?"  # a dyadic mismatched clip's motion_item where the study file does not say whose interlocutor it had
 
 
 @dataclass

@@ -22,6 +22,7 @@ from moglow_eval.core.tables import read_csv
 from ..data.transcripts import EXTENSIONS as TRANSCRIPT_EXTENSIONS
 from ..data.transcripts import TranscriptError, read_transcript
 from ..stimuli.files import StimuliError
+from . import designs
 from .cuts import plain
 from .inputs import seconds_text
 
@@ -138,18 +139,20 @@ def _highlighted(words, keyword):
 
 def item_captions(spec, lengths, size):
     """{item: tuple of rendering.captions.Phrase} for a study with [captions]; {} without. Words past the item's
-    clips are left out; for design semantic, every item needs its keyword and the keyword in its words."""
+    clips are left out; for a design that highlights one (semantic), every item needs its keyword and the keyword
+    in its words."""
     from rendering.captions import phrases
 
     if spec.captions is None:
         return {}
     keywords = read_keywords(spec)
+    highlights = designs.get(spec.design).highlights_keyword  # semantic: every item says its keyword
     out = {}
     for item, frames in lengths.items():
         seconds = frames / spec.fps
         words = [w for w in _words(spec.captions, item) if w[0] < seconds]
         marked = _highlighted(words, keywords.get(item))
-        if spec.design == "semantic" and not any(m[3] for m in marked):
+        if highlights and not any(m[3] for m in marked):
             what = keywords.get(item, ("no keyword",))[0]
             raise StimuliError(
                 f"{spec.keywords}: item {item}: its keyword ({what}) is not among its words in {spec.captions}"

@@ -3,12 +3,12 @@ captioned study, and what each design needs of the rest of the file."""
 
 from moglow_eval.core import colours
 
+from . import designs
 from .placing import PLACEMENTS
 from .study_keys import err, file, folder, number, unknown
 
-# Designs that need stimuli of their own: mismatched clips (appropriateness, semantic: another item's motion;
-# dyadic: the motion made for a mismatched interlocutor), two people (dyadic), keyword captions (semantic).
-STIMULUS_DESIGNS = ("appropriateness", "dyadic", "semantic")
+# The designs that need stimuli of their own, and what each needs, are in designs/ (one module each).
+STIMULUS_DESIGNS = tuple(designs.DESIGNS)
 INTERLOCUTOR_KEYS = {"folder", "placement", "distance", "open", "colour"}
 CAPTION_KEYS = {"folder", "interlocutor", "keywords"}
 
@@ -71,21 +71,10 @@ def check_needs(path, spec):
     """What each design needs from the rest of the study file; the framing's default (two people: upper)."""
     if spec.framing is None:
         spec.framing = "upper" if spec.interlocutor is not None else "full"
-    if spec.design in STIMULUS_DESIGNS and spec.audio_folder is None:
-        raise err(path, "design", f"{spec.design} asks whether motion fits its speech: give the [audio] table")
-    if spec.design == "dyadic":
-        if spec.interlocutor is None:
-            raise err(path, "design", "dyadic shows the agent beside its interlocutor: give the [interlocutor] table")
-        lacking = [n for n in spec.conditions if n != spec.reference and n not in spec.mismatched]
-        if lacking:
-            raise err(
-                path,
-                f"[mismatched] {lacking[0]}",
-                "missing: dyadic needs each system's motion made for a mismatched interlocutor (a folder each)",
-            )
-    elif spec.mismatched:
-        raise err(path, "[mismatched]", 'only design = "dyadic" shows motion made for a mismatched interlocutor')
-    if spec.design == "semantic" and (spec.captions is None or spec.keywords is None):
-        raise err(path, "design", "semantic highlights a keyword in the captions: give [captions] folder and keywords")
+    design = designs.get(spec.design)
+    design.check(path, spec)
+    if spec.mismatched and not design.mismatched_folders:
+        takes = " or ".join(f'"{d.name}"' for d in designs.DESIGNS.values() if d.mismatched_folders)
+        raise err(path, "[mismatched]", f"only design = {takes} shows motion made for a mismatched interlocutor")
     if spec.interlocutor_audio is not None and spec.interlocutor is None:
         raise err(path, "[audio] interlocutor", "the interlocutor's voice needs the [interlocutor] table")

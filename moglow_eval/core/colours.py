@@ -20,7 +20,7 @@ GREY_SATURATION = 0.15
 
 
 def from_hex(text: str) -> tuple[float, float, float]:
-    """"#RRGGBB" as rgb in 0..1; ValueError for anything else."""
+    """The text "#RRGGBB" as rgb in 0..1; ValueError for anything else."""
     if not isinstance(text, str) or not HEX.fullmatch(text):
         raise ValueError(f'must be "#RRGGBB", got {text!r}')
     return tuple(int(text[k : k + 2], 16) / 255 for k in (1, 3, 5))
@@ -28,7 +28,7 @@ def from_hex(text: str) -> tuple[float, float, float]:
 
 def to_hex(rgb) -> str:
     """rgb in 0..1 as "#rrggbb" (each channel rounded to the nearest of 256 levels)."""
-    return "#" + "".join(f"{min(255, max(0, round(float(c) * 255))):02x}" for c in rgb)
+    return "#" + bytes(min(255, max(0, round(float(c) * 255))) for c in rgb).hex()
 
 
 def colour_name(rgb) -> str:

@@ -7,6 +7,8 @@ whether the preference was strong, the ticked reasons as a JSON list and the fre
 write that format and `analysis.import_votes` reads it, so the column names and the level mapping live here once.
 """
 
+import json
+
 # The realism reasons GENEA's leaderboard asks for with every vote: (id in its files, label a rater sees).
 # The last one is its "other" box; our free-text field plays that part, so the app's default list is the first four.
 REALISM_REASONS = (
@@ -50,3 +52,39 @@ REASON_SEPARATOR = ";"
 
 # The leaderboard's speech-mismatch study names the motion made for other speech as the system's name and this.
 MISMATCH_SUFFIX = "_Mismatched"
+
+
+# ------------------------------------------------------------------------------ the battle format's rows
+def battle_row(user, input_code, model_a, model_b, preference: int, reasons, text: str) -> dict:
+    """One battle row from a vote: `reasons` the ticked ids in order, `text` the free text ("" for none)."""
+    winner, strong = preference_to_battle(int(preference))
+    ids = list(reasons)
+    if text and OTHER_REASON not in ids:
+        ids.append(OTHER_REASON)  # the leaderboard's free text belongs to its "other" box
+    return {
+        "user": user,
+        "input_code": input_code,
+        "model_a": model_a,
+        "model_b": model_b,
+        "winner": winner,
+        "is_strong": strong,
+        "juiceOptions": json.dumps(ids, separators=(",", ":")) if ids else "{}",
+        "juiceOtherReason": json.dumps(text) if text else "",
+    }
+
+
+def battles_from_pairs(rows):
+    """Battle rows from pairs.csv rows (dicts as the export writes them): the test votes, in order."""
+    for r in rows:
+        if r["role"] != "test":
+            continue
+        reasons = [x for x in (r.get("reasons") or "").split(";") if x]
+        yield battle_row(
+            r["rater_id"],
+            r["item"],
+            r["condition_a"],
+            r["condition_b"],
+            r["preference"],
+            reasons,
+            r.get("reason_text") or "",
+        )

@@ -22,7 +22,7 @@ DESIGNS: dict[str, Design] = {
 }
 assert tuple(DESIGNS) == study.DESIGNS, "moglow_eval.core.study.DESIGNS and the registry list the same designs"
 
-__all__ = ["DESIGNS", "LABELS", "MAX_PAGE", "Design", "Unit", "build_units", "get", "of_app"]
+__all__ = ["DESIGNS", "LABELS", "MAX_PAGE", "Design", "Unit", "build_units", "get", "of_app", "taking_reasons"]
 
 
 def get(name: str | None) -> Design:
@@ -31,6 +31,11 @@ def get(name: str | None) -> Design:
     if name not in DESIGNS:
         raise AppError(f"design {name!r} must be one of {', '.join(DESIGNS)}")
     return DESIGNS[name]
+
+
+def taking_reasons() -> list[str]:
+    """The names of the designs whose votes may carry reasons (base.Design.takes_reasons)."""
+    return [d.name for d in DESIGNS.values() if d.takes_reasons]
 
 
 def build_units(name: str, clips) -> dict[str, Unit]:

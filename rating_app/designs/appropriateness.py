@@ -26,6 +26,9 @@ class Appropriateness(Pairwise):
     export_noun = "appropriateness answers"
     columns = (*Pairwise.columns, "matched", study.MISMATCH_COLUMN["appropriateness"])
     default_reasons, default_reason_text = (), 0  # GENEA's reasons are about realism; set VOTE_REASONS to ask
+    # A system's score is against its own mismatched motion, not a ranking of pairs: no rounds, no adaptive pairing,
+    # no battles (the leaderboard's battles are between two systems).
+    grows = ranks_conditions = battles = False
     dashboard = {
         **Pairwise.dashboard,
         "note": " (a system's motion for the speech heard and for another item's, a preference; targets per item "

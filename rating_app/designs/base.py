@@ -17,6 +17,8 @@ from __future__ import annotations
 import random
 from dataclasses import dataclass
 
+from moglow_eval.core import votes
+
 MAX_PAGE = 8  # clips on one trial's page (labels A..H)
 LABELS = "ABCDEFGH"
 
@@ -43,6 +45,12 @@ class Design:
     several_clips = True  # a trial shows TrialClip rows (labelled A, B, ...) rather than one Trial.clip_id
     # The reasons asked with a vote (store/reasons.py): whether the design can take them, and its defaults.
     takes_reasons = False
+    # A study that grows (store/rounds.py, operations/conditions.py): whether a new condition only adds units, so
+    # that `add-condition` may begin a round (a parallel page, or a mismatched pair, would change instead).
+    grows = False
+    # Whether the study may pair adaptively and stop on a settled ranking (PAIRING, STOP_WHEN; pairing/active.py).
+    ranks_conditions = False
+    battles = False  # whether its export rows are votes between two systems, as the leaderboard's battles are
     default_reasons: tuple[tuple[str, str], ...] = ()
     default_reason_text = 0
     page = ""  # how the rater's page (static/study.js) shows a trial: "one" clip, a "pair" A/B, a "page" of clips
@@ -56,6 +64,11 @@ class Design:
         "per_unit": "clip",  # the per-unit table's heading: "Per ..."
         "unit_column": "unit",
     }
+
+    def battle_rows(self, session):
+        """The GENEA leaderboard's battle rows of this study's test votes (operations/battles.py), or None where the
+        design's answers are not votes between two systems (`battles`)."""
+        return votes.battles_from_pairs(self.export_rows(session)) if self.battles else None
 
     @property
     def page_template(self) -> str:

@@ -57,6 +57,9 @@ class Pairwise(UnitDesign):
     columns = COLUMNS
     page = "pair"
     takes_reasons = True
+    grows = True  # a new condition adds its pairs; every other pair stays as it is
+    ranks_conditions = True
+    battles = True
     answer_extra = ("reasons", "reason_text")
     default_reasons = votes.REALISM_REASONS
     default_reason_text = votes.FREE_TEXT_MAX

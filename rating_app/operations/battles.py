@@ -12,66 +12,38 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
 from moglow_eval.core import votes
 
-from ..designs import get
+from ..designs import DESIGNS, get
 from ..store.db import study_design
 from ..store.manifest import AppError
 from .export import cell
 
-
-def battle_row(user, input_code, model_a, model_b, preference: int, reasons, text: str) -> dict:
-    """One battle row from a vote: `reasons` the ticked ids in order, `text` the free text ("" for none)."""
-    winner, strong = votes.preference_to_battle(int(preference))
-    ids = list(reasons)
-    if text and votes.OTHER_REASON not in ids:
-        ids.append(votes.OTHER_REASON)  # the leaderboard's free text belongs to its "other" box
-    return {
-        "user": user,
-        "input_code": input_code,
-        "model_a": model_a,
-        "model_b": model_b,
-        "winner": winner,
-        "is_strong": strong,
-        "juiceOptions": json.dumps(ids, separators=(",", ":")) if ids else "{}",
-        "juiceOtherReason": json.dumps(text) if text else "",
-    }
-
-
-def battles_from_pairs(rows):
-    """Battle rows from pairs.csv rows (dicts as the export writes them): the test votes, in order."""
-    for r in rows:
-        if r["role"] != "test":
-            continue
-        reasons = [x for x in (r.get("reasons") or "").split(";") if x]
-        yield battle_row(
-            r["rater_id"],
-            r["item"],
-            r["condition_a"],
-            r["condition_b"],
-            r["preference"],
-            reasons,
-            r.get("reason_text") or "",
-        )
+# Where they were before the design held its battles (old imports): the rows from a vote, from pairs.csv rows.
+battle_row, battles_from_pairs = votes.battle_row, votes.battles_from_pairs
 
 
 def export_battles(engine: Engine, out=None) -> str | int:
     """Write the battle file to `out` (returns the row count) or return it as a string; AppError for a study
-    whose design is not pairwise."""
+    whose design has no battles (Design.battle_rows)."""
     buf = out if out is not None else io.StringIO()
     n = 0
     with Session(engine.execution_options(read_only=True)) as s:
         design = get(study_design(s))
-        if design.name != "pairwise":
-            raise AppError(f"--format battles: the study is {design.name}; the battle format holds pairwise votes")
+        rows = design.battle_rows(s)
+        if rows is None:
+            takes = " or ".join(d.name for d in DESIGNS.values() if d.battles)
+            raise AppError(
+                f"--format battles: the study is {design.name}; the battle format holds votes between two systems "
+                f"({takes} studies)"
+            )
         w = csv.DictWriter(buf, fieldnames=list(votes.BATTLE_COLUMNS), lineterminator="\n")
         w.writeheader()
-        for row in battles_from_pairs(design.export_rows(s)):
+        for row in rows:
             w.writerow({k: cell(v) for k, v in row.items()})
             n += 1
     return n if out is not None else buf.getvalue()

@@ -29,6 +29,7 @@ from pathlib import Path
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from .. import designs
 from ..designs import get
 from ..pairing.assign import lock_assign
 from ..store import rounds
@@ -37,13 +38,18 @@ from ..store.manifest import AppError, load_manifest, read_rows
 from . import submission
 
 
+def _growing() -> str:
+    """The designs that grow round by round (designs/base.py `grows`), for a message."""
+    return " or ".join(d.name for d in designs.DESIGNS.values() if d.grows)
+
+
 def _study(s, study_manifest):
     """(the design, the study's manifest path, {clip id: condition} of the database's clips)."""
     design = study_design(s)
-    if design not in rounds.GROWS:
+    if not designs.get(design).grows:
         raise AppError(
-            f"add-condition: the database holds a {design} study; only a {' or '.join(rounds.GROWS)} study takes new "
-            "conditions (its new pairs leave every stored one as it is)"
+            f"add-condition: the database holds a {design} study; only a {_growing()} study takes new conditions (its "
+            "new pairs leave every stored one as it is)"
         )
     path = study_manifest
     if path is None:
@@ -280,8 +286,10 @@ def withdraw_condition(engine, name: str) -> dict:
     """Stop serving the pairs of condition `name` (its votes stay); {"condition", "round", "served"}."""
     with Session(engine) as s, s.begin():
         design = study_design(s)
-        if design not in rounds.GROWS:
-            raise AppError(f"withdraw-condition: the database holds a {design} study; only a pairwise one has rounds")
+        if not designs.get(design).grows:
+            raise AppError(
+                f"withdraw-condition: the database holds a {design} study; only a {_growing()} one has rounds"
+            )
         lock_assign(s.connection())
         rows = {r.name: r for r in s.scalars(select(rounds.StudyCondition))}
         row = rows.get(name)

@@ -52,13 +52,13 @@ def parse_list(raw: str | None, default) -> tuple[tuple[str, str], ...]:
     return tuple(out)
 
 
-def configure(design, reasons_raw: str | None, text_max: int | None) -> dict:
+def configure(design, reasons_raw: str | None, text_max: int | None, takers=()) -> dict:
     """app.config entries VOTE_REASONS and REASON_TEXT for `design`; AppError when a design without reasons is
-    given some."""
+    given some. `takers`: the names of the designs that take reasons, for that message (the registry knows them)."""
     reasons = parse_list(reasons_raw, design.default_reasons)
     text = design.default_reason_text if text_max is None else text_max
     if (reasons or text) and not design.takes_reasons:
-        raise AppError(f"reasons: a {design.name} study asks for no reasons (pairwise and appropriateness do)")
+        raise AppError(f"reasons: a {design.name} study asks for no reasons ({', '.join(takers)} do)")
     return {"VOTE_REASONS": reasons, "REASON_TEXT": text}
 
 

@@ -20,7 +20,6 @@ from sqlalchemy import select
 from .db import StudyCondition, StudyManifest, StudySetting, study_setting
 from .manifest import AppError, load_manifest
 
-GROWS = ("pairwise",)  # the designs whose units a new condition only adds to (a parallel page would change)
 ROUND = "round"  # StudySetting: the study's round now (absent: 1); designs/pairwise.py reads it with each vote
 REVISION = "revision"  # StudySetting: bumped by every add and withdrawal, so that workers reload
 _reload_lock = threading.Lock()
@@ -82,7 +81,7 @@ def refresh(conn, app=None, seen: str | None = None) -> dict:
     cannot grow never reads it."""
     app = app or current_app
     ext = app.extensions["rating_app"]
-    if ext["design"].name not in GROWS:
+    if not ext["design"].grows:  # its units never change after the start (designs/base.py)
         return ext
     if (seen or revision(conn)) != ext.get("revision"):
         with _reload_lock:

@@ -117,10 +117,10 @@ def dashboard():
 
 def _conditions():
     """The study's conditions and rounds (a design that grows round by round), or None."""
+    from ..designs import of_app
     from ..operations.conditions import conditions_table
-    from ..store.rounds import GROWS
 
-    if current_app.config["STUDY_DESIGN"] not in GROWS:
+    if not of_app().grows:
         return None
     with app_engine().connect() as conn:
         return conditions_table(conn)

@@ -193,6 +193,12 @@ def check_enough(path, test):
 
 class Acr(Design):
     name = "acr"
+    methods_task = "rated each clip on its own on a five-point scale (1 = bad, 5 = excellent)"
+    methods_catch = "rated a deliberately broken clip (BAD) at {threshold} or above"
+    methods_stats = (
+        "a one-way ANOVA with Tukey's HSD, a linear mixed model with crossed random intercepts for raters and "
+        "clips, and cluster-bootstrap intervals resampling raters and clips"
+    )
     steps = 14  # five per analysis of two, three for the figures, one for the files
 
     def detects(self, columns):

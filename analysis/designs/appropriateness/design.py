@@ -15,6 +15,17 @@ class Appropriateness(FailedCatchDesign):
     (moglow_eval.core.study.MISMATCH_COLUMN)."""
 
     name = "appropriateness"
+    methods_task = (
+        "watched a system's motion for the speech they heard and its motion for other speech, with the same "
+        "audio, and chose the one that fitted the speech better on a five-level scale"
+    )
+    methods_stats = (
+        "the mean appropriateness score with Student-t intervals and sign tests against chance, Holm-adjusted"
+    )
+
+    def answers_per_unit(self, test):
+        return "votes per system", test.groupby("condition_a").size()
+
     score = "mean appropriateness score (MAS)"
     heading = (
         "Mean appropriateness score (MAS: +2 = the matched motion clearly preferred, -2 = the mismatched "

@@ -9,6 +9,15 @@ from ..appropriateness.design import Appropriateness
 
 class Dyadic(Appropriateness):
     name = "dyadic"
+    methods_task = (
+        "watched two people in conversation, the same real interlocutor and the same audio in both videos, one with a "
+        "system's agent motion made for that interlocutor and one with the same system's motion made for another, "
+        "and chose the agent that responded more appropriately on a five-level scale"
+    )
+    methods_stats = (
+        "the mean interlocutor appropriateness score with Student-t intervals and sign tests against no preference, "
+        "Holm-adjusted"
+    )
     score = "mean interlocutor appropriateness score"
     heading = (
         "Mean interlocutor appropriateness score (+2 = the motion made for this interlocutor clearly "

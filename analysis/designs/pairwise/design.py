@@ -4,6 +4,7 @@ figures."""
 
 import html
 
+import numpy as np
 import pandas as pd
 
 from ...data.load import AnalysisError
@@ -21,6 +22,20 @@ def _renamed_nat(df, name):
 
 class Pairwise(FailedCatchDesign):
     name = "pairwise"
+    methods_task = (
+        "watched two clips of the same item from two conditions and chose the one that looked more natural on a "
+        "five-level scale (clearly, slightly, no preference)"
+    )
+    methods_stats = (
+        "two-sided sign tests per pair (Holm-adjusted) and a Bradley-Terry model with Davidson's tie parameter, "
+        "reported on an Elo scale (400 points per factor of ten in the odds), with intervals and rank intervals "
+        "from a bootstrap over raters"
+    )
+
+    def answers_per_unit(self, test):
+        lo = np.minimum(test["condition_a"], test["condition_b"])
+        hi = np.maximum(test["condition_a"], test["condition_b"])
+        return "votes per pair of conditions", test.groupby([lo, hi]).size()
 
     def detects(self, columns):
         return "preference" in columns and mas.MATCHED not in columns  # that column: appropriateness

@@ -12,6 +12,9 @@ from . import mushra
 
 class Parallel(FailedCatchDesign):
     name = "parallel"
+    methods_task = "rated every condition of an item on one page, side by side, on a 0-100 scale (MUSHRA-like)"
+    methods_catch = "rated a deliberately broken clip (BAD) at or above the real motion on the same page"
+    methods_stats = "Wilcoxon signed-rank tests on page-paired ratings, Holm-adjusted"
 
     def detects(self, columns):
         return "page_id" in columns and "preference" not in columns  # both: a pairs.csv (pairwise's)

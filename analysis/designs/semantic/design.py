@@ -7,6 +7,14 @@ from ..appropriateness.design import Appropriateness
 
 class Semantic(Appropriateness):
     name = "semantic"
+    methods_task = (
+        "watched a system's motion for an utterance and its motion for another utterance, both with the utterance's "
+        "speech and captions and one word highlighted, and chose the motion that better showed the meaning of that "
+        "word on a five-level scale"
+    )
+    methods_stats = (
+        "the mean semantic alignment score with Student-t intervals and sign tests against chance, Holm-adjusted"
+    )
     score = "mean semantic alignment score"
     heading = (
         "Mean semantic alignment score (+2 = the motion made for this utterance clearly preferred, -2 = the "
