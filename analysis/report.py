@@ -19,7 +19,7 @@ from moglow_eval.core import cli, study, tables, user_files
 from .data.filtering import DEFAULT_THRESHOLD
 from .data.load import AnalysisError
 from .designs import Options, design_of
-from .designs.acr.design import MIXED_MAX_LEVELS, ORDINAL_MAX_RATINGS
+from .designs.base import MIXED_MAX_LEVELS, ORDINAL_MAX_RATINGS
 from .page import report_html
 from .page.methods import methods_paragraph
 from .page.study_text import reference_from_study_file
@@ -83,24 +83,7 @@ def shortfall_note(n_raters: int, target: int | None) -> str | None:
     )
 
 
-def build_report(
-    ratings_path,
-    out_dir="report",
-    metrics_path=None,
-    threshold=DEFAULT_THRESHOLD,
-    mixed=True,
-    seed=0,
-    n_boot=2000,
-    alpha=0.05,
-    mixed_max_levels=MIXED_MAX_LEVELS,
-    progress=True,
-    quiet=False,
-    ordinal=True,
-    ordinal_max_ratings=ORDINAL_MAX_RATINGS,
-    reference_name=None,
-    reference=None,
-    indifference=0.0,
-):
+def build_report(ratings_path, out_dir="report", options: Options | None = None, *, progress=True, quiet=False):
     """Run the whole analysis of a ratings file, of whichever design it holds, and write the report.
 
     Writes report.html, stats.json and the figures to `out_dir` (as `python -m analysis.report`), and prints
@@ -112,38 +95,13 @@ def build_report(
         The export of the rating app (ratings.csv, or the answers of another test design).
     out_dir : str or Path
         The report folder.
-    metrics_path : str or Path or None
-        metrics.csv of the stimuli: each metric is correlated with the clips' mean ratings (and the c2st.csv
-        beside it is read where there is one); None: no metrics.
-    threshold : int
-        The catch rating at or above which a rater is excluded (`exclude_raters`).
-    mixed : bool
-        Fit the linear mixed model.
-    seed : int
-        The seed of the bootstraps.
-    n_boot : int
-        The number of bootstrap replicates.
-    alpha : float
-        The family-wise error rate of the tests.
-    mixed_max_levels : int
-        The mixed models are skipped when the raters and the clips both outnumber this (their cost grows with
-        them).
+    options : analysis.designs.Options or None
+        The analysis's settings, plain data: the metrics, the catch threshold, the models, the bootstraps' seed and
+        size, the error rate, the reference and its name, the indifference margin (None: every default).
     progress : bool
         Show a progress bar on stderr.
     quiet : bool
         Print nothing to stdout.
-    ordinal : bool
-        Fit the ordinal mixed model.
-    ordinal_max_ratings : int
-        The ordinal model is skipped above this many test ratings (it works on every rating).
-    reference_name : str or None
-        The reference condition's own name (acr): the export calls it NAT (CONTRACTS §10); the report, its
-        figures and its models then use this name.
-    reference : str or None
-        pairwise: the condition at log strength 0 and Elo 1000 (None: NAT, else the first by name).
-    indifference : float
-        pairwise: a condition whose Elo lies within this many points of the one above in 95% of the bootstrap
-        resamples shares its group (the app's PAIRING_INDIFFERENCE; 0: groups by rank intervals alone).
 
     Returns
     -------
@@ -156,20 +114,7 @@ def build_report(
         Bad input: one line naming the file and the line or column.
     """
     t0 = time.perf_counter()
-    options = Options(
-        metrics_path,
-        threshold,
-        mixed,
-        seed,
-        n_boot,
-        alpha,
-        mixed_max_levels,
-        ordinal,
-        ordinal_max_ratings,
-        reference_name,
-        reference,
-        indifference,
-    )
+    options = options or Options()
     design = design_of(ratings_path)
     data = design.prepare(ratings_path, options)
     target = study_target(ratings_path)  # before any work: a bad value is the file's problem
@@ -193,8 +138,8 @@ def build_report(
         **design.stats_head(),
         "input": str(ratings_path),
         "generated_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-        "seed": seed,
-        "alpha": alpha,
+        "seed": options.seed,
+        "alpha": options.alpha,
         "figures": {k: str(Path(v).relative_to(out)) for k, v in figs.items()},
     }
     note = shortfall_note(data.counts["n_raters_total"], target)
@@ -291,24 +236,21 @@ def _main(argv):
         reference = reference_from_study_file(args.study)
     if reference is None:
         reference = study_reference(args.ratings)
-    build_report(
-        args.ratings,
-        args.out,
-        args.metrics,
-        args.threshold,
-        not args.no_mixed,
-        args.seed,
-        args.n_boot,
-        args.alpha,
-        args.mixed_max_levels,
-        progress=not args.quiet,
-        quiet=args.quiet,
+    options = Options(
+        metrics_path=args.metrics,
+        threshold=args.threshold,
+        mixed=not args.no_mixed,
+        seed=args.seed,
+        n_boot=args.n_boot,
+        alpha=args.alpha,
+        mixed_max_levels=args.mixed_max_levels,
         ordinal=not args.no_ordinal,
         ordinal_max_ratings=args.ordinal_max_ratings,
         reference_name=reference,
         reference=args.reference,
         indifference=args.indifference,
     )
+    build_report(args.ratings, args.out, options, progress=not args.quiet, quiet=args.quiet)
     return 0
 
 

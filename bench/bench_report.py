@@ -25,11 +25,11 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from analysis import rating_models  # noqa: E402
 from analysis.data.filtering import exclude_raters, only_test_rows  # noqa: E402
 from analysis.data.load import load_ratings  # noqa: E402
+from analysis.designs import Options  # noqa: E402
 from analysis.report import build_report  # noqa: E402
-from analysis.stats import bootstrap  # noqa: E402
+from analysis.stats import bootstrap, rating_models  # noqa: E402
 
 spec = importlib.util.spec_from_file_location("make_ratings", ROOT / "tests/data/analysis/make_ratings.py")
 gen = importlib.util.module_from_spec(spec)
@@ -40,7 +40,7 @@ def timed_report(csv, out, **kw):
     """Wall seconds of one whole report; CPU seconds of this process are kept in CPU[-1] (on a shared machine
     wall time includes waiting for a core)."""
     t, c = time.perf_counter(), time.process_time()
-    build_report(csv, out, progress=False, quiet=True, **kw)
+    build_report(csv, out, Options(**kw), progress=False, quiet=True)
     CPU.append(time.process_time() - c)
     return time.perf_counter() - t
 

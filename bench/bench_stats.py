@@ -24,10 +24,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from analysis import rating_models  # noqa: E402
 from analysis.data.filtering import exclude_raters, only_test_rows  # noqa: E402
 from analysis.data.load import load_ratings  # noqa: E402
 from analysis.report import build_report  # noqa: E402
+from analysis.stats import rating_models  # noqa: E402
 
 DATA = ROOT / "tests" / "data" / "analysis"
 REF_CSV = DATA / "ratings_r_reference.csv"

@@ -1,6 +1,6 @@
 """Votes a pairwise ranking study needs with the app's active pairing against round robin, on three truths; and the
 stopping rule's error rate. Pure simulation, no server, but the app's own rule: the pair order comes from
-moglow_eval.core.ranking.pick_order (what rating_app/pairing/active.py calls), its balanced share goes to the
+moglow_eval.core.pair_posterior.pick_order (what rating_app/pairing/active.py calls), its balanced share goes to the
 least-covered pair (the app's balanced claim), and the mean is refitted as the app refits it.
 
     nice python bench/pairwise_active.py [--reps 40] [--truths evenly,leaderboard,near-ties] [--skip stop,error]
@@ -8,18 +8,18 @@ least-covered pair (the app's balanced claim), and the mean is refitted as the a
 
 - The truths (log strengths): `evenly`, 8 systems 0.15 apart (26 Elo); `leaderboard`, the 8 systems of the GENEA
   leaderboard's released realism votes (../shared/data/genea-leaderboard-votes/battles_elo.csv, read there, never
-  copied), fitted by ranking.fit under a flat-enough prior (sd 10); `near-ties`, 10 systems 0.25 apart but for
+  copied), fitted by pair_posterior.fit under a flat-enough prior (sd 10); `near-ties`, 10 systems 0.25 apart but for
   two pairs 0.02 apart (3.5 Elo: alike for any rater).
 - A vote: its outcome drawn from Bradley-Terry with Davidson's ties (ν = --nu; 0.35 gives 15% ties between
   equals), a tie half to each side, as the app counts it.
 - round robin: the pair with the fewest votes so far, ties at random (the app's balanced pairing).
-- active: ranking.pick_order on the posterior the app holds (the last fit's mean, every vote so far in the
+- active: pair_posterior.pick_order on the posterior the app holds (the last fit's mean, every vote so far in the
   covariance), with --random-share and the indifference --margin; None: the least-covered pair. The app refits
   whenever a vote came in, at most once a second: --votes-per-second votes between fits (1: before every vote).
 - Votes to tau >= 0.9 in --share of replications: the smallest count from which on (checked --checks times a run)
   that share of replications rank the systems at Kendall tau >= 0.9 against the truth; active / round robin, with
   a percentile interval over replications (each scheme's replications resampled, 500 times).
-- The stopping rule (`error`): studies run until ranking.settledness at each of --levels (with --width, the Elo
+- The stopping rule (`error`): studies run until pair_posterior.settledness at each of --levels (with --width, the Elo
   width too) or --cap votes; how many claimed a wrong order, their median votes and Kendall tau at the stop.
 """
 
@@ -40,7 +40,7 @@ from scipy.stats import kendalltau
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from moglow_eval.core import ranking  # noqa: E402
+from moglow_eval.core import pair_posterior  # noqa: E402
 from moglow_eval.core.votes import battle_to_preference  # noqa: E402
 
 VOTES = ROOT.parent / "shared" / "data" / "genea-leaderboard-votes" / "battles_elo.csv"
@@ -55,8 +55,10 @@ def leaderboard_truth(path=VOTES):
     idx = {n: i for i, n in enumerate(names)}
     pref = [battle_to_preference(r["winner"], r["is_strong"]) for r in rows]
     outcome = [1.0 if p > 0 else 0.0 if p < 0 else 0.5 for p in pref]
-    w = ranking.win_matrix(len(names), [idx[r["model_a"]] for r in rows], [idx[r["model_b"]] for r in rows], outcome)
-    return names, ranking.fit(w, prior_sd=10.0).mean
+    w = pair_posterior.win_counts(
+        len(names), [idx[r["model_a"]] for r in rows], [idx[r["model_b"]] for r in rows], outcome
+    )
+    return names, pair_posterior.fit(w, prior_sd=10.0).mean
 
 
 # Round robin's votes per replication on each truth (about 1.5x what it needs): active gets --active-cap of them.
@@ -83,9 +85,9 @@ class Study:
     def __init__(self, truth, scheme, rng, a):
         self.truth, self.scheme, self.rng, self.a = truth, scheme, rng, a
         k = len(truth)
-        self.pr = ranking.pairs(k)
+        self.pr = pair_posterior.pairs(k)
         self.wins = np.zeros((k, k))
-        self.post = ranking.fit(self.wins)
+        self.post = pair_posterior.fit(self.wins)
         self.since_fit = 0
 
     @property
@@ -100,9 +102,9 @@ class Study:
         if self.scheme == "balanced":
             return self.pr[self.least_covered()]
         if self.since_fit >= self.a.votes_per_second:  # the app: refit when votes came in, once a second at most
-            self.post, self.since_fit = ranking.fit(self.wins, start=self.post.mean), 0
-        held = ranking.with_counts(self.post, self.wins + self.wins.T)
-        order = ranking.pick_order(held, self.rng, self.a.random_share, self.a.margin)
+            self.post, self.since_fit = pair_posterior.fit(self.wins, start=self.post.mean), 0
+        held = pair_posterior.with_counts(self.post, self.wins + self.wins.T)
+        order = pair_posterior.pick_order(held, self.rng, self.a.random_share, self.a.margin)
         return self.pr[self.least_covered() if order is None else order[0]]
 
     def vote(self):
@@ -117,7 +119,7 @@ class Study:
         return i, j
 
     def tau(self):
-        return kendalltau(ranking.fit(self.wins, start=self.post.mean).mean, self.truth).statistic
+        return kendalltau(pair_posterior.fit(self.wins, start=self.post.mean).mean, self.truth).statistic
 
 
 def run(truth, near, scheme, a, reps, max_votes, step, seed):
@@ -219,8 +221,8 @@ def run_stopping(truth, scheme, a, reps, level, seed, check=25):
         while True:
             for _ in range(check):
                 s.vote()
-            post = ranking.fit(s.wins, start=s.post.mean)
-            st = ranking.settledness(post, level, a.width, a.margin)
+            post = pair_posterior.fit(s.wins, start=s.post.mean)
+            st = pair_posterior.settledness(post, level, a.width, a.margin)
             if st["settled"] or s.votes >= a.cap:
                 break
         order, tied = st["order"], {tuple(p) for p in st["tied"]}
@@ -252,8 +254,8 @@ def main(argv=None):
     ap.add_argument("--scale", type=float, default=1.0, help="x each truth's votes per replication (MAX_VOTES)")
     ap.add_argument("--active-cap", type=float, default=0.75, help="active's votes per replication, x round robin's")
     ap.add_argument("--share", type=float, default=0.9, help="the share of replications at tau >= 0.9")
-    ap.add_argument("--random-share", type=float, default=ranking.RANDOM_SHARE, help="as PAIRING_RANDOM")
-    ap.add_argument("--margin", type=float, default=ranking.INDIFFERENCE_ELO, help="as PAIRING_INDIFFERENCE")
+    ap.add_argument("--random-share", type=float, default=pair_posterior.RANDOM_SHARE, help="as PAIRING_RANDOM")
+    ap.add_argument("--margin", type=float, default=pair_posterior.INDIFFERENCE_ELO, help="as PAIRING_INDIFFERENCE")
     ap.add_argument(
         "--votes-per-second",
         type=int,

@@ -23,8 +23,8 @@ from sample_quality import window_figures  # noqa: E402
 
 from generation.data.dataset import read_arrays, require  # noqa: E402
 from generation.data.torch_files import load_torch_file  # noqa: E402
-from generation.make_stimuli import checkpoints_in  # noqa: E402
 from generation.sampling.sample import load_model, sample_split  # noqa: E402
+from generation.stimuli.checkpoints import checkpoints_in  # noqa: E402
 
 TARGETS = {"skating": 3.0, "jerk": 2.0, "stepping": 0.9}
 LABELS = {

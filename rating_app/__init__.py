@@ -152,10 +152,10 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
     }
     _open_rounds(app)  # may withdraw units: the ranking below is built on what is served
     if app.config["PAIRING"] == "active" or app.config["STOP_WHEN"] == "settled":
-        from .pairing.active import Ranking
+        from .pairing.active import ActivePairing
 
         ext = app.extensions["rating_app"]
-        ext["ranking"] = Ranking(ext["units"], ext["clips"], app.config)
+        ext["ranking"] = ActivePairing(ext["units"], ext["clips"], app.config)
     pool = health.catch_pool_warning(
         design.name, clips, units, app.config["CLIPS_PER_RATER"], app.config["CATCH_PER_RATER"]
     )

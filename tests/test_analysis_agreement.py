@@ -6,6 +6,7 @@ import pandas as pd
 import pytest
 
 from analysis import report
+from analysis.designs import Options
 from analysis.page import methods
 from analysis.stats import agreement
 
@@ -71,7 +72,7 @@ def test_the_acr_report_has_agreement_and_a_methods_paragraph(tmp_path):
     bad = bad.assign(role="catch", condition="BAD", item="b0")
     path = tmp_path / "ratings.csv"
     pd.concat([df, bad]).astype({"rating": int}).to_csv(path, index=False)
-    doc = report.build_report(path, tmp_path / "rep", n_boot=100, progress=False, quiet=True, seed=7)
+    doc = report.build_report(path, tmp_path / "rep", Options(n_boot=100, seed=7), progress=False, quiet=True)
     ag = doc["agreement"]
     assert ag["krippendorff"]["n_units"] == 12 and ag["icc"]["icc_a1"] > 0
     text = doc["methods"]

@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 from scipy import stats as sps
 
-from analysis.designs.appropriateness.mas import analyse, failed_raters, load_answers
+from analysis.designs.appropriateness.mas import analyse, load_answers
+from analysis.designs.pairwise.preference import failed_raters
 
 VOTES = Path(__file__).resolve().parents[2] / "shared" / "data" / "genea-leaderboard-votes" / "battles_mismatch.csv"
 COLUMNS = ["rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role", "matched"]

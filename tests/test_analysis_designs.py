@@ -16,7 +16,7 @@ import pytest
 from scipy import stats as sps
 
 from analysis.data.load import AnalysisError
-from analysis.designs import detect_design
+from analysis.designs import Options, detect_design
 from analysis.designs.pairwise import preference as pairwise
 from analysis.designs.parallel import mushra as parallel
 from analysis.report import build_report
@@ -87,7 +87,7 @@ def test_pairwise_counts_by_hand_and_sign_test(tmp_path):
     data = [[r, f"i{k}", f"a{k}", f"b{k}", a, b, p, "test"] for k, (r, a, b, p) in enumerate(rows)]
     data.append(["r2", "k", "x1", "x2", "BAD", "NAT", 1, "catch"])  # r2 prefers BAD: excluded
     f = write(tmp_path / "pairs.csv", PAIR_COLS, data)
-    doc = build_report(f, tmp_path / "rep", n_boot=20, quiet=True)
+    doc = build_report(f, tmp_path / "rep", Options(n_boot=20), quiet=True)
     assert doc["design"] == "pairwise" and doc["excluded_raters"] == ["r2"] and doc["n_raters_excluded"] == 1
     kept = {(p["condition_a"], p["condition_b"]): p for p in doc["pairwise"]}
     everyone = {(p["condition_a"], p["condition_b"]): p for p in doc["without_exclusion"]["pairwise"]}
@@ -231,7 +231,7 @@ def test_parallel_statistics_against_scipy(tmp_path):
 
     rows = simulate_pages({"NAT": 75, "MG": 60, "FL": 58, "X": 30}, fail=(3,))
     f = write(tmp_path / "ratings.csv", PAGE_COLS, rows)
-    doc = build_report(f, tmp_path / "rep", n_boot=50, quiet=True)
+    doc = build_report(f, tmp_path / "rep", Options(n_boot=50), quiet=True)
     assert doc["design"] == "parallel" and doc["excluded_raters"] == ["r3"]
     df = pd.DataFrame(rows, columns=PAGE_COLS)
     kept = df[(df["role"] == "test") & (df["rater_id"] != "r3")]

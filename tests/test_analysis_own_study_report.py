@@ -10,6 +10,7 @@ import pytest
 
 from analysis import report
 from analysis.data.load import AnalysisError
+from analysis.designs import Options
 from analysis.page import study_text
 
 PAPER = "of the paper"
@@ -46,7 +47,11 @@ def test_an_own_study_report_names_its_reference_and_cites_no_paper(tmp_path):
         tmp_path, [("NAT:split", 7, 0.52, 0.1, 0.5), ("SYS_A", 7, 0.24, 0.1, 0.3), ("BAD", 30, 0.0, 0.0, 0.0)]
     )
     doc = report.build_report(
-        path, tmp_path / "rep", metrics, n_boot=20, ordinal=False, progress=False, quiet=True, reference_name="real"
+        path,
+        tmp_path / "rep",
+        Options(metrics_path=metrics, n_boot=20, ordinal=False, reference_name="real"),
+        progress=False,
+        quiet=True,
     )
     assert set(doc["condition_means"]) == {"real", "SYS_A"}
     assert doc["mixed_model"]["reference"] == "real"
@@ -63,7 +68,11 @@ def test_an_own_study_report_names_its_reference_and_cites_no_paper(tmp_path):
 
 def test_the_builtin_study_keeps_the_papers_captions(tmp_path):
     doc = report.build_report(
-        ratings(tmp_path, ["NAT", "MG", "FL"]), tmp_path / "rep", n_boot=20, ordinal=False, progress=False, quiet=True
+        ratings(tmp_path, ["NAT", "MG", "FL"]),
+        tmp_path / "rep",
+        Options(n_boot=20, ordinal=False),
+        progress=False,
+        quiet=True,
     )
     assert doc["mixed_model"]["reference"] == "NAT"
     page = (tmp_path / "rep" / "report.html").read_text()
@@ -84,10 +93,8 @@ def test_the_study_file_gives_the_reference_name(tmp_path, capsys):
 
 def test_a_reference_name_that_is_already_a_condition_is_an_error(tmp_path):
     with pytest.raises(AnalysisError, match="already has a condition"):
-        report.build_report(
-            ratings(tmp_path, ["NAT", "SYS"]), tmp_path / "rep", n_boot=20, progress=False, quiet=True,
-            reference_name="SYS",
-        )  # fmt: skip
+        opts = Options(n_boot=20, reference_name="SYS")
+        report.build_report(ratings(tmp_path, ["NAT", "SYS"]), tmp_path / "rep", opts, progress=False, quiet=True)
 
 
 @pytest.mark.parametrize(

@@ -14,7 +14,8 @@ import statsmodels.api as sm
 from helpers.paths import SHARED
 
 from analysis import report
-from analysis.designs.pairwise import partisans, ranking
+from analysis.designs import Options
+from analysis.designs.pairwise import elo_ranks, partisans
 from analysis.designs.pairwise import preference as pairwise
 from analysis.import_votes import import_votes
 
@@ -39,17 +40,17 @@ def simulated_pairs(path, strengths, n_raters=30, votes=40, seed=0, tie_band=0.0
 
 
 def test_elo_is_400_points_per_factor_of_ten_in_the_odds():
-    assert ranking.elo(0.0) == 1000.0
-    assert ranking.elo(math.log(10)) == pytest.approx(1400.0)
-    assert ranking.elo(1.0, reference_theta=1.0) == 1000.0
+    assert elo_ranks.elo(0.0) == 1000.0
+    assert elo_ranks.elo(math.log(10)) == pytest.approx(1400.0)
+    assert elo_ranks.elo(1.0, reference_theta=1.0) == 1000.0
 
 
 def test_groups_merge_only_overlapping_rank_intervals():
     order = ["a", "b", "c", "d"]
     lo = {"a": 1, "b": 1, "c": 3, "d": 3}
     hi = {"a": 2, "b": 2, "c": 4, "d": 4}
-    assert ranking.groups(order, lo, hi) == {"a": 1, "b": 1, "c": 2, "d": 2}
-    chain = ranking.groups(order, {"a": 1, "b": 1, "c": 2, "d": 4}, {"a": 2, "b": 3, "c": 3, "d": 4})
+    assert elo_ranks.groups(order, lo, hi) == {"a": 1, "b": 1, "c": 2, "d": 2}
+    chain = elo_ranks.groups(order, {"a": 1, "b": 1, "c": 2, "d": 4}, {"a": 2, "b": 3, "c": 3, "d": 4})
     assert chain == {"a": 1, "b": 1, "c": 1, "d": 2}  # b overlaps c: the chain is one group
 
 
@@ -92,20 +93,20 @@ def test_split_half_finds_no_order_where_there_is_none(tmp_path):
 def test_reference_flag_sets_the_anchor(tmp_path):
     truth = {"NAT": 0.0, "S1": -1.0, "S2": -2.0}
     path = simulated_pairs(tmp_path / "pairs.csv", truth, n_raters=10, votes=30)
-    doc = report.build_report(path, tmp_path / "rep", n_boot=50, progress=False, quiet=True, reference="S2")
+    doc = report.build_report(path, tmp_path / "rep", Options(n_boot=50, reference="S2"), progress=False, quiet=True)
     assert doc["elo"]["S2"] == 1000.0 and doc["bradley_terry"]["S2"] == 0.0
     assert doc["elo"]["NAT"] > doc["elo"]["S1"] > 1000.0
     from analysis.data.load import AnalysisError
 
     with pytest.raises(AnalysisError, match="--reference XYZ: no such condition"):
-        report.build_report(path, tmp_path / "rep2", n_boot=50, progress=False, quiet=True, reference="XYZ")
+        report.build_report(path, tmp_path / "rep2", Options(n_boot=50, reference="XYZ"), progress=False, quiet=True)
 
 
-def test_win_matrix_from_pair_counts():
+def test_win_rates_from_pair_counts():
     pairs = pd.DataFrame(
         [{"condition_a": "A", "condition_b": "B", "wins_a": 6, "wins_b": 2, "ties": 2, "n": 10, "p_holm": 0.01}]
     )
-    rate, p = ranking.win_matrix(pairs, ["A", "B", "C"])
+    rate, p = elo_ranks.win_rates(pairs, ["A", "B", "C"])
     assert rate[0, 1] == pytest.approx(0.7) and rate[1, 0] == pytest.approx(0.3)
     assert np.isnan(rate[0, 2]) and p[1, 0] == 0.01
 
@@ -113,7 +114,7 @@ def test_win_matrix_from_pair_counts():
 def test_the_report_shows_the_ranking(tmp_path):
     truth = {"NAT": 0.0, "S1": -0.5, "S2": -2.0}
     path = simulated_pairs(tmp_path / "pairs.csv", truth, n_raters=12, votes=30)
-    doc = report.build_report(path, tmp_path / "rep", n_boot=100, progress=False, quiet=True)
+    doc = report.build_report(path, tmp_path / "rep", Options(n_boot=100), progress=False, quiet=True)
     assert [r["condition"] for r in doc["ranking"]] == ["NAT", "S1", "S2"]
     assert {"elo", "elo_low", "elo_high", "rank_low", "rank_high", "group", "rank_range"} <= set(doc["ranking"][0])
     assert (tmp_path / "rep" / "figures" / "win_matrix.png").stat().st_size > 5000
@@ -127,7 +128,7 @@ def test_the_report_shows_the_ranking(tmp_path):
 def test_imported_leaderboard_votes_give_an_independent_fits_ranking(tmp_path):
     out = tmp_path / "pairs.csv"
     import_votes(BATTLES, out)
-    doc = report.build_report(out, tmp_path / "rep", n_boot=300, progress=False, quiet=True, reference="BEAT2")
+    doc = report.build_report(out, tmp_path / "rep", Options(n_boot=300, reference="BEAT2"), progress=False, quiet=True)
     elo = doc["elo"]
     assert elo["BEAT2"] == 1000.0 and len(elo) == 8
     # An independent fit: plain Bradley-Terry as a logistic regression on +-1 indicator columns (statsmodels),
@@ -152,7 +153,7 @@ def test_imported_leaderboard_votes_give_an_independent_fits_ranking(tmp_path):
     no_ties = no_ties[no_ties["preference"] != 0]
     no_ties.to_csv(tmp_path / "no_ties.csv", index=False)
     ours = report.build_report(
-        tmp_path / "no_ties.csv", tmp_path / "rep2", n_boot=20, progress=False, quiet=True, reference="BEAT2"
+        tmp_path / "no_ties.csv", tmp_path / "rep2", Options(n_boot=20, reference="BEAT2"), progress=False, quiet=True
     )["bradley_terry"]
     for c in conds:
         assert ours[c] == pytest.approx(independent[c], abs=2e-3)
@@ -189,7 +190,7 @@ def one_winner_three_alike(path, n_raters=8, items=6):
 
 def test_degenerate_votes_are_said_so_and_alike_conditions_share_a_group(tmp_path):
     path = one_winner_three_alike(tmp_path / "pairs.csv")
-    doc = report.build_report(path, tmp_path / "rep", n_boot=100, progress=False, quiet=True)
+    doc = report.build_report(path, tmp_path / "rep", Options(n_boot=100), progress=False, quiet=True)
     fit = doc["bradley_terry_fit"]
     # No "converged" fit with a tie parameter of 1e5 or more: the fit says it has no maximum, and no ν is given.
     assert fit["converged"] is False and fit["separated"] is True
@@ -219,8 +220,8 @@ def test_a_separated_study_with_an_estimable_tie_parameter_says_so_too(tmp_path)
 
 
 def test_tied_ranks_share_their_mean_rank_within_the_tolerance():
-    assert ranking.tied_ranks([0.0, 1e-5, 2.0, -1.0]).tolist() == [2.5, 2.5, 1.0, 4.0]
-    assert ranking.tied_ranks([0.0, 0.5, 1.0]).tolist() == [3.0, 2.0, 1.0]
+    assert elo_ranks.tied_ranks([0.0, 1e-5, 2.0, -1.0]).tolist() == [2.5, 2.5, 1.0, 4.0]
+    assert elo_ranks.tied_ranks([0.0, 0.5, 1.0]).tolist() == [3.0, 2.0, 1.0]
 
 
 def with_a_stuffer(path, truth, seed=0, n_raters=30):
@@ -242,7 +243,7 @@ def with_a_stuffer(path, truth, seed=0, n_raters=30):
 def test_raters_who_favour_one_condition_far_beyond_the_crowd_are_flagged(tmp_path):
     truth = {"NAT": 0.0, "MG": -0.4, "FL": -0.8, "SYS": -1.2}
     path = with_a_stuffer(tmp_path / "pairs.csv", truth)
-    doc = report.build_report(path, tmp_path / "rep", n_boot=100, progress=False, quiet=True)
+    doc = report.build_report(path, tmp_path / "rep", Options(n_boot=100), progress=False, quiet=True)
     part = doc["partisan_raters"]
     assert {(r["rater_id"], r["condition"]) for r in part["flagged"]} == {("stuffer", "SYS"), ("stuffer2", "SYS")}
     assert "Bonferroni" in part["rule"]
@@ -266,12 +267,12 @@ def test_conditions_confidently_within_the_indifference_margin_share_a_group():
     """Two conditions 10 Elo apart, measured so precisely that their rank intervals are disjoint: within an
     indifference margin of 25 Elo in every resample, the report groups them (issue 55 item 8)."""
     rng = np.random.default_rng(0)
-    per_elo = 1 / ranking.ELO_PER_LOG
+    per_elo = 1 / elo_ranks.ELO_PER_LOG
     centre = np.array([0.0, -10 * per_elo, -300 * per_elo])
     boot = centre + rng.normal(0, 2 * per_elo, (400, 3))
     strengths = dict(zip(["A", "B", "C"], centre))
-    table = ranking.rank_table(strengths, boot, ["A", "B", "C"], "A", margin_elo=25.0).set_index("condition")
+    table = elo_ranks.rank_table(strengths, boot, ["A", "B", "C"], "A", margin_elo=25.0).set_index("condition")
     assert table.at["A", "rank_high"] < table.at["B", "rank_low"]  # the intervals alone would part them
     assert table.at["A", "group"] == table.at["B", "group"] != table.at["C", "group"]
-    apart = ranking.rank_table(strengths, boot, ["A", "B", "C"], "A").set_index("condition")  # the default: off
+    apart = elo_ranks.rank_table(strengths, boot, ["A", "B", "C"], "A").set_index("condition")  # the default: off
     assert apart.at["A", "group"] != apart.at["B", "group"]

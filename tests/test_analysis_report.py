@@ -11,6 +11,7 @@ import pytest
 
 from analysis.data.filtering import exclude_raters
 from analysis.data.load import load_ratings
+from analysis.designs import Options
 from analysis.report import build_report, main
 
 DATA = Path(__file__).parent / "data" / "analysis"
@@ -45,7 +46,7 @@ def test_exclusion_rule_on_hand_made_file():
 
 
 def test_exclusion_report_uses_kept_test_rows_only(tmp_path):
-    doc = build_report(DATA / "exclusion.csv", tmp_path, n_boot=50, progress=False, quiet=True)
+    doc = build_report(DATA / "exclusion.csv", tmp_path, Options(n_boot=50), progress=False, quiet=True)
     assert (doc["n_ratings_total"], doc["n_ratings_removed"], doc["n_ratings_kept"]) == (21, 8, 13)
     assert (doc["n_raters_total"], doc["n_raters_excluded"]) == (5, 2)
     # kept test ratings: NAT 5,4,3  MG 4,3,5  FL 2,3,1 (catch rows never enter the statistics)
@@ -86,7 +87,7 @@ def test_threshold_option_changes_the_exclusion(tmp_path):
 def frozen_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("report")
     doc = build_report(
-        DATA / "ratings_small.csv", out, metrics_path=DATA / "metrics_small.csv", progress=False, quiet=True
+        DATA / "ratings_small.csv", out, Options(metrics_path=DATA / "metrics_small.csv"), progress=False, quiet=True
     )
     return out, doc
 
@@ -190,7 +191,9 @@ def test_frozen_comparison_catches_a_tiny_change():
 
 
 def test_mixed_model_skipped_beyond_max_levels(tmp_path):
-    doc = build_report(DATA / "exclusion.csv", tmp_path, n_boot=20, mixed_max_levels=2, progress=False, quiet=True)
+    doc = build_report(
+        DATA / "exclusion.csv", tmp_path, Options(n_boot=20, mixed_max_levels=2), progress=False, quiet=True
+    )
     assert doc["mixed_model"]["fixed_effects"] == {}
     assert doc["mixed_model"]["skipped"] == "3 raters and 3 clips: both above --mixed-max-levels 2"
     assert "Not fitted: 3 raters and 3 clips" in (tmp_path / "report.html").read_text()
@@ -209,7 +212,7 @@ def _csv(tmp_path, name, rows):
 def test_identical_ratings_are_no_variance_not_significant(tmp_path):
     """Every rating 3: the old report printed F = inf, p < 1e-16 and Tukey reject with meandiff 0."""
     path = _csv(tmp_path, "same", [(f"r{r}", f"c{c}", ["NAT", "MG"][c % 2], 3) for r in range(15) for c in range(2)])
-    doc = build_report(path, tmp_path / "rep", n_boot=50, progress=False, quiet=True)
+    doc = build_report(path, tmp_path / "rep", Options(n_boot=50), progress=False, quiet=True)
     assert doc["anova"]["F"] is None and doc["anova"]["p"] is None
     assert "no variance" in doc["anova"]["undefined"]
     assert [t["reject"] for t in doc["tukey"]] == [False] and doc["tukey"][0]["p_adj"] is None
@@ -224,7 +227,7 @@ def test_no_variance_within_conditions_is_undefined(tmp_path):
     path = _csv(
         tmp_path, "flat", [(f"r{r}", f"c{c}", ["NAT", "MG"][c % 2], [5, 2][c % 2]) for r in range(4) for c in range(4)]
     )
-    doc = build_report(path, tmp_path / "rep", n_boot=50, progress=False, quiet=True)
+    doc = build_report(path, tmp_path / "rep", Options(n_boot=50), progress=False, quiet=True)
     assert doc["anova"]["p"] is None and not any(t["reject"] for t in doc["tukey"])
     assert {"anova", "tukey", "mixed_model", "ordinal_model"} <= set(doc["undefined"])
     assert doc["mixed_model"]["fixed_effects"] == {} and doc["ordinal_model"]["fixed_effects"] == {}
@@ -285,7 +288,7 @@ def test_condition_names_are_escaped_in_the_html(tmp_path):
         for c in range(9)
     ]
     path = _csv(tmp_path, "evil", rows)
-    doc = build_report(path, tmp_path / "rep", n_boot=50, progress=False, quiet=True)
+    doc = build_report(path, tmp_path / "rep", Options(n_boot=50), progress=False, quiet=True)
     assert any(t["reject"] for t in doc["tukey"])  # the names reach the summary's Tukey sentence
     page = (tmp_path / "rep" / "report.html").read_text()
     assert "<script" not in page and "<b>FL</b>" not in page and "MG&co" not in page
@@ -424,7 +427,9 @@ def test_an_export_from_fewer_raters_than_its_target_is_noted_and_one_from_enoug
         stats = json.loads((out / "stats.json").read_text())
         assert stats["target_raters"] == target and bool(stats["notes"]) is noted
     # an export without the column (every one before it) has neither the note nor the keys
-    doc = build_report(DATA / "ratings_small.csv", tmp_path / "old", n_boot=20, mixed=False, progress=False, quiet=True)
+    doc = build_report(
+        DATA / "ratings_small.csv", tmp_path / "old", Options(n_boot=20, mixed=False), progress=False, quiet=True
+    )
     assert "target_raters" not in doc and "notes" not in doc
 
 

@@ -5,6 +5,7 @@ import json
 
 from test_analysis_style import synthetic
 
+from analysis.designs import Options
 from analysis.report import build_report
 
 
@@ -16,7 +17,7 @@ def write_ratings(path, df):
 
 def test_the_report_of_a_styled_study_has_the_style_factor(tmp_path):
     path = write_ratings(tmp_path / "ratings.csv", synthetic(-1.5, n_raters=10, clips_per_cell=4))
-    doc = build_report(path, tmp_path / "rep", n_boot=20, ordinal=False, progress=False, quiet=True)
+    doc = build_report(path, tmp_path / "rep", Options(n_boot=20, ordinal=False), progress=False, quiet=True)
     st = doc["style"]
     assert st["styles"] == ["stick", "solid"]
     assert st["anova"]["type"] == "II" and st["anova"]["terms"]["condition:style"]["p"] < 0.01
@@ -31,6 +32,6 @@ def test_the_report_of_a_styled_study_has_the_style_factor(tmp_path):
 
 def test_a_report_without_styles_has_no_style_section(tmp_path):
     path = write_ratings(tmp_path / "ratings.csv", synthetic(0.0, n_raters=6, clips_per_cell=3).drop(columns="style"))
-    doc = build_report(path, tmp_path / "rep", n_boot=20, ordinal=False, progress=False, quiet=True)
+    doc = build_report(path, tmp_path / "rep", Options(n_boot=20, ordinal=False), progress=False, quiet=True)
     assert "style" not in doc and "style_means" not in doc["figures"]
     assert "Condition × style" not in (tmp_path / "rep" / "report.html").read_text()

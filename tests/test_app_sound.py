@@ -14,7 +14,7 @@ from sqlalchemy import select
 from test_app_designs import complete, post, shown
 
 from analysis.designs import DESIGNS as DesignRegistry
-from analysis.designs import detect_design
+from analysis.designs import Options, detect_design
 from analysis.designs.appropriateness.mas import analyse, load_answers
 from analysis.report import build_report
 from moglow_eval.core import study
@@ -102,7 +102,7 @@ def test_appropriateness_units_export_and_analysis(make, fit_stimuli, tmp_path, 
     lines = text.splitlines(keepends=True)
     role = next(csv.reader(lines[:1])).index("role")
     path.write_text("".join([lines[0], *(x for x in lines[1:] if next(csv.reader([x]))[role] == "test")]))
-    stats = build_report(path, tmp_path / "report", n_boot=50, quiet=True)
+    stats = build_report(path, tmp_path / "report", Options(n_boot=50), quiet=True)
     assert stats["design"] == design and sum(v["n"] for v in stats["mas"].values()) == len(test)
     page = (tmp_path / "report" / "report.html").read_text()
     assert DesignRegistry[design].heading in page

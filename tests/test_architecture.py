@@ -373,3 +373,38 @@ def test_the_design_guard_sees_a_name(tmp_path):
     (tmp_path / "shared.py").write_text('def grows(design):\n    return design.name == "pairwise"\n')
     (tmp_path / "fine.py").write_text('def grows(design):\n    return design.grows  # "pairwise" in a comment\n')
     assert design_names_in([tmp_path / "shared.py", tmp_path / "fine.py"], tmp_path) == ["shared.py:2: 'pairwise'"]
+
+
+def unresolved_imports(paths, root=ROOT):
+    """'file:line: module.name' for each `from OUR_MODULE import name` in `paths` that no longer resolves: a
+    module or a name that moved (the benches import the product, and nothing else runs them)."""
+    import importlib
+
+    found = []
+    for path in paths:
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.ImportFrom) or node.level or not node.module:
+                continue
+            if node.module.split(".")[0] not in {p.split(".")[0] for p in PARTS}:
+                continue
+            try:
+                module = importlib.import_module(node.module)
+            except ImportError:
+                found.append(f"{path.relative_to(root)}:{node.lineno}: {node.module}")
+                continue
+            for alias in node.names:
+                if not hasattr(module, alias.name):
+                    try:
+                        importlib.import_module(f"{node.module}.{alias.name}")
+                    except ImportError:
+                        found.append(f"{path.relative_to(root)}:{node.lineno}: {node.module}.{alias.name}")
+    return found
+
+
+def test_every_bench_imports_what_exists():
+    assert not (found := unresolved_imports(sorted((ROOT / "bench").glob("*.py")))), "\n".join(found)
+
+
+def test_the_import_guard_sees_a_moved_name(tmp_path):
+    (tmp_path / "b.py").write_text("from analysis import rating_models\nfrom analysis.stats import anova\n")
+    assert unresolved_imports([tmp_path / "b.py"], tmp_path) == ["b.py:1: analysis.rating_models"]

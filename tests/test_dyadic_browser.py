@@ -21,6 +21,7 @@ from test_app_browser_sound import STATE
 from test_app_designs import complete
 from test_app_sound import _sample_of
 
+from analysis.designs import Options
 from analysis.report import build_report
 from generation.make_stimuli import main as make_stimuli
 from moglow_eval.core import colours
@@ -185,7 +186,7 @@ def test_the_crowd_fills_it_and_the_report_is_the_designs(built, tmp_path):
     column = {"dyadic": "mismatched_interlocutor", "semantic": "mismatched_utterance"}[design]
     assert rows and column in rows[0] and "mismatched_item" not in rows[0]
     (tmp_path / "pairs.csv").write_text(text)
-    stats = build_report(tmp_path / "pairs.csv", tmp_path / "report", n_boot=50, quiet=True)
+    stats = build_report(tmp_path / "pairs.csv", tmp_path / "report", Options(n_boot=50), quiet=True)
     assert stats["design"] == design and stats["mas"]
     assert all(v["mas"] == 1.0 for v in stats["mas"].values())  # every answer preferred the matched motion
 

@@ -13,6 +13,7 @@ from helpers.paths import ROOT, SHARED
 
 from analysis import import_votes as iv
 from analysis import report
+from analysis.designs import Options
 from moglow_eval.core import votes
 
 LB = SHARED / "data" / "genea-leaderboard-votes"
@@ -53,7 +54,7 @@ def test_the_mismatch_votes_become_an_appropriateness_export(tmp_path):
     got = rows(out)
     assert all(r["condition_a"] == r["condition_b"] and r["matched"] in "ab" for r in got)
     assert sum(r["matched"] == "b" for r in got) == 22  # README: the mismatched clip is on the left in 22 rows
-    doc = report.build_report(out, tmp_path / "rep", n_boot=50, progress=False, quiet=True)
+    doc = report.build_report(out, tmp_path / "rep", Options(n_boot=50), progress=False, quiet=True)
     assert doc["design"] == "appropriateness" and sum(v["n"] for v in doc["mas"].values()) == 50
 
 
@@ -109,7 +110,7 @@ def test_free_text_is_unquoted_and_a_hostile_text_stays_a_defused_text(tmp_path)
     got = rows(out)
     assert got[0]["reasons"] == "MotionSmoothness" and got[0]["reason_text"] == "It's in the hands, <b>really</b>"
     assert got[1]["reason_text"] == '\'=HYPERLINK("x")' and int(got[1]["preference"]) == -1
-    doc = report.build_report(out, tmp_path / "rep", n_boot=20, progress=False, quiet=True)
+    doc = report.build_report(out, tmp_path / "rep", Options(n_boot=20), progress=False, quiet=True)
     assert doc["design"] == "pairwise"
     assert "<b>really</b>" not in (tmp_path / "rep" / "report.html").read_text()
 

@@ -12,6 +12,7 @@ from helpers.bvh_fixtures import write_zeroeggs
 from helpers.figure_pixels import decode
 from helpers.paths import ROOT
 
+from analysis.designs import Options
 from generation.data.skinning import MeshSource, smpl_mesh
 from generation.data.smpl_files import SmplError, smpl_positions
 from generation.make_stimuli import main as make_stimuli
@@ -315,7 +316,7 @@ def test_a_stick_and_mesh_study_in_a_real_browser_reports_the_style(two_style_se
     export = client.get("/admin/export.csv", headers={"Authorization": "Bearer t"}).get_data(as_text=True)
     app_engine(app).dispose()
     (tmp_path / "ratings.csv").write_text(export)
-    stats = build_report(tmp_path / "ratings.csv", tmp_path / "report", n_boot=50, quiet=True)
+    stats = build_report(tmp_path / "ratings.csv", tmp_path / "report", Options(n_boot=50), quiet=True)
     assert stats["style"]["styles"] == ["stick", "mesh"]
     assert "condition:style" in stats["style"]["anova"]["terms"]
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.stats import binomtest
 
-from moglow_eval.core import ranking
+from moglow_eval.core import pair_posterior
 from rating_app.simulate.raters import BT_SCALE, ClipInfo, bt_probability, make_raters
 
 RATERS = make_raters(100, seed=3, careless=0.0, prefix="bt")
@@ -37,14 +37,16 @@ def test_a_fit_on_the_crowd_recovers_the_strengths():
     q = {"NAT": 4.2, "MG": 3.6, "FL": 2.6}
     names = list(q)
     firsts, seconds, outcomes = [], [], []
-    for i, j in ranking.pairs(3):
+    for i, j in pair_posterior.pairs(3):
         x = answers(q[names[i]], q[names[j]], per_rater=20)
         firsts += [i] * len(x)
         seconds += [j] * len(x)
         outcomes += [1.0 if v > 0 else 0.0 if v < 0 else 0.5 for v in x]
     decisive = np.array(outcomes) != 0.5
-    post = ranking.fit(
-        ranking.win_matrix(3, np.array(firsts)[decisive], np.array(seconds)[decisive], np.array(outcomes)[decisive]),
+    post = pair_posterior.fit(
+        pair_posterior.win_counts(
+            3, np.array(firsts)[decisive], np.array(seconds)[decisive], np.array(outcomes)[decisive]
+        ),
         prior_sd=100.0,
     )
     want = BT_SCALE * np.array([q[n] for n in names])

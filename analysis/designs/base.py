@@ -12,27 +12,42 @@ from pathlib import Path
 
 import pandas as pd
 
+from ..data.filtering import DEFAULT_THRESHOLD
 from ..data.load import AnalysisError
 from ..page import report_html
 from ..page.study_text import rename_reference
 
+MIXED_MAX_LEVELS = 2000  # the mixed models are skipped when the raters and the clips both outnumber this
+# The ordinal fit works on every rating (no sufficient statistics exist for it): ~4 s for 50,000 ratings on a
+# busy 2-core machine, twice per report, so beyond this many test ratings it is skipped unless asked for.
+ORDINAL_MAX_RATINGS = 50_000
 
-@dataclass
+
+@dataclass(frozen=True)
 class Options:
-    """The report's settings (analysis.report's flags); each design reads those it uses."""
+    """The report's settings (analysis.report's flags, plain data); each design reads those it uses.
 
-    metrics_path: str | None
-    threshold: int
-    mixed: bool
-    seed: int
-    n_boot: int
-    alpha: float
-    mixed_max_levels: int
-    ordinal: bool
-    ordinal_max_ratings: int
-    reference_name: str | None = None  # the reference's own name for NAT (analysis.page.study_text)
-    reference: str | None = None  # pairwise: the condition at strength 0 and Elo 1000 (default NAT, or the first)
-    indifference: float = 0.0  # pairwise: the Elo margin within which neighbours share a group (ranking.rank_table)
+    metrics_path: the stimuli's metrics.csv (and the c2st.csv beside it), each metric correlated with the clips'
+    mean ratings; None: none. threshold: the catch rating at or above which an acr rater is excluded. mixed, ordinal:
+    fit the linear and the ordinal mixed model. seed, n_boot: the bootstraps'. alpha: the family-wise error rate.
+    mixed_max_levels: the mixed models are skipped when the raters and the clips both outnumber it;
+    ordinal_max_ratings: the ordinal model above this many test ratings. reference_name: the reference's own name
+    for NAT (analysis.page.study_text). reference: pairwise, the condition at strength 0 and Elo 1000 (None: NAT, else
+    the first by name). indifference: pairwise, the Elo margin within which neighbours share a group
+    (elo_ranks.rank_table; the app's PAIRING_INDIFFERENCE; 0: groups by rank intervals alone)."""
+
+    metrics_path: str | None = None
+    threshold: int = DEFAULT_THRESHOLD
+    mixed: bool = True
+    seed: int = 0
+    n_boot: int = 2000
+    alpha: float = 0.05
+    mixed_max_levels: int = MIXED_MAX_LEVELS
+    ordinal: bool = True
+    ordinal_max_ratings: int = ORDINAL_MAX_RATINGS
+    reference_name: str | None = None
+    reference: str | None = None
+    indifference: float = 0.0
 
 
 @dataclass

@@ -149,7 +149,7 @@ def mas_bars(table, path, title=None, score="mean appropriateness score (MAS)"):
         return _save(fig, path)
 
 
-def win_matrix(rate, p, conds, path, alpha=0.05):
+def win_rate_figure(rate, p, conds, path, alpha=0.05):
     """Heat map of the win rate of each row condition over each column condition (ties half), strongest first;
     a star marks a pair whose Holm-adjusted sign test rejects at `alpha`; grey where two conditions never met."""
     import numpy as np

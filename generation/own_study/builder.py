@@ -52,7 +52,7 @@ from ..stimuli.render_pool import render_stimuli
 from ..stimuli.summary import blinding_warning
 from . import designs
 from .designs import mismatch_partners  # noqa: F401  (its home before the designs had theirs; tests import it)
-from .dyad import read_people
+from .dyad import read_people_motion
 from .inputs import (
     check_same_skeleton,
     check_valid,
@@ -308,7 +308,7 @@ def build_study(spec, out, size, preset, workers, force, progress):
     motions = read_all(spec, files, progress)
     motions = {(study.NATURAL if n == spec.reference else n): m for n, m in motions.items()}
     sources = read_sources(spec, set(motions[study.NATURAL]))
-    people = read_people(spec, motions[study.NATURAL], progress, sources[1])
+    people = read_people_motion(spec, motions[study.NATURAL], progress, sources[1])
     cut_items(motions, spec, people.extra())
     if wants_mesh(spec):
         check_mesh_inputs(spec, {**motions, **dict(enumerate(people.extra()))})  # before anything is written

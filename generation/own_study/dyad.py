@@ -42,7 +42,7 @@ def _files(name, folder, items, what):
     return {i: found[i] for i in items}
 
 
-def read_people(spec, reference, progress, sources=()):
+def read_people_motion(spec, reference, progress, sources=()):
     """People of a study: the interlocutors (with `[interlocutor]`) and the mismatched motion (with `[mismatched]`),
     `reference` {item: Motion} the reference condition's (as read), `sources` the rows of the sources table."""
     people = People()

@@ -66,7 +66,7 @@ from ..data.motion_files import UNITS, UPS
 from ..data.smpl_files import TYPES as SMPL_TYPES
 from ..stimuli.catch_kinds import KINDS as CATCH_KINDS
 from .study_keys import StudyFileError, err, folder, names, number, unknown
-from .study_people import STIMULUS_DESIGNS, check_needs, read_people
+from .study_people import STIMULUS_DESIGNS, check_needs, read_people_keys
 
 TOP_KEYS = {
     "reference",
@@ -195,7 +195,7 @@ def read_study_file(path):
     _skeleton(path, data.get("skeleton", {}), spec)
     _audio(path, data.get("audio"), spec)
     _render(path, data.get("render", {}), spec)
-    read_people(path, data, spec)
+    read_people_keys(path, data, spec)
     check_needs(path, spec)
     return spec
 

@@ -13,7 +13,7 @@ INTERLOCUTOR_KEYS = {"folder", "placement", "distance", "open", "colour"}
 CAPTION_KEYS = {"folder", "interlocutor", "keywords"}
 
 
-def read_people(path, data, spec):
+def read_people_keys(path, data, spec):
     """sources, [interlocutor], [mismatched] and [captions]: the second person, the mismatched motion and the
     captions of a two-person or captioned study."""
     if "sources" in data:

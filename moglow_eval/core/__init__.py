@@ -9,7 +9,7 @@
 - `votes`: what a pairwise vote is, as the app stores it and the analysis reads it.
 - `skeleton_names`: a joint's side, finger or face, from its name.
 - `moved`: commands that moved, and the one line their old path answers.
-- `ranking`: the Bradley-Terry posterior of a growing pairwise study, a pair's information, the stopping rule.
+- `pair_posterior`: the Bradley-Terry posterior of a growing pairwise study, a pair's information, the stopping rule.
 - `colours`: a person's drawing colour as the files carry it and as the rater's page names it.
 
 `core` imports nothing from the four parts (generation, rendering, rating_app, analysis); they import it.

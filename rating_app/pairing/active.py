@@ -1,7 +1,7 @@
 """Active pairing and the stopping rule of a pairwise study (CONTRACTS §8, "Active pairing and the stopping rule").
 
 `--pairing active`: a test slot gets a unit of the pair of conditions whose order the votes so far back least
-(moglow_eval.core.ranking.pick_order: the weakest evidence under the Bradley-Terry posterior of the test votes so
+(moglow_eval.core.pair_posterior.pick_order: the weakest evidence under the Bradley-Terry posterior of the test votes so
 far, a sequential probability ratio test on every pair at once; pairs tied within PAIRING_INDIFFERENCE Elo left
 out), except for a share of slots (PAIRING_RANDOM) that keep the balanced rule, so a wrong model cannot starve a
 pair. It only chooses among the units the balanced rule could give this slot: the same claim (least-covered first,
@@ -10,7 +10,7 @@ when none of the best pairs has one, the balanced claim over all units. Sides, c
 targets are untouched.
 
 `--stop-when settled`: a new session is refused (409, as a full study) once the ranking is settled
-(ranking.settledness at STOP_LEVEL, or every Elo interval narrower than STOP_WIDTH) or the test votes reached
+(pair_posterior.settledness at STOP_LEVEL, or every Elo interval narrower than STOP_WIDTH) or the test votes reached
 STOP_MAX_VOTES; sessions already started finish.
 
 Only trusted votes move the ranking: the votes of a rater whom the exclusion rule excludes (failed catch trials,
@@ -18,7 +18,7 @@ moglow_eval.core.study.excluded_raters, the report's rule too) are kept and expo
 neither the posterior that picks the pairs, nor the stop, nor the dashboard's figures. A rater who fails a catch
 trial after some test votes loses them at the next refit, which reads every vote again.
 
-Each worker keeps its own `Ranking`: the posterior mean of the last fit, refitted when the votes changed, at most
+Each worker keeps its own `ActivePairing`: the posterior mean of the last fit, refitted when the votes changed, at most
 every REFRESH_S seconds (a GET next) or at once (a new session, so the stop is decided on every vote in); and
 the votes per pair (the trusted answered ones at the last refresh, the held slots from the Cover rows, plus the
 slots this worker gave since), whose covariance lets a slot given now count before its answer, so concurrent
@@ -34,7 +34,7 @@ import numpy as np
 from sqlalchemy import case, func, select
 from sqlalchemy.orm import aliased
 
-from moglow_eval.core import ranking, study
+from moglow_eval.core import pair_posterior, study
 
 from ..store.db import Clip, Cover, Preference, Trial
 from .assign import claim
@@ -43,8 +43,9 @@ REFRESH_S = 1.0
 TRIES = 3  # pairs tried in pick_order's order before the balanced claim
 
 
-class Ranking:
-    """The ranking state of one worker (module docstring)."""
+class ActivePairing:
+    """Active pairing's state in one worker: the posterior of the trusted test votes, the counts behind it, and the
+    stopping rule (module docstring)."""
 
     def __init__(self, units, clips, cfg):
         self.units = units  # what it was built on: a new round or a withdrawal gives the worker new units
@@ -52,13 +53,13 @@ class Ranking:
         self.conds = sorted({clips[c].condition for u in tests.values() for c in u.clips})
         idx = {c: i for i, c in enumerate(self.conds)}
         k = len(self.conds)
-        self.pr = ranking.pairs(k)
+        self.pr = pair_posterior.pairs(k)
         at = {tuple(p): n for n, p in enumerate(self.pr.tolist())}
         self.pair_of = {key: at[tuple(sorted(idx[clips[c].condition] for c in u.clips))] for key, u in tests.items()}
         self.keys_of = [sorted(key for key, p in self.pair_of.items() if p == n) for n in range(len(self.pr))]
         self.cfg = cfg
         self.lock = threading.Lock()
-        self.post = ranking.fit(np.zeros((k, k)))
+        self.post = pair_posterior.fit(np.zeros((k, k)))
         self.counts = np.zeros((k, k))
         self.votes = 0
         self.untrusted = (0, 0)  # (test votes, raters) left out by the exclusion rule
@@ -79,7 +80,7 @@ class Ranking:
         wins, votes, left_out = self._wins(conn, excluded)
         counts = wins + wins.T + self._held(conn)
         with self.lock:
-            self.post = ranking.fit(wins, start=self.post.mean)
+            self.post = pair_posterior.fit(wins, start=self.post.mean)
             self.counts, self.votes, self.top_id = counts, votes, top
             self.untrusted = (left_out, len(excluded))
 
@@ -123,13 +124,15 @@ class Ranking:
 
     def posterior(self):
         with self.lock:
-            return ranking.with_counts(self.post, self.counts)
+            return pair_posterior.with_counts(self.post, self.counts)
 
     # -------------------------------------------------------------------------------------------- pairing
     def pick(self, conn, rng, rater_pk: int, units, target: int, wait: bool):
         """A test unit of the pair with the weakest evidence this slot can have, or None (then the balanced claim)."""
         self.refresh(conn)
-        order = ranking.pick_order(self.posterior(), rng, self.cfg["PAIRING_RANDOM"], self.cfg["PAIRING_INDIFFERENCE"])
+        order = pair_posterior.pick_order(
+            self.posterior(), rng, self.cfg["PAIRING_RANDOM"], self.cfg["PAIRING_INDIFFERENCE"]
+        )
         if order is None:
             return None
         had = select(Trial.unit).where(Trial.rater_pk == rater_pk, Trial.unit.is_not(None))
@@ -149,9 +152,9 @@ class Ranking:
         cfg = self.cfg
         with self.lock:
             post, votes, (left_out, n_excluded) = self.post, self.votes, self.untrusted
-        s = ranking.settledness(post, cfg["STOP_LEVEL"], cfg["STOP_WIDTH"] or None, cfg["PAIRING_INDIFFERENCE"])
-        anchor = ranking.elo_reference(self.conds)
-        elo, se = ranking.elo(post, self.conds.index(anchor))
+        s = pair_posterior.settledness(post, cfg["STOP_LEVEL"], cfg["STOP_WIDTH"] or None, cfg["PAIRING_INDIFFERENCE"])
+        anchor = pair_posterior.elo_reference(self.conds)
+        elo, se = pair_posterior.elo(post, self.conds.index(anchor))
         cap = cfg["STOP_MAX_VOTES"]
         return {
             "pairing": cfg["PAIRING"],
@@ -201,12 +204,12 @@ def excluded_raters(conn) -> list[int]:
 
 
 def of_app(app):
-    """The app's Ranking, or None when the study neither pairs actively nor stops when settled."""
+    """The app's ActivePairing, or None when the study neither pairs actively nor stops when settled."""
     return app.extensions["rating_app"].get("ranking")
 
 
 def for_units(ext, units):
-    """The worker's Ranking over `units` (rounds.current_units), rebuilt when the study gained or withdrew a
+    """The worker's ActivePairing over `units` (rounds.current_units), rebuilt when the study gained or withdrew a
     condition since it was built (the new condition's pairs then count from its first vote); None when the study
     neither pairs actively nor stops when settled."""
     r = ext.get("ranking")
@@ -214,7 +217,7 @@ def for_units(ext, units):
         with _rebuild_lock:
             r = ext["ranking"]
             if r.units is not units:
-                r = ext["ranking"] = Ranking(units, ext["clips"], r.cfg)
+                r = ext["ranking"] = ActivePairing(units, ext["clips"], r.cfg)
     return r
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass
 
-from moglow_eval.core import ranking, study, votes
+from moglow_eval.core import pair_posterior, study, votes
 from moglow_eval.core.cli import number
 
 from .manifest import AppError
@@ -193,7 +193,7 @@ TABLE = (
     Setting(
         "PAIRING_RANDOM",
         float,
-        ranking.RANDOM_SHARE,
+        pair_posterior.RANDOM_SHARE,
         arg="pairing_random",
         flag="--pairing-random",
         bounds=(0.0, 1.0),
@@ -203,7 +203,7 @@ TABLE = (
     Setting(
         "PAIRING_INDIFFERENCE",
         float,
-        ranking.INDIFFERENCE_ELO,
+        pair_posterior.INDIFFERENCE_ELO,
         arg="pairing_indifference",
         flag="--pairing-indifference",
         bounds=(0.0, 1000.0),

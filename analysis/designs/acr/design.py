@@ -20,13 +20,8 @@ from ...page import figures
 from ...page.report_html import records
 from ...page.study_text import rename_c2st, rename_reference
 from ...stats import agreement, anova, bootstrap, rating_models, style
-from ..base import Design, Prepared
+from ..base import MIXED_MAX_LEVELS, ORDINAL_MAX_RATINGS, Design, Prepared
 from . import sections
-
-MIXED_MAX_LEVELS = 2000
-# The ordinal fit works on every rating (no sufficient statistics exist for it): ~4 s for 50,000 ratings on a
-# busy 2-core machine, twice per report, so beyond this many test ratings it is skipped unless asked for.
-ORDINAL_MAX_RATINGS = 50_000
 
 
 def _fit_model(fit, test, enabled, flag, n_raters, n_clips, max_levels, max_ratings=None):

@@ -6,6 +6,7 @@ from moglow_eval.core import study
 from ...page import design_figures
 from ...page.report_html import table
 from ..base import FailedCatchDesign
+from ..pairwise import preference
 from . import mas
 
 
@@ -40,7 +41,7 @@ class Appropriateness(FailedCatchDesign):
         return mas.load_answers(path)
 
     def failed_raters(self, df):
-        return mas.failed_raters(df)
+        return preference.failed_raters(df)  # the pairwise rule: preferring BAD to the reference
 
     def analyse_rows(self, df, options):
         return mas.analyse(df, alpha=options.alpha)

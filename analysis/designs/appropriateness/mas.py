@@ -26,9 +26,8 @@ from moglow_eval.core import study
 
 from ...data.load import AnalysisError
 from ...stats.anova import holm
-from ..pairwise.preference import read_preferences
+from ..pairwise.preference import REQUIRED, read_preferences  # a preference export, read and excluded as pairwise
 
-REQUIRED = ("rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role")
 MATCHED = "matched"  # a or b on test rows (the side showing the motion made for this speech); empty on catch rows
 
 
@@ -50,13 +49,6 @@ def load_answers(path):
         raise AnalysisError(f"{path}: no test answers (every row is a catch trial)")
     df["score"] = np.where(test, np.where(side == "a", df["preference"], -df["preference"]), np.nan)
     return df
-
-
-def failed_raters(df):
-    """Raters excluded (study.excluded_raters) for preferring the BAD clip of catch pairs, at either level."""
-    c = df[df["role"] == "catch"]
-    fail = study.pair_catch_failed(c["condition_a"], c["condition_b"], c["preference"])
-    return study.excluded_raters(zip(c["rater_id"].tolist(), fail.tolist()))
 
 
 def mas_table(df, alpha=0.05):

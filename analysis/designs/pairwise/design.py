@@ -12,7 +12,7 @@ from ...page import design_figures
 from ...page.report_html import table
 from ..appropriateness import mas
 from ..base import FailedCatchDesign
-from . import partisans, preference, ranking, reasons, rounds
+from . import elo_ranks, partisans, preference, reasons, rounds
 
 
 def _renamed_nat(df, name):
@@ -74,11 +74,11 @@ class Pairwise(FailedCatchDesign):
 
     def figures(self, data, kept, everyone, folder):
         order = list(kept["ranking"]["condition"])  # strongest first
-        rate, p = ranking.win_matrix(kept["pairs"], order)
+        rate, p = elo_ranks.win_rates(kept["pairs"], order)
         return {
             "preference_bars": design_figures.preference_bars(kept["pairs"], folder / "preference_bars.png"),
             "bradley_terry": design_figures.bradley_terry(kept["bradley_terry"], folder / "bradley_terry.png"),
-            "win_matrix": design_figures.win_matrix(rate, p, order, folder / "win_matrix.png"),
+            "win_matrix": design_figures.win_rate_figure(rate, p, order, folder / "win_matrix.png"),
         }
 
     def section_json(self, res):
@@ -216,7 +216,7 @@ def fit_warning(res) -> str:
     bt = res["bradley_terry"]
     if not bt["separated"]:
         return ""
-    notes = ranking.unbounded(res["pairs"])
+    notes = elo_ranks.unbounded(res["pairs"])
     named = "; ".join(f"{c} {n.split(':')[0]}" for c, n in sorted(notes.items()))
     return (
         f"No maximum-likelihood fit: the votes are separated ({named or 'some conditions never beat others'}), "

@@ -22,11 +22,10 @@ import numpy as np
 import pandas as pd
 from scipy import stats as sps
 
-from moglow_eval.core import ranking as core_ranking
-from moglow_eval.core import study
+from moglow_eval.core import pair_posterior, study
 
 from ...data.load import AnalysisError, read_export
-from . import ranking, separation
+from . import elo_ranks, separation
 
 REQUIRED = ("rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role")
 ROLES = ("test", "catch")
@@ -295,7 +294,7 @@ def bradley_terry(o, n_boot=1000, seed=0, level=0.95, reference=None):
         parameter, 0 without ties in the data; separation.NU_FIXED where the data cannot estimate it), reference,
         log_likelihood, converged (False also where no maximum likelihood exists: separated votes, or a tie
         parameter the data cannot estimate), separated, nu_estimable (separation.check), n_boot, seed, level and
-        method; and for ranking.py (not in stats.json) boot, the resamples' strengths [n_boot, K] in conds
+        method; and for elo_ranks.py (not in stats.json) boot, the resamples' strengths [n_boot, K] in conds
         order, conds, and tables/pairs, the per-rater counts behind them.
 
     Notes
@@ -306,7 +305,7 @@ def bradley_terry(o, n_boot=1000, seed=0, level=0.95, reference=None):
     conds = sorted(set(o["first"]) | set(o["second"]))
     if reference is not None and reference not in conds:
         raise AnalysisError(f"--reference {reference}: no such condition in the test rows ({', '.join(conds)})")
-    reference = reference or core_ranking.elo_reference(conds)  # the dashboard's anchor too
+    reference = reference or pair_posterior.elo_reference(conds)  # the dashboard's anchor too
     tables, pairs = _tables(o, conds)
     total = tables.sum(axis=0)
     ties = bool(total[:, 2].sum() > 0)
@@ -362,15 +361,15 @@ def analyse(df, n_boot=1000, seed=0, alpha=0.05, reference=None, margin_elo=0.0)
     reference : str or None
         The condition at strength 0 and Elo 1000; None: NAT, or else the first.
     margin_elo : float
-        The indifference margin of the ranking's groups (ranking.rank_table; 0: off).
+        The indifference margin of the ranking's groups (elo_ranks.rank_table; 0: off).
 
     Returns
     -------
     dict
         n_test_answers, n_raters, n_items; pairs, a DataFrame with one row per pair of conditions (wins, ties,
         the share of each answer level, the sign test p and its Holm correction); bradley_terry, as from
-        `bradley_terry`; ranking (ranking.rank_table: Elo, rank intervals, groups); reliability
-        (ranking.split_half, None with fewer than 4 raters or 3 conditions).
+        `bradley_terry`; ranking (elo_ranks.rank_table: Elo, rank intervals, groups); reliability
+        (elo_ranks.split_half, None with fewer than 4 raters or 3 conditions).
 
     Raises
     ------
@@ -395,8 +394,8 @@ def analyse(df, n_boot=1000, seed=0, alpha=0.05, reference=None, margin_elo=0.0)
         "n_items": int(o["item"].nunique()),
         "pairs": counts,
         "bradley_terry": bt,
-        "ranking": ranking.rank_table(
-            bt["strengths"], bt["boot"], conds, bt["reference"], bt["level"], ranking.unbounded(counts), margin_elo
+        "ranking": elo_ranks.rank_table(
+            bt["strengths"], bt["boot"], conds, bt["reference"], bt["level"], elo_ranks.unbounded(counts), margin_elo
         ),
-        "reliability": ranking.split_half(bt["tables"], bt["pairs"], conds, fit, seed=seed),
+        "reliability": elo_ranks.split_half(bt["tables"], bt["pairs"], conds, fit, seed=seed),
     }

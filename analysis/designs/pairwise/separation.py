@@ -4,7 +4,7 @@ cannot estimate (one system that won every vote once gave a "converged" fit with
 - **Separation.** Draw an arrow from i to j whenever i beat or tied j in some vote. Conditions that reach each
   other along arrows form a component; between two components every vote went one way, so no finite difference
   of strengths fits them best (the ridge alone holds them apart). With more than one component the likelihood has
-  no maximum, and the report says which conditions won or lost every vote (ranking.unbounded).
+  no maximum, and the report says which conditions won or lost every vote (elo_ranks.unbounded).
 - **The tie parameter.** A vote between components is certain in the limit whatever ν is, so only the votes
   within components tell ν. Where they are all ties, ν runs off to infinity and drags the strengths with it; the
   strengths are then fitted with ν fixed at NU_FIXED (a tie between equals as likely as a win), and the report

@@ -29,7 +29,7 @@ class StimulusDesign:
 
     def mismatched_clips(self, spec, motions, roles, people) -> list[dict]:
         """The design's mismatched clips, as builder.StudyClip's keywords: `motions` {condition: {item: Motion}},
-        `roles` {item: role}, `people` the two-person inputs (dyad.read_people)."""
+        `roles` {item: role}, `people` the two-person inputs (dyad.read_people_motion)."""
         return []
 
 

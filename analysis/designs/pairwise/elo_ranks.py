@@ -20,11 +20,11 @@ import numpy as np
 import pandas as pd
 from scipy import stats as sps
 
-from moglow_eval.core import ranking as core_ranking
+from moglow_eval.core import pair_posterior
 
-# The scale is the app's (moglow_eval.core.ranking): 400 Elo per factor of ten in the odds; the report puts the
+# The scale is the app's (moglow_eval.core.pair_posterior): 400 Elo per factor of ten in the odds; the report puts the
 # reference condition, not the mean one, at ELO_ANCHOR.
-ELO_ANCHOR, ELO_PER_LOG = core_ranking.ELO_ANCHOR, core_ranking.ELO_PER_LOG
+ELO_ANCHOR, ELO_PER_LOG = pair_posterior.ELO_ANCHOR, pair_posterior.ELO_PER_LOG
 
 
 def elo(theta, reference_theta=0.0):
@@ -83,10 +83,10 @@ def unbounded(pairs):
     return notes
 
 
-def tied_with_above(order, boot, conds, margin_elo, confidence=core_ranking.TIE_CONFIDENCE):
+def tied_with_above(order, boot, conds, margin_elo, confidence=pair_posterior.TIE_CONFIDENCE):
     """The conditions of `order` (strongest first) whose Elo difference from the one above lies within
     `margin_elo` in at least `confidence` of the bootstrap resamples: the app's indifference zone
-    (moglow_eval.core.ranking.tied), which the report groups."""
+    (moglow_eval.core.pair_posterior.tied), which the report groups."""
     if not margin_elo or len(boot) == 0:
         return set()
     col = {c: k for k, c in enumerate(conds)}
@@ -170,7 +170,7 @@ def _range(lo, hi):
     return f"{lo}" if lo == hi else f"{lo}-{hi}"
 
 
-def win_matrix(pairs, conds):
+def win_rates(pairs, conds):
     """Win rates [K, K] of row over column (ties counting half) and the Holm-adjusted sign-test p of each pair,
     from analysis.designs.pairwise.preference.pair_counts' table; NaN where two conditions never met."""
     idx = {c: k for k, c in enumerate(conds)}

@@ -96,7 +96,7 @@ class Posterior:
     cov_even: np.ndarray
 
 
-def win_matrix(k: int, firsts, seconds, outcomes) -> np.ndarray:
+def win_counts(k: int, firsts, seconds, outcomes) -> np.ndarray:
     """W [k, k] from votes on (first, second) condition indices with outcomes 1 (the first won), 0 (the second
     won) or 0.5 (a tie, half to each side)."""
     w = np.zeros((k, k))
