@@ -45,12 +45,12 @@ def _float32_on_gpus():
 def pytest_configure(config):
     # make_stimuli picks MG's sampler precision per CPU (generation.sampling.precision), measuring at first use and
     # caching in the user's cache folder. The suite samples in float32 on every host, as its figures were made, and
-    # leaves that cache alone; tests/test_sampler_precision.py tests the pick with measurements it gives it.
+    # leaves that cache alone; tests/generation/test_sampler_precision.py tests the pick with measurements it gives it.
     os.environ.setdefault("MOGLOW_SAMPLER_PRECISION", "float32")
     # The suite's process draws meshes as a command's does, so it sets what a command's main sets before its first GL
     # context (rendering.mesh.GL_ENVIRONMENT: the library sets no environment variable); without it llvmpipe's
-    # rasteriser threads, which a forked child does not inherit, would leave tests/test_mesh_drawing.py's child
-    # waiting for ever.
+    # rasteriser threads, which a forked child does not inherit, would leave tests/rendering/test_mesh_drawing.py's
+    # child waiting for ever.
     set_gl_environment()
 
 
@@ -259,3 +259,68 @@ def make(app_db_url):
     yield build
     for a in made:
         app_engine(a).dispose()
+
+
+# --- a real browser, and the app served to it over HTTP ---
+@pytest.fixture
+def live_server(app_stimuli, app_db_url):
+    """The URL of the app serving `app_stimuli` over HTTP (a module may give its own `app_stimuli`);
+    helpers.browser.live_server_manifest holds its manifest and app meanwhile."""
+    import threading
+
+    from helpers.browser import live_server_manifest
+    from werkzeug.serving import make_server
+
+    from rating_app import create_app
+    from rating_app.store.db import app_engine
+
+    manifest = os.environ.get("SCREENSHOT_MANIFEST") or app_stimuli
+    app = create_app(
+        manifest=manifest, db_url=app_db_url, admin_token="browser-token", ratings_per_clip=5, clips_per_rater=3
+    )
+    server = make_server("127.0.0.1", 0, app, threaded=True)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    live_server_manifest[:] = [manifest, app]
+    yield f"http://127.0.0.1:{server.server_port}"
+    server.shutdown()
+    thread.join(5)
+    app_engine(app).dispose()
+
+
+@pytest.fixture
+def browser(tmp_path):
+    """Debian's chromium, headless, phone-sized (helpers/browser.py), quit at the end."""
+    from helpers.browser import chrome
+
+    driver = chrome(tmp_path)
+    yield driver
+    driver.quit()
+
+
+# --- the rating app's design tests and a running study's folders (add-condition) ---
+@pytest.fixture(scope="module")
+def stimuli(tmp_path_factory):
+    from helpers.fake_stimuli import write_fake_stimuli
+
+    return write_fake_stimuli(tmp_path_factory.mktemp("design_stimuli"), catch_nat=True)
+
+
+@pytest.fixture(scope="session")
+def stimulus_mp4(tmp_path_factory):
+    from helpers.fake_stimuli import write_stimulus_mp4
+
+    return write_stimulus_mp4(tmp_path_factory.mktemp("mp4") / "ref.mp4")
+
+
+@pytest.fixture
+def folders(tmp_path, stimulus_mp4):
+    """(the study's manifest, a new system's stimulus folder's manifest with NAT and SYS) in one-size sets."""
+    from helpers.fake_stimuli import write_fake_stimuli
+    from helpers.study_folders import N_ITEMS, one_size
+
+    study = write_fake_stimuli(tmp_path / "study", n_items=N_ITEMS, catch_nat=True)
+    new = write_fake_stimuli(tmp_path / "new", n_items=N_ITEMS, conditions=("NAT", "SYS"), catch_nat=True, seed=1)
+    one_size(study.parent, stimulus_mp4)
+    one_size(new.parent, stimulus_mp4)
+    return study, new

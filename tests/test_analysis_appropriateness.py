@@ -4,15 +4,15 @@ motion for the speech heard with the motion it made for other speech."""
 
 import csv
 import math
-from pathlib import Path
 
 import pytest
+from helpers.paths import DATA
 from scipy import stats as sps
 
 from analysis.designs.appropriateness.mas import analyse, load_answers
 from analysis.designs.pairwise.preference import failed_raters
 
-VOTES = Path(__file__).resolve().parents[2] / "shared" / "data" / "genea-leaderboard-votes" / "battles_mismatch.csv"
+VOTES = DATA / "genea-leaderboard-votes" / "battles_mismatch.csv"
 COLUMNS = ["rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role", "matched"]
 
 

@@ -8,11 +8,11 @@ import json
 import subprocess
 import sys
 from itertools import combinations
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from helpers.paths import ROOT
 from scipy import stats as sps
 
 from analysis.data.load import AnalysisError
@@ -21,7 +21,6 @@ from analysis.designs.pairwise import preference as pairwise
 from analysis.designs.parallel import mushra as parallel
 from analysis.report import build_report
 
-ROOT = Path(__file__).resolve().parents[1]
 PAIR_COLS = ["rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role"]
 PAGE_COLS = ["rater_id", "page_id", "item", "clip_id", "condition", "rating", "role"]
 

@@ -2,14 +2,13 @@
 
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
+from helpers.paths import ROOT, TEST_DATA
 
 from analysis.data.load import AnalysisError, load_metrics, load_ratings
 from analysis.report import main
 
-ROOT = Path(__file__).resolve().parents[1]
 HEADER = "rater_id,clip_id,condition,rating,role\n"
 GOOD = "r1,a1,NAT,4,test\nr1,b1,MG,3,test\nr1,x1,BAD,1,catch\nr2,a1,NAT,5,test\nr2,b1,MG,2,test\nr2,x1,BAD,2,catch\n"
 
@@ -157,7 +156,7 @@ def test_metrics_empty_cell_is_missing_not_an_error(tmp_path):
 
 
 # ---------------------------------------------------------------------------------------------- fuzzing (issue 11)
-REAL = (Path(__file__).parent / "data" / "analysis" / "ratings_small.csv").read_bytes()
+REAL = (TEST_DATA / "analysis" / "ratings_small.csv").read_bytes()
 REAL_LINES = REAL.split(b"\n")[:60]  # the header and enough rows for every kind of line; keeps each example fast
 
 

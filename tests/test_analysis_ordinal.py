@@ -2,17 +2,17 @@
 tests/data/analysis/r_reference.json by r_reference.R -- CI never needs R."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from helpers.paths import TEST_DATA
 
 from analysis.data.filtering import exclude_raters, only_test_rows
 from analysis.data.load import load_ratings
 from analysis.stats import ordinal, rating_models
 
-DATA = Path(__file__).parent / "data" / "analysis"
+DATA = TEST_DATA / "analysis"
 R = json.loads((DATA / "r_reference.json").read_text())
 
 

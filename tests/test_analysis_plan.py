@@ -4,16 +4,15 @@ report's own Tukey HSD on studies simulated with a known effect, and its command
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from helpers.paths import ROOT
 
 from analysis import plan
 from analysis.stats import anova as stats
 
-ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data" / "analysis"
 TRUE = {"means": {"NAT": 3.3, "MG": 3.0, "FL": 2.4}, "sd_rater": 0.5, "sd_clip": 0.3, "sd_residual": 1.05}
 CLIPS_PER_CONDITION, CLIPS_PER_RATER = 30, 45

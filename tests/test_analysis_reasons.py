@@ -7,16 +7,16 @@ on a small table, against a plain count on the GENEA leaderboard's released vote
 import csv
 import json
 from collections import Counter
-from pathlib import Path
 
 import pandas as pd
 import pytest
+from helpers.paths import DATA
 
 from analysis.designs.pairwise import reasons, rounds
 from analysis.report import main as report_main
 from moglow_eval.core import votes
 
-VOTES = Path(__file__).resolve().parents[2] / "shared" / "data" / "genea-leaderboard-votes" / "battles_elo.csv"
+VOTES = DATA / "genea-leaderboard-votes" / "battles_elo.csv"
 
 
 def test_shares_by_hand():

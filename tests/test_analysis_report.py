@@ -5,17 +5,16 @@ import math
 import re
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
+from helpers.paths import ROOT, TEST_DATA
 
 from analysis.data.filtering import exclude_raters
 from analysis.data.load import load_ratings
 from analysis.designs import Options
 from analysis.report import build_report, main
 
-DATA = Path(__file__).parent / "data" / "analysis"
-ROOT = Path(__file__).resolve().parents[1]
+DATA = TEST_DATA / "analysis"
 CONTRACT_KEYS = [
     "n_ratings_total",
     "n_ratings_removed",

@@ -3,7 +3,7 @@ report.html's section and the figure; a file without styles has none of them."""
 
 import json
 
-from test_analysis_style import synthetic
+from helpers.style_ratings import synthetic
 
 from analysis.designs import Options
 from analysis.report import build_report

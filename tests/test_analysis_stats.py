@@ -2,11 +2,11 @@
 
 import re
 from decimal import Decimal
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from helpers.paths import TEST_DATA
 from reference.anova_exact import one_way_anova_exact
 
 from analysis.data.filtering import exclude_raters, only_test_rows
@@ -14,7 +14,7 @@ from analysis.data.load import load_ratings
 from analysis.stats import anova as stats
 from analysis.stats import bootstrap, rating_models
 
-DATA = Path(__file__).parent / "data"
+DATA = TEST_DATA
 NIST = sorted((DATA / "nist_anova").glob("*.dat"))
 SMALL = DATA / "analysis" / "ratings_small.csv"
 

@@ -2,8 +2,8 @@
 
 Every `::: dotted.name` on the page is a function that imports, is defined where the page says, and has a numpy
 docstring with Parameters (matching its signature, each with a type) and Returns. The `>>>` examples of those
-docstrings run here as doctests. mkdocs build --strict (tests/test_docs.py) checks the rendering; this checks the
-content without mkdocs, and fast: no example renders, trains or fits a slow model.
+docstrings run here as doctests. mkdocs build --strict (tests/project/test_docs.py) checks the rendering; this checks
+the content without mkdocs, and fast: no example renders, trains or fits a slow model.
 """
 
 import doctest

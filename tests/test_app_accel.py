@@ -21,7 +21,6 @@ from helpers.servers import start_gunicorn, wait_for
 
 pytestmark = pytest.mark.full  # the full tier: real proxies (nginx, caddy)
 
-ROOT = Path(__file__).resolve().parents[1]
 NGINX_ACCEL = """{head}
 http {{
   access_log off;

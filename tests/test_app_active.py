@@ -1,20 +1,29 @@
 """Active pairing and the stopping rule of a pairwise study (CONTRACTS §8), on SQLite and PostgreSQL.
 
-`--pairing active` only chooses among the units the balanced rule allows, so the pairwise checks of
-test_app_designs.py and test_app_catch_pool.py (the flow, every unit and catch pair, the sides drawn per trial,
-catch failures, bad input, an idle session's pair given back, exact targets alone and under concurrent sessions,
-catch units recurring like test units) run here again with it on; then what it changes: the votes go to the
-pairs the ranking is unsure of. `--stop-when settled` closes the study to new raters, never to started ones."""
+`--pairing active` only chooses among the units the balanced rule allows, so the pairwise checks that
+test_app_designs.py and test_catch_pool.py run (helpers/design_checks.py and catch_pool.py: the flow, every unit
+and catch pair, the sides drawn per trial, catch failures, bad input, an idle session's pair given back, exact
+targets alone and under concurrent sessions, catch units recurring like test units) run here again with it on;
+then what it changes: the votes go to the pairs the ranking is unsure of. `--stop-when settled` closes the study
+to new raters, never to started ones."""
 
 import collections
 
 import pytest
-import test_app_catch_pool as pool
-import test_app_designs as base
+from helpers.api_client import TOKEN_HDR
+from helpers.catch_pool import CATCH_ITEMS, catch_recurrence
 from helpers.concurrent_raters import cover_mismatches
+from helpers.design_checks import (
+    an_idle_session_gives_its_pair_back,
+    pairwise_bad_input_and_training,
+    pairwise_catch_failures_on_the_dashboard,
+    pairwise_flow_units_catch_and_export,
+    targets_exact_under_concurrent_sessions,
+    targets_reached_exactly_with_fewest_raters,
+)
+from helpers.design_client import complete, export, post, start
 from helpers.fake_stimuli import write_fake_stimuli
 from helpers.tiers import only_when_slow
-from test_app_api import TOKEN_HDR
 
 from rating_app import AppError, create_app
 from rating_app.pairing import active
@@ -43,11 +52,11 @@ def big_stimuli(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def pool_stimuli(tmp_path_factory):
-    """As test_app_catch_pool's: 3 conditions x 30 items, 12 catch items."""
+    """As test_catch_pool's: 3 conditions x 30 items, 12 catch items."""
     return write_fake_stimuli(
         tmp_path_factory.mktemp("active_pool"),
         n_items=30,
-        n_catch=pool.CATCH_ITEMS,
+        n_catch=CATCH_ITEMS,
         n_frames=4,
         metrics=False,
         catch_nat=True,
@@ -56,34 +65,34 @@ def pool_stimuli(tmp_path_factory):
 
 # ------------------------------------------------------------------------------------ the rules it keeps
 def test_flow_units_catch_sides_and_export(active_make, stimuli):
-    base.test_pairwise_flow_units_catch_and_export(active_make, stimuli)
+    pairwise_flow_units_catch_and_export(active_make, stimuli)
 
 
 def test_catch_failures_on_the_dashboard(active_make, stimuli):
-    base.test_pairwise_catch_failures_on_the_dashboard(active_make, stimuli)
+    pairwise_catch_failures_on_the_dashboard(active_make, stimuli)
 
 
 def test_bad_input_and_training(active_make, stimuli):
-    base.test_pairwise_bad_input_and_training(active_make, stimuli)
+    pairwise_bad_input_and_training(active_make, stimuli)
 
 
 def test_an_idle_session_gives_its_pair_back(active_make, stimuli):
-    base.test_an_idle_session_gives_its_pair_back(active_make, stimuli)
+    an_idle_session_gives_its_pair_back(active_make, stimuli)
 
 
 @pytest.mark.full  # the full tier: crowds, as in the modules these checks come from
 def test_targets_reached_exactly_with_fewest_raters(active_make, big_stimuli):
-    base.test_targets_reached_exactly_with_fewest_raters(active_make, big_stimuli, "pairwise", 90, 30)
+    targets_reached_exactly_with_fewest_raters(active_make, big_stimuli, "pairwise")
 
 
 @pytest.mark.full  # the full tier: crowds, as in the modules these checks come from
 def test_targets_exact_under_concurrent_sessions(active_make, big_stimuli):
-    base.test_targets_exact_under_concurrent_sessions(active_make, big_stimuli, "pairwise", 90)
+    targets_exact_under_concurrent_sessions(active_make, big_stimuli, "pairwise")
 
 
 @pytest.mark.full  # the full tier: crowds, as in the modules these checks come from
 def test_catch_units_recur_like_test_units(active_make, pool_stimuli, monkeypatch):
-    pool.catch_recurrence(active_make, pool_stimuli, "pairwise", 24, monkeypatch)
+    catch_recurrence(active_make, pool_stimuli, "pairwise", 24, monkeypatch)
 
 
 # ---------------------------------------------------------------------------------- what it changes
@@ -110,7 +119,7 @@ def crowd(app, n_raters, prefer):
                 value, i = prefer(a, b, i), i + 1
                 if "BAD" not in (a, b):
                     votes[" vs ".join(sorted((a, b)))] += 1
-            assert base.post(c, token, t, preference=value).status_code == 201
+            assert post(c, token, t, preference=value).status_code == 201
     return votes, r
 
 
@@ -142,7 +151,7 @@ def test_a_settled_ranking_closes_the_study_to_new_raters_only(make, big_stimuli
     monkeypatch.setattr(active, "REFRESH_S", 0.0)
     app = make(big_stimuli, "pairwise", ratings_per_clip=20, clips_per_rater=6, stop_when="settled")
     c = app.test_client()
-    early = base.start(c)  # started before the stop: it may finish
+    early = start(c)  # started before the stop: it may finish
     votes, refused = crowd(app, 30, lambda a, b, i: 2 if RANK[a] > RANK[b] else -2)
     assert refused.status_code == 409 and refused.json["closed"] and refused.json["full"], refused.json
     assert "ranking is settled" in refused.json["error"]
@@ -152,7 +161,7 @@ def test_a_settled_ranking_closes_the_study_to_new_raters_only(make, big_stimuli
     assert p["elo_anchor"] == "NAT" and p["elo"]["NAT"] == 1000.0 and p["elo"]["FL"] < p["elo"]["MG"] < 1000.0
     assert p["weakest_separation"] >= p["separation_needed"] == pytest.approx(1 - 0.05 / 2)
     assert p["votes"] == sum(votes.values()) < 20 * 90  # long before the targets
-    trials, done = base.complete(
+    trials, done = complete(
         c, early, pref=lambda t: 2 if RANK[conditions(app, t)[0]] > RANK[conditions(app, t)[1]] else -2
     )
     assert done["done"] and trials
@@ -218,7 +227,7 @@ def test_raters_who_failed_catch_trials_neither_close_the_study_nor_move_its_pai
     assert not ranking.post.mean.any() and not ranking.counts.any()
     assert p["raters_excluded"] == 2 and [r["excluded"] for r in p["raters"]] == [True, True, False]
     # The bots' votes are kept, every one flagged.
-    rows = base.export(c)[0]
+    rows = export(c)[0]
     assert len(rows) >= 24 and all("failed_catch" in r["flags"].split(";") for r in rows)
     page = c.get("/admin", headers=TOKEN_HDR).get_data(as_text=True)
     assert "24 more from 2 excluded raters" in page

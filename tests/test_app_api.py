@@ -1,59 +1,11 @@
 """Rating app JSON API (CONTRACTS §5-6): the flow, assignment, idempotency and every bad-input case.
 Each test runs on SQLite and on PostgreSQL (the `app` fixture is parametrised)."""
 
-import csv
-import io
 import threading
 
+from helpers.api_client import TOKEN_HDR, answer, clips_by_role, complete, export_rows, idle, nxt, start
+
 from rating_app.store.manifest import load_manifest
-
-TOKEN_HDR = {"Authorization": "Bearer test-admin-token"}
-
-
-def start(client, **body):
-    r = client.post("/api/sessions", json=body)
-    assert r.status_code == 201, r.json
-    return r.json["session"]
-
-
-def nxt(client, token):
-    r = client.get(f"/api/sessions/{token}/next")
-    assert r.status_code == 200, r.json
-    return r.json
-
-
-def answer(client, token, trial, rating=3, watched_ms=500):
-    rating = None if trial["phase"] == "training" else rating
-    return client.post(
-        f"/api/sessions/{token}/ratings",
-        json={"trial_id": trial["trial_id"], "rating": rating, "watched_ms": watched_ms},
-    )
-
-
-def complete(client, token, rating=lambda t: 3):
-    seen = []
-    for _ in range(100):
-        j = nxt(client, token)
-        if j.get("done"):
-            return seen, j
-        t = j["trial"]
-        seen.append(t)
-        r = answer(client, token, t, rating(t))
-        assert r.status_code == 201, r.json
-    raise AssertionError("session never ended")
-
-
-def export_rows(client):
-    r = client.get("/admin/export.csv", headers=TOKEN_HDR)
-    assert r.status_code == 200
-    return list(csv.DictReader(io.StringIO(r.data.decode())))
-
-
-def clips_by_role(app_stimuli):
-    out = {}
-    for c in load_manifest(app_stimuli):
-        out.setdefault(c.role, set()).add(c.clip_id)
-    return out
 
 
 def test_whole_session_flow_and_export(client, app_stimuli):
@@ -208,19 +160,6 @@ def test_balanced_share_and_abandoned_slots(app_stimuli, make_app):
     r = c.get(f"/api/sessions/{ghost}/next")  # the ghost is told it expired, and gets no code
     assert r.status_code == 410 and r.json["expired"] is True and "completion_code" not in r.json
     assert c.post("/api/sessions", json={}).status_code == 409
-
-
-def idle(app, token, hours=2):
-    """Move a session's last answer (and last poll) `hours` into the past, as if it had been idle that long."""
-    import datetime as dt
-
-    from sqlalchemy import update
-
-    from rating_app.store.db import Rater, app_engine, utcnow
-
-    with app_engine(app).begin() as conn:
-        past = utcnow() - dt.timedelta(hours=hours)
-        conn.execute(update(Rater).where(Rater.token == token).values(last_progress=past, last_seen=past))
 
 
 # ---------------------------------------------------------------------------------------------- bad input

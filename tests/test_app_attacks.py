@@ -9,11 +9,11 @@ import io
 import os
 
 import pytest
+from helpers.api_client import TOKEN_HDR, answer, clips_by_role, complete, export_rows, idle, nxt, start
 from helpers.concurrent_raters import run_raters
 from helpers.fake_stimuli import write_fake_stimuli
 from helpers.flags import video_flags
 from sqlalchemy import update
-from test_app_api import TOKEN_HDR, answer, clips_by_role, complete, export_rows, idle, nxt, start
 
 from rating_app.store.db import Trial, app_engine, utcnow
 from rating_app.store.manifest import AppError, load_manifest

@@ -10,8 +10,7 @@ import os
 
 import pytest
 import requests
-from test_app_browser import browser  # noqa: F401  (the fixture)
-from test_app_browser_designs import _export, _run_flow, _screenshot, _shown, _trial_of, serve
+from helpers.design_pages import rater_export, run_flow, screenshot, serve, shown_clips, trial_of
 
 from moglow_eval.core import votes
 from rating_app.store.db import app_engine
@@ -42,7 +41,7 @@ def reason_stimuli(tmp_path_factory):
 
 
 @pytest.mark.parametrize("app_db_url", ["sqlite"], indirect=True)
-def test_reasons_reach_the_export_intact_and_are_shown_escaped(reason_stimuli, app_db_url, browser):  # noqa: F811
+def test_reasons_reach_the_export_intact_and_are_shown_escaped(reason_stimuli, app_db_url, browser):
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
     from selenium.webdriver.support.ui import WebDriverWait
@@ -73,16 +72,16 @@ def test_reasons_reach_the_export_intact_and_are_shown_escaped(reason_stimuli, a
             btn = wait.until(EC.element_to_be_clickable((By.CSS_SELECTOR, f'button.pref[data-preference="{pref}"]')))
             if index == 1:
                 browser.set_window_size(1280, 1150)
-                _screenshot(browser, "pairwise_reasons.png")
+                screenshot(browser, "pairwise_reasons.png")
                 browser.set_window_size(390, 844)
             btn.click()
-            trial = _trial_of(s["srcs"][0])
+            trial = trial_of(s["srcs"][0])
             typed[trial] = (";".join(ids[k] for k in ticks), text, pref)
             return trial, pref
 
-        given, n_training, code = _run_flow(browser, url, "pairwise", answer)
-        rows, _ = _export(url, "pairwisepid")
-        shown = _shown(app)
+        given, n_training, code = run_flow(browser, url, "pairwise", answer)
+        rows, _ = rater_export(url, "pairwisepid")
+        shown = shown_clips(app)
         battles = requests.get(
             url + "/admin/export.csv?format=battles", headers={"Authorization": "Bearer browser-token"}, timeout=10
         ).text

@@ -5,19 +5,19 @@ docs/img/sound_trial_*.png."""
 
 import os
 import threading
-from pathlib import Path
 
 import pytest
+from helpers.browser import STATE, chrome
 from helpers.own_study_data import make_study
+from helpers.paths import ROOT
 from helpers.sound_check import pass_sound_check
-from test_app_browser import chrome
 
 from generation.make_stimuli import main as make_stimuli
 from rating_app import create_app
 from rating_app.store.db import app_engine
 
 pytestmark = pytest.mark.browser
-IMG = Path(__file__).resolve().parents[1] / "docs" / "img"  # SAVE_SCREENSHOTS=1 writes the pages there
+IMG = ROOT / "docs" / "img"  # SAVE_SCREENSHOTS=1 writes the pages there
 
 
 @pytest.fixture(scope="module")
@@ -53,21 +53,6 @@ def served(request, sound_study, tmp_path):
     server.shutdown()
     thread.join(5)
     app_engine(app).dispose()
-
-
-STATE = (
-    "var ids=['audio-check','audio-failed','intro','trial','pair','rating-intro','done','error'];"
-    "var vis=ids.filter(function(id){return !document.getElementById(id).hidden});"
-    "var vs=Array.prototype.slice.call("
-    " document.querySelectorAll('#trial:not([hidden]) video, #pair:not([hidden]) video'));"
-    "var count=document.querySelector('#pair:not([hidden]) .trial-count')||document.getElementById('trial-count');"
-    "return {section: vis.length ? vis[0] : null, count: count.textContent,"
-    " label: (document.querySelector('#pair:not([hidden]) .phase-label')||document.getElementById('phase-label'))"
-    "   .textContent,"
-    " unmuted: vs.every(function(v){return !v.muted}),"
-    " decoded: vs.map(function(v){return v.webkitAudioDecodedByteCount||0}),"
-    " ended: vs.filter(function(v){return v.src}).map(function(v){return v.ended})};"
-)
 
 
 @pytest.mark.parametrize(

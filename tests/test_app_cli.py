@@ -8,12 +8,12 @@ import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 import requests
 from helpers.fake_stimuli import free_port
+from helpers.paths import ROOT
 from helpers.tiers import only_when_slow
 
 from moglow_eval.core.tables import read_metrics
@@ -21,8 +21,6 @@ from rating_app import create_app
 from rating_app.simulate.raters import ClipInfo, load_clips, parse_quality, quality_from_metrics
 from rating_app.store.db import app_engine
 from rating_app.store.manifest import AppError, load_manifest
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def cli(*args, timeout=120, **kw):

@@ -5,30 +5,29 @@ stored with the study, export and dashboard. Each test runs on SQLite and on Pos
 import collections
 import csv
 import datetime as dt
-import io
-import itertools
 import subprocess
 import sys
 import threading
-from pathlib import Path
 
 import pytest
-from helpers.concurrent_raters import cover_mismatches, run_raters
+from helpers.api_client import TOKEN_HDR
+from helpers.design_checks import (
+    an_idle_session_gives_its_pair_back,
+    pairwise_bad_input_and_training,
+    pairwise_catch_failures_on_the_dashboard,
+    pairwise_flow_units_catch_and_export,
+    targets_exact_under_concurrent_sessions,
+    targets_reached_exactly_with_fewest_raters,
+)
+from helpers.design_client import clips_of, complete, export, post, shown, start
 from helpers.fake_stimuli import write_fake_stimuli
+from helpers.paths import ROOT
 from sqlalchemy import update
-from test_app_api import TOKEN_HDR, idle
 
 from moglow_eval.core import study
 from rating_app import create_app
 from rating_app.store.db import Trial, app_engine, utcnow
-from rating_app.store.manifest import AppError, load_manifest
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-@pytest.fixture(scope="module")
-def stimuli(tmp_path_factory):
-    return write_fake_stimuli(tmp_path_factory.mktemp("design_stimuli"), catch_nat=True)
+from rating_app.store.manifest import AppError
 
 
 @pytest.fixture(scope="module")
@@ -45,169 +44,17 @@ def big_stimuli(tmp_path_factory):
     )
 
 
-def clips_of(manifest):
-    return {c.clip_id: c for c in load_manifest(manifest)}
-
-
-def shown(t):
-    return [t] if "clip_id" in t else [t["a"], t["b"]] if "a" in t else t["clips"]
-
-
-def value_for(t, pref=1, rating=lambda i, c: 40 + i):
-    if "clip_id" in t:  # acr
-        return {"rating": None if t["phase"] == "training" else 3}
-    if t["phase"] == "training":
-        return {"preference": None} if "a" in t else {"ratings": None}
-    if "a" in t:
-        return {"preference": pref(t) if callable(pref) else pref}
-    return {"ratings": {c["clip_id"]: rating(i, c) for i, c in enumerate(t["clips"])}}
-
-
-def post(c, token, t, **value):
-    body = value or value_for(t)
-    return c.post(f"/api/sessions/{token}/ratings", json={"trial_id": t["trial_id"], "watched_ms": 900, **body})
-
-
-def complete(c, token, **answer):
-    seen = []
-    for _ in range(400):
-        r = c.get(f"/api/sessions/{token}/next")
-        assert r.status_code == 200, r.json
-        if r.json.get("done"):
-            return seen, r.json
-        t = r.json["trial"]
-        for x in shown(t):
-            assert c.get(x["video_url"]).status_code == 200
-        seen.append(t)
-        r = post(c, token, t, **value_for(t, **answer))
-        assert r.status_code == 201, r.json
-    raise AssertionError("session never ended")
-
-
-def start(c, **body):
-    r = c.post("/api/sessions", json=body)
-    assert r.status_code == 201, r.json
-    return r.json["session"]
-
-
-def export(c):
-    r = c.get("/admin/export.csv", headers=TOKEN_HDR)
-    assert r.status_code == 200
-    return list(csv.DictReader(io.StringIO(r.data.decode()))), r
-
-
 # ------------------------------------------------------------------------------------------------- pairwise
 def test_pairwise_flow_units_catch_and_export(make, stimuli):
-    clips = clips_of(stimuli)
-    app = make(stimuli, "pairwise", ratings_per_clip=1)
-    c = app.test_client()
-    r = c.post("/api/sessions", json={"external_id": "P1", "session_id": "S1"})
-    assert r.status_code == 201 and r.json["design"] == "pairwise"
-    token = r.json["session"]
-    trials, done = complete(c, token, pref=lambda t: 2 if clips[t["a"]["clip_id"]].condition == "NAT" else -1)
-    assert done["done"] and done["completion_code"]
-    rating = [t for t in trials if t["phase"] == "rating"]
-    for t in trials:
-        assert t["design"] == "pairwise" and set(t) == {"trial_id", "design", "phase", "index", "of", "a", "b"}
-        assert t["a"]["label"] == "A" and t["b"]["label"] == "B"
-        assert t["a"]["video_url"].endswith(f"/trials/{t['trial_id']}/clips/A.mp4")
-        assert clips[t["a"]["clip_id"]].role == clips[t["b"]["clip_id"]].role
-    units = collections.Counter()
-    for t in rating:
-        a, b = clips[t["a"]["clip_id"]], clips[t["b"]["clip_id"]]
-        assert a.item == b.item and a.condition != b.condition  # two conditions of the same item
-        units[(a.item, *sorted((a.condition, b.condition)))] += 1
-    items = {x.item for x in clips.values() if x.role == "test"}
-    want = {(i, *p) for i in items for p in itertools.combinations(sorted(["NAT", "MG", "FL"]), 2)}
-    catch = {(x.item, "BAD", "NAT") for x in clips.values() if x.role == "catch"}
-    assert set(units) == want | catch and set(units.values()) == {1}  # every pair once, every catch pair
-    rows, resp = export(c)
-    assert "pairs.csv" in resp.headers["Content-Disposition"]
-    assert len(rows) == len(rating)
-    by_pair = {(row["clip_a"], row["clip_b"]): row for row in rows}
-    for t in rating:
-        row = by_pair[(t["a"]["clip_id"], t["b"]["clip_id"])]
-        a = clips[t["a"]["clip_id"]]
-        assert int(row["preference"]) == (2 if a.condition == "NAT" else -1)
-        assert (row["condition_a"], row["condition_b"]) == (a.condition, clips[t["b"]["clip_id"]].condition)
-        assert row["item"] == a.item and row["role"] == a.role and row["external_id"] == "P1"
-        assert int(row["trial_index"]) == t["index"] and row["submitted_at"].endswith("Z") and row["flags"] == ""
-    # A/B sides are drawn per trial: NAT is shown as A in some pairs and as B in others
-    sides = collections.Counter(
-        clips[t["a"]["clip_id"]].condition == "NAT"
-        for t in rating
-        if "NAT" in {clips[x["clip_id"]].condition for x in shown(t)}
-    )
-    assert sides[True] and sides[False]
-    assert c.post("/api/sessions", json={}).status_code == 409  # every unit has its target
+    pairwise_flow_units_catch_and_export(make, stimuli)
 
 
 def test_pairwise_catch_failures_on_the_dashboard(make, stimuli):
-    clips = clips_of(stimuli)
-    app = make(stimuli, "pairwise", ratings_per_clip=4)
-    c = app.test_client()
-
-    def prefer_bad(level):
-        def pref(t):
-            a = clips[t["a"]["clip_id"]].condition
-            if "BAD" not in (a, clips[t["b"]["clip_id"]].condition):
-                return 0
-            return level if a == "BAD" else -level
-
-        return pref
-
-    outcomes = {}
-    for name, pref in (
-        ("clearly", prefer_bad(2)),
-        ("slightly", prefer_bad(1)),
-        ("none", prefer_bad(0)),
-        ("good", prefer_bad(-2)),
-    ):
-        token = start(c, external_id=name)
-        complete(c, token, pref=pref)
-        outcomes[name] = token
-    p = c.get("/admin/progress.json", headers=TOKEN_HDR).json
-    assert p["design"] == "pairwise"
-    fails = {r["external_id"]: r["catch_failures"] for r in p["raters"]}
-    n_catch = sum(x.condition == "BAD" for x in clips.values())
-    assert fails == {"clearly": n_catch, "slightly": n_catch, "none": 0, "good": 0}
-    assert p["raters_failed_catch"] == 2
-    page = c.get("/admin", headers=TOKEN_HDR).data.decode()
-    assert "Design: <strong>pairwise</strong>" in page and "pairs.csv" in page
+    pairwise_catch_failures_on_the_dashboard(make, stimuli)
 
 
 def test_pairwise_bad_input_and_training(make, stimuli):
-    app = make(stimuli, "pairwise")
-    c = app.test_client()
-    token = start(c)
-    t = c.get(f"/api/sessions/{token}/next").json["trial"]
-    assert t["phase"] == "training"
-    assert post(c, token, t, preference=1).status_code == 400  # familiarisation: null only
-    assert post(c, token, t, preference=None).status_code == 201
-    while t["phase"] == "training":
-        t = c.get(f"/api/sessions/{token}/next").json["trial"]
-        if t["phase"] == "training":
-            assert post(c, token, t, preference=None).status_code == 201
-    for body, needle in (
-        ({"preference": 3}, "between -2 and 2"),
-        ({"preference": 1.5}, "integer"),
-        ({"preference": "1"}, "integer"),
-        ({"preference": True}, "integer"),
-        ({"rating": 3}, "unknown field"),
-        ({"ratings": {}}, "unknown field"),
-        ({}, "preference"),
-    ):
-        r = (
-            post(c, token, t, **body)
-            if body
-            else c.post(f"/api/sessions/{token}/ratings", json={"trial_id": t["trial_id"]})
-        )
-        assert r.status_code == 400 and needle in r.json["error"], (body, r.json)
-    assert post(c, token, t, preference=-2).status_code == 201
-    again = post(c, token, t, preference=2)  # a repeat: stored once, not changed
-    assert again.status_code == 200 and again.json["preference"] == -2
-    rows, _ = export(c)
-    assert len(rows) == 1 and rows[0]["preference"] == "-2"
+    pairwise_bad_input_and_training(make, stimuli)
 
 
 @pytest.mark.parametrize("design", ["pairwise", "parallel"])
@@ -304,90 +151,22 @@ def test_parallel_bad_input(make, stimuli):
 
 
 # ------------------------------------------------------------------------------------------------- balance
-# Per design, on big_stimuli: its test units and a rater's share of them. The balance tests run every design of
-# moglow_eval.core.study.DESIGNS, so a design missing here fails them (docs/ARCHITECTURE.md, "A test design").
-BALANCE = {
-    "acr": (90, 30),
-    "pairwise": (90, 30),
-    "parallel": (30, 10),
-    "appropriateness": (90, 30),  # a unit is an item and a system: its clip for this item against its mismatched one
-    "dyadic": (90, 30),
-    "semantic": (90, 30),
-}
-
-
+# Every design of moglow_eval.core.study.DESIGNS, each with its row of BALANCE (helpers/design_checks.py): a design
+# missing there fails them (docs/ARCHITECTURE.md, "A test design").
 @pytest.mark.parametrize("design", study.DESIGNS)
 @pytest.mark.full  # the full tier: crowds through every design
 def test_targets_reached_exactly_with_fewest_raters(make, big_stimuli, design):
-    units, per_rater = BALANCE[design]
-    clips = clips_of(big_stimuli)
-    target = 2
-    app = make(big_stimuli, design, ratings_per_clip=target, clips_per_rater=per_rater)
-    c = app.test_client()
-    raters = 0
-    while True:
-        r = c.post("/api/sessions", json={})
-        if r.status_code == 409:
-            break
-        complete(c, r.json["session"])
-        raters += 1
-    assert raters == units * target // per_rater
-    check_exact(c, clips, design, units, target)
-    assert cover_mismatches(app_engine(app)) == {}
-
-
-def unit_counts(rows, clips, design):
-    if design == "acr":
-        return collections.Counter(r["clip_id"] for r in rows if r["role"] == "test")
-    if design == "pairwise" or design in study.MISMATCH_COLUMN:  # matched/mismatched: (item, condition, condition)
-        return collections.Counter(
-            (r["item"], *sorted((r["condition_a"], r["condition_b"]))) for r in rows if r["role"] == "test"
-        )
-    pages = {}
-    for r in rows:
-        if r["role"] == "test":
-            pages.setdefault(r["page_id"], r["item"])
-    return collections.Counter(pages.values())
-
-
-def check_exact(c, clips, design, units, target):
-    rows, _ = export(c)
-    counts = unit_counts(rows, clips, design)
-    assert len(counts) == units and set(counts.values()) == {target}, collections.Counter(counts.values())
+    targets_reached_exactly_with_fewest_raters(make, big_stimuli, design)
 
 
 @pytest.mark.full  # the full tier: concurrent crowds
 @pytest.mark.parametrize("design", study.DESIGNS)
 def test_targets_exact_under_concurrent_sessions(make, big_stimuli, design):
-    units = BALANCE[design][0]
-    clips = clips_of(big_stimuli)
-    target = 3
-    app = make(big_stimuli, design, ratings_per_clip=target, clips_per_rater=7)
-    errors = run_raters(app, post)
-    assert not errors, errors[:3]
-    check_exact(app.test_client(), clips, design, units, target)
-    assert cover_mismatches(app_engine(app)) == {}
+    targets_exact_under_concurrent_sessions(make, big_stimuli, design)
 
 
 def test_an_idle_session_gives_its_pair_back(make, stimuli):
-    app = make(stimuli, "pairwise", ratings_per_clip=1)
-    c = app.test_client()
-    clips = clips_of(stimuli)
-    ghost = start(c)
-    t = c.get(f"/api/sessions/{ghost}/next").json["trial"]
-    while t["phase"] == "training" or clips[t["a"]["clip_id"]].role == "catch":
-        assert post(c, ghost, t).status_code == 201
-        t = c.get(f"/api/sessions/{ghost}/next").json["trial"]
-    held = {t["a"]["clip_id"], t["b"]["clip_id"]}
-    trials, _ = complete(c, start(c))
-    assert held not in [{x["a"]["clip_id"], x["b"]["clip_id"]} for x in trials]
-    r = c.post("/api/sessions", json={})
-    assert r.status_code == 409 and "for now" in r.json["error"]
-    idle(app, ghost)
-    assert post(c, ghost, t).status_code == 410
-    assert cover_mismatches(app_engine(app)) == {}  # the expiry gave the held pair back
-    trials, _ = complete(c, start(c))
-    assert held in [{x["a"]["clip_id"], x["b"]["clip_id"]} for x in trials]
+    an_idle_session_gives_its_pair_back(make, stimuli)
 
 
 # ------------------------------------------------------------------------------------------------- the study's design

@@ -5,63 +5,21 @@ design (acr, pairwise, parallel), on SQLite and PostgreSQL."""
 import collections
 import threading
 import time
-from pathlib import Path
 
 import pytest
 from helpers.concurrent_raters import cover_mismatches
+from helpers.crowd_records import DESIGNS
 from helpers.fake_stimuli import free_port, write_fake_stimuli
 from helpers.servers import crowd_env, kill9, start_gunicorn, stop, warm_up
 from helpers.tiers import only_when_slow
 
 from moglow_eval.core import study
-from rating_app.designs.acr import iter_rows
-from rating_app.designs.appropriateness import iter_fit_rows
-from rating_app.designs.pairwise import iter_pair_rows
-from rating_app.designs.parallel import iter_page_rows
 from rating_app.simulate import run_simulation
 from rating_app.store.db import make_engine
 
 pytestmark = pytest.mark.full  # the full tier: hundreds of raters against real servers
 
-ROOT = Path(__file__).resolve().parents[1]
 N_RATERS = 200
-
-
-# Per design: the acknowledged record's identity, the export's rows, acknowledged records per rater (2 test and 2
-# catch trials; a parallel page acknowledges each of its clips: 2 x 3 test + 2 x 3 catch, a catch page being as large
-# as a test page) and the balanced unit of
-# a test row (None: the row is counted through another row of its unit).
-DESIGNS = {
-    "acr": (("rater_id", "clip_id", "rating"), iter_rows, 4, lambda r: r["clip_id"]),
-    "pairwise": (
-        ("rater_id", "clip_a", "clip_b", "preference"),
-        iter_pair_rows,
-        4,
-        lambda r: (r["item"], *sorted((r["condition_a"], r["condition_b"]))),
-    ),
-    "appropriateness": (
-        ("rater_id", "clip_a", "clip_b", "preference"),
-        lambda s: iter_fit_rows(s, "mismatched_item"),
-        4,
-        lambda r: (r["item"], r["condition_a"]),
-    ),
-    "parallel": (
-        ("rater_id", "page_id", "clip_id", "rating"),
-        iter_page_rows,
-        12,
-        lambda r: r["item"] if r["condition"] == "NAT" else None,
-    ),
-    # dyadic and semantic: appropriateness's units and rows under their own mismatch column (CONTRACTS §8)
-    **{
-        name: (
-            ("rater_id", "clip_a", "clip_b", "preference"),
-            lambda s, column=study.MISMATCH_COLUMN[name]: iter_fit_rows(s, column),
-            4,
-            lambda r: (r["item"], r["condition_a"]),
-        )
-        for name in ("dyadic", "semantic")
-    },
-}
 
 
 @pytest.fixture(scope="module")
@@ -70,7 +28,7 @@ def design_stimuli(tmp_path_factory):
 
 
 @pytest.mark.parametrize("raters", [pytest.param(N_RATERS, marks=pytest.mark.slow), 60])
-@pytest.mark.parametrize("design", study.DESIGNS)  # every design: DESIGNS[design] fails for one not described above
+@pytest.mark.parametrize("design", study.DESIGNS)  # every design: DESIGNS[design] fails for one crowd_records lacks
 def test_200_raters_with_a_server_crash(app_stimuli, design_stimuli, app_db_url, tmp_path, design, raters, request):
     """200 raters (--run-slow), and a 60-rater short variant in CI: the same crash, the same checks."""
     if design != "acr" and "sqlite" in app_db_url:

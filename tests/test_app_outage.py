@@ -17,11 +17,10 @@ import time
 import pytest
 import requests
 from helpers.concurrent_raters import cover_mismatches
+from helpers.crowd_records import DESIGNS
 from helpers.fake_stimuli import free_port, write_fake_stimuli
 from helpers.pg_server import Cluster, ServerError
 from helpers.servers import crowd_env, start_gunicorn
-from test_app_browser import browser  # noqa: F401  (the fixture)
-from test_app_load import DESIGNS
 
 from rating_app.simulate import run_simulation
 from rating_app.store.db import make_engine
@@ -123,7 +122,7 @@ return {section: vis.length ? vis[0] : null, label: document.getElementById('pha
 
 
 @pytest.mark.browser
-def test_the_page_retries_an_answer_through_a_database_restart(cluster, app_stimuli, browser):  # noqa: F811
+def test_the_page_retries_an_answer_through_a_database_restart(cluster, app_stimuli, browser):
     """The real page in chromium: the database stops as the rater answers, stays away 10 s and comes back; the page
     says it is retrying, sends the answer by itself once the server is back and goes on; the answer is stored once."""
     from selenium.webdriver.common.by import By

@@ -12,14 +12,13 @@ import shlex
 import shutil
 import signal
 import subprocess
-from pathlib import Path
 
 import pytest
 import requests
 from helpers.fake_stimuli import free_port
+from helpers.paths import ROOT
 from helpers.servers import start_gunicorn, wait_for
 
-ROOT = Path(__file__).resolve().parents[1]
 NGINX = shutil.which("nginx") or "/usr/sbin/nginx"
 TOKEN = "proxy-admin-token"
 

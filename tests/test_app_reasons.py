@@ -5,10 +5,10 @@ exported beside it (a formula defused), the settings checked at the start, and t
 import csv
 import io
 import json
-from pathlib import Path
 
 import pytest
 from helpers.fake_stimuli import write_fake_stimuli
+from helpers.paths import DATA
 
 from moglow_eval.core import votes
 from rating_app import AppError, create_app
@@ -162,7 +162,7 @@ def test_the_battle_export_of_another_design_is_refused(make, stimuli, app_db_ur
     assert not out.exists() and not (tmp_path / "battles.csv.partial").exists()
 
 
-LEADERBOARD = Path(__file__).resolve().parents[2] / "shared" / "data" / "genea-leaderboard-votes"
+LEADERBOARD = DATA / "genea-leaderboard-votes"
 
 
 @pytest.mark.parametrize("name", ["battles_elo.csv", "battles_mismatch.csv"])

@@ -8,63 +8,20 @@ import csv
 import io
 import json
 import os
-import shutil
 import subprocess
 import sys
-from pathlib import Path
 
-import pytest
 import requests
+from helpers.api_client import TOKEN_HDR
 from helpers.cli import fails_with
-from helpers.fake_stimuli import write_fake_stimuli, write_stimulus_mp4
-from sqlalchemy import MetaData, select
+from helpers.fake_stimuli import write_fake_stimuli
+from helpers.paths import ROOT
+from helpers.study_folders import N_ITEMS, dump, folder_state, one_size
 
 from rating_app.__main__ import main
 from rating_app.store import rounds
 from rating_app.store.db import app_engine, utcnow
 from rating_app.store.manifest import load_manifest
-
-ROOT = Path(__file__).resolve().parents[1]
-TOKEN_HDR = {"Authorization": "Bearer test-admin-token"}
-N_ITEMS = 3
-
-
-def one_size(folder: Path, ref: Path) -> None:
-    """Every video of a stimulus folder the same bytes as `ref` (made by the stimulus encoder), and every motion
-    file the manifest names present: a set that keeps CONTRACTS §4's one-size rule, as make_stimuli writes one."""
-    for v in (folder / "videos").glob("*.mp4"):
-        shutil.copyfile(ref, v)
-        os.utime(v, (1.7e9, 1.7e9))  # and one file time (make_stimuli's same_mtime)
-    for row in csv.DictReader(open(folder / "manifest.csv")):
-        (folder / row["motion"]).parent.mkdir(exist_ok=True)
-        (folder / row["motion"]).write_bytes(b"motion of " + row["clip_id"].encode())
-
-
-@pytest.fixture(scope="session")
-def stimulus_mp4(tmp_path_factory):
-    return write_stimulus_mp4(tmp_path_factory.mktemp("mp4") / "ref.mp4")
-
-
-@pytest.fixture
-def folders(tmp_path, stimulus_mp4):
-    """(the study's manifest, a new system's stimulus folder's manifest with NAT and SYS) in one-size sets."""
-    study = write_fake_stimuli(tmp_path / "study", n_items=N_ITEMS, catch_nat=True)
-    new = write_fake_stimuli(tmp_path / "new", n_items=N_ITEMS, conditions=("NAT", "SYS"), catch_nat=True, seed=1)
-    one_size(study.parent, stimulus_mp4)
-    one_size(new.parent, stimulus_mp4)
-    return study, new
-
-
-def dump(engine) -> dict:
-    """{table: {primary key: row}} of every row of every table."""
-    meta = MetaData()
-    meta.reflect(engine)
-    out = {}
-    with engine.connect() as conn:
-        for t in meta.sorted_tables:
-            pk = [c.name for c in t.primary_key.columns]
-            out[t.name] = {tuple(r._mapping[k] for k in pk): tuple(r) for r in conn.execute(select(t))}
-    return out
 
 
 def unchanged(before, after) -> None:
@@ -74,16 +31,6 @@ def unchanged(before, after) -> None:
             if table == "study_settings" and key[0] in (rounds.ROUND, rounds.REVISION):
                 continue
             assert after[table].get(key) == row, (table, key)
-
-
-def folder_state(manifest: Path) -> dict:
-    """{relative path: bytes} of a stimulus folder's files (the videos by name and size only)."""
-    root = manifest.parent
-    return {
-        str(p.relative_to(root)): (p.stat().st_size if p.suffix == ".mp4" else p.read_bytes())
-        for p in sorted(root.rglob("*"))
-        if p.is_file()
-    }
 
 
 def complete(c, reasons=None, bad=(), prefer=None):

@@ -110,7 +110,7 @@ def test_the_pool_size_is_bounded_where_the_engine_is_made():
 
 def test_the_video_cache_is_a_setting(make_app, monkeypatch):
     """The bytes of videos a worker keeps come from RATING_VIDEO_CACHE_MB, read with the other settings (a bad value
-    is one line: test_app_cli), not from the environment at import."""
+    is one line: test_cli), not from the environment at import."""
     assert make_app().extensions["rating_app"]["videos"].cache_bytes == 512 * 2**20
     monkeypatch.setenv("RATING_VIDEO_CACHE_MB", "0")
     videos = make_app().extensions["rating_app"]["videos"]

@@ -6,17 +6,15 @@ import json
 import subprocess
 import sys
 import threading
-from pathlib import Path
 
 import pytest
 from helpers.fake_stimuli import free_port
+from helpers.paths import ROOT
 
 from rating_app import create_app
 from rating_app.store.db import app_engine
 
 pytestmark = pytest.mark.full  # the full tier: served apps and crowds that fall short
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def simulate(*args, timeout=120):

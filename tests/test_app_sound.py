@@ -9,9 +9,9 @@ import wave
 
 import numpy as np
 import pytest
+from helpers.design_client import complete, post, shown
 from helpers.fake_stimuli import write_fake_stimuli
-from sqlalchemy import select
-from test_app_designs import complete, post, shown
+from helpers.sound_check import sample_of
 
 from analysis.designs import DESIGNS as DesignRegistry
 from analysis.designs import Options, detect_design
@@ -19,7 +19,6 @@ from analysis.designs.appropriateness.mas import analyse, load_answers
 from analysis.report import build_report
 from moglow_eval.core import study
 from rating_app.designs import get
-from rating_app.store.db import Rater, app_engine
 from rating_app.store.manifest import AppError, load_manifest
 
 
@@ -135,11 +134,6 @@ def test_appropriateness_needs_mismatched_clips(make, tmp_path):
 
 
 # ---------------------------------------------------------------- the sound check
-def _sample_of(app, token):
-    with app_engine(app).connect() as conn:
-        return conn.execute(select(Rater.audio_sample).where(Rater.token == token)).scalar()
-
-
 def test_sound_check_comes_first_and_two_failures_end_the_session(make, sound_stimuli):
     app = make(sound_stimuli, "appropriateness", ratings_per_clip=2)
     answers = {
@@ -154,11 +148,11 @@ def test_sound_check_comes_first_and_two_failures_end_the_session(make, sound_st
     wav = c.get(f"/api/sessions/{token}/audio-check.wav")
     assert wav.status_code == 200 and wav.mimetype == "audio/wav" and wav.data[:4] == b"RIFF"
     assert "ETag" not in wav.headers
-    first = _sample_of(app, token)
+    first = sample_of(app, token)
     assert c.post(f"/api/sessions/{token}/audio-check", json={"answer": 5}).status_code == 400
     r = c.post(f"/api/sessions/{token}/audio-check", json={"answer": "000"})
     assert r.status_code == 200 and r.json == {"passed": False, "final": False, "tries_left": 1}
-    assert _sample_of(app, token) != first  # the second try plays another sample
+    assert sample_of(app, token) != first  # the second try plays another sample
     r = c.post(f"/api/sessions/{token}/audio-check", json={"answer": "999 9"})
     assert r.json["final"] and "sound" in r.json["error"]
     assert c.get(f"/api/sessions/{token}/next").status_code == 410  # the session is over
@@ -166,7 +160,7 @@ def test_sound_check_comes_first_and_two_failures_end_the_session(make, sound_st
 
     token = c.post("/api/sessions", json={}).json["session"]
     assert c.get(f"/api/sessions/{token}/audio-check.wav").status_code == 200
-    digits = answers[_sample_of(app, token)]
+    digits = answers[sample_of(app, token)]
     r = c.post(f"/api/sessions/{token}/audio-check", json={"answer": " ".join(digits)})  # spaces are fine
     assert r.json == {"passed": True}
     r = c.get(f"/api/sessions/{token}/next")

@@ -1,30 +1,11 @@
 """The export carries the manifest's style (CONTRACTS §4, §7): one clip per style, each its own stimulus, and a
 `style` column in ratings.csv; a manifest without styles gives an export without the column."""
 
-import csv
-import io
-
 import pytest
+from helpers.api_client import rate_everything
 from helpers.fake_stimuli import write_fake_stimuli
 
 from rating_app.store.manifest import load_manifest
-
-TOKEN_HDR = {"Authorization": "Bearer test-admin-token"}
-
-
-def rate_everything(client):
-    token = client.post("/api/sessions", json={}).json["session"]
-    for _ in range(200):
-        j = client.get(f"/api/sessions/{token}/next").json
-        if j.get("done"):
-            break
-        t = j["trial"]
-        rating = None if t["phase"] == "training" else 3
-        r = client.post(f"/api/sessions/{token}/ratings", json={"trial_id": t["trial_id"], "rating": rating})
-        assert r.status_code == 201, r.json
-    r = client.get("/admin/export.csv", headers=TOKEN_HDR)
-    assert r.status_code == 200
-    return list(csv.DictReader(io.StringIO(r.data.decode())))
 
 
 @pytest.fixture(scope="module")

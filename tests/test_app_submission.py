@@ -10,10 +10,11 @@ import os
 import shutil
 
 import pytest
+from helpers.api_client import TOKEN_HDR
 from helpers.cli import fails_with
 from helpers.fake_stimuli import write_stimulus_mp4
+from helpers.study_folders import dump, folder_state
 from sqlalchemy.orm import Session
-from test_app_rounds import TOKEN_HDR, dump, folder_state, folders, stimulus_mp4  # noqa: F401  (fixtures)
 
 from rating_app.__main__ import main
 from rating_app.operations import submission
@@ -46,7 +47,7 @@ def tree(folder):
 
 
 @pytest.fixture
-def study_app(make, folders):  # noqa: F811
+def study_app(make, folders):
     study, new = folders
     return make(study, "pairwise", upload_root=str(new.parent.parent / "uploads")), study, new
 
@@ -156,7 +157,7 @@ def test_a_refused_add_leaves_no_file_and_no_folder(study_app, app_db_url, capsy
 
 
 # ------------------------------------------------------------------------------ the dashboard's upload root
-def test_the_dashboard_reads_only_under_its_upload_root(make, folders, tmp_path):  # noqa: F811
+def test_the_dashboard_reads_only_under_its_upload_root(make, folders, tmp_path):
     study, new = folders
     uploads = tmp_path / "uploads"
     uploads.mkdir()

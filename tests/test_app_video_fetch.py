@@ -7,10 +7,9 @@ import csv
 import io
 
 import pytest
+from helpers.api_client import TOKEN_HDR
+from helpers.design_client import shown, value_for
 from helpers.flags import video_flags
-from test_app_api import TOKEN_HDR
-from test_app_browser import browser  # noqa: F401  (the fixture)
-from test_app_designs import shown, stimuli, value_for  # noqa: F401  (stimuli: a fixture)
 
 from rating_app.store.db import app_engine
 
@@ -56,7 +55,7 @@ CASES = [
 
 
 @pytest.mark.parametrize("design", ["acr", "pairwise", "parallel"])
-def test_only_a_whole_video_counts_as_fetched(make, stimuli, design):  # noqa: F811
+def test_only_a_whole_video_counts_as_fetched(make, stimuli, design):
     app = make(stimuli, design, ratings_per_clip=3)
     sizes = {c.clip_id: c.video.stat().st_size for c in app.extensions["rating_app"]["clips"].values()}
     c = app.test_client()
@@ -92,7 +91,7 @@ def test_only_a_whole_video_counts_as_fetched(make, stimuli, design):  # noqa: F
     assert "only part of the video fetched" in page
 
 
-def test_a_range_request_records_its_bytes_once_covered(make, stimuli):  # noqa: F811
+def test_a_range_request_records_its_bytes_once_covered(make, stimuli):
     """The stored ranges are merged; once the file is covered, later requests (replays) write nothing."""
     from sqlalchemy import event, select
 
@@ -128,7 +127,7 @@ return {section: vis.length ? vis[0] : null, label: document.getElementById('pha
 
 @pytest.mark.browser
 @pytest.mark.parametrize("app_db_url", ["sqlite"], indirect=True)
-def test_the_page_is_never_flagged_with_replays_and_a_reload(app_stimuli, app_db_url, browser):  # noqa: F811
+def test_the_page_is_never_flagged_with_replays_and_a_reload(app_stimuli, app_db_url, browser):
     """The real page in chromium: every rating trial is replayed once (from the browser's cache), and the page is
     reloaded in the middle of one trial (it resumes the same trial and plays it again); no answer is flagged."""
     import threading

@@ -6,13 +6,13 @@ hides a dependency from Python's import order, not from this test.
 
 import ast
 import sys
-from pathlib import Path
 
 import pytest
+from helpers.paths import ROOT
+from helpers.rooms import ROOMS
 
 from moglow_eval.core import moved
 
-ROOT = Path(__file__).resolve().parents[1]
 # Each part may import only the parts listed: core is the floor, rendering draws clips, generation makes them
 # (and renders its stimuli), the app and the analysis read only files and core's contracts.
 ALLOWED = {
@@ -25,13 +25,6 @@ ALLOWED = {
     "moglow_eval": {"moglow_eval.core", "rendering", "generation", "rating_app", "analysis"},
 }
 PARTS = tuple(ALLOWED)
-# Each big part's rooms (subpackages), lowest first: a room may import those before it, never one after it. The
-# part's top-level modules (its commands: the main job, the report, the app's factory) may import every room.
-ROOMS = {
-    "generation": ("motion", "data", "metrics", "models", "training", "sampling", "stimuli", "own_study"),
-    "rating_app": ("store", "guard", "media", "pairing", "designs", "trials", "operations", "web", "simulate"),
-    "analysis": ("data", "stats", "page", "designs"),
-}
 # The modules a part keeps at its top, beside its rooms (the one-line pointers of moved commands are checked apart).
 TOP_MODULES = {
     "generation": ["make_stimuli"],

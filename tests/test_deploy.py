@@ -5,17 +5,17 @@ serves /healthz without torch."""
 
 import shutil
 import subprocess
-from pathlib import Path
 
 import pytest
 import yaml
+from helpers.paths import ROOT
 
 from rating_app import SETTINGS
 from rating_app.store.config import load_study_file
 
 pytestmark = pytest.mark.full  # the full tier: containers and system services
 
-DEPLOY = Path(__file__).resolve().parents[1] / "deploy"
+DEPLOY = ROOT / "deploy"
 
 
 @pytest.fixture(scope="module")

@@ -14,12 +14,10 @@ import numpy as np
 import pytest
 import requests
 from helpers import figure_pixels, seamless_fixtures
-from helpers.sound_check import pass_sound_check
+from helpers.browser import STATE, chrome
+from helpers.design_client import complete
+from helpers.sound_check import pass_sound_check, sample_of
 from helpers.voices import decoded_audio, ffmpeg_loudness, voice_energy
-from test_app_browser import chrome
-from test_app_browser_sound import STATE
-from test_app_designs import complete
-from test_app_sound import _sample_of
 
 from analysis.designs import Options
 from analysis.report import build_report
@@ -173,7 +171,7 @@ def test_the_crowd_fills_it_and_the_report_is_the_designs(built, tmp_path):
             break
         token = r.json["session"]
         assert client.get(f"/api/sessions/{token}/audio-check.wav").status_code == 200  # its sample is drawn
-        answer = digits[_sample_of(app, token)]
+        answer = digits[sample_of(app, token)]
         assert client.post(f"/api/sessions/{token}/audio-check", json={"answer": answer}).json == {"passed": True}
         complete(client, token, pref=prefer)
         n += 1

@@ -36,7 +36,7 @@ def _build(root, design, size=SIZE, **kw):
 def dyadic(tmp_path_factory):
     # Solid bodies: a stick figure's lines, one or two pixels wide at this size, come out of the encoder too unlike
     # from one video to the next to compare the interlocutor by its pixels (before encoding they are the same:
-    # tests/test_two_people.py).
+    # tests/rendering/test_two_people.py).
     return _build(tmp_path_factory.mktemp("dyadic"), "dyadic", style="solid")
 
 

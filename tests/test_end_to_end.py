@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers.paths import ROOT
 from helpers.tiers import run_slow
 
 pytestmark = pytest.mark.full  # the full tier: whole studies on PostgreSQL
@@ -116,7 +117,7 @@ def test_demo_stops_everything_on_error(quick_stimuli, tmp_path):
 def _demo_in_a_row(cwd: Path, runs: list[tuple[str, int, list[str]]]):
     """`analysis.demo` run in `cwd` with its default --out, once per (design, seed, more flags), each after the
     other; checks that each run's report is its own design's and the earlier run's export is gone."""
-    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
     small = ["--raters", "40", "--ratings-per-clip", "2", "--clips-per-rater", "0"]
     for design, seed, more in runs:
         cmd = [sys.executable, "-m", "analysis.demo", "--design", design, "--seed", str(seed), *small, *more]

@@ -6,6 +6,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 import pytest
 from helpers.paths import BANDAI, PFNN
+from helpers.small_bvh import bvh_text, motion_values
 from reference.bvh_fk import fk_positions
 
 from generation.data.prepare import category_of, find_takes
@@ -219,8 +220,6 @@ def test_pfnn_lowpass_removes_jitter():
 
 
 def test_unknown_skeleton_is_a_clear_error(tmp_path):
-    from test_bvh import bvh_text, motion_values
-
     path = tmp_path / "odd.bvh"
     path.write_text(bvh_text(motion_values()))
     with pytest.raises(BvhError, match=r"odd\.bvh:1: unknown skeleton"):

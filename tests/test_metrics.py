@@ -1,11 +1,10 @@
 """Objective motion metrics on real takes and on motion spoiled in known ways."""
 
-import csv
 import warnings
 
 import numpy as np
 import pytest
-from helpers.paths import DATA
+from helpers.paths import takes
 
 from generation.metrics.objective import (
     CONTACT_HEIGHT,
@@ -20,16 +19,6 @@ from generation.motion import skeleton
 from generation.motion.features import load_take, to_features
 
 pytestmark = pytest.mark.full  # the full tier: real walks from ../shared
-
-
-def takes(category, n, min_seconds=5.0):
-    with open(DATA / "MANIFEST.csv", newline="") as f:
-        rows = [
-            r
-            for r in csv.DictReader(f)
-            if r["locomotion"] == category and float(r["seconds"]) >= min_seconds and r["path"].startswith("bandai")
-        ]
-    return [DATA / r["path"] for r in sorted(rows, key=lambda r: r["path"])[:n]]
 
 
 @pytest.fixture(scope="module")

@@ -3,11 +3,10 @@ restating them (a copy goes stale the next time a model is retrained), and neith
 no reader of a release can follow."""
 
 import re
-from pathlib import Path
 
 import pytest
+from helpers.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 PARTS = ("moglow_eval", "generation", "rendering", "rating_app", "analysis")
 # A measured ratio: "1.34x", "2x", "1.0-1.5x", "40×" (not "0x1F", "2x512", "2×512 LSTMs", "x264").
 RATIO = re.compile(r"(?<![\w.])\d+(?:\.\d+)?(?:-\d+(?:\.\d+)?)?[x×](?![\w×])")

@@ -1,7 +1,7 @@
 """A study of your own motion (issue 31): folders of any skeleton and format -> stimuli -> app -> report.
 
 The study is built from the real Bandai-Namco actions (not locomotion) with a 70-joint finger-and-face skeleton
-(tests/own_study_data.py): the reference as BVH, one made-up system as Z-up centimetre .npy arrays with a
+(tests/helpers/own_study_data.py): the reference as BVH, one made-up system as Z-up centimetre .npy arrays with a
 skeleton JSON, another as BVH."""
 
 import csv
@@ -9,11 +9,12 @@ import hashlib
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.browser import acr_rater_flow
 from helpers.own_study_data import action_takes, make_study
+from helpers.paths import ROOT
 from helpers.tiers import only_when_slow
 
 from generation.data.motion_files import read_motion
@@ -26,8 +27,6 @@ from rendering.camera import framing_camera
 from rendering.raster import FrameDrawer
 
 pytestmark = pytest.mark.full  # the full tier: the real actions in ../shared
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def _rows(path):
@@ -327,8 +326,11 @@ def app_stimuli(own_study):
     return str(own_study[1] / "manifest.csv")
 
 
-from test_app_browser import browser, live_server  # noqa: E402, F401  (fixtures, served with the study above)
-from test_app_browser import test_rater_flow_in_a_real_browser as test_own_study_in_a_real_browser  # noqa: E402, F401
+# The page does not depend on the database (the API suite covers both); one browser run, as the ACR page's own test.
+@pytest.mark.parametrize("app_db_url", ["postgres"], indirect=True)
+def test_own_study_in_a_real_browser(live_server, browser):
+    """The rater's whole flow (helpers.browser.acr_rater_flow), served with the study above."""
+    acr_rater_flow(live_server, browser)
 
 
 def test_users_own_catch_folder(tmp_path):

@@ -3,11 +3,10 @@ globs cover every file in the folders they name (a design's page template in tem
 out of the wheel, which an editable install does not show)."""
 
 import tomllib
-from pathlib import Path
 
 import pytest
+from helpers.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 PACKAGE_DATA = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
 
 

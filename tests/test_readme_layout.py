@@ -2,12 +2,11 @@
 every room of every part and every module in it, and names nothing that is not there (issue 53, item 4)."""
 
 import re
-from pathlib import Path
 
 import pytest
-from test_architecture import ROOMS
+from helpers.paths import ROOT
+from helpers.rooms import ROOMS
 
-ROOT = Path(__file__).resolve().parents[1]
 ARCHITECTURE = ROOT / "docs" / "ARCHITECTURE.md"
 ROW_CHARS = 150  # one line of the README's table: what a part holds, not its modules
 

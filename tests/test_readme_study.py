@@ -21,9 +21,9 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers.paths import ROOT
 from helpers.servers import wait_for
 
-ROOT = Path(__file__).resolve().parents[1]
 SECTION = "## A study in five commands"
 
 

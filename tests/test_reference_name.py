@@ -5,8 +5,8 @@ import csv
 import json
 
 import pytest
+from helpers.api_client import rate_everything
 from helpers.fake_stimuli import write_fake_stimuli
-from test_app_style_export import rate_everything
 
 from analysis import report
 from analysis.data.load import AnalysisError

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import requests
+from helpers.browser import live_server_manifest
 from helpers.bvh_fixtures import SPEAKER, write_zeroeggs
 from helpers.figure_pixels import classes, decode, height_share, touches_edge
 from helpers.own_study_data import speech
@@ -54,9 +55,6 @@ def app_stimuli(tmp_path_factory):
     args = ["--study", str(root / "study.toml"), "--out", str(root / "out"), "--size", "240", "--quiet"]
     assert make_stimuli(args) == 0
     return str(root / "out" / "manifest.csv")
-
-
-from test_app_browser import browser, live_server  # noqa: E402, F401  (fixtures, served with the study above)
 
 
 def _rate_trials(driver, url, n, app):
@@ -114,9 +112,8 @@ def _check(frames, style):
 
 
 @pytest.mark.parametrize("app_db_url", ["sqlite", "postgres"], indirect=True)
-def test_speaker_study_in_a_real_browser(app_stimuli, live_server, browser, tmp_path, request):  # noqa: F811
+def test_speaker_study_in_a_real_browser(app_stimuli, live_server, browser, tmp_path, request):
     from sqlalchemy import select
-    from test_app_browser import live_server_manifest
 
     from rating_app.store.db import Trial, app_engine
 

@@ -234,13 +234,12 @@ def test_a_stick_and_mesh_study_in_a_real_browser_reports_the_style(two_style_se
     import shutil
     import threading
 
+    from helpers.browser import STATE, chrome
+    from helpers.design_client import post
     from PIL import Image
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
     from selenium.webdriver.support.ui import WebDriverWait
-    from test_app_browser import chrome
-    from test_app_browser_sound import STATE
-    from test_app_designs import post
     from werkzeug.serving import make_server
 
     from analysis.report import build_report

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 import torch
-from test_metrics import takes
+from helpers.paths import takes
 
 from generation.data.dataset import load_dataset
 from generation.metrics.objective import foot_skating

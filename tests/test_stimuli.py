@@ -123,7 +123,7 @@ def test_stimuli_files_tell_nothing_outside_their_pixels(manifest, quick_stimuli
         + [quick_stimuli / m["motion"] for m in manifest]
         + [quick_stimuli / "sheets" / f"{m['clip_id']}.png" for m in manifest]
     )
-    assert len({v.stat().st_size for v in videos}) == 1  # one size by construction (tests/test_blinding.py)
+    assert len({v.stat().st_size for v in videos}) == 1  # one size by construction (tests/rendering/test_blinding.py)
     assert len({f.stat().st_mtime_ns for f in files}) == 1  # one time stamp
     conditions = [m["condition"] for m in manifest]
     # Files were written in a random order: by creation (inode change) time the conditions are mixed.

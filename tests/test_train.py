@@ -402,7 +402,7 @@ def test_core_share_leaves_a_busy_neighbour_its_core():
     if load > 0.4:  # CoreShare reads the whole machine: another job's load would look like the neighbour's
         pytest.skip(
             f"the machine is busy with other work ({load:.1f} cores): this test needs it quiet "
-            "(the suite's second worker counts too: `python -m pytest -n 0 tests/test_train.py` runs it)"
+            "(the suite's second worker counts too: `python -m pytest -n 0 tests/generation/test_train.py` runs it)"
         )
     before = torch.get_num_threads()
     busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])

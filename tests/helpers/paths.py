@@ -3,6 +3,7 @@
 Tests that read ../shared belong to the full tier (conftest marks them `full`); the fast tier reads only what the
 repository holds (tests/data/)."""
 
+import csv
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -19,3 +20,15 @@ def small_take_names(per_category=4):
     from generation.data.prepare import longest_takes
 
     return longest_takes(BANDAI, per_category)
+
+
+def takes(category, n, min_seconds=5.0):
+    """The first `n` Bandai-Namco takes (by path) of locomotion `category` lasting `min_seconds` or more, from
+    ../shared's MANIFEST.csv."""
+    with open(DATA / "MANIFEST.csv", newline="") as f:
+        rows = [
+            r
+            for r in csv.DictReader(f)
+            if r["locomotion"] == category and float(r["seconds"]) >= min_seconds and r["path"].startswith("bandai")
+        ]
+    return [DATA / r["path"] for r in sorted(rows, key=lambda r: r["path"])[:n]]

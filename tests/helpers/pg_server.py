@@ -3,7 +3,7 @@ server of the tests' own, made with initdb in a temporary folder and started wit
 `postgres` user when run as root: initdb refuses root), stopped and removed at the end of the run (conftest).
 RATING_TEST_PG / E2E_PG, when set, name the server to use instead and nothing is started.
 
-`Cluster` is also the restart test's server (tests/test_app_outage.py), never the shared one."""
+`Cluster` is also the restart test's server (tests/rating_app/test_outage.py), never the shared one."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The app as a real server for the tests: gunicorn started and waited for, killed without a clean shutdown, and
-the settings of a crowd run (tests/test_app_load.py, test_app_hosts.py, test_app_outage.py, test_app_proxy.py,
-test_app_accel.py)."""
+the settings of a crowd run (tests/rating_app/test_app_load.py, test_hosts.py, test_outage.py, test_proxy.py,
+test_accel.py)."""
 
 import contextlib
 import os

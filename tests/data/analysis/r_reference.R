@@ -1,5 +1,5 @@
-# R's fits of ratings_r_reference.csv, frozen as r_reference.json for tests/test_analysis_ordinal.py and
-# tests/test_analysis_stats.py (CI never needs R). Run from the repository root:
+# R's fits of ratings_r_reference.csv, frozen as r_reference.json for tests/analysis/test_ordinal.py and
+# tests/analysis/test_stats.py (CI never needs R). Run from the repository root:
 #   Rscript tests/data/analysis/r_reference.R
 # The same rater exclusion as the report (any catch rating >= 3 removes every rating of that rater), then
 # test rows only.
