@@ -1,0 +1,26 @@
+"""Fixtures the rating app's test modules share: the design tests' stimulus folder, and a running study's
+folders with a new system's (add-condition and its hostile submissions)."""
+
+import pytest
+from helpers.fake_stimuli import write_fake_stimuli, write_stimulus_mp4
+from helpers.study_folders import N_ITEMS, one_size
+
+
+@pytest.fixture(scope="module")
+def stimuli(tmp_path_factory):
+    return write_fake_stimuli(tmp_path_factory.mktemp("design_stimuli"), catch_nat=True)
+
+
+@pytest.fixture(scope="session")
+def stimulus_mp4(tmp_path_factory):
+    return write_stimulus_mp4(tmp_path_factory.mktemp("mp4") / "ref.mp4")
+
+
+@pytest.fixture
+def folders(tmp_path, stimulus_mp4):
+    """(the study's manifest, a new system's stimulus folder's manifest with NAT and SYS) in one-size sets."""
+    study = write_fake_stimuli(tmp_path / "study", n_items=N_ITEMS, catch_nat=True)
+    new = write_fake_stimuli(tmp_path / "new", n_items=N_ITEMS, conditions=("NAT", "SYS"), catch_nat=True, seed=1)
+    one_size(study.parent, stimulus_mp4)
+    one_size(new.parent, stimulus_mp4)
+    return study, new
