@@ -401,3 +401,95 @@ def test_every_bench_imports_what_exists():
 def test_the_import_guard_sees_a_moved_name(tmp_path):
     (tmp_path / "b.py").write_text("from analysis import rating_models\nfrom analysis.stats import anova\n")
     assert unresolved_imports([tmp_path / "b.py"], tmp_path) == ["b.py:1: analysis.rating_models"]
+
+
+# The suite mirrors the house: a folder of tests per part, one for whole studies across the parts, one for the
+# house's own rules; beside them only what the tests share (tests/helpers/, tests/data/, tests/reference/).
+TEST_FOLDERS = ("core", "rendering", "generation", "rating_app", "analysis", "end_to_end", "project")
+SHARED_FOLDERS = ("helpers", "data", "reference")
+
+
+def imports_of_test_modules(paths, root=ROOT):
+    """'file:line: module' for each import of a test module (one named test_*) in `paths`, at any depth: tests share
+    through tests/helpers/ and the conftest.py files, never through another test file, whose tests would then run
+    twice or not at all."""
+    found = []
+    for path in paths:
+        tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+        imports = [n for n in ast.walk(tree) if isinstance(n, (ast.Import, ast.ImportFrom))]
+        for node in sorted(imports, key=lambda n: n.lineno):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module]
+            else:  # `import test_x`, and `from . import test_x`, which names the module among the imported names
+                names = [alias.name for alias in node.names]
+            found += [
+                f"{path.relative_to(root)}:{node.lineno}: {name}"
+                for name in names
+                if any(part.startswith("test_") for part in name.split("."))
+            ]
+    return found
+
+
+def test_no_test_file_imports_another():
+    found = imports_of_test_modules(sorted((ROOT / "tests").rglob("*.py")))
+    assert not found, "\n".join(found)
+
+
+def test_the_test_import_guard_sees_a_lazy_import(tmp_path):
+    (tmp_path / "test_a.py").write_text(
+        "from helpers.api_client import TOKEN_HDR\n"
+        "NAME = 'test_b'\n"
+        "def test_x():\n"
+        "    from test_b import post\n"
+        "import test_c as c\n"
+        "from . import test_d\n"
+    )
+    assert imports_of_test_modules([tmp_path / "test_a.py"], tmp_path) == [
+        "test_a.py:4: test_b",
+        "test_a.py:5: test_c",
+        "test_a.py:6: test_d",
+    ]
+
+
+def misplaced_tests(tests):
+    """What breaks the layout of the folder `tests`: a test file outside the part folders, a folder that is neither
+    one of them nor one the tests share, two test files of one name (pytest imports each by its name alone), and an
+    __init__.py in a part folder (tests/rendering/ would become a package `rendering`, hiding the part's)."""
+    files = sorted(tests.rglob("test_*.py"))
+    found = [
+        f"{p.relative_to(tests)}: outside {', '.join(TEST_FOLDERS)}"
+        for p in files
+        if p.parent.parent != tests or p.parent.name not in TEST_FOLDERS
+    ]
+    found += [
+        f"{p.name}/: not a folder of tests/"
+        for p in sorted(tests.iterdir())
+        if p.is_dir() and p.name not in TEST_FOLDERS + SHARED_FOLDERS and p.name != "__pycache__"
+    ]
+    names = [p.name for p in files]
+    found += [
+        f"{name}: {names.count(name)} test files of this name" for name in sorted(set(names)) if names.count(name) > 1
+    ]
+    found += [
+        f"{f}/__init__.py: a part folder is no package" for f in TEST_FOLDERS if (tests / f / "__init__.py").exists()
+    ]
+    return found
+
+
+def test_every_test_file_lives_in_its_part_folder():
+    found = misplaced_tests(ROOT / "tests")
+    assert not found, "\n".join(found)
+
+
+def test_the_layout_guard_sees_a_stray_test(tmp_path):
+    for path in ("test_top.py", "core/test_a.py", "project/test_a.py", "misc/test_b.py", "rendering/__init__.py"):
+        (tmp_path / path).parent.mkdir(exist_ok=True)
+        (tmp_path / path).write_text("")
+    (tmp_path / "helpers").mkdir()
+    assert misplaced_tests(tmp_path) == [
+        f"misc/test_b.py: outside {', '.join(TEST_FOLDERS)}",
+        f"test_top.py: outside {', '.join(TEST_FOLDERS)}",
+        "misc/: not a folder of tests/",
+        "test_a.py: 2 test files of this name",
+        "rendering/__init__.py: a part folder is no package",
+    ]
