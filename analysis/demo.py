@@ -303,7 +303,7 @@ def run_demo(
 
 
 def build_parser():
-    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
+    """The command's argument parser (also read by tests/project/test_docs.py to check the docs' commands)."""
     p = cli.ArgumentParser(
         prog="python -m analysis.demo", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )

@@ -165,7 +165,7 @@ def build_report(ratings_path, out_dir="report", options: Options | None = None,
 
 
 def build_parser():
-    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
+    """The command's argument parser (also read by tests/project/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m analysis.report", description=__doc__.splitlines()[0])
     ap.add_argument("ratings", help="ratings.csv exported by the rating app (CONTRACTS.md §6)")
     ap.add_argument("--out", default="report", help="report folder (default: report/)")

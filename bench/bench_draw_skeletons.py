@@ -41,7 +41,7 @@ print(json.dumps(best * 1000))
 
 
 def _inputs(tmp):
-    """Two .npz inputs: the 21-joint walk, and a 70-joint figure (tests/own_study_data.py's skeleton)."""
+    """Two .npz inputs: the 21-joint walk, and a 70-joint figure (tests/helpers/own_study_data.py's skeleton)."""
     import numpy as np
 
     sys.path.insert(0, str(ROOT))

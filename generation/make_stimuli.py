@@ -66,7 +66,7 @@ from .stimuli.summary import condition_fmd, print_summary
 
 # torch is never imported at module level here (training, sampling and the motion encoder import it inside the
 # functions that run them): --help, --export-items and the checks of imported systems need no models, and
-# tests/test_stimuli.py keeps `import generation.make_stimuli` torch-free.
+# tests/generation/test_stimuli.py keeps `import generation.make_stimuli` torch-free.
 
 log = logging.getLogger(__name__)
 MG, FL = study.GENERATED
@@ -240,7 +240,7 @@ def run(args):
 
 # ---------------------------------------------------------------- command line
 def build_parser():
-    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
+    """The command's argument parser (also read by tests/project/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.make_stimuli", description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="stimuli", help="stimulus folder to write (default stimuli)")
     ap.add_argument(

@@ -220,7 +220,7 @@ def _rounds_parsers(sub, db):
 
 
 def build_parser():
-    """The command's parser (also read by tests/test_docs.py to check the docs' commands)."""
+    """The command's parser (also read by tests/project/test_docs.py to check the docs' commands)."""
     p = cli.ArgumentParser(prog="python -m rating_app", description=__doc__)
     sub = p.add_subparsers(dest="cmd", required=True, parser_class=cli.ArgumentParser)
     _serve_parser(sub)

@@ -12,7 +12,7 @@ PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "sl
 
 
 def build_parser():
-    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
+    """The command's argument parser (also read by tests/project/test_docs.py to check the docs' commands)."""
     p = cli.ArgumentParser(prog="python -m rendering", description=__doc__)
     p.add_argument("clip", help="motion clip .npz (CONTRACTS.md §1)")
     p.add_argument("out", help="output .mp4")

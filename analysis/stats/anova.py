@@ -70,7 +70,7 @@ def one_way_anova(df, dv="rating", between="condition"):
     Notes
     -----
     A shifted, corrected two-pass algorithm keeps >= 9 significant digits on every NIST StRD ANOVA set that
-    float64 can hold (tests/test_analysis_stats.py).
+    float64 can hold (tests/analysis/test_stats.py).
 
     Examples
     --------

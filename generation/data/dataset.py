@@ -7,7 +7,7 @@ naming the file and the key.
 
 torch is imported inside the two functions that make tensors, not at module level: make_stimuli reads the
 held-out windows through this module, and `import generation.make_stimuli` must stay torch-free (its --help,
---export-items and item checks run before any model is needed; tests/test_stimuli.py guards it).
+--export-items and item checks run before any model is needed; tests/generation/test_stimuli.py guards it).
 """
 
 from __future__ import annotations

@@ -72,7 +72,7 @@ def import_motion(in_path, out_path, scale=0.01, fps=None):
 
 
 def build_parser():
-    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
+    """The command's argument parser (also read by tests/project/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.data.import_motion", description=__doc__.split("\n")[0])
     ap.add_argument("input", help="BVH file (.bvh or .bvh.gz)")
     ap.add_argument("output", help="clip .npz to write")

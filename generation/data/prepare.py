@@ -342,7 +342,7 @@ def summary_table(summary):
 
 
 def build_parser():
-    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
+    """The command's argument parser (also read by tests/project/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.data.prepare", description=__doc__.split("\n")[0])
     ap.add_argument("--data", help="folder of BVH takes (default: ../shared/data/bandai-namco-locomotion)")
     ap.add_argument("--out", default="dataset.npz", help="output .npz (default: dataset.npz)")

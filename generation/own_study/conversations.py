@@ -190,7 +190,7 @@ def cut_conversations(folders, out, mode, length_s, margin_s=0.5, min_valid=0.9,
 
 
 def build_parser():
-    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
+    """The command's argument parser (also read by tests/project/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.own_study.conversations", description=__doc__.split("\n")[0])
     ap.add_argument("folders", nargs="+", help="folders holding Seamless Interaction files (searched recursively)")
     ap.add_argument("--out", required=True, help="the item folders to write")

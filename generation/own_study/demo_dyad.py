@@ -209,7 +209,7 @@ interlocutor = "interlocutor_transcript"
 
 
 def build_parser():
-    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
+    """The command's argument parser (also read by tests/project/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.own_study.demo_dyad", description=__doc__.split("\n")[0])
     ap.add_argument("--out", required=True, help="folder for the study file and its folders")
     ap.add_argument("--items", type=cli.number(int, 3, 30), default=8, help="items (default 8)")

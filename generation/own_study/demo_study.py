@@ -131,7 +131,7 @@ loudness = -23
 
 
 def build_parser():
-    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
+    """The command's argument parser (also read by tests/project/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.own_study.demo_study", description=__doc__.split("\n")[0])
     ap.add_argument("--out", required=True, help="folder for the study file and its folders")
     ap.add_argument("--items", type=cli.number(int, 3, 60), default=12, help="items (default 12)")

@@ -196,7 +196,7 @@ def sampler_precision(device, override=None):
 
 
 def build_parser():
-    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
+    """The command's argument parser (also read by tests/project/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.sampling.pretrained", description=__doc__.split("\n")[0])
     for kind in CHECKPOINTS:
         ap.add_argument(f"--{kind}", required=True, help=f"checkpoint to ship as {CHECKPOINTS[kind].name}")

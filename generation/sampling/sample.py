@@ -153,7 +153,7 @@ def sample_split(model, data_path, split="test", n=None, temperature=1.0, seed=0
 
 
 def build_parser():
-    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
+    """The command's argument parser (also read by tests/project/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.sampling.sample", description="Sample clips from a checkpoint.")
     ap.add_argument("--checkpoint", required=True)
     ap.add_argument("--data", required=True, help="prepared dataset .npz whose control (and history) to use")

@@ -3,7 +3,7 @@
 The workers are spawned, not forked: the parent has loaded torch (sampling, training), whose thread pools make
 forked children hang. A spawned worker imports only this module to find `_render_job`, so this module imports
 rendering and nothing that loads torch; keep it so (seconds and hundreds of MB per worker otherwise;
-tests/test_stimuli.py checks the workers' imports).
+tests/generation/test_stimuli.py checks the workers' imports).
 """
 
 import logging

@@ -412,7 +412,7 @@ def _threads(text):
 
 
 def build_parser():
-    """The command's argument parser (also read by tests/test_docs.py to check the docs' commands)."""
+    """The command's argument parser (also read by tests/project/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.training.train", description=__doc__.split("\n")[0])
     ap.add_argument("--model", required=True, choices=sorted(MODELS))
     ap.add_argument("--config", default="cpu", help="tiny | cpu | paper | path to a JSON config")

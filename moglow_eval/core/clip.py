@@ -29,7 +29,7 @@ MAX_MESH_VERTICES = 200_000
 # What numpy and zipfile raise on a damaged archive: its own types do not cover deflate and header errors.
 # numpy parses an .npy header as Python: a corrupt one can end in tokenize.TokenError or SyntaxError, which are
 # not ValueErrors, and zipfile raises NotImplementedError for a version or compression byte it does not know
-# (each found by tests/test_bad_input.py's fuzzing).
+# (each found by tests/generation/test_bad_input.py's fuzzing).
 NPZ_READ_ERRORS = (
     OSError,
     ValueError,
