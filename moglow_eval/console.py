@@ -3,6 +3,7 @@
 Each command is the part's own `python -m` main, given the rest of the arguments unchanged:
 
     moglow-eval stimuli ...   = python -m generation.make_stimuli ...
+    moglow-eval intake ...    = python -m generation.challenge.intake ...   (teams' submissions checked)
     moglow-eval serve ...     = python -m rating_app serve ...    (also simulate, export, backup, restore)
     moglow-eval report ...    = python -m analysis.report ...
     moglow-eval plan ...      = python -m analysis.plan ...
@@ -22,6 +23,12 @@ from .core import cli
 # (generation) nor Flask (rating_app) for nothing, and a machine that only analyses needs neither.
 def _stimuli(args):
     from generation.make_stimuli import main as run
+
+    return run(args)
+
+
+def _intake(args):
+    from generation.challenge.intake import main as run
 
     return run(args)
 
@@ -56,6 +63,7 @@ def _demo(args):
 APP_COMMANDS = ("serve", "simulate", "export", "backup", "restore")
 COMMANDS = {
     "stimuli": _stimuli,
+    "intake": _intake,
     **{c: _app(c) for c in APP_COMMANDS},
     "report": _report,
     "plan": _plan,

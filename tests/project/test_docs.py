@@ -43,6 +43,7 @@ MODULES = {
 }
 CONSOLE = {
     "stimuli": ("generation.make_stimuli", []),
+    "intake": ("generation.challenge.intake", []),
     **{c: ("rating_app.__main__", [c]) for c in ("serve", "simulate", "export", "backup", "restore")},
     "report": ("analysis.report", []),
     "plan": ("analysis.plan", []),

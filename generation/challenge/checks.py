@@ -1,0 +1,120 @@
+"""One submitted motion file checked against its test item: read within bounds by the study reader, then its frame
+rate, its length against the item's speech, its valid frames, and whether it is a body (docs/challenge.md).
+
+Every check that can still run after another has failed runs, so a team learns every problem of a file at once; a
+file that cannot be read at all (unreadable, too large, not finite) stops there, as nothing else can be judged.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..data import seamless_files
+from ..data.motion_files import MotionError, native_fps, read_motion
+from ..data.smpl_files import is_smpl_file
+from .layout import Problem
+
+MAX_SPEED = 20.0  # m/s: no joint of a person moves faster (a thrown ball's hand reaches about 15 between frames)
+MAX_BONE_CHANGE = 0.10  # a bone of joint positions may stretch or shrink this share of its median length, no more
+FORMATS = {"bvh": "BVH", "npy": "joint positions (.npy)", "clip": "clip files (.npz)",
+           "smpl": "SMPL-family parameters (.npz)", "seamless": "Seamless Interaction smplh:* (.npz)"}  # fmt: skip
+POSITIONS = ("npy", "clip")  # formats of joint positions, whose bones nothing holds rigid
+
+
+@dataclass(frozen=True)
+class Rules:
+    """What the challenge asks of every file: the dataset's frame rate, the samples per item, the bounds of a body,
+    and how the study reader reads the files (read_motion's units, up, skeleton, source_fps, smpl_model, smpl_type)."""
+
+    fps: float
+    samples: int = 1
+    max_speed: float = MAX_SPEED
+    max_bone_change: float = MAX_BONE_CHANGE
+    read: dict = field(default_factory=dict)
+
+
+def file_format(path) -> str:
+    """The format of a motion file, a key of FORMATS, from its name and (for .npz) its member names alone."""
+    name = str(path)
+    if name.endswith((".bvh", ".bvh.gz")):
+        return "bvh"
+    if name.endswith(".npy"):
+        return "npy"
+    if seamless_files.is_seamless_file(path):
+        return "seamless"
+    return "smpl" if is_smpl_file(path) else "clip"
+
+
+# What a reader's refusal means, by the words of its message, and what the team should do about it.
+READ_KINDS = (
+    ("NaN or infinite", "finite", "export every frame with finite numbers"),
+    ("tall after unit conversion", "height", "give positions in metres with the body upright"),
+)
+
+
+def _refused(path, e: MotionError, item, sample) -> Problem:
+    text = str(e)
+    for words, check, todo in READ_KINDS:
+        if words in text:
+            return Problem(str(path), item, sample, check, f"{text}: {todo}")
+    return Problem(str(path), item, sample, "read", f"{text}: export it again in a format the study reader takes")
+
+
+def check_file(path, item: str, sample: str, seconds: float | None, rules: Rules) -> list[Problem]:
+    """The problems of one motion file: `seconds` the length of its item's speech (None: not known)."""
+    out = []
+
+    def add(check, text):
+        out.append(Problem(str(path), item, sample, check, text))
+
+    try:
+        fps = native_fps(path, rules.read.get("source_fps"))
+    except MotionError as e:
+        return [_refused(path, e, item, sample)]
+    if abs(fps - rules.fps) > 1e-3 * rules.fps:
+        add("fps", f"{fps:g} fps, where the dataset is {rules.fps:g} fps: export it at {rules.fps:g} fps")
+    try:
+        m = read_motion(path, fps, **rules.read)
+    except MotionError as e:
+        return out + [_refused(path, e, item, sample)]
+    n = len(m.joints)
+    if seconds is not None and abs(n / fps - seconds) > 1.0 / fps + 1e-9:
+        want = round(seconds * fps)
+        add("length", f"{n} frames ({n / fps:.2f} s), where the item's speech is {seconds:.2f} s: give {want} "
+            f"frames at {fps:g} fps")  # fmt: skip
+    valid = np.ones(n, bool) if m.valid is None else np.asarray(m.valid, bool)
+    if not valid.all():
+        spans = seamless_files.invalid_spans(valid)
+        add("valid", f"{int((~valid).sum())} frames marked invalid (is_valid false: frames "
+            f"{seamless_files.spans_text(spans)}): give valid motion in every frame")  # fmt: skip
+    out += _body(m, valid, file_format(path), rules, add)
+    return out
+
+
+def _body(m, valid, fmt, rules, add) -> list:
+    """A body's checks: no joint faster than the bound between two valid frames, and (joint positions) no bone
+    stretching beyond its bound. Adds through `add`; returns nothing of its own."""
+    if len(m.joints) >= 2:
+        speed = np.linalg.norm(np.diff(m.joints, axis=0), axis=-1) * m.fps  # [T-1, J] m/s
+        speed[~(valid[1:] & valid[:-1])] = 0.0
+        t, j = np.unravel_index(int(np.argmax(speed)), speed.shape)
+        if speed[t, j] > rules.max_speed:
+            add("speed", f"{m.names[j]} moves at {speed[t, j]:.1f} m/s between frames {t} and {t + 1} (at most "
+                f"{rules.max_speed:g} m/s for a person): look for a jump there, or the wrong units")  # fmt: skip
+    if fmt in POSITIONS and (np.asarray(m.parents) > 0).any():
+        # Bones below the root: many skeletons' root is a point on the floor under the hips, whose link to the
+        # hips moves as the body does; the rest are a body's bones.
+        child = np.flatnonzero(np.asarray(m.parents) > 0)
+        length = np.linalg.norm(m.joints[valid][:, child] - m.joints[valid][:, m.parents[child]], axis=-1)
+        median = np.median(length, axis=0)
+        change = np.max(np.abs(length / np.where(median > 0, median, 1.0) - 1.0), axis=0)
+        change[median <= 1e-6] = 0.0  # a bone of no length (a joint on its parent) has no length to keep
+        worst = int(np.argmax(change))
+        if change[worst] > rules.max_bone_change:
+            c = child[worst]
+            bound = 100 * rules.max_bone_change
+            add("bones", f"the bone {m.names[m.parents[c]]}-{m.names[c]} changes its length by "
+                f"{100 * change[worst]:.0f}% (at most {bound:g}%): keep every bone's length")  # fmt: skip
+    return []

@@ -1,0 +1,229 @@
+"""Check teams' submissions against the released test inputs, every problem at once, and write a report per team.
+
+    python -m generation.challenge.intake --inputs SPEECH/ --fps 30 [--samples 5] --out intake/ TEAM/ [TEAM/ ...]
+    python -m generation.challenge.intake --inputs SPEECH/ --fps 30 --teams SUBMISSIONS/ --out intake/
+    moglow-eval intake ...
+
+SPEECH/ holds the test items' speech (ITEM.wav or ITEM.flac): their names are the items, their lengths what each
+motion must last. Each TEAM/ folder is one team's submission (generation.challenge.layout); with --teams, every
+folder inside SUBMISSIONS/ is one. For every team, intake/TEAM/intake.csv lists each problem (the file, the item, the
+sample, the check, what is wrong and what to do) and intake/TEAM/intake.html shows it as a page an organiser can
+send; intake/teams.csv and intake/index.html hold one row per team: its items, samples, files, problems and verdict.
+
+The exit status: 0 every team accepted, 1 a team refused (its problems listed), 2 unusable (a command-line input
+that cannot be read, or a team folder that is not one), each with one line naming it. docs/challenge.md walks the
+organiser's steps.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import stat
+import sys
+import tempfile
+from collections import Counter
+from pathlib import Path
+
+from tqdm import tqdm
+
+from moglow_eval.core import cli
+from moglow_eval.core.cli import UserError
+from rendering.audio import audio_seconds
+from rendering.errors import RenderError
+
+from ..data.motion_files import Skeleton
+from . import intake_page
+from .checks import FORMATS, Rules, check_file, file_format
+from .layout import Problem, Submission, plain_name, read_submission
+
+SPEECH_EXTENSIONS = (".wav", ".flac")
+PROBLEM_COLUMNS = ("team", "file", "item", "sample", "check", "problem")
+TEAM_COLUMNS = ("team", "verdict", "items", "items_given", "samples_per_item", "files", "problems", "format")
+EXIT_REFUSED = 1
+
+
+def read_inputs(folder) -> dict[str, float | None]:
+    """{item: seconds of its speech} of the released inputs' speech folder; UserError naming what is wrong."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise UserError(f"{folder}: not a folder of the test items' speech (ITEM.wav)")
+    items = {}
+    for entry in sorted(os.scandir(folder), key=lambda e: e.name):
+        name = entry.name
+        if not name.endswith(SPEECH_EXTENSIONS) or not plain_name(name):
+            continue
+        if not stat.S_ISREG(entry.stat(follow_symlinks=False).st_mode):
+            raise UserError(f"{folder / name}: not a regular file (a link or a special file): give the speech itself")
+        try:
+            items[name.rsplit(".", 1)[0]] = audio_seconds(folder / name)
+        except RenderError as e:
+            raise UserError(str(e)) from None
+    if not items:
+        raise UserError(f"{folder}: no speech files (ITEM.wav or ITEM.flac): the test items are named by them")
+    return items
+
+
+def check_team(team: str, folder, inputs: dict, rules: Rules, bar=None) -> tuple[Submission, dict]:
+    """A team's submission and its row of the table (TEAM_COLUMNS): every problem of its layout and of its files."""
+    folder = Path(folder)
+    sub = read_submission(team, folder, inputs, rules.samples)
+    formats = {}
+    for item, by_sample in sorted(sub.files.items()):
+        for sample, path in sorted(by_sample.items()):
+            formats[path] = file_format(path)
+    counts = Counter(formats.values())
+    usual = counts.most_common(1)[0][0] if counts else ""
+    for item, by_sample in sorted(sub.files.items()):
+        for sample, path in sorted(by_sample.items()):
+            if formats[path] != usual:
+                sub.problems.append(Problem(str(path), item, sample, "format", f"{FORMATS[formats[path]]}, where the "
+                                            f"rest are {FORMATS[usual]}: give every file in one format"))  # fmt: skip
+                continue
+            sub.problems.extend(check_file(path, item, sample, inputs[item], rules))
+            if bar is not None:
+                bar.update()
+    n_files = sum(len(s) for s in sub.files.values())
+    row = {
+        "team": team,
+        "verdict": "refused" if sub.problems else "accepted",
+        "items": len(inputs),
+        "items_given": len(sub.files),
+        "samples_per_item": rules.samples,
+        "files": n_files,
+        "problems": len(sub.problems),
+        "format": FORMATS.get(usual, ""),
+    }
+    return sub, row
+
+
+def write_csv(path: Path, columns, rows) -> None:
+    """A CSV written whole or not at all (a temporary file beside it, then renamed)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.NamedTemporaryFile("w", dir=path.parent, suffix=".tmp", delete=False, newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(columns), lineterminator="\n")
+        w.writeheader()
+        w.writerows(rows)
+    os.replace(f.name, path)
+
+
+def write_text(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.NamedTemporaryFile("w", dir=path.parent, suffix=".tmp", delete=False, encoding="utf-8") as f:
+        f.write(text)
+    os.replace(f.name, path)
+
+
+def relative(path, folder) -> str:
+    """A problem's file as the team knows it: its path inside the team's folder."""
+    try:
+        return str(Path(path).relative_to(folder))
+    except ValueError:
+        return str(path)
+
+
+def problem_rows(sub: Submission) -> list[dict]:
+    return [
+        {
+            "team": sub.team,
+            "file": relative(p.file, sub.folder),
+            "item": p.item,
+            "sample": p.sample,
+            "check": p.check,
+            "problem": p.text,
+        }  # fmt: skip
+        for p in sub.problems
+    ]
+
+
+def team_folders(args) -> dict[str, Path]:
+    """{team: folder} from the positional folders or --teams; UserError for a folder that is not one."""
+    if args.teams:
+        parent = Path(args.teams)
+        if not parent.is_dir():
+            raise UserError(f"{parent}: not a folder of teams' submissions")
+        folders = [
+            parent / e.name for e in sorted(os.scandir(parent), key=lambda e: e.name) if e.is_dir(follow_symlinks=False)
+        ]
+    else:
+        folders = [Path(f) for f in args.folders]
+    if not folders:
+        raise UserError("no submission: give TEAM folders, or --teams with a folder of them")
+    out = {}
+    for folder in folders:
+        team = folder.resolve().name if folder.name in ("", ".", "..") else folder.name
+        if not plain_name(team):
+            raise UserError(f"{ascii(str(folder))}: a team folder's name must be plain printable text")
+        if team in out:
+            raise UserError(f"{folder}: two submissions for team {team} ({out[team]} and {folder})")
+        out[team] = folder
+    return out
+
+
+def build_parser():
+    ap = cli.ArgumentParser(
+        prog="python -m generation.challenge.intake",
+        description="Check teams' submissions against the test inputs, every problem at once; a report per team.",
+    )
+    ap.add_argument("folders", nargs="*", help="team folders (each one team's submission)")
+    ap.add_argument("--teams", help="a folder whose every folder is one team's submission (instead of FOLDERS)")
+    ap.add_argument("--inputs", required=True, help="the released test items' speech: ITEM.wav or ITEM.flac")
+    ap.add_argument("--fps", required=True, type=cli.number(float, 5, 240), help="the dataset's frame rate")
+    ap.add_argument("--samples", type=cli.number(int, 1, 100), default=1,
+                    help="samples per item the rules ask for (a stochastic system's; default 1)")  # fmt: skip
+    ap.add_argument("--out", default="intake", help="the reports' folder (default intake/)")
+    ap.add_argument("--max-speed", type=cli.number(float, 1, 1000), default=Rules.max_speed,
+                    help=f"the fastest a joint may move, m/s (default {Rules.max_speed:g})")  # fmt: skip
+    ap.add_argument("--max-bone-change", type=cli.number(float, 0.001, 10), default=Rules.max_bone_change,
+                    help="joint positions: the share of its length a bone may change by "
+                    f"(default {Rules.max_bone_change:g})")  # fmt: skip
+    ap.add_argument("--units", default="auto", help="the files' units: auto, m, cm or mm (default auto)")
+    ap.add_argument("--up", default="auto", choices=("auto", "y", "z"), help="the files' up axis (default auto)")
+    ap.add_argument("--skeleton", help=".npy files: the skeleton JSON (names, parents)")
+    ap.add_argument("--source-fps", type=cli.number(float, 5, 240), help=".npy files: their frame rate")
+    ap.add_argument("--smpl-model", help="SMPL-family and Seamless files: the body model (.npz)")
+    ap.add_argument("--quiet", action="store_true", help="no progress bar, one line per team")
+    return ap
+
+
+def _main(argv):
+    args = build_parser().parse_args(argv)
+    if args.units not in ("auto", "m", "cm", "mm"):
+        raise UserError(f"--units must be auto, m, cm or mm, got {args.units!r}")
+    inputs = read_inputs(args.inputs)
+    teams = team_folders(args)
+    read = dict(units=args.units, up=args.up, source_fps=args.source_fps, smpl_model=args.smpl_model)
+    if args.skeleton:
+        read["skeleton"] = Skeleton.load(args.skeleton)
+    rules = Rules(args.fps, args.samples, args.max_speed, args.max_bone_change, read)
+    out = Path(args.out)
+    rows, unusable = [], []
+    total = len(inputs) * args.samples * len(teams)
+    with tqdm(total=total, desc="intake", unit="file", file=sys.stderr, disable=args.quiet) as bar:
+        for team, folder in teams.items():
+            if not folder.is_dir() or folder.is_symlink():
+                unusable.append(f"{folder}: not a folder (a team's submission is a folder of motion files)")
+                rows.append({"team": team, "verdict": "unusable", "items": len(inputs), "items_given": 0,
+                             "samples_per_item": args.samples, "files": 0, "problems": 1, "format": ""})  # fmt: skip
+                continue
+            sub, row = check_team(team, folder, inputs, rules, bar)
+            rows.append(row)
+            problems = problem_rows(sub)
+            write_csv(out / team / "intake.csv", PROBLEM_COLUMNS, problems)
+            write_text(out / team / "intake.html", intake_page.team_page(row, problems, rules))
+    write_csv(out / "teams.csv", TEAM_COLUMNS, rows)
+    write_text(out / "index.html", intake_page.challenge_page(rows, rules))
+    for row in rows:
+        print(f"{row['team']}: {row['verdict']}, {row['problems']} problem(s) in {row['files']} file(s) "
+              f"for {row['items']} items ({out / row['team'] / 'intake.html'})")  # fmt: skip
+    if unusable:
+        raise UserError(unusable[0] + (f" (and {len(unusable) - 1} more)" if len(unusable) > 1 else ""))
+    return EXIT_REFUSED if any(r["verdict"] == "refused" for r in rows) else 0
+
+
+def main(argv=None):
+    return cli.run(_main, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,211 @@
+"""Issue 64, intake: a team's submission checked against the released test inputs, every problem at once, a report
+per team (CSV and HTML) and a verdict in the exit status (generation.challenge.intake). The motion is a real take
+(tests/data/bvh) cut into items; each problem is made from it by hand, and each test asserts the check that must
+find it, so none passes without its check."""
+
+import csv
+import os
+import wave
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers.paths import TEST_DATA
+
+from generation.challenge.intake import main as intake
+from generation.data.motion_files import read_motion
+from moglow_eval.core.clip import save_clip
+
+TAKE = TEST_DATA / "bvh" / "bandai_walk_angry_002.bvh.gz"
+FPS, FRAMES, ITEMS = 30.0, 60, ("item01", "item02", "item03")
+
+
+@pytest.fixture(scope="module")
+def take():
+    return read_motion(TAKE, FPS, up="y")  # the walk goes a long way: its up axis is told, not guessed
+
+
+def write_speech(folder: Path, seconds: dict):
+    folder.mkdir(parents=True, exist_ok=True)
+    for item, s in seconds.items():
+        with wave.open(str(folder / f"{item}.wav"), "wb") as w:
+            w.setnchannels(1)
+            w.setsampwidth(2)
+            w.setframerate(16000)
+            w.writeframes(np.zeros(round(16000 * s), np.int16).tobytes())
+    return folder
+
+
+def clip(take, k, frames=FRAMES):
+    """Item k's motion: its own stretch of the real take."""
+    return take.joints[k * 40 : k * 40 + frames]
+
+
+def write_team(root: Path, take, edit=None, samples=1):
+    """A team folder of clip files, one per item (or `samples` per item, each a stretch a frame later), after
+    `edit(folder)` has spoiled it."""
+    folder = root / "team"
+    for k, item in enumerate(ITEMS):
+        for s in range(samples):
+            path = folder / f"{item}.npz" if samples == 1 else folder / item / f"{s + 1}.npz"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            joints = take.joints[k * 40 + s : k * 40 + s + FRAMES]
+            save_clip(path, joints, take.parents, take.names, FPS)
+    if edit:
+        edit(folder)
+    return folder
+
+
+def run(tmp_path, folders, samples=1, extra=()):
+    speech = write_speech(tmp_path / "speech", {i: FRAMES / FPS for i in ITEMS})
+    out = tmp_path / "out"
+    argv = ["--inputs", str(speech), "--fps", "30", "--out", str(out), "--quiet", "--samples", str(samples)]
+    code = intake([*argv, *extra, *map(str, folders)])
+    return code, out
+
+
+def problems(out, team="team"):
+    with open(out / team / "intake.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_a_good_submission_is_accepted_with_its_report(tmp_path, take):
+    code, out = run(tmp_path, [write_team(tmp_path, take)])
+    assert code == 0 and problems(out) == []
+    with open(out / "teams.csv", newline="") as f:
+        (row,) = list(csv.DictReader(f))
+    assert row["verdict"] == "accepted" and row["files"] == "3" and row["items_given"] == "3"
+    page = (out / "team" / "intake.html").read_text()
+    assert "accepted" in page and "<script" not in page and 'name="viewport"' in page
+
+
+def _resave(item, fn):
+    """An edit that rewrites one item's clip through fn(joints, fps) -> (joints, fps)."""
+
+    def edit(folder):
+        from moglow_eval.core.clip import load_clip
+
+        path = folder / f"{item}.npz"
+        c = load_clip(path)
+        joints, fps = fn(np.array(c["joints"]), float(c["fps"]))
+        path.unlink()
+        np.savez(path, joints=joints.astype(np.float32), parents=c["parents"], joint_names=c["joint_names"],
+                 fps=np.float64(fps))  # fmt: skip
+
+    return edit
+
+
+def _nan(j, fps):
+    j[7, 3] = np.nan
+    return j, fps
+
+
+def _jump(j, fps):
+    j[30:] += np.float32([2.0, 0.0, 0.0])  # the body leaps 2 m sideways between two frames (60 m/s), bones intact
+    return j, fps
+
+
+def _stretch(j, fps):
+    j[20:25, 5] += (j[20:25, 5] - j[20:25, 4]) * 0.5  # one bone half as long again for five frames
+    return j, fps
+
+
+@pytest.mark.parametrize(
+    "edit, check, needle",
+    [
+        (lambda f: (f / "item02.npz").unlink(), "missing", "no motion for test item item02"),
+        (
+            lambda f: (f / "item09.npz").write_bytes((f / "item01.npz").read_bytes()),
+            "entry",
+            "item09 is not a test item",
+        ),
+        (lambda f: (f / "readme.txt").write_text("hi"), "entry", "not a motion file"),
+        (_resave("item01", lambda j, fps: (j[:50], 25.0)), "fps", "25 fps, where the dataset is 30 fps"),
+        (_resave("item02", lambda j, fps: (j[:-10], fps)), "length", "give 60 frames"),
+        (_resave("item03", _nan), "finite", "NaN"),
+        (_resave("item01", _jump), "speed", "m/s between frames 29 and 30"),
+        (_resave("item02", _stretch), "bones", "changes its length by"),
+        (_resave("item03", lambda j, fps: (j * 100, fps)), "height", "tall"),
+    ],
+    ids=["missing", "extra", "not-motion", "fps", "length", "nan", "speed", "bones", "height"],
+)
+def test_each_problem_is_found_and_named(tmp_path, take, edit, check, needle):
+    code, out = run(tmp_path, [write_team(tmp_path, take, edit)])
+    found = problems(out)
+    assert code == 1, found
+    assert [p["check"] for p in found] == [check], found
+    assert needle in found[0]["problem"] and ":" in found[0]["problem"], found  # what, then what to do
+
+
+def test_every_problem_at_once_and_one_format(tmp_path, take):
+    def spoil(folder):
+        _resave("item01", lambda j, fps: (j[:50], 25.0))(folder)
+        (folder / "item02.npz").unlink()
+        np.save(folder / "item02.npy", clip(take, 1))  # a second format
+        _resave("item03", _jump)(folder)
+
+    code, out = run(tmp_path, [write_team(tmp_path, take, spoil)])
+    checks = sorted(p["check"] for p in problems(out))
+    assert code == 1 and checks == ["format", "fps", "speed"], checks
+
+
+def test_samples_per_item(tmp_path, take):
+    def drop(folder):
+        (folder / "item02" / "3.npz").unlink()
+
+    code, out = run(tmp_path, [write_team(tmp_path, take, drop, samples=3)], samples=3)
+    found = problems(out)
+    assert code == 1 and [p["check"] for p in found] == ["samples"] and "2 samples of item02" in found[0]["problem"]
+    code, out = run(tmp_path / "again", [write_team(tmp_path / "again", take, samples=3)], samples=3)
+    assert code == 0
+    code, out = run(tmp_path / "one", [write_team(tmp_path / "one", take)], samples=3)  # one file each: 3 asked
+    assert code == 1 and {p["check"] for p in problems(out)} == {"samples"}
+
+
+def test_hostile_entries_are_one_line_each(tmp_path, take):
+    def hostile(folder):
+        os.symlink("/etc/passwd", folder / "item04.npz")
+        os.mkfifo(folder / "item05.npz")
+        (folder / "item\x1b[31m.npz").write_bytes(b"x")
+        (folder / "item01" / "deeper").mkdir(parents=True)
+        (folder / "item01.npz").unlink()
+        bomb = folder / "item02.npz"  # a header that declares 2 TB of joints
+        bomb.unlink()
+        with open(bomb, "wb") as f:
+            np.lib.format.write_array_header_1_0(f, {"descr": "<f4", "fortran_order": False, "shape": (10**9, 100, 3)})
+
+    code, out = run(tmp_path, [write_team(tmp_path, take, hostile)])
+    lines = problems(out)
+    text = "\n".join(f"{p['file']}: {p['check']}: {p['problem']}" for p in lines)
+    assert code == 1
+    assert "item04.npz: entry: a symbolic link" in text
+    assert "item05.npz: entry: not a regular file" in text
+    assert "'item\\x1b[31m.npz': entry: a name that is not plain" in text
+    assert "a folder inside item01/" in text and "item01: samples: a folder" in text
+    assert "item02.npz: read:" in text
+    assert "\x1b" not in (out / "team" / "intake.html").read_text()
+
+
+def test_a_whole_challenge_in_one_run(tmp_path, take):
+    teams = tmp_path / "teams"
+    good = write_team(tmp_path / "a", take)
+    bad = write_team(tmp_path / "b", take, lambda f: (f / "item03.npz").unlink())
+    good.rename(teams / "alpha") if teams.exists() else (teams.mkdir(), good.rename(teams / "alpha"))
+    bad.rename(teams / "beta")
+    (teams / "gamma").write_text("not a folder")  # left out: teams are folders
+    code, out = run(tmp_path, [], extra=["--teams", str(teams)])
+    with open(out / "teams.csv", newline="") as f:
+        rows = {r["team"]: r for r in csv.DictReader(f)}
+    assert code == 1 and set(rows) == {"alpha", "beta"}
+    assert rows["alpha"]["verdict"] == "accepted" and rows["beta"]["verdict"] == "refused"
+    index = (out / "index.html").read_text()
+    assert 'href="alpha/intake.html"' in index and 'href="beta/intake.html"' in index
+
+
+def test_unusable_inputs_exit_2_with_one_line(tmp_path, take, capsys):
+    team = write_team(tmp_path, take)
+    assert intake(["--inputs", str(tmp_path / "nowhere"), "--fps", "30", str(team)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: ") and "nowhere" in err and "\n" not in err
+    code, out = run(tmp_path, [tmp_path / "no_team"])
+    assert code == 2 and "not a folder" in capsys.readouterr().err
