@@ -21,7 +21,7 @@ from rendering.mesh import set_gl_environment
 
 # Fixtures that need the full machine: ../shared, PostgreSQL, or a real run of the pipeline.
 FULL_FIXTURES = {"shared_dir", "small_dataset", "tiny_runs", "quick_stimuli", "pg_server", "pg_database"}
-FULL_MARKERS = ("full", "slow", "postgres", "browser")
+FULL_MARKERS = ("full", "postgres", "browser")
 
 
 @pytest.fixture(scope="session")
@@ -70,10 +70,6 @@ def pg_server():
         cluster.remove()
 
 
-def pytest_addoption(parser):
-    parser.addoption("--run-slow", action="store_true", help="also run tests marked slow (full-size end-to-end runs)")
-
-
 def needs_full(item):
     """Whether a collected test belongs to the full tier (see the module's docstring)."""
     if any(m in item.keywords for m in FULL_MARKERS) or FULL_FIXTURES & set(item.fixturenames):
@@ -83,17 +79,11 @@ def needs_full(item):
 
 
 def pytest_collection_modifyitems(config, items):
-    from helpers.tiers import run_slow
-
+    # Every collected test runs, in CI too: a long variant of a check is a benchmark or a script (bench/, deploy/),
+    # never a test left out.
     for item in items:
         if needs_full(item):
             item.add_marker(pytest.mark.full)
-    if run_slow(config):
-        return
-    skip = pytest.mark.skip(reason="slow: run with --run-slow (CI runs the short variant)")
-    for item in items:
-        if "slow" in item.keywords:
-            item.add_marker(skip)
 
 
 # --- data ---

@@ -10,7 +10,6 @@ from pathlib import Path
 
 import pytest
 from helpers.paths import ROOT
-from helpers.tiers import run_slow
 
 pytestmark = pytest.mark.full  # the full tier: whole studies on PostgreSQL
 
@@ -130,13 +129,12 @@ def _demo_in_a_row(cwd: Path, runs: list[tuple[str, int, list[str]]]):
     return cwd / "demo"
 
 
-def test_demo_runs_one_design_after_another_in_its_default_folder(quick_stimuli, tmp_path, request):
+def test_demo_runs_one_design_after_another_in_its_default_folder(quick_stimuli, tmp_path):
     """Issue 46: `analysis.demo --design pairwise` after `analysis.demo` could not run (its database held an acr
-    study, make_stimuli refused the set there: the slow test below). Here on the session's stimuli; --run-slow
-    also goes back to acr after the pairwise run."""
+    study, make_stimuli refused the set there: the test below). Here on the session's stimuli, and back to acr
+    after the pairwise run."""
     given = ["--stimuli", str(quick_stimuli)]
-    back = [("acr", 1, given)] if run_slow(request.config) else []
-    _demo_in_a_row(tmp_path, [("acr", 0, given), ("pairwise", 0, given), *back])
+    _demo_in_a_row(tmp_path, [("acr", 0, given), ("pairwise", 0, given), ("acr", 1, given)])
     # A folder the demo did not make is refused, and left as it was.
     mine = tmp_path / "mine"
     mine.mkdir()
@@ -148,7 +146,6 @@ def test_demo_runs_one_design_after_another_in_its_default_folder(quick_stimuli,
     assert [p.name for p in mine.iterdir()] == ["notes.txt"]
 
 
-@pytest.mark.slow
 def test_demo_makes_its_stimuli_anew_for_each_run(quick_stimuli, tmp_path):
     """The newcomer's case in full: each run makes its stimuli into demo/stimuli, where the earlier run's are (the
     tiny models are brought along with --runs, so that they are reused, not trained)."""

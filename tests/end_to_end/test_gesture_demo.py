@@ -32,7 +32,6 @@ def demo(stimuli, out, design):
     return json.loads((out / "report" / "stats.json").read_text())
 
 
-@pytest.mark.slow
 def test_appropriateness_with_speech_through_the_demo(tmp_path):
     stimuli = build(tmp_path / "a", '\ndesign = "appropriateness"', audio=True)
     stats = demo(stimuli, tmp_path / "demo_a", "appropriateness")
@@ -42,7 +41,6 @@ def test_appropriateness_with_speech_through_the_demo(tmp_path):
     assert all(v["n"] > 0 for v in stats["mas"].values())
 
 
-@pytest.mark.slow
 def test_a_two_style_acr_study_through_the_demo(tmp_path):
     stimuli = build(tmp_path / "s", "", audio=False, style='style = ["stick", "solid"]\n')
     stats = demo(stimuli, tmp_path / "demo_s", "acr")

@@ -2,10 +2,9 @@
 runs them, in a fresh folder: the app in one process, the other commands beside it. The crowd must fill the
 study and the report must count every rater it brought.
 
-The full run (`--run-slow`) makes the stimuli with the README's first command (half a minute or more). The short
-run, in the normal suite, checks that first command but takes the session's `make_stimuli --quick` folder in its
-place, and runs the other four exactly as written. The one liberty taken: when port 5000, which the README's
-commands use, is busy on this machine (another test run), the app gets a free port and the crowd's URL follows.
+The suite runs all five as written, the stimuli made by the README's first command (half a minute or more). The
+one liberty taken: when port 5000, which the README's commands use, is busy on this machine (another test run), the
+app gets a free port and the crowd's URL follows.
 """
 
 import csv
@@ -13,7 +12,6 @@ import json
 import os
 import re
 import shlex
-import shutil
 import signal
 import socket
 import subprocess
@@ -96,19 +94,13 @@ def run(argv, env, cwd, timeout):
     )
 
 
-def study_in_five_commands(folder: Path, quick_stimuli: Path | None):
+def study_in_five_commands(folder: Path):
     cmds = by_role(readme_commands())
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     env.pop("RATING_DATABASE_URL", None), env.pop("RATING_MANIFEST", None)  # a newcomer's shell sets neither
     stim_env, stim = cmds["stimuli"]
-    if quick_stimuli is None:
-        r = run(stim, {**env, **stim_env}, folder, 900)
-        assert r.returncode == 0, r.stderr[-3000:]
-    else:
-        from generation.make_stimuli import build_parser
-
-        out = flag(stim, "--out") or build_parser().get_default("out")
-        shutil.copytree(quick_stimuli, folder / out)
+    r = run(stim, {**env, **stim_env}, folder, 900)
+    assert r.returncode == 0, r.stderr[-3000:]
     serve_env, serve = cmds["serve"]
     sim_env, simulate = cmds["simulate"]
     serve, simulate = on_a_free_port(serve, simulate)
@@ -171,12 +163,7 @@ def test_the_readme_names_five_commands_that_parse():
     assert report_parser().parse_args(cmds["report"][1][3:]).ratings == export.out
 
 
-def test_the_readmes_study_with_the_quick_stimuli(quick_stimuli, tmp_path):
-    summary, ratings, report, console = study_in_five_commands(tmp_path, quick_stimuli)
-    check_the_study(tmp_path, summary, ratings, report, console)
-
-
-@pytest.mark.slow
+@pytest.mark.full  # the README's own study, its five commands as written
 def test_the_readmes_five_commands_as_written(tmp_path):
-    summary, ratings, report, console = study_in_five_commands(tmp_path, None)
+    summary, ratings, report, console = study_in_five_commands(tmp_path)
     check_the_study(tmp_path, summary, ratings, report, console)

@@ -16,7 +16,6 @@ from helpers.bvh_fixtures import SPEAKER, write_zeroeggs
 from helpers.figure_pixels import classes, decode, height_share, touches_edge
 from helpers.own_study_data import speech
 from helpers.sound_check import pass_sound_check
-from helpers.tiers import only_when_slow
 
 from generation.make_stimuli import main as make_stimuli
 
@@ -111,14 +110,12 @@ def _check(frames, style):
     return np.mean([(t | le | r).sum() for t, le, r in masks])
 
 
-@pytest.mark.parametrize("app_db_url", ["sqlite", "postgres"], indirect=True)
+@pytest.mark.parametrize("app_db_url", ["postgres"], indirect=True)  # the database is the app's concern
 def test_speaker_study_in_a_real_browser(app_stimuli, live_server, browser, tmp_path, request):
     from sqlalchemy import select
 
     from rating_app.store.db import Trial, app_engine
 
-    if request.node.callspec.params["app_db_url"] == "sqlite":
-        only_when_slow(request, "the short variant serves the page from PostgreSQL")
     srcs = _rate_trials(browser, live_server, 3, live_server_manifest[1])
     with app_engine(live_server_manifest[1]).connect() as conn:
         clip_of = dict(conn.execute(select(Trial.id, Trial.clip_id)).all())

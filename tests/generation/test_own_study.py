@@ -15,7 +15,6 @@ import pytest
 from helpers.browser import acr_rater_flow
 from helpers.own_study_data import action_takes, make_study
 from helpers.paths import ROOT
-from helpers.tiers import only_when_slow
 
 from generation.data.motion_files import read_motion
 from generation.make_stimuli import main as make_stimuli
@@ -297,11 +296,9 @@ def test_builtin_study_output_unchanged(tmp_path):
 
 
 # ---------------------------------------------------------------- end to end
-@pytest.mark.parametrize("db", ["sqlite", "postgres"])
+@pytest.mark.parametrize("db", ["postgres"])  # the database is the app's concern, tested there on both
 def test_own_study_end_to_end(own_study, tmp_path, db, request):
-    """Study from folders -> app -> simulated crowd -> export -> report, on SQLite and on PostgreSQL."""
-    if db == "sqlite":
-        only_when_slow(request, "the short variant runs on PostgreSQL; the database is the app's concern")
+    """Study from folders -> app -> simulated crowd -> export -> report, on PostgreSQL."""
     _, stimuli = own_study
     url = f"sqlite:///{tmp_path / 'r.sqlite'}" if db == "sqlite" else request.getfixturevalue("pg_database")
     out = tmp_path / "demo"

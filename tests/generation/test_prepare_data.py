@@ -162,7 +162,6 @@ def test_default_data_dir_found():
     assert prepare_data.default_data_dir() == BANDAI.resolve()
 
 
-@pytest.mark.slow
 def test_full_prepare(tmp_path):
     """All 1067 takes (the default run): every category but the too-short dashes is held out equally."""
     summary = prepare(BANDAI, tmp_path / "full.npz", progress=False)

@@ -328,28 +328,6 @@ def test_stimuli_hostile_system_file_one_line(quick_stimuli, tmp_path, capsys, h
     assert f"{items[0]}.bvh" in last
 
 
-@pytest.mark.slow
-def test_stimuli_full_default_run(tmp_path):
-    """The default job at full size: the whole data set, the cpu configs, 640x640 videos."""
-    out = tmp_path / "stimuli"
-    r = subprocess.run(
-        [sys.executable, "-m", "generation.make_stimuli", "--out", str(out), "--runs", str(tmp_path / "runs")],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=4 * 3600,
-    )
-    assert r.returncode == 0, r.stderr[-3000:]
-    man = read_csv(out / "manifest.csv")
-    # 12 catch items (the pool of CONTRACTS §5), each with its BAD clip and its NAT, MG and FL clips
-    assert sum(m["role"] == "test" for m in man) == 90 and sum(m["role"] == "catch" for m in man) == 48
-    for m in man[:10]:
-        assert decode(out / m["video"])[:4] == (80, 640, 640, "yuv420p")
-    rows = read_csv(out / "metrics.csv")
-    nat = np.array([float(r["foot_skating"]) for r in rows if r["condition"] == "NAT"])
-    assert np.median(nat) < 0.1
-
-
 @pytest.mark.parametrize("module", ["generation.stimuli.render_pool", "generation.make_stimuli"])
 def test_render_workers_load_no_torch(module):
     """make_stimuli's render workers are spawned and import generation.stimuli.render_pool: that import must not load

@@ -5,7 +5,6 @@ point at the catch trials. Many sessions at the production settings, in every de
 import pytest
 from helpers.catch_pool import CATCH_ITEMS, CATCH_PER_RATER, PRODUCTION, catch_recurrence, run_sessions
 from helpers.fake_stimuli import write_fake_stimuli
-from helpers.tiers import only_when_slow
 
 from moglow_eval.core import study
 from rating_app.designs import build_units, get
@@ -29,13 +28,14 @@ def pool_stimuli(tmp_path_factory):
     )
 
 
-@pytest.mark.parametrize("design", study.DESIGNS)
-@pytest.mark.parametrize("n_sessions", [pytest.param(60, marks=pytest.mark.slow), 24])
-def test_catch_units_recur_like_test_units(make, pool_stimuli, design, n_sessions, monkeypatch, request):
-    """60 sessions (--run-slow: the whole acr study) and a 24-session short variant for CI."""
-    if design != "acr" and request.node.callspec.params["app_db_url"] == "sqlite":
-        only_when_slow(request, "the short variant runs every design on PostgreSQL and acr on SQLite too")
-    catch_recurrence(make, pool_stimuli, design, n_sessions, monkeypatch)
+# Every design on PostgreSQL, and acr on SQLite too: which database holds the answers is the app's concern.
+DESIGN_DATABASES = [(d, "postgres") for d in study.DESIGNS] + [("acr", "sqlite")]
+
+
+@pytest.mark.parametrize("design, app_db_url", DESIGN_DATABASES, indirect=["app_db_url"])
+def test_catch_units_recur_like_test_units(make, pool_stimuli, design, app_db_url, monkeypatch):
+    """24 sessions of every design (the whole acr study is 60: `catch_recurrence(..., 60, ...)` by hand)."""
+    catch_recurrence(make, pool_stimuli, design, 24, monkeypatch)
 
 
 def test_a_pool_too_small_is_a_warning_and_the_cap_keeps_every_rater_equal(make, pool_stimuli, tmp_path, caplog):

@@ -14,7 +14,6 @@ import pytest
 import requests
 from helpers.fake_stimuli import free_port
 from helpers.paths import ROOT
-from helpers.tiers import only_when_slow
 
 from moglow_eval.core.tables import read_metrics
 from rating_app import create_app
@@ -57,10 +56,9 @@ def live(app_stimuli, app_db_url):
 
 
 @pytest.mark.full  # the full tier: a crowd against a served app
-def test_simulated_crowd_matches_export(live, app_stimuli, tmp_path, request):
+@pytest.mark.parametrize("app_db_url", ["postgres"], indirect=True)  # the database is the app's concern, not the CLI's
+def test_simulated_crowd_matches_export(live, app_stimuli, tmp_path):
     url, db = live
-    if db.startswith("sqlite"):
-        only_when_slow(request, "the short variant serves the crowd from PostgreSQL")
     out = tmp_path / "summary.json"
     r = cli(
         "simulate",

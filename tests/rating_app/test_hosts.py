@@ -120,9 +120,9 @@ def proxy(kind, tmp_path, a, b, stimuli):
         p.wait(15)
 
 
-@pytest.mark.parametrize("raters", [pytest.param(150, marks=pytest.mark.slow), 40])
 @pytest.mark.parametrize("kind", ["nginx", "caddy"])
-def test_two_hosts_one_database_and_a_kill(kind, raters, tmp_path, pg_database, monkeypatch):
+def test_two_hosts_one_database_and_a_kill(kind, tmp_path, pg_database, monkeypatch):
+    raters = 40
     db = pg_database.replace("postgresql://", "postgresql+psycopg://", 1)
     stimuli = write_fake_stimuli(tmp_path / "stimuli", n_items=10, n_catch=2)
     env = crowd_env(stimuli, db, "hosts-token", PROXY_COUNT="1", VIDEO_ACCEL=kind)

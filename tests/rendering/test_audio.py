@@ -152,7 +152,7 @@ def test_sample_rate_of_zero(tmp_path, capsys):
     _fails(study, tmp_path, capsys, "item01.wav: the sample rate is 0")
 
 
-@pytest.mark.slow  # the app side of appropriateness with sound: rating_app/test_sound, test_browser_sound
+@pytest.mark.full  # a whole study through the demo; the app side of sound: rating_app/test_sound, test_browser_sound
 def test_demo_runs_the_appropriateness_design_with_sound(tmp_path):
     """`python -m analysis.demo --design appropriateness`: a study with synthesised speech (own_study.demo_study)
     -> stimuli with sound and mismatched clips -> the app with its sound check -> the simulated crowd -> pairs.csv
