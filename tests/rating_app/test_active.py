@@ -11,7 +11,7 @@ import collections
 
 import pytest
 from helpers.api_client import TOKEN_HDR
-from helpers.catch_pool import CATCH_ITEMS, catch_recurrence
+from helpers.catch_pool import catch_recurrence
 from helpers.concurrent_raters import cover_mismatches
 from helpers.design_checks import (
     an_idle_session_gives_its_pair_back,
@@ -46,19 +46,6 @@ def big_stimuli(tmp_path_factory):
     """As test_app_designs' big_stimuli: 3 conditions x 30 items, 4 catch items, 3 training clips."""
     return write_fake_stimuli(
         tmp_path_factory.mktemp("active_big"), n_items=30, n_catch=4, n_frames=4, metrics=False, catch_nat=True
-    )
-
-
-@pytest.fixture(scope="module")
-def pool_stimuli(tmp_path_factory):
-    """As test_catch_pool's: 3 conditions x 30 items, 12 catch items."""
-    return write_fake_stimuli(
-        tmp_path_factory.mktemp("active_pool"),
-        n_items=30,
-        n_catch=CATCH_ITEMS,
-        n_frames=4,
-        metrics=False,
-        catch_nat=True,
     )
 
 

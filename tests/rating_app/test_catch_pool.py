@@ -3,7 +3,7 @@ so a catch unit reaches about the same share of raters as a test unit, and the c
 point at the catch trials. Many sessions at the production settings, in every design, on SQLite and PostgreSQL."""
 
 import pytest
-from helpers.catch_pool import CATCH_ITEMS, CATCH_PER_RATER, PRODUCTION, catch_recurrence, run_sessions
+from helpers.catch_pool import CATCH_PER_RATER, PRODUCTION, catch_recurrence, run_sessions
 from helpers.fake_stimuli import write_fake_stimuli
 
 from moglow_eval.core import study
@@ -12,20 +12,6 @@ from rating_app.operations.health import catch_pool_warning
 from rating_app.store.manifest import load_manifest
 
 pytestmark = pytest.mark.full  # the full tier: crowds drawing from catch pools
-
-
-@pytest.fixture(scope="module")
-def pool_stimuli(tmp_path_factory):
-    """3 conditions x 30 items, 12 catch items (BAD + NAT, MG, FL), 3 training clips."""
-    return write_fake_stimuli(
-        tmp_path_factory.mktemp("pool_stimuli"),
-        n_items=30,
-        n_catch=CATCH_ITEMS,
-        n_frames=4,
-        metrics=False,
-        catch_nat=True,
-        mismatched=True,  # served only by the matched-against-mismatched designs
-    )
 
 
 # Every design on PostgreSQL, and acr on SQLite too: which database holds the answers is the app's concern.
