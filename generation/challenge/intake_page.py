@@ -15,7 +15,8 @@ th, td { text-align: left; padding: .3rem .5rem; border-bottom: 1px solid #ddd; 
 th { background: #f3f3f3; }
 .accepted { color: #17622b; font-weight: 600; }
 .refused, .unusable { color: #a01818; font-weight: 600; }
-code { font-size: 90%; word-break: break-all; }
+code { font-size: 90%; overflow-wrap: anywhere; }
+td:first-child { min-width: 8rem; }
 footer { margin-top: 2rem; color: #666; font-size: 90%; }
 """
 
