@@ -1,5 +1,5 @@
-"""Fixtures the rating app's test modules share: the design tests' stimulus folder, the catch pool's, and a running
-study's folders with a new system's (add-condition and its hostile submissions)."""
+"""Fixtures the rating app's test modules share: the design tests' stimulus folders (small, big, the catch pool's),
+and a running study's folders with a new system's (add-condition and its hostile submissions)."""
 
 import pytest
 from helpers.catch_pool import CATCH_ITEMS
@@ -10,6 +10,21 @@ from helpers.study_folders import N_ITEMS, one_size
 @pytest.fixture(scope="module")
 def stimuli(tmp_path_factory):
     return write_fake_stimuli(tmp_path_factory.mktemp("design_stimuli"), catch_nat=True)
+
+
+@pytest.fixture(scope="module")
+def big_stimuli(tmp_path_factory):
+    """The balance tests' set: 3 conditions x 30 items with their mismatched clips, 4 catch items (BAD + NAT, MG,
+    FL), 3 training clips."""
+    return write_fake_stimuli(
+        tmp_path_factory.mktemp("big_stimuli"),
+        n_items=30,
+        n_catch=4,
+        n_frames=4,
+        metrics=False,
+        catch_nat=True,
+        mismatched=True,  # served only by the matched-against-mismatched designs
+    )
 
 
 @pytest.fixture(scope="module")

@@ -22,7 +22,6 @@ from helpers.design_checks import (
     targets_reached_exactly_with_fewest_raters,
 )
 from helpers.design_client import complete, export, post, start
-from helpers.fake_stimuli import write_fake_stimuli
 
 from rating_app import AppError, create_app
 from rating_app.pairing import active
@@ -34,19 +33,6 @@ def active_make(make, monkeypatch):
     """`make` with --pairing active, the posterior refitted at every call (not at most once a second)."""
     monkeypatch.setattr(active, "REFRESH_S", 0.0)
     return lambda manifest, design, **kw: make(manifest, design, **{"pairing": "active", **kw})
-
-
-@pytest.fixture(scope="module")
-def stimuli(tmp_path_factory):
-    return write_fake_stimuli(tmp_path_factory.mktemp("active_stimuli"), catch_nat=True)
-
-
-@pytest.fixture(scope="module")
-def big_stimuli(tmp_path_factory):
-    """As test_app_designs' big_stimuli: 3 conditions x 30 items, 4 catch items, 3 training clips."""
-    return write_fake_stimuli(
-        tmp_path_factory.mktemp("active_big"), n_items=30, n_catch=4, n_frames=4, metrics=False, catch_nat=True
-    )
 
 
 # ------------------------------------------------------------------------------------ the rules it keeps

@@ -30,20 +30,6 @@ from rating_app.store.db import Trial, app_engine, utcnow
 from rating_app.store.manifest import AppError
 
 
-@pytest.fixture(scope="module")
-def big_stimuli(tmp_path_factory):
-    """3 conditions x 30 items, 4 catch items (BAD + NAT, MG, FL), 3 training clips."""
-    return write_fake_stimuli(
-        tmp_path_factory.mktemp("big_stimuli"),
-        n_items=30,
-        n_catch=4,
-        n_frames=4,
-        metrics=False,
-        catch_nat=True,
-        mismatched=True,  # served only by the matched-against-mismatched designs
-    )
-
-
 # ------------------------------------------------------------------------------------------------- pairwise
 def test_pairwise_flow_units_catch_and_export(make, stimuli):
     pairwise_flow_units_catch_and_export(make, stimuli)

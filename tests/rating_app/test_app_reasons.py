@@ -18,11 +18,6 @@ TOKEN_HDR = {"Authorization": "Bearer test-admin-token"}
 IDS = [rid for rid, _ in votes.REALISM_REASONS]
 
 
-@pytest.fixture(scope="module")
-def stimuli(tmp_path_factory):
-    return write_fake_stimuli(tmp_path_factory.mktemp("reason_api"), catch_nat=True)
-
-
 def first_rating_trial(c, reason=IDS[0]):
     """(token, the first rating-phase trial), the familiarisation trials answered (and a reason refused there)."""
     token = c.post("/api/sessions", json={}).json["session"]
