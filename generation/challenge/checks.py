@@ -62,8 +62,9 @@ def _refused(path, e: MotionError, item, sample) -> Problem:
     return Problem(str(path), item, sample, "read", f"{text}: export it again in a format the study reader takes")
 
 
-def check_file(path, item: str, sample: str, seconds: float | None, rules: Rules) -> list[Problem]:
-    """The problems of one motion file: `seconds` the length of its item's speech (None: not known)."""
+def check_file(path, item: str, sample: str, seconds: float | None, rules: Rules, fmt: str) -> list[Problem]:
+    """The problems of one motion file: `seconds` the length of its item's speech (None: not known), `fmt` its
+    format (file_format, which the caller has read once for the team's one-format check)."""
     out = []
 
     def add(check, text):
@@ -89,13 +90,13 @@ def check_file(path, item: str, sample: str, seconds: float | None, rules: Rules
         spans = seamless_files.invalid_spans(valid)
         add("valid", f"{int((~valid).sum())} frames marked invalid (is_valid false: frames "
             f"{seamless_files.spans_text(spans)}): give valid motion in every frame")  # fmt: skip
-    out += _body(m, valid, file_format(path), rules, add)
+    _body(m, valid, fmt, rules, add)
     return out
 
 
-def _body(m, valid, fmt, rules, add) -> list:
-    """A body's checks: no joint faster than the bound between two valid frames, and (joint positions) no bone
-    stretching beyond its bound. Adds through `add`; returns nothing of its own."""
+def _body(m, valid, fmt, rules, add) -> None:
+    """A body's checks, each problem given to `add`: no joint faster than the bound between two valid frames, and
+    (joint positions) no bone stretching beyond its bound."""
     if len(m.joints) >= 2:
         speed = np.linalg.norm(np.diff(m.joints, axis=0), axis=-1) * m.fps  # [T-1, J] m/s
         speed[~(valid[1:] & valid[:-1])] = 0.0
@@ -117,4 +118,3 @@ def _body(m, valid, fmt, rules, add) -> list:
             bound = 100 * rules.max_bone_change
             add("bones", f"the bone {m.names[m.parents[c]]}-{m.names[c]} changes its length by "
                 f"{100 * change[worst]:.0f}% (at most {bound:g}%): keep every bone's length")  # fmt: skip
-    return []

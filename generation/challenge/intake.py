@@ -18,6 +18,7 @@ organiser's steps.
 from __future__ import annotations
 
 import csv
+import io
 import os
 import stat
 import sys
@@ -80,7 +81,7 @@ def check_team(team: str, folder, inputs: dict, rules: Rules, bar=None) -> tuple
                 sub.problems.append(Problem(str(path), item, sample, "format", f"{FORMATS[formats[path]]}, where the "
                                             f"rest are {FORMATS[usual]}: give every file in one format"))  # fmt: skip
                 continue
-            sub.problems.extend(check_file(path, item, sample, inputs[item], rules))
+            sub.problems.extend(check_file(path, item, sample, inputs[item], rules, formats[path]))
             if bar is not None:
                 bar.update()
     n_files = sum(len(s) for s in sub.files.values())
@@ -98,16 +99,16 @@ def check_team(team: str, folder, inputs: dict, rules: Rules, bar=None) -> tuple
 
 
 def write_csv(path: Path, columns, rows) -> None:
-    """A CSV written whole or not at all (a temporary file beside it, then renamed)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile("w", dir=path.parent, suffix=".tmp", delete=False, newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(columns), lineterminator="\n")
-        w.writeheader()
-        w.writerows(rows)
-    os.replace(f.name, path)
+    """A CSV written whole or not at all (write_text)."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(columns), lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    write_text(path, buf.getvalue())
 
 
 def write_text(path: Path, text: str) -> None:
+    """A file written whole or not at all: a temporary file beside it, then renamed over it."""
     path.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.NamedTemporaryFile("w", dir=path.parent, suffix=".tmp", delete=False, encoding="utf-8") as f:
         f.write(text)
