@@ -60,6 +60,38 @@ class Prepared:
     extra: dict  # what else a design read beside the file (acr: metrics, the C2ST table)
 
 
+@dataclass(frozen=True)
+class Standings:
+    """A task's results as a board publishes them: what the score is, and one row per system, best first.
+
+    score: the score's short name, a table's heading ("MOS", "Elo"). about: one sentence for the reader: the scale,
+    the interval, and what decides the ranks. count: what `n` counts ("ratings" or "votes"). rows: {"system",
+    "score", "low", "high" (the interval), "n", "rank_low", "rank_high" (the rank interval), "group" (1 = best)}."""
+
+    score: str
+    about: str
+    count: str
+    rows: list
+
+
+def ranked(rows, better) -> list[dict]:
+    """`rows` ({"system", "score", "low", "high", "n"}) best score first, with rank intervals and groups where the
+    design's tests order systems: `better` holds (a, b) for each pair its test says a beats b. A system ranks at
+    best 1 + the systems decided above it and at worst K - those decided below it; groups join neighbours in score
+    order while their rank intervals overlap, as the pairwise ranking's groups do."""
+    order = sorted(rows, key=lambda r: (r["score"] is None, -(r["score"] or 0.0), r["system"]))
+    names = [r["system"] for r in order]
+    out, group, reach = [], 0, 0
+    for r in order:
+        me = r["system"]
+        low = 1 + sum((other, me) in better for other in names)
+        high = len(names) - sum((me, other) in better for other in names)
+        group += low > reach  # disjoint from every rank interval above: a new group starts
+        reach = max(reach, high)
+        out.append({**r, "rank_low": low, "rank_high": high, "group": group})
+    return out
+
+
 class Design:
     name = ""  # as moglow_eval.core.study.DESIGNS spells it
     steps = 0  # progress-bar steps of one report (0: no bar)
@@ -104,6 +136,11 @@ class Design:
 
     def console(self, counts: dict, kept: dict, everyone: dict) -> str:
         """The summary printed on stdout."""
+        raise NotImplementedError
+
+    def standings(self, doc: dict) -> Standings:
+        """The results a board publishes (analysis.board), read from the report's stats.json `doc` (its primary
+        analysis, with the rater exclusion). KeyError, TypeError or ValueError where `doc` is not this design's."""
         raise NotImplementedError
 
 

@@ -91,3 +91,10 @@ def methods_paragraph(design, rows, kept, counts, options) -> str:
     parts[-1] += f", of the stimulus manifest {mh[:16]}." if mh else "."
     parts.append(f"Analysed with moglow-eval {tool_version()}.")
     return " ".join(parts)
+
+
+def methods_outline(design) -> str:
+    """What a study of `design` asks and how it is analysed, in the paragraph's words, from the design alone: no
+    number and no condition of the data, for a page that may not show results yet (a challenge's board before it
+    publishes)."""
+    return f"Raters {design.methods_task}. The statistics are {design.methods_stats}."

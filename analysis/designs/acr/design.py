@@ -20,7 +20,7 @@ from ...page import figures
 from ...page.report_html import records
 from ...page.study_text import rename_c2st, rename_reference
 from ...stats import agreement, anova, bootstrap, rating_models, style
-from ..base import MIXED_MAX_LEVELS, ORDINAL_MAX_RATINGS, Design, Prepared
+from ..base import MIXED_MAX_LEVELS, ORDINAL_MAX_RATINGS, Design, Prepared, Standings, ranked
 from . import sections
 
 
@@ -274,3 +274,21 @@ class Acr(Design):
 
     def console(self, counts, kept, everyone):
         return sections.console_summary(counts, kept, everyone)
+
+    def standings(self, doc):
+        summary, counts = doc["condition_summary"], doc["condition_counts"]
+        rows = [
+            {"system": c, "score": m, "low": summary[c]["boot_low"], "high": summary[c]["boot_high"], "n": counts[c]}
+            for c, m in doc["condition_means"].items()
+        ]
+        # Tukey's rows: meandiff = mean(group2) - mean(group1); a rejected pair is ordered by its sign.
+        better = {
+            (t["group2"], t["group1"]) if t["meandiff"] > 0 else (t["group1"], t["group2"])
+            for t in doc["tukey"]
+            if t["reject"]
+        }
+        about = (
+            "The mean opinion score (1 = bad, 5 = excellent) with its 95% cluster-bootstrap interval (raters and "
+            "clips resampled). A system ranks above another only where Tukey's HSD tells them apart."
+        )
+        return Standings("MOS", about, "ratings", ranked(rows, better))

@@ -5,7 +5,7 @@ from moglow_eval.core import study
 
 from ...page import design_figures
 from ...page.report_html import table
-from ..base import FailedCatchDesign
+from ..base import FailedCatchDesign, Standings, ranked
 from ..pairwise import preference
 from . import mas
 
@@ -65,6 +65,27 @@ class Appropriateness(FailedCatchDesign):
             "(ties dropped), Holm</h3>",
             table(res["mas"], ("p", "p_holm")),
         ]
+
+    short = "MAS"  # the score's short name, a board's column heading
+
+    def standings(self, doc):
+        rows = [
+            {"system": c, "score": m["mas"], "low": m["ci_low"], "high": m["ci_high"], "n": m["n"]}
+            for c, m in doc["mas"].items()
+        ]
+        # The report tests each system against chance, not against each other: two systems are ordered only where
+        # their intervals do not overlap, a conservative order.
+        better = {
+            (a["system"], b["system"])
+            for a in rows
+            for b in rows
+            if a["low"] is not None and b["high"] is not None and a["low"] > b["high"]
+        }
+        about = (
+            f"{self.heading}, with its 95% Student-t interval. A system ranks above another only where their "
+            "intervals do not overlap (the report tests each system against chance, not against each other)."
+        )
+        return Standings(self.short, about, "votes", ranked(rows, better))
 
     def console_lines(self, kept):
         lines = [f"{'system':<14}{'n':>6}{'MAS':>8}{'95% interval':>18}{'matched %':>11}{'p (Holm)':>10}"]

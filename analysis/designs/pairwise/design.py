@@ -11,7 +11,7 @@ from ...data.load import AnalysisError
 from ...page import design_figures
 from ...page.report_html import table
 from ..appropriateness import mas
-from ..base import FailedCatchDesign
+from ..base import FailedCatchDesign, Standings
 from . import elo_ranks, partisans, preference, reasons, rounds
 
 
@@ -153,6 +153,31 @@ class Pairwise(FailedCatchDesign):
             *ranking_html(res),
             *self._votes_html(res),
         ]
+
+    def standings(self, doc):
+        votes = {}
+        for p in doc["pairwise"]:
+            for c in (p["condition_a"], p["condition_b"]):
+                votes[c] = votes.get(c, 0) + p["n"]
+        rows = [
+            {
+                "system": r["condition"],
+                "score": r["elo"],
+                "low": r["elo_low"],
+                "high": r["elo_high"],
+                "n": votes.get(r["condition"], 0),
+                "rank_low": int(r["rank_low"]),
+                "rank_high": int(r["rank_high"]),
+                "group": int(r["group"]),
+            }
+            for r in doc["ranking"]  # strongest first
+        ]
+        about = (
+            "The Bradley-Terry strength on the Elo scale (400 points per factor of ten in the odds of winning, "
+            f"{doc['bradley_terry_fit']['reference']} at 1000) with its 95% bootstrap interval (raters resampled). "
+            "Rank intervals come from the same bootstrap."
+        )
+        return Standings("Elo", about, "votes", rows)
 
     def console_lines(self, kept):
         lines = [f"{'pair':<18}{'wins':>6}{'ties':>6}{'losses':>8}{'sign p (Holm)':>15}"]

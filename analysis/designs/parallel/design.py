@@ -6,7 +6,7 @@ import html
 from ...page import design_figures
 from ...page.report_html import mixed_html, table
 from ...stats import agreement
-from ..base import FailedCatchDesign
+from ..base import FailedCatchDesign, Standings, ranked
 from . import mushra
 
 
@@ -61,6 +61,24 @@ class Parallel(FailedCatchDesign):
             mixed_html(res["mixed"]),
             f"<h3>Rater agreement</h3><p>{html.escape(agreement.agreement_text(res['agreement']))}</p>",
         ]
+
+    def standings(self, doc):
+        summary, counts = doc["condition_summary"], doc["condition_counts"]
+        rows = [
+            {"system": c, "score": m, "low": summary[c]["mean_low"], "high": summary[c]["mean_high"], "n": counts[c]}
+            for c, m in doc["condition_means"].items()
+        ]
+        means = doc["condition_means"]  # a pair the test tells apart is ordered by the score the board shows
+        better = {
+            (w["group2"], w["group1"]) if means[w["group2"]] > means[w["group1"]] else (w["group1"], w["group2"])
+            for w in doc["wilcoxon"]
+            if w["reject"] and means[w["group2"]] != means[w["group1"]]
+        }
+        about = (
+            "The mean rating (0 to 100) with its 95% bootstrap interval (raters resampled). A system ranks above "
+            "another only where the Wilcoxon signed-rank test on page-paired ratings (Holm-adjusted) tells them apart."
+        )
+        return Standings("mean rating", about, "ratings", ranked(rows, better))
 
     def console_lines(self, kept):
         s = kept["summary"]

@@ -16,6 +16,7 @@ class Semantic(Appropriateness):
         "the mean semantic alignment score with Student-t intervals and sign tests against chance, Holm-adjusted"
     )
     score = "mean semantic alignment score"
+    short = "alignment score"
     heading = (
         "Mean semantic alignment score (+2 = the motion made for this utterance clearly preferred, -2 = the "
         "one made for another; 0 = chance)"
