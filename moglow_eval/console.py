@@ -7,6 +7,7 @@ Each command is the part's own `python -m` main, given the rest of the arguments
     moglow-eval serve ...     = python -m rating_app serve ...    (also simulate, export, backup, restore)
     moglow-eval report ...    = python -m analysis.report ...
     moglow-eval plan ...      = python -m analysis.plan ...
+    moglow-eval board ...     = python -m analysis.board ...      (the results published as a static site)
     moglow-eval demo ...      = python -m analysis.demo ...
 
 This package sits above the five parts (docs/ARCHITECTURE.md): it may import any of them, and none imports it.
@@ -54,6 +55,12 @@ def _plan(args):
     return run(args)
 
 
+def _board(args):
+    from analysis.board import main as run
+
+    return run(args)
+
+
 def _demo(args):
     from analysis.demo import main as run
 
@@ -67,6 +74,7 @@ COMMANDS = {
     **{c: _app(c) for c in APP_COMMANDS},
     "report": _report,
     "plan": _plan,
+    "board": _board,
     "demo": _demo,
 }
 

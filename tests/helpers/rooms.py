@@ -6,5 +6,5 @@ README layout test checks that ARCHITECTURE names every room."""
 ROOMS = {
     "generation": ("motion", "data", "metrics", "models", "training", "sampling", "stimuli", "own_study", "challenge"),
     "rating_app": ("store", "guard", "media", "pairing", "designs", "trials", "operations", "web", "simulate"),
-    "analysis": ("data", "stats", "page", "designs"),
+    "analysis": ("data", "stats", "page", "designs", "board"),
 }

@@ -47,6 +47,7 @@ CONSOLE = {
     **{c: ("rating_app.__main__", [c]) for c in ("serve", "simulate", "export", "backup", "restore")},
     "report": ("analysis.report", []),
     "plan": ("analysis.plan", []),
+    "board": ("analysis.board", []),
     "demo": ("analysis.demo", []),
 }
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
