@@ -22,7 +22,9 @@ from .designs import Options, design_of
 from .designs.base import MIXED_MAX_LEVELS, ORDINAL_MAX_RATINGS
 from .page import report_html
 from .page.methods import methods_paragraph
+from .page.samples_text import samples_console, samples_html, samples_sentence
 from .page.study_text import reference_from_study_file
+from .stats.samples import sample_scores, sample_spread
 
 
 def _prepare_out(out):
@@ -134,6 +136,7 @@ def build_report(ratings_path, out_dir="report", options: Options | None = None,
         bar.close()  # leave=False: the bar disappears, the error line stands alone
         raise AnalysisError(f"{ratings_path}: {exc}") from None
     figs = design.figures(data, kept, everyone, out / "figures")
+    spread = sample_spread(sample_scores(data.kept))  # a stochastic system's samples (CONTRACTS §4); else empty
     meta = {
         **design.stats_head(),
         "input": str(ratings_path),
@@ -144,20 +147,27 @@ def build_report(ratings_path, out_dir="report", options: Options | None = None,
     }
     note = shortfall_note(data.counts["n_raters_total"], target)
     methods = methods_paragraph(design, data.rows, data.kept, data.counts, options)
+    methods = " ".join(filter(None, [methods, samples_sentence(spread)]))
     (out / "methods.txt").write_text(methods + "\n", encoding="utf-8")
     body = design.html(meta, data.counts, kept, everyone, figs)
+    if not spread.empty:
+        body.append(samples_html(spread))
     body.append(f"<h2>Methods, for a paper</h2><p class=methods>{html.escape(methods)}</p>")
     if note:  # right under the title, before any figure is read
         body.insert(1, f"<p class=warn>{html.escape(note)}</p>")
     page = report_html.page(body)
     (out / "report.html").write_text(page, encoding="utf-8")
     extra = {} if target is None else {TARGET_COLUMN: target, "notes": [note] if note else []}
+    if not spread.empty:
+        extra["samples"] = report_html.records(spread)
     doc = report_html.clean({**meta, **data.counts, **extra, **design.stats_json(kept, everyone), "methods": methods})
     (out / "stats.json").write_text(json.dumps(doc, indent=1, allow_nan=False), encoding="utf-8")
     bar.update(bar.total - bar.n)
     bar.close()
     if not quiet:
         print(design.console(data.counts, kept, everyone))
+        if not spread.empty:
+            print("\n" + samples_console(spread))
         if note:
             print(f"\n{note}")
         print(f"\nReport: {out / 'report.html'}  ({time.perf_counter() - t0:.1f} s)")

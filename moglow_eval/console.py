@@ -9,6 +9,7 @@ Each command is the part's own `python -m` main, given the rest of the arguments
     moglow-eval plan ...      = python -m analysis.plan ...
     moglow-eval board ...     = python -m analysis.board ...      (the results published as a static site)
     moglow-eval demo ...      = python -m analysis.demo ...
+    moglow-eval challenge-demo ... = python -m analysis.challenge_demo ...   (a whole challenge, inputs to board)
 
 This package sits above the five parts (docs/ARCHITECTURE.md): it may import any of them, and none imports it.
 """
@@ -67,6 +68,12 @@ def _demo(args):
     return run(args)
 
 
+def _challenge_demo(args):
+    from analysis.challenge_demo import main as run
+
+    return run(args)
+
+
 APP_COMMANDS = ("serve", "simulate", "export", "backup", "restore")
 COMMANDS = {
     "stimuli": _stimuli,
@@ -76,6 +83,7 @@ COMMANDS = {
     "plan": _plan,
     "board": _board,
     "demo": _demo,
+    "challenge-demo": _challenge_demo,
 }
 
 

@@ -113,10 +113,15 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
     from .media.videos import VideoStore
     from .operations import health
     from .store.db import make_read_engine
+    from .store.samples import group as group_samples
+    from .store.samples import standing
 
     manifest = values["RATING_MANIFEST"]
     design = designs.get(app.config["STUDY_DESIGN"])
-    clips = design.serving_clips(load_manifest(manifest, check_files=check_files))
+    # A stochastic system's samples (pairing/samples.py): the balancing counts the clip that stands for them; every
+    # sample is a clip of the database and its video is served.
+    every, samples = group_samples(design.serving_clips(load_manifest(manifest, check_files=check_files)))
+    clips = standing(every)
     units = design.build_units(clips)
     app.config["STUDY_SOUND"] = any(c.audio for c in clips)  # the page plays sound and checks the rater hears
     # The interlocutor's colour as the renderer drew it (study.json), which the rater's page names; None: unnamed.
@@ -126,7 +131,7 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
     engine = _open_database(
         values["DATABASE_URL"],
         values["DB_POOL_SIZE"],
-        clips,
+        every,
         design.name,
         design.cover_keys(clips, units),
         target_raters(design.pool(clips, units)[0], app.config),
@@ -136,10 +141,12 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
         "manifest": Path(manifest).resolve(),
         "engine": engine,
         "read_engine": make_read_engine(engine),
-        "clips": {c.clip_id: c for c in clips},
+        "clips": {c.clip_id: c for c in every},
+        "samples": samples,
+        "sample_seed": _sample_seed(engine),
         # With VIDEO_ACCEL the proxy sends the bytes: no video is read into a worker's memory.
         "videos": VideoStore(
-            clips,
+            every,
             Path(manifest).resolve().parent,
             preload=check_files and values["VIDEO_ACCEL"] == "off",
             cache_bytes=values["VIDEO_CACHE_MB"] * 2**20,
@@ -161,6 +168,16 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
     )
     if pool:
         health.of_app(app).add("catch_pool", pool)
+
+
+def _sample_seed(engine) -> str:
+    """The study's sample seed (db.SAMPLE_SEED), written by the database's first start."""
+    from .store.db import SAMPLE_SEED, study_setting
+
+    with engine.connect() as conn:
+        seed = study_setting(conn, SAMPLE_SEED)
+    engine.dispose()
+    return seed
 
 
 def _open_rounds(app: Flask) -> None:

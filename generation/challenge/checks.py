@@ -8,6 +8,7 @@ file that cannot be read at all (unreadable, too large, not finite) stops there,
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -33,6 +34,15 @@ class Rules:
     max_speed: float = MAX_SPEED
     max_bone_change: float = MAX_BONE_CHANGE
     read: dict = field(default_factory=dict)
+    # GENEA 2026's rule: `samples` from a stochastic system, one file per item from a deterministic one. With it, a
+    # team whose folder holds no item folder is checked as one sample per item.
+    or_one: bool = False
+
+    def samples_of(self, folder) -> int:
+        """The samples per item a team's folder must hold."""
+        if self.or_one and not any(p.is_dir() and not p.is_symlink() for p in Path(folder).iterdir()):
+            return 1
+        return self.samples
 
 
 def file_format(path) -> str:

@@ -68,7 +68,8 @@ def read_inputs(folder) -> dict[str, float | None]:
 def check_team(team: str, folder, inputs: dict, rules: Rules, bar=None) -> tuple[Submission, dict]:
     """A team's submission and its row of the table (TEAM_COLUMNS): every problem of its layout and of its files."""
     folder = Path(folder)
-    sub = read_submission(team, folder, inputs, rules.samples)
+    samples = rules.samples_of(folder)
+    sub = read_submission(team, folder, inputs, samples)
     formats = {}
     for item, by_sample in sorted(sub.files.items()):
         for sample, path in sorted(by_sample.items()):
@@ -90,7 +91,7 @@ def check_team(team: str, folder, inputs: dict, rules: Rules, bar=None) -> tuple
         "verdict": "refused" if sub.problems else "accepted",
         "items": len(inputs),
         "items_given": len(sub.files),
-        "samples_per_item": rules.samples,
+        "samples_per_item": samples,
         "files": n_files,
         "problems": len(sub.problems),
         "format": FORMATS.get(usual, ""),
@@ -172,6 +173,8 @@ def build_parser():
     ap.add_argument("--fps", required=True, type=cli.number(float, 5, 240), help="the dataset's frame rate")
     ap.add_argument("--samples", type=cli.number(int, 1, 100), default=1,
                     help="samples per item the rules ask for (a stochastic system's; default 1)")  # fmt: skip
+    ap.add_argument("--or-one", action="store_true",
+                    help="a team of one file per item (a deterministic system) gives one sample")  # fmt: skip
     ap.add_argument("--out", default="intake", help="the reports' folder (default intake/)")
     ap.add_argument("--max-speed", type=cli.number(float, 1, 1000), default=Rules.max_speed,
                     help=f"the fastest a joint may move, m/s (default {Rules.max_speed:g})")  # fmt: skip
@@ -196,7 +199,7 @@ def _main(argv):
     read = dict(units=args.units, up=args.up, source_fps=args.source_fps, smpl_model=args.smpl_model)
     if args.skeleton:
         read["skeleton"] = Skeleton.load(args.skeleton)
-    rules = Rules(args.fps, args.samples, args.max_speed, args.max_bone_change, read)
+    rules = Rules(args.fps, args.samples, args.max_speed, args.max_bone_change, read, args.or_one)
     out = Path(args.out)
     rows, unusable = [], []
     total = len(inputs) * args.samples * len(teams)

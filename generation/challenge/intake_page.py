@@ -38,6 +38,8 @@ def _page(title: str, body: list[str]) -> str:
 
 def _rules_text(rules) -> str:
     samples = f"{rules.samples} samples per item" if rules.samples > 1 else "one file per item"
+    if rules.samples > 1 and rules.or_one:
+        samples += " (or one file per item from a deterministic system)"
     return (
         f"The rules checked: every test item, and nothing else, {samples}, all in one format the study reader takes; "
         f"{rules.fps:g} fps and the length of the item's speech within one frame; finite numbers and every frame "

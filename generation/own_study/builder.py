@@ -60,6 +60,7 @@ from .inputs import (
     match_items,
     read_all,
     read_options,
+    read_samples,
     seconds_text,
     with_study_fps,
 )
@@ -183,15 +184,19 @@ class StudyClip:
     motion_item: str = ""  # appropriateness: the other item whose motion a mismatched clip shows
     start: int = 0  # the motion's frame the clip starts at (a catch copy's: 1)
     path: str = ""  # the file its motion came from, where no condition's folder of its item holds it (dyadic)
+    sample: str = ""  # a stochastic system's sample it shows (manifest `sample`, CONTRACTS §10)
 
 
-def build_clips(spec, motions, roles, catch_items, bad, people=None):
+def build_clips(spec, motions, roles, catch_items, bad, people=None, samples=None):
     """Every clip: each item in every condition with its role; per catch item its BAD clip and copies of its clips
     in every condition with role catch; and the design's mismatched clips (designs/: appropriateness and semantic,
     each condition's motion for a partner item with this item's sound; dyadic, the motion it made for a mismatched
     interlocutor, from `people`, shown with this item's). A catch copy starts one frame
     later (its last frame held), so that no two videos of the set are the same bytes (a repeated content hash
-    would point at the catch trial)."""
+    would point at the catch trial).
+
+    `samples` (Samples): a stochastic system's clips name the sample they show; where the app draws one per rater
+    and unit, every other sample of a test item is a test clip too."""
     clips = []
     for item, role in roles.items():
         for name, by_item in motions.items():
@@ -202,7 +207,44 @@ def build_clips(spec, motions, roles, catch_items, bad, people=None):
             joints = by_item[item].joints
             clips.append(StudyClip(name, item, CATCH, np.concatenate([joints[1:], joints[-1:]]), start=1))
         clips.append(StudyClip(study.CATCH, item, CATCH, bad[item][0], bad[item][1]))
+    if samples is None:
+        return clips
+    for c in clips:
+        if c.condition in samples.drawn and not c.path:
+            c.sample = samples.drawn[c.condition][c.motion_item or c.item]
+    for name, by_item in samples.more.items():
+        for item, by_sample in by_item.items():
+            if roles[item] == TEST:
+                clips += [
+                    StudyClip(name, item, TEST, m.joints, path=str(m.path), sample=s) for s, m in by_sample.items()
+                ]
     return clips
+
+
+@dataclass
+class Samples:
+    """A study's stochastic systems: the sample drawn per item ({condition: {item: sample}}, what its training,
+    catch and mismatched clips show, and all it shows with `[samples] draw = "item"`), and with draw = "rater"
+    every other sample ({condition: {item: {sample: Motion}}})."""
+
+    drawn: dict
+    more: dict
+
+    def extra(self):
+        """Every other sample as [{item: Motion}], to be cut with its item (cut_items)."""
+        return [{item: m} for by_item in self.more.values() for item, ms in by_item.items() for m in ms.values()]
+
+
+def read_study_samples(spec, files, samples, motions, progress):
+    """The study's Samples, or None where no condition gives several samples per item."""
+    if not samples:
+        return None
+    drawn = {
+        name: {item: next(s for s, p in found.items() if p == files[name][item]) for item, found in by_item.items()}
+        for name, by_item in samples.items()
+    }
+    more = read_samples(spec, samples, files, motions[spec.reference], progress) if spec.sample_draw == "rater" else {}
+    return Samples(drawn, more)
 
 
 def skeleton_of(motions):
@@ -224,6 +266,7 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
     options = dict(hide=tuple(spec.hide), thin=None if spec.thin == "auto" else tuple(spec.thin))
     # Every clip in every style: each styled clip is a stimulus of its own, with its own random id.
     styled = [(c, style) for c in clips for style in spec.styles]
+    sampled = any(c.sample for c in clips)  # a stochastic system's: every row names its sample, if any
     for k in tqdm(rng.permutation(len(styled)), desc="clips", unit="clip", file=sys.stderr, disable=not progress):
         c, style = styled[k] if len(spec.styles) > 1 else (clips[k], spec.styles[0])
         cond, item, role, joints = c.condition, c.item, c.role, c.joints
@@ -250,11 +293,13 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
             row["audio"] = "1"
         if spec.styles != ["stick"]:
             row["style"] = style
+        if sampled:
+            row["sample"] = c.sample
         manifest.append(row)
         m = any_clip_metrics(joints, spec.fps, parents, feet)
         metrics_rows.append(dict(clip_id=cid, condition=cond, role=role, item=item, **m))
-        if c.motion_item or style != spec.styles[0]:
-            continue  # the figures are of each condition's own motion, once
+        if c.motion_item or style != spec.styles[0] or (c.sample and c.path):
+            continue  # the figures are of each condition's own motion, once (its drawn sample's)
         c2st.collect(feats, cond, role, item, joints, spec.fps, parents)
     return manifest, metrics_rows, jobs, groups, feats
 
@@ -302,16 +347,18 @@ def build_study(spec, out, size, preset, workers, force, progress):
         A sound file that cannot be read or muxed, or a render that fails.
     """
     t0 = time.perf_counter()
-    files = match_items(spec)
+    files, sampled = match_items(spec)
     spec = with_study_fps(spec, files)
     n_catch, own_catch = _catch_items(spec, files[spec.reference])
     motions = read_all(spec, files, progress)
+    samples = read_study_samples(spec, files, sampled, motions, progress)
     motions = {(study.NATURAL if n == spec.reference else n): m for n, m in motions.items()}
     sources = read_sources(spec, set(motions[study.NATURAL]))
     people = read_people_motion(spec, motions[study.NATURAL], progress, sources[1])
-    cut_items(motions, spec, people.extra())
+    cut_items(motions, spec, [*people.extra(), *(samples.extra() if samples else [])])
     if wants_mesh(spec):
-        check_mesh_inputs(spec, {**motions, **dict(enumerate(people.extra()))})  # before anything is written
+        more = [*people.extra(), *(samples.extra() if samples else [])]
+        check_mesh_inputs(spec, {**motions, **dict(enumerate(more))})  # before anything is written
     items = sorted(motions[study.NATURAL])
     roles, catch_items = assign_roles(items, spec, n_catch)
     if own_catch is not None:
@@ -321,7 +368,7 @@ def build_study(spec, out, size, preset, workers, force, progress):
         log.info(f"study: the reference condition {spec.reference} is written as {study.NATURAL} in the manifest")
     with tempfile.TemporaryDirectory() as tmp:
         # Everything is placed, framed, heard and captioned before anything is written.
-        clips = build_clips(spec, motions, roles, catch_items, bad, people)
+        clips = build_clips(spec, motions, roles, catch_items, bad, people, samples)
         lengths = {i: len(m.joints) for i, m in motions[study.NATURAL].items()}
         captions = item_captions(spec, lengths, size)
         room = CAPTION_ROOM if captions else 0.0

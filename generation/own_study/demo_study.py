@@ -52,7 +52,9 @@ def actions_dir():
     return folder if folder.is_dir() else None
 
 
-def _speak(path, text, seconds):
+def speak(path, text, seconds, exact=False):
+    """`text` spoken by espeak-ng into the WAV `path`, padded with silence to `seconds` (and, `exact`, cut to it)."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
     raw = subprocess.run(["espeak-ng", "--stdout", "-s", "165", text], capture_output=True, check=True).stdout
     tmp = path.with_suffix(".tmp.wav")
     tmp.write_bytes(raw)
@@ -60,6 +62,8 @@ def _speak(path, text, seconds):
         rate, pcm = w.getframerate(), np.frombuffer(w.readframes(w.getnframes()), "<i2")
     tmp.unlink()
     pcm = np.concatenate([pcm, np.zeros(max(0, int(seconds * rate) - len(pcm)), "<i2")])
+    if exact:
+        pcm = pcm[: int(round(seconds * rate))]
     with wave.open(str(path), "wb") as w:
         w.setnchannels(1)
         w.setsampwidth(2)
@@ -97,7 +101,7 @@ def build(out, n_items=12, appropriateness=False, seed=0):
         smooth = np.concatenate([np.repeat(smooth[:1], late, 0), smooth[:-late]])
         np.save(out / "smooth" / f"{stem}.npy", smooth.astype(np.float32))
         np.save(out / "tremble" / f"{stem}.npy", (j + rng.normal(0, 0.015, j.shape)).astype(np.float32))
-        _speak(out / "audio" / f"{stem}.wav", SENTENCES[kept % len(SENTENCES)], m.seconds + 0.5)
+        speak(out / "audio" / f"{stem}.wav", SENTENCES[kept % len(SENTENCES)], m.seconds + 0.5)
         skeleton = dict(names=m.names, parents=[int(p) for p in m.parents])
         kept += 1
     (out / "skeleton.json").write_text(json.dumps(skeleton))

@@ -9,11 +9,14 @@ file.
 import dataclasses
 import logging
 import math
+import random
 import sys
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
+
+from moglow_eval.core import study
 
 from ..data.motion_files import Skeleton, motion_stem, native_fps, read_motion
 from ..stimuli.files import StimuliError
@@ -72,9 +75,58 @@ def folder_files(name, folder):
     return found
 
 
+def condition_samples(name, folder):
+    """{item: {sample: path}} of a condition that gives several samples per item (a stochastic system): a folder
+    per item, ITEM/SAMPLE.EXT, as a challenge's intake takes them (docs/challenge.md); None for a folder of
+    ITEM.EXT files. StimuliError for a folder that mixes the two, an item without samples, a sample name that is
+    not plain, or items with different numbers of samples (every item is drawn from as many)."""
+    folder = Path(folder)
+    subs = sorted(p for p in folder.iterdir() if p.is_dir() and not p.is_symlink())
+    if not subs:
+        return None
+    flat = [p for p in folder.iterdir() if p.is_file() and motion_stem(p) is not None]
+    if flat:
+        raise StimuliError(
+            f"{flat[0]}: condition {name} has folders of samples (ITEM/SAMPLE.EXT) and files (ITEM.EXT); give "
+            "every item one way"
+        )
+    out = {}
+    for sub in subs:
+        found = folder_files(name, sub)
+        bad = next((s for s in found if not study.SAMPLE_NAME.fullmatch(s)), None)
+        if bad is not None:
+            raise StimuliError(f"{found[bad]}: sample name {bad!r} is not letters, digits, _, . or - (at most 64)")
+        out[sub.name] = found
+    counts = {len(v) for v in out.values()}
+    if len(counts) > 1:
+        fewest = min(out, key=lambda i: len(out[i]))
+        raise StimuliError(
+            f"{folder / fewest}: {len(out[fewest])} samples, where other items of condition {name} have "
+            f"{max(counts)}; give every item the same number"
+        )
+    return out
+
+
+def drawn_sample(seed, condition, item, names):
+    """The sample of `item` a condition shows where one is drawn per item: seeded by the study's seed, the
+    condition and the item alone, so that adding a condition or an item never changes another's draw."""
+    return random.Random(f"{seed}\0{condition}\0{item}").choice(sorted(names))
+
+
 def match_items(spec):
-    """{condition: {item: path}} with every condition holding exactly the reference's items."""
-    files = {name: folder_files(name, folder) for name, folder in spec.conditions.items()}
+    """({condition: {item: path}}, {condition: {item: {sample: path}}}): every condition holding exactly the
+    reference's items; a condition that gives several samples per item is in the second, and in the first with
+    the sample drawn for each item (drawn_sample), which its training, catch and mismatched clips show."""
+    files, samples = {}, {}
+    for name, folder in spec.conditions.items():
+        by_item = condition_samples(name, folder)
+        if by_item is None:
+            files[name] = folder_files(name, folder)
+            continue
+        if name == spec.reference:
+            raise StimuliError(f"{folder}: the reference {name} is real motion, one file per item (ITEM.EXT)")
+        samples[name] = by_item
+        files[name] = {i: found[drawn_sample(spec.seed, name, i, found)] for i, found in by_item.items()}
     items = files[spec.reference]
     for name, found in files.items():
         missing = [i for i in items if i not in found]
@@ -88,7 +140,7 @@ def match_items(spec):
             raise StimuliError(
                 f"{found[extra[0]]}: item {extra[0]} is not in the reference folder {spec.conditions[spec.reference]}"
             )
-    return files
+    return files, samples
 
 
 # ---------------------------------------------------------------- reading and checking
@@ -99,21 +151,46 @@ def read_all(spec, files, progress):
     motions = {name: {} for name in files}
     with tqdm(jobs, desc="read", unit="file", file=sys.stderr, disable=not progress) as bar:
         for k, (name, item, path) in enumerate(bar):
-            m = read_motion(path, **read)
+            m = _read_checked(spec, path, read)
             if k == 0:
                 check_joint_names(spec, m.names, path)
-            if m.seconds < MIN_SECONDS:
-                raise StimuliError(f"{path}: {seconds_text(m.seconds)} long; a clip needs at least {MIN_SECONDS:g} s")
-            if spec.length_s and m.seconds + 0.5 / spec.fps < spec.length_s:
-                raise StimuliError(
-                    f"{path}: {seconds_text(m.seconds)} long, shorter than the study's length_s {spec.length_s:g}"
-                )
             motions[name][item] = m
     ref = motions[spec.reference]
     for by_item in motions.values():
         for item, m in by_item.items():
             check_same_skeleton(m, ref[item])
     return motions
+
+
+def read_samples(spec, samples, files, ref, progress):
+    """{condition: {item: {sample: Motion}}} of every sample that `files` does not already hold (the drawn one),
+    for a study that draws a sample per rater and unit: each read and checked as the drawn ones are, against the
+    reference's skeleton `ref` ({item: Motion})."""
+    read = read_options(spec)
+    jobs = [
+        (name, item, sample, path)
+        for name, by_item in samples.items()
+        for item, found in by_item.items()
+        for sample, path in found.items()
+        if path != files[name][item]
+    ]
+    out = {name: {item: {} for item in by_item} for name, by_item in samples.items()}
+    for name, item, sample, path in tqdm(jobs, desc="samples", unit="file", file=sys.stderr, disable=not progress):
+        m = _read_checked(spec, path, read)
+        check_same_skeleton(m, ref[item])
+        out[name][item][sample] = m
+    return out
+
+
+def _read_checked(spec, path, read):
+    m = read_motion(path, **read)
+    if m.seconds < MIN_SECONDS:
+        raise StimuliError(f"{path}: {seconds_text(m.seconds)} long; a clip needs at least {MIN_SECONDS:g} s")
+    if spec.length_s and m.seconds + 0.5 / spec.fps < spec.length_s:
+        raise StimuliError(
+            f"{path}: {seconds_text(m.seconds)} long, shorter than the study's length_s {spec.length_s:g}"
+        )
+    return m
 
 
 def check_valid(m, n):

@@ -84,7 +84,9 @@ TOP_KEYS = {
     "interlocutor",
     "mismatched",
     "captions",
+    "samples",
 }
+SAMPLE_DRAWS = ("item", "rater")  # a stochastic system's samples: one per item, or one per rater and unit (the app)
 RENDER_KEYS = {"view", "framing", "style", "face"}
 FACES = ("mask", "none")  # the mesh style's face: a plain mask over it (GENEA 2026), or the mesh's own
 AUDIO_KEYS = {"folder", "loudness", "interlocutor", "channels"}
@@ -136,6 +138,7 @@ class StudySpec:
     captions: Path | None = None  # the agent's transcripts
     interlocutor_captions: Path | None = None
     keywords: Path | None = None
+    sample_draw: str = "item"  # a condition with several samples per item (ITEM/SAMPLE.EXT): SAMPLE_DRAWS
 
 
 def read_study_file(path):
@@ -195,6 +198,7 @@ def read_study_file(path):
     _skeleton(path, data.get("skeleton", {}), spec)
     _audio(path, data.get("audio"), spec)
     _render(path, data.get("render", {}), spec)
+    _samples(path, data.get("samples", {}), spec)
     read_people_keys(path, data, spec)
     check_needs(path, spec)
     return spec
@@ -332,6 +336,17 @@ def _render(path, table, spec):
     if face not in FACES:
         raise err(path, "[render] face", f"must be {' or '.join(FACES)}, got {face!r}")
     spec.face = face
+
+
+def _samples(path, table, spec):
+    """[samples] draw: how a condition that gives several samples per item (a stochastic system) is shown."""
+    if not isinstance(table, dict):
+        raise err(path, "[samples]", "must be a table")
+    unknown(path, "samples", table, {"draw"})
+    draw = table.get("draw", "item")
+    if draw not in SAMPLE_DRAWS:
+        raise err(path, "[samples] draw", f"must be {' or '.join(map(repr, SAMPLE_DRAWS))}, got {draw!r}")
+    spec.sample_draw = draw
 
 
 def check_joint_names(spec, names, where):

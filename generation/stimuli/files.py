@@ -123,8 +123,8 @@ def write_tables(out, manifest, metrics_rows, fmd):
     # A study of your own motion may also say which item's motion each clip shows (appropriateness) and that its
     # videos carry sound (CONTRACTS §10).
     # The built-in study says which clips' bones were set to the actor's (generation.motion.rigid). A study drawn in
-    # more than one style says each clip's ([render] style).
-    extra = [c for c in ("motion_item", "audio", "postprocess", "style") if any(c in row for row in manifest)]
+    # more than one style says each clip's ([render] style), and one with a stochastic system each clip's sample.
+    extra = [c for c in ("motion_item", "audio", "postprocess", "style", "sample") if any(c in row for row in manifest)]
     write_csv(out / "manifest.csv", MANIFEST_COLUMNS + extra, manifest)
     write_csv(
         out / "metrics.csv",

@@ -55,6 +55,9 @@ INTERLOCUTOR_COLOUR = "interlocutor_colour"
 # A condition's name as a user gives it (an imported system, a study file's condition): short, and safe in a file
 # name, a CSV cell, an HTML page and a figure label. Always fullmatch.
 CONDITION_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,31}")
+# A stochastic system's sample of an item (the manifest's `sample`, CONTRACTS §4): its file's name in the team's
+# ITEM/ folder. Exported, never shown to a rater.
+SAMPLE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
 
 
 def condition_order(conditions):

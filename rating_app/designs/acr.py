@@ -12,14 +12,16 @@ from moglow_eval.core import study
 
 from ..guard.bodies import int_field
 from ..pairing.assign import NO_TARGET, StudyFull, claim, cover, n_catch_slots, short_or_full, slots
-from ..store.db import Clip, Cover, Rater, Rating, Trial
+from ..store.db import STANDING_CLIP, Clip, Cover, Rater, Rating, Trial
 from .base import Design, new_condition_row
 from .export_cells import RATER_EXTRA, TAIL, common
 
 # The clips a slot of each kind draws from: test clips, or the bad examples among the catch clips. One statement
 # for both kinds, so that their timing matches.
 _ROLE_CLIPS = select(Clip.clip_id).where(
-    Clip.role == bindparam("role"), or_(Clip.role != "catch", Clip.condition == study.CATCH)
+    Clip.role == bindparam("role"),
+    or_(Clip.role != "catch", Clip.condition == study.CATCH),
+    STANDING_CLIP,  # a stochastic system's clip once, by the clip that stands for its samples
 )
 
 
@@ -150,7 +152,7 @@ def iter_rows(s):
     q = (
         select(
             Rater.rater_id,
-            Rating.clip_id,
+            func.coalesce(Trial.sample_clip, Rating.clip_id),  # the clip shown: a stochastic system's drawn sample
             Clip.condition,
             Rating.rating,
             Clip.role,
@@ -177,7 +179,7 @@ def progress_tables(s, target) -> dict:
     """The dashboard's figures of an acr study: per clip, per condition, and each rater's ratings and failures."""
     clips = s.execute(
         select(Clip.clip_id, Clip.condition, Clip.role, Clip.item)
-        .where(Clip.role != "training", (Clip.role != "catch") | (Clip.condition == study.CATCH))
+        .where(Clip.role != "training", (Clip.role != "catch") | (Clip.condition == study.CATCH), STANDING_CLIP)
         .order_by(Clip.role, Clip.condition, Clip.clip_id)
     ).all()
     # One pass over the ratings: count and sum per clip (condition means come from the exact sums).

@@ -67,6 +67,26 @@ def clip_styles(s) -> dict[str, str]:
     return styles
 
 
+# A stochastic system's samples (CONTRACTS §4, §6): the sample each clip column's clip shows.
+SAMPLE_COLUMNS = {"clip_id": "sample", "clip_a": "sample_a", "clip_b": "sample_b"}
+
+
+def clip_samples(s) -> dict[str, str]:
+    """{clip_id: sample} of the study's clips that name a sample; empty when none does, and the export then has no
+    sample column."""
+    return {c: name for c, name in s.execute(select(Clip.clip_id, Clip.sample)) if name}
+
+
+def sample_columns(columns) -> list[str]:
+    """The sample columns of an export with these columns: one per column that names a clip."""
+    return [SAMPLE_COLUMNS[c] for c in CLIP_COLUMNS if c in columns]
+
+
+def row_samples(row: dict, samples: dict[str, str]) -> dict[str, str]:
+    """The sample cells of a row: the sample its clip, or each of its clips, shows ("" for a clip without one)."""
+    return {SAMPLE_COLUMNS[c]: samples.get(row.get(c) or "", "") for c in CLIP_COLUMNS if c in row}
+
+
 def row_style(row: dict, styles: dict[str, str]) -> str:
     """The style of the clips a row names: one style, or the distinct ones joined by `/` in the row's clip order
     (a pair of clips drawn in different styles)."""

@@ -20,7 +20,15 @@ from moglow_eval.core import study
 from moglow_eval.core.user_files import defuse
 
 from ..designs import get
-from ..designs.export_cells import EXCLUDED, clip_styles, row_style, with_flag
+from ..designs.export_cells import (
+    EXCLUDED,
+    clip_samples,
+    clip_styles,
+    row_samples,
+    row_style,
+    sample_columns,
+    with_flag,
+)
 from ..store.db import TARGET_RATERS, study_design, study_setting
 
 # A CSV cell that no spreadsheet evaluates: the rule every CSV this project writes from a user's text follows.
@@ -44,11 +52,16 @@ def export_csv(engine: Engine, out=None) -> str | int:
         # A manifest with a style column (CONTRACTS §4): every row says how its clips were drawn (§7).
         styles = clip_styles(s)
         style_col = ["style"] if styles else []
-        w = csv.DictWriter(buf, fieldnames=[*design.columns, *style_col, *extra], lineterminator="\n")
+        # A stochastic system's samples (CONTRACTS §4): the sample behind each clip of a row (§6).
+        samples = clip_samples(s)
+        sample_cols = sample_columns(design.columns) if samples else []
+        w = csv.DictWriter(buf, fieldnames=[*design.columns, *style_col, *sample_cols, *extra], lineterminator="\n")
         w.writeheader()
         for row in flagged(design, design.export_rows(s)):
             if styles:
                 row = {**row, "style": row_style(row, styles)}
+            if samples:
+                row = {**row, **row_samples(row, samples)}
             w.writerow({k: cell(v) for k, v in {**row, **extra}.items()})
             n += 1
     return n if out is not None else buf.getvalue()

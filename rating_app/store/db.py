@@ -15,11 +15,9 @@ migration change side by side.
 
 from __future__ import annotations
 
-import contextlib
 import datetime as dt
-import fcntl
 import os
-from pathlib import Path
+import secrets
 
 from flask import current_app
 from sqlalchemy import (
@@ -37,9 +35,8 @@ from sqlalchemy import (
     create_engine,
     event,
     func,
-    inspect,
+    or_,
     select,
-    text,
 )
 from sqlalchemy.engine import Engine, make_url
 from sqlalchemy.exc import ArgumentError
@@ -48,6 +45,7 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 from moglow_eval.core import study
 
 from .manifest import AppError
+from .schema import add_missing_columns, init_lock
 from .settings import SETTINGS
 
 DEFAULT_DB = "sqlite:///ratings.sqlite"
@@ -74,6 +72,10 @@ class Clip(Base):
     motion_item: Mapped[str | None] = mapped_column(String(128), nullable=True, default="")
     # how the body is drawn (manifest `style`, CONTRACTS §4); "" or NULL when the manifest has no style column
     style: Mapped[str | None] = mapped_column(String(16), nullable=True, default="")
+    # a stochastic system's sample (manifest `sample`), and the clip that stands for its samples in the balancing
+    # (pairing/samples.py): "" or NULL without samples
+    sample: Mapped[str | None] = mapped_column(String(64), nullable=True, default="")
+    sample_of: Mapped[str | None] = mapped_column(String(64), nullable=True, default="")
 
 
 class Rater(Base):
@@ -127,6 +129,9 @@ class Trial(Base):
     released: Mapped[bool] = mapped_column(Boolean, default=False)
     # pairwise / parallel: the unit (designs.Unit.key) the slot got when served; its clips are TrialClip rows.
     unit: Mapped[str | None] = mapped_column(String(400), nullable=True, index=True)
+    # acr, a stochastic system's clip: the sample drawn for this rater (pairing/samples.py), which the trial shows
+    # and its rating names; NULL where the clip has no other samples. (A unit's clips are the drawn samples.)
+    sample_clip: Mapped[str | None] = mapped_column(String(64), nullable=True)
 
 
 class TrialClip(Base):
@@ -198,6 +203,9 @@ class PageRating(Base):
 # The StudySetting (and export column) holding how many raters fill the study as the app was last started
 # (create_app's target_raters): analysis.report notes an export from fewer raters than that (CONTRACTS §6).
 TARGET_RATERS = "target_raters"
+# The secret that seeds each rater's draw of a stochastic system's sample (pairing/samples.py): written by the
+# first start and kept, so that a restart draws as before.
+SAMPLE_SEED = "sample_seed"
 
 
 class StudySetting(Base):
@@ -269,6 +277,8 @@ class Cover(Base):
 
 # A trial's Cover key: its clip (acr) or its unit (pairwise, parallel); a served test or catch trial has exactly one.
 COVER_KEY = func.coalesce(Trial.clip_id, Trial.unit)
+# A clip the balancing counts: every clip but the other samples of a stochastic system's clip (store/samples.py).
+STANDING_CLIP = or_(Clip.sample_of.is_(None), Clip.sample_of == "", Clip.sample_of == Clip.clip_id)
 COVERED_KINDS = ("test", "catch")  # trials counted in Cover (training trials are shown to everyone)
 
 
@@ -379,56 +389,6 @@ def make_engine(url: str | None = None, pool_size: int = SETTINGS["DB_POOL_SIZE"
     return create_engine(url, pool_size=pool, max_overflow=pool, pool_recycle=1800)
 
 
-@contextlib.contextmanager
-def _init_lock(engine: Engine):
-    """Serialise schema creation between processes starting at once (gunicorn workers)."""
-    if is_sqlite(engine):
-        db = make_url(str(engine.url)).database
-        if not db or db == ":memory:":
-            yield
-            return
-        with open(str(Path(db)) + ".init-lock", "w") as fh:
-            fcntl.flock(fh, fcntl.LOCK_EX)
-            try:
-                yield
-            finally:
-                fcntl.flock(fh, fcntl.LOCK_UN)
-    else:
-        with engine.connect() as conn:
-            conn.execute(text("SELECT pg_advisory_lock(715517)"))
-            try:
-                yield
-            finally:
-                conn.execute(text("SELECT pg_advisory_unlock(715517)"))
-                conn.commit()
-
-
-# Columns added since the first schema: (table, column, type); a database made before them gets them, NULL.
-ADDED_COLUMNS = (
-    ("trials", "unit", "VARCHAR(400)"),  # the designs: NULL, as for every acr trial
-    ("trials", "video_ranges", "VARCHAR(400)"),  # bytes sent (CONTRACTS §5); NULL = none recorded
-    ("trial_clips", "video_ranges", "VARCHAR(400)"),
-    ("clips", "motion_item", "VARCHAR(128)"),  # appropriateness: NULL for every clip of an older study
-    ("clips", "style", "VARCHAR(16)"),  # the manifest's style: NULL for every clip of an older study
-    ("raters", "audio_sample", "VARCHAR(64)"),  # the sound check
-    ("raters", "audio_tries", "INTEGER"),
-    ("raters", "audio_passed_at", "TIMESTAMP"),
-    ("preferences", "round", "INTEGER"),  # votes stored before rounds: NULL, exported as round 1
-    ("preferences", "reasons", "VARCHAR(500)"),
-    ("preferences", "reason_text", "TEXT"),
-)
-
-
-def _add_missing_columns(engine: Engine) -> None:
-    """Add the ADDED_COLUMNS a database made before them lacks."""
-    insp = inspect(engine)
-    have = {t: {c["name"] for c in insp.get_columns(t)} for t in {t for t, _, _ in ADDED_COLUMNS}}
-    for table, column, kind in ADDED_COLUMNS:
-        if column not in have[table]:
-            with engine.begin() as conn:
-                conn.execute(text(f"ALTER TABLE {table} ADD COLUMN {column} {kind}"))
-
-
 def study_setting(conn, name: str) -> str | None:
     """A StudySetting's value, or None when the database has none of that name."""
     return conn.execute(select(StudySetting.value).where(StudySetting.name == name)).scalar()
@@ -451,12 +411,25 @@ def _add_cover_rows(session, keys) -> None:
         session.add_all(Cover(key=k, answered=counts.get(k, (0, 0))[0], held=counts.get(k, (0, 0))[1]) for k in missing)
 
 
-CLIP_COLUMNS = ("clip_id", "condition", "role", "item", "frames", "fps", "motion_item", "style")  # from the manifest
+# from the manifest (and pairing/samples.py's sample_of)
+CLIP_COLUMNS = ("clip_id", "condition", "role", "item", "frames", "fps", "motion_item", "style", "sample", "sample_of")
 
 
 def clip_row(c) -> Clip:
     """The Clip row of a manifest clip (manifest.ManifestClip)."""
     return Clip(**{k: getattr(c, k) for k in CLIP_COLUMNS})
+
+
+def _upsert_clips(s, clips) -> None:
+    """The manifest's clips as Clip rows: new ones added, known ones updated."""
+    have = {c.clip_id: c for c in s.scalars(select(Clip))}
+    for c in clips:
+        row = have.get(c.clip_id)
+        if row is None:
+            s.add(clip_row(c))
+        else:
+            for k in CLIP_COLUMNS[1:]:
+                setattr(row, k, getattr(c, k))
 
 
 def init_db(engine: Engine, clips=None, design: str | None = None, cover_keys=None, settings=None) -> None:
@@ -466,9 +439,9 @@ def init_db(engine: Engine, clips=None, design: str | None = None, cover_keys=No
     rows that follow the app's configuration, written at every start (the design is written once)."""
     from sqlalchemy.orm import Session
 
-    with _init_lock(engine):
+    with init_lock(engine):
         Base.metadata.create_all(engine)
-        _add_missing_columns(engine)
+        add_missing_columns(engine)
         with Session(engine) as s, s.begin():
             if s.get(Lock, "assign") is None:
                 s.add(Lock(name="assign"))
@@ -484,15 +457,10 @@ def init_db(engine: Engine, clips=None, design: str | None = None, cover_keys=No
                     )
                 if s.get(StudySetting, "design") is None:
                     s.add(StudySetting(name="design", value=design))
+            if s.get(StudySetting, SAMPLE_SEED) is None:
+                s.add(StudySetting(name=SAMPLE_SEED, value=secrets.token_hex(16)))
             if clips:
-                have = {c.clip_id: c for c in s.scalars(select(Clip))}
-                for c in clips:
-                    row = have.get(c.clip_id)
-                    if row is None:
-                        s.add(clip_row(c))
-                    else:
-                        for k in CLIP_COLUMNS[1:]:
-                            setattr(row, k, getattr(c, k))
+                _upsert_clips(s, clips)
             if cover_keys:
                 _add_cover_rows(s, cover_keys)
             for name, value in (settings or {}).items():

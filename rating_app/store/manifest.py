@@ -30,6 +30,8 @@ class ManifestClip:
     motion_item: str = ""  # appropriateness: the other item whose motion this clip shows (CONTRACTS §10)
     audio: bool = False  # the video carries sound (a study with [audio], CONTRACTS §10)
     style: str = ""  # how the body is drawn (a study with [render] style, CONTRACTS §4): exported, never served
+    sample: str = ""  # a stochastic system's sample (CONTRACTS §4): exported, never served
+    sample_of: str = ""  # the clip that stands for this clip's samples (pairing/samples.py); "" without samples
 
     @property
     def duration_ms(self) -> int | None:
@@ -96,6 +98,9 @@ def clip_from_row(row: dict, where: str, base: Path, check_files: bool) -> Manif
         raise AppError(f"{where}: video {row['video']!r} leaves the stimulus folder {base}")
     if check_files and not video.is_file():
         raise AppError(f"{where}: video {row['video']!r} not found ({video})")
+    sample = (row.get("sample") or "").strip()
+    if sample and not study.SAMPLE_NAME.fullmatch(sample):
+        raise AppError(f"{where}: sample {sample!r} is not a sample name {study.SAMPLE_NAME.pattern}")
     return ManifestClip(
         clip_id=cid,
         condition=condition,
@@ -107,6 +112,7 @@ def clip_from_row(row: dict, where: str, base: Path, check_files: bool) -> Manif
         motion_item=(row.get("motion_item") or "").strip()[:128],
         audio=(row.get("audio") or "").strip() == "1",
         style=(row.get("style") or "").strip()[:16],
+        sample=sample,
     )
 
 

@@ -16,6 +16,8 @@ import threading
 from flask import current_app
 from sqlalchemy import select
 
+from . import samples
+
 # Its tables are db.py's, with the rest of the schema, so that the schema never depends on which modules were imported.
 from .db import StudyCondition, StudyManifest, StudySetting, study_setting
 from .manifest import AppError, load_manifest
@@ -66,10 +68,10 @@ def load(ext: dict, conn, manifest) -> None:
     withdrawals, as of the database's revision."""
     rev = revision(conn)
     design = ext["design"]
-    clips = design.serving_clips(load_manifest(manifest, check_files=True))
-    units = design.build_units(clips)
-    by_id = {c.clip_id: c for c in clips}
-    ext["videos"].paths.update({c.clip_id: c.video for c in clips})  # the new videos, read when first asked for
+    every, ext["samples"] = samples.group(design.serving_clips(load_manifest(manifest, check_files=True)))
+    units = design.build_units(samples.standing(every))
+    by_id = {c.clip_id: c for c in every}
+    ext["videos"].paths.update({c.clip_id: c.video for c in every})  # the new videos, read when first asked for
     ext["clips"] = by_id
     ext["units"] = active_units(units, by_id, withdrawn(conn))
     ext["revision"] = rev

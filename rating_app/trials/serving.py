@@ -21,6 +21,7 @@ from ..pairing import active
 from ..pairing.assign import expire_idle, hold, lock_assign
 from ..store.db import Rater, Trial, TrialClip, read_engine
 from ..store.rounds import current_units
+from ..store.samples import draw
 from . import sessions
 
 
@@ -38,16 +39,22 @@ def _assign(conn, rng, rater_pk, t, wait):
     return of_app().assign(conn, rng, rater_pk, t.kind, cfg["RATINGS_PER_CLIP"], units, wait)
 
 
-def _give(conn, rng, t, assigned, now):
+def _give(conn, rng, rater_pk, t, assigned, now):
     """Trial `t` gets its clip or unit, is marked served, and a test slot is held in its Cover row; returns the
     trial as served."""
     shown = None
+    ext = current_app.extensions["rating_app"]
+    seed, samples = ext["sample_seed"], ext["samples"]
     if isinstance(assigned, str):
         key, served = assigned, {"clip_id": assigned}
+        if assigned in samples:  # a stochastic system's clip: the rater's own draw of its samples (store/samples.py)
+            served["sample_clip"] = draw(seed, rater_pk, assigned, assigned, samples)
     else:
         key, served = assigned.key, {"unit": assigned.key}
-        # Sides and page order are drawn per trial; labels follow the order shown.
-        order = rng.sample(assigned.clips, len(assigned.clips))
+        # Sides and page order are drawn per trial; labels follow the order shown. A stochastic system's clip is
+        # the rater's own draw of its samples.
+        clips = [draw(seed, rater_pk, key, c, samples) for c in assigned.clips]
+        order = rng.sample(clips, len(clips))
         shown = [SimpleNamespace(label=LABELS[i], clip_id=c) for i, c in enumerate(order)]
         conn.execute(
             insert(TrialClip),
@@ -83,7 +90,7 @@ def serve(conn, rater_pk: int, now):
             expire_idle(conn, current_app.config["SLOT_TIMEOUT_S"], now)
             assigned = _assign(conn, rng, rater_pk, t, wait=True)
         if assigned is not None:
-            return _give(conn, rng, t, assigned, now), dropped
+            return _give(conn, rng, rater_pk, t, assigned, now), dropped
         # No clip left for this slot: drop it; the later rating trials move up one.
         conn.execute(update(Trial).where(Trial.id == t.id).values(released=True))
         conn.execute(
@@ -115,7 +122,8 @@ def trial_reply(token, rater, trial, conn=None):
     design = of_app()
     if not design.several_clips:
         video = url_for("api.trial_video", token=token, trial_id=trial.id)
-        out.update(design.payload([{"clip_id": trial.clip_id, "video_url": video}]))
+        clip = getattr(trial, "sample_clip", None) or trial.clip_id  # the sample it shows (store/samples.py)
+        out.update(design.payload([{"clip_id": clip, "video_url": video}]))
         return jsonify(trial=out)
     clips = getattr(trial, "shown", None)
     if clips is None:

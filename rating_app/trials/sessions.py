@@ -39,6 +39,7 @@ TRIAL_COLS = (
     Trial.position,
     Trial.served_at,
     Trial.unit,
+    Trial.sample_clip,
 )
 
 

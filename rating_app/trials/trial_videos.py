@@ -16,8 +16,14 @@ from ..store.db import Rater, Trial, TrialClip, app_engine, read_engine, utcnow
 from ..store.rounds import know_clips
 from . import sessions
 
-TRIAL_VIDEO = (
-    select(Trial.id, Trial.clip_id, Trial.video_ranges, Trial.released, Trial.served_at)
+TRIAL_VIDEO = (  # the clip, or the sample of it drawn for this rater (store/samples.py)
+    select(
+        Trial.id,
+        func.coalesce(Trial.sample_clip, Trial.clip_id).label("clip_id"),
+        Trial.video_ranges,
+        Trial.released,
+        Trial.served_at,
+    )
     .join(Rater, Rater.id == Trial.rater_pk)
     .where(Rater.token == bindparam("token"), Trial.id == bindparam("trial_id"))
 )

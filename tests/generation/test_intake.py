@@ -160,6 +160,15 @@ def test_samples_per_item(tmp_path, take):
     assert code == 0
     code, out = run(tmp_path / "one", [write_team(tmp_path / "one", take)], samples=3)  # one file each: 3 asked
     assert code == 1 and {p["check"] for p in problems(out)} == {"samples"}
+    # GENEA 2026's rule (--or-one): a deterministic system's one file per item is accepted; a stochastic one's
+    # folders still need every sample
+    code, out = run(tmp_path / "or1", [write_team(tmp_path / "or1", take)], samples=3, extra=["--or-one"])
+    assert code == 0
+    with open(out / "teams.csv", newline="") as f:
+        assert next(csv.DictReader(f))["samples_per_item"] == "1"
+    code, out = run(tmp_path / "or3", [write_team(tmp_path / "or3", take, drop, samples=3)], samples=3,
+                    extra=["--or-one"])  # fmt: skip
+    assert code == 1 and [p["check"] for p in problems(out)] == ["samples"]
 
 
 def test_hostile_entries_are_one_line_each(tmp_path, take):

@@ -140,9 +140,10 @@ def speech(path, text, seconds, rate=22050):
 NUMBERS = ("zero", "one", "two", "three", "four", "five", "six", "seven", "eight", "nine")
 
 
-def make_study(root, n_items=8, n_catch=3, fps=20, extra_toml="", audio=False):
+def make_study(root, n_items=8, n_catch=3, fps=20, extra_toml="", audio=False, samples=0):
     """A study from folders at `root`: real/ (70-joint BVH), sys_a/ (.npy, Z-up cm, + skeleton.json), sys_b/
-    (BVH), and study.toml; with `audio`, audio/ITEM.wav (one .flac) of synthesised speech and an [audio] table.
+    (BVH), and study.toml; with `audio`, audio/ITEM.wav (one .flac) of synthesised speech and an [audio] table;
+    with `samples`, sys_b is a stochastic system: sys_b/ITEM/1.bvh ... each with noise of its own.
     Returns the study file's path."""
     root = Path(root)
     for sub in ("real", "sys_a", "sys_b"):
@@ -153,8 +154,11 @@ def make_study(root, n_items=8, n_catch=3, fps=20, extra_toml="", audio=False):
         stem = f"item{k:02d}"
         names, parents, offsets, channels, motion, dt = finger_take(take, rng)
         write_bvh(root / "real" / f"{stem}.bvh.gz", names, parents, offsets, channels, motion, dt)
-        *_, noisy, _ = finger_take(take, rng, noise_deg=1.0)
-        write_bvh(root / "sys_b" / f"{stem}.bvh", names, parents, offsets, channels, noisy, dt)
+        for sample in range(1, samples + 1) if samples else [None]:
+            *_, noisy, _ = finger_take(take, rng, noise_deg=1.0 * (sample or 1))
+            where = root / "sys_b" / (f"{stem}.bvh" if sample is None else f"{stem}/{sample}.bvh")
+            where.parent.mkdir(exist_ok=True)
+            write_bvh(where, names, parents, offsets, channels, noisy, dt)
         m = read_motion(root / "real" / f"{stem}.bvh.gz", fps=30.0, units="cm")
         j = m.joints.astype(np.float64)
         kernel = np.ones(5) / 5

@@ -29,7 +29,7 @@ PARTS = tuple(ALLOWED)
 TOP_MODULES = {
     "generation": ["make_stimuli"],
     "rating_app": ["wsgi"],
-    "analysis": ["demo", "import_votes", "plan", "report"],
+    "analysis": ["challenge_demo", "demo", "import_votes", "plan", "report"],
 }
 
 
@@ -335,6 +335,7 @@ NAMES_A_DESIGN = {
     "analysis/demo.py": "runs the demo of the design it is asked for",
     "generation/own_study/demo_dyad.py": "builds the dyadic or semantic demo study",
     "analysis/import_votes.py": "writes a pairwise or appropriateness export from another tool's votes",
+    "generation/challenge/demo_inputs.py": "writes the demo challenge's two tasks, each served by a design it names",
 }
 
 

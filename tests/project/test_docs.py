@@ -49,6 +49,7 @@ CONSOLE = {
     "plan": ("analysis.plan", []),
     "board": ("analysis.board", []),
     "demo": ("analysis.demo", []),
+    "challenge-demo": ("analysis.challenge_demo", []),
 }
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
