@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from moglow_eval.core.user_files import shown_text
+
 from .raster import _TO_U, _TO_V, _TO_Y
 
 TEXT_SHARE = 0.05  # the text's size (em) as a share of the frame height: 32 px at 640, legible on a phone
@@ -71,8 +73,10 @@ def phrases(words, size, speaker=0):
     """Phrases of one speaker's words [(start s, end s, text, highlighted)], in time order: a new phrase after a
     pause of PAUSE_S, or where the words would take more than LINES lines at this video size."""
     font, width = _font(int(round(TEXT_SHARE * size))), WIDTH_SHARE * size
+    # Only text that can be drawn: a control character stops the text layout (raqm) with a traceback.
+    words = [(a, b, shown_text(str(t)), key) for a, b, t, key in words]
     groups = []
-    for w in sorted(words, key=lambda w: w[0]):
+    for w in sorted((w for w in words if w[2]), key=lambda w: w[0]):
         g = groups[-1] if groups else None
         fits = g is not None and len(_lines([(x[2], x[3]) for x in g + [w]], font, width)) <= LINES
         if g is not None and w[0] - g[-1][1] < PAUSE_S and fits:

@@ -7,6 +7,8 @@ clear wins; bradley_terry: log strengths with bootstrap intervals; parallel_boxp
 condition, with the means marked.
 """
 
+import textwrap
+
 import matplotlib
 
 from .figures import STYLE, _save, colours, subplots, text
@@ -119,6 +121,9 @@ def parallel_boxplot(t, summary, path, title=None):
         return _save(fig, path)
 
 
+LABEL_CHARS = 44  # characters of an axis label a line, in one of mas_bars's two 4.5-inch panels
+
+
 def mas_bars(table, path, title=None, score="mean appropriateness score (MAS)"):
     """Appropriateness (and the dyadic and semantic designs, whose `score` is named for what they ask): each
     system's mean score with its 95% interval (0 = chance), and beside it the shares of answers preferring the
@@ -140,10 +145,11 @@ def mas_bars(table, path, title=None, score="mean appropriateness score (MAS)"):
         ax.set_yticks(range(len(order)))
         ax.set_yticklabels([text(c) for c in order])
         ax.axvline(0, color="black", lw=0.6, ls=":")
-        ax.set_xlabel(f"{score}, 95% interval; 0 = chance")
+        # Each label wrapped to its own axis's width: a long score name (the dyadic design's) ran into its neighbour.
+        ax.set_xlabel(textwrap.fill(f"{score}, 95% interval; 0 = chance", LABEL_CHARS))
         bx.set_xlim(0, 1)
         bx.axvline(0.5, color="black", lw=0.6, ls=":")
-        bx.set_xlabel("share: matched preferred | no preference | mismatched preferred")
+        bx.set_xlabel(textwrap.fill("share: matched preferred | no preference | mismatched preferred", LABEL_CHARS))
         if title:
             fig.suptitle(text(title))
         return _save(fig, path)

@@ -120,7 +120,7 @@ def _word(path, where, entry):
     text = entry.get("word")
     if not isinstance(text, str) or len(text) > MAX_WORD_CHARS:
         raise TranscriptError(f"{path}: {where}.word: must be text of at most {MAX_WORD_CHARS} characters")
-    return Word(start, end, text.strip())
+    return Word(start, end, user_files.shown_text(text))  # a caption's word: no control character reaches the layout
 
 
 def _list(path, where, value):

@@ -130,7 +130,8 @@ def _proposals(mode, agent, other, length, margin, wanted):
                 continue
             mid = (w.start + w.end) / 2
             start = min(max(mid - length / 2, lo), hi)
-            out.append((start, 1.0 - abs(start + length / 2 - mid) / length, w.text, (w.start, w.end)))
+            # the keyword as the user's file names it (sources.csv, the semantic design's highlight), not "glacier."
+            out.append((start, 1.0 - abs(start + length / 2 - mid) / length, plain(w.text), (w.start, w.end)))
         return out
     events = mine if mode == "speaking" else theirs
     for a, _ in events:

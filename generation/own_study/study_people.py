@@ -68,7 +68,13 @@ def _captions(path, table, spec):
 
 
 def check_needs(path, spec):
-    """What each design needs from the rest of the study file; the framing's default (two people: upper)."""
+    """What each design needs from the rest of the study file; the view's and the framing's defaults (two people:
+    upper; one person with speech, captions or an SMPL-family body: front and auto)."""
+    if spec.interlocutor is None and spec.view is None and (spec.audio_folder or spec.captions or spec.smpl_model):
+        # A speech or gesture study: the built-in study's walking camera sees a keyword's gesture edge-on. From the
+        # front, and from the hips up where the feet stay put (auto: a speaker who walks keeps the full body).
+        spec.view = "front"
+        spec.framing = spec.framing or "auto"
     if spec.framing is None:
         spec.framing = "upper" if spec.interlocutor is not None else "full"
     design = designs.get(spec.design)

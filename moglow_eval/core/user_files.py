@@ -20,8 +20,10 @@ import contextlib
 import csv
 import json
 import os
+import re
 import stat
 import tomllib
+import unicodedata
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -39,6 +41,19 @@ def defuse(value):
     if isinstance(value, str) and value.startswith(FORMULA_START):
         return "'" + value
     return value
+
+
+# A terminal's escape sequence (ESC [ ... letter, or ESC and one character): cut whole, not left as "[31m".
+_ESCAPE = re.compile(r"\x1b(\[[0-?]*[ -/]*[@-~]|[@-_])")
+
+
+def shown_text(value: str) -> str:
+    """A user's text as it may be drawn or shown (a caption's word, a keyword): escape sequences cut, every control,
+    format, surrogate, private or unassigned character removed (a NUL stops the text layout with a traceback, a
+    bidirectional override reorders what is drawn), and runs of white space one space."""
+    value = _ESCAPE.sub("", value)
+    kept = "".join(" " if ch.isspace() else ch for ch in value if ch.isspace() or unicodedata.category(ch)[0] != "C")
+    return " ".join(kept.split())
 
 
 @contextlib.contextmanager

@@ -77,3 +77,27 @@ def test_bad_matched_side_is_one_line(tmp_path):
     path.write_text(",".join(COLUMNS) + "\nr1,i1,x1,x2,S,S,2,test,left\n")
     with pytest.raises(AnalysisError, match=r"a.csv:2: a test answer's matched side must be a or b"):
         load_answers(path)
+
+
+def test_the_two_panels_labels_do_not_run_into_each_other(tmp_path, monkeypatch):
+    """Issue 65: the dyadic design's long score name ran its label into the share panel's."""
+    import pandas as pd
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from analysis.designs.dyadic.design import Dyadic
+    from analysis.page import design_figures
+
+    table = pd.DataFrame({"condition": ["A", "NAT"], "mas": [0.2, 1.0], "ci_low": [0.0, 0.8], "ci_high": [0.4, 1.2],
+                          "matched": [0.5, 0.8], "tie": [0.2, 0.1], "mismatched": [0.3, 0.1]})  # fmt: skip
+    seen = {}
+
+    def keep(fig, path):
+        FigureCanvasAgg(fig).draw()
+        r = fig.canvas.get_renderer()
+        seen["labels"] = [a.xaxis.label.get_window_extent(r) for a in fig.axes]
+        return path
+
+    monkeypatch.setattr(design_figures, "_save", keep)
+    design_figures.mas_bars(table, tmp_path / "mas.png", score=Dyadic.score)
+    left, right = seen["labels"]
+    assert left.x1 < right.x0  # side by side, apart

@@ -155,3 +155,37 @@ def test_an_existing_item_folder_is_replaced_only_with_force(raw, tmp_path, caps
     fails_with(conversations, argv, capsys, "already exists; give --force")
     assert (tmp_path / "items" / "keep.txt").exists()
     assert conversations([*argv, "--force"]) == 0 and not (tmp_path / "items" / "keep.txt").exists()
+
+
+def test_a_keyword_said_with_punctuation_is_written_as_the_keyword_file_names_it():
+    """Issue 65: a word said at a sentence's end ("glacier.") matched the keyword file's "glacier" but went into
+    sources.csv with its full stop."""
+    from types import SimpleNamespace
+
+    from generation.data.transcripts import Transcript, Word
+    from generation.own_study.cuts import _proposals
+
+    said = Transcript([[Word(3.0, 3.2, "the"), Word(3.2, 3.8, "Glacier.")]])
+    agent, other = SimpleNamespace(transcript=said), SimpleNamespace(transcript=Transcript([]))
+    ((_, _, keyword, span),) = _proposals("keyword", agent, other, 4.0, 0.5, {"glacier"})
+    assert keyword == "glacier" and span == (3.2, 3.8)
+
+
+def test_a_transcripts_control_characters_never_reach_the_captions(tmp_path):
+    """Issue 65: a word with a NUL and a terminal escape stopped the build with raqm_layout's traceback."""
+    import json
+
+    import numpy as np
+
+    from generation.data.transcripts import TRANSCRIPT_KEY, read_transcript
+    from rendering.captions import CaptionLayer, phrases
+
+    word = dict(word="a\x00b\x1b[31m", start=0.1, end=0.5, score=1.0)
+    path = tmp_path / "t.json"
+    path.write_text(json.dumps({TRANSCRIPT_KEY: [dict(start=0.1, end=0.5, transcript="x", words=[word])]}))
+    assert [w.text for w in read_transcript(path).words] == ["ab"]
+    size = 96
+    layer = CaptionLayer(phrases([(0.1, 0.5, "a\x00b\x1b[31m\u202e", False)], size), size)
+    frame = np.zeros(size * size * 3 // 2, np.uint8)  # a yuv420p frame, flat
+    layer.apply(frame, 0.2)  # drawn, no traceback
+    assert frame.any()

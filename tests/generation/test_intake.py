@@ -218,3 +218,30 @@ def test_unusable_inputs_exit_2_with_one_line(tmp_path, take, capsys):
     assert err.startswith("error: ") and "nowhere" in err and "\n" not in err
     code, out = run(tmp_path, [tmp_path / "no_team"])
     assert code == 2 and "not a folder" in capsys.readouterr().err
+
+
+def test_seamless_and_amass_layout_submissions_with_their_body_model(tmp_path):
+    """GENEA 2026's formats: Seamless Interaction's smplh:* files (is_valid respected: an invalid frame is a problem)
+    and the AMASS/BEAT2 layout (poses, trans, betas), each read through the SMPL-H body model."""
+    from helpers import seamless_fixtures
+    from helpers.smpl_fixtures import write_body_model, write_motion
+
+    model = write_body_model(tmp_path / "SMPLH_NEUTRAL.npz", "smplh")
+    teams = tmp_path / "teams"
+    for k, item in enumerate(ITEMS):
+        orient, body, left, right, trans = seamless_fixtures.pose_arrays(0, FRAMES)
+        valid = np.ones(FRAMES, bool)
+        valid[10:15] = k != 1  # item02's frames 10-14 invalid
+        (teams / "seamless").mkdir(parents=True, exist_ok=True)
+        np.savez(teams / "seamless" / f"{item}.npz", **{"smplh:global_orient": orient, "smplh:body_pose": body.reshape(
+            FRAMES, 63), "smplh:left_hand_pose": left.reshape(FRAMES, 45), "smplh:right_hand_pose": right.reshape(
+            FRAMES, 45), "smplh:translation": trans, "smplh:is_valid": valid})  # fmt: skip
+        (teams / "amass").mkdir(exist_ok=True)
+        write_motion(teams / "amass" / f"{item}.npz", "smplh", frames=FRAMES, fps=FPS)
+    code, out = run(tmp_path, [], extra=["--teams", str(teams), "--smpl-model", str(model)])
+    with open(out / "teams.csv", newline="") as f:
+        rows = {r["team"]: r for r in csv.DictReader(f)}
+    assert code == 1 and rows["amass"]["verdict"] == "accepted" and rows["seamless"]["verdict"] == "refused"
+    assert rows["seamless"]["format"].startswith("Seamless") and rows["amass"]["format"].startswith("SMPL-family")
+    (found,) = problems(out, "seamless")
+    assert found["check"] == "valid" and found["item"] == "item02" and "frames 10-14" in found["problem"]

@@ -351,3 +351,24 @@ def test_a_skeleton_whose_first_joint_is_not_the_root(tmp_path):
     np.save(tmp_path / "a.npy", np.tile(np.array([[0, 1.2, 0], [0, 0.9, 0]], np.float32), (30, 1, 1)) * [1, 1.5, 1])
     with pytest.raises(MotionError, match="the first joint .Spine. must be the root"):
         read_motion(tmp_path / "a.npy", 20.0, skeleton=Skeleton.load(tmp_path / "s.json"), source_fps=30.0)
+
+
+@pytest.mark.parametrize(
+    "extra, view, framing",
+    [
+        ("", None, "full"),  # motion alone: the built-in study's camera
+        ('[audio]\nfolder = "audio"\n', "front", "auto"),  # speech: a gesture seen from the front (issue 65)
+        ('[audio]\nfolder = "audio"\n[render]\nview = "side"\n', "side", "full"),  # what the file says stands
+        ('[skeleton]\nsmpl_model = "model.npz"\n', "front", "auto"),  # an SMPL-family body
+    ],
+)
+def test_a_speech_or_gesture_study_is_filmed_from_the_front(tmp_path, extra, view, framing):
+    from generation.own_study.study_file import read_study_file
+
+    for sub in ("real", "sys", "audio"):
+        (tmp_path / sub).mkdir()
+    (tmp_path / "model.npz").write_bytes(b"")
+    study = tmp_path / "study.toml"
+    study.write_text(f'reference = "real"\n[conditions]\nreal = "real"\nSYS = "sys"\n{extra}')
+    spec = read_study_file(study)
+    assert (spec.view, spec.framing) == (view, framing)
