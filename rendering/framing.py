@@ -148,7 +148,7 @@ def _distance(p, lim, pad):
     return float(max((reach - p[:, 2]).max(), NEAR + BODY_PAD - p[:, 2].min()))
 
 
-def item_camera(clips, names, parents, fps, view=None, framing="full", room=0.0):
+def item_camera(clips, names, parents, fps, view=None, framing="full", room=0.0, facing=None):
     """The camera of one item's clips (joints [T, J, 3], metres, Y up, placed).
 
     Parameters
@@ -165,6 +165,9 @@ def item_camera(clips, names, parents, fps, view=None, framing="full", room=0.0)
         "full", "upper" or "auto" (upper when the feet barely move: `feet_still`).
     room : float
         The share of the frame's height kept free of the body at the bottom (captions); upper framing only.
+    facing : sequence of ndarray or None
+        The clips whose mean facing `view` is measured from (None: `clips`): a study's reference, so that the
+        view does not turn when a system joins.
 
     Returns
     -------
@@ -173,12 +176,32 @@ def item_camera(clips, names, parents, fps, view=None, framing="full", room=0.0)
     base = DEFAULT_CAMERA
     if view is not None:
         offset = VIEWS[view] if isinstance(view, str) else float(view)
-        base = replace(base, azimuth=(mean_facing(clips, names) + offset) % 360.0)
+        base = replace(base, azimuth=(mean_facing(clips if facing is None else facing, names) + offset) % 360.0)
     if framing == "auto":
         framing = "upper" if feet_still(clips, names, parents) else "full"
     if framing == "upper":
         return upper_camera(clips, names, parents, fps, base, room)
     return framing_camera(clips, base)
+
+
+# The steps a study's cameras are held to (steady): a system whose motion stays inside the frame leaves its item's
+# camera, and so every other clip of the item, as it was.
+DISTANCE_STEP = 0.03  # the distance, up to the next of a 3% ladder (with 1% to spare: room for the height's step)
+HEIGHT_STEP = 0.01  # metres: the look-at height and lag, to the nearest centimetre
+
+
+def steady(camera):
+    """The camera held to steps: its distance up to the next step of a ladder (never nearer: what was framed stays
+    framed, and a little more), its height and lag to the nearest HEIGHT_STEP. A study's build keys each video by
+    its camera (generation.stimuli.build_index): a condition that joins without leaving the frame then re-renders
+    nothing of the others."""
+    rung = np.ceil(np.log(camera.distance * 1.01) / np.log1p(DISTANCE_STEP))
+    return replace(
+        camera,
+        distance=float(np.exp(rung * np.log1p(DISTANCE_STEP))),
+        height=float(np.round(camera.height / HEIGHT_STEP) * HEIGHT_STEP),
+        max_lag=float(np.round(camera.max_lag / HEIGHT_STEP) * HEIGHT_STEP),
+    )
 
 
 # A two-person item's views, in degrees from the perpendicular of the two people's line towards the agent's front:

@@ -46,6 +46,7 @@ from ..data.motion_files import read_motion
 from ..metrics import c2st
 from ..metrics.c2st_features import FEATURE_COLUMNS, feature_table, feature_text
 from ..metrics.objective import any_clip_metrics, find_feet
+from ..stimuli.build_index import BuildIndex, keyed_id
 from ..stimuli.catch_kinds import make_catch
 from ..stimuli.files import StimuliError, clip_files, manifest_row, prepare_out, summary_text, write_csv, write_tables
 from ..stimuli.render_pool import render_stimuli
@@ -94,8 +95,8 @@ _DIGIT_WORDS = ("zero", "one", "two", "three", "four", "five", "six", "seven", "
 def write_audio_check(out, spec):
     """audio_check.csv and audio_check/*.wav: AUDIO_CHECK_SAMPLES sequences of AUDIO_CHECK_DIGITS spoken digits,
     synthesised with Debian's espeak-ng and normalised to the study's loudness. The app plays one to each rater
-    with sound, who types the digits (CONTRACTS §5); the file names are random, and only the app reads the
-    answers."""
+    with sound, who types the digits (CONTRACTS §5); the file names are drawn from the study's seed (the same in
+    every build, and unpredictable without it), and only the app reads the answers."""
     import shutil
     import subprocess
     import wave
@@ -116,7 +117,7 @@ def write_audio_check(out, spec):
         tmp.write_bytes(raw)
         samples = audio.normalise(audio.read_audio(tmp), spec.loudness)
         tmp.unlink()
-        name = f"{study.new_clip_id(taken)}.wav"
+        name = f"{keyed_id(spec.seed, f'audio check {len(rows)}', taken)}.wav"  # one seed, the same names
         with wave.open(str(folder / name), "wb") as w:
             w.setnchannels(samples.shape[1])
             w.setsampwidth(2)
@@ -247,6 +248,12 @@ def read_study_samples(spec, files, samples, motions, progress):
     return Samples(drawn, more)
 
 
+def clip_identity(c, style):
+    """What a clip is, as its id is drawn from it (build_index.keyed_id): the same clip of the same study has the
+    same id in every build, and a condition that joins changes no other clip's."""
+    return "\0".join(map(str, (c.condition, c.item, c.role, style, c.sample, c.motion_item, c.note, c.start)))
+
+
 def skeleton_of(motions):
     """(joint names, parents) of the study's motion (the reference's; every condition's is checked to match)."""
     any_ref = next(iter(motions[study.NATURAL].values()))
@@ -270,7 +277,7 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
     for k in tqdm(rng.permutation(len(styled)), desc="clips", unit="clip", file=sys.stderr, disable=not progress):
         c, style = styled[k] if len(spec.styles) > 1 else (clips[k], spec.styles[0])
         cond, item, role, joints = c.condition, c.item, c.role, c.joints
-        cid = study.new_clip_id(taken, forbidden)
+        cid = keyed_id(spec.seed, clip_identity(c, style), taken, forbidden)  # one seed, the same ids
         motion, video, sheet = clip_files(out, cid)
         save_clip(motion, joints, parents, names, spec.fps)
         job = dict(**scene.job(item, style), **options)
@@ -374,11 +381,11 @@ def build_study(spec, out, size, preset, workers, force, progress):
         room = CAPTION_ROOM if captions else 0.0
         scene = stage(clips, skeleton_of(motions), spec, people.partners, Path(tmp), room)
         sound = prepare_audio(spec, lengths, Path(tmp), scene.sides)
-        out = prepare_out(out, force)
+        out = prepare_out(out, force, keep_videos=True)
         manifest, metrics_rows, jobs, groups, feats = write_study_clips(
             out, clips, motions, spec, size, preset, progress, sound, scene, captions
         )
-        render_stimuli(jobs, workers, progress, groups)
+        render_stimuli(jobs, workers, progress, groups, index=BuildIndex(out))
         if sound:
             write_audio_check(out, spec)
     c2st_table = c2st.c2st_table(feats), feature_table(feats, *skeleton_of(motions))

@@ -16,7 +16,7 @@ import numpy as np
 from moglow_eval.core import study
 from moglow_eval.core.clip import save_clip
 from rendering.camera import Projector
-from rendering.framing import item_camera, pair_camera
+from rendering.framing import item_camera, pair_camera, steady
 from rendering.raster import PARTNER_COLOUR, STYLES, one_colour
 
 from ..motion.features import rotate_y
@@ -88,8 +88,11 @@ def stage(clips, skeleton, spec, partners, folder, room=0.0):
         if not partners:
             for c in group:
                 c.joints = place(c.joints, names)
-            scene.cameras[item] = item_camera(
-                [c.joints for c in group], names, parents, spec.fps, spec.view, framing, room
+            # Facing measured from the reference's clips, and held to steps (framing.steady): a system that joins
+            # the study changes its item's camera, and so the other clips' videos, only if it leaves the frame.
+            facing = [c.joints for c in group if c.condition == study.NATURAL] or None
+            scene.cameras[item] = steady(
+                item_camera([c.joints for c in group], names, parents, spec.fps, spec.view, framing, room, facing)
             )
             continue
         group = _reference_first(group)

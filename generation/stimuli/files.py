@@ -3,6 +3,7 @@ items.csv and items/ITEM.npz. What goes into them is decided by make_stimuli; th
 
 import contextlib
 import csv
+import logging
 import shutil
 from pathlib import Path
 
@@ -14,7 +15,10 @@ from moglow_eval.core.cli import UserError
 from ..data.systems import canonical_placement
 from ..motion import skeleton
 from ..motion.features import to_world
+from .build_index import INDEX
 from .items import CATCH, TRAINING
+
+log = logging.getLogger(__name__)
 
 MANIFEST_COLUMNS = [
     "clip_id",
@@ -45,12 +49,15 @@ def refuse_existing(out, force):
         raise StimuliError(f"{out}: already holds a stimulus set (manifest.csv); pass --force to replace it")
 
 
-def prepare_out(out, force):
-    """An empty stimulus folder at `out` with its clip subfolders; an existing set is replaced only with `force`."""
+def prepare_out(out, force, keep_videos=False):
+    """An empty stimulus folder at `out` with its clip subfolders; an existing set is replaced only with `force`.
+    `keep_videos`: the videos and sheets stay, for the build's index to reuse (build_index; the render removes
+    those no clip names any more)."""
     out = Path(out)
     refuse_existing(out, force)
+    kept = ("videos", "sheets") if keep_videos else ()
     for sub in (*SUBFOLDERS, "items", "audio_check"):
-        if (out / sub).exists():
+        if (out / sub).exists() and sub not in kept:
             shutil.rmtree(out / sub)
     for name in ("manifest.csv", "metrics.csv", "items.csv", "c2st.csv", "c2st_features.csv", "audio_check.csv"):
         (out / name).unlink(missing_ok=True)
@@ -75,6 +82,14 @@ def nothing_left_on_failure(out):
     try:
         yield
     except BaseException:
+        if (out / INDEX).is_file():
+            # A study's build had begun to render: its finished clips stay for the same command to resume with,
+            # and the folder holds no manifest, so it is no stimulus set meanwhile.
+            for part in [*out.glob("videos/*.part.*"), *out.glob("sheets/*.part.*")]:
+                part.unlink(missing_ok=True)
+            (out / "manifest.csv").unlink(missing_ok=True)
+            log.warning(f"{out}: the build stopped; its finished clips are kept: run the same command to go on")
+            raise
         if top is not None:
             shutil.rmtree(top, ignore_errors=True)
         elif out.is_dir():

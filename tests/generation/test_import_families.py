@@ -107,13 +107,13 @@ def test_fps_in_the_study_file_overrides_and_fast_capture_is_capped(tmp_path):
     spec = read_study_file(study)
     from generation.own_study.inputs import match_items
 
-    assert with_study_fps(spec, match_items(spec)).fps == 20
+    assert with_study_fps(spec, match_items(spec)[0]).fps == 20
     study = write_family_study(tmp_path / "b", "lafan1", n_items=2, frames=240, fps=120.0)
     spec = read_study_file(study)
-    assert spec.fps is None and with_study_fps(spec, match_items(spec)).fps == 60
+    assert spec.fps is None and with_study_fps(spec, match_items(spec)[0]).fps == 60
     study = write_family_study(tmp_path / "c", "bandai", n_items=2, frames=60, fps=25.0)
     spec = read_study_file(study)
-    assert with_study_fps(spec, match_items(spec)).fps == 25
+    assert with_study_fps(spec, match_items(spec)[0]).fps == 25
 
 
 # ---------------------------------------------------------------- SMPL-family parameter files
