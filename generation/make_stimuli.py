@@ -367,6 +367,12 @@ def _output_flags(ap):
         default=os.cpu_count() or 1,
         help="rendering processes (default: one per core)",
     )
+    ap.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="--study: render on the Dask cluster whose scheduler is at ADDRESS (tcp://host:8786) instead of local "
+        "processes; its workers see the same files at the same paths (docs/hosting.md, Rendering on other machines)",
+    )
     # The flag's earlier name, still accepted; --workers is what every command of the project calls a pool's size.
     ap.add_argument(
         "--jobs", dest="workers", type=cli.number(int, 1, 1024), default=argparse.SUPPRESS, help=argparse.SUPPRESS
@@ -468,7 +474,9 @@ def _main(argv):
         if args.study:
             from .own_study.builder import build_study
 
-            return build_study(args.spec, args.out, args.size, args.preset, args.workers, args.force, args.progress)
+            return build_study(
+                args.spec, args.out, args.size, args.preset, args.workers, args.force, args.progress, args.scheduler
+            )
         return run(args)
 
 

@@ -312,7 +312,7 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
 
 
 # ---------------------------------------------------------------- the job
-def build_study(spec, out, size, preset, workers, force, progress):
+def build_study(spec, out, size, preset, workers, force, progress, scheduler=None):
     """Build the stimulus folder of a study of your own motion, as `python -m generation.make_stimuli --study` does.
 
     Every file is read and checked before anything is written; then the clips are cut, the catch clips made,
@@ -335,6 +335,9 @@ def build_study(spec, out, size, preset, workers, force, progress):
         Replace a stimulus set already in `out`.
     progress : bool
         Show progress bars on stderr.
+    scheduler : str or None
+        A Dask scheduler's address: the clips are rendered on its workers (render_pool.render_all), which see the
+        same files at the same paths; the build's own temporary files are then written inside `out`.
 
     Returns
     -------
@@ -373,7 +376,11 @@ def build_study(spec, out, size, preset, workers, force, progress):
     bad = catch_clips(spec, motions, catch_items, progress)
     if spec.reference != study.NATURAL:
         log.info(f"study: the reference condition {spec.reference} is written as {study.NATURAL} in the manifest")
-    with tempfile.TemporaryDirectory() as tmp:
+    # A cluster's workers read the sound and the other person from these files: inside `out`, which they share.
+    here = None if scheduler is None else Path(out).absolute()
+    if here is not None:
+        here.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=here, prefix=".build-") as tmp:
         # Everything is placed, framed, heard and captioned before anything is written.
         clips = build_clips(spec, motions, roles, catch_items, bad, people, samples)
         lengths = {i: len(m.joints) for i, m in motions[study.NATURAL].items()}
@@ -385,7 +392,7 @@ def build_study(spec, out, size, preset, workers, force, progress):
         manifest, metrics_rows, jobs, groups, feats = write_study_clips(
             out, clips, motions, spec, size, preset, progress, sound, scene, captions
         )
-        render_stimuli(jobs, workers, progress, groups, index=BuildIndex(out))
+        render_stimuli(jobs, workers, progress, groups, index=BuildIndex(out), scheduler=scheduler)
         if sound:
             write_audio_check(out, spec)
     c2st_table = c2st.c2st_table(feats), feature_table(feats, *skeleton_of(motions))

@@ -1,4 +1,4 @@
-"""Clips built once (issue 65): a study's clip ids drawn from its secret seed, every video keyed by what decides
+"""Clips built once: a study's clip ids drawn from its secret seed, every video keyed by what decides
 its bytes, and the index of finished clips that lets a rebuild reuse them and a killed build resume.
 
 - `keyed_id`: a clip's id is an HMAC-SHA-256 of what the clip is (its condition, item, role, style, sample, the

@@ -59,10 +59,14 @@ def _render_job(job):
     return n
 
 
-def render_all(jobs, workers, progress=True, done=None):
-    """Render (motion, video, sheet, size, preset[, keywords: _render_job's]) jobs on `workers` processes, with a
-    progress bar; `done(k)` is called as job k's files take their names."""
+def render_all(jobs, workers, progress=True, done=None, scheduler=None):
+    """Render (motion, video, sheet, size, preset[, keywords: _render_job's]) jobs on `workers` processes, or on the
+    Dask cluster at `scheduler`, with a progress bar; `done(k)` is called as job k's files take their names."""
     with tqdm(total=len(jobs), desc="render", unit="clip", file=sys.stderr, disable=not progress) as bar:
+        if scheduler is not None:
+            from .cluster import render_on_cluster
+
+            return render_on_cluster(jobs, scheduler, _render_job, lambda k: (done and done(k), bar.update()))
         if workers <= 1:
             for k, job in enumerate(jobs):
                 _render_job(job)
@@ -83,7 +87,7 @@ def render_all(jobs, workers, progress=True, done=None):
             pool.shutdown(cancel_futures=True)
 
 
-def render_stimuli(jobs, workers, progress=True, groups=None, index=None):
+def render_stimuli(jobs, workers, progress=True, groups=None, index=None, scheduler=None):
     """Render every job of a stimulus set, check that the videos are one size (rendering.blinding: by
     construction, every frame one size) and give every file one time. `groups`: a key per job whose videos must
     agree (a study of your own motion: the item, whose clips share a length and a sound); None: all of them.
@@ -91,7 +95,8 @@ def render_stimuli(jobs, workers, progress=True, groups=None, index=None):
     `index` (build_index.BuildIndex of the folder): every job is keyed (build_index.job_key) and its encoder's
     random rate share seeded from its key, so one study with one seed gives the same bytes in every build; a job
     whose key the index lists, with its files there, is not rendered again (renamed, where its clip's id
-    changed), each finished job is listed as it finishes, and files of clips no job names any more are removed."""
+    changed), each finished job is listed as it finishes, and files of clips no job names any more are removed.
+    `scheduler`: render on that Dask cluster (cluster.py) instead of local processes."""
     workers = min(workers, len(jobs))
     size = jobs[0][3] if jobs else 0
     todo = list(range(len(jobs)))
@@ -108,7 +113,7 @@ def render_stimuli(jobs, workers, progress=True, groups=None, index=None):
         if index is not None:
             index.add(keys[todo[k]], Path(jobs[todo[k]][1]).stem)
 
-    render_all([jobs[k] for k in todo], workers, progress=progress, done=finished)
+    render_all([jobs[k] for k in todo], workers, progress=progress, done=finished, scheduler=scheduler)
     by_group = {}
     for k, job in enumerate(jobs):
         by_group.setdefault(None if groups is None else groups[k], []).append(k)
@@ -120,7 +125,7 @@ def render_stimuli(jobs, workers, progress=True, groups=None, index=None):
         # another random share of the rate per frame puts the frames elsewhere, and the video comes out one size.
         log.info(f"render: {len(odd)} video(s) came out a frame size off the others of their item; encoding again")
         again = [_with_seed(jobs[k], attempt) if index is not None else jobs[k] for k in odd]
-        render_all(again, max(1, min(workers, len(odd))), progress=False)
+        render_all(again, max(1, min(workers, len(odd))), progress=False, scheduler=scheduler)
     if index is not None:
         index.keep_only({keys[k]: Path(job[1]).stem for k, job in enumerate(jobs)})
         _remove_stale(jobs)

@@ -23,6 +23,7 @@ from helpers.paths import ROOT
 NOT_OURS = {
     "cd",
     "curl",
+    "dask",  # the cluster's scheduler and workers (docs/hosting.md, Rendering on other machines)
     "git",
     "gunicorn",
     "ln",
