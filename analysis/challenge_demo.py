@@ -25,7 +25,7 @@ from pathlib import Path
 
 from moglow_eval.core import cli
 
-from .demo import DemoError, Processes, run_demo
+from .demo import DemoError, Processes, interrupted, run_demo
 
 MARK = "challenge-demo.json"
 SAMPLES = 5  # the rules: five samples per item from a stochastic system, one file from a deterministic one
@@ -133,8 +133,7 @@ def _main(argv) -> int:
     try:
         run_challenge(Path(a.out), a.items, a.raters, a.seed, a.db)
     except KeyboardInterrupt:
-        print("interrupted: everything the demo started has been stopped", file=sys.stderr)
-        return 130
+        return interrupted()
     return 0
 
 

@@ -377,9 +377,14 @@ def _main(argv) -> int:
             runs=Path(a.runs) if a.runs else None,
         )
     except KeyboardInterrupt:
-        print("interrupted: everything the demo started has been stopped", file=sys.stderr)
-        return 130
+        return interrupted()
     return 0
+
+
+def interrupted() -> int:
+    """What a demo's command says and returns when Ctrl-C stopped it (Processes stopped everything it started)."""
+    print("interrupted: everything the demo started has been stopped", file=sys.stderr)
+    return 130
 
 
 def main(argv=None) -> int:
