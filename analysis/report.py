@@ -12,18 +12,21 @@ import sys
 import time
 from pathlib import Path
 
+import pandas as pd
 from tqdm import tqdm
 
 from moglow_eval.core import cli, study, tables, user_files
 
 from .data.filtering import DEFAULT_THRESHOLD
-from .data.load import AnalysisError
+from .data.load import AnalysisError, load_measure_clips, load_measure_notes
 from .designs import Options, design_of
 from .designs.base import MIXED_MAX_LEVELS, ORDINAL_MAX_RATINGS
 from .page import report_html
+from .page.measures_text import measures_console, measures_html, measures_sentence
 from .page.methods import methods_paragraph
 from .page.samples_text import samples_console, samples_html, samples_sentence
 from .page.study_text import reference_from_study_file
+from .stats.metric_agreement import item_table, rank_agreement, system_values
 from .stats.samples import sample_scores, sample_spread
 
 
@@ -83,6 +86,28 @@ def shortfall_note(n_raters: int, target: int | None) -> str | None:
         f"note: ratings from {n_raters} raters, fewer than the {target} this study needs to fill ({TARGET_COLUMN} in "
         "the export): the study did not fill, and every figure here rests on fewer answers than it was planned for"
     )
+
+
+def objective_measures(design, doc, options):
+    """(each system's values, their rank agreement, the human score's name, measures.csv's notes) of the stimuli's
+    metrics.csv against the design's per-system score (its `standings`, read from the report's stats.json `doc`);
+    None without --metrics."""
+    if not options.metrics_path:
+        return None
+    clips = load_measure_clips(options.metrics_path)
+    notes = load_measure_notes(options.metrics_path)
+    reference = options.reference_name or study.NATURAL
+    clips["condition"] = clips["condition"].replace({study.NATURAL: reference})
+    keys = {*study.METRIC_KEYS, "matched"}
+    measures = [c for c in clips.columns if c not in keys and clips[c].notna().any()]
+    standing = design.standings(doc)
+    scores = pd.DataFrame(standing.rows, columns=["system", "score", "low", "high"]).astype(
+        {"score": float, "low": float, "high": float}
+    )
+    tables = item_table(clips, measures)
+    values = system_values(tables, options.n_boot, options.seed)
+    agreement = rank_agreement(tables, scores, reference, options.n_boot, options.seed)
+    return values, agreement, standing.score, notes
 
 
 def build_report(ratings_path, out_dir="report", options: Options | None = None, *, progress=True, quiet=False):
@@ -148,19 +173,28 @@ def build_report(ratings_path, out_dir="report", options: Options | None = None,
     note = shortfall_note(data.counts["n_raters_total"], target)
     methods = methods_paragraph(design, data.rows, data.kept, data.counts, options)
     methods = " ".join(filter(None, [methods, samples_sentence(spread)]))
-    (out / "methods.txt").write_text(methods + "\n", encoding="utf-8")
     body = design.html(meta, data.counts, kept, everyone, figs)
     if not spread.empty:
         body.append(samples_html(spread))
-    body.append(f"<h2>Methods, for a paper</h2><p class=methods>{html.escape(methods)}</p>")
     if note:  # right under the title, before any figure is read
         body.insert(1, f"<p class=warn>{html.escape(note)}</p>")
-    page = report_html.page(body)
-    (out / "report.html").write_text(page, encoding="utf-8")
     extra = {} if target is None else {TARGET_COLUMN: target, "notes": [note] if note else []}
     if not spread.empty:
         extra["samples"] = report_html.records(spread)
     doc = report_html.clean({**meta, **data.counts, **extra, **design.stats_json(kept, everyone), "methods": methods})
+    measures = objective_measures(design, doc, options)
+    if measures is not None:
+        values, agreement, score, notes = measures
+        methods = " ".join(filter(None, [methods, measures_sentence(notes, agreement, score, options.n_boot,
+                                                                     options.seed)]))  # fmt: skip
+        body.append(measures_html(values, agreement, score, notes, options.n_boot))
+        doc["methods"] = methods
+        doc["measures"] = report_html.clean(
+            {"score": score, "values": report_html.records(values), "agreement": report_html.records(agreement)}
+        )
+    (out / "methods.txt").write_text(methods + "\n", encoding="utf-8")
+    body.append(f"<h2>Methods, for a paper</h2><p class=methods>{html.escape(methods)}</p>")
+    (out / "report.html").write_text(report_html.page(body), encoding="utf-8")
     (out / "stats.json").write_text(json.dumps(doc, indent=1, allow_nan=False), encoding="utf-8")
     bar.update(bar.total - bar.n)
     bar.close()
@@ -168,6 +202,8 @@ def build_report(ratings_path, out_dir="report", options: Options | None = None,
         print(design.console(data.counts, kept, everyone))
         if not spread.empty:
             print("\n" + samples_console(spread))
+        if measures is not None and not measures[1].empty:
+            print("\n" + measures_console(measures[1], measures[2]))
         if note:
             print(f"\n{note}")
         print(f"\nReport: {out / 'report.html'}  ({time.perf_counter() - t0:.1f} s)")

@@ -4,6 +4,8 @@ Nothing is dropped silently: a bad row stops the analysis with the file line tha
 frame's index is the file line number of each row (header = line 1), so later messages can name lines too.
 """
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
@@ -161,3 +163,38 @@ def load_metrics(path):
 def load_c2st(path):
     """c2st.csv -> DataFrame (moglow_eval.core.tables.read_c2st), errors as AnalysisError."""
     return tables.read_c2st(path, AnalysisError)
+
+
+def load_measure_clips(path):
+    """metrics.csv with its keys, for the report's objective measures: a DataFrame indexed by clip_id with
+    condition, role, item, `matched` and the metric columns. A clip is matched unless the manifest beside the file
+    (CONTRACTS §4) gives it a `motion_item` (a mismatched clip: another item's motion, or motion made for another
+    interlocutor); without a manifest every clip is. AnalysisError, one line, for a file without its keys."""
+    df = tables.read_metrics(path, AnalysisError, keys=True)
+    missing = [c for c in study.METRIC_KEYS[1:] if c not in df.columns]
+    if missing:
+        raise AnalysisError(f"{path}: missing column {missing[0]} (the measures need each clip's condition and item)")
+    manifest = Path(path).resolve().parent / "manifest.csv"
+    df.insert(3, "matched", True)
+    if manifest.is_file():
+        _, rows = tables.read_csv(manifest, AnalysisError)
+        if "motion_item" in rows.columns and "clip_id" in rows.columns:
+            mismatched = set(rows.loc[rows["motion_item"].str.strip() != "", "clip_id"].str.strip())
+            df["matched"] = ~df.index.isin(mismatched)
+    return df
+
+
+MEASURE_NOTE_COLUMNS = ("measure", "status", "reason", "settings")
+
+
+def load_measure_notes(path):
+    """measures.csv beside metrics.csv (each measure's status, why, its settings; CONTRACTS §4) as a DataFrame with
+    MEASURE_NOTE_COLUMNS; an empty one where the stimuli have none (the built-in study, an older set)."""
+    notes = Path(path).resolve().parent / study.MEASURES_FILE
+    if not notes.is_file():
+        return pd.DataFrame(columns=list(MEASURE_NOTE_COLUMNS))
+    _, df = tables.read_csv(notes, AnalysisError)
+    missing = [c for c in MEASURE_NOTE_COLUMNS if c not in df.columns]
+    if missing:
+        raise AnalysisError(f"{notes}: missing column {missing[0]} (header has: {', '.join(df.columns)})")
+    return df[list(MEASURE_NOTE_COLUMNS)].reset_index(drop=True)

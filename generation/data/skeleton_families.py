@@ -25,6 +25,7 @@ class Family:
     needs: frozenset = frozenset()  # every one of these joint names
     prefix: str = ""  # ... or a joint name starting with this
     lacks: frozenset = frozenset()  # ... and none of these
+    gesture: bool = False  # a speech-gesture data set's skeleton: a study of it gets the gesture measures
 
     def matches(self, names):
         if self.prefix and not any(n.startswith(self.prefix) for n in names):
@@ -35,9 +36,14 @@ class Family:
 # Most specific first: the first family that matches names the file.
 FAMILIES = (
     Family("Bandai-Namco", "cm", frozenset({"joint_Root", "Hips", "UpperLeg_L", "UpperArm_R"})),
-    Family("GENEA 2022/2023 (Talking With Hands)", "cm", frozenset({"b_root", "b_spine0", "b_r_upleg", "b_l_arm"})),
+    Family(
+        "GENEA 2022/2023 (Talking With Hands)",
+        "cm",
+        frozenset({"b_root", "b_spine0", "b_r_upleg", "b_l_arm"}),
+        gesture=True,
+    ),
     Family("Mixamo", "cm", prefix="mixamorig"),
-    Family("ZeroEGGS/BEAT", "cm", frozenset({"Hips", "Spine3", "Neck1", "RightHandThumb1"})),
+    Family("ZeroEGGS/BEAT", "cm", frozenset({"Hips", "Spine3", "Neck1", "RightHandThumb1"}), gesture=True),
     Family("CMU", "CMU units (5.64 cm)", frozenset({"Hips", "LHipJoint", "RHipJoint", "LowerBack", "LeftUpLeg"})),
     Family("LaFAN1", "cm", frozenset({"Hips", "LeftToe", "RightToe", "Spine2"}), lacks=frozenset({"Spine3"})),
 )

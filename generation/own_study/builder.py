@@ -65,6 +65,7 @@ from .inputs import (
     seconds_text,
     with_study_fps,
 )
+from .measures import study_measures
 from .mesh_clips import check_mesh_inputs, mesh_spec, partner_mesh_spec, wants_mesh
 from .scene import stage
 from .speech import item_captions, prepare_audio, read_sources
@@ -261,14 +262,15 @@ def skeleton_of(motions):
 
 
 def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=None, scene=None, captions=None):
-    """Clip files (random order and ids), manifest and metrics rows, render jobs, and C2ST features; the clips
-    placed and each item's camera (and other person) in `scene` (generation.own_study.scene.stage)."""
+    """Clip files (random order and ids), manifest and metrics rows (with, per row, the index of its clip in `clips`),
+    render jobs, and C2ST features; the clips placed and each item's camera (and other person) in `scene`
+    (generation.own_study.scene.stage)."""
     rng = np.random.default_rng(spec.seed)
     names, parents = skeleton_of(motions)
     feet = find_feet(names) if spec.feet == "auto" else [names.index(n) for n in spec.feet]
     if feet is not None and len(feet) == 2:  # one joint per foot: it is both the foot's ankle and its toe
         feet = [feet[0], feet[0], feet[1], feet[1]]
-    taken, manifest, metrics_rows, jobs, groups, feats = set(), [], [], [], [], {}
+    taken, manifest, metrics_rows, jobs, groups, feats, row_clips = set(), [], [], [], [], {}, []
     forbidden = [*study.RESERVED, *spec.conditions]
     options = dict(hide=tuple(spec.hide), thin=None if spec.thin == "auto" else tuple(spec.thin))
     # Every clip in every style: each styled clip is a stimulus of its own, with its own random id.
@@ -276,6 +278,7 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
     sampled = any(c.sample for c in clips)  # a stochastic system's: every row names its sample, if any
     for k in tqdm(rng.permutation(len(styled)), desc="clips", unit="clip", file=sys.stderr, disable=not progress):
         c, style = styled[k] if len(spec.styles) > 1 else (clips[k], spec.styles[0])
+        row_clips.append(k // len(spec.styles))
         cond, item, role, joints = c.condition, c.item, c.role, c.joints
         cid = keyed_id(spec.seed, clip_identity(c, style), taken, forbidden)  # one seed, the same ids
         motion, video, sheet = clip_files(out, cid)
@@ -308,7 +311,7 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
         if c.motion_item or style != spec.styles[0] or (c.sample and c.path):
             continue  # the figures are of each condition's own motion, once (its drawn sample's)
         c2st.collect(feats, cond, role, item, joints, spec.fps, parents)
-    return manifest, metrics_rows, jobs, groups, feats
+    return manifest, (metrics_rows, row_clips), jobs, groups, feats
 
 
 # ---------------------------------------------------------------- the job
@@ -389,7 +392,7 @@ def build_study(spec, out, size, preset, workers, force, progress, scheduler=Non
         scene = stage(clips, skeleton_of(motions), spec, people.partners, Path(tmp), room)
         sound = prepare_audio(spec, lengths, Path(tmp), scene.sides)
         out = prepare_out(out, force, keep_videos=True)
-        manifest, metrics_rows, jobs, groups, feats = write_study_clips(
+        manifest, (metrics_rows, row_clips), jobs, groups, feats = write_study_clips(
             out, clips, motions, spec, size, preset, progress, sound, scene, captions
         )
         render_stimuli(jobs, workers, progress, groups, index=BuildIndex(out), scheduler=scheduler)
@@ -420,20 +423,23 @@ def build_study(spec, out, size, preset, workers, force, progress, scheduler=Non
     if spec.interlocutor is not None:
         names[study.INTERLOCUTOR_COLOUR] = colours.to_hex(spec.colour or PARTNER_COLOUR)
     (out / study.STUDY_NAMES_FILE).write_text(json.dumps(names) + "\n")
-    write_tables(out, manifest, metrics_rows, [])  # manifest.csv last: a folder without one is no stimulus set
-    print_study_summary(out, manifest, metrics_rows, c2st_table, time.perf_counter() - t0)
+    extra, gesture_text = study_measures(spec, clips, row_clips, metrics_rows, skeleton_of(motions), lengths, out)
+    write_tables(out, manifest, metrics_rows, [], extra)  # manifest.csv last: a folder without one is no stimulus set
+    print_study_summary(out, manifest, metrics_rows, c2st_table, time.perf_counter() - t0, gesture_text)
     warning = blinding_warning(out, manifest)
     if warning:
         log.warning(warning)
     return 0
 
 
-def print_study_summary(out, manifest, metrics_rows, c2st_table, seconds):
+def print_study_summary(out, manifest, metrics_rows, c2st_table, seconds, gesture_text=None):
     n = {r: sum(m["role"] == r for m in manifest) for r in study.ROLES}
     print(
         "\nobjective metrics, mean (sd) per condition: foot_skating m/s, bone_length_std m, jerk m/s^3, "
         f"acceleration m/s^2\n{summary_text(metrics_rows)}"
     )
+    if gesture_text:
+        print("\n" + gesture_text)
     print("\n" + c2st.c2st_text(c2st_table[0]) + "\n" + feature_text(c2st_table[1]))
     print(
         f"\nwrote {Path(out) / 'manifest.csv'}: {len(manifest)} clips ({n['test']} test, {n['catch']} catch, "

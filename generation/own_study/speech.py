@@ -86,6 +86,23 @@ def prepare_audio(spec, lengths, folder, pans=None):
     return out
 
 
+def read_voices(spec, lengths):
+    """(agent's, interlocutor's) {item: mono float32 samples at rendering.audio.RATE} for the gesture measures: each
+    voice's own track over the item, as the study's sound reads it (the interlocutor's {} without one); ({}, {})
+    for a study without [audio]."""
+    if spec.audio_folder is None:
+        return {}, {}
+    folders = [spec.audio_folder, *([spec.interlocutor_audio] if spec.interlocutor_audio else [])]
+    out = ({}, {})
+    for where, voices in zip(folders, out):
+        found = _item_files(where, AUDIO_EXTENSIONS)
+        for item, frames in lengths.items():
+            if item not in found:
+                raise StimuliError(f"{where}: no audio for item {item} (expected {item}.wav or {item}.flac)")
+            voices[item] = _track(found[item], frames / spec.fps, spec.fps).mean(axis=1)
+    return out
+
+
 # ---------------------------------------------------------------- captions
 def read_keywords(spec):
     """{item: (keyword, (start, end) or None)} from `[captions] keywords`; {} without one."""

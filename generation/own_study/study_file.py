@@ -32,6 +32,8 @@
     framing = "upper"            # "full" (the default), "upper" (hips up) or "auto" (upper when the feet stay)
     style = ["stick", "mesh"]    # "stick" (the default), "solid", "mesh" (SMPL-family files), or a list of them
     face = "mask"                # the mesh's face: a plain mask over it (the default), or "none"
+    [metrics]                    # optional
+    gesture = "auto"             # the gesture measures: "auto" (with speech, an SMPL-family or speech-gesture skeleton)
 
 Two people and captions (generation.own_study.dyad, speech; CONTRACTS §10):
 
@@ -85,6 +87,7 @@ TOP_KEYS = {
     "mismatched",
     "captions",
     "samples",
+    "metrics",
 }
 SAMPLE_DRAWS = ("item", "rater")  # a stochastic system's samples: one per item, or one per rater and unit (the app)
 RENDER_KEYS = {"view", "framing", "style", "face"}
@@ -139,6 +142,7 @@ class StudySpec:
     interlocutor_captions: Path | None = None
     keywords: Path | None = None
     sample_draw: str = "item"  # a condition with several samples per item (ITEM/SAMPLE.EXT): SAMPLE_DRAWS
+    gesture: bool | str = "auto"  # [metrics] gesture: the gesture measures, or "auto" (measures.gesture_study)
 
 
 def read_study_file(path):
@@ -199,6 +203,7 @@ def read_study_file(path):
     _audio(path, data.get("audio"), spec)
     _render(path, data.get("render", {}), spec)
     _samples(path, data.get("samples", {}), spec)
+    _metrics(path, data.get("metrics", {}), spec)
     read_people_keys(path, data, spec)
     check_needs(path, spec)
     return spec
@@ -347,6 +352,17 @@ def _samples(path, table, spec):
     if draw not in SAMPLE_DRAWS:
         raise err(path, "[samples] draw", f"must be {' or '.join(map(repr, SAMPLE_DRAWS))}, got {draw!r}")
     spec.sample_draw = draw
+
+
+def _metrics(path, table, spec):
+    """[metrics] gesture: whether metrics.csv gets the gesture measures (generation.own_study.measures)."""
+    if not isinstance(table, dict):
+        raise err(path, "[metrics]", "must be a table")
+    unknown(path, "metrics", table, {"gesture"})
+    gesture = table.get("gesture", "auto")
+    if gesture != "auto" and not isinstance(gesture, bool):
+        raise err(path, "[metrics] gesture", f'must be true, false or "auto", got {gesture!r}')
+    spec.gesture = gesture
 
 
 def check_joint_names(spec, names, where):

@@ -59,7 +59,8 @@ def prepare_out(out, force, keep_videos=False):
     for sub in (*SUBFOLDERS, "items", "audio_check"):
         if (out / sub).exists() and sub not in kept:
             shutil.rmtree(out / sub)
-    for name in ("manifest.csv", "metrics.csv", "items.csv", "c2st.csv", "c2st_features.csv", "audio_check.csv"):
+    for name in ("manifest.csv", "metrics.csv", "items.csv", "c2st.csv", "c2st_features.csv", "audio_check.csv",
+                 study.MEASURES_FILE, study.GESTURE_FILE):  # fmt: skip
         (out / name).unlink(missing_ok=True)
     for sub in SUBFOLDERS:
         (out / sub).mkdir(parents=True, exist_ok=True)
@@ -131,9 +132,9 @@ def write_csv(path, columns, rows):
         w.writerows(rows)
 
 
-def write_tables(out, manifest, metrics_rows, fmd):
-    """manifest.csv (rows in the given order), metrics.csv (6 significant digits, nan for undefined) and, when
-    there are FMD rows, fmd.csv."""
+def write_tables(out, manifest, metrics_rows, fmd, extra_metrics=()):
+    """manifest.csv (rows in the given order), metrics.csv (6 significant digits, nan for undefined; `extra_metrics`
+    columns after study.METRIC_NAMES: a gesture study's measures) and, when there are FMD rows, fmd.csv."""
     out = Path(out)
     # A study of your own motion may also say which item's motion each clip shows (appropriateness) and that its
     # videos carry sound (CONTRACTS §10).
@@ -143,7 +144,7 @@ def write_tables(out, manifest, metrics_rows, fmd):
     write_csv(out / "manifest.csv", MANIFEST_COLUMNS + extra, manifest)
     write_csv(
         out / "metrics.csv",
-        METRICS_COLUMNS,
+        [*METRICS_COLUMNS, *extra_metrics],
         [{k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()} for row in metrics_rows],
     )
     if fmd:

@@ -42,6 +42,36 @@ CLIP_ID_ALPHABET = "abcdefghijklmnopqrstuvwxyz0123456789"
 # Per-clip objective metrics in metrics.csv (CONTRACTS §4), in column order; generation.metrics.objective computes them.
 METRIC_NAMES = ("foot_skating", "bone_length_std", "jerk", "control_error", "control_following", "acceleration")
 METRIC_KEYS = ("clip_id", "condition", "role", "item")  # the columns of metrics.csv that are not metrics
+# The locomotion metrics among them: a gesture study (speech, an SMPL-family or speech-gesture skeleton) writes them
+# as nan, and says so in MEASURES_FILE.
+LOCOMOTION_METRICS = ("foot_skating", "control_error", "control_following")
+# The gesture measures a gesture study adds to metrics.csv, in column order (docs/metrics.md; generation.metrics.gesture
+# computes them): the Fréchet gesture distance, BeatAlign, the Hellinger distances of each joint group's speed and
+# acceleration histograms, diversity, and a two-person study's listener response.
+JOINT_GROUPS = ("hands", "arms", "head")
+HELLINGER_METRICS = tuple(f"hellinger_{kind}_{g}" for kind in ("speed", "accel") for g in JOINT_GROUPS)
+GESTURE_METRIC_NAMES = ("fgd", "beat_align", *HELLINGER_METRICS, "diversity", "listener_response")
+# Which way each measure is better, for the report's rank agreement with people: "lower", "higher", or "reference"
+# (the closer to the reference condition's value, the better). A column not named here is read as "higher".
+METRIC_DIRECTION = {
+    "foot_skating": "lower",
+    "bone_length_std": "lower",
+    "jerk": "reference",
+    "control_error": "lower",
+    "control_following": "lower",
+    "acceleration": "reference",
+    "fgd": "lower",
+    "beat_align": "higher",
+    **{name: "lower" for name in HELLINGER_METRICS},
+    "diversity": "reference",
+    "listener_response": "reference",
+}
+# Beside metrics.csv in a study of your own motion (CONTRACTS §4): each measure's status and why, and a gesture
+# study's per-condition values.
+MEASURES_FILE = "measures.csv"
+MEASURES_COLUMNS = ("measure", "status", "clips", "reason", "settings")
+MEASURE_STATUS = ("measured", "partly", "skipped")
+GESTURE_FILE = "gesture.csv"
 
 # A study of your own motion writes its reference as NATURAL in the manifest (every design's catch and anchor
 # rules key on it); the name the study file gave it travels beside the manifest in this file, as

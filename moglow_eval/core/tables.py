@@ -55,11 +55,12 @@ def first_line(mask):
     return int(mask.index[np.flatnonzero(np.asarray(mask))[0]])
 
 
-def read_metrics(path, error=TableError):
+def read_metrics(path, error=TableError, keys=False):
     """metrics.csv (clip_id, condition, role, item, metric columns...) -> DataFrame indexed by clip_id.
 
     Every column other than the four keys is an objective metric and must be numeric (empty = missing,
-    reported as such, never guessed).
+    reported as such, never guessed). With `keys`, the key columns the file has (condition, role, item) come first,
+    as text.
     """
     path, df = read_csv(path, error)
     if "clip_id" not in df.columns:
@@ -78,6 +79,8 @@ def read_metrics(path, error=TableError):
     if not metric_cols:
         raise error(f"{path}: no metric columns besides {', '.join(study.METRIC_KEYS)}")
     out = pd.DataFrame(index=df["clip_id"].to_numpy())
+    for col in [c for c in study.METRIC_KEYS[1:] if c in df.columns] if keys else []:
+        out[col] = df[col].str.strip().to_numpy()
     for col in metric_cols:
         out[col] = _numbers(path, df, col, error)
     out.index.name = "clip_id"

@@ -1,0 +1,77 @@
+"""Which measures a study of your own motion gets (generation.own_study.measures): a study with speech gets the gesture
+measures in metrics.csv and gesture.csv, drops foot skating, and says so in measures.csv; a study of walking without
+sound keeps foot skating and says the gesture measures were skipped, and why."""
+
+import csv
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from helpers.own_study_data import make_study
+
+from generation.make_stimuli import main as make_stimuli
+from generation.own_study.measures import gesture_study
+from moglow_eval.core import study
+
+
+def _rows(path):
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+@dataclass
+class Spec:
+    gesture: object = "auto"
+    audio_folder: object = None
+    smpl_model: object = None
+
+
+BANDAI = ["joint_Root", "Hips", "UpperLeg_L", "UpperArm_R", "Hand_R", "Head"]
+GENEA = ["b_root", "b_spine0", "b_r_upleg", "b_l_arm", "b_l_wrist", "b_head"]
+
+
+@pytest.mark.parametrize(
+    "spec, names, on, why",
+    [
+        (Spec(), BANDAI, False, "not a gesture study"),
+        (Spec(audio_folder="audio"), BANDAI, True, "it has speech"),
+        (Spec(smpl_model="m.npz"), BANDAI, True, "an SMPL-family body"),
+        (Spec(), GENEA, True, "GENEA"),
+        (Spec(gesture=False, audio_folder="audio"), BANDAI, False, "[metrics] gesture = false"),
+        (Spec(gesture=True), BANDAI, True, "[metrics] gesture = true"),
+    ],
+)
+def test_a_gesture_study_is_told_by_its_sound_its_body_or_its_skeleton(spec, names, on, why):
+    found, reason = gesture_study(spec, names)
+    assert found is on and why in reason
+
+
+@pytest.fixture(scope="module")
+def speech_study(tmp_path_factory):
+    root = tmp_path_factory.mktemp("gesture_study")
+    spec = make_study(root / "in", n_items=4, n_catch=2, audio=True)
+    spec.write_text(spec.read_text().replace("n_training = 1", "n_training = 1\nlength_s = 3"))
+    assert make_stimuli(["--study", str(spec), "--out", str(root / "out"), "--size", "64", "--quiet"]) == 0
+    return root / "out"
+
+
+@pytest.mark.full  # make_study's takes are in ../shared
+def test_a_study_with_speech_gets_the_gesture_measures(speech_study):
+    out = speech_study
+    metrics = _rows(out / "metrics.csv")
+    assert list(metrics[0])[-len(study.GESTURE_METRIC_NAMES) :] == list(study.GESTURE_METRIC_NAMES)
+    assert all(r["foot_skating"] == "nan" for r in metrics)  # a speaker's feet are not what is judged
+    nat = [r for r in metrics if r["condition"] == "NAT" and r["role"] == "test"]
+    assert all(np.isfinite(float(r[m])) for r in nat for m in ("fgd", "beat_align", "hellinger_speed_hands"))
+    table = {r["condition"]: r for r in _rows(out / study.GESTURE_FILE)}
+    assert list(table) == ["NAT", "SYS_A", "SYS_B", "BAD"]
+    # the catch clips (a shaking and a frozen body) are farther from the reference than the smoothed system
+    assert float(table["BAD"]["fgd"]) > float(table["SYS_A"]["fgd"])
+    assert float(table["BAD"]["hellinger_accel_hands"]) > float(table["SYS_A"]["hellinger_accel_hands"])
+    assert table["NAT"]["listener_response"] == "nan"  # one voice
+    notes = {r["measure"]: r for r in _rows(out / study.MEASURES_FILE)}
+    assert set(notes) == {*study.METRIC_NAMES, *study.GESTURE_METRIC_NAMES}
+    assert notes["foot_skating"]["status"] == "skipped" and "it has speech" in notes["foot_skating"]["reason"]
+    assert notes["beat_align"]["status"] == "measured" and "sigma 0.3 s" in notes["beat_align"]["settings"]
+    assert notes["listener_response"]["status"] == "skipped" and "two voices" in notes["listener_response"]["reason"]
+    assert notes["jerk"]["status"] == "measured" and int(notes["jerk"]["clips"]) == len(metrics)
