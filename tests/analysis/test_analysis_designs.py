@@ -5,14 +5,12 @@ Holm; the catch exclusion; bad rows refused with one line naming the row."""
 
 import csv
 import json
-import subprocess
-import sys
 from itertools import combinations
 
 import numpy as np
 import pandas as pd
 import pytest
-from helpers.paths import ROOT
+from helpers.cli import fails_with
 from scipy import stats as sps
 
 from analysis.data.load import AnalysisError
@@ -20,6 +18,7 @@ from analysis.designs import Options, detect_design
 from analysis.designs.pairwise import preference as pairwise
 from analysis.designs.parallel import mushra as parallel
 from analysis.report import build_report
+from analysis.report import main as report_main
 
 PAIR_COLS = ["rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role"]
 PAGE_COLS = ["rater_id", "page_id", "item", "clip_id", "condition", "rating", "role"]
@@ -317,29 +316,16 @@ def test_bad_page_rows_are_refused_naming_the_row(tmp_path, row, needle):
         parallel.load_pages(f)
 
 
-def test_cli_gives_one_line_for_a_bad_row_and_writes_the_report(tmp_path):
+def test_cli_gives_one_line_for_a_bad_row_and_writes_the_report(tmp_path, capsys):
+    """analysis.report's main in-process (its own process: tests/analysis/test_analysis_load.py)."""
     f = write(tmp_path / "pairs.csv", PAIR_COLS, [GOOD_PAIR, ["r1", "i2", "cc", "cd", "NAT", "FL", "9", "test"]])
-    r = subprocess.run(
-        [sys.executable, "-m", "analysis.report", str(f), "--out", str(tmp_path / "o")],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=120,
-    )
-    assert r.returncode == 2 and r.stderr.strip().count("\n") == 0 and f"{f}:3: preference '9'" in r.stderr
+    fails_with(report_main, [str(f), "--out", str(tmp_path / "o")], capsys, f"{f}:3: preference '9'")
     f = write(tmp_path / "ok.csv", PAIR_COLS, simulate_pairs({"NAT": 0, "MG": -1}, n_raters=5, items=2))
-    r = subprocess.run(
-        [sys.executable, "-m", "analysis.report", str(f), "--out", str(tmp_path / "o"), "--n-boot", "20"],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=120,
-    )
-    assert r.returncode == 0, r.stderr
+    assert report_main([str(f), "--out", str(tmp_path / "o"), "--n-boot", "20"]) == 0
     doc = json.loads((tmp_path / "o" / "stats.json").read_text())
     assert doc["design"] == "pairwise" and set(doc["bradley_terry"]) == {"NAT", "MG"}
     assert doc["bradley_terry"]["NAT"] == 0 and set(doc["bradley_terry_ci"]) == {"NAT", "MG"}
-    assert "MG vs NAT" in r.stdout
+    assert "MG vs NAT" in capsys.readouterr().out
 
 
 def test_a_condition_that_never_wins_stays_finite():

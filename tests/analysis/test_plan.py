@@ -2,12 +2,11 @@
 report's own Tukey HSD on studies simulated with a known effect, and its command line."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pandas as pd
 import pytest
+from helpers.cli import fails_with
 from helpers.paths import ROOT
 
 from analysis import plan
@@ -98,32 +97,16 @@ def test_null_rejection_rate_is_alpha_where_tukey_is_exact():
     assert abs(p - 0.05) < 0.012 and low < p < high
 
 
-def test_plan_cli_writes_curve_and_table(tmp_path):
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "analysis.plan",
-            str(DATA / "ratings_small.csv"),
-            "--out",
-            str(tmp_path),
-            "--n-sim",
-            "200",
-            "--raters",
-            "6",
-            "--quiet",
-        ],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert proc.returncode == 0, proc.stderr
+def test_plan_cli_writes_curve_and_table(tmp_path, capsys):
+    """The command's main in-process (its own process: tests/project/test_console.py)."""
+    argv = [str(DATA / "ratings_small.csv"), "--out", str(tmp_path), "--n-sim", "200", "--raters", "6", "--quiet"]
+    assert plan.main(argv) == 0
+    out = capsys.readouterr().out
     doc = json.loads((tmp_path / "plan.json").read_text())
     assert doc["pair"] == ["NAT", "MG"]  # the pilot's closest pair
     assert doc["planned_raters"] >= 2 and doc["planned_power"] >= 0.8 and "6" in doc["power_at"]
     assert (tmp_path / "power_curve.png").read_bytes()[:4] == b"\x89PNG"
-    assert "Power 0.8 needs" in proc.stdout and "ratings per clip" in proc.stdout
+    assert "Power 0.8 needs" in out and "ratings per clip" in out
 
 
 @pytest.mark.parametrize(
@@ -138,21 +121,13 @@ def test_plan_cli_writes_curve_and_table(tmp_path):
         ([], "error: give a pilot ratings file"),
     ],
 )
-@pytest.mark.full  # the full tier: the planner's command per bad flag
-def test_plan_cli_errors_are_one_line(tmp_path, args, start):
-    proc = subprocess.run(
-        [sys.executable, "-m", "analysis.plan", *args, "--out", str(tmp_path), "--quiet"],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert proc.returncode == 2 and proc.stderr.startswith(start), proc.stderr
-    assert len(proc.stderr.strip().splitlines()) == 1
+def test_plan_cli_errors_are_one_line(tmp_path, args, start, capsys):
+    """The command's main in-process, per bad flag (a process each was the full tier's; helpers/cli.py)."""
+    assert fails_with(plan.main, [*args, "--out", str(tmp_path), "--quiet"], capsys, "").startswith(start)
 
 
-def test_plan_help_says_acr_only():
-    proc = subprocess.run(
-        [sys.executable, "-m", "analysis.plan", "--help"], cwd=ROOT, capture_output=True, text=True, timeout=60
-    )
-    assert proc.returncode == 0 and "acr" in proc.stdout and "pairwise" in proc.stdout.lower()
+def test_plan_help_says_acr_only(capsys):
+    with pytest.raises(SystemExit) as e:
+        plan.main(["--help"])
+    out = capsys.readouterr().out
+    assert e.value.code == 0 and "acr" in out and "pairwise" in out.lower()

@@ -3,11 +3,10 @@
 import json
 import math
 import re
-import subprocess
-import sys
 
 import pytest
-from helpers.paths import ROOT, TEST_DATA
+from helpers.cli import fails_with
+from helpers.paths import TEST_DATA
 
 from analysis.data.filtering import exclude_raters
 from analysis.data.load import load_ratings
@@ -302,28 +301,13 @@ def test_condition_names_are_escaped_in_the_html(tmp_path):
         (["--alpha", "0"], r"--alpha: must be > 0"),
     ],
 )
-def test_bad_flags_one_line_exit_2(tmp_path, args, pattern):
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "analysis.report",
-            str(DATA / "exclusion.csv"),
-            "--quiet",
-            "--out",
-            str(tmp_path / "rep"),
-            *args,
-        ],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
-    assert re.search(pattern, proc.stderr) and "Traceback" not in proc.stderr
+def test_bad_flags_one_line_exit_2(tmp_path, args, pattern, capsys):
+    """The command's main in-process (helpers/cli.py); its own process: test_analysis_load.py's module test."""
+    line = fails_with(main, [str(DATA / "exclusion.csv"), "--quiet", "--out", str(tmp_path / "rep"), *args], capsys, "")
+    assert re.search(pattern, line)
 
 
-def test_too_few_ratings_and_bad_out_are_one_line_errors(tmp_path):
+def test_too_few_ratings_and_bad_out_are_one_line_errors(tmp_path, capsys):
     two = _csv(tmp_path, "two", [("r1", "a", "NAT", 3), ("r2", "b", "MG", 4)])
     a_file = tmp_path / "taken"
     a_file.write_text("not a folder")
@@ -333,16 +317,8 @@ def test_too_few_ratings_and_bad_out_are_one_line_errors(tmp_path):
         ([str(DATA / "exclusion.csv"), "--out", str(a_file / "sub")], f"--out {a_file / 'sub'}: cannot create"),
     ]
     for args, start in cases:
-        proc = subprocess.run(
-            [sys.executable, "-m", "analysis.report", *args, "--quiet", "--n-boot", "20"]
-            + ([] if "--out" in args else ["--out", str(tmp_path / "rep")]),
-            cwd=ROOT,
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
-        assert proc.returncode == 2, (args, proc.stderr)
-        assert proc.stderr.startswith(f"error: {start}") and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+        argv = [*args, "--quiet", "--n-boot", "20"] + ([] if "--out" in args else ["--out", str(tmp_path / "rep")])
+        assert fails_with(main, argv, capsys, "").startswith(f"error: {start}")
     assert a_file.read_text() == "not a folder"
 
 

@@ -8,6 +8,7 @@ import sys
 
 import numpy as np
 import pytest
+from helpers.cli import fails_with
 from helpers.paths import DATA, ROOT, TEST_DATA
 
 from generation import make_stimuli
@@ -351,25 +352,20 @@ def test_a_condition_under_natural_motions_fmd_is_named_and_explained():
     assert below_floor(rows[:1] + rows[2:]) == [] and below_floor(rows[1:]) == []  # no NAT: no floor to be under
 
 
-def _make_stimuli(*args):
-    return subprocess.run(
-        [sys.executable, "-m", "generation.make_stimuli", "--quiet", *map(str, args)],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=300,
-    )
+def _fails(capsys, *args):
+    """make_stimuli's main in-process (a process each cost a few seconds; the command's own process:
+    tests/project/test_console.py), which must stop with one line and exit 2; that line."""
+    return fails_with(make_stimuli.main, ["--quiet", *map(str, args)], capsys, "error: ")
 
 
 def _tree(folder):
     return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
 
 
-def test_a_failed_build_leaves_no_new_file_or_folder(tmp_path):
+def test_a_failed_build_leaves_no_new_file_or_folder(tmp_path, capsys):
     """Issue 46: `--n-items 5000` left empty videos/, motion/ and sheets/ behind."""
     # A folder the build would create, two levels of it: nothing of it is left.
-    r = _make_stimuli("--n-items", 5000, "--out", tmp_path / "new" / "stimuli")
-    assert r.returncode == 2 and r.stderr.startswith("error:") and "Traceback" not in r.stderr, r.stderr
+    _fails(capsys, "--n-items", 5000, "--out", tmp_path / "new" / "stimuli")
     assert _tree(tmp_path) == []
     # A folder that exists, with a file of the user's: only that file is left, after a failure before the clips
     # (too many items) and after one once the set's folders exist (a checkpoint that is not there).
@@ -377,19 +373,17 @@ def test_a_failed_build_leaves_no_new_file_or_folder(tmp_path):
     out.mkdir()
     (out / "notes.txt").write_text("mine")
     for args in (("--n-items", 5000), ("--mg-checkpoint", tmp_path / "none.pt")):
-        r = _make_stimuli(*args, "--out", out)
-        assert r.returncode == 2 and r.stderr.startswith("error:"), r.stderr
+        line = _fails(capsys, *args, "--out", out)
         assert _tree(out) == ["notes.txt"], (args, _tree(out))
-    assert "none.pt: no such file" in r.stderr
+    assert "none.pt: no such file" in line
 
 
-def test_refusing_to_replace_a_set_touches_nothing(tmp_path):
+def test_refusing_to_replace_a_set_touches_nothing(tmp_path, capsys):
     out = tmp_path / "stimuli"
     for sub in ("videos", "motion", "sheets"):
         (out / sub).mkdir(parents=True)
         (out / sub / "x").write_text("clip")
     (out / "manifest.csv").write_text("clip_id\n")
     before = _tree(out)
-    r = _make_stimuli("--out", out)
-    assert r.returncode == 2 and "pass --force to replace it" in r.stderr, r.stderr
+    assert "pass --force to replace it" in _fails(capsys, "--out", out)
     assert _tree(out) == before

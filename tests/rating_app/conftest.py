@@ -1,5 +1,6 @@
 """Fixtures the rating app's test modules share: the design tests' stimulus folders (small, big, the catch pool's),
-and a running study's folders with a new system's (add-condition and its hostile submissions)."""
+a running study's folders with a new system's (add-condition and its hostile submissions), and the app's command run
+in-process to a one-line error."""
 
 import pytest
 from helpers.catch_pool import CATCH_ITEMS
@@ -55,3 +56,34 @@ def folders(tmp_path, stimulus_mp4):
     one_size(study.parent, stimulus_mp4)
     one_size(new.parent, stimulus_mp4)
     return study, new
+
+
+@pytest.fixture
+def command_fails(capsys, monkeypatch):
+    """fails(*args, needle=...): `python -m rating_app ARGS`'s main run in this process (a process each took a second
+    or two), which must stop with one line on stderr that starts with "error: " and says `needle`, nothing on stdout,
+    no traceback, and exit 2; returns that line. `serve` must stop before it serves: Flask's run would wait for ever,
+    so here it fails the test. The commands' own processes: tests/rating_app/test_cli.py's test_serve_cli and
+    test_export_cli_errors, tests/project/test_console.py."""
+    from flask import Flask
+
+    from rating_app.__main__ import main
+
+    def served(*args, **kwargs):
+        pytest.fail("serve started the app where it should have stopped with one line")
+
+    monkeypatch.setattr(Flask, "run", served)
+
+    def fails(*args, needle):
+        capsys.readouterr()
+        try:
+            code = main([str(a) for a in args])
+        except SystemExit as e:  # argparse's
+            code = e.code
+        out, err = capsys.readouterr()
+        lines = err.strip().splitlines()
+        assert code == 2 and out == "" and "Traceback" not in err, (code, out, err)
+        assert len(lines) == 1 and lines[0].startswith("error: ") and needle in lines[0], err
+        return lines[0]
+
+    return fails

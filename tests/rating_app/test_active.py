@@ -11,7 +11,7 @@ import collections
 
 import pytest
 from helpers.api_client import TOKEN_HDR
-from helpers.catch_pool import catch_recurrence
+from helpers.catch_pool import SESSIONS, catch_recurrence
 from helpers.concurrent_raters import cover_mismatches
 from helpers.design_checks import (
     an_idle_session_gives_its_pair_back,
@@ -64,7 +64,7 @@ def test_targets_exact_under_concurrent_sessions(active_make, big_stimuli):
 
 @pytest.mark.full  # the full tier: crowds, as in the modules these checks come from
 def test_catch_units_recur_like_test_units(active_make, pool_stimuli, monkeypatch):
-    catch_recurrence(active_make, pool_stimuli, "pairwise", 24, monkeypatch)
+    catch_recurrence(active_make, pool_stimuli, "pairwise", SESSIONS, monkeypatch)
 
 
 # ---------------------------------------------------------------------------------- what it changes

@@ -3,7 +3,7 @@ so a catch unit reaches about the same share of raters as a test unit, and the c
 point at the catch trials. Many sessions at the production settings, in every design, on SQLite and PostgreSQL."""
 
 import pytest
-from helpers.catch_pool import CATCH_PER_RATER, PRODUCTION, catch_recurrence, run_sessions
+from helpers.catch_pool import CATCH_PER_RATER, PRODUCTION, SESSIONS, catch_recurrence, run_sessions
 from helpers.fake_stimuli import write_fake_stimuli
 
 from moglow_eval.core import study
@@ -20,8 +20,8 @@ DESIGN_DATABASES = [(d, "postgres") for d in study.DESIGNS] + [("acr", "sqlite")
 
 @pytest.mark.parametrize("design, app_db_url", DESIGN_DATABASES, indirect=["app_db_url"])
 def test_catch_units_recur_like_test_units(make, pool_stimuli, design, app_db_url, monkeypatch):
-    """24 sessions of every design (the whole acr study is 60: `catch_recurrence(..., 60, ...)` by hand)."""
-    catch_recurrence(make, pool_stimuli, design, 24, monkeypatch)
+    """SESSIONS sessions of every design (helpers/catch_pool.py says why that many)."""
+    catch_recurrence(make, pool_stimuli, design, SESSIONS, monkeypatch)
 
 
 def test_a_pool_too_small_is_a_warning_and_the_cap_keeps_every_rater_equal(make, pool_stimuli, tmp_path, caplog):

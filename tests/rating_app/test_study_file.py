@@ -142,20 +142,12 @@ BAD = [
 ]
 
 
-@pytest.mark.full  # the full tier: a served app started per bad file
 @pytest.mark.parametrize("text, message", BAD, ids=[m.split(":")[0] for _, m in BAD])
-def test_a_bad_study_file_is_one_line_naming_the_key(study_dir, text, message):
+def test_a_bad_study_file_is_one_line_naming_the_key(study_dir, text, message, command_fails):
+    """`serve --config` per bad file, in-process (a process each was the full tier's; the conftest's command_fails)."""
     bad = study_dir / "bad.toml"
     bad.write_text('rating_manifest = "stimuli/manifest.csv"\n' + text)
-    r = subprocess.run(
-        [sys.executable, "-m", "rating_app", "serve", "--config", str(bad)],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert r.returncode == 2 and r.stdout == ""
-    assert r.stderr.startswith(f"error: {bad}: {message}") and r.stderr.count("\n") == 1, r.stderr
+    assert command_fails("serve", "--config", bad, needle="").startswith(f"error: {bad}: {message}")
 
 
 def test_a_missing_study_file_is_one_line(study_dir):
