@@ -24,6 +24,13 @@ def _text(col: pd.Series) -> pd.Series:
     return col.map(lambda v: "" if pd.isna(v) else (f"{v:g}" if isinstance(v, float) else str(v).strip()))
 
 
+def _scores(rows, condition: str, sample: str, score) -> pd.DataFrame:
+    """(condition, item, sample, score) of `rows`, the condition and the sample from the named columns."""
+    return pd.DataFrame(
+        {"condition": rows[condition], "item": rows["item"], "sample": _text(rows[sample]), "score": score}
+    )
+
+
 def sample_scores(df: pd.DataFrame) -> pd.DataFrame:
     """(condition, item, sample, score) of every test answer about a clip that names a sample: a rating (acr,
     parallel), or a preference seen from the sample's side (-2..2, the designs that compare two clips; where a
@@ -32,29 +39,12 @@ def sample_scores(df: pd.DataFrame) -> pd.DataFrame:
     test = df[df["role"] == "test"] if "role" in df else df
     parts = []
     if "sample" in test and "rating" in test:
-        parts.append(
-            pd.DataFrame(
-                {"condition": test["condition"], "item": test["item"], "sample": _text(test["sample"]),
-                 "score": test["rating"].astype(float)}
-            )
-        )  # fmt: skip
+        parts.append(_scores(test, "condition", "sample", test["rating"].astype(float)))
     for col, cond, sign in SIDES:
         if col in test and "preference" in test:
-            if "matched" in test:  # a system against itself, matched against mismatched: the matched side's sample
-                side = test[test["matched"] == col[-1]]
-                parts.append(
-                    pd.DataFrame(
-                        {"condition": side[cond], "item": side["item"], "sample": _text(side[col]),
-                         "score": sign * side["preference"].astype(float)}
-                    )
-                )  # fmt: skip
-                continue
-            parts.append(
-                pd.DataFrame(
-                    {"condition": test[cond], "item": test["item"], "sample": _text(test[col]),
-                     "score": sign * test["preference"].astype(float)}
-                )
-            )  # fmt: skip
+            # a system against itself, matched against mismatched: the matched side's sample
+            side = test[test["matched"] == col[-1]] if "matched" in test else test
+            parts.append(_scores(side, cond, col, sign * side["preference"].astype(float)))
     if not parts:
         return pd.DataFrame(columns=["condition", "item", "sample", "score"])
     out = pd.concat(parts, ignore_index=True)
