@@ -16,7 +16,13 @@ CODED_SHARE = 0.9
 # how much x264 spends on a frame otherwise swings with how much the picture changed, more in a jittery clip.
 DITHER_SD = 1.0
 DITHER_RANGE = (0.25, 4.0)
-MAX_ZONES = 100  # about 1.5 kB of x264 options in the first frame
+MAX_ZONES = 100  # about 6 kB of x264 options in the first frame, which the caller strips
+# The first frame is coded from nothing, and it is the poster a rater looks at while the other video of a pair
+# plays: at one frame's budget its static floor comes out blocky and sharpens only over the next frames. So it is
+# given this many frames' worth of bits, in every video alike: the set keeps one schedule of frame sizes, the same
+# for every video of a size and frame rate, and the key frame reaches the quality of the frames after it
+# (bench/RESULTS.md#key-frame).
+KEY_FRAME_BUDGET = 3
 
 
 def video_rate(fps) -> Fraction:
@@ -42,12 +48,14 @@ def frame_bits(size, fps):
     return 8 * round(RATE_BITS_PER_ROW * size / fps / 8)
 
 
-def rate_dither(frames, seed=None):
+def rate_dither(frames, seed=None, after_key=""):
     """x264 zones giving each of `frames` frames a random multiple of the rate (seed None: fresh randomness).
 
     Every multiple is written with the same number of characters, so that x264's options (written into the
     first frame, and stripped from it by the caller) are as long for every clip; a long clip gets its multiples
     in runs of frames, at most MAX_ZONES of them, so that they stay a small part of the first frame.
+    after_key: x264 options for every frame after the first, which keeps the options it starts with (a zone
+    of its own at the mean rate); "" gives no such zone.
     """
     run = -(-frames // MAX_ZONES)
     starts = range(0, frames, run)
@@ -55,7 +63,11 @@ def rate_dither(frames, seed=None):
     m = [rng.lognormvariate(0.0, DITHER_SD) for _ in starts]
     mean = sum(m) / len(m)
     lo, hi = DITHER_RANGE
-    return "/".join(f"{a},{min(a + run, frames) - 1},b={min(max(x / mean, lo), hi):.3f}" for a, x in zip(starts, m))
+    first = 1 if after_key else 0
+    zones = [(max(a, first), min(a + run, frames) - 1, min(max(x / mean, lo), hi)) for a, x in zip(starts, m)]
+    extra = f",{after_key}" if after_key else ""
+    dither = [f"{a},{b},b={x:.3f}{extra}" for a, b, x in zones if a <= b]
+    return "/".join((["0,0,b=1.000"] if after_key else []) + dither)
 
 
 def _rate_control(size, fps, qp, crf, frames, seed):
@@ -75,16 +87,27 @@ def _rate_control(size, fps, qp, crf, frames, seed):
     cap = round(bits * video_rate(fps))
     aim = round(CODED_SHARE * bits * video_rate(fps))
     x264 = ["filler=1", "qcomp=0", "scenecut=0", "bframes=0"]
+    buffer, top = bits, cap
     if frames:
-        x264.append(f"zones={rate_dither(frames, seed)}")
-    rate = ["-b:v", str(aim), "-maxrate", str(cap), "-bufsize", str(bits), "-bsf:v", "filter_units=remove_types=6"]
+        # The key frame's budget: the buffer starts full at KEY_FRAME_BUDGET frames and fills at that much a frame,
+        # so filler tops the key frame up to it whatever it shows. From frame 1 on, a zone sets buffer and rate back
+        # to one frame's (in kbit, as ffmpeg hands x264 the global ones); x264 applies them from frame 2, so frame 1
+        # also comes out near the key frame's budget: one fixed schedule of sizes, the same for every clip.
+        buffer, top = KEY_FRAME_BUDGET * bits, KEY_FRAME_BUDGET * cap
+        # x264 aims at an average over the clip, and the two key frames' extra would otherwise come out of the
+        # frames after them: the aim grows by that extra.
+        aim = round(aim * (frames + 2 * (KEY_FRAME_BUDGET - 1)) / frames)
+        per_frame = f"vbv-bufsize={bits // 1000},vbv-maxrate={cap // 1000}"
+        x264 += ["vbv-init=1", f"zones={rate_dither(frames, seed, per_frame)}"]
+    rate = ["-b:v", str(aim), "-maxrate", str(top), "-bufsize", str(buffer), "-bsf:v", "filter_units=remove_types=6"]
     return rate, x264
 
 
 def ffmpeg_writer(out_mp4, size, fps, preset="ultrafast", qp=None, crf=None, threads=None, frames=None, seed=None):
     """An ffmpeg process reading raw yuv420p frames on stdin and writing H.264 yuv420p +faststart MP4, no audio.
 
-    Rate control: by default every frame is `frame_bits(size, fps)` bits, filler data included, so every video of one
+    Rate control: by default every frame is `frame_bits(size, fps)` bits, filler data included (given `frames`, the
+    key frame KEY_FRAME_BUDGET times that and the next nearly as much), so every video of one
     size and frame rate has the same frame sizes and byte size: what a blinded stimulus set needs
     (rendering.blinding, CONTRACTS §4). With `qp` (a constant quantiser) or `crf` (x264's rate factor) the
     sizes follow the content instead. ultrafast at qp 17 was the default before; the default now is as close to

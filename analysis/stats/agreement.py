@@ -82,11 +82,15 @@ def krippendorff_alpha(df, unit="clip_id", value="rating", n_boot=1000, seed=0, 
     }
 
 
-def _icc(y, rater, clip, k):
+def _icc(y, rater, clip, k, start=None):
+    """(ICC(A,1), ICC(A,k), the variance components); `start`: the components a resample's search begins from."""
+    if start is not None:  # as relative SDs, the model's own parameters
+        start = [(start["rater"] / start["residual"]) ** 0.5, (start["clip"] / start["residual"]) ** 0.5]
     with np.errstate(
         divide="raise", invalid="raise"
     ):  # a degenerate fit raises (FIT_ERRORS) instead of warning its way to a NaN
-        vc = fit_crossed(y, np.ones((len(y), 1)), rater, clip, ["(Intercept)"])["variance_components"]
+        fit = fit_crossed(y, np.ones((len(y), 1)), rater, clip, ["(Intercept)"], tests=False, start=start)
+        vc = fit["variance_components"]
     total = vc["clip"] + vc["rater"] + vc["residual"]
     return vc["clip"] / total, vc["clip"] / (vc["clip"] + (vc["rater"] + vc["residual"]) / k), vc
 
@@ -111,9 +115,10 @@ def _icc_complete(d, unit, value):
     }
 
 
-def _icc_bootstrap(y, rater, clip, k, n_boot, seed, level):
+def _icc_bootstrap(y, rater, clip, k, n_boot, seed, level, start=None):
     """Percentile intervals of ICC(A,1), ICC(A,k) from resampling raters and clips at once, each draw a level of
-    its own: both are random samples, and the clips' sampling is most of an ICC's uncertainty."""
+    its own: both are random samples, and the clips' sampling is most of an ICC's uncertainty. Each resample's
+    fit starts at `start` (the whole sample's variance components), near where it ends."""
     rng = np.random.default_rng(seed)
     by_r = [np.flatnonzero(rater == r) for r in range(rater.max() + 1)]
     n_c = clip.max() + 1
@@ -132,7 +137,7 @@ def _icc_bootstrap(y, rater, clip, k, n_boot, seed, level):
         c_code = pd.factorize(slots[first[clip[idx]] + j], sort=True)[0]
         if len(np.unique(r_code)) >= 2 and c_code.max() >= 1:
             try:
-                boot.append(_icc(y[idx], r_code, c_code, k)[:2])
+                boot.append(_icc(y[idx], r_code, c_code, k, start)[:2])
             except FIT_ERRORS:  # a degenerate resample (e.g. no residual variance left) has no ICC: skip it
                 pass
     boot = np.array(boot).reshape(-1, 2)
@@ -164,7 +169,7 @@ def icc(df, unit="clip_id", value="rating", n_boot=ICC_BOOT_MAX, seed=0, level=0
     if complete:
         return {**out, **_icc_complete(d, unit, value), "n_boot": 0, "seed": int(seed), "level": 0.95}
     n_boot = min(n_boot, ICC_BOOT_MAX)
-    ci1, cik = _icc_bootstrap(y, rater, clip, k, n_boot, seed, level)
+    ci1, cik = _icc_bootstrap(y, rater, clip, k, n_boot, seed, level, vc)
     return {
         **out,
         "icc_a1": float(a1),
@@ -182,9 +187,9 @@ def icc(df, unit="clip_id", value="rating", n_boot=ICC_BOOT_MAX, seed=0, level=0
 def agreement(df, unit="clip_id", value="rating", n_boot=1000, seed=0):
     """Both measures over the test rows: {"krippendorff": ..., "icc": ...}."""
     test = only_test_rows(df)
-    measures = {  # the ICC's bootstrap refits a model per resample: it keeps its own count (ICC_BOOT_MAX)
+    measures = {  # the ICC's bootstrap refits a model per resample: at most ICC_BOOT_MAX of them
         "krippendorff": lambda: krippendorff_alpha(test, unit, value, n_boot=n_boot, seed=seed),
-        "icc": lambda: icc(test, unit, value, seed=seed),
+        "icc": lambda: icc(test, unit, value, n_boot=n_boot, seed=seed),
     }
     out = {}
     for name, measure in measures.items():

@@ -21,6 +21,9 @@ from scipy import linalg, optimize, sparse
 from scipy import stats as sps
 from threadpoolctl import threadpool_limits
 
+BOUND_NEAR = 1e-3  # a relative SD this close to 0 sits at the bound, where the polish is needed
+DENSE_MAX = 4_000_000  # raters x clips up to which the count table is held dense (32 MB)
+
 
 class _Suff:
     """Sufficient statistics of the design: counts per level, the rater x clip count table, X'X, X'y, Z'X, Z'y."""
@@ -46,6 +49,9 @@ class _Suff:
         # w_g (A_g' A_g): precompute the few A_g' A_g once (a panel where everyone rates everything has one).
         self.rater_big = self.R >= self.C
         self.A = self.N if self.rater_big else self.N.T.tocsr()
+        # A panel's count table is small: dense products skip sparse bookkeeping that costs more than the
+        # arithmetic, at each of the hundreds of evaluations a fit makes.
+        self.A_op = self.A.toarray() if self.R * self.C <= DENSE_MAX else self.A
         n_big = self.nr if self.rater_big else self.nc
         small = min(self.R, self.C)
         counts, which = np.unique(n_big, return_inverse=True)
@@ -71,10 +77,12 @@ def _solve_parts(s, tr, tc):
     chol = linalg.cho_factor(schur, lower=True, check_finite=False)
     logdet = float(np.log(d_big).sum() + 2 * np.log(np.diag(chol[0])).sum())
 
+    op = s.A_op
+
     def solve(v_big, v_small):
-        rhs = v_small - a * (A.T @ (v_big / d_big[:, None] if v_big.ndim == 2 else v_big / d_big))
+        rhs = v_small - a * (op.T @ (v_big / d_big[:, None] if v_big.ndim == 2 else v_big / d_big))
         x_small = linalg.cho_solve(chol, rhs, check_finite=False)
-        x_big = (v_big - a * (A @ x_small)) / (d_big[:, None] if v_big.ndim == 2 else d_big)
+        x_big = (v_big - a * (op @ x_small)) / (d_big[:, None] if v_big.ndim == 2 else d_big)
         return x_big, x_small
 
     return logdet, solve
@@ -173,22 +181,28 @@ def satterthwaite_df(s, varpar):
     return 2 * np.diag(cov) ** 2 / denom
 
 
-def fit_crossed(y, X, rater, clip, names, with_cov=False):
+def fit_crossed(y, X, rater, clip, names, with_cov=False, tests=True, start=None):
     """REML fit. y float [n]; X [n, p] fixed-effects design (first column the intercept); rater, clip int codes.
 
     Returns dict: fixed_effects, std_errors, df (Satterthwaite), t, p_values (t tests on those df),
     ci_low/ci_high (95%, t on those df),
     variance_components {rater, clip, residual}, reml_log_likelihood, converged; with `with_cov`, also
     "covariance": the fixed effects' covariance matrix [p, p] (for a joint Wald test of several effects).
+    tests=False leaves out df, t, p_values and the intervals (their Satterthwaite df cost a fifth of a fit), for
+    a caller that wants only the variances, as a bootstrap of them does. start: the random effects' SDs relative
+    to the residual's where the search begins, for a refit near a known estimate (a bootstrap's resample starts
+    at the whole sample's); such a refit skips the derivative-free polish unless an SD ends at 0.
     """
     # One BLAS thread: the criterion is a chain of small factorisations, where thread hand-offs cost more than
     # they save (far slower on a busy 2-core machine), and the rounding is then identical from run to run.
     with threadpool_limits(limits=1, user_api="blas"):
-        fit, cov = _fit(np.asarray(y, float), np.asarray(X, float), np.asarray(rater), np.asarray(clip), names)
+        fit, cov = _fit(
+            np.asarray(y, float), np.asarray(X, float), np.asarray(rater), np.asarray(clip), names, tests, start
+        )
     return {**fit, "covariance": cov} if with_cov else fit
 
 
-def _fit(y, X, rater, clip, names):
+def _fit(y, X, rater, clip, names, tests=True, start=None):
     """(fit_crossed's dict, the fixed effects' covariance matrix)."""
     s = _Suff(y, X, rater, clip)
 
@@ -203,19 +217,22 @@ def _fit(y, X, rater, clip, names):
     # Tolerances sit above the float noise of the criterion (~1e-16 x its size), so both stop cleanly.
     best = optimize.minimize(
         objective,
-        np.array([0.5, 0.5]),
+        np.array([0.5, 0.5]) if start is None else np.asarray(start, float),
         method="L-BFGS-B",
         bounds=[(0, None), (0, None)],
         options={"ftol": 1e-13, "gtol": 1e-8, "maxiter": 200},
     )
     # Polish: a derivative-free search from there (robust when an SD sits on the 0 bound, where the
-    # finite-difference gradient of L-BFGS-B is one-sided).
-    polish = optimize.minimize(
-        lambda v: objective(np.abs(v)),
-        best.x,
-        method="Nelder-Mead",
-        options={"xatol": 1e-8, "fatol": 1e-9, "maxiter": 600},
-    )
+    # finite-difference gradient of L-BFGS-B is one-sided). A refit from a given start (a bootstrap's, from the
+    # whole sample's estimate) polishes only where it can matter: at a bound, or where L-BFGS-B did not converge.
+    polish = best
+    if start is None or not best.success or min(best.x) < BOUND_NEAR:
+        polish = optimize.minimize(
+            lambda v: objective(np.abs(v)),
+            best.x,
+            method="Nelder-Mead",
+            options={"xatol": 1e-8, "fatol": 1e-9, "maxiter": 600},
+        )
     x = np.abs(polish.x) if polish.fun <= best.fun else best.x
     dev, b, XVX, r2 = _gls(s, x[0] ** 2, x[1] ** 2)
     sigma2 = r2 / (s.n - s.p)
@@ -224,19 +241,23 @@ def _fit(y, X, rater, clip, names):
     cov = sigma2 * linalg.inv(XVX)
     se = np.sqrt(np.diag(cov))
     varpar = np.array([sigma2 * x[0] ** 2, sigma2 * x[1] ** 2, sigma2])
-    df = satterthwaite_df(s, varpar)
-    t = b / se
-    p = 2 * sps.t.sf(np.abs(t), df)
-    q = sps.t.ppf(0.975, df)
-    return {
+    out = {
         "fixed_effects": dict(zip(names, b.tolist())),
         "std_errors": dict(zip(names, se.tolist())),
-        "df": dict(zip(names, df.tolist())),
-        "t": dict(zip(names, t.tolist())),
-        "p_values": dict(zip(names, p.tolist())),
-        "ci_low": dict(zip(names, (b - q * se).tolist())),
-        "ci_high": dict(zip(names, (b + q * se).tolist())),
         "variance_components": {"rater": float(varpar[0]), "clip": float(varpar[1]), "residual": float(sigma2)},
         "reml_log_likelihood": -0.5 * dev,
         "converged": bool(best.success or polish.success),
-    }, cov
+    }
+    if tests:
+        df = satterthwaite_df(s, varpar)
+        t = b / se
+        p = 2 * sps.t.sf(np.abs(t), df)
+        q = sps.t.ppf(0.975, df)
+        out.update(
+            df=dict(zip(names, df.tolist())),
+            t=dict(zip(names, t.tolist())),
+            p_values=dict(zip(names, p.tolist())),
+            ci_low=dict(zip(names, (b - q * se).tolist())),
+            ci_high=dict(zip(names, (b + q * se).tolist())),
+        )
+    return out, cov
