@@ -184,7 +184,8 @@ def test_the_crowd_fills_it_and_the_report_is_the_designs(built, tmp_path):
     column = {"dyadic": "mismatched_interlocutor", "semantic": "mismatched_utterance"}[design]
     assert rows and column in rows[0] and "mismatched_item" not in rows[0]
     (tmp_path / "pairs.csv").write_text(text)
-    stats = build_report(tmp_path / "pairs.csv", tmp_path / "report", Options(n_boot=50), quiet=True)
+    options = Options(n_boot=50, metrics_path=str(out / "metrics.csv"))
+    stats = build_report(tmp_path / "pairs.csv", tmp_path / "report", options, quiet=True)
     assert stats["design"] == design and stats["mas"]
     assert all(v["mas"] == 1.0 for v in stats["mas"].values())  # every answer preferred the matched motion
 
@@ -194,3 +195,11 @@ def audio_check_answers(manifest):
     path = manifest.parent / "audio_check.csv"
     with open(path, newline="") as f:
         return {row["file"].split("/")[1][:-4]: row["answer"] for row in csv.DictReader(f)}
+    # The build's gesture measures stand beside the crowd's result, each with its rank agreement.
+    measures = stats["measures"]
+    assert measures["score"] == {"dyadic": "MAS", "semantic": "alignment score"}[design]
+    agreed = {r["measure"]: r for r in measures["agreement"]}
+    assert {"fgd", "hellinger_speed_hands", "diversity"} <= set(agreed), sorted(agreed)
+    assert {r["system"] for r in measures["values"]} >= set(stats["mas"])
+    assert "Kendall's tau-b" in stats["methods"]
+    assert "Objective measures and how far each agrees with people" in (tmp_path / "report" / "report.html").read_text()
