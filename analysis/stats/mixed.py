@@ -241,13 +241,7 @@ def _fit(y, X, rater, clip, names, tests=True, start=None):
     cov = sigma2 * linalg.inv(XVX)
     se = np.sqrt(np.diag(cov))
     varpar = np.array([sigma2 * x[0] ** 2, sigma2 * x[1] ** 2, sigma2])
-    out = {
-        "fixed_effects": dict(zip(names, b.tolist())),
-        "std_errors": dict(zip(names, se.tolist())),
-        "variance_components": {"rater": float(varpar[0]), "clip": float(varpar[1]), "residual": float(sigma2)},
-        "reml_log_likelihood": -0.5 * dev,
-        "converged": bool(best.success or polish.success),
-    }
+    out = {"fixed_effects": dict(zip(names, b.tolist())), "std_errors": dict(zip(names, se.tolist()))}
     if tests:
         df = satterthwaite_df(s, varpar)
         t = b / se
@@ -260,4 +254,9 @@ def _fit(y, X, rater, clip, names, tests=True, start=None):
             ci_low=dict(zip(names, (b - q * se).tolist())),
             ci_high=dict(zip(names, (b + q * se).tolist())),
         )
+    out.update(
+        variance_components={"rater": float(varpar[0]), "clip": float(varpar[1]), "residual": float(sigma2)},
+        reml_log_likelihood=-0.5 * dev,
+        converged=bool(best.success or polish.success),
+    )
     return out, cov
