@@ -5,20 +5,29 @@ in-process to a one-line error."""
 import pytest
 from helpers.catch_pool import CATCH_ITEMS
 from helpers.fake_stimuli import write_fake_stimuli, write_stimulus_mp4
+from helpers.once import built_once
 from helpers.study_folders import N_ITEMS, one_size
 
+# The three sets are read, never written, by every test that takes them: each is made once for the whole run
+# (helpers.once), not once per module and worker.
 
-@pytest.fixture(scope="module")
+
+@pytest.fixture(scope="session")
 def stimuli(tmp_path_factory):
-    return write_fake_stimuli(tmp_path_factory.mktemp("design_stimuli"), catch_nat=True)
+    folder = built_once(tmp_path_factory, "design_stimuli", lambda f: write_fake_stimuli(f, catch_nat=True))
+    return folder / "manifest.csv"
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def big_stimuli(tmp_path_factory):
     """The balance tests' set: 3 conditions x 30 items with their mismatched clips, 4 catch items (BAD + NAT, MG,
     FL), 3 training clips."""
-    return write_fake_stimuli(
-        tmp_path_factory.mktemp("big_stimuli"),
+    return built_once(tmp_path_factory, "big_stimuli", _big) / "manifest.csv"
+
+
+def _big(folder):
+    write_fake_stimuli(
+        folder,
         n_items=30,
         n_catch=4,
         n_frames=4,
@@ -28,12 +37,16 @@ def big_stimuli(tmp_path_factory):
     )
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def pool_stimuli(tmp_path_factory):
     """The catch-pool tests' set: 3 conditions x 30 items with their mismatched clips, 12 catch items (BAD + NAT, MG,
     FL), 3 training clips."""
-    return write_fake_stimuli(
-        tmp_path_factory.mktemp("pool_stimuli"),
+    return built_once(tmp_path_factory, "pool_stimuli", _pool) / "manifest.csv"
+
+
+def _pool(folder):
+    write_fake_stimuli(
+        folder,
         n_items=30,
         n_catch=CATCH_ITEMS,
         n_frames=4,
