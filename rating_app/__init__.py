@@ -23,7 +23,7 @@ from werkzeug.exceptions import HTTPException
 
 from moglow_eval.core import study
 
-from .store.manifest import AppError, interlocutor_colour, load_manifest, reference_name
+from .store.manifest import AppError, interlocutor_colour, load_manifest, reference_name, video_size
 from .store.settings import ARGS, SETTINGS, resolve
 
 __all__ = ["create_app", "AppError", "SETTINGS"]
@@ -126,6 +126,8 @@ def _open_study(app: Flask, values: dict, check_files: bool) -> None:
     app.config["STUDY_SOUND"] = any(c.audio for c in clips)  # the page plays sound and checks the rater hears
     # The interlocutor's colour as the renderer drew it (study.json), which the rater's page names; None: unnamed.
     app.config["INTERLOCUTOR_COLOUR"] = interlocutor_colour(manifest)
+    # The videos' size, so that the page lays out a wide two-person video as wide before it loads.
+    app.config["VIDEO_SIZE"] = video_size(every)
     # The page says "stick figure" only where every video draws one (the manifest's style; empty: the stick).
     app.config["FIGURE"] = "stick figure" if {c.style or "stick" for c in clips} == {"stick"} else "figure"
     engine = _open_database(

@@ -51,6 +51,13 @@ def framing_camera(clips, base=DEFAULT_CAMERA, fill=FILL):
 NEAR = 0.2  # metres; floor lines are clipped to this depth in front of the camera
 
 
+def frame_size(size):
+    """(width, height) in pixels of a frame given as one side (square) or as (width, height)."""
+    if isinstance(size, (tuple, list)):
+        return int(size[0]), int(size[1])
+    return int(size), int(size)
+
+
 def camera_targets(joints, fps, camera=DEFAULT_CAMERA):
     """Look-at point per frame [T, 3]: the smoothed floor projection of the root, held within max_lag of it."""
     root = joints[:, 0, [0, 2]].astype(np.float64)

@@ -17,11 +17,12 @@ import numpy as np
 
 from moglow_eval.core.user_files import shown_text
 
-from .raster import _TO_U, _TO_V, _TO_Y
+from .camera import frame_size
+from .yuv import TO_U, TO_V, TO_Y
 
 TEXT_SHARE = 0.05  # the text's size (em) as a share of the frame height: 32 px at 640, legible on a phone
 LINES = 2  # the most lines a phrase takes
-WIDTH_SHARE = 0.92  # of the frame width a line may take
+WIDTH_SHARE = 0.92  # of the frame width a line may take (phrases are cut for a square frame of the same height)
 BOTTOM_SHARE = 0.03  # of the frame height left under the captions
 PAUSE_S = 0.7  # a pause this long between words starts a new phrase
 HOLD_S = 0.6  # a phrase stays this long after its last word
@@ -93,10 +94,11 @@ def phrases(words, size, speaker=0):
 
 
 class CaptionLayer:
-    """The captions of one video: `apply(frame, t)` blends the phrases on at time t into a yuv420p frame."""
+    """The captions of one video: `apply(frame, t)` blends the phrases on at time t into a yuv420p frame of `size`
+    (a side, or (width, height)): the text a share of the height, centred across the width."""
 
     def __init__(self, all_phrases, size):
-        self.size = size
+        self.width, self.height = frame_size(size)
         self.phrases = sorted(all_phrases, key=lambda p: (p.start, p.speaker))
         self.cache = {}
 
@@ -109,28 +111,28 @@ class CaptionLayer:
         return tuple(on[s] for s in sorted(on))
 
     def apply(self, frame, t):
-        """Blend the captions on at time t (seconds) into `frame` (flat yuv420p of size x size) in place."""
+        """Blend the captions on at time t (seconds) into `frame` (flat yuv420p of width x height) in place."""
         shown = self.active(t)
         if not shown:
             return frame
         if shown not in self.cache:
-            self.cache[shown] = _layer(shown, self.size)
+            self.cache[shown] = _layer(shown, self.width, self.height)
         r0, luma, alpha, chroma, calpha = self.cache[shown]
-        n, h = self.size * self.size, len(luma)
-        y = frame[:n].reshape(self.size, self.size)[r0 : r0 + h]
+        n, h = self.width * self.height, len(luma)
+        y = frame[:n].reshape(self.height, self.width)[r0 : r0 + h]
         y[:] = (y * (1 - alpha) + luma + 0.5).astype(np.uint8)
-        half = self.size // 2
         for k, plane in enumerate((frame[n : n + n // 4], frame[n + n // 4 :])):
-            c = plane.reshape(half, half)[r0 // 2 : (r0 + h) // 2]
+            c = plane.reshape(self.height // 2, self.width // 2)[r0 // 2 : (r0 + h) // 2]
             c[:] = (c * (1 - calpha) + chroma[k] + 0.5).astype(np.uint8)
         return frame
 
 
-def _image(shown, size):
-    """An RGBA image [H, size, 4] of the phrases `shown` (the agent's lowest), each line on its band."""
+def _image(shown, size, frame_height=None):
+    """An RGBA image [H, size, 4] of the phrases `shown` (the agent's lowest), each line on its band, the text
+    TEXT_SHARE of `frame_height` (None: `size`, a square frame)."""
     from PIL import Image, ImageDraw
 
-    px = int(round(TEXT_SHARE * size))
+    px = int(round(TEXT_SHARE * (frame_height or size)))
     font, width = _font(px), WIDTH_SHARE * size
     line_h, pad = int(round(1.25 * px)), int(round(0.35 * px))
     blocks = [(p, _lines(list(p.words), font, width)) for p in reversed(shown)]  # the agent's drawn last, lowest
@@ -159,19 +161,19 @@ def _image(shown, size):
     return np.asarray(im)
 
 
-def _layer(shown, size):
+def _layer(shown, width, height):
     """(first row, premultiplied luma [H, W], alpha [H, W], premultiplied chroma [2, H/2, W/2], chroma alpha) of
     the caption image for `shown`, placed BOTTOM_SHARE above the frame's bottom on an even row."""
-    rgba = _image(shown, size).astype(np.float32)
+    rgba = _image(shown, width, height).astype(np.float32)
     h = len(rgba)
-    r0 = size - h - int(round(BOTTOM_SHARE * size))
+    r0 = height - h - int(round(BOTTOM_SHARE * height))
     r0 -= r0 % 2
     a = rgba[..., 3] / 255.0
     rgb = rgba[..., :3]
-    luma = (rgb @ _TO_Y + 16) * a
+    luma = (rgb @ TO_Y + 16) * a
 
     def blocks(x):  # the mean of each 2x2 block, as the chroma planes sample the frame
-        return x.reshape(h // 2, 2, size // 2, 2).mean((1, 3))
+        return x.reshape(h // 2, 2, width // 2, 2).mean((1, 3))
 
-    chroma = np.stack([blocks((rgb @ to + 128) * a) for to in (_TO_U, _TO_V)])
+    chroma = np.stack([blocks((rgb @ to + 128) * a) for to in (TO_U, TO_V)])
     return max(r0, 0), luma.astype(np.float32), a.astype(np.float32), chroma.astype(np.float32), blocks(a)

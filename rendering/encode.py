@@ -103,8 +103,11 @@ def _rate_control(size, fps, qp, crf, frames, seed):
     return rate, x264
 
 
-def ffmpeg_writer(out_mp4, size, fps, preset="ultrafast", qp=None, crf=None, threads=None, frames=None, seed=None):
+def ffmpeg_writer(
+    out_mp4, size, fps, preset="ultrafast", qp=None, crf=None, threads=None, frames=None, seed=None, width=None
+):
     """An ffmpeg process reading raw yuv420p frames on stdin and writing H.264 yuv420p +faststart MP4, no audio.
+    The frames are `size` pixels high and `width` wide (None: square).
 
     Rate control: by default every frame is `frame_bits(size, fps)` bits, filler data included (given `frames`, the
     key frame KEY_FRAME_BUDGET times that and the next nearly as much), so every video of one
@@ -117,7 +120,11 @@ def ffmpeg_writer(out_mp4, size, fps, preset="ultrafast", qp=None, crf=None, thr
     """
     import imageio_ffmpeg  # here, not at the top: loading and sampling the models must not need an encoder
 
-    rate, x264 = _rate_control(size, fps, qp, crf, frames, seed)
+    width = width or size
+    # A wide frame holds more side by side at the same scale (two people): its rate is a square frame's of the
+    # same area, so that a set's frame sizes still follow from its pixel size alone.
+    side = size if width == size else round((width * size) ** 0.5)
+    rate, x264 = _rate_control(side, fps, qp, crf, frames, seed)
 
     cmd = [
         imageio_ffmpeg.get_ffmpeg_exe(),
@@ -129,7 +136,7 @@ def ffmpeg_writer(out_mp4, size, fps, preset="ultrafast", qp=None, crf=None, thr
         "-pix_fmt",
         "yuv420p",
         "-s",
-        f"{size}x{size}",
+        f"{width}x{size}",
         "-r",
         str(video_rate(fps)),
         "-i",

@@ -21,10 +21,17 @@ from .raster import head_joint
 VIEWS = {"front": 0.0, "three-quarter": 40.0, "side": 90.0}  # degrees from the body's mean facing
 FRAMINGS = ("full", "upper", "auto")
 UPPER_ELEVATION = 5.0  # degrees: a nearly level camera, as a seated audience sees a speaker
-UPPER_MARGIN = 0.005  # of the half-frame kept free around the framed body
+# Of the half-frame kept free around the framed body: the drawing's antialiased edge and the 2x2 block of pixels
+# that shares its colour (yuv420p) spill a pixel or two beyond what the pads cover: two pixels at 160 px high.
+UPPER_MARGIN = 0.025
 BODY_PAD = 0.05  # metres around every framed joint: the solid body's limb capsules (raster.Style.limb_radius)
 DETAIL_PAD = 0.012  # metres around a finger or face joint: the thin capsules (raster.Style.thin_radius)
-HEAD_TOP = 0.18  # metres from the head joint along the neck to the drawn head's top (the solid's sphere; stick 0.16)
+# The drawn head, framed as a ball (seen from any side, a head tipped towards the camera included): its centre this
+# far from the head joint along the neck (the stick's disc, Style.head_radius; the solid's sphere, 0.8 of its
+# radius), and this radius around it (the solid's sphere, Style.sphere_radius; the stick's disc and its outline).
+HEAD_CENTRE = 0.08
+HEAD_RADIUS = 0.1
+HEAD_TOP = HEAD_CENTRE + HEAD_RADIUS  # metres from the head joint along the neck to the drawn head's top
 UPPER_FOV = 15.0  # degrees: a longer lens than the full body's, so that hands near the camera loom less
 FEET_STILL = 0.4  # metres: "auto" frames the upper body when no foot strays further than this from its start
 LEG_WORDS = {"leg", "upleg", "thigh", "knee", "shin", "calf", "foot", "ankle", "toe", "toes", "heel"}
@@ -79,28 +86,29 @@ def feet_still(clips, names, parents):
     return True
 
 
-def upper_camera(clips, names, parents, fps, base, room=0.0):
-    """A camera that frames the body from the hips up: every joint but the legs' and the drawn head's top inside
-    the frame in every frame of every clip, as large as that allows, through a nearly level camera at `base`'s
-    azimuth that follows the root as `camera_targets` does. Each joint is padded by what is drawn around it
-    (BODY_PAD, DETAIL_PAD for fingers and face), the head's top (HEAD_TOP along the neck) by nothing, so that
-    the frame ends at the head's top above and at the lowest fingertip below: hands hanging below the hips
-    extend the frame downwards, and the hips-to-head share of the frame is what is left above them."""
+def upper_camera(clips, names, parents, fps, base, room=0.0, aspect=1.0, reach=None):
+    """A camera that frames the body from the hips up: every joint but the legs' and the drawn head inside the
+    frame (`aspect`: its width over its height) in every frame of every clip, as large as that allows, through a
+    nearly level camera at `base`'s azimuth that follows the root as `camera_targets` does. Each joint is padded
+    by what is drawn around it (`framed_points`), so that the frame ends at the head's top above and at the lowest
+    fingertip below: hands hanging below the hips extend the frame downwards, and the hips-to-head share of the
+    frame is what is left above them."""
     base = replace(base, elevation=UPPER_ELEVATION, fov=UPPER_FOV)
     points, pads = [], []
     for joints in clips:
         joints = np.asarray(joints, dtype=np.float64)
         floor = camera_targets(joints, fps, base) * np.array([1.0, 0.0, 1.0])
-        framed_points(joints - floor[:, None], names, parents, True, points, pads)
-    distance, height = _fit(np.concatenate(points), np.concatenate(pads), base, room)
+        framed_points(joints - floor[:, None], names, parents, True, points, pads, reach)
+    distance, height = _fit(np.concatenate(points), np.concatenate(pads), base, room, aspect)
     return replace(base, distance=distance, height=height)
 
 
-def framed_points(rel, names, parents, upper, points, pads):
+def framed_points(rel, names, parents, upper, points, pads, reach=None):
     """Append to `points` and `pads` what a camera must frame of one clip (joints [T, J, 3] relative to the
     look-at point on the floor): every joint (upper: but the legs' and the hips' ancestors), each padded by what
-    is drawn around it (BODY_PAD, DETAIL_PAD for fingers and face), and the drawn head's top (HEAD_TOP along the
-    neck), padded by nothing."""
+    is drawn around it (BODY_PAD, DETAIL_PAD for fingers and face; or `reach` [J], metres a joint, where more is
+    drawn around it: a mesh's surface, its fingertips beyond the last finger joint), and the drawn head as a ball
+    (HEAD_RADIUS around HEAD_CENTRE along the neck)."""
     below = set()
     if upper:
         legs = set(leg_joints(names, parents))
@@ -109,23 +117,28 @@ def framed_points(rel, names, parents, upper, points, pads):
     head = head_joint(names)
     if head is not None and parents[head] >= 0:
         neck = rel[:, head] - rel[:, parents[head]]
-        top = rel[:, head] + HEAD_TOP * neck / np.maximum(np.linalg.norm(neck, axis=1, keepdims=True), 1e-6)
+        ball = rel[:, head] + HEAD_CENTRE * neck / np.maximum(np.linalg.norm(neck, axis=1, keepdims=True), 1e-6)
+        radius = HEAD_RADIUS
     else:
-        top = rel[np.arange(len(rel)), rel[:, keep, 1].argmax(1)] + np.array([0.0, HEAD_ROOM, 0.0])
-    points += [rel[:, keep].reshape(-1, 3), top]
-    pad = [DETAIL_PAD if skeleton_names.is_detail(names[j]) else BODY_PAD for j in keep]
-    pads += [np.tile(pad, len(rel)), np.zeros(len(rel))]
+        ball = rel[np.arange(len(rel)), rel[:, keep, 1].argmax(1)] + np.array([0.0, HEAD_ROOM, 0.0])
+        radius = 0.0
+    points += [rel[:, keep].reshape(-1, 3), ball]
+    pad = np.array([DETAIL_PAD if skeleton_names.is_detail(names[j]) else BODY_PAD for j in keep])
+    if reach is not None and len(reach) == len(names):
+        pad = np.maximum(pad, np.asarray(reach, np.float64)[keep])
+    pads += [np.tile(pad, len(rel)), np.full(len(rel), radius)]
 
 
-def _fit(points, pad, base, room=0.0):
+def _fit(points, pad, base, room=0.0, aspect=1.0):
     """(distance, look-at height) at which every point (relative to the look-at point on the floor [N, 3]), padded
-    by `pad` metres (one a point), is inside the frame of `base`'s view and field of view, as large as that allows,
-    with the lowest `room` of the frame's height kept free (for captions: the body is framed in the rest)."""
+    by `pad` metres (one a point), is inside the frame of `base`'s view and field of view (vertical; `aspect` times
+    as wide), as large as that allows, with the lowest `room` of the frame's height kept free (for captions: the
+    body is framed in the rest)."""
     rot = Projector(replace(base, distance=1.0), 2, 2).rot
     q = points @ rot.T  # camera axes, relative to the target on the floor
     up = rot[:, 1]  # the camera-axis components of world up
     lim = (1 - UPPER_MARGIN) * np.tan(np.radians(base.fov) / 2)
-    lims = np.array([lim, (1 - room) * lim])
+    lims = np.array([aspect * lim, (1 - room) * lim])
     height = float(points[:, 1].mean())
     for _ in range(4):  # fit the distance, then centre the look-at height on the framed span, and again
         p = q - height * up
@@ -148,7 +161,7 @@ def _distance(p, lim, pad):
     return float(max((reach - p[:, 2]).max(), NEAR + BODY_PAD - p[:, 2].min()))
 
 
-def item_camera(clips, names, parents, fps, view=None, framing="full", room=0.0, facing=None):
+def item_camera(clips, names, parents, fps, view=None, framing="full", room=0.0, facing=None, aspect=1.0, reach=None):
     """The camera of one item's clips (joints [T, J, 3], metres, Y up, placed).
 
     Parameters
@@ -168,6 +181,11 @@ def item_camera(clips, names, parents, fps, view=None, framing="full", room=0.0,
     facing : sequence of ndarray or None
         The clips whose mean facing `view` is measured from (None: `clips`): a study's reference, so that the
         view does not turn when a system joins.
+    aspect : float
+        The frame's width over its height (upper framing).
+    reach : ndarray or None
+        Metres drawn around each joint [J] beyond what BODY_PAD and DETAIL_PAD allow (a mesh's surface); upper
+        framing.
 
     Returns
     -------
@@ -180,7 +198,7 @@ def item_camera(clips, names, parents, fps, view=None, framing="full", room=0.0,
     if framing == "auto":
         framing = "upper" if feet_still(clips, names, parents) else "full"
     if framing == "upper":
-        return upper_camera(clips, names, parents, fps, base, room)
+        return upper_camera(clips, names, parents, fps, base, room, aspect, reach)
     return framing_camera(clips, base)
 
 
@@ -204,19 +222,27 @@ def steady(camera):
     )
 
 
-# A two-person item's views, in degrees from the perpendicular of the two people's line towards the agent's front:
-# "three-quarter" (the default) sees an agent turned a little towards the camera (generation.own_study.placing) at
-# three-quarter and the other person nearly in profile.
+# A two-person item's views, in degrees from the perpendicular of the two people's line towards the agent's front.
+# "side" (the default) sees the two, each turned a little towards the camera (generation.own_study.placing), alike
+# and at one distance, so that each is as large as one person in an upper frame; "three-quarter" sees the agent
+# nearer three-quarter and the other person nearly in profile, the agent further away and smaller.
 PAIR_VIEWS = {"side": 0.0, "three-quarter": 20.0, "front": 60.0}
-PAIR_FOV = 20.0  # degrees: two people side by side need a wider lens than one person's upper body
-PAIR_ELEVATION = 8.0  # degrees
+PAIR_VIEW = "side"
+PAIR_FOV = 20.0  # degrees: the full bodies of two people
+PAIR_ELEVATION = 8.0  # degrees, full bodies (the upper framing takes the one-person UPPER_ELEVATION)
+# Degrees: two people from the hips up. A longer lens than one person's (UPPER_FOV): a hand held towards the camera
+# (or, seen at three-quarter, the nearer of the two) looms less, the further the camera.
+PAIR_UPPER_FOV = 10.0
+# Two people side by side in a frame three times as wide as high, as GENEA 2026's visualiser films them (1536x512):
+# each person's upper body then fills the frame's height, as one person's does in a square upper frame.
+PAIR_ASPECT = 3.0
 
 
 def pair_azimuth(agent_root, partner_root, agent_facing, view=None):
     """The camera's azimuth (degrees, from +Z towards +X) for two people: on the side of the line between their
     roots (x, z) that the agent faces (its mean facing, degrees), turned `view` (a key of PAIR_VIEWS or degrees;
-    None: three-quarter) from the perpendicular towards the agent's front."""
-    offset = PAIR_VIEWS[view or "three-quarter"] if not isinstance(view, (int, float)) else float(view)
+    None: PAIR_VIEW) from the perpendicular towards the agent's front."""
+    offset = PAIR_VIEWS[view or PAIR_VIEW] if not isinstance(view, (int, float)) else float(view)
     line = np.asarray(partner_root, np.float64) - np.asarray(agent_root, np.float64)
     line /= max(np.linalg.norm(line), 1e-9)
     side = np.array([-line[1], line[0]])  # the line turned a quarter: one side's perpendicular (x, z)
@@ -228,7 +254,7 @@ def pair_azimuth(agent_root, partner_root, agent_facing, view=None):
     return float(np.degrees(np.arctan2(direction[0], direction[1])) % 360.0)
 
 
-def pair_camera(clips, people, view=None, framing="upper", room=0.0):
+def pair_camera(clips, people, view=None, framing="upper", room=0.0, aspect=1.0, facing=None, reach=(None, None)):
     """One fixed camera for a two-person item: (Camera, look-at point [3]).
 
     Parameters
@@ -239,30 +265,41 @@ def pair_camera(clips, people, view=None, framing="upper", room=0.0):
         The agent's skeleton (partner None) and the partner's skeleton and joints [T, K, 3].
     view : str or float or None
         A key of PAIR_VIEWS or degrees from the perpendicular of their line towards the agent's front (the side
-        the agent faces); None: three-quarter.
+        the agent faces); None: PAIR_VIEW, side.
     framing : str
         "upper" (hips up: the usual for people talking), "full", or "auto" (upper).
     room : float
         The share of the frame's height kept free of the bodies at the bottom (captions).
+    aspect : float
+        The frame's width over its height (PAIR_ASPECT: the wide frame two people are filmed in).
+    facing : sequence of ndarray or None
+        The agent's clips the view and the look-at point are measured from (None: `clips`): the reference's, so
+        that they stay put when a system joins.
+    reach : (ndarray or None, ndarray or None)
+        The agent's and the partner's metres drawn around each joint beyond BODY_PAD and DETAIL_PAD (a mesh's
+        surface: framed_points).
 
     Returns
     -------
     (Camera, ndarray)
-        The camera (as close as framing both in every frame of every clip allows) and the point it looks at in
-        every frame: between the two, so that it never moves and the partner is the same pixels in every
-        condition's video.
+        The camera (as close as framing both in every frame of every clip allows, held to steps: `steady`) and the
+        point it looks at in every frame: between the two, so that it never moves and the partner is the same
+        pixels in every condition's video.
     """
     (names, parents, _), (p_names, p_parents, partner) = people
-    roots = np.mean([np.asarray(c)[:, 0, [0, 2]].mean(0) for c in clips], 0)
+    measured = clips if facing is None else facing
+    roots = np.mean([np.asarray(c)[:, 0, [0, 2]].mean(0) for c in measured], 0)
     partner_root = np.asarray(partner)[:, 0, [0, 2]].mean(0)
-    azimuth = pair_azimuth(roots, partner_root, mean_facing(clips, names), view)
+    azimuth = pair_azimuth(roots, partner_root, mean_facing(measured, names), view)
     upper = framing != "full"
-    base = replace(DEFAULT_CAMERA, azimuth=azimuth, fov=PAIR_FOV, elevation=PAIR_ELEVATION if upper else 12.0)
+    fov, elevation = (PAIR_UPPER_FOV, UPPER_ELEVATION) if upper else (PAIR_FOV, PAIR_ELEVATION)
+    base = replace(DEFAULT_CAMERA, azimuth=azimuth, fov=fov, elevation=elevation)
     centre = (roots + partner_root) / 2
     floor = np.array([centre[0], 0.0, centre[1]])
     points, pads = [], []
     for joints in clips:
-        framed_points(np.asarray(joints, np.float64) - floor, names, parents, upper, points, pads)
-    framed_points(np.asarray(partner, np.float64) - floor, p_names, p_parents, upper, points, pads)
-    distance, height = _fit(np.concatenate(points), np.concatenate(pads), base, room)
-    return replace(base, distance=distance, height=height), np.array([centre[0], height, centre[1]])
+        framed_points(np.asarray(joints, np.float64) - floor, names, parents, upper, points, pads, reach[0])
+    framed_points(np.asarray(partner, np.float64) - floor, p_names, p_parents, upper, points, pads, reach[1])
+    distance, height = _fit(np.concatenate(points), np.concatenate(pads), base, room, aspect)
+    camera = steady(replace(base, distance=distance, height=height))
+    return camera, np.array([centre[0], camera.height, centre[1]])

@@ -27,6 +27,7 @@ import numpy as np
 
 from moglow_eval.core.clip import MAX_MESH_VERTICES
 
+from .camera import frame_size
 from .errors import RenderError
 from .solid import AMBIENT, DIFFUSE, LIGHT
 
@@ -177,8 +178,8 @@ def vertex_normals_operator(faces, n_vertices):
 
 
 class MeshBody:
-    """Draws one or more people's meshes into a frame of `size` pixels square seen through a pinhole of `focal`
-    pixels (rendering.camera.Projector's), each person in one plain colour.
+    """Draws one or more people's meshes into a frame of `size` pixels (a side, or (width, height)) seen through a
+    pinhole of `focal` pixels (rendering.camera.Projector's), each person in one plain colour.
 
     `draw(people)`: people is a list of (camera-space vertices [V, 3], colour rgb 0..1[, their normals [V, 3] in
     camera axes: vertex_normals' rotated into the camera's; computed here when not given]); returns (rgba, box)
@@ -194,7 +195,8 @@ class MeshBody:
                 )
             if m.faces.min() < 0 or m.faces.max() >= len(m.mask):
                 raise RenderError(f"a mesh's faces index vertices outside its {len(m.mask)}")
-        self.size, self.focal = size, float(focal)
+        self.width, self.height = frame_size(size)
+        self.focal = float(focal)
         self.meshes = list(meshes)
         ctx = self.ctx = gl_context()
         defines = {"FAR": FAR_PLANE, "NEAR": NEAR_PLANE, "AMBIENT": AMBIENT, "DIFFUSE": DIFFUSE}
@@ -254,13 +256,14 @@ class MeshBody:
         if not lo:
             return None
         xy = self.focal * np.array([np.min(lo, 0), np.max(hi, 0)], np.float64)  # [[x, y] least, [x, y] most]
-        half = self.size / 2
-        c0, c1 = xy[0, 0] + half, xy[1, 0] + half
-        r0, r1 = half - xy[1, 1], half - xy[0, 1]  # rows grow downwards
+        half_w, half_h = self.width / 2, self.height / 2
+        c0, c1 = xy[0, 0] + half_w, xy[1, 0] + half_w
+        r0, r1 = half_h - xy[1, 1], half_h - xy[0, 1]  # rows grow downwards
         lo = np.floor(np.array([c0, r0]) / 2 - 1) * 2
         hi = np.ceil(np.array([c1, r1]) / 2 + 1) * 2
-        c0, r0 = np.clip(lo, 0, self.size).astype(int)
-        c1, r1 = np.clip(hi, 0, self.size).astype(int)
+        edge = np.array([self.width, self.height])
+        c0, r0 = np.clip(lo, 0, edge).astype(int)
+        c1, r1 = np.clip(hi, 0, edge).astype(int)
         return (c0, r0, c1, r1) if c1 > c0 and r1 > r0 else None
 
     def draw(self, people):
@@ -273,10 +276,11 @@ class MeshBody:
         w, h = c1 - c0, r1 - r0
         (ww, wh), body = self.window(w, h)
         # The window's pixel (0, 0) is the box's bottom-left corner (GL counts rows from the bottom): a camera
-        # point at frame pixel (column, row) lands at window pixel (column - c0, size - row - (size - r1)).
-        half = self.size / 2
+        # point at frame pixel (column, row) lands at window pixel (column - c0, height - row - (height - r1)).
+        half_w, half_h = self.width / 2, self.height / 2
         self.prog["focal"].value = (self.focal / (ww / 2), self.focal / (wh / 2))
-        self.prog["shift"].value = ((c0 + ww / 2 - half) / (ww / 2), ((self.size - r1) + wh / 2 - half) / (wh / 2))
+        shift = ((c0 + ww / 2 - half_w) / (ww / 2), ((self.height - r1) + wh / 2 - half_h) / (wh / 2))
+        self.prog["shift"].value = shift
         body.use()
         ctx.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         ctx.enable(ctx.DEPTH_TEST)
@@ -394,15 +398,16 @@ class Painted:
 
 class MeshPainter:
     """Draws one person's mesh frame by frame (Painted), seen through `proj` (rendering.camera.Projector) in a frame
-    of `size` pixels, on a grid of `grid` frame pixels per drawn pixel.
+    of `size` pixels (a side, or (width, height)), on a grid of `grid` frame pixels per drawn pixel.
 
     An OpenGL context belongs to a thread, so a painter is used in the thread that made it: rendering.render makes
     one on its skinning thread, where the drawing and its edge pass run beside the frame's floor, blending and
     encoding."""
 
     def __init__(self, mesh, size, proj, colour, grid):
-        self.body = MeshBody([mesh], size // grid, proj.focal / grid)
-        self.proj, self.colour, self.grid, self.row = proj, tuple(colour), grid, size // 2
+        width, height = frame_size(size)
+        self.body = MeshBody([mesh], (width // grid, height // grid), proj.focal / grid)
+        self.proj, self.colour, self.grid, self.row = proj, tuple(colour), grid, width // 2
         self.rot = proj.rot.T.astype(np.float32)  # into camera axes, as Projector.to_camera turns points
 
     def vertices_and_normals(self, a, b):

@@ -17,10 +17,11 @@ from matplotlib.transforms import IdentityTransform
 
 from moglow_eval.core import skeleton_names
 
-from .camera import DEFAULT_CAMERA, NEAR, Projector, clip_to_frustum
+from .camera import DEFAULT_CAMERA, NEAR, Projector, clip_to_frustum, frame_size
 from .errors import RenderError
 from .mesh import MeshPainter, Painted, over
 from .solid import SolidBody
+from .yuv import BLOCK_TO_UV, RGBA_TO_Y, TO_U, TO_V, TO_Y, grey_to_y, yuv_to_rgb
 
 
 @dataclass(frozen=True)
@@ -99,30 +100,6 @@ def _wu_lines(flat, width, a, b, value, alpha):
     flat[idx] = (y + w * (np.float32(value) - y) + np.float32(0.5)).astype(np.uint8)
 
 
-# BT.601 limited range, what ffmpeg's own rgb -> yuv420p conversion uses.
-_TO_Y = np.array([0.2568, 0.5041, 0.0979], np.float32)
-_TO_U = np.array([-0.1482, -0.2910, 0.4392], np.float32)
-_TO_V = np.array([0.4392, -0.3678, -0.0714], np.float32)
-_RGBA_TO_Y = np.append(_TO_Y, np.float32(0))  # rgba @ _RGBA_TO_Y = Y - 16
-# A 2x2 block's 4 rgba pixels in a row [16] @ _BLOCK_TO_UV = the block's mean (U - 128, V - 128).
-_BLOCK_TO_UV = np.tile(np.vstack([np.stack([_TO_U, _TO_V], 1), np.zeros((1, 2), np.float32)]) / 4, (4, 1))
-
-
-def grey_to_y(g):
-    """Luma of a grey level g in [0, 1]."""
-    return 16.0 + 219.0 * g
-
-
-def yuv_to_rgb(frame, size):
-    """A yuv420p frame (flat uint8, as FrameDrawer.draw returns) -> RGB uint8 [size, size, 3]."""
-    n = size * size
-    y = frame[:n].reshape(size, size).astype(np.float32) - 16
-    u = frame[n : n + n // 4].reshape(size // 2, size // 2).repeat(2, 0).repeat(2, 1).astype(np.float32) - 128
-    v = frame[n + n // 4 :].reshape(size // 2, size // 2).repeat(2, 0).repeat(2, 1).astype(np.float32) - 128
-    rgb = np.stack([1.164 * y + 1.596 * v, 1.164 * y - 0.392 * u - 0.813 * v, 1.164 * y + 2.017 * u], -1)
-    return np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
-
-
 class FrameDrawer:
     """Draws the frames of one clip as yuv420p (what the encoder wants); reused for every frame.
 
@@ -139,6 +116,9 @@ class FrameDrawer:
     (core.skeleton_names; neutral where none can be told), finger and face bones (`thin`: joint names, or None
     to tell them from the names) at `style.thin` of the line width. Bones of a joint in `hide` are not drawn,
     nor those from a root joint named like a root (`joint_Root`, `b_root`: a floor marker, not a bone).
+
+    `size` is the frame's side (square) or (width, height): a two-person video's frame is wide. Sizes in the
+    style (line widths) are shares of the height, as the camera's field of view is.
     """
 
     def __init__(
@@ -153,28 +133,29 @@ class FrameDrawer:
         frame=None,
         meshes=None,
     ):
-        if size % 2:
-            raise RenderError(f"size must be even for yuv420p, got {size}")
-        self.size, self.camera, self.style = size, camera, style
-        self.proj = Projector(camera, size, size)
-        self.renderer = RendererAgg(size, size, 72)
+        width, height = frame_size(size)
+        if width % 2 or height % 2:
+            raise RenderError(f"width and height must be even for yuv420p, got {width}x{height}")
+        self.width, self.height, self.camera, self.style = width, height, camera, style
+        self.proj = Projector(camera, width, height)
+        self.renderer = RendererAgg(width, height, 72)
         self.rgba = np.asarray(self.renderer.buffer_rgba())  # the figure, on transparent black
         self.rgba.fill(0)
-        self.px = self.rgba.view(np.uint32).reshape(size, size)  # one word per pixel: nonzero where drawn
+        self.px = self.rgba.view(np.uint32).reshape(height, width)  # one word per pixel: nonzero where drawn
         self.px_flat = self.px.reshape(-1)
-        n = size * size
+        n = width * height
         # The yuv420p frame written to the encoder; a second person's drawer draws into the first's (`frame`).
         self.frame = np.empty(n * 3 // 2, np.uint8) if frame is None else frame
-        self.y = self.frame[:n].reshape(size, size)
+        self.y = self.frame[:n].reshape(height, width)
         self.y_flat = self.frame[:n]
-        self.uv = self.frame[n:].reshape(2, size // 2, size // 2)
+        self.uv = self.frame[n:].reshape(2, height // 2, width // 2)
         self.u_flat, self.v_flat = self.frame[n : n + n // 4], self.frame[n + n // 4 :]
-        self.quad = np.array([0, 1, size, size + 1])  # a 2x2 block's pixels from its top left
+        self.quad = np.array([0, 1, width, width + 1])  # a 2x2 block's pixels from its top left
         self.parents = np.asarray(parents)
         self._bones(joint_names, hide, thin)
         self.head = head_joint(joint_names)
         self.circle = Path.unit_circle()
-        self.width = style.bone_width * size
+        self.line = style.bone_width * height
         self.gcs = {}
         colours = {
             "shadow": (style.shadow,) * 3,
@@ -186,22 +167,22 @@ class FrameDrawer:
         for key in ("shadow", "head", *self.sides):
             gc = self.renderer.new_gc()
             gc.set_foreground(colours[key[0] if isinstance(key, tuple) else key])
-            gc.set_linewidth(self.width * (style.thin if isinstance(key, tuple) and key[1] else 1.0))
+            gc.set_linewidth(self.line * (style.thin if isinstance(key, tuple) and key[1] else 1.0))
             gc.set_antialiased(True)
             gc.set_capstyle("round")
             gc.set_joinstyle("round")
             self.gcs[key] = gc
-        self.blank_y, self.grid_alpha = _background(camera, style, size)
-        # Floor lines are clipped in camera space (x, y, z) to depth >= NEAR and to image columns and rows
-        # [0, size-2], so that both pixels of every Wu sample are inside the plane:
-        # column = cx + f x / z, row = size - cy - f y / z.
+        self.blank_y, self.grid_alpha = _background(camera, style, width, height)
+        # Floor lines are clipped in camera space (x, y, z) to depth >= NEAR and to image columns [0, width-2]
+        # and rows [0, height-2], so that both pixels of every Wu sample are inside the plane:
+        # column = cx + f x / z, row = height - cy - f y / z.
         (cx, cy), f = self.proj.centre, self.proj.focal
         self.frustum = np.array(
-            [[0, 0, 1, -NEAR], [f, 0, cx, 0], [-f, 0, size - 2 - cx, 0], [0, -f, size - cy, 0], [0, f, cy - 2, 0]],
+            [[0, 0, 1, -NEAR], [f, 0, cx, 0], [-f, 0, width - 2 - cx, 0], [0, -f, height - cy, 0], [0, f, cy - 2, 0]],
             np.float64,
         )
         self.grid_y = grey_to_y(style.grid)
-        self.solid = SolidBody(size, self.proj.focal, style.solid_grid) if style.body == "solid" else None
+        self.solid = SolidBody((width, height), self.proj.focal, style.solid_grid) if style.body == "solid" else None
         if self.solid:
             self._capsules()
         self.mesh, self.meshes = None, meshes  # (mesh: a MeshPainter, made when this thread first draws vertices)
@@ -213,7 +194,8 @@ class FrameDrawer:
         """A MeshPainter for this drawer's person, for the calling thread (rendering.render's skinning thread draws
         the next frames' meshes with one while this drawer composes the frame before)."""
         # On a grid of 2 a quarter of the pixels are drawn, each one 2x2 block of the frame (as the solid body's).
-        return MeshPainter(self.meshes[0], self.size, self.proj, self.style.mesh_colour, self.style.mesh_grid)
+        frame, style = (self.width, self.height), self.style
+        return MeshPainter(self.meshes[0], frame, self.proj, style.mesh_colour, style.mesh_grid)
 
     def close(self):
         """Free what the drawer holds beyond memory (the mesh body's GL objects)."""
@@ -272,12 +254,13 @@ class FrameDrawer:
         a = np.concatenate([np.stack([xs, 0 * xs, target[2] - hx], 1), np.stack([target[0] - hz, 0 * zs, zs], 1)])
         b = np.concatenate([np.stack([xs, 0 * xs, target[2] + hx], 1), np.stack([target[0] + hz, 0 * zs, zs], 1)])
         a, b = clip_to_frustum(self.proj.to_camera(a, eye), self.proj.to_camera(b, eye), self.frustum)
-        a, b = (np.clip(self._rows(self.proj.to_screen(p)), 0, self.size - 2) for p in (a, b))
-        _wu_lines(self.y_flat, self.size, a, b, self.grid_y, self.grid_alpha)
+        edge = np.array([self.width - 2, self.height - 2])
+        a, b = (np.clip(self._rows(self.proj.to_screen(p)), 0, edge) for p in (a, b))
+        _wu_lines(self.y_flat, self.width, a, b, self.grid_y, self.grid_alpha)
 
     def _rows(self, xy):
         """Agg display coordinates (y up) -> image (column, row)."""
-        return xy * np.array([1.0, -1.0]) + np.array([0.0, self.size])
+        return xy * np.array([1.0, -1.0]) + np.array([0.0, self.height])
 
     def _figure(self, joints, eye, vertices=None):
         """Draw shadow, bones and head with Agg (on the cleared buffer); returns the screen points drawn and
@@ -391,10 +374,10 @@ class FrameDrawer:
         points, radius = self._figure(joints, eye, vertices)
         if len(points):
             # The figure's bounding box in image rows/columns, on even pixels (for the 2x2 chroma blocks).
-            pad = radius + self.width + 2
-            xy = self._rows(points)
-            c0, r0 = (np.floor((xy.min(0) - pad) / 2) * 2).clip(0, self.size).astype(int)
-            c1, r1 = (np.ceil((xy.max(0) + pad) / 2) * 2).clip(0, self.size).astype(int)
+            pad = radius + self.line + 2
+            xy, edge = self._rows(points), np.array([self.width, self.height])
+            c0, r0 = (np.floor((xy.min(0) - pad) / 2) * 2).clip(0, edge).astype(int)
+            c1, r1 = (np.ceil((xy.max(0) + pad) / 2) * 2).clip(0, edge).astype(int)
             if c1 > c0 and r1 > r0:
                 self._blend(r0, r1, c0, c1)
         if self.solid is not None and self.solid.blocks is not None:
@@ -407,8 +390,8 @@ class FrameDrawer:
         """Composite a body drawn on a grid of 2 over the planes: each of its pixels [M] (a 2x2 block's index, as the
         chroma planes count them) of colour `rgb` [M, 3] (0-255) and its frame pixels' coverage `cover` [M, 4] (in
         self.quad's order; the solid body's), or [M] (one for the whole block: the mesh body's)."""
-        br, bc = np.divmod(blocks, self.size // 2)
-        luma = rgb @ _TO_Y + np.float32(16.5)
+        br, bc = np.divmod(blocks, self.width // 2)
+        luma = rgb @ TO_Y + np.float32(16.5)
         if cover.ndim == 1:
             whole, block_cover = cover >= 1, cover
         else:
@@ -416,15 +399,15 @@ class FrameDrawer:
             whole = np.minimum(np.minimum(c0, c1), np.minimum(c2, c3)) >= 1
             block_cover = (c0 + c1 + c2 + c3) * np.float32(0.25)
         pairs = self.y_flat.view(np.uint16)  # a block's two pixels in a row are one word
-        top = (self.size * br + bc)[whole]
-        pairs[top] = pairs[top + self.size // 2] = luma[whole].astype(np.uint16) * 257
+        top = (self.width * br + bc)[whole]
+        pairs[top] = pairs[top + self.width // 2] = luma[whole].astype(np.uint16) * 257
         part = np.flatnonzero(~whole)
-        idx = (2 * self.size * br[part] + 2 * bc[part])[:, None] + self.quad
+        idx = (2 * self.width * br[part] + 2 * bc[part])[:, None] + self.quad
         y = self.y_flat[idx].astype(np.float32)
         part_cover = cover[part, None] if cover.ndim == 1 else cover[part]
         blend = y + part_cover * (luma[part, None] - np.float32(0.5) - y) + np.float32(0.5)
         self.y_flat[idx] = blend.astype(np.uint8)
-        for plane, to in ((self.u_flat, _TO_U), (self.v_flat, _TO_V)):
+        for plane, to in ((self.u_flat, TO_U), (self.v_flat, TO_V)):
             old = plane[blocks].astype(np.float32)
             plane[blocks] = (old + block_cover * (rgb @ to + 128 - old) + np.float32(0.5)).astype(np.uint8)
 
@@ -439,23 +422,23 @@ class FrameDrawer:
         br, bc = np.divmod(blocks, (c1 - c0) // 2)
         br += r0 // 2
         bc += c0 // 2
-        idx = (2 * self.size * br + 2 * bc)[:, None] + self.quad  # [N, 4] flat pixel indices
+        idx = (2 * self.width * br + 2 * bc)[:, None] + self.quad  # [N, 4] flat pixel indices
         px = self.px_flat[idx]
         self.px_flat[idx] = 0
         px = px.view(np.uint8).reshape(4 * len(blocks), 4).astype(np.float32)
         a = px[:, 3] * np.float32(1 / 255)
         y = self.y_flat[idx].reshape(-1).astype(np.float32)
-        self.y_flat[idx] = (y + a * (px @ _RGBA_TO_Y + 16 - y) + np.float32(0.5)).astype(np.uint8).reshape(-1, 4)
+        self.y_flat[idx] = (y + a * (px @ RGBA_TO_Y + 16 - y) + np.float32(0.5)).astype(np.uint8).reshape(-1, 4)
         # Over the grey background (chroma 128) the chroma is 128 + a * (the figure's), averaged per 2x2 block:
         # one product of the block's 4 alpha-weighted RGBA pixels [N, 16] with the stacked chroma rows [16, 2].
-        c = (px * a[:, None]).reshape(-1, 16) @ _BLOCK_TO_UV + np.float32(128.5)
-        b = br * (self.size // 2) + bc
+        c = (px * a[:, None]).reshape(-1, 16) @ BLOCK_TO_UV + np.float32(128.5)
+        b = br * (self.width // 2) + bc
         self.u_flat[b] = c[:, 0].astype(np.uint8)
         self.v_flat[b] = c[:, 1].astype(np.uint8)
 
     def rgb(self):
-        """The current frame as RGB [size, size, 3] (for contact sheets and tests)."""
-        return yuv_to_rgb(self.frame, self.size)
+        """The current frame as RGB [height, width, 3] (for contact sheets and tests)."""
+        return yuv_to_rgb(self.frame, (self.width, self.height))
 
 
 def head_joint(names):
@@ -468,18 +451,18 @@ def head_joint(names):
 
 
 @functools.lru_cache(maxsize=4)
-def _background(camera, style, size):
-    """The blank luma plane [size, size] (sky, a grey floor disc fading out around the look-at point) and the
+def _background(camera, style, width, height):
+    """The blank luma plane [height, width] (sky, a grey floor disc fading out around the look-at point) and the
     grid's alpha map (flat), both read-only; cached, since every clip of a run shares them.
 
     The camera's x axis is horizontal, so a pixel row's ray has one downward slope: the distance along the
     ray to the floor depends on the row alone, and the floor point (relative to the look-at point) is
     affine in the column within a row.
     """
-    proj = Projector(camera, size, size)
+    proj = Projector(camera, width, height)
     right, up, fwd = proj.rot
-    xc = (np.arange(size) + 0.5 - proj.centre[0]) / proj.focal  # per column
-    yc = (size - (np.arange(size) + 0.5) - proj.centre[1]) / proj.focal  # per row
+    xc = (np.arange(width) + 0.5 - proj.centre[0]) / proj.focal  # per column
+    yc = (height - (np.arange(height) + 0.5) - proj.centre[1]) / proj.focal  # per row
     ray_y = yc * up[1] + fwd[1]
     down = ray_y < -1e-9
     t = np.where(down, (proj.offset[1] + camera.height) / np.where(down, -ray_y, 1.0), 0.0)

@@ -54,27 +54,27 @@ def reencode(src, dst, like, seed: int | None = None) -> None:
 
     src, dst = Path(src), Path(dst)
     (w, h), fps, _ = _probe(Path(like))
-    if w != h:
-        raise RenderError(f"{like}: {w}x{h} pixels; a stimulus video is square")
+    if w % 2 or h % 2:
+        raise RenderError(f"{like}: {w}x{h} pixels; a stimulus video's sides are even (yuv420p)")
     frames = imageio_ffmpeg.count_frames_and_secs(str(like))[0]
     try:
-        _reencode(src, dst, w, fps, frames, seed)
+        _reencode(src, dst, (w, h), fps, frames, seed)
     except BaseException:
         dst.unlink(missing_ok=True)
         dst.with_name(dst.stem + ".video.mp4").unlink(missing_ok=True)
         raise
 
 
-def _reencode(src: Path, dst: Path, size: int, fps: float, frames: int, seed: int | None) -> None:
+def _reencode(src: Path, dst: Path, size: tuple, fps: float, frames: int, seed: int | None) -> None:
     (w, h), src_fps, sound = _probe(src)
-    if (w, h) != (size, size) or abs(src_fps - fps) > 1e-3:
-        raise RenderError(f"{src}: {w}x{h} pixels at {src_fps:g} fps; the study's are {size}x{size} at {fps:g}")
-    frame_bytes = size * size * 3 // 2  # yuv420p
+    if (w, h) != size or abs(src_fps - fps) > 1e-3:
+        raise RenderError(f"{src}: {w}x{h} pixels at {src_fps:g} fps; the study's are {size[0]}x{size[1]} at {fps:g}")
+    frame_bytes = w * h * 3 // 2  # yuv420p
     video = dst.with_name(dst.stem + ".video.mp4") if sound else dst
     decode = [_ffmpeg(), "-v", "error", "-i", str(src), "-map", "0:v:0", "-frames:v", str(frames + 1)]
     decode += ["-f", "rawvideo", "-pix_fmt", "yuv420p", "-"]
     reader = subprocess.Popen(decode, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
-    writer = ffmpeg_writer(video, size, fps, frames=frames, seed=seed)
+    writer = ffmpeg_writer(video, h, fps, frames=frames, seed=seed, width=w)
     n = 0
     try:
         while chunk := reader.stdout.read(frame_bytes):

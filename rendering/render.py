@@ -27,6 +27,8 @@ from .errors import RenderError
 from .raster import DEFAULT_STYLE, FrameDrawer, Style, one_colour
 
 MIN_SIZE, MAX_SIZE = 32, 4096  # pixels; beyond 4096 x264's level limits and memory get in the way
+MIN_ASPECT, MAX_ASPECT = 0.25, 4.0  # width / height: from a tall 1:4 to a wide 4:1 frame
+MAX_WIDTH = 8192  # pixels: a wide frame's memory and x264's levels
 MESH_CHUNK = 64  # frames of a mesh's vertices skinned and held at once
 MESH_AHEAD = 8  # frames of drawn meshes the skinning thread keeps ready ahead of the frame being composed
 
@@ -37,6 +39,12 @@ def size_flag(text):
     if size % 2:
         raise argparse.ArgumentTypeError(f"must be even (H.264 yuv420p), got {size}")
     return size
+
+
+def frame_width(size, aspect=1.0):
+    """The width in pixels of a frame `size` pixels high at `aspect` (width / height): the nearest even number
+    (yuv420p halves both sides), the height itself for a square frame."""
+    return size if aspect == 1 else max(2, 2 * round(size * float(aspect) / 2))
 
 
 def _as_clip(clip_or_path):
@@ -53,7 +61,7 @@ class RenderOptions:
     Attributes
     ----------
     size : int
-        Width = height in pixels: even, 32-4096 (H.264 yuv420p).
+        The frame's height in pixels: even, 32-4096 (H.264 yuv420p).
     camera : Camera
         The camera (rendering.camera); it follows the root unless `target` is given.
     style : Style
@@ -82,6 +90,9 @@ class RenderOptions:
     rate_seed : int or None
         The seed of the default rate control's random share of the rate per frame (None: fresh randomness, so
         the bytes differ from one render to the next; the pixels hardly do).
+    aspect : float
+        The frame's width over its height (MIN_ASPECT-MAX_ASPECT): 1 a square frame (one person), 3 the wide
+        frame two people are filmed in; the width is `frame_width(size, aspect)`.
     """
 
     size: int = 640
@@ -97,6 +108,7 @@ class RenderOptions:
     crf: int | None = None
     threads: int | None = None
     rate_seed: int | None = None
+    aspect: float = 1.0
 
 
 def render_clip(clip_or_path, out_mp4, options=None, *, sheet=None, partner=None, captions=None, mesh=None,
@@ -148,6 +160,11 @@ def render_clip(clip_or_path, out_mp4, options=None, *, sheet=None, partner=None
     name = str(clip_or_path) if not isinstance(clip_or_path, dict) else str(out_mp4)
     if size % 2 or not MIN_SIZE <= size <= MAX_SIZE:
         raise RenderError(f"{out_mp4}: size must be even and {MIN_SIZE}-{MAX_SIZE} (H.264 yuv420p), got {size}")
+    if not MIN_ASPECT <= o.aspect <= MAX_ASPECT:
+        raise RenderError(f"{out_mp4}: aspect (width / height) must be {MIN_ASPECT:g}-{MAX_ASPECT:g}, got {o.aspect}")
+    frame = (frame_width(size, o.aspect), size)
+    if frame[0] > MAX_WIDTH:
+        raise RenderError(f"{out_mp4}: {frame[0]}x{size} pixels; at most {MAX_WIDTH} wide")
     joints = np.asarray(clip["joints"], dtype=np.float64)
     if joints.ndim != 3 or joints.shape[2] != 3 or len(joints) < 1:
         raise RenderError(f"{name}: joints must be [T >= 1, J, 3], got {joints.shape}")
@@ -159,10 +176,12 @@ def render_clip(clip_or_path, out_mp4, options=None, *, sheet=None, partner=None
         targets = camera_targets(joints, fps, o.camera)
     else:
         targets = np.tile(np.asarray(o.target, np.float64), (len(joints), 1))
-    layer = CaptionLayer(captions, size) if captions else None
+    layer = CaptionLayer(captions, frame) if captions else None
     keep = set(np.linspace(0, len(joints) - 1, o.sheet_frames).round().astype(int)) if sheet else set()
     kept = []
-    proc = ffmpeg_writer(out_mp4, size, fps, o.preset, o.qp, o.crf, o.threads, frames=len(joints), seed=o.rate_seed)
+    proc = ffmpeg_writer(
+        out_mp4, size, fps, o.preset, o.qp, o.crf, o.threads, frames=len(joints), seed=o.rate_seed, width=frame[0]
+    )
     painted = _painted(people, [m if d.style.body == "mesh" else None for (d, _), m in zip(people, meshes)], targets)
     try:
         for t, meshes_t in enumerate(painted):
@@ -192,11 +211,12 @@ def _people(clip, joints, name, o, partner, mesh, partner_mesh):
             raise RenderError(f"{name}: a mesh of {m.n_frames} frames for {len(joints)} frames of joints")
     meshes = [mesh] if mesh is not None else None
     names = list(clip["joint_names"])
-    drawer = FrameDrawer(clip["parents"], names, o.size, o.camera, o.style, o.hide, o.thin, meshes=meshes)
+    frame = (frame_width(o.size, o.aspect), o.size)
+    drawer = FrameDrawer(clip["parents"], names, frame, o.camera, o.style, o.hide, o.thin, meshes=meshes)
     people, meshes = [(drawer, joints)], [mesh]
     if partner is not None:
         second = o.partner_style or one_colour(o.style)
-        people.append(_partner(partner, len(joints), o.size, o.camera, second, drawer, name, partner_mesh))
+        people.append(_partner(partner, len(joints), frame, o.camera, second, drawer, name, partner_mesh))
         meshes.append(partner_mesh)
     return people, meshes
 
@@ -317,7 +337,7 @@ def contact_sheet(frames, fps, out_png, columns=4, thumb=240):
     columns : int
         Frames per row.
     thumb : int
-        The side of each tile in pixels.
+        The height of each tile in pixels (its width keeps the frames' aspect).
 
     Returns
     -------
@@ -328,11 +348,12 @@ def contact_sheet(frames, fps, out_png, columns=4, thumb=240):
 
     rows = -(-len(frames) // columns)
     label = 18
-    sheet = Image.new("RGB", (columns * thumb, rows * (thumb + label)), "white")
+    wide = round(thumb * frames[0][1].shape[1] / frames[0][1].shape[0]) if frames else thumb
+    sheet = Image.new("RGB", (columns * wide, rows * (thumb + label)), "white")
     draw = ImageDraw.Draw(sheet)
     for k, (t, rgb) in enumerate(frames):
-        im = Image.fromarray(rgb).resize((thumb, thumb), Image.LANCZOS)
-        x, y = (k % columns) * thumb, (k // columns) * (thumb + label)
+        im = Image.fromarray(rgb).resize((wide, thumb), Image.LANCZOS)
+        x, y = (k % columns) * wide, (k // columns) * (thumb + label)
         sheet.paste(im, (x, y))
         draw.text((x + 4, y + thumb + 3), f"{t / fps:.2f} s", fill=(60, 60, 60))
     sheet.save(out_png, compress_level=1)  # fast; the sheets are for reports, not archives

@@ -18,6 +18,8 @@ bench/bench_render_solid.py measures it against the stick figure.
 
 import numpy as np
 
+from .camera import frame_size
+
 LIGHT = np.array([-0.35, 0.55, -0.76])  # towards the light in camera axes (x right, y up, z away from the camera)
 LIGHT = LIGHT / np.linalg.norm(LIGHT)
 AMBIENT, DIFFUSE = 0.55, 0.6  # shade = AMBIENT + DIFFUSE * max(0, normal . LIGHT), capped at 1.1
@@ -25,21 +27,23 @@ f32 = np.float32
 
 
 class SolidBody:
-    """Rasterises capsules into a frame of `size` pixels square, seen through a camera of `focal` pixels, on a
-    grid of `scale` frame pixels per grid pixel across and down (1: every pixel; 2: a quarter of the work, each
-    grid pixel written to its 2x2 frame pixels, the edges stepped by two pixels)."""
+    """Rasterises capsules into a frame of `size` pixels (a side, or (width, height)), seen through a camera of
+    `focal` pixels, on a grid of `scale` frame pixels per grid pixel across and down (1: every pixel; 2: a quarter
+    of the work, each grid pixel written to its 2x2 frame pixels, the edges stepped by two pixels)."""
 
     def __init__(self, size, focal, scale=1):
-        self.full, self.scale = size, scale
-        self.size, self.focal = size // scale, focal / scale  # the grid the capsules are rasterised on
-        self.zbuf = np.full(self.size * self.size, np.inf, np.float32)
+        width, height = frame_size(size)
+        self.full, self.scale = width, scale  # (full: a frame row's pixels)
+        self.grid = np.array([width // scale, height // scale])  # the grid the capsules are rasterised on
+        self.size, self.focal = int(self.grid[0]), focal / scale  # (size: a grid row's pixels)
+        self.zbuf = np.full(int(self.grid.prod()), np.inf, np.float32)
         step = np.arange(scale)
-        self.block = (step[:, None] * size + step[None]).reshape(-1)  # a grid pixel's frame pixels from its first
+        self.block = (step[:, None] * width + step[None]).reshape(-1)  # a grid pixel's frame pixels from its first
         self.blocks = None
 
     def draw(self, rgba_flat, a, b, radii, colours, to_rows, capped=None):
         """Rasterise capsules a->b (camera coordinates [N, 3], depth > 0) of `radii` (metres) and `colours`
-        into `rgba_flat` ([size*size, 4] uint8, straight alpha; None on a grid of 2: `blocks` then holds each
+        into `rgba_flat` ([height*width, 4] uint8, straight alpha; None on a grid of 2: `blocks` then holds each
         grid pixel's 2x2 block of the frame, its colour (0-255) and coverage); `to_rows`: camera points [N, 3] -> image
         (column, row); `capped` [N] bool: whether a capsule has its round end at b (None: all have; a bone needs
         none at a joint that another capsule at least as thick ends at). Returns the (column, row)
@@ -89,9 +93,8 @@ class SolidBody:
         per row of its bounding box, the columns within the larger pad of the axis's stretch over the rows within
         that pad (a diagonal arm's box is mostly empty). Returns (capsule index, column, row, the boxes' union's
         low corner, its high corner), or None where none."""
-        size = self.size
-        lo = np.floor(np.minimum(sa - pad_a, sb - pad_b)).clip(0, size).astype(np.int64)
-        hi = np.ceil(np.maximum(sa + pad_a, sb + pad_b)).clip(0, size).astype(np.int64)
+        lo = np.floor(np.minimum(sa - pad_a, sb - pad_b)).clip(0, self.grid).astype(np.int64)
+        hi = np.ceil(np.maximum(sa + pad_a, sb + pad_b)).clip(0, self.grid).astype(np.int64)
         h = np.where(hi[:, 0] > lo[:, 0], np.maximum(hi[:, 1] - lo[:, 1], 0), 0)
         if h.sum() == 0:
             return None

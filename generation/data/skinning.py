@@ -11,6 +11,7 @@ against its vertices and joints, and refuses a model of more than MAX_MESH_VERTI
 torch and smplx are imported only when frames are skinned.
 """
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +31,9 @@ from .smpl_files import (
 )
 
 MESH_BATCH = 32  # frames per pass through the skinning: bounds the vertices held at once (32 x 10k x 3 floats)
+# Metres added to surface_reach's bound: the pose blend shapes move the surface by a centimetre or so (a bent elbow,
+# a raised shoulder), which the rest shape does not show.
+POSE_SHAPE_MARGIN = 0.015
 
 
 def smpl_mesh(path, model, smpl_type=None, source_fps=None, face="mask", hand_mean="auto"):
@@ -119,6 +123,44 @@ class MeshSource:
                 verts[s - a : e - a] = v.numpy() + shift
                 joints[s - a : e - a] = j.numpy() + shift
         return verts, joints
+
+
+@functools.lru_cache(maxsize=4)
+def _rest_model(model, smpl_type):
+    """(v_template, shapedirs, J_regressor, kind, weights [V, J]) of a body model, read once per process."""
+    template, shapedirs, regressor, parents, kind = read_model(model, smpl_type)
+    weights = np.asarray(load_arrays(Path(model), ("weights",), "a body model")["weights"], np.float64)
+    if weights.shape != (len(template), len(parents)):
+        raise SmplError(
+            f"{model}: weights {weights.shape} do not fit its {len(template)} vertices and {len(parents)} joints"
+        )
+    return template, shapedirs, regressor, kind, weights
+
+
+def surface_reach(model, smpl_type, betas):
+    """How far the mesh's surface reaches from each joint [J], in metres, in any pose: what a camera must frame
+    around the joints to keep the whole mesh in view (rendering.framing.framed_points' `reach`): a fingertip beyond
+    the last finger joint, the top of the head above the head joint, the flesh around a limb.
+
+    Each vertex belongs to the joint that weighs most in its skinning. Linear blend skinning moves it by its
+    joints' transforms, weighted; by the triangle inequality it stays within sum_k w_k (|v - J_k| + |J_k - J|)
+    of its joint J in every pose, where the distances are the rest shape's (`betas`: the body's shape; empty: the
+    mean) and |J_k - J| is a bone's length for the neighbouring joints that skin it. A joint's reach is the
+    largest bound of its vertices, with POSE_SHAPE_MARGIN for the pose blend shapes; 0 for a joint that owns none."""
+    template, shapedirs, regressor, kind, weights = _rest_model(str(model), smpl_type)
+    dirs, coef = shape_and_expression(kind, shapedirs, np.asarray(betas, np.float64).reshape(-1), None)
+    shaped = template + (dirs @ coef[0] if dirs.shape[2] else 0.0)
+    joints = regressor @ shaped
+    owner = weights.argmax(1)
+    bound = np.zeros(len(shaped))
+    for k in np.unique(np.nonzero(weights > 0)[1]):  # the joints that skin any vertex: few against the vertices
+        w = weights[:, k]
+        on = w > 0
+        far = np.linalg.norm(shaped[on] - joints[k], axis=1) + np.linalg.norm(joints[k] - joints[owner[on]], axis=1)
+        bound[on] += w[on] * far
+    reach = np.zeros(len(joints))
+    np.maximum.at(reach, owner, bound)
+    return np.where(reach > 0, reach + POSE_SHAPE_MARGIN, 0.0)
 
 
 def face_vertices(shaped, joints):

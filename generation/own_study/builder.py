@@ -41,6 +41,7 @@ from moglow_eval.core.clip import save_clip
 from moglow_eval.core.tables import C2ST_COLUMNS
 from rendering.captions import ROOM as CAPTION_ROOM
 from rendering.raster import PARTNER_COLOUR, STYLES
+from rendering.render import frame_width
 
 from ..data.motion_files import read_motion
 from ..metrics import c2st
@@ -66,7 +67,7 @@ from .inputs import (
     with_study_fps,
 )
 from .measures import study_measures
-from .mesh_clips import check_mesh_inputs, mesh_spec, partner_mesh_spec, wants_mesh
+from .mesh_clips import check_mesh_inputs, clip_reach, file_reach, mesh_spec, partner_mesh_spec, wants_mesh
 from .scene import stage
 from .speech import item_captions, prepare_audio, read_sources
 
@@ -297,6 +298,7 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
         jobs.append((str(motion), str(video), str(sheet), size, preset, job))
         groups.append(item)  # an item's videos share a length and a sound, so they must be one size
         row = manifest_row(cid, cond, dict(id=item, role=role), c.note, len(joints), spec.fps, size)
+        row["width"] = frame_width(size, scene.aspect)
         if spec.design:
             row["motion_item"] = c.motion_item
         if sound:
@@ -389,7 +391,11 @@ def build_study(spec, out, size, preset, workers, force, progress, scheduler=Non
         lengths = {i: len(m.joints) for i, m in motions[study.NATURAL].items()}
         captions = item_captions(spec, lengths, size)
         room = CAPTION_ROOM if captions else 0.0
-        scene = stage(clips, skeleton_of(motions), spec, people.partners, Path(tmp), room)
+        # With the mesh style each camera frames the meshes' surfaces: their fingertips and the tops of their heads.
+        reach = None
+        if wants_mesh(spec):
+            reach = (lambda c: clip_reach(c, motions, spec)), (lambda m: file_reach(m.path, spec))
+        scene = stage(clips, skeleton_of(motions), spec, people.partners, Path(tmp), room, reach)
         sound = prepare_audio(spec, lengths, Path(tmp), scene.sides)
         out = prepare_out(out, force, keep_videos=True)
         manifest, (metrics_rows, row_clips), jobs, groups, feats = write_study_clips(

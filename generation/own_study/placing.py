@@ -5,7 +5,7 @@ one conversation need not put them face to face (nor on one floor). `facing` (th
 every condition's clip of the agent alike, with its mean root position on the floor at its own spot, DISTANCE
 apart along X (the agent at -X), turned so that its mean facing over the clip is towards the other, opened by OPEN
 degrees towards the +Z side of their line (a shallow V, as a stage turns two people talking, so that a camera on
-that side sees the agent at three-quarter and the other nearly in profile: rendering.framing.pair_camera), its
+that side sees both turned a little towards it: rendering.framing.pair_camera), its
 lowest joint's median height on the floor. `recorded` keeps the two where the files put
 them (every condition's agent in the interlocutor's frame), moved and turned as one so that the line between the
 real agent and the interlocutor runs along +X from the midpoint at the origin, the floor under the lower of them.

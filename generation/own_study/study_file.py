@@ -32,6 +32,7 @@
     framing = "upper"            # "full" (the default), "upper" (hips up) or "auto" (upper when the feet stay)
     style = ["stick", "mesh"]    # "stick" (the default), "solid", "mesh" (SMPL-family files), or a list of them
     face = "mask"                # the mesh's face: a plain mask over it (the default), or "none"
+    aspect = "3:1"               # the frame's width to height: "W:H" or a number (default 3:1 for two people, else 1:1)
     [metrics]                    # optional
     gesture = "auto"             # the gesture measures: "auto" (with speech, an SMPL-family or speech-gesture skeleton)
 
@@ -90,7 +91,7 @@ TOP_KEYS = {
     "metrics",
 }
 SAMPLE_DRAWS = ("item", "rater")  # a stochastic system's samples: one per item, or one per rater and unit (the app)
-RENDER_KEYS = {"view", "framing", "style", "face"}
+RENDER_KEYS = {"view", "framing", "style", "face", "aspect"}
 FACES = ("mask", "none")  # the mesh style's face: a plain mask over it (GENEA 2026), or the mesh's own
 AUDIO_KEYS = {"folder", "loudness", "interlocutor", "channels"}
 CATCH_KEYS = {"make", "n", "folder"}
@@ -127,6 +128,7 @@ class StudySpec:
     loudness: float = -23.0
     view: object = None  # None: the built-in study's fixed camera; else a key of rendering.framing.VIEWS or degrees
     framing: str | None = None  # None: "full" for one person, "upper" for two (study_people.check_needs)
+    aspect: float | None = None  # the frame's width / height; None: 3 for two people, 1 for one (check_needs)
     styles: list = field(default_factory=lambda: ["stick"])
     face: str = "mask"
     sources: Path | None = None  # the table of where each item came from
@@ -314,7 +316,7 @@ def _audio(path, table, spec):
 
 
 def _render(path, table, spec):
-    """[render] view, framing and style: how the videos film and draw the body (rendering.framing, raster)."""
+    """[render] view, framing, style and aspect: how the videos film and draw the body (rendering.framing, raster)."""
     from rendering.framing import FRAMINGS, VIEWS
     from rendering.raster import STYLES
 
@@ -341,6 +343,31 @@ def _render(path, table, spec):
     if face not in FACES:
         raise err(path, "[render] face", f"must be {' or '.join(FACES)}, got {face!r}")
     spec.face = face
+    if "aspect" in table:
+        spec.aspect = _aspect(path, table["aspect"])
+
+
+def _aspect(path, value):
+    """[render] aspect: "W:H" (as "3:1" or "16:9") or a number, the frame's width over its height."""
+    from rendering.render import MAX_ASPECT, MIN_ASPECT
+
+    ratio = None
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        ratio = float(value)
+    elif isinstance(value, str) and value.count(":") == 1:
+        try:
+            w, h = (float(x) for x in value.split(":"))
+            ratio = w / h if h > 0 and w > 0 else None
+        except ValueError:
+            ratio = None
+    if ratio is None or not MIN_ASPECT <= ratio <= MAX_ASPECT:
+        raise err(
+            path,
+            "[render] aspect",
+            f'must be "W:H" (as "3:1") or a number, the width over the height, from {MIN_ASPECT:g} to '
+            f"{MAX_ASPECT:g}, got {value!r}",
+        )
+    return ratio
 
 
 def _samples(path, table, spec):

@@ -2,6 +2,7 @@
 captioned study, and what each design needs of the rest of the file."""
 
 from moglow_eval.core import colours
+from rendering.framing import PAIR_ASPECT
 
 from . import designs
 from .placing import PLACEMENTS
@@ -68,8 +69,8 @@ def _captions(path, table, spec):
 
 
 def check_needs(path, spec):
-    """What each design needs from the rest of the study file; the view's and the framing's defaults (two people:
-    upper; one person with speech, captions or an SMPL-family body: front and auto)."""
+    """What each design needs from the rest of the study file; the view's, the framing's and the aspect's defaults
+    (two people: upper, 3:1; one person with speech, captions or an SMPL-family body: front and auto, square)."""
     if spec.interlocutor is None and spec.view is None and (spec.audio_folder or spec.captions or spec.smpl_model):
         # A speech or gesture study: the built-in study's walking camera sees a keyword's gesture edge-on. From the
         # front, and from the hips up where the feet stay put (auto: a speaker who walks keeps the full body).
@@ -77,6 +78,8 @@ def check_needs(path, spec):
         spec.framing = spec.framing or "auto"
     if spec.framing is None:
         spec.framing = "upper" if spec.interlocutor is not None else "full"
+    if spec.aspect is None:  # two people side by side in a wide frame, as GENEA 2026's visualiser films them
+        spec.aspect = PAIR_ASPECT if spec.interlocutor is not None else 1.0
     design = designs.get(spec.design)
     design.check(path, spec)
     if spec.mismatched and not design.mismatched_folders:

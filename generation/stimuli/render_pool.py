@@ -21,7 +21,7 @@ from tqdm import tqdm
 from rendering.audio import mux_audio
 from rendering.blinding import check_one_size, odd_ones, same_mtime
 from rendering.mesh import set_gl_environment
-from rendering.render import RenderOptions, render_clip
+from rendering.render import RenderOptions, frame_width, render_clip
 
 from .build_index import job_key
 
@@ -99,6 +99,7 @@ def render_stimuli(jobs, workers, progress=True, groups=None, index=None, schedu
     `scheduler`: render on that Dask cluster (cluster.py) instead of local processes."""
     workers = min(workers, len(jobs))
     size = jobs[0][3] if jobs else 0
+    width = frame_width(size, jobs[0][5].get("aspect", 1.0)) if jobs and len(jobs[0]) > 5 else size
     todo = list(range(len(jobs)))
     if index is not None:
         keys = [job_key(job) for job in jobs]
@@ -106,7 +107,7 @@ def render_stimuli(jobs, workers, progress=True, groups=None, index=None, schedu
             jobs[k][5]["rate_seed"] = int(key[:12], 16)  # the same bytes for the same inputs, build after build
         todo = _reuse(jobs, keys, index)
     log.info(
-        f"render: {len(todo)} of {len(jobs)} clips at {size}x{size} on {min(workers, max(1, len(todo)))} processes"
+        f"render: {len(todo)} of {len(jobs)} clips at {width}x{size} on {min(workers, max(1, len(todo)))} processes"
     )
 
     def finished(k):

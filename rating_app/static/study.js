@@ -17,6 +17,10 @@
   var lastPhase = null;
   var watchedMs = 0, playStart = null, answered = false;
   var video = $("video");
+  if (app.dataset.videoWidth) {  // the videos' shape, for the page's wide layout (style.css: .frame-wide)
+    document.documentElement.style.setProperty("--video-aspect",
+      String(Number(app.dataset.videoWidth) / Number(app.dataset.videoHeight)));
+  }
   var rateButtons = Array.prototype.slice.call(document.querySelectorAll("button.rate"));
 
   function show(id) {
@@ -342,6 +346,10 @@
       v.setAttribute("playsinline", "");
       v.setAttribute("disablepictureinpicture", "");
       v.preload = "auto";
+      if (app.dataset.videoWidth) {  // the set's size (manifest): the video keeps its shape before it loads
+        v.setAttribute("width", app.dataset.videoWidth);
+        v.setAttribute("height", app.dataset.videoHeight);
+      }
       v.src = c.video_url;
       player.appendChild(v);
       var slider = document.createElement("input");

@@ -12,6 +12,7 @@ from moglow_eval.core.cli import UserError
 
 REQUIRED = ("clip_id", "condition", "role", "item", "video")
 MAX_BYTES = 64 << 20  # a manifest row is about 200 bytes: 300,000 clips
+MAX_SIDE = 16384  # pixels: more than any video the renderer writes
 
 
 class AppError(UserError):
@@ -32,6 +33,8 @@ class ManifestClip:
     style: str = ""  # how the body is drawn (a study with [render] style, CONTRACTS §4): exported, never served
     sample: str = ""  # a stochastic system's sample (CONTRACTS §4): exported, never served
     sample_of: str = ""  # the clip that stands for this clip's samples (pairing/samples.py); "" without samples
+    width: int | None = None  # the video's pixels across and down (CONTRACTS §4), for the page to lay it out
+    height: int | None = None
 
     @property
     def duration_ms(self) -> int | None:
@@ -113,7 +116,24 @@ def clip_from_row(row: dict, where: str, base: Path, check_files: bool) -> Manif
         audio=(row.get("audio") or "").strip() == "1",
         style=(row.get("style") or "").strip()[:16],
         sample=sample,
+        width=_side(row.get("width"), where, "width"),
+        height=_side(row.get("height"), where, "height"),
     )
+
+
+def _side(value, where, field):
+    """A video's width or height from the manifest: a positive whole number of pixels, or None where not given."""
+    x = _number(value, int, where, field)
+    if x is not None and not 0 < x <= MAX_SIDE:
+        raise AppError(f"{where}: field '{field}' must be 1-{MAX_SIDE} pixels, got {value!r}")
+    return x
+
+
+def video_size(clips) -> tuple[int, int] | None:
+    """(width, height) of a set's videos, as the manifest gives them (every video of a set is one size, §4), for
+    the rater's page to lay them out before they load (a two-person study's are wide); None where not given."""
+    sizes = {(c.width, c.height) for c in clips if c.width and c.height}
+    return sizes.pop() if len(sizes) == 1 else None
 
 
 def _study_names(manifest) -> tuple[Path, dict | None]:

@@ -52,6 +52,7 @@ def index():
         question=cfg["STUDY_QUESTION"],
         sound=cfg["STUDY_SOUND"],
         interlocutor=_named_colour(cfg.get("INTERLOCUTOR_COLOUR")),  # two people: the one drawn the same in both
+        video_size=cfg.get("VIDEO_SIZE"),  # (width, height) of every video, or None: laid out square until loaded
         figure=cfg.get("FIGURE", "stick figure"),  # the page's word for what the videos draw
         reasons=cfg["VOTE_REASONS"],  # the boxes shown with a vote, and the free text's limit (store/reasons.py)
         reason_text=cfg["REASON_TEXT"],

@@ -62,9 +62,37 @@ def served(built, tmp_path):
     app_engine(app).dispose()
 
 
+LAYOUT = """
+var box = function (id) { var r = document.getElementById(id).getBoundingClientRect();
+  return [r.left, r.top, r.width, r.height]; };
+return {a: box('video-a'), b: box('video-b'), view: [window.innerWidth, window.innerHeight],
+  fits: document.documentElement.scrollWidth <= window.innerWidth + 1,
+  hint: document.querySelector('#pair .turn-hint').getBoundingClientRect().height > 0};
+"""
+
+
+def wide_layout(browser):
+    """The pair on screen as a desktop (1280x900) and a phone held upright (390x844) show it: each video in the
+    wide frame's shape (3:1: the manifest's size), one above the other; on the desktop both on the screen at once
+    and large, on the phone as wide as the screen, nothing wider than it, and a word to turn it."""
+    for window, phone in (((1280, 900), False), ((390, 844), True)):
+        browser.set_window_size(*window)
+        s = browser.execute_script(LAYOUT)
+        (ax, ay, aw, ah), (bx, by, bw, bh), (vw, vh) = s["a"], s["b"], s["view"]
+        assert abs(aw / ah - 3) < 0.05 and abs(bw / bh - 3) < 0.05, s  # the wide frame, neither cut nor padded
+        assert by >= ay + ah and abs(ax - bx) < 1 and aw == bw, s  # A above B, alike
+        assert s["fits"] and ax >= 0 and ax + aw <= vw, s
+        assert s["hint"] == phone, s
+        if phone:
+            assert aw >= 0.85 * vw, s  # as wide as the screen
+        else:
+            assert by + bh <= vh and aw >= 0.6 * vw, s  # both on the screen at once, and large
+    browser.set_window_size(1280, 900)
+
+
 def answer_a_pair(browser, wait, url, app):
     """Consent, the sound check, the introduction, then pairs until the first test pair is answered; returns the
-    URLs of that pair's two videos."""
+    URLs of that pair's two videos. The first pair's layout is checked on a desktop and a phone (wide_layout)."""
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
 
@@ -74,6 +102,7 @@ def answer_a_pair(browser, wait, url, app):
     pass_sound_check(browser, wait, app)
     wait.until(EC.visibility_of_element_located((By.ID, "intro")))
     browser.find_element(By.ID, "intro-go").click()
+    looked = False
     for _ in range(12):
         wait.until(lambda d: d.execute_script(STATE)["section"] in ("pair", "rating-intro"))
         s = browser.execute_script(STATE)
@@ -82,6 +111,9 @@ def answer_a_pair(browser, wait, url, app):
             wait.until(lambda d: d.execute_script(STATE)["section"] != "rating-intro")
             continue
         assert s["unmuted"]
+        if s["label"] == "Example" and not looked:
+            wide_layout(browser)
+            looked = True
         srcs = [browser.find_element(By.ID, v).get_attribute("src") for v in ("video-a", "video-b")]
         browser.find_element(By.ID, "video-a").click()  # with sound nothing plays by itself: a tap
         wait.until(lambda d: all(d.execute_script(STATE)["ended"]))

@@ -71,11 +71,11 @@ def highlight(frame):
 
 
 def caption_rows(frame):
-    """Indices of the rows crossed by a caption's band: more than 40% of the row dark and grey (no body is that
-    wide)."""
+    """Indices of the rows crossed by a caption's band: dark and grey over more than 40% of the frame's height (no
+    body is that wide; the text is a share of the height, in a wide frame too)."""
     rgb = frame.astype(np.int16)
     dark = (rgb.max(-1) < 90) & (rgb.max(-1) - rgb.min(-1) < 25)
-    return np.flatnonzero(dark.mean(1) > 0.4)
+    return np.flatnonzero(dark.sum(1) > 0.4 * frame.shape[0])
 
 
 def caption_text(frame):

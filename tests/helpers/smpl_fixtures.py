@@ -154,11 +154,13 @@ class _MeshBuilder:
                 self.faces.append((pole, p, q) if end == 0 else (pole, q, p))
 
 
-def body_model_arrays(kind, rings=4, segments=12, head_rings=10, seed=0):
+def body_model_arrays(kind, rings=4, segments=12, head_rings=10, seed=0, tips=0.0, head=(0.05, 0.1)):
     """A synthetic model of the smplx layout whose mesh is a body: one closed tube around each bone (its vertices
     skinned to the bone's parent joint, as a limb's are in SMPL) and a closed sphere around the head joint, the head's
     vertices on its front (+Z, where SMPL faces) making up the face. The first J vertices are the rest joints, which
-    J_regressor picks, as in `model_arrays`. `rings` and `segments` set the vertex count (the real SMPL-H has 6890)."""
+    J_regressor picks, as in `model_arrays`. `rings` and `segments` set the vertex count (the real SMPL-H has 6890).
+    `tips`: metres each finger goes on beyond its last joint (skinned to it), as a real hand's fingertips do beyond
+    SMPL-H's last finger joints; `head`: the head sphere's centre above the head joint and its radius (metres)."""
     arrays = model_arrays(kind, seed=seed)
     parents, rest = tree(kind)
     n = len(parents)
@@ -166,7 +168,10 @@ def body_model_arrays(kind, rings=4, segments=12, head_rings=10, seed=0):
     for j in range(1, n):
         if j != 15:  # the head: a sphere
             mesh.tube(rest[parents[j]], rest[j], _radius(kind, j), parents[j], rings)
-    mesh.sphere(rest[15] + (0, 0.05, 0), 0.1, 15, head_rings)
+        if tips and j >= (25 if kind == "smplx" else 22) and j not in parents:  # a finger's last joint
+            along = (rest[j] - rest[parents[j]]) / np.linalg.norm(rest[j] - rest[parents[j]])
+            mesh.tube(rest[j], rest[j] + tips * along, _radius(kind, j), j, rings)
+    mesh.sphere(rest[15] + (0, head[0], 0), head[1], 15, head_rings)
     v = len(mesh.verts)
     weights = np.zeros((v, n), np.float32)
     weights[np.arange(v), mesh.joint] = 1.0

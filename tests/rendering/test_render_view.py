@@ -65,7 +65,7 @@ def test_upper_framing_keeps_every_hand_in_frame_and_fills_it(speaker):
         return (s[:, -1, 1] - s[:, 0, 1]) / 2
 
     assert share(upper).min() > 1.5 * share(full).max()  # hips to head far larger than in the full framing
-    assert share(upper).min() >= 0.7  # in every frame, though the fingertips hang below the hips
+    assert share(upper).min() >= 2 / 3  # in every frame, though the fingertips hang below the hips
 
 
 def test_upper_framing_leaves_out_a_root_on_the_floor():
@@ -98,6 +98,10 @@ def test_auto_framing_is_upper_for_a_speaker_and_full_for_a_walker(speaker):
         ('style = "cartoon"', "[render] style: must be"),
         ("style = []", "[render] style: must be"),
         ('camera = "front"', "[render] camera: unknown key"),
+        ('aspect = "wide"', '[render] aspect: must be "W:H" (as "3:1") or a number'),
+        ('aspect = "3:0"', "[render] aspect: must be"),
+        ("aspect = 9", "[render] aspect: must be"),
+        ("aspect = true", "[render] aspect: must be"),
     ],
 )
 def test_bad_render_keys_are_one_line(tmp_path, table, needle):
@@ -108,11 +112,11 @@ def test_bad_render_keys_are_one_line(tmp_path, table, needle):
 
 
 def test_render_keys_are_read(tmp_path):
-    study = write_family_study(tmp_path, n_items=2, tables='[render]\nview = 15\nframing = "auto"\n')
+    study = write_family_study(tmp_path, n_items=2, tables='[render]\nview = 15\nframing = "auto"\naspect = "16:9"\n')
     spec = read_study_file(study)
-    assert (spec.view, spec.framing, spec.styles) == (15.0, "auto", ["stick"])
+    assert (spec.view, spec.framing, spec.styles, spec.aspect) == (15.0, "auto", ["stick"], 16 / 9)
     plain = read_study_file(write_family_study(tmp_path / "plain", n_items=2))
-    assert (plain.view, plain.framing, plain.styles) == (None, "full", ["stick"])
+    assert (plain.view, plain.framing, plain.styles, plain.aspect) == (None, "full", ["stick"], 1.0)
 
 
 def test_two_styles_each_clip_its_own_stimulus_on_pixels(tmp_path):

@@ -1,0 +1,31 @@
+"""The frame's colour planes: BT.601 limited range as ffmpeg converts RGB to yuv420p, and a yuv420p frame back to
+RGB (contact sheets, tests)."""
+
+import numpy as np
+
+from .camera import frame_size
+
+# BT.601 limited range, what ffmpeg's own rgb -> yuv420p conversion uses.
+TO_Y = np.array([0.2568, 0.5041, 0.0979], np.float32)
+TO_U = np.array([-0.1482, -0.2910, 0.4392], np.float32)
+TO_V = np.array([0.4392, -0.3678, -0.0714], np.float32)
+RGBA_TO_Y = np.append(TO_Y, np.float32(0))  # rgba @ RGBA_TO_Y = Y - 16
+# A 2x2 block's 4 rgba pixels in a row [16] @ BLOCK_TO_UV = the block's mean (U - 128, V - 128).
+BLOCK_TO_UV = np.tile(np.vstack([np.stack([TO_U, TO_V], 1), np.zeros((1, 2), np.float32)]) / 4, (4, 1))
+
+
+def grey_to_y(g):
+    """Luma of a grey level g in [0, 1]."""
+    return 16.0 + 219.0 * g
+
+
+def yuv_to_rgb(frame, size):
+    """A yuv420p frame (flat uint8, as FrameDrawer.draw returns) of `size` (a side, or (width, height)) -> RGB
+    uint8 [height, width, 3]."""
+    w, h = frame_size(size)
+    n = w * h
+    y = frame[:n].reshape(h, w).astype(np.float32) - 16
+    u = frame[n : n + n // 4].reshape(h // 2, w // 2).repeat(2, 0).repeat(2, 1).astype(np.float32) - 128
+    v = frame[n + n // 4 :].reshape(h // 2, w // 2).repeat(2, 0).repeat(2, 1).astype(np.float32) - 128
+    rgb = np.stack([1.164 * y + 1.596 * v, 1.164 * y - 0.392 * u - 0.813 * v, 1.164 * y + 2.017 * u], -1)
+    return np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
