@@ -72,18 +72,21 @@ return {a: box('video-a'), b: box('video-b'), view: [window.innerWidth, window.i
 
 
 def wide_layout(browser):
-    """The pair on screen as a desktop (1280x900) and a phone held upright (390x844) show it: each video in the
-    wide frame's shape (3:1: the manifest's size), one above the other; on the desktop both on the screen at once
-    and large, on the phone as wide as the screen, nothing wider than it, and a word to turn it."""
-    for window, phone in (((1280, 900), False), ((390, 844), True)):
+    """The pair on screen as a desktop (1280x900), a phone held upright (390x844) and turned (844x390) show it: each
+    video in the wide frame's shape (3:1: the manifest's size), one above the other; on the desktop both on the
+    screen at once and large, on the upright phone as wide as the screen, nothing wider than it, and a word to turn
+    it; on the turned phone each nearly as high as the screen."""
+    for window, phone in (((1280, 900), False), ((390, 844), True), ((844, 390), None)):
         browser.set_window_size(*window)
         s = browser.execute_script(LAYOUT)
         (ax, ay, aw, ah), (bx, by, bw, bh), (vw, vh) = s["a"], s["b"], s["view"]
         assert abs(aw / ah - 3) < 0.05 and abs(bw / bh - 3) < 0.05, s  # the wide frame, neither cut nor padded
         assert by >= ay + ah and abs(ax - bx) < 1 and aw == bw, s  # A above B, alike
         assert s["fits"] and ax >= 0 and ax + aw <= vw, s
-        assert s["hint"] == phone, s
-        if phone:
+        assert s["hint"] == bool(phone), s
+        if phone is None:  # the phone turned sideways: each video nearly the screen's height, scrolled to in turn
+            assert ah >= 0.75 * vh, s
+        elif phone:
             assert aw >= 0.85 * vw, s  # as wide as the screen
         else:
             assert by + bh <= vh and aw >= 0.6 * vw, s  # both on the screen at once, and large
