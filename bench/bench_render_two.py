@@ -2,10 +2,11 @@
 (and captions), against the agent alone, at the same size and style (target: within 2x).
 
 Two takes of ../shared's Bandai-Namco actions stand face to face (generation.own_study.placing), one fixed camera
-frames both from the hips up (rendering.framing.pair_camera); the one-person clip is the agent alone through its
-own upper-body camera (as a one-person item is built: the body larger in the frame), and through the pair's camera
-(the same body, only the second person missing). Each style is timed in turns, for --repeats rounds in one
-process; prints the medians, the ratios against both, and the load average beside them.
+frames both from the hips up in the wide frame two people are filmed in (rendering.framing.pair_camera,
+PAIR_ASPECT: three times the pixels of the square one-person frame of the same height); the one-person clip is
+the agent alone through its own upper-body camera (as a one-person item is built: the body larger in the frame),
+and through the pair's camera (the same body, only the second person missing). Each style is timed in turns, for
+--repeats rounds in one process; prints the medians, the ratios against both, and the load average beside them.
 
     PYTHONPATH=$PWD python bench/bench_render_two.py [--size 640] [--frames 150] [--repeats 3]
 """
@@ -26,7 +27,7 @@ from generation.own_study.demo_study import actions_dir  # noqa: E402
 from generation.own_study.placing import place_pair  # noqa: E402
 from generation.own_study.scene import place  # noqa: E402
 from rendering.captions import ROOM, phrases  # noqa: E402
-from rendering.framing import item_camera, pair_camera  # noqa: E402
+from rendering.framing import PAIR_ASPECT, item_camera, pair_camera  # noqa: E402
 from rendering.raster import STYLES  # noqa: E402
 from rendering.render import RenderOptions, render_clip  # noqa: E402
 
@@ -58,9 +59,9 @@ def main():
     alone = place(a.joints[:n], names)
     one_camera = item_camera([alone], names, parents, 30.0, "three-quarter", "upper")
     (agents, partner) = place_pair([a.joints[:n]], names, b.joints[:n], list(b.names))
-    two_camera, target = pair_camera(agents, [(names, parents, None), (list(b.names), b.parents, partner)])
-    cap_camera, cap_target = pair_camera(agents, [(names, parents, None), (list(b.names), b.parents, partner)],
-                                         room=ROOM)  # fmt: skip
+    people = [(names, parents, None), (list(b.names), b.parents, partner)]
+    two_camera, target = pair_camera(agents, people, aspect=PAIR_ASPECT)
+    cap_camera, cap_target = pair_camera(agents, people, room=ROOM, aspect=PAIR_ASPECT)
     words = [(0.2 + 0.3 * k, 0.2 + 0.3 * k + 0.25, w, w == "bridge") for k, w in enumerate(WORDS)]
     captions = phrases(words, args.size)
     clip = dict(joints=alone, parents=parents, joint_names=names, fps=30.0)
@@ -73,8 +74,8 @@ def main():
             for style in ("stick", "solid"):
                 s = STYLES[style]
                 one = RenderOptions(args.size, one_camera, s, threads=1)
-                two = RenderOptions(args.size, two_camera, s, threads=1, target=target)
-                cap = RenderOptions(args.size, cap_camera, s, threads=1, target=cap_target)
+                two = RenderOptions(args.size, two_camera, s, threads=1, target=target, aspect=PAIR_ASPECT)
+                cap = RenderOptions(args.size, cap_camera, s, threads=1, target=cap_target, aspect=PAIR_ASPECT)
                 runs = {
                     "one": lambda o=one: render_clip(clip, out, o),
                     "one, pair camera": lambda o=two: render_clip(pair, out, o),
@@ -85,7 +86,9 @@ def main():
                     t0 = time.perf_counter()
                     run()
                     times.setdefault((style, name), []).append(time.perf_counter() - t0)
-    print(f"{n} frames at {args.size}x{args.size}, {args.repeats} rounds; load average {os.getloadavg()[0]:.1f}")
+    wide = f"{round(PAIR_ASPECT * args.size)}x{args.size}"
+    load = os.getloadavg()[0]
+    print(f"{n} frames at {args.size}x{args.size} (two people: {wide}), {args.repeats} rounds; load {load:.1f}")
     for style in ("stick", "solid"):
         one = float(np.median(times[(style, "one")]))
         same = float(np.median(times[(style, "one, pair camera")]))
