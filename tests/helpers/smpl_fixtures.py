@@ -189,6 +189,19 @@ def body_model_arrays(kind, rings=4, segments=12, head_rings=10, seed=0, tips=0.
     return arrays
 
 
+def write_arms_take(path, lowered, fps=30.0, bow=0.6):
+    """An SMPL-H parameter file of a body standing still, its arms turned down from the T-pose by `lowered` [T]
+    radians (0: spread wide, the wrists 1.36 m apart; negative: raised) and its head bowed by `bow` radians at the
+    neck (the top of a ball round the head is then above the neck's line)."""
+    lowered = np.asarray(lowered, np.float64)
+    poses = np.zeros((len(lowered), 52, 3))
+    poses[:, 16, 2], poses[:, 17, 2] = -lowered, lowered  # the left shoulder, the right (tree)
+    poses[:, 12, 0] = bow
+    trans = np.tile([0.0, 0.93, 0.0], (len(lowered), 1))
+    np.savez(path, poses=poses.reshape(len(lowered), -1), trans=trans, betas=np.zeros(10), mocap_frame_rate=fps)
+    return path
+
+
 def write_body_model(path, kind, **kw):
     np.savez(path, **body_model_arrays(kind, **kw))
     return path

@@ -22,14 +22,7 @@ TIPS, HEAD = 0.03, (0.08, 0.14)  # fingertips 3 cm beyond the last finger joints
 
 
 def _take(path, lowered):
-    """An SMPL-H parameter file of a body standing still, its arms turned down from the T-pose by `lowered` [T]
-    radians (0: spread wide; negative: raised)."""
-    poses = np.zeros((len(lowered), 52, 3))
-    poses[:, 16, 2], poses[:, 17, 2] = -lowered, lowered  # the left shoulder, the right (smpl_fixtures.tree)
-    poses[:, 12, 0] = 0.6  # the head bowed: the top of a ball round the head is then above the neck's line
-    trans = np.tile([0.0, 0.93, 0.0], (len(lowered), 1))
-    np.savez(path, poses=poses.reshape(len(lowered), -1), trans=trans, betas=np.zeros(10), mocap_frame_rate=FPS)
-    return path
+    return smpl_fixtures.write_arms_take(path, lowered, FPS)
 
 
 @pytest.fixture(scope="module")
