@@ -223,13 +223,6 @@ def test_the_crowd_fills_it_and_the_report_is_the_designs(built, tmp_path):
     stats = build_report(tmp_path / "pairs.csv", tmp_path / "report", options, quiet=True)
     assert stats["design"] == design and stats["mas"]
     assert all(v["mas"] == 1.0 for v in stats["mas"].values())  # every answer preferred the matched motion
-
-
-def audio_check_answers(manifest):
-    """{sample stem: digits} of the set's audio_check.csv (beside the manifest)."""
-    path = manifest.parent / "audio_check.csv"
-    with open(path, newline="") as f:
-        return {row["file"].split("/")[1][:-4]: row["answer"] for row in csv.DictReader(f)}
     # The build's gesture measures stand beside the crowd's result, each with its rank agreement.
     measures = stats["measures"]
     assert measures["score"] == {"dyadic": "MAS", "semantic": "alignment score"}[design]
@@ -238,3 +231,10 @@ def audio_check_answers(manifest):
     assert {r["system"] for r in measures["values"]} >= set(stats["mas"])
     assert "Kendall's tau-b" in stats["methods"]
     assert "Objective measures and how far each agrees with people" in (tmp_path / "report" / "report.html").read_text()
+
+
+def audio_check_answers(manifest):
+    """{sample stem: digits} of the set's audio_check.csv (beside the manifest)."""
+    path = manifest.parent / "audio_check.csv"
+    with open(path, newline="") as f:
+        return {row["file"].split("/")[1][:-4]: row["answer"] for row in csv.DictReader(f)}
