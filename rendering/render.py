@@ -9,6 +9,7 @@ pipe and x264.
 """
 
 import argparse
+import contextlib
 import os
 import queue
 import threading
@@ -16,6 +17,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from moglow_eval.core import cli
 from moglow_eval.core.clip import check_fps, check_joints, load_clip
@@ -253,74 +255,99 @@ def compose(people, t, target, layer=None, fps=1.0, vertices=None):
 def _painted(people, meshes, targets):
     """Each frame's [each person's mesh drawn (rendering.mesh.Painted), or None where the person is no mesh].
 
-    One thread (_mesh_thread) skins a chunk of frames at a time (MESH_CHUNK; a short first one, so that the first
-    frame is not kept waiting), sums their normals, and draws each frame's mesh with its own painters (an OpenGL
-    context is a thread's), MESH_AHEAD frames ahead of the frame being composed: the skinning's torch, the sparse
-    product and the drawing all let go of the GIL, so the mesh is drawn on one core while the floor, the blending
-    and x264 use the other. What it holds is bounded by the chunk, whatever the clip's length; an error there is
-    raised here."""
+    Each person's mesh has a thread of its own (_mesh_thread): it skins a chunk of frames at a time (MESH_CHUNK; a
+    short first one, so that the first frame is not kept waiting), sums their normals, and draws each frame's mesh
+    with its own painter (an OpenGL context is a thread's), MESH_AHEAD frames ahead of the frame being composed. The
+    skinning's products and the sparse sums let go of the GIL (moderngl holds it through a draw and its readback),
+    so two people's meshes are skinned side by side while the floor, the blending and x264 take what the cores have
+    left: with one thread for both, that thread alone set a two-person clip's pace. What it holds is bounded by the
+    chunk, whatever the clip's length; an error there is raised here."""
     n = len(targets)
-    if all(m is None for m in meshes):
+    drawn = [k for k, m in enumerate(meshes) if m is not None]
+    if not drawn:
         yield from ([None] * len(meshes) for _ in range(n))
         return
-    ready = queue.Queue(maxsize=MESH_AHEAD)
+    ready = {k: queue.Queue(maxsize=MESH_AHEAD) for k in drawn}
     stop = threading.Event()
-    job = _mesh_thread().submit(_paint, people, meshes, targets, ready, stop)
+    with _one_blas_thread():
+        with _SUBMITTING:  # a clip's people in a row on every mesh thread: two clips at once never wait on each other
+            jobs = [_mesh_thread(i).submit(_paint, people[k][0], targets, ready[k], stop) for i, k in enumerate(drawn)]
+        try:
+            for _ in range(n):
+                frame = [None] * len(meshes)
+                for k in drawn:
+                    frame[k] = ready[k].get()
+                    if isinstance(frame[k], BaseException):
+                        raise frame[k]
+                yield frame
+        finally:
+            stop.set()
+            while not all(job.done() for job in jobs):  # take what they still put, so that they see the stop
+                for q in ready.values():
+                    try:
+                        q.get(timeout=0.05 / len(ready))
+                    except queue.Empty:
+                        pass
+
+
+_MESH_THREADS = {}  # {process id: its mesh threads}, empty until a process first draws a mesh
+_SUBMITTING = threading.Lock()
+_BLAS = {"clips": 0, "limits": None, "lock": threading.Lock()}  # the clips drawing meshes in this process now
+
+
+@contextlib.contextmanager
+def _one_blas_thread():
+    """numpy's BLAS held to one thread while any clip of this process draws a mesh (the limit is the process's: the
+    first clip sets it, the last restores it). In two BLAS threads the skinning's matrix products spun on the cores
+    that the other mesh thread, the composing thread and x264 needed, and took longer than in one."""
+    with _BLAS["lock"]:
+        if _BLAS["clips"] == 0:
+            _BLAS["limits"] = threadpool_limits(limits=1, user_api="blas")
+        _BLAS["clips"] += 1
     try:
-        for _ in range(n):
-            item = ready.get()
-            if isinstance(item, BaseException):
-                raise item
-            yield item
+        yield
     finally:
-        stop.set()
-        while not job.done():  # take what it still puts, so that it sees the stop
-            try:
-                ready.get(timeout=0.05)
-            except queue.Empty:
-                pass
+        with _BLAS["lock"]:
+            _BLAS["clips"] -= 1
+            if _BLAS["clips"] == 0:
+                _BLAS["limits"].restore_original_limits()
 
 
-_MESH_THREAD = {}  # {process id: its mesh thread}, empty until a process first draws a mesh
-
-
-def _mesh_thread():
-    """The one thread that skins and draws meshes, for every clip this process renders: its OpenGL context
-    (rendering.mesh.gl_context, a thread's) is made once, not once a clip. Made on first use, so that importing
-    rendering starts nothing; keyed by the process, so that a forked child, which inherits the parent's entry but
-    not its thread, makes its own (no fork hook needed)."""
+def _mesh_thread(k=0):
+    """The k-th thread that skins and draws meshes (one per person of a clip), for every clip this process renders:
+    its OpenGL context (rendering.mesh.gl_context, a thread's) is made once, not once a clip. Made on first use, so
+    that importing rendering starts nothing; keyed by the process, so that a forked child, which inherits the
+    parent's entry but not its threads, makes its own (no fork hook needed)."""
     pid = os.getpid()
-    if pid not in _MESH_THREAD:
-        _MESH_THREAD.clear()
-        _MESH_THREAD[pid] = ThreadPoolExecutor(1, thread_name_prefix="mesh")
-    return _MESH_THREAD[pid]
+    if pid not in _MESH_THREADS:
+        _MESH_THREADS.clear()
+        _MESH_THREADS[pid] = []
+    threads = _MESH_THREADS[pid]
+    while len(threads) <= k:
+        threads.append(ThreadPoolExecutor(1, thread_name_prefix=f"mesh{len(threads)}"))
+    return threads[k]
 
 
-def _paint(people, meshes, targets, ready, stop):
-    """_painted's thread: skins, sums the normals and draws, putting each frame's Painted list (or the error) on
-    `ready` until the clip ends or `stop` is set."""
-    painters = []
+def _paint(drawer, targets, ready, stop):
+    """_painted's thread for one person (`drawer`'s): skins, sums the normals and draws, putting each frame's Painted
+    (or the error) on `ready` until the clip ends or `stop` is set."""
+    painter = None
     try:
-        for (d, _), m in zip(people, meshes):  # one by one: those made are released if a later one fails
-            painters.append(None if m is None else d.mesh_painter())
+        painter = drawer.mesh_painter()
         a, size, n = 0, MESH_AHEAD, len(targets)
         while a < n and not stop.is_set():
             b = min(n, a + size)
-            skinned = [None if p is None else p.vertices_and_normals(a, b) for p in painters]
+            vertices, normals = painter.vertices_and_normals(a, b)
             for t in range(a, b):
                 if stop.is_set():
                     return
-                eyes = [targets[t] + d.proj.offset for d, _ in people]
-                ready.put(
-                    [None if p is None else p(x[0][t - a], x[1][t - a], e) for p, x, e in zip(painters, skinned, eyes)]
-                )
+                ready.put(painter(vertices[t - a], normals[t - a], targets[t] + drawer.proj.offset))
             a, size = b, MESH_CHUNK
     except BaseException as e:  # noqa: BLE001 -- raised again in the composing thread, which reports it
         ready.put(e)
     finally:
-        for p in painters:
-            if p is not None:
-                p.release()
+        if painter is not None:
+            painter.release()
 
 
 def contact_sheet(frames, fps, out_png, columns=4, thumb=240):

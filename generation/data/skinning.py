@@ -1,14 +1,14 @@
-"""The mesh of an SMPL-family motion, skinned on demand (`style = "mesh"`): smplx's own skinning with the user's body
-model, a chunk of frames at a time.
+"""The mesh of an SMPL-family motion, skinned on demand (`style = "mesh"`): smplx's skinning, written out in numpy,
+with the user's body model, a chunk of frames at a time.
 
 `smpl_mesh` reads an SMPL-family parameter file as smpl_files reads it for its joints (the same hand rule,
 smpl_files.apply_hand_mean, and the same SMPL-X expressions), so the mesh and the joints agree; `mesh_source` takes
 poses already read (Seamless Interaction's files, generation.data.seamless_files). A MeshSource gives frames a..b's
-vertices through `smplx.lbs.lbs` (shape and pose blend shapes, then linear blend skinning) and which vertices the
-face mask covers; rendering.mesh draws them, and generation.stimuli.mesh_track carries them onto a clip's joints.
-Beyond the four arrays the joints need, the skinning reads the model's posedirs, weights and faces, each checked
-against its vertices and joints, and refuses a model of more than MAX_MESH_VERTICES vertices before it loads them.
-torch and smplx are imported only when frames are skinned.
+vertices through `smplx.lbs.lbs`'s arithmetic (shape and pose blend shapes, then linear blend skinning) and which
+vertices the face mask covers; rendering.mesh draws them, and generation.stimuli.mesh_track carries them onto a
+clip's joints. Beyond the four arrays the joints need, the skinning reads the model's posedirs, weights and faces,
+each checked against its vertices and joints, and refuses a model of more than MAX_MESH_VERTICES vertices before it
+loads them. The body model's arrays are read once per process and file. Neither torch nor smplx is imported here.
 """
 
 import functools
@@ -38,8 +38,8 @@ POSE_SHAPE_MARGIN = 0.015
 
 def smpl_mesh(path, model, smpl_type=None, source_fps=None, face="mask", hand_mean="auto"):
     """The skinned mesh of an SMPL-family parameter file (`style = "mesh"`): a MeshSource whose `vertices(a, b)`
-    gives frames a..b's vertices [n, V, 3] (metres, the model's axes, float32) through smplx's own skinning
-    (`smplx.lbs.lbs`: shape and pose blend shapes, then linear blend skinning) with the user's model file and the
+    gives frames a..b's vertices [n, V, 3] (metres, the model's axes, float32) through smplx's skinning
+    (`smplx.lbs.lbs`'s: shape and pose blend shapes, then linear blend skinning) with the user's model file and the
     motion's betas, a chunk at a time, so memory does not grow with the clip. `face`: "mask" (the face's vertices
     flagged for the mask, rendering.mesh) or "none"; `hand_mean` as smpl_positions takes it, and the file's SMPL-X
     expressions, so that the mesh and the joints agree. SmplError naming the file otherwise."""
@@ -57,7 +57,7 @@ def mesh_source(poses, trans, betas, fps, model, smpl_type, face, where, express
     SmplError naming `where` or the model."""
     if model is None or not Path(model).is_file():
         raise SmplError(f"{model or where}: no body model file for the mesh style; {WHERE_TO_GET}")
-    template, shapedirs, regressor, parents, kind = read_model(model, smpl_type)
+    template, shapedirs, regressor, parents, kind = _read_model(*_file_version(model), smpl_type)
     if poses.shape[1] != 3 * len(parents):
         raise SmplError(
             f"{where}: 'poses' has {poses.shape[1]} values a frame; the {kind} model {model} takes {3 * len(parents)}"
@@ -82,6 +82,7 @@ class MeshSource:
         self.n_shape = shape[2]
         self.parents = parents
         self.posedirs, self.weights, self.faces = skin
+        self._one_shape = self._sparse_weights = None  # made on first use: the skinning's, once a clip
         none = np.zeros(len(template), bool)
         self.mask = face_vertices(self.shaped(), self.rest_joints()) if face == "mask" else none
 
@@ -99,30 +100,86 @@ class MeshSource:
 
     def posed(self, a, b):
         """(vertices [b - a, V, 3], joints [b - a, J, 3]) of frames a..b, float32, the root translation applied:
-        smplx's forward pass, a chunk of MESH_BATCH frames at a time."""
-        import torch
-        from smplx.lbs import lbs
+        smplx's forward pass (`smplx.lbs.lbs`: shape and pose blend shapes, then linear blend skinning), written out in
+        numpy, a chunk of MESH_BATCH frames at a time.
 
+        The same arithmetic in float32 as smplx's (tests/rendering/test_render_mesh.py holds the two together), but
+        for what a clip does not need again: the rest shape and its joints made once for a clip of one shape, each
+        vertex blending only the joints whose weight is not zero (an SMPL body's vertex follows a few of its 52).
+        smplx's lbs spent several times as long, most of it in torch's thread pool waiting on the cores that compose
+        and encode the frames; a render worker that draws the mesh now loads no torch."""
+        n_joints = len(self.parents)
         verts = np.empty((b - a, len(self.template), 3), np.float32)
-        joints = np.empty((b - a, len(self.parents), 3), np.float32)
-        with torch.no_grad():
-            for s in range(a, b, MESH_BATCH):
-                e = min(b, s + MESH_BATCH)
-                coef = np.repeat(self.coef, e - s, 0) if len(self.coef) == 1 else self.coef[s:e]
-                v, j = lbs(
-                    torch.from_numpy(coef),
-                    torch.from_numpy(self.poses[s:e].astype(np.float32)),
-                    torch.from_numpy(self.template),
-                    torch.from_numpy(self.shapedirs),
-                    torch.from_numpy(self.posedirs),
-                    torch.from_numpy(self.regressor),
-                    torch.from_numpy(self.parents),
-                    torch.from_numpy(self.weights),
-                )
-                shift = self.trans[s:e, None].astype(np.float32)
-                verts[s - a : e - a] = v.numpy() + shift
-                joints[s - a : e - a] = j.numpy() + shift
+        joints = np.empty((b - a, n_joints, 3), np.float32)
+        eye = np.eye(3, dtype=np.float32)
+        for s in range(a, b, MESH_BATCH):
+            e = min(b, s + MESH_BATCH)
+            shaped, rest = self._shaped(s, e)  # [1 or e - s, V, 3], [1 or e - s, J, 3]
+            rot = rodrigues(self.poses[s:e].astype(np.float32).reshape(-1, 3)).reshape(e - s, n_joints, 3, 3)
+            placed, moves = rigid_transforms(rot, rest, self.parents)
+            feature = (rot[:, 1:] - eye).reshape(e - s, -1)
+            v_posed = (feature @ self.posedirs).reshape(e - s, -1, 3) + shaped
+            shift = self.trans[s:e, None].astype(np.float32)
+            verts[s - a : e - a] = self._skin(v_posed, moves) + shift
+            joints[s - a : e - a] = placed + shift
         return verts, joints
+
+    def _shaped(self, s, e):
+        """The rest vertices [1 or e - s, V, 3] of frames s..e in the body's shape (and SMPL-X's expression), and
+        their joints [1 or e - s, J, 3]: made once when every frame shares them."""
+        if len(self.coef) > 1:  # one matrix product each, the frames along the columns
+            n_vertices, n = len(self.template), e - s
+            offsets = self.shapedirs.reshape(n_vertices * 3, -1) @ self.coef[s:e].T  # [V * 3, n]
+            shaped = self.template + offsets.reshape(n_vertices, 3, n).transpose(2, 0, 1)
+            rest = self.regressor @ shaped.transpose(1, 0, 2).reshape(n_vertices, -1)  # [J, n * 3]
+            return shaped, rest.reshape(-1, n, 3).transpose(1, 0, 2)
+        if self._one_shape is None:
+            shaped = self.template + self.shapedirs @ self.coef[0]
+            self._one_shape = shaped[None], (self.regressor @ shaped)[None]
+        return self._one_shape
+
+    def _skin(self, v_posed, moves):
+        """Linear blend skinning: vertices [n, V, 3] moved by their joints' transforms `moves` [n, J, 3, 4] ([R | t]),
+        blended by the weights [V, J]."""
+        if self._sparse_weights is None:
+            from scipy.sparse import csr_matrix  # here: the builder imports this module without skinning anything
+
+            self._sparse_weights = csr_matrix(self.weights)
+        n, n_joints = moves.shape[:2]
+        # Frames last, so that every product below runs along contiguous memory (twice as fast as frames first).
+        rows = moves.transpose(1, 2, 3, 0).reshape(n_joints, 12 * n)  # each joint's [R | t] in every frame
+        blend = (self._sparse_weights @ rows).reshape(-1, 3, 4, n)  # [V, 3, 4, n]
+        at = np.ascontiguousarray(v_posed.transpose(1, 2, 0))  # [V, 3, n]
+        x, y, z = (at[:, None, k] for k in range(3))  # each [V, 1, n]
+        return (blend[:, :, 3] + blend[:, :, 0] * x + blend[:, :, 1] * y + blend[:, :, 2] * z).transpose(2, 0, 1)
+
+
+def rodrigues(rot_vecs):
+    """Rotation matrices [N, 3, 3] of axis-angle vectors [N, 3] (float32): smplx.lbs.batch_rodrigues in numpy."""
+    angle = np.linalg.norm(rot_vecs + np.float32(1e-8), axis=1, keepdims=True)
+    x, y, z = (rot_vecs / angle).T
+    zero = np.zeros_like(x)
+    k = np.stack([zero, -z, y, z, zero, -x, -y, x, zero], 1).reshape(-1, 3, 3)
+    return np.eye(3, dtype=np.float32) + np.sin(angle)[:, :, None] * k + (1 - np.cos(angle))[:, :, None] * (k @ k)
+
+
+def rigid_transforms(rot, rest, parents):
+    """(posed joints [n, J, 3], each joint's transform of the rest body [n, J, 3, 4] as [R | t]) of local rotations
+    `rot` [n, J, 3, 3] about the rest joints `rest` [1 or n, J, 3] down the tree `parents` [J] (parents before their
+    children): smplx.lbs.batch_rigid_transform in numpy."""
+    n, n_joints = rot.shape[:2]
+    rest = np.broadcast_to(rest, (n, n_joints, 3))
+    offset = rest.copy()
+    offset[:, 1:] -= rest[:, parents[1:]]
+    turn = np.empty_like(rot)
+    placed = np.empty((n, n_joints, 3), rot.dtype)
+    turn[:, 0], placed[:, 0] = rot[:, 0], offset[:, 0]
+    for j in range(1, n_joints):
+        p = parents[j]
+        turn[:, j] = turn[:, p] @ rot[:, j]
+        placed[:, j] = (turn[:, p] @ offset[:, j, :, None])[..., 0] + placed[:, p]
+    moves = np.concatenate([turn, (placed - (turn @ rest[..., None])[..., 0])[..., None]], -1)
+    return placed, moves
 
 
 @functools.lru_cache(maxsize=4)
@@ -170,12 +227,34 @@ def face_vertices(shaped, joints):
     return (np.linalg.norm(r, axis=1) < 0.15) & (r[:, 2] > 0.04) & (r[:, 1] > -0.07)
 
 
+# A mesh clip's motion file is read for each clip, its body model once a process: reading the model and laying out
+# its pose blend shapes (40 MB for SMPL-H) cost a render worker about a fifth of a second a person a clip. Keyed by
+# the file as it is on disk now (its path, time and size); what is kept is read-only, shared by every clip.
+def _file_version(model):
+    stat = Path(model).stat()
+    return str(model), stat.st_mtime_ns, stat.st_size
+
+
+@functools.lru_cache(maxsize=2)
+def _read_model(model, mtime_ns, size, smpl_type):
+    """smpl_files.read_model's arrays of a body model, read-only."""
+    arrays = read_model(model, smpl_type)
+    for array in arrays[:4]:
+        array.flags.writeable = False
+    return arrays
+
+
 def _read_skin(model, n_vertices, n_joints):
     """(posedirs [(J-1)*9, V*3] as smplx's lbs takes them, weights [V, J], faces [F, 3] int64) of a body model,
-    refused with one line where they do not fit its vertices and joints."""
-    model = Path(model)
+    refused with one line where they do not fit its vertices and joints; read-only."""
     if n_vertices > MAX_MESH_VERTICES:
         raise SmplError(f"{model}: {n_vertices} vertices, more than a body mesh has (at most {MAX_MESH_VERTICES})")
+    return _skin_arrays(*_file_version(model), n_vertices, n_joints)
+
+
+@functools.lru_cache(maxsize=2)
+def _skin_arrays(model, mtime_ns, size, n_vertices, n_joints):
+    model = Path(model)
     d = load_arrays(model, ("posedirs", "weights", "f"), "a body model")
     posedirs, weights, faces = np.asarray(d["posedirs"], np.float32), np.asarray(d["weights"], np.float32), d["f"]
     if posedirs.shape != (n_vertices, 3, (n_joints - 1) * 9) or weights.shape != (n_vertices, n_joints):
@@ -188,4 +267,7 @@ def _read_skin(model, n_vertices, n_joints):
         raise SmplError(f"{model}: 'f' must be integer triangles [F, 3], got {faces.shape} {faces.dtype}")
     if faces.min() < 0 or faces.max() >= n_vertices:
         raise SmplError(f"{model}: 'f' indexes vertices outside the model's {n_vertices}")
-    return posedirs.reshape(n_vertices * 3, -1).T.copy(), weights, faces.astype(np.int64)
+    skin = posedirs.reshape(n_vertices * 3, -1).T.copy(), weights, faces.astype(np.int64)
+    for array in skin:
+        array.flags.writeable = False
+    return skin

@@ -4,7 +4,7 @@ A study turns a motion file into a clip's joints by steps that know nothing of a
 resampling to the study's frame rate, standing the clip at the origin facing +Z (own_study.builder.place), cutting it
 to its item's length or holding its last pose, and, for a catch clip, breaking it (stimuli.catch_kinds). Rather than
 mirror each step, a MeshTrack follows the clip's joints: for each of its frames it skins the file's frame at the same
-time (generation.data.skinning, smplx's own skinning), moves that mesh by the similarity (scale, rotation,
+time (generation.data.skinning, smplx's skinning), moves that mesh by the similarity (scale, rotation,
 translation: Umeyama's least-squares fit) that best takes the file's joints onto the clip's, and adds what is left of
 each joint's move to the vertices that joint skins, by their skinning weights. For a clip that is its file moved
 about, nothing is left; for a catch clip, what is left is the break, and the mesh breaks with it.
@@ -68,18 +68,23 @@ class MeshTrack:
         """The clip's frames a..b as vertices [b - a, V, 3] float32 in the joints' world."""
         pos = self.frames[a:b]
         lo = np.floor(pos).astype(int)
-        hi = np.minimum(lo + 1, self.source.n_frames - 1)
+        w = (pos - lo).astype(np.float32)[:, None, None]
+        hi = np.where(w[:, 0, 0] > 0, np.minimum(lo + 1, self.source.n_frames - 1), lo)  # a whole frame: itself
         first, last = int(lo.min()), int(hi.max()) + 1
         verts, joints = self.source.posed(first, last)  # the file's frames the chunk needs, once each
-        w = (pos - lo)[:, None, None]
-        v = (1 - w) * verts[lo - first] + w * verts[hi - first]
-        j = (1 - w) * joints[lo - first] + w * joints[hi - first]
-        return follow(v, j, self.joints[a:b], self.source.weights).astype(np.float32)
+        v, j = verts[lo - first], joints[lo - first]
+        if w.any():  # between two of the file's frames (another frame rate)
+            v = (1 - w) * v + w * verts[hi - first]
+            j = (1 - w) * j + w * joints[hi - first]
+        return follow(v, j, self.joints[a:b], self.source.weights)
 
 
 def follow(verts, joints, target, weights):
     """Vertices [n, V, 3] skinned to `joints` [n, J, 3], carried onto `target` [n, J, 3]: the per-frame similarity that
-    best takes joints onto target (Umeyama 1991), then each joint's remaining offset spread by `weights` [V, J]."""
+    best takes joints onto target (Umeyama 1991), then each joint's remaining offset spread by `weights` [V, J].
+    The fit in float64 (a few numbers a frame), the vertices moved in float32 (what the drawing takes), by matrix
+    products: per vertex this is the skinning's cost again, and einsum in float64 took four times the skinning's."""
+    joints, target = np.asarray(joints, np.float64), np.asarray(target, np.float64)
     mj, mt = joints.mean(1, keepdims=True), target.mean(1, keepdims=True)
     x, y = joints - mj, target - mt
     cov = np.einsum("nji,njk->nik", y, x) / joints.shape[1]
@@ -89,6 +94,10 @@ def follow(verts, joints, target, weights):
     rot = u @ (sign[:, :, None] * vt)
     var = (x * x).sum((1, 2)) / joints.shape[1]
     scale = (d * sign).sum(1) / np.maximum(var, 1e-12)
-    moved = scale[:, None, None] * np.einsum("nik,nvk->nvi", rot, verts - mj) + mt
-    placed = scale[:, None, None] * np.einsum("nik,njk->nji", rot, x) + mt
-    return moved + np.einsum("vj,njk->nvk", weights, target - placed)
+    turn = scale[:, None, None] * rot  # [n, 3, 3]
+    placed = np.einsum("nik,njk->nji", turn, x) + mt
+    f32 = np.float32
+    moved = (np.asarray(verts, f32) - mj.astype(f32)) @ turn.transpose(0, 2, 1).astype(f32) + mt.astype(f32)
+    rest = (target - placed).astype(f32).transpose(1, 0, 2).reshape(len(x[0]), -1)  # [J, n * 3]
+    moved += (np.asarray(weights, f32) @ rest).reshape(len(weights), -1, 3).transpose(1, 0, 2)  # one product
+    return moved

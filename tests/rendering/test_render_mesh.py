@@ -216,6 +216,37 @@ def test_the_mesh_and_the_joints_agree(tmp_path):
     assert np.abs(posed - joints).max() < 1e-4
 
 
+@pytest.mark.parametrize("kind", ["smplh", "smplx"])
+def test_the_skinning_is_smplxs(tmp_path, kind):
+    """MeshSource.posed, written out in numpy, gives smplx.lbs.lbs's vertices and joints to float32's precision:
+    with pose blend shapes, vertices skinned to several joints each, a body shape and (SMPL-X) an expression that
+    changes from frame to frame, across a chunk boundary."""
+    import torch
+    from smplx.lbs import lbs
+
+    rng = np.random.default_rng(2)
+    arrays = smpl_fixtures.body_model_arrays(kind)
+    arrays["posedirs"] = rng.normal(0, 0.003, arrays["posedirs"].shape).astype(np.float32)
+    spread = arrays["weights"] + rng.random(arrays["weights"].shape) * (rng.random(arrays["weights"].shape) < 0.1)
+    arrays["weights"] = (spread / spread.sum(1, keepdims=True)).astype(np.float32)
+    arrays["shapedirs"] = rng.normal(0, 0.002, arrays["shapedirs"].shape[:2] + (20,)).astype(np.float32)
+    np.savez(tmp_path / "model.npz", **arrays)
+    motion = smpl_fixtures.motion_arrays(kind, frames=40)
+    motion["poses"] = motion["poses"] + rng.normal(0, 0.3, motion["poses"].shape)
+    np.savez(tmp_path / "take.npz", **motion, expressions=rng.normal(0, 1, (40, 10)))
+    source = smpl_mesh(tmp_path / "take.npz", tmp_path / "model.npz")
+    assert (kind == "smplx") == (len(source.coef) == 40)  # SMPL-X: a shape per frame, its expression's
+    verts, joints = source.posed(3, 40)
+    coef = source.coef[3:40] if len(source.coef) > 1 else np.repeat(source.coef, 37, 0)
+    tensors = (coef, source.poses[3:40].astype(np.float32), source.template, source.shapedirs, source.posedirs)
+    tensors += (source.regressor, source.parents, source.weights)
+    with torch.no_grad():  # (copies: the model's arrays are shared, read-only)
+        want_v, want_j = (x.numpy() for x in lbs(*(torch.from_numpy(np.array(x)) for x in tensors)))
+    shift = source.trans[3:40, None].astype(np.float32)
+    assert np.abs(verts - (want_v + shift)).max() < 2e-5 and np.abs(joints - (want_j + shift)).max() < 2e-5
+    assert np.abs(verts - verts.mean(1, keepdims=True)).max() > 0.3  # a body, not a point
+
+
 @pytest.fixture(scope="module")
 def two_style_set(tmp_path_factory):
     """A study of SMPL-H clips drawn stick and mesh (3 items, 2 conditions), from the front, hips up, at 320 px."""
