@@ -114,6 +114,7 @@ def gl_context():
     for kw in ({"backend": "egl"}, {}):
         try:
             ctx = moderngl.create_context(standalone=True, require=330, **kw)
+            _CONTEXT.egl = bool(kw)
             break
         except Exception as e:  # noqa: BLE001 -- every failure of a platform is tried past and reported below
             errors.append(str(e).splitlines()[0] if str(e) else type(e).__name__)
@@ -124,6 +125,33 @@ def gl_context():
         )
     _CONTEXT.ctx = ctx
     return ctx
+
+
+def egl_read_pixels():
+    """glReadPixels of the thread's GL context as a ctypes function (EGL's pointer to it), or None where the context
+    is not EGL's or EGL gives none. ctypes lets go of the GIL for the call, and the call is where llvmpipe
+    rasterises the frame (it draws in the calling thread: GL_ENVIRONMENT): moderngl's own read holds the GIL
+    throughout, so no other thread of the process (the other person's mesh, the composing thread) ran meanwhile."""
+    if not getattr(_CONTEXT, "egl", False):
+        return None
+    if "read" not in _EGL:
+        import ctypes
+
+        try:
+            egl = ctypes.CDLL("libEGL.so.1")
+            egl.eglGetProcAddress.restype = ctypes.c_void_p
+            egl.eglGetProcAddress.argtypes = [ctypes.c_char_p]
+            address = egl.eglGetProcAddress(b"glReadPixels")
+        except (OSError, AttributeError):
+            address = None
+        c = ctypes
+        signature = c.CFUNCTYPE(None, c.c_int, c.c_int, c.c_int, c.c_int, c.c_uint, c.c_uint, c.c_void_p)
+        _EGL["read"] = signature(address) if address else None
+    return _EGL["read"]
+
+
+_EGL = {}  # the process's EGL glReadPixels (egl_read_pixels), looked up once
+GL_RGBA, GL_UNSIGNED_BYTE = 0x1908, 0x1401
 
 
 def set_gl_environment():
@@ -223,6 +251,7 @@ class MeshBody:
             state = {"colour": None, "closed": closed(faces), "front": None}
             self.people.append((m, faces, vertex_normals_operator(faces, len(m.mask)), pos, nrm, col, vao, state))
         self.windows = {}  # (width, height) -> the body's framebuffer
+        self.read_pixels = egl_read_pixels()
 
     def window(self, w, h):
         """The framebuffers the body's box is drawn in, of at least w x h pixels (rounded up to WINDOW_STEP, so
@@ -317,8 +346,12 @@ class MeshBody:
             vao.render()
             ctx.disable(ctx.CULL_FACE)
         ctx.disable(ctx.DEPTH_TEST)
-        raw = body.read(viewport=(0, 0, w, h), components=4, alignment=1)
-        return np.frombuffer(raw, np.uint8).reshape(h, w, 4)[::-1], box  # drawn (alpha 255) or not; rows from the top
+        if self.read_pixels is None:
+            raw = body.read(viewport=(0, 0, w, h), components=4, alignment=1)
+            return np.frombuffer(raw, np.uint8).reshape(h, w, 4)[::-1], box  # drawn (alpha 255) or not; rows from top
+        rgba = np.empty((h, w, 4), np.uint8)  # rows of w * 4 bytes: packed at any GL_PACK_ALIGNMENT
+        self.read_pixels(0, 0, w, h, GL_RGBA, GL_UNSIGNED_BYTE, rgba.ctypes.data)  # the bound framebuffer's
+        return rgba[::-1], box
 
 
 def antialias(body):

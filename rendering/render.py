@@ -258,10 +258,10 @@ def _painted(people, meshes, targets):
     Each person's mesh has a thread of its own (_mesh_thread): it skins a chunk of frames at a time (MESH_CHUNK; a
     short first one, so that the first frame is not kept waiting), sums their normals, and draws each frame's mesh
     with its own painter (an OpenGL context is a thread's), MESH_AHEAD frames ahead of the frame being composed. The
-    skinning's products and the sparse sums let go of the GIL (moderngl holds it through a draw and its readback),
-    so two people's meshes are skinned side by side while the floor, the blending and x264 take what the cores have
-    left: with one thread for both, that thread alone set a two-person clip's pace. What it holds is bounded by the
-    chunk, whatever the clip's length; an error there is raised here."""
+    skinning's products, the sparse sums and the readback, where llvmpipe rasterises (rendering.mesh.egl_read_pixels),
+    let go of the GIL, so two people's meshes are drawn side by side while the floor, the blending and x264 take what
+    the cores have left: with one thread for both, that thread alone set a two-person clip's pace. What it holds is
+    bounded by the chunk, whatever the clip's length; an error there is raised here."""
     n = len(targets)
     drawn = [k for k, m in enumerate(meshes) if m is not None]
     if not drawn:

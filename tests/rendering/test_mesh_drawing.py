@@ -89,6 +89,21 @@ def test_back_faces_are_culled_only_on_a_closed_body(take):
     body.release()
 
 
+def test_the_readback_is_moderngls(take):
+    """The frame read back through EGL's glReadPixels (which lets the process's other threads run while llvmpipe
+    rasterises) is moderngl's own read of the same framebuffer, byte for byte."""
+    source, clip = take
+    cams, proj = camera_space(source, clip, 320, 1)
+    body = MeshBody([source], 320, proj.focal)
+    assert body.read_pixels is not None  # an EGL context here
+    got, box = body.draw([(cams[0], (0.4, 0.5, 0.7))])
+    w, h = box[2] - box[0], box[3] - box[1]
+    raw = body.window(w, h)[1].read(viewport=(0, 0, w, h), components=4, alignment=1)
+    want = np.frombuffer(raw, np.uint8).reshape(h, w, 4)[::-1]
+    assert np.array_equal(got, want) and (got[..., 3] == 255).sum() > 1000
+    body.release()
+
+
 def test_a_chunks_normals_are_each_frames(take):
     """vertex_normals over a chunk of frames at once is each frame's sum of its faces' normals."""
     source, _ = take
