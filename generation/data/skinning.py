@@ -183,9 +183,10 @@ def rigid_transforms(rot, rest, parents):
 
 
 @functools.lru_cache(maxsize=4)
-def _rest_model(model, smpl_type):
-    """(v_template, shapedirs, J_regressor, kind, weights [V, J]) of a body model, read once per process."""
-    template, shapedirs, regressor, parents, kind = read_model(model, smpl_type)
+def _rest_model(model, mtime_ns, size, smpl_type):
+    """(v_template, shapedirs, J_regressor, kind, weights [V, J]) of a body model, read once per process and file
+    version: the four arrays through _read_model's cache, which the skinning shares."""
+    template, shapedirs, regressor, parents, kind = _read_model(model, mtime_ns, size, smpl_type)
     weights = np.asarray(load_arrays(Path(model), ("weights",), "a body model")["weights"], np.float64)
     if weights.shape != (len(template), len(parents)):
         raise SmplError(
@@ -204,7 +205,7 @@ def surface_reach(model, smpl_type, betas):
     of its joint J in every pose, where the distances are the rest shape's (`betas`: the body's shape; empty: the
     mean) and |J_k - J| is a bone's length for the neighbouring joints that skin it. A joint's reach is the
     largest bound of its vertices, with POSE_SHAPE_MARGIN for the pose blend shapes; 0 for a joint that owns none."""
-    template, shapedirs, regressor, kind, weights = _rest_model(str(model), smpl_type)
+    template, shapedirs, regressor, kind, weights = _rest_model(*_file_version(model), smpl_type)
     dirs, coef = shape_and_expression(kind, shapedirs, np.asarray(betas, np.float64).reshape(-1), None)
     shaped = template + (dirs @ coef[0] if dirs.shape[2] else 0.0)
     joints = regressor @ shaped
