@@ -131,9 +131,9 @@ class Dask:
     def start(self):
         from distributed import Client
 
-        address = f"tcp://127.0.0.1:{free_port()}"
-        port = address.rsplit(":", 1)[1]
-        self.procs = [subprocess.Popen(["dask", "scheduler", "--port", port, "--no-dashboard"], **QUIET)]
+        port = free_port()
+        address = f"tcp://127.0.0.1:{port}"
+        self.procs = [subprocess.Popen(["dask", "scheduler", "--port", str(port), "--no-dashboard"], **QUIET)]
         worker = ["dask", "worker", address, "--nworkers", "1", "--nthreads", "1", "--no-dashboard"]
         self.procs += [subprocess.Popen(worker, **QUIET) for _ in range(WORKERS)]
         self.client = Client(address, timeout="30s")

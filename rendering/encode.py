@@ -123,7 +123,7 @@ def ffmpeg_writer(
     width = width or size
     # A wide frame holds more side by side at the same scale (two people): its rate is a square frame's of the
     # same area, so that a set's frame sizes still follow from its pixel size alone.
-    side = size if width == size else round((width * size) ** 0.5)
+    side = round((width * size) ** 0.5)
     rate, x264 = _rate_control(side, fps, qp, crf, frames, seed)
 
     cmd = [

@@ -172,7 +172,7 @@ def render_clip(clip_or_path, out_mp4, options=None, *, sheet=None, partner=None
         raise RenderError(f"{name}: joints must be [T >= 1, J, 3], got {joints.shape}")
     check_joints(joints, name)
     fps = check_fps(clip["fps"], name)
-    people, meshes = _people(clip, joints, name, o, partner, mesh, partner_mesh)
+    people, meshes = _people(clip, joints, name, o, frame, partner, mesh, partner_mesh)
     drawer = people[0][0]
     if o.target is None:
         targets = camera_targets(joints, fps, o.camera)
@@ -205,15 +205,14 @@ def render_clip(clip_or_path, out_mp4, options=None, *, sheet=None, partner=None
     return len(joints)
 
 
-def _people(clip, joints, name, o, partner, mesh, partner_mesh):
+def _people(clip, joints, name, o, frame, partner, mesh, partner_mesh):
     """([(drawer, joints [T, J, 3])], [each one's mesh or None]): the clip's person, and the partner (a clip, or
-    None) drawing into the same frame, as RenderOptions `o` says."""
+    None) drawing into the same frame `frame` (width, height), as RenderOptions `o` says."""
     for m in (mesh, partner_mesh):
         if m is not None and getattr(m, "n_frames", len(joints)) != len(joints):
             raise RenderError(f"{name}: a mesh of {m.n_frames} frames for {len(joints)} frames of joints")
     meshes = [mesh] if mesh is not None else None
     names = list(clip["joint_names"])
-    frame = (frame_width(o.size, o.aspect), o.size)
     drawer = FrameDrawer(clip["parents"], names, frame, o.camera, o.style, o.hide, o.thin, meshes=meshes)
     people, meshes = [(drawer, joints)], [mesh]
     if partner is not None:
