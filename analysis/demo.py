@@ -174,7 +174,7 @@ def make_stimuli(procs: "Processes", out: Path, s: dict) -> Path:
         _stage(f"1/5 a study of two people talking (generation.own_study.demo_dyad) → {stimuli}")
         cmd = ["--out", str(out / "study"), "--seed", str(seed), "--design", design]
         procs.run([py, "-m", "generation.own_study.demo_dyad", *cmd], "generation.own_study.demo_dyad")
-        cmd = ["--study", str(out / "study" / "study.toml"), "--size", "320"]
+        cmd = ["--study", str(out / "study" / "study.toml")]
     elif sound:
         _stage(f"1/5 a study with sound (generation.own_study.demo_study) → {stimuli}")
         procs.run(
@@ -182,10 +182,11 @@ def make_stimuli(procs: "Processes", out: Path, s: dict) -> Path:
             + (["--appropriateness"] if design == "appropriateness" else []),
             "generation.own_study.demo_study",
         )
-        cmd = ["--study", str(out / "study" / "study.toml"), "--size", "320"]
+        cmd = ["--study", str(out / "study" / "study.toml")]
     else:
         _stage(f"1/5 make stimuli (--quick) → {stimuli}")
         cmd = ["--quick", "--runs", str(s["runs"] or out / "runs"), "--seed", str(seed)]
+    cmd += ["--size", str(s["size"])]
     procs.run([py, "-m", "generation.make_stimuli", *cmd, "--out", str(stimuli), "--force"], "make_stimuli")
     return stimuli
 
@@ -269,6 +270,7 @@ def run_demo(
     design: str = "acr",
     sound: bool = False,
     runs: Path | None = None,
+    size: int = 320,
 ) -> dict:
     """Run the study; returns paths and the crowd's summary. `stimuli` reuses an existing folder. What an earlier
     run left in `out` is replaced (clear_earlier_run)."""
@@ -329,6 +331,12 @@ def build_parser():
     p.add_argument("--seed", type=cli.number(int, 0), default=0)
     p.add_argument("--stimuli", default=None, help="reuse this stimulus folder instead of making one")
     p.add_argument(
+        "--size",
+        type=cli.number(int, 1),
+        default=320,
+        help="make_stimuli --size: the videos' height in pixels, even (default 320; two people are filmed wide)",
+    )
+    p.add_argument(
         "--runs",
         default=None,
         help="where make_stimuli --quick keeps its tiny models and data, reused when there (default OUT/runs)",
@@ -375,6 +383,7 @@ def _main(argv) -> int:
             design=a.design,
             sound=a.sound,
             runs=Path(a.runs) if a.runs else None,
+            size=a.size,
         )
     except KeyboardInterrupt:
         return interrupted()

@@ -32,7 +32,7 @@ def main():
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
     load_before = os.getloadavg()
-    rounds = [pretrained.measure_speed(frames=a.frames) for _ in range(a.rounds)]
+    rounds = [pretrained.measure_speed(frames=a.frames, early=False) for _ in range(a.rounds)]
     t0 = time.perf_counter()
     figures = {p: pretrained.quality(precision=p, models=("MG",))["MG"] for p in ("float32", "bfloat16")}
     quality_s = time.perf_counter() - t0

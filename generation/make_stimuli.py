@@ -353,7 +353,9 @@ def _item_flags(ap):
 def _output_flags(ap):
     """How the videos are made and how the job runs."""
     ap.add_argument(
-        "--size", type=size_flag, help="video width = height in pixels, even (default 640; 320 with --quick)"
+        "--size",
+        type=size_flag,
+        help="video height in pixels, even (default 640; 320 with --quick); the width by [render] aspect",
     )
     ap.add_argument(
         "--preset",

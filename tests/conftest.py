@@ -206,6 +206,32 @@ def quick_stimuli(tmp_path_factory):
     return built_once(tmp_path_factory, "quick_stimuli", build) / "stimuli"
 
 
+def _two_person_set(tmp_path_factory, design):
+    """(stimulus folder, manifest rows, {item: sources.csv row}) of the shared `design` set, made once a run."""
+    import csv
+
+    from helpers.seamless_fixtures import build_two_person_set
+
+    root = built_once(tmp_path_factory, f"{design}_set", lambda f: build_two_person_set(f, design))
+    with open(root / "out" / "manifest.csv", newline="") as f:
+        manifest = list(csv.DictReader(f))
+    with open(root / "items" / "sources.csv", newline="") as f:
+        sources = {r["item"]: r for r in csv.DictReader(f)}
+    return root / "out", manifest, sources
+
+
+@pytest.fixture(scope="session")
+def dyadic_set(tmp_path_factory):
+    """A dyadic study built from two synthetic Seamless conversations (helpers.seamless_fixtures), read-only."""
+    return _two_person_set(tmp_path_factory, "dyadic")
+
+
+@pytest.fixture(scope="session")
+def semantic_set(tmp_path_factory):
+    """The semantic study of the same conversations, stereo, read-only."""
+    return _two_person_set(tmp_path_factory, "semantic")
+
+
 @pytest.fixture
 def torch_one_thread():
     """Tiny models: one thread is as fast and immune to other jobs on a shared 2-core machine."""

@@ -331,7 +331,7 @@ def build_study(spec, out, size, preset, workers, force, progress, scheduler=Non
     out : str or Path
         The stimulus folder to write.
     size : int
-        Video width = height in pixels (even).
+        Video height in pixels (even); the width by `[render] aspect` (rendering.render.frame_width).
     preset : str
         The x264 speed preset (make_stimuli's default is ultrafast).
     workers : int

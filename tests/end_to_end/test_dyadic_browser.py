@@ -21,24 +21,18 @@ from helpers.voices import decoded_audio, ffmpeg_loudness, voice_energy
 
 from analysis.designs import Options
 from analysis.report import build_report
-from generation.make_stimuli import main as make_stimuli
 from moglow_eval.core import colours
 from rating_app import create_app
 from rating_app.store.db import app_engine
 
 pytestmark = pytest.mark.browser
-SIZE = 192
 
 
-@pytest.fixture(scope="module", params=["dyadic", "semantic"])
-def built(request, tmp_path_factory):
-    root = tmp_path_factory.mktemp(request.param)
-    study = seamless_fixtures.write_study(root, request.param, length_s=2.0, style="solid")
-    argv = ["--study", str(study), "--out", str(root / "out"), "--size", str(SIZE), "--quiet", "--workers", "1"]
-    assert make_stimuli(argv) == 0
-    with open(root / "items" / "sources.csv", newline="") as f:
-        sources = {r["item"]: r for r in csv.DictReader(f)}
-    return request.param, root / "out", sources
+@pytest.fixture(params=["dyadic", "semantic"])
+def built(request):
+    """The design's shared two-person set (tests/conftest.py, made once a run)."""
+    out, _, sources = request.getfixturevalue(f"{request.param}_set")
+    return request.param, out, sources
 
 
 def study_app(out, design, db, **settings):

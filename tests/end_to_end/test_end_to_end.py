@@ -125,7 +125,8 @@ def _demo_in_a_row(cwd: Path, runs: list[tuple[str, int, list[str]]]):
     """`analysis.demo` run in `cwd` with its default --out, once per (design, seed, more flags), each after the
     other; checks that each run's report is its own design's and the earlier run's export is gone."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    small = ["--raters", "40", "--ratings-per-clip", "2", "--clips-per-rater", "0"]
+    # Small videos: what is checked here is the folder each run leaves, not the pictures.
+    small = ["--raters", "40", "--ratings-per-clip", "2", "--clips-per-rater", "0", "--size", "96"]
     for design, seed, more in runs:
         cmd = [sys.executable, "-m", "analysis.demo", "--design", design, "--seed", str(seed), *small, *more]
         r = subprocess.run(cmd, capture_output=True, text=True, timeout=900, cwd=cwd, env=env)
@@ -141,8 +142,9 @@ def test_demo_runs_one_design_after_another_in_its_default_folder(quick_stimuli,
     """Issue 46, the newcomer's case: `analysis.demo --design pairwise` after `analysis.demo` in its default folder
     could not run (its database held an acr study, make_stimuli refused the set there). Each of the first two runs
     makes its stimuli into demo/stimuli, where the earlier run's are (the tiny models are brought along with --runs,
-    so that they are reused, not trained); the third goes back to acr on the set it is given (--stimuli), and
-    leaves the set in demo/stimuli as it was."""
+    so that they are reused, not trained). A run on a set it is given (--stimuli) clears what the earlier run left
+    but the set in demo/stimuli: that rule is checked in-process (demo.clear_earlier_run, what such a run does first),
+    as the runs above have taken the whole way twice."""
     import shutil
 
     runs = tmp_path / "runs"
@@ -155,8 +157,11 @@ def test_demo_runs_one_design_after_another_in_its_default_folder(quick_stimuli,
     for design, seed in (("acr", 0), ("pairwise", 1)):
         demo = _demo_in_a_row(tmp_path, [(design, seed, ["--runs", str(runs)])])
         assert mg_seeds(demo) == {str(seed + 1)}  # made anew for this run (MG samples with --seed + 1)
-    demo = _demo_in_a_row(tmp_path, [("acr", 1, ["--stimuli", str(quick_stimuli)])])
-    assert mg_seeds(demo) == {"2"}  # a set given with --stimuli leaves the earlier run's in place
+    from analysis.demo import clear_earlier_run
+
+    clear_earlier_run(demo, new_stimuli=False)  # a run given --stimuli
+    assert mg_seeds(demo) == {"2"}  # leaves the earlier run's set in place
+    assert not list(demo.glob("*.csv")) and not (demo / "report").exists()  # and clears the rest
     # A folder the demo did not make is refused, and left as it was.
     mine = tmp_path / "mine"
     mine.mkdir()

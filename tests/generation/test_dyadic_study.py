@@ -17,32 +17,8 @@ from generation.make_stimuli import main as make_stimuli
 from rendering.audio import RATE
 from rendering.blinding import check_one_size
 
-pytestmark = pytest.mark.full  # three sets built and rendered: the full tier (the fast tier stays near two minutes)
-SIZE = 192
-
-
-def _build(root, design, size=SIZE, **kw):
-    study = seamless_fixtures.write_study(root, design, **kw)
-    argv = ["--study", str(study), "--out", str(root / "out"), "--size", str(size), "--quiet", "--workers", "1"]
-    assert make_stimuli(argv) == 0
-    with open(root / "out" / "manifest.csv", newline="") as f:
-        manifest = list(csv.DictReader(f))
-    with open(root / "items" / "sources.csv", newline="") as f:
-        sources = {r["item"]: r for r in csv.DictReader(f)}
-    return root / "out", manifest, sources
-
-
-@pytest.fixture(scope="module")
-def dyadic(tmp_path_factory):
-    # Solid bodies: a stick figure's lines, one or two pixels wide at this size, come out of the encoder too unlike
-    # from one video to the next to compare the interlocutor by its pixels (before encoding they are the same:
-    # tests/rendering/test_two_people.py).
-    return _build(tmp_path_factory.mktemp("dyadic"), "dyadic", style="solid")
-
-
-@pytest.fixture(scope="module")
-def semantic(tmp_path_factory):
-    return _build(tmp_path_factory.mktemp("semantic"), "semantic", stereo=True)
+pytestmark = pytest.mark.full  # two-person sets built and rendered: the full tier (the fast tier stays short)
+SIZE = seamless_fixtures.SET_SIZE
 
 
 def _unit(manifest, item, condition):
@@ -51,8 +27,8 @@ def _unit(manifest, item, condition):
     return next(r for r in rows if not r["motion_item"]), next(r for r in rows if r["motion_item"])
 
 
-def test_a_dyadic_set_has_the_appropriateness_shape(dyadic):
-    out, manifest, sources = dyadic
+def test_a_dyadic_set_has_the_appropriateness_shape(dyadic_set):
+    out, manifest, sources = dyadic_set
     tests = {r["item"] for r in manifest if r["role"] == "test"}
     assert tests and all(r["audio"] == "1" for r in manifest)
     for item in tests:
@@ -68,8 +44,8 @@ def test_a_dyadic_set_has_the_appropriateness_shape(dyadic):
         check_one_size(out / r["video"] for r in manifest if r["item"] == item)
 
 
-def test_both_videos_of_a_unit_show_the_same_interlocutor_and_sound(dyadic):
-    out, manifest, _ = dyadic
+def test_both_videos_of_a_unit_show_the_same_interlocutor_and_sound(dyadic_set):
+    out, manifest, _ = dyadic_set
     item = sorted(r["item"] for r in manifest if r["role"] == "test")[0]
     matched, mismatched = _unit(manifest, item, "JITTERY")
     a, b = (out / r["video"] for r in (matched, mismatched))
@@ -81,15 +57,15 @@ def test_both_videos_of_a_unit_show_the_same_interlocutor_and_sound(dyadic):
     # (test_two_people's partner test says more).
     near = figure_pixels.partner_near(fa, fb, range(0, len(fa), 6))
     assert np.mean(near) > 0.9, near  # 0.96 seen; single frames down to 0.79
-    for t in (15, 60, 105):
+    for t in (len(fa) // 8, len(fa) // 2, 7 * len(fa) // 8):
         pa, pb = figure_pixels.partner(fa[t]), figure_pixels.partner(fb[t])
         assert figure_pixels.agent(fa[t]).sum() > 60 and pa.sum() > 60  # two figures
         both = pa & pb
         assert np.abs(fa[t][both].mean(0) - fb[t][both].mean(0)).max() < 4  # in the same colour
 
 
-def test_both_voices_are_heard_at_the_target_loudness(dyadic):
-    out, manifest, sources = dyadic
+def test_both_voices_are_heard_at_the_target_loudness(dyadic_set):
+    out, manifest, sources = dyadic_set
     row = next(r for r in manifest if r["role"] == "test" and r["condition"] == "NAT")
     sound = decoded_audio(out / row["video"])[:, 0]
     assert abs(ffmpeg_loudness(out / row["video"]) - (-23.0)) <= 1.0
@@ -103,8 +79,8 @@ def test_both_voices_are_heard_at_the_target_loudness(dyadic):
         assert low > 0.01 * high
 
 
-def test_captions_are_burned_in(dyadic):
-    out, manifest, sources = dyadic
+def test_captions_are_burned_in(dyadic_set):
+    out, manifest, sources = dyadic_set
     row = next(r for r in manifest if r["role"] == "test" and r["condition"] == "JITTERY" and not r["motion_item"])
     frames = figure_pixels.decode(out / row["video"])[0]
     words = [(w["start"], w["end"]) for seg in _transcript(out, row["item"], "interlocutor") for w in seg["words"]]
@@ -120,8 +96,8 @@ def _transcript(out, item, who):
     return json.loads(path.read_text())["metadata:transcript"]
 
 
-def test_a_semantic_unit_shows_the_keyword_in_both_clips(semantic):
-    out, manifest, sources = semantic
+def test_a_semantic_unit_shows_the_keyword_in_both_clips(semantic_set):
+    out, manifest, sources = semantic_set
     item = sorted(r["item"] for r in manifest if r["role"] == "test")[0]
     matched, mismatched = _unit(manifest, item, "CALM")
     assert mismatched["motion_item"] != item and mismatched["motion_item"] in sources  # another item's motion
@@ -133,8 +109,8 @@ def test_a_semantic_unit_shows_the_keyword_in_both_clips(semantic):
     assert figure_pixels.highlight(figure_pixels.decode(out / plain["video"])[0][t]).sum() > 20
 
 
-def test_stereo_puts_each_voice_on_its_persons_side(semantic):
-    out, manifest, _ = semantic
+def test_stereo_puts_each_voice_on_its_persons_side(semantic_set):
+    out, manifest, _ = semantic_set
     row = next(r for r in manifest if r["role"] == "test" and r["condition"] == "NAT")
     sound = decoded_audio(out / row["video"], channels=2)
     frames = figure_pixels.decode(out / row["video"])[0]

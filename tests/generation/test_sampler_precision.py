@@ -116,3 +116,19 @@ def test_the_shipped_mgs_measurement_and_guard_run_as_the_pick_calls_them():
     times = pretrained.measure_speed(frames=3, warmup=1, streams=4)
     assert set(times) == {"float32", "bfloat16", "ratio"} and all(v > 0 for v in times.values())
     assert pretrained.bfloat16_guard_failures() == []
+
+
+@pytest.mark.parametrize("early", [True, False])
+def test_the_measurement_stops_early_only_where_bfloat16_is_hopeless(monkeypatch, early):
+    """measure_speed stops after EARLY_FRAMES frames when bfloat16 is under EARLY_RATIO of float32's speed: here
+    with the ratio's bar set so high that any CPU is under it, counted by the frames the streams were asked for."""
+    from generation.models.mg_stream import MGStream
+    from generation.sampling import pretrained
+
+    steps = []
+    step = MGStream.step
+    monkeypatch.setattr(MGStream, "step", lambda self, c: steps.append(1) or step(self, c))
+    monkeypatch.setattr(pretrained, "EARLY_FRAMES", 2)
+    monkeypatch.setattr(pretrained, "EARLY_RATIO", 1e9)
+    times = pretrained.measure_speed(frames=6, warmup=1, streams=2, early=early)
+    assert len(steps) == 2 * (1 + (2 if early else 6)) and times["ratio"] > 0

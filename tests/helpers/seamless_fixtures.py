@@ -275,3 +275,31 @@ style = "{style}"
 """
     (root / "study.toml").write_text(text)
     return root / "study.toml"
+
+
+# The two-person sets the study and browser tests share (tests/conftest.py: dyadic_set, semantic_set), in solid
+# bodies (a stick's one-pixel lines come out of the encoder too unlike from video to video to compare the
+# interlocutor by its pixels): dyadic in 2-s items; semantic in 4-s items, long enough around the agent's keyword
+# for the interlocutor to speak too, each voice on its person's side.
+SET_SIZE = 192
+
+
+def build_two_person_set(root, design):
+    """`write_study` for `design` in `root`, built by make_stimuli into root/out at SET_SIZE."""
+    from generation.make_stimuli import main as make_stimuli
+
+    semantic = design == "semantic"
+    study = write_study(root, design, length_s=4.0 if semantic else 2.0, style="solid", stereo=semantic)
+    argv = [
+        "--study",
+        str(study),
+        "--out",
+        str(Path(root) / "out"),
+        "--size",
+        str(SET_SIZE),
+        "--quiet",
+        "--workers",
+        "1",
+    ]
+    if make_stimuli(argv) != 0:
+        raise RuntimeError(f"make_stimuli failed on the {design} set in {root}")
