@@ -188,7 +188,7 @@ def measure_speed(frames=150, warmup=5, streams=30, early=True):
 
 
 # The early stop of measure_speed: bfloat16 under half float32's speed over this many frames is not worth the rest
-# (precision.MIN_GAIN asks for 1.15x the other way).
+# (precision.MIN_GAIN is the gain asked of it the other way).
 EARLY_FRAMES, EARLY_RATIO = 20, 0.5
 
 
