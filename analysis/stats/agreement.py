@@ -16,12 +16,14 @@
 
 import numpy as np
 import pandas as pd
+from scipy import linalg, sparse
 
 from ..data.filtering import only_test_rows
 from .mixed import fit_crossed
 
 FIT_ERRORS = (ValueError, ZeroDivisionError, FloatingPointError, np.linalg.LinAlgError)
 ICC_BOOT_MAX = 100  # REML refits of an incomplete table; each takes a few hundredths of a second
+EXACT_FIT = 1e-12  # residual sum of squares, as a share of the total, at which raters and clips fit every rating
 
 
 def _codes(series):
@@ -82,8 +84,38 @@ def krippendorff_alpha(df, unit="clip_id", value="rating", n_boot=1000, seed=0, 
     }
 
 
+def additive_rss(y, rater, clip):
+    """Residual sum of squares of y ~ rater + clip, both factors fixed (least squares; rater and clip int codes).
+
+    Solved from the normal equations as mixed.py solves its own: the larger factor's block is diagonal and is
+    eliminated, and the smaller one's Schur complement (singular by one, the shared intercept) is solved by least
+    squares, so the cost follows the number of raters and clips, not of ratings."""
+    y = np.asarray(y, float)
+    yc = y - y.mean()
+    R, C = int(rater.max()) + 1, int(clip.max()) + 1
+    n_r = np.bincount(rater, minlength=R).astype(float)
+    n_c = np.bincount(clip, minlength=C).astype(float)
+    z_r = np.bincount(rater, weights=yc, minlength=R)
+    z_c = np.bincount(clip, weights=yc, minlength=C)
+    N = sparse.csr_matrix((np.ones(len(y)), (rater, clip)), shape=(R, C))
+    if R >= C:  # eliminate the raters
+        A, n_big, z_big, n_small, z_small = N, n_r, z_r, n_c, z_c
+    else:
+        A, n_big, z_big, n_small, z_small = N.T.tocsr(), n_c, z_c, n_r, z_r
+    schur = np.diag(n_small) - (A.T @ sparse.diags(1 / n_big) @ A).toarray()
+    b = linalg.lstsq(schur, z_small - A.T @ (z_big / n_big), check_finite=False)[0]
+    a = (z_big - A @ b) / n_big
+    return max(float(yc @ yc - a @ z_big - b @ z_small), 0.0)
+
+
 def _icc(y, rater, clip, k, start=None):
-    """(ICC(A,1), ICC(A,k), the variance components); `start`: the components a resample's search begins from."""
+    """(ICC(A,1), ICC(A,k), the variance components); `start`: the components a resample's search begins from.
+
+    FloatingPointError where raters and clips fit every rating exactly (no residual left: a bootstrap resample of
+    a small study often is such a table). The REML criterion then falls without end as the residual variance goes
+    to 0, so there is no estimate, and the search would only wander off among ever larger variances."""
+    if additive_rss(y, rater, clip) <= EXACT_FIT * float(((y - y.mean()) ** 2).sum()):
+        raise FloatingPointError("raters and clips fit every rating exactly: no residual variance to estimate")
     if start is not None:  # as relative SDs, the model's own parameters
         start = [(start["rater"] / start["residual"]) ** 0.5, (start["clip"] / start["residual"]) ** 0.5]
     with np.errstate(
@@ -140,9 +172,12 @@ def _icc_bootstrap(y, rater, clip, k, n_boot, seed, level, start=None):
                 boot.append(_icc(y[idx], r_code, c_code, k, start)[:2])
             except FIT_ERRORS:  # a degenerate resample (e.g. no residual variance left) has no ICC: skip it
                 pass
+    if not boot:  # no resample had an estimate: the interval is unknown, not made up
+        return None, None, 0
     boot = np.array(boot).reshape(-1, 2)
     q = [100 * (1 - level) / 2, 100 * (1 + level) / 2]
-    return [float(v) for v in np.percentile(boot[:, 0], q)], [float(v) for v in np.percentile(boot[:, 1], q)]
+    ci1, cik = ([float(v) for v in np.percentile(boot[:, j], q)] for j in (0, 1))
+    return ci1, cik, len(boot)
 
 
 def icc(df, unit="clip_id", value="rating", n_boot=ICC_BOOT_MAX, seed=0, level=0.95):
@@ -153,7 +188,8 @@ def icc(df, unit="clip_id", value="rating", n_boot=ICC_BOOT_MAX, seed=0, level=0
     dict
         icc_a1, icc_a1_ci, icc_ak, icc_ak_ci, k (mean ratings per unit), complete (whether every rater rated
         every unit: then pingouin's ANOVA estimates and F intervals; else REML variance components and a
-        bootstrap over raters and clips, at most ICC_BOOT_MAX resamples), n_boot, seed, level, method; None with
+        bootstrap over raters and clips, at most ICC_BOOT_MAX resamples), n_boot, n_fitted (the resamples that
+        had an estimate; bootstrapped only), seed, level, method; None with
         fewer than 3 raters or 3 units.
     """
     d = df[[unit, "rater_id", value]].dropna()
@@ -169,7 +205,7 @@ def icc(df, unit="clip_id", value="rating", n_boot=ICC_BOOT_MAX, seed=0, level=0
     if complete:
         return {**out, **_icc_complete(d, unit, value), "n_boot": 0, "seed": int(seed), "level": 0.95}
     n_boot = min(n_boot, ICC_BOOT_MAX)
-    ci1, cik = _icc_bootstrap(y, rater, clip, k, n_boot, seed, level, vc)
+    ci1, cik, n_fitted = _icc_bootstrap(y, rater, clip, k, n_boot, seed, level, vc)
     return {
         **out,
         "icc_a1": float(a1),
@@ -177,10 +213,12 @@ def icc(df, unit="clip_id", value="rating", n_boot=ICC_BOOT_MAX, seed=0, level=0
         "icc_ak": float(ak),
         "icc_ak_ci": cik,
         "n_boot": int(n_boot),
+        "n_fitted": int(n_fitted),
         "seed": int(seed),
         "level": level,
         "method": "ICC(A,1) and ICC(A,k) (McGraw & Wong) from REML variance components of crossed rater and "
-        "clip intercepts (the table is incomplete); percentile intervals from a bootstrap over raters and clips",
+        "clip intercepts (the table is incomplete); percentile intervals from a bootstrap over raters and clips "
+        "(n_fitted of the n_boot resamples: one that raters and clips fit exactly has no estimate)",
     }
 
 
@@ -210,9 +248,12 @@ def agreement_text(ag) -> str:
             f"over {ka['n_units']} clips"
         )
     if ic:
+
+        def ci(v):  # None: no bootstrap resample had an estimate
+            return "(no interval)" if v is None else f"[{v[0]:.2f}, {v[1]:.2f}]"
+
         parts.append(
-            f"ICC(A,1) {ic['icc_a1']:.2f} [{ic['icc_a1_ci'][0]:.2f}, {ic['icc_a1_ci'][1]:.2f}], "
-            f"ICC(A,k) of a clip's mean of k = {ic['k']:.1f} ratings {ic['icc_ak']:.2f} "
-            f"[{ic['icc_ak_ci'][0]:.2f}, {ic['icc_ak_ci'][1]:.2f}]"
+            f"ICC(A,1) {ic['icc_a1']:.2f} {ci(ic['icc_a1_ci'])}, "
+            f"ICC(A,k) of a clip's mean of k = {ic['k']:.1f} ratings {ic['icc_ak']:.2f} {ci(ic['icc_ak_ci'])}"
         )
     return ("Rater agreement: " + "; ".join(parts) + ".") if parts else "Rater agreement: too few raters or clips."
