@@ -186,6 +186,7 @@ def make_stimuli(procs: "Processes", out: Path, s: dict) -> Path:
     else:
         _stage(f"1/5 make stimuli (--quick) → {stimuli}")
         cmd = ["--quick", "--runs", str(s["runs"] or out / "runs"), "--seed", str(seed)]
+        cmd += ["--n-items", str(s["items"])] if s["items"] else []
     cmd += ["--size", str(s["size"])]
     procs.run([py, "-m", "generation.make_stimuli", *cmd, "--out", str(stimuli), "--force"], "make_stimuli")
     return stimuli
@@ -271,11 +272,17 @@ def run_demo(
     sound: bool = False,
     runs: Path | None = None,
     size: int = 320,
+    items: int | None = None,
 ) -> dict:
     """Run the study; returns paths and the crowd's summary. `stimuli` reuses an existing folder. What an earlier
-    run left in `out` is replaced (clear_earlier_run)."""
+    run left in `out` is replaced (clear_earlier_run). `items`: test items of the built-in set (None: make_stimuli's
+    default, the paper's 30)."""
     out = Path(out)
     sound = sound or design in study.MISMATCH_COLUMN  # the matched-against-mismatched designs are about speech
+    if items is not None and (stimuli is not None or sound):
+        # Checked before anything in `out` is replaced: a refused run leaves an earlier one as it was.
+        given = "--stimuli" if stimuli is not None else f"--design {design}" if design != "acr" else "--sound"
+        raise DemoError(f"--items: only the built-in set is made with a number of items, not with {given}")
     settings = dict(locals())
     clear_earlier_run(out, stimuli is None)
     (out / "logs").mkdir(parents=True, exist_ok=True)
@@ -337,6 +344,12 @@ def build_parser():
         help="make_stimuli --size: the videos' height in pixels, even (default 320; two people are filmed wide)",
     )
     p.add_argument(
+        "--items",
+        type=cli.number(int, 2, 10_000),
+        default=None,
+        help="test items of the built-in set (make_stimuli --n-items; default the paper's 30), for a quicker try",
+    )
+    p.add_argument(
         "--runs",
         default=None,
         help="where make_stimuli --quick keeps its tiny models and data, reused when there (default OUT/runs)",
@@ -384,6 +397,7 @@ def _main(argv) -> int:
             sound=a.sound,
             runs=Path(a.runs) if a.runs else None,
             size=a.size,
+            items=a.items,
         )
     except KeyboardInterrupt:
         return interrupted()

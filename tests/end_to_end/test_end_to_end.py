@@ -125,8 +125,8 @@ def _demo_in_a_row(cwd: Path, runs: list[tuple[str, int, list[str]]]):
     """`analysis.demo` run in `cwd` with its default --out, once per (design, seed, more flags), each after the
     other; checks that each run's report is its own design's and the earlier run's export is gone."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    # Small videos: what is checked here is the folder each run leaves, not the pictures.
-    small = ["--raters", "40", "--ratings-per-clip", "2", "--clips-per-rater", "0", "--size", "96"]
+    # Small sets of small videos: what is checked here is the folder each run leaves, not the pictures.
+    small = ["--raters", "40", "--ratings-per-clip", "2", "--clips-per-rater", "0", "--size", "96", "--items", "6"]
     for design, seed, more in runs:
         cmd = [sys.executable, "-m", "analysis.demo", "--design", design, "--seed", str(seed), *small, *more]
         r = subprocess.run(cmd, capture_output=True, text=True, timeout=900, cwd=cwd, env=env)
@@ -171,3 +171,11 @@ def test_demo_runs_one_design_after_another_in_its_default_folder(quick_stimuli,
     )
     assert r.returncode == 2 and "holds files the demo did not make" in r.stderr, r.stderr
     assert [p.name for p in mine.iterdir()] == ["notes.txt"]
+    # --items sizes the built-in set only: with a set given, or one with speech, it is refused before anything
+    # in the folder is touched.
+    from analysis.demo import main as demo_main
+
+    before = sorted(p.name for p in demo.iterdir())
+    for more in (["--stimuli", str(demo / "stimuli")], ["--design", "appropriateness"]):
+        assert demo_main(["--out", str(demo), "--items", "6", *more]) == 2
+    assert sorted(p.name for p in demo.iterdir()) == before
