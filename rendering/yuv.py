@@ -24,8 +24,14 @@ def yuv_to_rgb(frame, size):
     uint8 [height, width, 3]."""
     w, h = frame_size(size)
     n = w * h
-    y = frame[:n].reshape(h, w).astype(np.float32) - 16
-    u = frame[n : n + n // 4].reshape(h // 2, w // 2).repeat(2, 0).repeat(2, 1).astype(np.float32) - 128
-    v = frame[n + n // 4 :].reshape(h // 2, w // 2).repeat(2, 0).repeat(2, 1).astype(np.float32) - 128
-    rgb = np.stack([1.164 * y + 1.596 * v, 1.164 * y - 0.392 * u - 0.813 * v, 1.164 * y + 2.017 * u], -1)
-    return np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
+    # Viewed as [h/2, 2, w/2, 2], each 2x2 block's luma meets its one chroma sample by broadcasting: the chroma terms
+    # are computed once a block, not once a pixel, and no full-size chroma plane is made (a contact sheet converts
+    # 8 frames a clip). Every sum is formed in the same order as pixel by pixel, so the bytes are the same.
+    y = 1.164 * (frame[:n].reshape(h // 2, 2, w // 2, 2).astype(np.float32) - 16)
+    u = frame[n : n + n // 4].reshape(h // 2, 1, w // 2, 1).astype(np.float32) - 128
+    v = frame[n + n // 4 :].reshape(h // 2, 1, w // 2, 1).astype(np.float32) - 128
+    rgb = np.empty((h // 2, 2, w // 2, 2, 3), np.uint8)
+    for c, plane in enumerate((y + 1.596 * v, y - 0.392 * u - 0.813 * v, y + 2.017 * u)):
+        plane += 0.5
+        rgb[..., c] = np.clip(plane, 0, 255, out=plane)
+    return rgb.reshape(h, w, 3)
