@@ -38,6 +38,7 @@ def _study(root, two):
     return root / "study.toml"
 
 
+@pytest.mark.full  # mesh studies built: the full tier (the fast tier stays short)
 @pytest.mark.parametrize("two", [False, True], ids=["one person", "two people"])
 def test_no_mesh_leaves_a_built_studys_frame(tmp_path, two):
     """Every video of the set: the study's frame (two people: 3:1, the default; one: square), and no body's pixel

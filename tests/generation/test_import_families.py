@@ -94,6 +94,7 @@ def test_units_in_the_study_file_still_rule(tmp_path):
 
 
 # ---------------------------------------------------------------- the study's frame rate
+@pytest.mark.full  # a study built: the full tier (the fast tier stays short)
 def test_a_study_keeps_the_reference_frame_rate(tmp_path):
     study = write_family_study(tmp_path / "s", "zeroeggs", n_items=3, frames=45, fps=30.0)
     assert make_stimuli(["--study", str(study), "--out", str(tmp_path / "out"), "--size", "64", "--quiet"]) == 0
@@ -165,6 +166,7 @@ def test_an_smpl_file_without_its_model_says_where_to_get_one(tmp_path, capsys):
         assert needle in line
 
 
+@pytest.mark.full  # a study built: the full tier (the fast tier stays short)
 def test_an_smpl_study_builds_with_the_model_named_in_the_study_file(tmp_path, capsys):
     root = tmp_path / "s"
     for sub, seed in (("real", 0), ("sys", 1)):

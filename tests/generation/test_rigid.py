@@ -87,6 +87,7 @@ def test_a_bone_length_error_does_not_carry_down_the_limb():
     assert np.abs(lengths_of(y.reshape(1, 1, -1)) - lengths).max() < 1e-9
 
 
+@pytest.mark.full  # the default job run: the full tier (the fast tier stays short)
 def test_the_default_job_records_the_fit_in_the_manifest(tmp_path):
     import csv
 

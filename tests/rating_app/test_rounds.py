@@ -11,6 +11,7 @@ import os
 import subprocess
 import sys
 
+import pytest
 import requests
 from helpers.api_client import TOKEN_HDR
 from helpers.cli import fails_with
@@ -239,6 +240,7 @@ def test_the_dashboard_adds_and_withdraws(make, folders, tmp_path):
     assert r.status_code == 403  # never on behalf of another site
 
 
+@pytest.mark.full  # gunicorn and its workers: the full tier (the fast tier stays short)
 def test_the_workers_of_a_running_gunicorn_learn_of_the_round(folders, app_db_url, tmp_path):
     """A real server, three worker processes: a crowd rates, add-condition runs beside it, a second crowd gets the
     new pairs from whichever worker it meets, and every count still adds up."""

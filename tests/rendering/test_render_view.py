@@ -119,6 +119,7 @@ def test_render_keys_are_read(tmp_path):
     assert (plain.view, plain.framing, plain.styles, plain.aspect) == (None, "full", ["stick"], 1.0)
 
 
+@pytest.mark.full  # a study built in two styles and its videos decoded: the full tier (the fast tier stays short)
 def test_two_styles_each_clip_its_own_stimulus_on_pixels(tmp_path):
     """A ZeroEGGS-like speaker (75 joints, fingers, cm, 30 fps) built with units = "auto", view = "front",
     framing = "upper" and style = ["stick", "solid"]: every clip in both styles under ids of its own, one video
