@@ -1,14 +1,18 @@
 """The key frame's budget (rendering.encode.KEY_FRAME_BUDGET): each frame's SSIM against the drawn frames, the key
 frame's and the rest's, at one frame's budget (as before) and at the shipped budget, on real takes drawn as a stick
 figure and a solid body and on a synthetic SMPL-H body drawn as the mesh, at 640 px; and the bytes a clip costs.
+Each clip is encoded at its set's rate (rendering.render.rate_for_set: the mesh at encode.MESH_RATE_BITS_PER_ROW, the
+others at encode.RATE_BITS_PER_ROW), or at each rate of `--rates` (bits per second per row), to choose the mesh's.
 
 SSIM is ffmpeg's ssim filter: "All" (Y, U and V weighted 4:1:1, as bench_blind_sizes and bench/RESULTS.md quote it)
 and Y alone. Nothing here is timed, so the load does not matter.
 
     PYTHONPATH=$PWD python bench/bench_key_frame.py [--size 640] [--seconds 4] [--seeds 3]
+        [--styles stick,solid,mesh] [--rates 2300,2800] [--budgets 1,3]
 """
 
 import argparse
+import itertools
 import subprocess
 import sys
 import tempfile
@@ -30,6 +34,7 @@ from rendering import encode  # noqa: E402
 from rendering.camera import camera_targets  # noqa: E402
 from rendering.framing import item_camera  # noqa: E402
 from rendering.raster import STYLES, FrameDrawer  # noqa: E402
+from rendering.render import rate_for_set  # noqa: E402
 
 ACTIONS = ROOT.parent / "shared" / "data" / "bandai-namco-actions" / "dataset-1" / "data"
 TAKES = ("dataset-1_punch_normal_001", "dataset-1_dance-short_normal_001", "dataset-1_bow_active_001")
@@ -58,9 +63,9 @@ def drawn(clip, size, style, mesh=None, camera=None):
     return b"".join(frames)
 
 
-def encode_raw(raw, out, size, seed):
+def encode_raw(raw, out, size, seed, bits_per_row=None):
     frames = len(raw) // (size * size * 3 // 2)
-    proc = encode.ffmpeg_writer(out, size, FPS, threads=1, frames=frames, seed=seed)
+    proc = encode.ffmpeg_writer(out, size, FPS, threads=1, frames=frames, seed=seed, bits_per_row=bits_per_row)
     _, err = proc.communicate(raw)
     if proc.returncode:
         raise RuntimeError(err.decode(errors="replace"))
@@ -80,10 +85,13 @@ def frame_ssim(raw_file, mp4, size):
     return np.array([[float(r.split("All:")[1].split()[0]), float(r.split("Y:")[1].split()[0])] for r in rows])
 
 
-def clips(folder, seconds):
+def clips(folder, seconds, styles):
     for name in TAKES:
         for style in ("stick", "solid"):
-            yield f"{name.split('_', 1)[1].rsplit('_', 1)[0]} ({style})", bvh_clip(name, seconds), style, None, None
+            if style in styles:
+                yield f"{name.split('_', 1)[1].rsplit('_', 1)[0]} ({style})", bvh_clip(name, seconds), style, None, None
+    if "mesh" not in styles:
+        return
     model = folder / "SMPLH_NEUTRAL.npz"
     smpl_fixtures.write_body_model(model, "smplh", rings=7, segments=18, head_rings=22)
     motion = smpl_fixtures.write_motion(folder / "take.npz", "smplh", frames=int(seconds * FPS), fps=FPS)
@@ -98,22 +106,28 @@ def main():
     p.add_argument("--size", type=int, default=640)
     p.add_argument("--seconds", type=float, default=4.0)
     p.add_argument("--seeds", type=int, default=3, help="draws of the rate's dither per clip")
+    p.add_argument("--styles", default="stick,solid,mesh", help="the clips' styles, comma-separated")
+    p.add_argument("--rates", default="", help="bits per second per row, comma-separated (default: each set's)")
+    p.add_argument("--budgets", default=f"1,{encode.KEY_FRAME_BUDGET}", help="key frame budgets, in frames")
     args = p.parse_args()
     size = args.size
-    budgets = (1, encode.KEY_FRAME_BUDGET)
+    budgets = [int(b) for b in args.budgets.split(",")]
+    rates = [int(r) for r in args.rates.split(",") if r]
+    shipped = encode.KEY_FRAME_BUDGET
     print(f"{size} px, {FPS:g} fps, {args.seconds:g} s, {args.seeds} dither seeds; SSIM All (Y)")
-    head = f"{'clip':<40}{'budget':>7}{'frame 0':>16}{'frame 1':>16}{'min, rest':>16}{'< 0.98':>8}{'MB':>7}"
+    head = f"{'clip':<40}{'rate':>6}{'budget':>7}{'frame 0':>16}{'frame 1':>16}{'min, rest':>16}{'< 0.98':>8}{'MB':>7}"
     print(head)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        for label, clip, style, mesh, camera in clips(folder, args.seconds):
+        for label, clip, style, mesh, camera in clips(folder, args.seconds, args.styles.split(",")):
             raw = drawn(clip, size, style, mesh, camera)
             (folder / "raw.yuv").write_bytes(raw)
-            for budget in budgets:
+            own = rate_for_set([STYLES[style]]) or encode.RATE_BITS_PER_ROW
+            for rate, budget in itertools.product(rates or [own], budgets):
                 encode.KEY_FRAME_BUDGET = budget
                 got, mb = [], []
                 for seed in range(args.seeds):
-                    encode_raw(raw, folder / "v.mp4", size, seed)
+                    encode_raw(raw, folder / "v.mp4", size, seed, rate)
                     got.append(frame_ssim(folder / "raw.yuv", folder / "v.mp4", size))
                     mb.append((folder / "v.mp4").stat().st_size / 1e6)
                 s = np.stack(got)  # [seed, frame, (All, Y)]
@@ -123,10 +137,10 @@ def main():
                     return f"{v[0]:.4f} ({v[1]:.4f})"
 
                 print(
-                    f"{label:<40}{budget:>7}{cell(s[:, 0].min(0)):>16}{cell(s[:, 1].min(0)):>16}"
+                    f"{label:<40}{rate:>6}{budget:>7}{cell(s[:, 0].min(0)):>16}{cell(s[:, 1].min(0)):>16}"
                     f"{cell(s[:, 2:].min((0, 1))):>16}{int((low < 0.98).sum()):>8}{np.mean(mb):>7.3f}"
                 )
-            encode.KEY_FRAME_BUDGET = budgets[-1]
+            encode.KEY_FRAME_BUDGET = shipped
 
 
 if __name__ == "__main__":

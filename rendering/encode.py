@@ -7,9 +7,16 @@ from fractions import Fraction
 # The default rate control gives every frame of a video the same size: a rate of this many bits per second per row
 # of the frame's height, filler included (line drawings cost bits along their lines, so in proportion to the side,
 # not the area), spread evenly over the frames. At 640x640 that is 1.47 Mb/s at any frame rate: what a rater
-# downloads on a phone. Its image quality against the drawn frames, and what the sizes tell, are measured in
-# bench/RESULTS.md#video-rate.
+# downloads on a phone (a set with a mesh body: MESH_RATE_BITS_PER_ROW). Its image quality against the drawn
+# frames, and what the sizes tell, are measured in bench/RESULTS.md#video-rate.
 RATE_BITS_PER_ROW = 2300
+# The rate of every video of a set with a mesh body among its styles (rendering.render.rate_for_set, decided once
+# for the whole set: an item's videos are one size whatever their style); 2.11 Mb/s at 640x640. A skinned mesh's
+# shaded surface costs more bits than lines or capsules: at RATE_BITS_PER_ROW the frames the dither gives a low share
+# of the rate fell short of the SSIM every frame of the other styles reaches against a lossless encode, and raising
+# the dither's floor instead lets the coded sizes tell more of the content. The smallest rate in steps of 100 at
+# which every frame of the bench's mesh clip keeps a margin above that SSIM (bench/RESULTS.md#key-frame).
+MESH_RATE_BITS_PER_ROW = 3300
 # The share of that rate x264 aims to spend on the picture on average; the filler data pays for the rest.
 CODED_SHARE = 0.9
 # Each frame's share of the rate is drawn at random (log-normal, this spread, within DITHER_RANGE of the mean):
@@ -33,19 +40,21 @@ def video_rate(fps) -> Fraction:
     return Fraction(fps).limit_denominator(1001)
 
 
-def frame_bits(size, fps):
+def frame_bits(size, fps, bits_per_row=None):
     """The size of every frame at the default rate control, in bits (filler included), for a size x size video at
-    `fps` frames per second: near RATE_BITS_PER_ROW * size / fps, in whole bytes, and where it can be, such that
-    the rate it makes is a whole number of kbit/s. x264 takes its maximum rate in kbit/s and gives each frame that
-    rate over the frame rate; a frame budget with a fraction of a byte makes the filler alternate between two frame
-    sizes (by frame number, whatever the picture: it tells nothing, but one size is simpler to check)."""
+    `fps` frames per second: near bits_per_row * size / fps (None: RATE_BITS_PER_ROW), in whole bytes, and where it
+    can be, such that the rate it makes is a whole number of kbit/s. x264 takes its maximum rate in kbit/s and gives
+    each frame that rate over the frame rate; a frame budget with a fraction of a byte makes the filler alternate
+    between two frame sizes (by frame number, whatever the picture: it tells nothing, but one size is simpler to
+    check)."""
+    bits_per_row = RATE_BITS_PER_ROW if bits_per_row is None else bits_per_row
     rate = video_rate(fps)
-    target = RATE_BITS_PER_ROW * size / 1000
+    target = bits_per_row * size / 1000
     for kbit in sorted(range(max(1, int(target * 0.8)), int(target * 1.2) + 2), key=lambda k: abs(k - target)):
         bits = Fraction(kbit * 1000) / rate
         if bits.denominator == 1 and bits.numerator % 8 == 0:
             return bits.numerator
-    return 8 * round(RATE_BITS_PER_ROW * size / fps / 8)
+    return 8 * round(bits_per_row * size / fps / 8)
 
 
 def rate_dither(frames, seed=None, after_key=""):
@@ -70,8 +79,8 @@ def rate_dither(frames, seed=None, after_key=""):
     return "/".join((["0,0,b=1.000"] if after_key else []) + dither)
 
 
-def _rate_control(size, fps, qp, crf, frames, seed):
-    """(ffmpeg options, x264 parameters) of the rate control."""
+def _rate_control(size, fps, qp, crf, frames, seed, bits):
+    """(ffmpeg options, x264 parameters) of the rate control; `bits`: each frame's budget (frame_bits)."""
     if crf is not None:
         return ["-crf", str(crf)], []
     if qp is not None:
@@ -83,7 +92,6 @@ def _rate_control(size, fps, qp, crf, frames, seed):
     # gets, so the total of the coded (non-filler) NAL units hardly varies with the content either. No scene-cut
     # keyframes and no B-frames: where x264 puts them follows the content, and the boxes would show it. The SEI
     # units (x264's options, the dither among them) are removed, so no parser reads the frames' multiples.
-    bits = frame_bits(size, fps)
     cap = round(bits * video_rate(fps))
     aim = round(CODED_SHARE * bits * video_rate(fps))
     x264 = ["filler=1", "qcomp=0", "scenecut=0", "bframes=0"]
@@ -104,19 +112,33 @@ def _rate_control(size, fps, qp, crf, frames, seed):
 
 
 def ffmpeg_writer(
-    out_mp4, size, fps, preset="ultrafast", qp=None, crf=None, threads=None, frames=None, seed=None, width=None
+    out_mp4,
+    size,
+    fps,
+    preset="ultrafast",
+    qp=None,
+    crf=None,
+    threads=None,
+    frames=None,
+    seed=None,
+    width=None,
+    bits_per_row=None,
+    bits=None,
 ):
     """An ffmpeg process reading raw yuv420p frames on stdin and writing H.264 yuv420p +faststart MP4, no audio.
     The frames are `size` pixels high and `width` wide (None: square).
 
-    Rate control: by default every frame is `frame_bits(size, fps)` bits, filler data included (given `frames`, the
-    key frame KEY_FRAME_BUDGET times that and the next nearly as much), so every video of one
-    size and frame rate has the same frame sizes and byte size: what a blinded stimulus set needs
+    Rate control: by default every frame is `frame_bits(size, fps, bits_per_row)` bits, filler data included (given
+    `frames`, the key frame KEY_FRAME_BUDGET times that and the next nearly as much), so every video of one size,
+    frame rate and rate has the same frame sizes and byte size: what a blinded stimulus set needs
     (rendering.blinding, CONTRACTS §4). With `qp` (a constant quantiser) or `crf` (x264's rate factor) the
     sizes follow the content instead. ultrafast at qp 17 was the default before; the default now is as close to
     the frames (PSNR +0.8 dB on average, SSIM higher for every clip measured; bench/notes/2026-11-25-history.md).
     frames, seed: the number of frames that will come, for the default's random share of the rate per frame
     (`rate_dither`; no dither without `frames`), and its seed (None: fresh randomness).
+    bits_per_row: the default's rate (None: RATE_BITS_PER_ROW; MESH_RATE_BITS_PER_ROW for a set with a mesh body).
+    bits: each frame's budget in bits, as another video of the set has it (rendering.reencode), in place of the one
+    `bits_per_row` gives; a whole number of bytes.
     """
     import imageio_ffmpeg  # here, not at the top: loading and sampling the models must not need an encoder
 
@@ -124,7 +146,11 @@ def ffmpeg_writer(
     # A wide frame holds more side by side at the same scale (two people): its rate is a square frame's of the
     # same area, so that a set's frame sizes still follow from its pixel size alone.
     side = round((width * size) ** 0.5)
-    rate, x264 = _rate_control(side, fps, qp, crf, frames, seed)
+    if bits is None:
+        bits = frame_bits(side, fps, bits_per_row)
+    elif bits <= 0 or bits % 8:
+        raise ValueError(f"a frame budget is a positive whole number of bytes, got {bits} bits")
+    rate, x264 = _rate_control(side, fps, qp, crf, frames, seed, bits)
 
     cmd = [
         imageio_ffmpeg.get_ffmpeg_exe(),

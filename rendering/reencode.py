@@ -5,21 +5,25 @@ A system that joins a running study (`python -m rating_app add-condition`) bring
 are, their bytes (or any hash of them) would let whoever submitted them pick out their own system's clips and vote
 for it. So the study takes the frames, not the file: each video is decoded and encoded again by the stimulus
 encoder (rendering.encode: the one-size rate control, each frame's share of the rate drawn afresh), and its sound,
-if any, is copied across as the study's videos carry it. The result has the study's sizes by construction; the
-caller checks them. Only a video of the size, frame rate and number of frames of the study's video `--like` is
-taken: the decoder reads a hostile file, and nothing larger than the study's own clips is ever decoded.
+if any, is copied across as the study's videos carry it. The result has the study's sizes by construction: each
+frame's budget is read from `--like`'s own frame sizes (`frame_budget`), so a set encoded at another rate (a set
+with a mesh body, rendering.encode.MESH_RATE_BITS_PER_ROW) is matched as the others are; the caller checks them.
+Only a video of the size, frame rate and number of frames of the study's video `--like` is taken: the decoder reads
+a hostile file, and nothing larger than the study's own clips is ever decoded.
 """
 
 from __future__ import annotations
 
 import subprocess
 import sys
+from fractions import Fraction
 from pathlib import Path
 
 from moglow_eval.core import cli
 
-from .encode import ffmpeg_writer
+from .encode import KEY_FRAME_BUDGET, ffmpeg_writer, video_rate
 from .errors import RenderError
+from .mp4_layout import read_layout
 
 TIMEOUT_S = 600  # one clip: decoding and encoding a few hundred frames takes seconds
 
@@ -46,6 +50,29 @@ def _probe(src: Path) -> tuple[tuple[int, int], float, bool]:
     return tuple(meta["size"]), float(meta["fps"]), "Audio:" in listing.stderr
 
 
+def frame_budget(sizes, fps) -> int:
+    """The frame budget in bits (rendering.encode.frame_bits) of a video the stimulus encoder wrote, from its frame
+    sizes in bytes (the MP4's sample table) at `fps`.
+
+    The encoder caps every frame after the first two at the rate x264 takes in whole kbit/s (K), and tops it up
+    with filler: the later frames are one size, a byte over the budget, or, where the budget makes no whole kbit/s,
+    alternate between two sizes whose mean K gives. K, read from their mean, leaves a few budgets (a byte apart) that
+    give it; of those, the key frame's size (KEY_FRAME_BUDGET budgets, filler included) picks the one whose schedule
+    it is. RenderError when the video has too few frames to tell."""
+    if len(sizes) < 3:
+        raise RenderError(f"{len(sizes)} frames: too few to read the study's frame budget from")
+    rate = video_rate(fps)
+    later = Fraction(sum(sizes[2:]), len(sizes) - 2) - 1  # the budget in bytes a later frame gets, on average
+
+    def kbit(n):  # x264's rate in whole kbit/s for a budget of n bytes a frame, as rendering.encode hands it over
+        return round(8 * n * rate) // 1000
+
+    k = round(8 * later * rate / 1000)
+    near = range(max(1, int(later) - 64), int(later) + 64)
+    fits = [n for n in near if kbit(n) == k] or [round(later)]
+    return 8 * min(fits, key=lambda n: (abs(KEY_FRAME_BUDGET * n - sizes[0]), n))
+
+
 def reencode(src, dst, like, seed: int | None = None) -> None:
     """Encode the video `src` again into `dst` (stimulus encoder, fresh randomness unless `seed`), as the video
     `like` is: its size, frame rate and number of frames; RenderError, one line, when `src` differs in any or
@@ -57,15 +84,16 @@ def reencode(src, dst, like, seed: int | None = None) -> None:
     if w % 2 or h % 2:
         raise RenderError(f"{like}: {w}x{h} pixels; a stimulus video's sides are even (yuv420p)")
     frames = imageio_ffmpeg.count_frames_and_secs(str(like))[0]
+    bits = frame_budget(read_layout(like).sample_sizes, fps)
     try:
-        _reencode(src, dst, (w, h), fps, frames, seed)
+        _reencode(src, dst, (w, h), fps, frames, seed, bits)
     except BaseException:
         dst.unlink(missing_ok=True)
         dst.with_name(dst.stem + ".video.mp4").unlink(missing_ok=True)
         raise
 
 
-def _reencode(src: Path, dst: Path, size: tuple, fps: float, frames: int, seed: int | None) -> None:
+def _reencode(src: Path, dst: Path, size: tuple, fps: float, frames: int, seed: int | None, bits: int) -> None:
     (w, h), src_fps, sound = _probe(src)
     if (w, h) != size or abs(src_fps - fps) > 1e-3:
         raise RenderError(f"{src}: {w}x{h} pixels at {src_fps:g} fps; the study's are {size[0]}x{size[1]} at {fps:g}")
@@ -74,7 +102,7 @@ def _reencode(src: Path, dst: Path, size: tuple, fps: float, frames: int, seed: 
     decode = [_ffmpeg(), "-v", "error", "-i", str(src), "-map", "0:v:0", "-frames:v", str(frames + 1)]
     decode += ["-f", "rawvideo", "-pix_fmt", "yuv420p", "-"]
     reader = subprocess.Popen(decode, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
-    writer = ffmpeg_writer(video, h, fps, frames=frames, seed=seed, width=w)
+    writer = ffmpeg_writer(video, h, fps, frames=frames, seed=seed, width=w, bits=bits)
     n = 0
     try:
         while chunk := reader.stdout.read(frame_bytes):

@@ -24,7 +24,7 @@ from moglow_eval.core.clip import check_fps, check_joints, load_clip
 
 from .camera import DEFAULT_CAMERA, Camera, camera_targets
 from .captions import CaptionLayer
-from .encode import ffmpeg_writer
+from .encode import MESH_RATE_BITS_PER_ROW, ffmpeg_writer
 from .errors import RenderError
 from .raster import DEFAULT_STYLE, FrameDrawer, Style, one_colour
 
@@ -84,7 +84,8 @@ class RenderOptions:
         skips deblocking and CABAC).
     qp, crf : int or None
         Neither (the default): every frame one size, filler data included (`encode.frame_bits`: 1.47 Mb/s at
-        640x640, a 4-s clip 0.74 MB, at any frame rate), so that a set's videos are one size (rendering.blinding).
+        640x640, a 4-s clip 0.74 MB, at any frame rate; more in a set with a mesh body, `bits_per_row`), so that a
+        set's videos are one size (rendering.blinding).
         qp (a constant quantiser; 17 was the default before) or crf (x264's rate factor): sizes that follow the
         content, for a video that is not a stimulus.
     threads : int or None
@@ -95,6 +96,10 @@ class RenderOptions:
     aspect : float
         The frame's width over its height (MIN_ASPECT-MAX_ASPECT): 1 a square frame (one person), 3 the wide
         frame two people are filmed in; the width is `frame_width(size, aspect)`.
+    bits_per_row : int or None
+        The default rate control's rate in bits per second per row of the frame's height (`encode.frame_bits`):
+        None is encode.RATE_BITS_PER_ROW; a set that draws a mesh body in any of its styles takes
+        `rate_for_set(styles)` for every video, whatever each one's style, so that they stay one size.
     """
 
     size: int = 640
@@ -111,6 +116,14 @@ class RenderOptions:
     threads: int | None = None
     rate_seed: int | None = None
     aspect: float = 1.0
+    bits_per_row: int | None = None
+
+
+def rate_for_set(styles):
+    """The `bits_per_row` of every video of a set whose clips are drawn in `styles` (rendering.raster.Style): the
+    mesh body's higher rate (encode.MESH_RATE_BITS_PER_ROW) if any of them draws a mesh, else None (the default,
+    encode.RATE_BITS_PER_ROW). Decided once for the set: every video of an item must be one size."""
+    return MESH_RATE_BITS_PER_ROW if any(style.body == "mesh" for style in styles) else None
 
 
 def render_clip(clip_or_path, out_mp4, options=None, *, sheet=None, partner=None, captions=None, mesh=None,
@@ -182,7 +195,17 @@ def render_clip(clip_or_path, out_mp4, options=None, *, sheet=None, partner=None
     keep = set(np.linspace(0, len(joints) - 1, o.sheet_frames).round().astype(int)) if sheet else set()
     kept = []
     proc = ffmpeg_writer(
-        out_mp4, size, fps, o.preset, o.qp, o.crf, o.threads, frames=len(joints), seed=o.rate_seed, width=frame[0]
+        out_mp4,
+        size,
+        fps,
+        o.preset,
+        o.qp,
+        o.crf,
+        o.threads,
+        frames=len(joints),
+        seed=o.rate_seed,
+        width=frame[0],
+        bits_per_row=o.bits_per_row,
     )
     painted = _painted(people, [m if d.style.body == "mesh" else None for (d, _), m in zip(people, meshes)], targets)
     try:

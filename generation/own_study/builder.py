@@ -41,7 +41,7 @@ from moglow_eval.core.clip import save_clip
 from moglow_eval.core.tables import C2ST_COLUMNS
 from rendering.captions import ROOM as CAPTION_ROOM
 from rendering.raster import PARTNER_COLOUR, STYLES
-from rendering.render import frame_width
+from rendering.render import frame_width, rate_for_set
 
 from ..data.motion_files import read_motion
 from ..metrics import c2st
@@ -262,6 +262,18 @@ def skeleton_of(motions):
     return any_ref.names, any_ref.parents
 
 
+def render_settings(spec):
+    """The render settings every clip of the study shares (generation.stimuli.render_pool: RenderOptions' fields)."""
+    options = dict(hide=tuple(spec.hide), thin=None if spec.thin == "auto" else tuple(spec.thin))
+    # One rate for the whole set, whatever each clip's style: a set with a mesh body takes the mesh's higher rate in
+    # every video, so that an item's videos stay one size. Named in the job (and so in its key) only where it is not
+    # the default, so that a set without a mesh has the jobs it had.
+    rate = rate_for_set([STYLES[s] for s in spec.styles])
+    if rate is not None:
+        options["bits_per_row"] = rate
+    return options
+
+
 def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=None, scene=None, captions=None):
     """Clip files (random order and ids), manifest and metrics rows (with, per row, the index of its clip in `clips`),
     render jobs, and C2ST features; the clips placed and each item's camera (and other person) in `scene`
@@ -273,7 +285,7 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
         feet = [feet[0], feet[0], feet[1], feet[1]]
     taken, manifest, metrics_rows, jobs, groups, feats, row_clips = set(), [], [], [], [], {}, []
     forbidden = [*study.RESERVED, *spec.conditions]
-    options = dict(hide=tuple(spec.hide), thin=None if spec.thin == "auto" else tuple(spec.thin))
+    options = render_settings(spec)
     # Every clip in every style: each styled clip is a stimulus of its own, with its own random id.
     styled = [(c, style) for c in clips for style in spec.styles]
     sampled = any(c.sample for c in clips)  # a stochastic system's: every row names its sample, if any

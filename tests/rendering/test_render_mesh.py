@@ -17,9 +17,12 @@ from generation.data.skinning import MeshSource, smpl_mesh
 from generation.data.smpl_files import SmplError, smpl_positions
 from generation.make_stimuli import main as make_stimuli
 from generation.stimuli.mesh_track import MeshTrack
+from rendering.blinding import check_one_size
 from rendering.camera import Projector, camera_targets
+from rendering.encode import MESH_RATE_BITS_PER_ROW, frame_bits
 from rendering.errors import RenderError
 from rendering.framing import item_camera
+from rendering.mp4_layout import read_layout
 from rendering.raster import STYLES, FrameDrawer
 from rendering.render import MESH_CHUNK, RenderOptions, render_clip
 
@@ -158,6 +161,10 @@ def test_a_study_draws_every_clip_as_stick_and_mesh(tmp_path):
         s: sorted((r["condition"], r["item"], r["role"]) for r in rows if r["style"] == s) for s in ("stick", "mesh")
     }
     assert by_style["stick"] == by_style["mesh"] and any(c == "BAD" for c, _, _ in by_style["mesh"])
+    # One rate for the set: the stick videos too at the mesh's, every frame after the first two at its budget.
+    check_one_size([tmp_path / "o" / r["video"] for r in rows])
+    budget = frame_bits(128, 30.0, MESH_RATE_BITS_PER_ROW) // 8
+    assert 0 <= read_layout(tmp_path / "o" / rows[0]["video"]).sample_sizes[-1] - budget <= 16
     for r in rows:
         frames, _ = decode(tmp_path / "o" / r["video"])
         body, _ = body_pixels(frames[len(frames) // 2])
