@@ -102,9 +102,11 @@ def additive_rss(y, rater, clip):
         A, n_big, z_big, n_small, z_small = N, n_r, z_r, n_c, z_c
     else:
         A, n_big, z_big, n_small, z_small = N.T.tocsr(), n_c, z_c, n_r, z_r
-    schur = np.diag(n_small) - (A.T @ sparse.diags(1 / n_big) @ A).toarray()
-    b = linalg.lstsq(schur, z_small - A.T @ (z_big / n_big), check_finite=False)[0]
-    a = (z_big - A @ b) / n_big
+    # A level with no rating (a bootstrap draws a rater whose clips were all left out) has no part in the fit.
+    inv_big = np.divide(1.0, n_big, out=np.zeros_like(n_big), where=n_big > 0)
+    schur = np.diag(n_small) - (A.T @ sparse.diags(inv_big) @ A).toarray()
+    b = linalg.lstsq(schur, z_small - A.T @ (z_big * inv_big), check_finite=False)[0]
+    a = (z_big - A @ b) * inv_big
     return max(float(yc @ yc - a @ z_big - b @ z_small), 0.0)
 
 

@@ -69,6 +69,11 @@ def test_the_additive_fit_is_least_squares_and_an_exact_fit_has_no_icc():
         dummies[np.arange(60), rater] = dummies[np.arange(60), raters + clip] = 1
         fit = np.linalg.lstsq(dummies, y, rcond=None)[0]
         assert agreement.additive_rss(y, rater, clip) == pytest.approx(((dummies @ fit - y) ** 2).sum(), rel=1e-9)
+        # a level with no rating left (as a bootstrap resample can have) changes nothing, and warns of nothing
+        with np.errstate(all="raise"):
+            assert agreement.additive_rss(y, np.where(rater == 0, raters, rater), clip) == pytest.approx(
+                ((dummies @ fit - y) ** 2).sum(), rel=1e-9
+            )
     # Ratings that a rater bias plus a clip level give exactly: the REML criterion has no minimum, so no ICC (not
     # the arbitrary value a search wandering off among ever larger variances would stop at)...
     df = panel(raters=6, clips=8, missing=0.3, seed=2)
