@@ -159,6 +159,7 @@ def test_a_condition_joins_a_running_study_and_is_withdrawn(make, folders, app_d
     }
 
 
+@pytest.mark.full  # add-condition run again and again: the full tier (the fast tier keeps the first test of it)
 def test_clashes_are_refused_with_one_line_and_change_nothing(
     make, folders, tmp_path, capsys, app_db_url, stimulus_mp4
 ):
@@ -216,6 +217,7 @@ def test_only_a_pairwise_study_grows(make, folders, capsys, app_db_url):
     fails_with(main, ["add-condition", "--db", app_db_url, "--manifest", str(new)], capsys, "only a pairwise study")
 
 
+@pytest.mark.full  # the dashboard re-encodes the new videos: the full tier (the fast tier keeps add-condition)
 def test_the_dashboard_adds_and_withdraws(make, folders, tmp_path):
     study, new = folders
     app = make(study, "pairwise", upload_root=str(tmp_path))
@@ -286,6 +288,7 @@ def test_the_workers_of_a_running_gunicorn_learn_of_the_round(folders, app_db_ur
         engine.dispose()
 
 
+@pytest.mark.full  # add-condition as a process: the full tier (the fast tier keeps its first test)
 def test_active_pairing_takes_in_a_new_condition_and_lets_a_withdrawn_one_go(make, folders, app_db_url):
     """With `--pairing active` the running app's ranking grows with the round: the new system's pairs, with no votes
     yet, have the weakest evidence for their order once the first three's order is backed by votes, so a new
