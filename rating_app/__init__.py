@@ -189,9 +189,13 @@ def _open_rounds(app: Flask) -> None:
 
     from .store import rounds
     from .store.db import utcnow
+    from .store.schema import init_lock
 
     ext = app.extensions["rating_app"]
-    with Session(ext["engine"]) as s, s.begin():
+    # Under the lock the schema is made under: gunicorn's workers start at once, and on a fresh database each would
+    # insert the manifest's row and the conditions' rows (a worker that lost the race failed to boot, and took the
+    # whole server down with it).
+    with init_lock(ext["engine"]), Session(ext["engine"]) as s, s.begin():
         rounds.record_start(s, ext["manifest"], ext["clips"].values(), utcnow())
         gone = rounds.withdrawn(s.connection())
         ext["units"] = rounds.active_units(ext["units"], ext["clips"], gone)

@@ -107,3 +107,53 @@ def test_raters_with_a_server_crash(app_stimuli, design_stimuli, app_db_url, tmp
     # the balanced assignment spread the 2 test slots per rater evenly over the test units
     per_unit = collections.Counter(unit(r) for r in rows if r["role"] == "test" and unit(r) is not None)
     assert max(per_unit.values()) - min(per_unit.values()) <= 3
+
+
+def test_apps_starting_at_once_on_a_fresh_database_all_start(app_stimuli, pg_server, monkeypatch):
+    """gunicorn's workers each open the study as they boot. On a fresh PostgreSQL database they raced to record the
+    manifest's row: a worker that lost failed to boot, and gunicorn shut the whole server down ("Worker failed to
+    boot"), seen once in this file's crowds. Here two apps start in threads, each held before recording its start
+    until the other is there too (or 3 s have passed: under the lock that now orders them, the first waits alone)."""
+    import secrets
+
+    import psycopg
+
+    from rating_app import create_app
+    from rating_app.store import rounds
+
+    record, meet = rounds.record_start, threading.Barrier(2, timeout=3)
+
+    def together(*args):
+        try:
+            meet.wait()
+        except threading.BrokenBarrierError:
+            pass
+        return record(*args)
+
+    monkeypatch.setattr(rounds, "record_start", together)
+    for _ in range(2):
+        name = f"start_{secrets.token_hex(4)}"
+        with psycopg.connect(pg_server, autocommit=True) as conn:
+            conn.execute(f'CREATE DATABASE "{name}"')
+        url = pg_server.rsplit("/", 1)[0] + f"/{name}"
+        errors, apps = [], []
+
+        def start():
+            try:
+                apps.append(create_app(manifest=app_stimuli, db_url=url, admin_token="start-token"))
+            except Exception as e:  # said in the assertion below
+                errors.append(repr(e))
+
+        meet.reset()
+        threads = [threading.Thread(target=start) for _ in range(2)]
+        try:
+            for t in threads:
+                t.start()
+            for t in threads:
+                t.join(120)
+            assert errors == [] and len(apps) == 2, errors
+        finally:
+            for app in apps:
+                app.extensions["rating_app"]["engine"].dispose()
+            with psycopg.connect(pg_server, autocommit=True) as conn:
+                conn.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
