@@ -77,14 +77,14 @@ def reencode(src, dst, like, seed: int | None = None) -> None:
     """Encode the video `src` again into `dst` (stimulus encoder, fresh randomness unless `seed`), as the video
     `like` is: its size, frame rate and number of frames; RenderError, one line, when `src` differs in any or
     ffmpeg fails, and then no `dst`."""
-    import imageio_ffmpeg
-
     src, dst = Path(src), Path(dst)
     (w, h), fps, _ = _probe(Path(like))
     if w % 2 or h % 2:
         raise RenderError(f"{like}: {w}x{h} pixels; a stimulus video's sides are even (yuv420p)")
-    frames = imageio_ffmpeg.count_frames_and_secs(str(like))[0]
-    bits = frame_budget(read_layout(like).sample_sizes, fps)
+    # The study's video's sample table gives its frames (one sample a frame: the encoder writes no B-frames) and
+    # their sizes, with no pass of ffmpeg over the file to count them.
+    sizes = read_layout(like).sample_sizes
+    frames, bits = len(sizes), frame_budget(sizes, fps)
     try:
         _reencode(src, dst, (w, h), fps, frames, seed, bits)
     except BaseException:
