@@ -436,9 +436,10 @@ class FrameDrawer:
         self.u_flat[b] = c[:, 0].astype(np.uint8)
         self.v_flat[b] = c[:, 1].astype(np.uint8)
 
-    def rgb(self):
-        """The current frame as RGB [height, width, 3] (for contact sheets and tests)."""
-        return yuv_to_rgb(self.frame, (self.width, self.height))
+    def rgb(self, half=False):
+        """The current frame as RGB [height, width, 3] (for contact sheets and tests); with `half`, at half the
+        width and height (yuv.yuv_to_rgb)."""
+        return yuv_to_rgb(self.frame, (self.width, self.height), half)
 
 
 def head_joint(names):

@@ -33,6 +33,7 @@ MIN_ASPECT, MAX_ASPECT = 0.25, 4.0  # width / height: from a tall 1:4 to a wide 
 MAX_WIDTH = 8192  # pixels: a wide frame's memory and x264's levels
 MESH_CHUNK = 64  # frames of a mesh's vertices skinned and held at once
 MESH_AHEAD = 8  # frames of drawn meshes the skinning thread keeps ready ahead of the frame being composed
+SHEET_TILE = 240  # pixels: the height of a contact sheet's tiles
 
 
 def size_flag(text):
@@ -193,7 +194,7 @@ def render_clip(clip_or_path, out_mp4, options=None, *, sheet=None, partner=None
         targets = np.tile(np.asarray(o.target, np.float64), (len(joints), 1))
     layer = CaptionLayer(captions, frame) if captions else None
     keep = set(np.linspace(0, len(joints) - 1, o.sheet_frames).round().astype(int)) if sheet else set()
-    kept = []
+    kept, half = [], size >= 2 * SHEET_TILE  # a tile of half the frame or less: convert at half size, a 4th the work
     proc = ffmpeg_writer(
         out_mp4,
         size,
@@ -212,7 +213,7 @@ def render_clip(clip_or_path, out_mp4, options=None, *, sheet=None, partner=None
         for t, meshes_t in enumerate(painted):
             proc.stdin.write(compose(people, t, targets[t], layer, fps, meshes_t))
             if t in keep:
-                kept.append((t, drawer.rgb()))
+                kept.append((t, drawer.rgb(half)))
         proc.stdin.close()
     except BrokenPipeError:
         pass
@@ -372,8 +373,8 @@ def _paint(drawer, targets, ready, stop):
             painter.release()
 
 
-def contact_sheet(frames, fps, out_png, columns=4, thumb=240):
-    """Tile frames into one PNG, each frame's time written under it.
+def contact_sheet(frames, fps, out_png, columns=4, thumb=SHEET_TILE):
+    """Tile frames into one PNG, each frame's time written under it; a frame lower than `thumb` is not enlarged.
 
     Parameters
     ----------
@@ -386,7 +387,7 @@ def contact_sheet(frames, fps, out_png, columns=4, thumb=240):
     columns : int
         Frames per row.
     thumb : int
-        The height of each tile in pixels (its width keeps the frames' aspect).
+        The height of each tile in pixels (its width keeps the frames' aspect), at most the frames' own.
 
     Returns
     -------
@@ -397,11 +398,13 @@ def contact_sheet(frames, fps, out_png, columns=4, thumb=240):
 
     rows = -(-len(frames) // columns)
     label = 18
+    thumb = min(thumb, frames[0][1].shape[0]) if frames else thumb  # enlarging a small video adds bytes, not detail
     wide = round(thumb * frames[0][1].shape[1] / frames[0][1].shape[0]) if frames else thumb
     sheet = Image.new("RGB", (columns * wide, rows * (thumb + label)), "white")
     draw = ImageDraw.Draw(sheet)
     for k, (t, rgb) in enumerate(frames):
-        im = Image.fromarray(rgb).resize((wide, thumb), Image.LANCZOS)
+        im = Image.fromarray(rgb)
+        im = im if im.size == (wide, thumb) else im.resize((wide, thumb), Image.LANCZOS)
         x, y = (k % columns) * wide, (k // columns) * (thumb + label)
         sheet.paste(im, (x, y))
         draw.text((x + 4, y + thumb + 3), f"{t / fps:.2f} s", fill=(60, 60, 60))

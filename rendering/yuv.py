@@ -19,19 +19,31 @@ def grey_to_y(g):
     return 16.0 + 219.0 * g
 
 
-def yuv_to_rgb(frame, size):
+def yuv_to_rgb(frame, size, half=False):
     """A yuv420p frame (flat uint8, as FrameDrawer.draw returns) of `size` (a side, or (width, height)) -> RGB
-    uint8 [height, width, 3]."""
+    uint8 [height, width, 3]; with `half`, at half the width and height: each 2x2 block's mean luma with its chroma
+    sample, a quarter of the work, for a picture that is to be shrunk anyway (a contact sheet's tile)."""
     w, h = frame_size(size)
     n = w * h
+    if half:
+        y = frame[:n].reshape(h // 2, 2, w // 2, 2).mean(axis=(1, 3), dtype=np.float32)
+        y = 1.164 * (y - 16)
+        u = frame[n : n + n // 4].reshape(h // 2, w // 2).astype(np.float32) - 128
+        v = frame[n + n // 4 :].reshape(h // 2, w // 2).astype(np.float32) - 128
+        return _to_bytes(y, u, v, (h // 2, w // 2, 3))
     # Viewed as [h/2, 2, w/2, 2], each 2x2 block's luma meets its one chroma sample by broadcasting: the chroma terms
     # are computed once a block, not once a pixel, and no full-size chroma plane is made (a contact sheet converts
     # 8 frames a clip). Every sum is formed in the same order as pixel by pixel, so the bytes are the same.
     y = 1.164 * (frame[:n].reshape(h // 2, 2, w // 2, 2).astype(np.float32) - 16)
     u = frame[n : n + n // 4].reshape(h // 2, 1, w // 2, 1).astype(np.float32) - 128
     v = frame[n + n // 4 :].reshape(h // 2, 1, w // 2, 1).astype(np.float32) - 128
-    rgb = np.empty((h // 2, 2, w // 2, 2, 3), np.uint8)
+    return _to_bytes(y, u, v, (h // 2, 2, w // 2, 2, 3)).reshape(h, w, 3)
+
+
+def _to_bytes(y, u, v, shape):
+    """RGB uint8 of `shape` from the scaled luma and the centred chroma (broadcast to the luma's shape)."""
+    rgb = np.empty(shape, np.uint8)
     for c, plane in enumerate((y + 1.596 * v, y - 0.392 * u - 0.813 * v, y + 2.017 * u)):
         plane += 0.5
         rgb[..., c] = np.clip(plane, 0, 255, out=plane)
-    return rgb.reshape(h, w, 3)
+    return rgb

@@ -1,6 +1,7 @@
 """make_stimuli: the stimulus folder of one real --quick run (CONTRACTS.md §4), system import, bad input."""
 
 import csv
+import os
 import re
 import shutil
 import subprocess
@@ -341,6 +342,30 @@ def test_render_workers_load_no_torch(module):
         cwd=ROOT,
     )
     assert r.returncode == 0 and r.stdout.strip() == "False", r.stderr[-500:]
+
+
+def test_render_workers_do_not_run_the_commands_main_module_again(tmp_path):
+    """A command run as `python -m` hands render_all two jobs on two workers: the module's own lines run once, in
+    the command, not again in each spawned worker, and both videos are made."""
+    (tmp_path / "probe_main.py").write_text(
+        "import os, sys\n"
+        "import numpy as np\n"
+        "with open('imported.txt', 'a') as f:\n"
+        "    f.write(f'{os.getpid()}\\n')\n"
+        "from generation.motion import skeleton\n"
+        "from generation.stimuli.render_pool import render_all\n"
+        "from moglow_eval.core.clip import save_clip\n"
+        "if __name__ == '__main__':\n"
+        "    joints = np.random.default_rng(0).normal(0, 0.3, (6, len(skeleton.PARENTS), 3)) + [0, 1, 0]\n"
+        "    save_clip('c.npz', joints, skeleton.PARENTS, skeleton.JOINT_NAMES, 20.0)\n"
+        "    render_all([('c.npz', f'{k}.mp4', None, 32, 'ultrafast') for k in range(2)], 2, progress=False)\n"
+        "    assert sys.modules['__main__'].__file__.endswith('probe_main.py')  # given back after the start\n"
+    )
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    r = subprocess.run([sys.executable, "-m", "probe_main"], capture_output=True, text=True, cwd=tmp_path, env=env)
+    assert r.returncode == 0, r.stderr[-1500:]
+    assert len((tmp_path / "imported.txt").read_text().split()) == 1
+    assert (tmp_path / "0.mp4").stat().st_size > 0 and (tmp_path / "1.mp4").stat().st_size > 0
 
 
 def test_a_condition_under_natural_motions_fmd_is_named_and_explained():
