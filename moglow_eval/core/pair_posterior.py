@@ -60,7 +60,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import expit, ndtr, ndtri
 
 from . import study
 
@@ -96,6 +95,14 @@ class Posterior:
     cov_even: np.ndarray
 
 
+def _special():
+    """scipy.special, imported at its first use, not with this module: every worker of the rating app imports the
+    module for its settings' defaults, and scipy would add about a third of a second to each one's start."""
+    from scipy import special
+
+    return special
+
+
 def win_counts(k: int, firsts, seconds, outcomes) -> np.ndarray:
     """W [k, k] from votes on (first, second) condition indices with outcomes 1 (the first won), 0 (the second
     won) or 0.5 (a tie, half to each side)."""
@@ -123,7 +130,7 @@ def fit(wins, prior_sd: float = PRIOR_SD, start=None, tol: float = 1e-9) -> Post
 
     f = objective(theta)
     for _ in range(100):
-        p = expit(theta[:, None] - theta[None, :])
+        p = _special().expit(theta[:, None] - theta[None, :])
         grad = -(w - n * p).sum(axis=1) + prec * theta
         hess = _laplacian(n * p * (1.0 - p)) + prec * np.eye(k)
         step = np.linalg.solve(hess, grad)
@@ -145,7 +152,7 @@ def covariance(mean, counts, prior_sd: float = PRIOR_SD) -> np.ndarray:
     pair): what it is before their outcomes are known, so that votes asked for but not yet in (slots held by raters
     now watching) already count for the choice of the next pair."""
     mean = np.asarray(mean, float)
-    p = expit(mean[:, None] - mean[None, :])
+    p = _special().expit(mean[:, None] - mean[None, :])
     return np.linalg.inv(_laplacian(np.asarray(counts, float) * p * (1.0 - p)) + np.eye(len(mean)) / prior_sd**2)
 
 
@@ -183,7 +190,7 @@ def within(post: Posterior, a, b, margin_elo: float) -> np.ndarray:
     m = margin_elo / ELO_PER_LOG
     d = post.mean[a] - post.mean[b]
     sd = np.sqrt(np.maximum(_difference_var(post.cov, a, b), 1e-300))
-    return ndtr((m - d) / sd) - ndtr((-m - d) / sd)
+    return _special().ndtr((m - d) / sd) - _special().ndtr((-m - d) / sd)
 
 
 def tied(post: Posterior, margin_elo: float, confidence: float = TIE_CONFIDENCE) -> np.ndarray:
@@ -262,10 +269,10 @@ def settledness(post: Posterior, level: float, width: float | None = None, margi
     var = _difference_var(post.cov, a, b)
     needed = 1.0 - (1.0 - level) / (k - 1)
     is_tied = within(post, a, b, margin_elo) >= needed if margin_elo and margin_elo > 0 else np.zeros(k - 1, bool)
-    sep = ndtr((post.mean[a] - post.mean[b]) / np.sqrt(var))
+    sep = _special().ndtr((post.mean[a] - post.mean[b]) / np.sqrt(var))
     weakest = float(sep[~is_tied].min()) if (~is_tied).any() else 1.0
     se = _centred_se(post)
-    widest = float(2.0 * ndtri(1.0 - (1.0 - level) / 2.0) * se.max())
+    widest = float(2.0 * _special().ndtri(1.0 - (1.0 - level) / 2.0) * se.max())
     separated = weakest >= needed
     narrow = width is not None and width > 0 and widest <= width
     return {

@@ -333,3 +333,19 @@ def test_a_stale_database_variable_is_refused_by_the_commands_that_default_to_it
     monkeypatch.setenv("DATABASE_URL", f"sqlite:///{tmp_path / 'study.sqlite'}")
     for args in (("export", "--out", tmp_path / "x.csv"), ("withdraw-condition", "--condition", "MG")):
         command_fails(*args, needle="DATABASE_URL is set, but the app reads RATING_DATABASE_URL now")
+
+
+def test_an_app_worker_starts_without_scipy_pandas_or_torch():
+    """A gunicorn worker imports the app (rating_app.wsgi's create_app): scipy, pandas and torch stay out of it,
+    each a fraction of a second more for every worker's start. Active pairing loads scipy when it first fits."""
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import sys, rating_app; print(sorted({'scipy', 'pandas', 'torch'} & set(sys.modules)))",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
+    assert r.returncode == 0 and r.stdout.strip() == "[]", r.stdout + r.stderr[-500:]
