@@ -15,7 +15,7 @@ import sys
 import psycopg
 import pytest
 from helpers.once import built_once
-from helpers.paths import BANDAI, ROOT, SHARED, small_take_names
+from helpers.paths import BANDAI, PARTS, ROOT, SHARED, small_take_names
 
 from rendering.mesh import set_gl_environment
 
@@ -52,6 +52,15 @@ def pytest_configure(config):
     # rasteriser threads, which a forked child does not inherit, would leave tests/rendering/test_mesh_drawing.py's
     # child waiting for ever.
     set_gl_environment()
+    if sys.dont_write_bytecode and not hasattr(config, "workerinput"):
+        # Where PYTHONDONTWRITEBYTECODE is set, as on some CI machines, each of the several hundred processes the
+        # suite starts (servers and their workers, commands, render workers) would compile the product's modules
+        # from source again, a few tenths of a second each. Compiled once here, before xdist's workers start, they
+        # are read from __pycache__ (which git ignores), as on a machine without that setting.
+        import compileall
+
+        for part in PARTS:
+            compileall.compile_dir(ROOT / part, quiet=1)
 
 
 @pytest.fixture(scope="session")

@@ -7,6 +7,7 @@ import csv
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
+PARTS = ("moglow_eval", "generation", "rendering", "rating_app", "analysis")  # the product's packages
 SHARED = ROOT.parent / "shared"
 DATA = SHARED / "data"
 BANDAI = DATA / "bandai-namco-locomotion"

@@ -5,9 +5,8 @@ no reader of a release can follow."""
 import re
 
 import pytest
-from helpers.paths import ROOT
+from helpers.paths import PARTS, ROOT
 
-PARTS = ("moglow_eval", "generation", "rendering", "rating_app", "analysis")
 # A measured ratio: "1.34x", "2x", "1.0-1.5x", "40×" (not "0x1F", "2x512", "2×512 LSTMs", "x264").
 RATIO = re.compile(r"(?<![\w.])\d+(?:\.\d+)?(?:-\d+(?:\.\d+)?)?[x×](?![\w×])")
 ISSUE = re.compile(r"\bissues? #?\d+", re.I)
