@@ -1,5 +1,5 @@
 """`python -m rendering.reencode IN.mp4 OUT.mp4 --like STUDY.mp4`: a stimulus video encoded again, with fresh
-randomness, so that its bytes cannot be predicted from the file it came from.
+randomness, so that the file served is never the file submitted.
 
 A system that joins a running study (`python -m rating_app add-condition`) brings its own videos; served as they
 are, their bytes (or any hash of them) would let whoever submitted them pick out their own system's clips and vote
@@ -10,10 +10,17 @@ frame's budget is read from `--like`'s own frame sizes (`frame_budget`), so a se
 with a mesh body, rendering.encode.MESH_RATE_BITS_PER_ROW) is matched as the others are; the caller checks them.
 Only a video of the size, frame rate and number of frames of the study's video `--like` is taken: the decoder reads
 a hostile file, and nothing larger than the study's own clips is ever decoded.
+
+The fresh rates change the bytes of a real stimulus at every encode. A video with almost nothing in it (a flat
+picture, a bar that moves) is coded at the encoder's finest step whatever its rate, so its bytes can come out as
+they went in; such an encode is drawn again (`ATTEMPTS`). What no encode can hide is the picture itself: whoever
+made a clip and decodes what a study serves will know it, which is why nothing a client can see before it
+downloads a video (its id, URL, size, ETag) may tell them apart.
 """
 
 from __future__ import annotations
 
+import filecmp
 import subprocess
 import sys
 from fractions import Fraction
@@ -26,6 +33,7 @@ from .errors import RenderError
 from .mp4_layout import read_layout
 
 TIMEOUT_S = 600  # one clip: decoding and encoding a few hundred frames takes seconds
+ATTEMPTS = 8  # encodes drawn before a video whose bytes keep coming out as submitted is refused
 
 
 def _ffmpeg() -> str:
@@ -75,8 +83,9 @@ def frame_budget(sizes, fps) -> int:
 
 def reencode(src, dst, like, seed: int | None = None) -> None:
     """Encode the video `src` again into `dst` (stimulus encoder, fresh randomness unless `seed`), as the video
-    `like` is: its size, frame rate and number of frames; RenderError, one line, when `src` differs in any or
-    ffmpeg fails, and then no `dst`."""
+    `like` is: its size, frame rate and number of frames, and never byte for byte `src` (an encode that comes out
+    so is drawn again, `seed + 1` after `seed`); RenderError, one line, when `src` differs in any, keeps coming out
+    as it went in or ffmpeg fails, and then no `dst`."""
     src, dst = Path(src), Path(dst)
     (w, h), fps, _ = _probe(Path(like))
     if w % 2 or h % 2:
@@ -85,12 +94,17 @@ def reencode(src, dst, like, seed: int | None = None) -> None:
     # their sizes, with no pass of ffmpeg over the file to count them.
     sizes = read_layout(like).sample_sizes
     frames, bits = len(sizes), frame_budget(sizes, fps)
-    try:
-        _reencode(src, dst, (w, h), fps, frames, seed, bits)
-    except BaseException:
-        dst.unlink(missing_ok=True)
-        dst.with_name(dst.stem + ".video.mp4").unlink(missing_ok=True)
-        raise
+    for attempt in range(ATTEMPTS):
+        try:
+            _reencode(src, dst, (w, h), fps, frames, None if seed is None else seed + attempt, bits)
+            if not filecmp.cmp(src, dst, shallow=False):
+                return
+            dst.unlink()
+        except BaseException:
+            dst.unlink(missing_ok=True)
+            dst.with_name(dst.stem + ".video.mp4").unlink(missing_ok=True)
+            raise
+    raise RenderError(f"{src}: encoded again {ATTEMPTS} times, it came out as submitted each time (a flat picture?)")
 
 
 def _reencode(src: Path, dst: Path, size: tuple, fps: float, frames: int, seed: int | None, bits: int) -> None:

@@ -8,7 +8,7 @@
 - The clips it takes get fresh random ids (moglow_eval.core.study.new_clip_id) and new file names, so that nothing
   a rater's client sees (the trial's clip ids, the URLs) is a name the submitter chose or knows; their videos are
   encoded again with fresh randomness by `python -m rendering.reencode` (run as a process: the app imports no
-  other part), so their bytes cannot be predicted from the submitted files either.
+  other part), so that no served file is one of the submitted files byte for byte either.
 """
 
 from __future__ import annotations

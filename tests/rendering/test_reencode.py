@@ -1,0 +1,36 @@
+"""`rendering.reencode` never hands back the file it was given: a video with almost nothing in it is coded at the
+encoder's finest step whatever its rates, so an encode can come out byte for byte as submitted (with the dither
+seed the submitted file was made with, it does); such an encode is drawn again, and one that keeps coming out so
+is refused with one line and no file. The sizes a study's videos keep are tests/rendering/test_set_rate.py's."""
+
+import pytest
+from helpers.fake_stimuli import write_stimulus_mp4
+
+from rendering import reencode as reencode_module
+from rendering.errors import RenderError
+from rendering.mp4_layout import read_layout
+from rendering.reencode import reencode
+
+
+@pytest.fixture
+def flat(tmp_path):
+    """(a study's video, a submitted one made with dither seed 1): 64 px, a dark bar moving on white."""
+    return write_stimulus_mp4(tmp_path / "like.mp4"), write_stimulus_mp4(tmp_path / "src.mp4", seed=1)
+
+
+def test_an_encode_that_comes_out_as_submitted_is_drawn_again(flat, tmp_path):
+    like, src = flat
+    out = tmp_path / "out.mp4"
+    reencode(src, out, like, seed=1)  # seed 1 first: the submitted file's own rates
+    assert out.read_bytes() != src.read_bytes()
+    assert read_layout(out).sample_sizes == read_layout(like).sample_sizes
+
+
+def test_a_video_that_keeps_coming_out_as_submitted_is_refused(flat, tmp_path, monkeypatch):
+    like, src = flat
+    out = tmp_path / "out.mp4"
+    monkeypatch.setattr(reencode_module, "ATTEMPTS", 1)  # the one draw: seed 1, which gives the submitted bytes
+    with pytest.raises(RenderError, match=r"src\.mp4: encoded again 1 times, it came out as submitted") as e:
+        reencode(src, out, like, seed=1)
+    assert "\n" not in str(e.value)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["like.mp4", "src.mp4"]
