@@ -35,6 +35,7 @@ def test_alpha_is_the_librarys_and_the_closed_form_agrees():
     assert res["ci"][0] < res["alpha"] < res["ci"][1]
 
 
+@pytest.mark.filterwarnings("ignore:The inplace keyword in DataFrame.dropna")  # pingouin's, as _icc_complete ignores it
 def test_icc_is_pingouins_on_a_complete_table_and_the_reml_estimate_matches_it():
     import pingouin
 
