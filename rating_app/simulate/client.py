@@ -45,11 +45,13 @@ def probe(url: str, wait_s: float = REACH_S) -> dict:
     return body
 
 
-def check_design(url: str, design: str) -> None:
-    """AppError unless the server at `url` runs `design` (its /healthz names it)."""
-    running = probe(url).get("design", study.DEFAULT_DESIGN)
+def check_design(url: str, design: str) -> dict:
+    """The app's /healthz reply; AppError unless the server at `url` runs `design` (the reply names it)."""
+    body = probe(url)
+    running = body.get("design", study.DEFAULT_DESIGN)
     if running != design:
         raise AppError(f"--design {design}: the server at {url} runs a {running} study")
+    return body
 
 
 class Refused(AppError):

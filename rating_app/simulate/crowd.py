@@ -45,12 +45,12 @@ def run_simulation(
     started = time.monotonic()
     clips = load_clips(manifest)  # the user's files first: a bad one is named even with no server up
     by_condition = set_qualities(clips, quality)
-    if design is not None:
-        check_design(url, design)
-    else:
-        probe(url)  # no server: say so now, not at the time limit
+    # no server, or another design: say so now, not at the time limit
+    health = check_design(url, design) if design is not None else probe(url)
     raters = make_raters(n_raters, seed, careless, prefix or f"sim{seed}")
     crowd = _Crowd(url, clips, started + timeout_s, think_s, on_ack)
+    view = health.get("min_view")  # the time limit's line names it even if no session began
+    crowd.min_view = float(view) if isinstance(view, (int, float)) and not isinstance(view, bool) else None
     crowd.heard = load_audio_answers(manifest)
     if progress:
         from tqdm import tqdm
@@ -134,7 +134,7 @@ class _Crowd:
         self.bar = None  # a progress bar, counting raters as they finish
         self.heard = {}  # a study with sound: the sound-check samples' digits by their bytes' hash
         self.timed_out = False  # a rater gave up, or never began, at the time limit
-        self.min_view = None  # the app's, from the first session reply
+        self.min_view = None  # the app's, from /healthz, then from the session replies
 
     def take_part(self, rater: Rater) -> None:
         res = self.results[rater.index] = _new_result(rater)

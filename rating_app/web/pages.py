@@ -81,4 +81,5 @@ def video(name):
 
 @bp.get("/healthz")
 def healthz():
-    return jsonify(ok=True, design=current_app.config["STUDY_DESIGN"], warnings=health.of_app().list())
+    cfg = current_app.config
+    return jsonify(ok=True, design=cfg["STUDY_DESIGN"], min_view=cfg["MIN_VIEW"], warnings=health.of_app().list())

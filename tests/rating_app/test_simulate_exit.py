@@ -118,6 +118,18 @@ def test_the_time_limit_is_a_failure_that_names_min_view(app_stimuli, tmp_path):
     assert json.loads(r.stdout)["timed_out"] is True
 
 
+def test_a_time_limit_before_any_session_still_names_the_apps_min_view(app_stimuli, tmp_path):
+    """The app's --min-view comes from /healthz, which the crowd reads before any rater starts: a limit that passes
+    before the first session reply (a loaded machine, a slow server) still names it."""
+    db = f"sqlite:///{tmp_path}/r.sqlite"
+    with served(app_stimuli, db, min_view=0.75, sessions_per_client=0) as url:
+        r = simulate("--url", url, "--raters", 2, "--manifest", app_stimuli, "--timeout", 0.001, timeout=40)
+    line = one_error_line(r)
+    assert "with 0 of 2 raters done" in line and "the app's is 0.75," in line, line
+    summary = json.loads(r.stdout)
+    assert summary["timed_out"] is True and summary["n_raters_started"] == 0
+
+
 def test_a_full_study_is_a_success(app_stimuli, tmp_path):
     db = f"sqlite:///{tmp_path}/r.sqlite"
     with served(app_stimuli, db, ratings_per_clip=2, min_view=0, sessions_per_client=0) as url:
