@@ -29,6 +29,7 @@ def render_on_cluster(jobs, scheduler: str, render, done) -> None:
         from distributed import Client, as_completed
     except ImportError:
         raise UserError("--scheduler needs Dask: pip install 'moglow-eval[cluster]'") from None
+    _refuse_a_closed_port(scheduler)
     try:
         client = Client(scheduler, timeout="20s")
     except OSError as e:
@@ -50,6 +51,31 @@ def render_on_cluster(jobs, scheduler: str, render, done) -> None:
             except Exception as e:  # the worker's RenderError, or Dask's KilledWorker after repeated losses
                 raise UserError(f"{jobs[futures[fut]][1]}: rendering on the cluster failed: {e}") from None
             done(futures[fut])
+
+
+def _refuse_a_closed_port(scheduler: str) -> None:
+    """UserError at once when nothing listens at a tcp:// scheduler's port. Dask's Client tries a refused address
+    again until its timeout, which suits a scheduler still starting on a slow network; a machine that answers
+    "refused" now has no scheduler there, and the organiser should hear so in a moment, not in twenty seconds.
+    Other schemes, and an address that does not answer at all, are left to Dask's own timeout."""
+    import socket
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(scheduler)
+    try:
+        host, port = parts.hostname, parts.port
+    except ValueError:  # a port that is not a number: Dask names the fault
+        return
+    if parts.scheme != "tcp" or not host or not port:
+        return
+    try:
+        socket.create_connection((host, port), timeout=5).close()
+    except ConnectionRefusedError:
+        raise UserError(
+            f"--scheduler {scheduler}: no Dask scheduler answers there (the connection was refused)"
+        ) from None
+    except OSError:
+        return
 
 
 def _name(job) -> str:

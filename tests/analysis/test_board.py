@@ -439,12 +439,12 @@ def test_the_board_in_chromium_at_a_phones_width(every_design, reports, browser,
         " videos: Array.prototype.map.call(document.querySelectorAll('video'),"
         "   function(v){return {src: v.currentSrc, ready: v.readyState, width: v.videoWidth}})};"
     )
-    from selenium.webdriver.support.ui import WebDriverWait
+    from helpers.browser import waiting
 
     for page in pages:
         browser.get(page.as_uri())
         if "systems" in page.parts:
-            WebDriverWait(browser, 20).until(lambda d: all(v["ready"] >= 1 for v in d.execute_script(state)["videos"]))
+            waiting(browser, 20).until(lambda d: all(v["ready"] >= 1 for v in d.execute_script(state)["videos"]))
         s = browser.execute_script(state)
         assert s["inner"] == 390 and s["wide"] <= 390 and s["body"] <= 390, (page, s)
         assert s["scripts"] == 0

@@ -94,7 +94,7 @@ def test_the_demos_board_in_chromium(challenge, browser):
         " fetched: performance.getEntriesByType('resource').map(function(e){return e.name}),"
         " videos: Array.prototype.map.call(document.querySelectorAll('video'), function(v){return v.readyState})};"
     )
-    from selenium.webdriver.support.ui import WebDriverWait
+    from helpers.browser import waiting
 
     browser.get((board / "index.html").as_uri())
     s = browser.execute_script(state)
@@ -103,7 +103,7 @@ def test_the_demos_board_in_chromium(challenge, browser):
     for system in realism["systems"]:  # the page shows board.json's numbers (the report's, tests/analysis/test_board)
         assert f"{system['score']:.2f}" in s["text"]
     browser.get((board / top["latest"] / "systems" / "TEAM_C.html").as_uri())
-    WebDriverWait(browser, 20).until(lambda d: d.execute_script(state)["videos"] and all(
+    waiting(browser, 20).until(lambda d: d.execute_script(state)["videos"] and all(
         v >= 1 for v in d.execute_script(state)["videos"]))  # fmt: skip
     s = browser.execute_script(state)
     assert s["wide"] <= 390 and all(u.startswith(board.as_uri() + "/") for u in s["fetched"])

@@ -126,8 +126,8 @@ def answer_a_pair(browser, wait, url, app):
 
 
 def test_a_two_person_study_in_a_real_browser(served, tmp_path):
+    from helpers.browser import waiting
     from selenium.webdriver.common.by import By
-    from selenium.webdriver.support.ui import WebDriverWait
 
     design, app, url, sources = served
     browser = chrome(tmp_path, "1280,900")
@@ -138,7 +138,7 @@ def test_a_two_person_study_in_a_real_browser(served, tmp_path):
             swatch = browser.find_element(By.CSS_SELECTOR, ".swatch rect").value_of_css_property("fill")
             assert swatch == "rgb(102, 153, 112)", swatch  # rendering.raster.PARTNER_COLOUR, the default
             assert "grey" not in browser.find_element(By.ID, "welcome").text
-        srcs = answer_a_pair(browser, WebDriverWait(browser, 90), url, app)
+        srcs = answer_a_pair(browser, waiting(browser, 90), url, app)
         cookies = {c["name"]: c["value"] for c in browser.get_cookies()}
         errors = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
         assert not errors, errors

@@ -59,11 +59,11 @@ def app_stimuli(tmp_path_factory):
 def _rate_trials(driver, url, n, app):
     """Take a rater (in `driver`) through consent, the sound check and `n` trials, each started by a tap and
     played to its end with its sound; returns the videos' URLs."""
+    from helpers.browser import waiting
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
-    from selenium.webdriver.support.ui import WebDriverWait
 
-    wait = WebDriverWait(driver, 30)
+    wait = waiting(driver, 30)
     driver.get(url + "/?PROLIFIC_PID=renderpid1&STUDY_ID=st1&SESSION_ID=se1")
     driver.find_element(By.ID, "consent").click()
     wait.until(EC.element_to_be_clickable((By.ID, "start"))).click()

@@ -21,6 +21,18 @@ CHROMIUM, CHROMEDRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
 live_server_manifest = []
 
 
+# How often a wait asks the page again. selenium's default, half a second, was seconds of nothing in every browser
+# test: a rater's flow waits some sixty times (a clip's end, the next trial), and each wait lasts to the next poll.
+POLL_S = 0.05
+
+
+def waiting(driver, timeout):
+    """selenium's WebDriverWait on `driver` for up to `timeout` seconds, asking every POLL_S."""
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    return WebDriverWait(driver, timeout, poll_frequency=POLL_S)
+
+
 def chrome(tmp_path, window="390,844"):
     """Debian's chromium, headless, through chromedriver, with a window of `window` (width,height)."""
     if not (shutil.which(CHROMIUM) and shutil.which(CHROMEDRIVER)):
@@ -55,9 +67,8 @@ def acr_rater_flow(live_server, browser):
     end: the ratings clicked are the export's, and nothing is flagged but a failed catch trial."""
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
-    from selenium.webdriver.support.ui import WebDriverWait
 
-    wait = WebDriverWait(browser, 20)
+    wait = waiting(browser, 20)
     browser.get(live_server + "/?PROLIFIC_PID=browserpid1&STUDY_ID=st1&SESSION_ID=se1")
     start = browser.find_element(By.ID, "start")
     assert not start.is_enabled()  # consent first

@@ -61,9 +61,10 @@ def run_flow(browser, url, design, answer):
     and returns (trial id, value). Returns ({trial id: value}, number of familiarisation trials, code)."""
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
-    from selenium.webdriver.support.ui import WebDriverWait
 
-    wait = WebDriverWait(browser, 30)
+    from .browser import waiting
+
+    wait = waiting(browser, 30)
     browser.get(url + f"/?PROLIFIC_PID={design}pid&STUDY_ID=st1&SESSION_ID=se1")
     browser.find_element(By.ID, "consent").click()
     wait.until(EC.element_to_be_clickable((By.ID, "start"))).click()

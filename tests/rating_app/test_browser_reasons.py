@@ -42,9 +42,9 @@ def reason_stimuli(tmp_path_factory):
 
 @pytest.mark.parametrize("app_db_url", ["sqlite"], indirect=True)
 def test_reasons_reach_the_export_intact_and_are_shown_escaped(reason_stimuli, app_db_url, browser):
+    from helpers.browser import waiting
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
-    from selenium.webdriver.support.ui import WebDriverWait
 
     app, server, thread = serve(reason_stimuli, app_db_url, "pairwise")
     url = f"http://127.0.0.1:{server.server_port}"
@@ -91,7 +91,7 @@ def test_reasons_reach_the_export_intact_and_are_shown_escaped(reason_stimuli, a
         browser.get(url + "/admin")
         browser.find_element(By.NAME, "token").send_keys("browser-token")
         browser.find_element(By.CSS_SELECTOR, "form button").click()
-        table = WebDriverWait(browser, 20).until(EC.presence_of_element_located((By.ID, "reason-texts"))).text
+        table = waiting(browser, 20).until(EC.presence_of_element_located((By.ID, "reason-texts"))).text
         title = browser.title
     finally:
         server.shutdown()

@@ -62,14 +62,14 @@ def served(request, sound_study, tmp_path):
     ids=["phone", "desktop"],
 )
 def test_sound_check_and_a_trial_with_sound(served, window, tmp_path):
+    from helpers.browser import waiting
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
-    from selenium.webdriver.support.ui import WebDriverWait
 
     app, url = served
     browser = chrome(tmp_path, window)
     try:
-        wait = WebDriverWait(browser, 60)
+        wait = waiting(browser, 60)
         browser.get(url + "/?PROLIFIC_PID=soundpid1")
         assert "headphones" in browser.find_element(By.ID, "welcome").text.lower()
         browser.find_element(By.ID, "consent").click()

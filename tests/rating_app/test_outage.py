@@ -121,9 +121,9 @@ return {section: vis.length ? vis[0] : null, label: document.getElementById('pha
 def test_the_page_retries_an_answer_through_a_database_restart(cluster, app_stimuli, browser):
     """The real page in chromium: the database stops as the rater answers, stays away 10 s and comes back; the page
     says it is retrying, sends the answer by itself once the server is back and goes on; the answer is stored once."""
+    from helpers.browser import waiting
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
-    from selenium.webdriver.support.ui import WebDriverWait
     from werkzeug.serving import make_server
 
     from rating_app import create_app
@@ -133,7 +133,7 @@ def test_the_page_retries_an_answer_through_a_database_restart(cluster, app_stim
     server = make_server("127.0.0.1", 0, app, threaded=True)
     threading.Thread(target=server.serve_forever, daemon=True).start()
     url = f"http://127.0.0.1:{server.server_port}"
-    wait = WebDriverWait(browser, 30)
+    wait = waiting(browser, 30)
     state = lambda: browser.execute_script(PAGE_JS)  # noqa: E731
     try:
         browser.get(url + "/?PROLIFIC_PID=outage1&SESSION_ID=se1")
@@ -158,14 +158,14 @@ def test_the_page_retries_an_answer_through_a_database_restart(cluster, app_stim
                 if not outage_done:
                     cluster.stop("fast")
                     button.click()
-                    WebDriverWait(browser, 15).until(lambda d: state()["retrying"])
+                    waiting(browser, 15).until(lambda d: state()["retrying"])
                     time.sleep(10)  # longer than the page's old retries lasted
                     assert state()["count"] == s["count"] and state()["section"] == "trial"
                     cluster.start()
                     outage_done = True
                 else:
                     button.click()
-            WebDriverWait(browser, 60).until(
+            waiting(browser, 60).until(
                 lambda d, s=s: (state()["section"], state()["count"]) != (s["section"], s["count"])
             )
         else:

@@ -133,9 +133,9 @@ def test_the_page_is_never_flagged_with_replays_and_a_reload(app_stimuli, app_db
     import threading
 
     import requests
+    from helpers.browser import waiting
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
-    from selenium.webdriver.support.ui import WebDriverWait
     from werkzeug.serving import make_server
 
     from rating_app import create_app
@@ -145,7 +145,7 @@ def test_the_page_is_never_flagged_with_replays_and_a_reload(app_stimuli, app_db
     threading.Thread(target=server.serve_forever, daemon=True).start()
     url = f"http://127.0.0.1:{server.server_port}"
     try:
-        wait = WebDriverWait(browser, 30)
+        wait = waiting(browser, 30)
         browser.get(url + "/?PROLIFIC_PID=replayer&SESSION_ID=se1")
         browser.find_element(By.ID, "consent").click()
         wait.until(EC.element_to_be_clickable((By.ID, "start"))).click()

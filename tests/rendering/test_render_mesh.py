@@ -272,12 +272,11 @@ def test_a_stick_and_mesh_study_in_a_real_browser_reports_the_style(two_style_se
     import shutil
     import threading
 
-    from helpers.browser import STATE, chrome
+    from helpers.browser import STATE, chrome, waiting
     from helpers.design_client import post
     from PIL import Image
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
-    from selenium.webdriver.support.ui import WebDriverWait
     from werkzeug.serving import make_server
 
     from analysis.report import build_report
@@ -294,7 +293,7 @@ def test_a_stick_and_mesh_study_in_a_real_browser_reports_the_style(two_style_se
     browser = chrome(tmp_path, "1280,900")
     seen, meshes = set(), 0
     try:
-        wait = WebDriverWait(browser, 60)
+        wait = waiting(browser, 60)
         browser.get(url + "/?PROLIFIC_PID=meshpid1")
         browser.find_element(By.ID, "consent").click()
         wait.until(EC.element_to_be_clickable((By.ID, "start"))).click()
