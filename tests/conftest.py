@@ -63,6 +63,17 @@ def pytest_configure(config):
             compileall.compile_dir(ROOT / part, quiet=1)
 
 
+def pytest_xdist_auto_num_workers(config):
+    """The workers of `-n auto` (pyproject's addopts): one a core for the fast tier, which computes all the time,
+    and one more for the full tier, whose browsers, servers, crowds and databases leave a core waiting about a fifth
+    of the run; a third worker on 2 cores fills that time, and would only slow the fast tier (bench/RESULTS.md,
+    test-suite). PYTEST_XDIST_AUTO_NUM_WORKERS, xdist's own setting, still decides where it is set."""
+    if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS", "").isdigit():
+        return int(os.environ["PYTEST_XDIST_AUTO_NUM_WORKERS"])
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    return cores if "not full" in (config.option.markexpr or "") else cores + 1
+
+
 @pytest.fixture(scope="session")
 def pg_server():
     """The plain URL of the tests' PostgreSQL database `test`: the server at 127.0.0.1:5432 when it answers, else
