@@ -101,9 +101,16 @@ def needs_full(item):
 def pytest_collection_modifyitems(config, items):
     # Every collected test runs, in CI too: a long variant of a check is a benchmark or a script (bench/, deploy/),
     # never a test left out.
+    full_files = set()
     for item in items:
         if needs_full(item):
             item.add_marker(pytest.mark.full)
+            full_files.add(item.path)
+    # The files with full-tier tests first: they hold the long ones (whole studies, browsers, servers), and the
+    # workers, which take a file at a time in this order (--dist loadfile), then end on the many short files
+    # together instead of one finishing a long file while the others wait. A stable sort: each file's tests keep
+    # their order, and every worker collects the same order, as xdist requires.
+    items.sort(key=lambda item: item.path not in full_files)
 
 
 # --- data ---
