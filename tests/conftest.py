@@ -107,9 +107,10 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.full)
             full_files.add(item.path)
     # The files with full-tier tests first: they hold the long ones (whole studies, browsers, servers), and the
-    # workers, which take a file at a time in this order (--dist loadfile), then end on the many short files
-    # together instead of one finishing a long file while the others wait. A stable sort: each file's tests keep
-    # their order, and every worker collects the same order, as xdist requires.
+    # workers, which take a file at a time in this order (--dist loadfile --no-loadscope-reorder: xdist's own order,
+    # by the number of tests in a file, left the README's study, two tests, to the end), then end on the many short
+    # files together instead of one finishing a long file while the others wait. A stable sort: each file's tests
+    # keep their order, and every worker collects the same order, as xdist requires.
     items.sort(key=lambda item: item.path not in full_files)
 
 
