@@ -4,7 +4,8 @@
     intake (every team accepted)  →  make_stimuli, one study per task  →  serve, a simulated crowd, export and
     report per task (analysis.demo)  →  analysis.board
 
-    python -m analysis.challenge_demo [--out challenge-demo/] [--items 6] [--raters 40] [--seed 0]
+    python -m analysis.challenge_demo [--out challenge-demo/] [--items 6] [--raters 40] [--ratings-per-clip 20]
+                                      [--seed 0]
     moglow-eval challenge-demo ...
 
 Team A is a deterministic system, team B first submits a broken folder (a missing item, a wrong frame rate, NaN
@@ -60,8 +61,11 @@ def _intake(procs: Processes, data: Path, out: Path, log: Path) -> dict:
     return verdicts
 
 
-def run_challenge(out: Path, n_items: int = 6, raters: int = 40, seed: int = 0, db: str | None = None) -> dict:
-    """Run the demo challenge into `out`; returns the paths of its board and its reports."""
+def run_challenge(
+    out: Path, n_items: int = 6, raters: int = 40, seed: int = 0, db: str | None = None, ratings_per_clip: int = 20
+) -> dict:
+    """Run the demo challenge into `out`; returns the paths of its board and its reports. `ratings_per_clip`: each
+    task's target, answers a clip (or a pair), as analysis.demo's."""
     out = Path(out)
     _fresh(out)
     (out / MARK).write_text(json.dumps({"items": n_items, "seed": seed}) + "\n")
@@ -98,7 +102,9 @@ def run_challenge(out: Path, n_items: int = 6, raters: int = 40, seed: int = 0, 
         for task, design in tasks.items():
             print(f"\n-- {task} ({design})", flush=True)
             url = None if db is None else db
-            run_demo(out / task, db=url, raters=raters, seed=seed, design=design, stimuli=out / "stimuli" / task)
+            stimuli = out / "stimuli" / task
+            run_demo(out / task, db=url, raters=raters, seed=seed, design=design, stimuli=stimuli,
+                     ratings_per_clip=ratings_per_clip)  # fmt: skip
             reports[task] = out / task / "report"
 
         _stage(6, f"the board → {out / 'board'}")
@@ -123,6 +129,12 @@ def build_parser():
     p.add_argument("--out", default="challenge-demo", help="folder for everything it makes (default challenge-demo/)")
     p.add_argument("--items", type=cli.number(int, 4, 40), default=6, help="test items per task (default 6)")
     p.add_argument("--raters", type=cli.number(int, 1, 10_000), default=40, help="most simulated raters per task")
+    p.add_argument(
+        "--ratings-per-clip",
+        type=cli.number(int, 1, 10_000),
+        default=20,
+        help="answers each clip (or pair) of a task gets before its crowd stops (default 20)",
+    )
     p.add_argument("--seed", type=cli.number(int, 0), default=0)
     p.add_argument("--db", default=None, help="database URL (default an SQLite file per task)")
     return p
@@ -131,7 +143,7 @@ def build_parser():
 def _main(argv) -> int:
     a = build_parser().parse_args(argv)
     try:
-        run_challenge(Path(a.out), a.items, a.raters, a.seed, a.db)
+        run_challenge(Path(a.out), a.items, a.raters, a.seed, a.db, a.ratings_per_clip)
     except KeyboardInterrupt:
         return interrupted()
     return 0
