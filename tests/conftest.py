@@ -71,7 +71,7 @@ def pytest_xdist_auto_num_workers(config):
     if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS", "").isdigit():
         return int(os.environ["PYTEST_XDIST_AUTO_NUM_WORKERS"])
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    return cores if "not full" in (config.option.markexpr or "") else cores + 1
+    return cores if _fast_tier(config) else cores + 1
 
 
 @pytest.fixture(scope="session")
@@ -110,8 +110,15 @@ def pytest_collection_modifyitems(config, items):
     # workers, which take a file at a time in this order (--dist loadfile --no-loadscope-reorder: xdist's own order,
     # by the number of tests in a file, left the README's study, two tests, to the end), then end on the many short
     # files together instead of one finishing a long file while the others wait. A stable sort: each file's tests
-    # keep their order, and every worker collects the same order, as xdist requires.
-    items.sort(key=lambda item: item.path not in full_files)
+    # keep their order, and every worker collects the same order, as xdist requires. The fast tier keeps the files'
+    # own order: it has no long files to put first.
+    if not _fast_tier(config):
+        items.sort(key=lambda item: item.path not in full_files)
+
+
+def _fast_tier(config):
+    """Whether this run is the fast tier (`-m "not full"`)."""
+    return "not full" in (config.option.markexpr or "")
 
 
 # --- data ---
