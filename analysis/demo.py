@@ -150,6 +150,11 @@ DB_NAME = "ratings.sqlite"
 ENV_NAMES = {"design": "RATING_STUDY_DESIGN"}
 
 
+# The items a study with speech may have here: what both of the demo's own studies can make (demo_study and demo_dyad
+# take at least three; two people at most thirty).
+SPEECH_ITEMS = (3, 30)
+
+
 def clear_earlier_run(out: Path, new_stimuli: bool) -> None:
     """Remove what an earlier demo run left in `out`; DemoError when `out` holds files the demo did not make (it
     writes MARK first), rather than deleting anyone's work."""
@@ -173,13 +178,15 @@ def make_stimuli(procs: "Processes", out: Path, s: dict) -> Path:
     if design in ("dyadic", "semantic"):
         _stage(f"1/5 a study of two people talking (generation.own_study.demo_dyad) → {stimuli}")
         cmd = ["--out", str(out / "study"), "--seed", str(seed), "--design", design]
+        cmd += ["--items", str(s["items"])] if s["items"] else []
         procs.run([py, "-m", "generation.own_study.demo_dyad", *cmd], "generation.own_study.demo_dyad")
         cmd = ["--study", str(out / "study" / "study.toml")]
     elif sound:
         _stage(f"1/5 a study with sound (generation.own_study.demo_study) → {stimuli}")
         procs.run(
             [py, "-m", "generation.own_study.demo_study", "--out", str(out / "study"), "--seed", str(seed)]
-            + (["--appropriateness"] if design == "appropriateness" else []),
+            + (["--appropriateness"] if design == "appropriateness" else [])
+            + (["--items", str(s["items"])] if s["items"] else []),
             "generation.own_study.demo_study",
         )
         cmd = ["--study", str(out / "study" / "study.toml")]
@@ -275,14 +282,15 @@ def run_demo(
     items: int | None = None,
 ) -> dict:
     """Run the study; returns paths and the crowd's summary. `stimuli` reuses an existing folder. What an earlier
-    run left in `out` is replaced (clear_earlier_run). `items`: test items of the built-in set (None: make_stimuli's
-    default, the paper's 30)."""
+    run left in `out` is replaced (clear_earlier_run). `items`: test items of the set it makes (None: the paper's 30
+    for the built-in set, the demo study's own number for a study with speech)."""
     out = Path(out)
     sound = sound or design in study.MISMATCH_COLUMN  # the matched-against-mismatched designs are about speech
-    if items is not None and (stimuli is not None or sound):
-        # Checked before anything in `out` is replaced: a refused run leaves an earlier one as it was.
-        given = "--stimuli" if stimuli is not None else f"--design {design}" if design != "acr" else "--sound"
-        raise DemoError(f"--items: only the built-in set is made with a number of items, not with {given}")
+    # Checked before anything in `out` is replaced: a refused run leaves an earlier one as it was.
+    if items is not None and stimuli is not None:
+        raise DemoError("--items: a set given with --stimuli is used as it is; leave out one of the two")
+    if items is not None and sound and not SPEECH_ITEMS[0] <= items <= SPEECH_ITEMS[1]:
+        raise DemoError(f"--items: a study with speech has {SPEECH_ITEMS[0]} to {SPEECH_ITEMS[1]} items, not {items}")
     settings = dict(locals())
     clear_earlier_run(out, stimuli is None)
     (out / "logs").mkdir(parents=True, exist_ok=True)
@@ -347,7 +355,8 @@ def build_parser():
         "--items",
         type=cli.number(int, 2, 10_000),
         default=None,
-        help="test items of the built-in set (make_stimuli --n-items; default the paper's 30), for a quicker try",
+        help="test items of the set it makes, for a quicker try: the built-in set's (make_stimuli --n-items; default "
+        f"the paper's 30) or the study with speech's ({SPEECH_ITEMS[0]}-{SPEECH_ITEMS[1]}; default the study's own)",
     )
     p.add_argument(
         "--runs",

@@ -22,6 +22,7 @@ from rendering.mesh import set_gl_environment
 # Fixtures that need the full machine: ../shared, PostgreSQL, or a real run of the pipeline.
 FULL_FIXTURES = {"shared_dir", "small_dataset", "tiny_runs", "quick_stimuli", "pg_server", "pg_database"}
 FULL_MARKERS = ("full", "postgres", "browser")
+MAX_WORKERS = 4  # cores that `-n auto` counts at most (pytest_xdist_auto_num_workers)
 
 
 @pytest.fixture(scope="session")
@@ -67,10 +68,13 @@ def pytest_xdist_auto_num_workers(config):
     """The workers of `-n auto` (pyproject's addopts): one a core for the fast tier, which computes all the time,
     and one more for the full tier, whose browsers, servers, crowds and databases leave a core waiting about a fifth
     of the run; a third worker on 2 cores fills that time, and would only slow the fast tier (bench/RESULTS.md,
-    test-suite). PYTEST_XDIST_AUTO_NUM_WORKERS, xdist's own setting, still decides where it is set."""
+    test-suite). At most MAX_WORKERS a core count: each worker's servers, crowds and browsers hold PostgreSQL
+    connections and memory, and the suite was measured on 2 cores. PYTEST_XDIST_AUTO_NUM_WORKERS, xdist's own
+    setting, still decides where it is set."""
     if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS", "").isdigit():
         return int(os.environ["PYTEST_XDIST_AUTO_NUM_WORKERS"])
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    cores = min(cores, MAX_WORKERS)
     return cores if _fast_tier(config) else cores + 1
 
 

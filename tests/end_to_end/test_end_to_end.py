@@ -171,11 +171,13 @@ def test_demo_runs_one_design_after_another_in_its_default_folder(quick_stimuli,
     )
     assert r.returncode == 2 and "holds files the demo did not make" in r.stderr, r.stderr
     assert [p.name for p in mine.iterdir()] == ["notes.txt"]
-    # --items sizes the built-in set only: with a set given, or one with speech, it is refused before anything
-    # in the folder is touched.
+    # --items sizes a set the demo makes: with a set given, or more items than a study with speech can have, it is
+    # refused before anything in the folder is touched.
+    from analysis.demo import SPEECH_ITEMS
     from analysis.demo import main as demo_main
 
     before = sorted(p.name for p in demo.iterdir())
-    for more in (["--stimuli", str(demo / "stimuli")], ["--design", "appropriateness"]):
-        assert demo_main(["--out", str(demo), "--items", "6", *more]) == 2
+    too_many = str(SPEECH_ITEMS[1] + 1)
+    for more in (["--items", "6", "--stimuli", str(demo / "stimuli")], ["--items", too_many, "--design", "dyadic"]):
+        assert demo_main(["--out", str(demo), *more]) == 2
     assert sorted(p.name for p in demo.iterdir()) == before
