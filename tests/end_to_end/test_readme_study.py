@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 from helpers.paths import ROOT
+from helpers.ports import free_port
 from helpers.servers import wait_for
 
 SECTION = "## A study in five commands"
@@ -80,9 +81,7 @@ def on_a_free_port(serve, simulate):
     assert int(flag(serve, "--port") or 5000) == port, "README: the crowd's --url is not where the app serves"
     if port_free(port):
         return serve, simulate
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        free = s.getsockname()[1]
+    free = free_port()
     simulate = [f"http://127.0.0.1:{free}" if w == url else w for w in simulate]
     return [*serve, "--port", str(free)], simulate
 

@@ -5,24 +5,18 @@ mid-build has its clips run again on the other (generation.stimuli.cluster)."""
 import hashlib
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
 
 import pytest
 from helpers.own_study_data import make_study
+from helpers.ports import free_port
 
 from generation.stimuli.build_index import BuildIndex
 
 pytestmark = pytest.mark.full  # the real actions in ../shared
 ARGS = ["--size", "96", "--length-s", "1.5", "--quiet"]
-
-
-def _port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _files(folder):
@@ -33,7 +27,7 @@ def _files(folder):
 @pytest.fixture
 def cluster(tmp_path):
     """(scheduler address, [worker processes]): `dask scheduler` and two `dask worker`s, each a process group."""
-    address = f"tcp://127.0.0.1:{_port()}"
+    address = f"tcp://127.0.0.1:{free_port()}"
     started = []
 
     def start(*cmd, log):
@@ -87,6 +81,6 @@ def test_no_scheduler_there_is_one_line(tmp_path, capsys):
 
     study = make_study(tmp_path / "in", n_items=2, n_catch=1)
     out = tmp_path / "out"
-    code = main(["--study", str(study), "--out", str(out), *ARGS, "--scheduler", f"tcp://127.0.0.1:{_port()}"])
+    code = main(["--study", str(study), "--out", str(out), *ARGS, "--scheduler", f"tcp://127.0.0.1:{free_port()}"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code != 0 and "no Dask scheduler answers there" in err[-1] and "Traceback" not in "\n".join(err)

@@ -8,12 +8,13 @@ import contextlib
 import csv
 import os
 import secrets
-import socket
 from pathlib import Path
 
 import numpy as np
 
 from moglow_eval.core import study
+
+from .ports import free_port  # noqa: F401  (the app's tests import it from here)
 
 
 def pg_base() -> str:
@@ -185,9 +186,3 @@ def pg_schema(base_url: str | None = None):
     finally:
         with psycopg.connect(plain, autocommit=True) as conn:
             conn.execute(f'DROP SCHEMA IF EXISTS "{name}" CASCADE')
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]

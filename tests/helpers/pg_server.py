@@ -10,12 +10,13 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
-import socket
 import subprocess
 import tempfile
 from pathlib import Path
 
 import psycopg
+
+from .ports import free_port
 
 PG_BIN = Path("/usr/lib/postgresql/15/bin")
 DEFAULT_ADMIN = "postgresql://postgres@127.0.0.1:5432/test"
@@ -23,13 +24,6 @@ DEFAULT_ADMIN = "postgresql://postgres@127.0.0.1:5432/test"
 
 class ServerError(RuntimeError):
     pass
-
-
-def free_port() -> int:
-    # Not fake_stimuli's: that module is the app's tests', and this one must stand alone.
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class Cluster:

@@ -1,0 +1,37 @@
+"""Ports for the servers the tests start (apps, proxies, PostgreSQL, Dask schedulers).
+
+A port the kernel hands out for `bind(0)` is one of its ephemeral ports, which it also gives every outgoing
+connection (a client to PostgreSQL, chromedriver, a crowd): between the test taking such a port and its server
+binding it, another worker's connection can take it, and the server fails with "address already in use" (a proxy
+did so once in a full run). A port below the ephemeral range is never given to an outgoing connection, so only
+another test's own pick could take it: drawn at random from thousands, and checked free, that is rare.
+"""
+
+import random
+import socket
+from pathlib import Path
+
+LOWEST = 10_000  # below this, ports that services on a developer's machine tend to use
+
+
+def _ephemeral_start() -> int:
+    try:
+        return int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 32_768  # Linux's default
+
+
+def free_port() -> int:
+    """A port on 127.0.0.1 that nothing listens on, below the kernel's ephemeral range."""
+    top = _ephemeral_start()
+    for _ in range(200):
+        port = random.randrange(LOWEST, top)
+        with socket.socket() as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    with socket.socket() as s:  # a machine whose low ports are all taken: the kernel's pick, as before
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
