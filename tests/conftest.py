@@ -69,10 +69,10 @@ def pytest_xdist_auto_num_workers(config):
     and one more for the full tier, whose browsers, servers, crowds and databases leave a core waiting about a fifth
     of the run; a third worker on 2 cores fills that time, and would only slow the fast tier (bench/RESULTS.md,
     test-suite). At most MAX_WORKERS a core count: each worker's servers, crowds and browsers hold PostgreSQL
-    connections and memory, and the suite was measured on 2 cores. PYTEST_XDIST_AUTO_NUM_WORKERS, xdist's own
-    setting, still decides where it is set."""
-    if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS", "").isdigit():
-        return int(os.environ["PYTEST_XDIST_AUTO_NUM_WORKERS"])
+    connections and memory, and the suite was measured on 2 cores. Where PYTEST_XDIST_AUTO_NUM_WORKERS is set, this
+    answers nothing, and xdist's own hook reads it."""
+    if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS"):
+        return None
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
     cores = min(cores, MAX_WORKERS)
     return cores if _fast_tier(config) else cores + 1

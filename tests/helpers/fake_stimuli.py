@@ -1,6 +1,6 @@
-"""Helpers for the rating app's tests and bench/bench_app.py: a small stimulus folder of real MP4s, throw-away
-PostgreSQL schemas and a free port. They live beside the tests, not in rating_app, so that the product ships no
-fake stimuli under the name of the real `generation.make_stimuli`."""
+"""Helpers for the rating app's tests and bench/bench_app.py: a small stimulus folder of real MP4s and throw-away
+PostgreSQL schemas (free ports: helpers.ports). They live beside the tests, not in rating_app, so that the product
+ships no fake stimuli under the name of the real `generation.make_stimuli`."""
 
 from __future__ import annotations
 
@@ -13,8 +13,6 @@ from pathlib import Path
 import numpy as np
 
 from moglow_eval.core import study
-
-from .ports import free_port  # noqa: F401  (the app's tests import it from here)
 
 
 def pg_base() -> str:

@@ -4,8 +4,8 @@ server from the installed binaries, points every test's URL at it, and removes i
 import os
 
 import psycopg
-from helpers.fake_stimuli import free_port
 from helpers.pg_server import answers, suite_server
+from helpers.ports import free_port
 
 
 def test_the_suite_has_a_postgresql_and_every_url_points_at_it(pg_server):

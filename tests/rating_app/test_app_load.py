@@ -9,7 +9,8 @@ import time
 import pytest
 from helpers.concurrent_raters import cover_mismatches
 from helpers.crowd_records import DESIGNS
-from helpers.fake_stimuli import free_port, write_fake_stimuli
+from helpers.fake_stimuli import write_fake_stimuli
+from helpers.ports import free_port
 from helpers.servers import crowd_env, kill9, start_gunicorn, stop, warm_up
 
 from moglow_eval.core import study

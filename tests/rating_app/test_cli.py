@@ -12,8 +12,8 @@ import time
 import numpy as np
 import pytest
 import requests
-from helpers.fake_stimuli import free_port
 from helpers.paths import ROOT
+from helpers.ports import free_port
 
 from moglow_eval.core.tables import read_metrics
 from rating_app import create_app

@@ -18,7 +18,8 @@ from pathlib import Path
 import pytest
 import requests
 from helpers.concurrent_raters import cover_mismatches
-from helpers.fake_stimuli import free_port, write_fake_stimuli
+from helpers.fake_stimuli import write_fake_stimuli
+from helpers.ports import free_port
 from helpers.proxies import caddy_accel, nginx_accel, nginx_head, nginx_temp_paths
 from helpers.servers import crowd_env, kill9, start_gunicorn, stop
 

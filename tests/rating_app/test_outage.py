@@ -18,8 +18,9 @@ import pytest
 import requests
 from helpers.concurrent_raters import cover_mismatches
 from helpers.crowd_records import DESIGNS
-from helpers.fake_stimuli import free_port, write_fake_stimuli
+from helpers.fake_stimuli import write_fake_stimuli
 from helpers.pg_server import Cluster, ServerError
+from helpers.ports import free_port
 from helpers.servers import crowd_env, start_gunicorn
 
 from rating_app.simulate import run_simulation

@@ -15,8 +15,8 @@ import subprocess
 
 import pytest
 import requests
-from helpers.fake_stimuli import free_port
 from helpers.paths import ROOT
+from helpers.ports import free_port
 from helpers.servers import start_gunicorn, wait_for
 
 NGINX = shutil.which("nginx") or "/usr/sbin/nginx"

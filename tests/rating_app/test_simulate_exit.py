@@ -8,8 +8,8 @@ import sys
 import threading
 
 import pytest
-from helpers.fake_stimuli import free_port
 from helpers.paths import ROOT
+from helpers.ports import free_port
 
 from rating_app import create_app
 from rating_app.store.db import app_engine
