@@ -26,8 +26,14 @@ def yuv_to_rgb(frame, size, half=False):
     w, h = frame_size(size)
     n = w * h
     if half:
-        y = frame[:n].reshape(h // 2, 2, w // 2, 2).mean(axis=(1, 3), dtype=np.float32)
-        y = 1.164 * (y - 16)
+        # The block's four lumas summed as integers (exact), then a quarter of that: the bytes of a float32 mean
+        # over the block's axes, at a tenth of its cost (numpy reduces over strided axes slowly).
+        q = frame[:n].reshape(h // 2, 2, w // 2, 2)
+        s = q[:, 0, :, 0].astype(np.uint16)
+        s += q[:, 0, :, 1]
+        s += q[:, 1, :, 0]
+        s += q[:, 1, :, 1]
+        y = 1.164 * (s.astype(np.float32) * np.float32(0.25) - 16)
         u = frame[n : n + n // 4].reshape(h // 2, w // 2).astype(np.float32) - 128
         v = frame[n + n // 4 :].reshape(h // 2, w // 2).astype(np.float32) - 128
         return _to_bytes(y, u, v, (h // 2, w // 2, 3))

@@ -19,7 +19,8 @@ import math
 import numpy as np
 from scipy import linalg, optimize, sparse
 from scipy import stats as sps
-from threadpoolctl import threadpool_limits
+
+from .blas import one_blas_thread
 
 BOUND_NEAR = 1e-3  # a relative SD this close to 0 sits at the bound, where the polish is needed
 DENSE_MAX = 4_000_000  # raters x clips up to which the count table is held dense (32 MB)
@@ -195,7 +196,7 @@ def fit_crossed(y, X, rater, clip, names, with_cov=False, tests=True, start=None
     """
     # One BLAS thread: the criterion is a chain of small factorisations, where thread hand-offs cost more than
     # they save (far slower on a busy 2-core machine), and the rounding is then identical from run to run.
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         fit, cov = _fit(
             np.asarray(y, float), np.asarray(X, float), np.asarray(rater), np.asarray(clip), names, tests, start
         )

@@ -24,7 +24,8 @@ import numpy as np
 from scipy import linalg, optimize
 from scipy import stats as sps
 from scipy.special import expit
-from threadpoolctl import threadpool_limits
+
+from .blas import one_blas_thread
 
 
 class OrdinalError(ValueError):
@@ -252,7 +253,7 @@ def fit_clmm(y, X, rater, clip, names, n_levels, level_names=None):
     Returns dict: thresholds, fixed_effects, std_errors, threshold_std_errors, z, p_values, sd_rater, sd_clip,
     log_likelihood, converged, max_abs_gradient, n_evaluations.
     """
-    with threadpool_limits(limits=1, user_api="blas"):  # small factorisations: threads cost more than they save
+    with one_blas_thread():  # small factorisations: threads cost more than they save
         return _fit(
             np.asarray(y, np.int64),
             np.asarray(X, float),
