@@ -20,7 +20,7 @@ import numpy as np
 from scipy import linalg, optimize, sparse
 from scipy import stats as sps
 
-from .blas import one_blas_thread
+from moglow_eval.core.blas import one_blas_thread
 
 BOUND_NEAR = 1e-3  # a relative SD this close to 0 sits at the bound, where the polish is needed
 DENSE_MAX = 4_000_000  # raters x clips up to which the count table is held dense (32 MB)

@@ -25,7 +25,7 @@ from scipy import linalg, optimize
 from scipy import stats as sps
 from scipy.special import expit
 
-from .blas import one_blas_thread
+from moglow_eval.core.blas import one_blas_thread
 
 
 class OrdinalError(ValueError):
