@@ -72,7 +72,7 @@ def _rate_trials(driver, url, n, app):
         "var vis=['intro','trial','rating-intro','done'].filter(function(id){"
         " return !document.getElementById(id).hidden});"
         "var v=document.getElementById('video');"
-        "return {section: vis.length ? vis[0] : null, src: v.currentSrc, ended: v.ended, muted: v.muted,"
+        "return {section: vis.length ? vis[0] : null, src: v.src, ended: v.ended, muted: v.muted,"
         " decoded: v.webkitAudioDecodedByteCount||0, count: document.getElementById('trial-count').textContent};"
     )
     srcs = []

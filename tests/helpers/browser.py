@@ -80,12 +80,12 @@ def acr_rater_flow(live_server, browser):
 
     clicked, seen_before_end, n_training = {}, 0, 0
     screenshot = os.environ.get("SAVE_SCREENSHOTS") == "1"
-    state_js = (
+    state_js = (  # the video's src, not its currentSrc, which chromium updates a task later (design_pages.STATE_JS)
         "var vis=['trial','rating-intro','done'].filter(function(id){return !document.getElementById(id).hidden});"
         "var v=document.getElementById('video');"
         "return {section: vis.length ? vis[0] : null,"
         " label: document.getElementById('phase-label').textContent,"
-        " count: document.getElementById('trial-count').textContent, ended: v.ended, src: v.currentSrc,"
+        " count: document.getElementById('trial-count').textContent, ended: v.ended, src: v.src,"
         " disabled: Array.prototype.every.call(document.querySelectorAll('button.rate'),"
         "   function(b){return b.disabled}),"
         " fits: document.documentElement.scrollWidth <= window.innerWidth + 1};"

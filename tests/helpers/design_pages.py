@@ -33,6 +33,9 @@ def serve(manifest, db_url, design):
     return app, server, thread
 
 
+# A video's `src` (the address the page set, in the same task as the trial's label and count), never `currentSrc`:
+# chromium updates currentSrc in a later task of its own, so under load a state read in between named the trial
+# before (seen once: the first rated pair taken for the last example, absent from the export).
 STATE_JS = """
 var vis = ['pair', 'page', 'rating-intro', 'intro', 'done'].filter(function (id) {
   return !document.getElementById(id).hidden; });
@@ -43,7 +46,7 @@ var box = function (id) {
 return {section: sec,
   label: sec ? (document.querySelector('#' + sec + ' .phase-label') || {}).textContent : null,
   count: sec ? (document.querySelector('#' + sec + ' .trial-count') || {}).textContent : null,
-  ended: vids.map(function (v) { return v.ended; }), srcs: vids.map(function (v) { return v.currentSrc; }),
+  ended: vids.map(function (v) { return v.ended; }), srcs: vids.map(function (v) { return v.src; }),
   prefs_disabled: Array.prototype.every.call(document.querySelectorAll('button.pref'),
                                              function (b) { return b.disabled; }),
   submit_disabled: document.getElementById('page-submit').disabled,
