@@ -30,7 +30,6 @@ import os
 import secrets
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -39,17 +38,12 @@ import urllib.request
 from pathlib import Path
 
 from moglow_eval.core import cli, study
+from moglow_eval.core.ports import free_port
 from moglow_eval.core.study import DESIGNS
 
 
 class DemoError(cli.UserError):
     """A stage failed; the message says which and where its log is."""
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _stage(title: str):
@@ -213,7 +207,7 @@ def serve_command(manifest: Path, db: str, port: int, opts: dict, gunicorn: bool
 def start_app(procs: "Processes", out: Path, manifest: Path, db: str, s: dict) -> tuple[str, dict]:
     """Stage 2: the app on a free port, once it answers; returns its URL and the environment holding its admin
     token."""
-    port = _free_port()
+    port = free_port()
     url = f"http://127.0.0.1:{port}"
     env = dict(os.environ, RATING_ADMIN_TOKEN=secrets.token_hex(16))
     _stage(f"2/5 rating app at {url} (database {db.split('@')[-1]})")

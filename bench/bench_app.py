@@ -53,10 +53,10 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))  # the fake stimulus folder the app's tests use (tests/fake_stimuli.py)
 
 from helpers.fake_stimuli import pg_schema, write_fake_stimuli  # noqa: E402
-from helpers.ports import free_port  # noqa: E402
 from helpers.proxies import caddy_accel  # noqa: E402
 
 from moglow_eval.core import cli  # noqa: E402
+from moglow_eval.core.ports import free_port  # noqa: E402
 from moglow_eval.core.study import DESIGNS  # noqa: E402
 
 

@@ -20,7 +20,6 @@ import filecmp
 import os
 import shutil
 import signal
-import socket
 import statistics
 import subprocess
 import sys
@@ -33,6 +32,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 from generation.stimuli import render_pool  # noqa: E402
+from moglow_eval.core.ports import free_port  # noqa: E402
 
 WORKERS = 2
 
@@ -103,12 +103,6 @@ def retarget(jobs, out):
 
 
 # ---------------------------------------------------------------- the engines
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 QUIET = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
 
 

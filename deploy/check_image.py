@@ -10,7 +10,6 @@ the image builds and serves; an AssertionError says which step failed.
 """
 
 import shutil
-import socket
 import subprocess
 import sys
 import tempfile
@@ -18,13 +17,10 @@ from pathlib import Path
 
 DEPLOY = Path(__file__).resolve().parent
 sys.path.insert(0, str(DEPLOY.parent / "tests"))  # the tests' writer of a small stimulus set
+sys.path.insert(0, str(DEPLOY.parent))
 from helpers.fake_stimuli import write_fake_stimuli  # noqa: E402
 
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from moglow_eval.core.ports import free_port  # noqa: E402
 
 
 def check_image(tmp_path):

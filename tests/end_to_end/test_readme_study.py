@@ -20,8 +20,9 @@ from pathlib import Path
 
 import pytest
 from helpers.paths import ROOT
-from helpers.ports import free_port
 from helpers.servers import wait_for
+
+from moglow_eval.core.ports import free_port
 
 SECTION = "## A study in five commands"
 

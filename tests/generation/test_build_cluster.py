@@ -11,9 +11,9 @@ import time
 
 import pytest
 from helpers.own_study_data import make_study
-from helpers.ports import free_port
 
 from generation.stimuli.build_index import BuildIndex
+from moglow_eval.core.ports import free_port
 
 pytestmark = pytest.mark.full  # the real actions in ../shared
 ARGS = ["--size", "96", "--length-s", "1.5", "--quiet"]

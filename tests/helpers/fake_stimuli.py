@@ -1,6 +1,6 @@
 """Helpers for the rating app's tests and bench/bench_app.py: a small stimulus folder of real MP4s and throw-away
-PostgreSQL schemas (free ports: helpers.ports). They live beside the tests, not in rating_app, so that the product
-ships no fake stimuli under the name of the real `generation.make_stimuli`."""
+PostgreSQL schemas (free ports: moglow_eval.core.ports). They live beside the tests, not in rating_app, so that the
+product ships no fake stimuli under the name of the real `generation.make_stimuli`."""
 
 from __future__ import annotations
 

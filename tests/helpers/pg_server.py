@@ -16,7 +16,7 @@ from pathlib import Path
 
 import psycopg
 
-from .ports import free_port
+from moglow_eval.core.ports import free_port
 
 PG_BIN = Path("/usr/lib/postgresql/15/bin")
 DEFAULT_ADMIN = "postgresql://postgres@127.0.0.1:5432/test"

@@ -5,7 +5,8 @@ import os
 
 import psycopg
 from helpers.pg_server import answers, suite_server
-from helpers.ports import free_port
+
+from moglow_eval.core.ports import free_port
 
 
 def test_the_suite_has_a_postgresql_and_every_url_points_at_it(pg_server):

@@ -16,9 +16,10 @@ import pytest
 import requests
 from helpers.fake_stimuli import write_fake_stimuli
 from helpers.flags import video_flags
-from helpers.ports import free_port
 from helpers.proxies import caddy_accel, nginx_accel, nginx_head, nginx_temp_paths
 from helpers.servers import start_gunicorn, wait_for
+
+from moglow_eval.core.ports import free_port
 
 pytestmark = pytest.mark.full  # the full tier: real proxies (nginx, caddy)
 

@@ -10,10 +10,10 @@ import pytest
 from helpers.concurrent_raters import cover_mismatches
 from helpers.crowd_records import DESIGNS
 from helpers.fake_stimuli import write_fake_stimuli
-from helpers.ports import free_port
 from helpers.servers import crowd_env, kill9, start_gunicorn, stop, warm_up
 
 from moglow_eval.core import study
+from moglow_eval.core.ports import free_port
 from rating_app.simulate import run_simulation
 from rating_app.store.db import make_engine
 

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import requests
 from helpers.paths import ROOT
-from helpers.ports import free_port
 
+from moglow_eval.core.ports import free_port
 from moglow_eval.core.tables import read_metrics
 from rating_app import create_app
 from rating_app.simulate.raters import ClipInfo, load_clips, parse_quality, quality_from_metrics

@@ -19,10 +19,10 @@ import pytest
 import requests
 from helpers.concurrent_raters import cover_mismatches
 from helpers.fake_stimuli import write_fake_stimuli
-from helpers.ports import free_port
 from helpers.proxies import caddy_accel, nginx_accel, nginx_head, nginx_temp_paths
 from helpers.servers import crowd_env, kill9, start_gunicorn, stop
 
+from moglow_eval.core.ports import free_port
 from rating_app.designs.acr import iter_rows
 from rating_app.simulate import run_simulation
 from rating_app.store.db import make_engine

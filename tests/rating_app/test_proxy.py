@@ -16,8 +16,9 @@ import subprocess
 import pytest
 import requests
 from helpers.paths import ROOT
-from helpers.ports import free_port
 from helpers.servers import start_gunicorn, wait_for
+
+from moglow_eval.core.ports import free_port
 
 NGINX = shutil.which("nginx") or "/usr/sbin/nginx"
 TOKEN = "proxy-admin-token"

@@ -247,9 +247,9 @@ def test_the_workers_of_a_running_gunicorn_learn_of_the_round(folders, app_db_ur
     """A real server, three worker processes: a crowd rates, add-condition runs beside it, a second crowd gets the
     new pairs from whichever worker it meets, and every count still adds up."""
     from helpers.concurrent_raters import cover_mismatches
-    from helpers.ports import free_port
     from helpers.servers import crowd_env, start_gunicorn, stop
 
+    from moglow_eval.core.ports import free_port
     from rating_app.simulate import run_simulation
     from rating_app.store.db import make_engine
 

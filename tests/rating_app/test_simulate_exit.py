@@ -9,8 +9,8 @@ import threading
 
 import pytest
 from helpers.paths import ROOT
-from helpers.ports import free_port
 
+from moglow_eval.core.ports import free_port
 from rating_app import create_app
 from rating_app.store.db import app_engine
 

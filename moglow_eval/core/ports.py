@@ -1,10 +1,11 @@
-"""Ports for the servers the tests start (apps, proxies, PostgreSQL, Dask schedulers).
+"""Ports for the servers this project starts on loopback for a moment: the demo's app, and the tests' and
+benchmarks' apps, proxies, PostgreSQL and Dask schedulers.
 
 A port the kernel hands out for `bind(0)` is one of its ephemeral ports, which it also gives every outgoing
-connection (a client to PostgreSQL, chromedriver, a crowd): between the test taking such a port and its server
-binding it, another worker's connection can take it, and the server fails with "address already in use" (a proxy
-did so once in a full run). A port below the ephemeral range is never given to an outgoing connection, so only
-another test's own pick could take it: drawn at random from thousands, and checked free, that is rare.
+connection (a client to PostgreSQL, chromedriver, a crowd): between taking such a port and the server binding it,
+another process's connection can take it, and the server fails with "address already in use" (a proxy in the test
+suite did so once). A port below the ephemeral range is never given to an outgoing connection, so only another
+such pick could take it: drawn at random from thousands, and checked free, that is rare.
 """
 
 import random
