@@ -17,9 +17,9 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from moglow_eval.core import cli
+from moglow_eval.core.blas import one_blas_thread
 from moglow_eval.core.clip import check_fps, check_joints, load_clip
 
 from .camera import DEFAULT_CAMERA, Camera, camera_targets
@@ -325,7 +325,7 @@ def _one_blas_thread():
     that the other mesh thread, the composing thread and x264 needed, and took longer than in one."""
     with _BLAS["lock"]:
         if _BLAS["clips"] == 0:
-            _BLAS["limits"] = threadpool_limits(limits=1, user_api="blas")
+            _BLAS["limits"] = one_blas_thread()
         _BLAS["clips"] += 1
     try:
         yield

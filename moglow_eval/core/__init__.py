@@ -11,7 +11,7 @@
 - `moved`: commands that moved, and the one line their old path answers.
 - `pair_posterior`: the Bradley-Terry posterior of a growing pairwise study, a pair's information, the stopping rule.
 - `colours`: a person's drawing colour as the files carry it and as the rater's page names it.
-- `blas`: one BLAS thread around small, repeated fits (the report's models, the stimuli's two-sample tests).
+- `blas`: one BLAS thread around small, repeated fits (the report's models, the two-sample tests, mesh skinning).
 - `ports`: a free loopback port below the kernel's ephemeral range, for a server started for a moment.
 
 `core` imports nothing from the four parts (generation, rendering, rating_app, analysis); they import it.

@@ -16,10 +16,18 @@ def test_a_free_port_is_below_the_ephemeral_range_and_can_be_bound():
 
 
 def test_a_taken_port_is_never_given(monkeypatch):
+    draw = ports.random.randrange
+    calls = []
+
+    def taken_twice(a, b):  # the held port drawn first and second, then the picker's own draws
+        calls.append(a)
+        return taken if len(calls) <= 2 else draw(a, b)
+
     with socket.socket() as held:
         held.bind(("127.0.0.1", 0))
         held.listen()
         taken = held.getsockname()[1]
-        draws = iter([taken, taken, taken + 1 if taken + 1 < 65536 else taken - 1])
-        monkeypatch.setattr(ports.random, "randrange", lambda a, b: next(draws))
-        assert ports.free_port() != taken
+        monkeypatch.setattr(ports.random, "randrange", taken_twice)
+        port = ports.free_port()
+    assert port != taken and len(calls) >= 3
+    assert ports.LOWEST <= port < ports._ephemeral_start()
