@@ -144,11 +144,6 @@ DB_NAME = "ratings.sqlite"
 ENV_NAMES = {"design": "RATING_STUDY_DESIGN"}
 
 
-# The items a study with speech may have here: what both of the demo's own studies can make (demo_study and demo_dyad
-# take at least three; two people at most thirty).
-SPEECH_ITEMS = (3, 30)
-
-
 def clear_earlier_run(out: Path, new_stimuli: bool) -> None:
     """Remove what an earlier demo run left in `out`; DemoError when `out` holds files the demo did not make (it
     writes MARK first), rather than deleting anyone's work."""
@@ -164,12 +159,24 @@ def clear_earlier_run(out: Path, new_stimuli: bool) -> None:
             path.unlink()
 
 
+# The designs whose demo study is two people in conversation (generation.own_study.demo_dyad); the others with
+# sound get one person talking (demo_study).
+TWO_PERSON = ("dyadic", "semantic")
+
+
+def speech_items(design: str) -> tuple[tuple[int, int], str]:
+    """The bounds of --items for the study with speech the demo makes for `design`, and who talks in it."""
+    if design in TWO_PERSON:
+        return study.TWO_PERSON_DEMO_ITEMS, "two people talking"
+    return study.SPEECH_DEMO_ITEMS, "one person talking"
+
+
 def make_stimuli(procs: "Processes", out: Path, s: dict) -> Path:
     """Stage 1: a stimulus set in out/stimuli, a study of speech and motion with `sound`, else make_stimuli
     --quick (its tiny models in `runs`, default out/runs, trained once and reused by later runs)."""
     seed, design, sound = s["seed"], s["design"], s["sound"]
     py, stimuli = sys.executable, out / "stimuli"
-    if design in ("dyadic", "semantic"):
+    if design in TWO_PERSON:
         _stage(f"1/5 a study of two people talking (generation.own_study.demo_dyad) → {stimuli}")
         cmd = ["--out", str(out / "study"), "--seed", str(seed), "--design", design]
         cmd += ["--items", str(s["items"])] if s["items"] else []
@@ -283,8 +290,10 @@ def run_demo(
     # Checked before anything in `out` is replaced: a refused run leaves an earlier one as it was.
     if items is not None and stimuli is not None:
         raise DemoError("--items: a set given with --stimuli is used as it is; leave out one of the two")
-    if items is not None and sound and not SPEECH_ITEMS[0] <= items <= SPEECH_ITEMS[1]:
-        raise DemoError(f"--items: a study with speech has {SPEECH_ITEMS[0]} to {SPEECH_ITEMS[1]} items, not {items}")
+    if items is not None and sound:
+        (low, high), who = speech_items(design)
+        if not low <= items <= high:
+            raise DemoError(f"--items: a study of {who} has {low} to {high} items, not {items}")
     settings = dict(locals())
     clear_earlier_run(out, stimuli is None)
     (out / "logs").mkdir(parents=True, exist_ok=True)
@@ -350,7 +359,8 @@ def build_parser():
         type=cli.number(int, 2, 10_000),
         default=None,
         help="test items of the set it makes, for a quicker try: the built-in set's (make_stimuli --n-items; default "
-        f"the paper's 30) or the study with speech's ({SPEECH_ITEMS[0]}-{SPEECH_ITEMS[1]}; default the study's own)",
+        "the paper's 30) or the study with speech's (one person talking {}-{}, two people {}-{}; default the "
+        "study's own)".format(*study.SPEECH_DEMO_ITEMS, *study.TWO_PERSON_DEMO_ITEMS),
     )
     p.add_argument(
         "--runs",

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from moglow_eval.core import cli
+from moglow_eval.core.study import SPEECH_DEMO_ITEMS
 
 from ..data.motion_files import read_motion
 from ..data.prepare import default_data_dir
@@ -138,7 +139,7 @@ def build_parser():
     """The command's argument parser (also read by tests/project/test_docs.py to check the docs' commands)."""
     ap = cli.ArgumentParser(prog="python -m generation.own_study.demo_study", description=__doc__.split("\n")[0])
     ap.add_argument("--out", required=True, help="folder for the study file and its folders")
-    ap.add_argument("--items", type=cli.number(int, 3, 60), default=12, help="items (default 12)")
+    ap.add_argument("--items", type=cli.number(int, *SPEECH_DEMO_ITEMS), default=12, help="items (default 12)")
     ap.add_argument("--appropriateness", action="store_true", help="also make the mismatched clips")
     ap.add_argument("--seed", type=cli.number(int, 0), default=0)
     return ap

@@ -34,6 +34,13 @@ MISMATCH_COLUMN = {
 }
 DEFAULT_DESIGN = "acr"  # the paper's design: a study, a database or a file that names none
 
+# The test items each of the demo's studies with speech can make, from the first to the last: one person talking
+# (generation.own_study.demo_study) and two people in conversation (generation.own_study.demo_dyad, which pairs the
+# long takes of the actions data and finds thirty pairs at most). analysis.demo checks its --items against them before
+# it replaces an earlier run; the two commands take them as their own --items bounds.
+SPEECH_DEMO_ITEMS = (3, 60)
+TWO_PERSON_DEMO_ITEMS = (3, 30)
+
 # Clip ids are random, so a file or URL name tells a rater nothing about the condition (CONTRACTS §4).
 CLIP_ID = re.compile(r"[a-z0-9]{12,64}")  # always fullmatch
 CLIP_ID_LENGTH = 16  # what make_stimuli writes

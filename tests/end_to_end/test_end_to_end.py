@@ -173,11 +173,11 @@ def test_demo_runs_one_design_after_another_in_its_default_folder(quick_stimuli,
     assert [p.name for p in mine.iterdir()] == ["notes.txt"]
     # --items sizes a set the demo makes: with a set given, or more items than a study with speech can have, it is
     # refused before anything in the folder is touched.
-    from analysis.demo import SPEECH_ITEMS
     from analysis.demo import main as demo_main
+    from moglow_eval.core.study import TWO_PERSON_DEMO_ITEMS
 
     before = sorted(p.name for p in demo.iterdir())
-    too_many = str(SPEECH_ITEMS[1] + 1)
+    too_many = str(TWO_PERSON_DEMO_ITEMS[1] + 1)
     for more in (["--items", "6", "--stimuli", str(demo / "stimuli")], ["--items", too_many, "--design", "dyadic"]):
         assert demo_main(["--out", str(demo), *more]) == 2
     assert sorted(p.name for p in demo.iterdir()) == before
