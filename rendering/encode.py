@@ -30,6 +30,13 @@ MAX_ZONES = 100  # about 6 kB of x264 options in the first frame, which the call
 # for every video of a size and frame rate, and the key frame reaches the quality of the frames after it
 # (bench/RESULTS.md#key-frame).
 KEY_FRAME_BUDGET = 3
+# Where a key frame's budget is more than its picture needs (a small frame: at 64 px x264 spends it all at a quantiser
+# near 0), its picture codes to within a few bytes of the budget, and the filler unit that tops a frame up cannot be
+# smaller than six: such a video comes out a few bytes short, whatever the dither of the frames after it. Encoded
+# again for that (generation.stimuli.render_pool, rendering.reencode), its key frame takes the next of these
+# quantisers, near a small frame's other frames': its picture codes to another size, smaller as the quantiser rises,
+# and the filler tops it up as before.
+KEY_QP = (10, 14, 18)
 
 
 def video_rate(fps) -> Fraction:
@@ -57,14 +64,14 @@ def frame_bits(size, fps, bits_per_row=None):
     return 8 * round(bits_per_row * size / fps / 8)
 
 
-def rate_dither(frames, seed=None, after_key=""):
+def rate_dither(frames, seed=None, after_key="", key_qp=None):
     """x264 zones giving each of `frames` frames a random multiple of the rate (seed None: fresh randomness).
 
     Every multiple is written with the same number of characters, so that x264's options (written into the
     first frame, and stripped from it by the caller) are as long for every clip; a long clip gets its multiples
     in runs of frames, at most MAX_ZONES of them, so that they stay a small part of the first frame.
     after_key: x264 options for every frame after the first, which keeps the options it starts with (a zone
-    of its own at the mean rate); "" gives no such zone.
+    of its own at the mean rate, or at the quantiser `key_qp`); "" gives no such zone.
     """
     run = -(-frames // MAX_ZONES)
     starts = range(0, frames, run)
@@ -76,11 +83,13 @@ def rate_dither(frames, seed=None, after_key=""):
     zones = [(max(a, first), min(a + run, frames) - 1, min(max(x / mean, lo), hi)) for a, x in zip(starts, m)]
     extra = f",{after_key}" if after_key else ""
     dither = [f"{a},{b},b={x:.3f}{extra}" for a, b, x in zones if a <= b]
-    return "/".join((["0,0,b=1.000"] if after_key else []) + dither)
+    key = "0,0,b=1.000" if key_qp is None else f"0,0,q={key_qp}"
+    return "/".join(([key] if after_key else []) + dither)
 
 
-def _rate_control(size, fps, qp, crf, frames, seed, bits):
-    """(ffmpeg options, x264 parameters) of the rate control; `bits`: each frame's budget (frame_bits)."""
+def _rate_control(size, fps, qp, crf, frames, seed, bits, key_qp=None):
+    """(ffmpeg options, x264 parameters) of the rate control; `bits`: each frame's budget (frame_bits);
+    `key_qp`: the key frame's quantiser, None for the rate control's own (ffmpeg_writer)."""
     if crf is not None:
         return ["-crf", str(crf)], []
     if qp is not None:
@@ -106,7 +115,7 @@ def _rate_control(size, fps, qp, crf, frames, seed, bits):
         # frames after them: the aim grows by that extra.
         aim = round(aim * (frames + 2 * (KEY_FRAME_BUDGET - 1)) / frames)
         per_frame = f"vbv-bufsize={bits // 1000},vbv-maxrate={cap // 1000}"
-        x264 += ["vbv-init=1", f"zones={rate_dither(frames, seed, per_frame)}"]
+        x264 += ["vbv-init=1", f"zones={rate_dither(frames, seed, per_frame, key_qp)}"]
     rate = ["-b:v", str(aim), "-maxrate", str(top), "-bufsize", str(buffer), "-bsf:v", "filter_units=remove_types=6"]
     return rate, x264
 
@@ -124,6 +133,7 @@ def ffmpeg_writer(
     width=None,
     bits_per_row=None,
     bits=None,
+    key_qp=None,
 ):
     """An ffmpeg process reading raw yuv420p frames on stdin and writing H.264 yuv420p +faststart MP4, no audio.
     The frames are `size` pixels high and `width` wide (None: square).
@@ -139,6 +149,8 @@ def ffmpeg_writer(
     bits_per_row: the default's rate (None: RATE_BITS_PER_ROW; MESH_RATE_BITS_PER_ROW for a set with a mesh body).
     bits: each frame's budget in bits, as another video of the set has it (rendering.reencode), in place of the one
     `bits_per_row` gives; a whole number of bytes.
+    key_qp: the key frame's quantiser (0-51; KEY_QP for a video encoded again because it came out a few bytes short),
+    None for the rate control's own; the budget still caps the frame (x264's buffer overrides a zone's quantiser).
     """
     import imageio_ffmpeg  # here, not at the top: loading and sampling the models must not need an encoder
 
@@ -150,7 +162,9 @@ def ffmpeg_writer(
         bits = frame_bits(side, fps, bits_per_row)
     elif bits <= 0 or bits % 8:
         raise ValueError(f"a frame budget is a positive whole number of bytes, got {bits} bits")
-    rate, x264 = _rate_control(side, fps, qp, crf, frames, seed, bits)
+    if key_qp is not None and not 0 <= key_qp <= 51:
+        raise ValueError(f"key_qp is an H.264 quantiser, 0-51, got {key_qp}")
+    rate, x264 = _rate_control(side, fps, qp, crf, frames, seed, bits, key_qp)
 
     cmd = [
         imageio_ffmpeg.get_ffmpeg_exe(),

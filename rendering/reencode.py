@@ -7,7 +7,9 @@ for it. So the study takes the frames, not the file: each video is decoded and e
 encoder (rendering.encode: the one-size rate control, each frame's share of the rate drawn afresh), and its sound,
 if any, is copied across as the study's videos carry it. The result has the study's sizes by construction: each
 frame's budget is read from `--like`'s own frame sizes (`frame_budget`), so a set encoded at another rate (a set
-with a mesh body, rendering.encode.MESH_RATE_BITS_PER_ROW) is matched as the others are; the caller checks them.
+with a mesh body, rendering.encode.MESH_RATE_BITS_PER_ROW) is matched as the others are. Each encode's frame sizes
+are checked against `--like`'s, as a build checks its set's: at a small size a key frame can come out a few bytes
+short (rendering.encode.KEY_QP), and is drawn again; the caller checks the files' sizes too.
 Only a video of the size, frame rate and number of frames of the study's video `--like` is taken: the decoder reads
 a hostile file, and nothing larger than the study's own clips is ever decoded.
 
@@ -28,12 +30,12 @@ from pathlib import Path
 
 from moglow_eval.core import cli
 
-from .encode import KEY_FRAME_BUDGET, ffmpeg_writer, video_rate
+from .encode import KEY_FRAME_BUDGET, KEY_QP, ffmpeg_writer, video_rate
 from .errors import RenderError
 from .mp4_layout import read_layout
 
 TIMEOUT_S = 600  # one clip: decoding and encoding a few hundred frames takes seconds
-ATTEMPTS = 8  # encodes drawn before a video whose bytes keep coming out as submitted is refused
+ATTEMPTS = 8  # encodes drawn before a video that keeps coming out as submitted, or a few bytes short, is refused
 
 
 def _ffmpeg() -> str:
@@ -83,9 +85,10 @@ def frame_budget(sizes, fps) -> int:
 
 def reencode(src, dst, like, seed: int | None = None) -> None:
     """Encode the video `src` again into `dst` (stimulus encoder, fresh randomness unless `seed`), as the video
-    `like` is: its size, frame rate and number of frames, and never byte for byte `src` (an encode that comes out
-    so is drawn again, `seed + 1` after `seed`); RenderError, one line, when `src` differs in any, keeps coming out
-    as it went in or ffmpeg fails, and then no `dst`."""
+    `like` is: its size, frame rate, number of frames and frame sizes, and never byte for byte `src` (an encode that
+    comes out so, or a few bytes short, is drawn again, `seed + 1` after `seed`, with its key frame at the next of
+    encode.KEY_QP); RenderError, one line, when `src` differs in any, keeps coming out as it went in or ffmpeg
+    fails, and then no `dst`."""
     src, dst = Path(src), Path(dst)
     (w, h), fps, _ = _probe(Path(like))
     if w % 2 or h % 2:
@@ -94,20 +97,26 @@ def reencode(src, dst, like, seed: int | None = None) -> None:
     # their sizes, with no pass of ffmpeg over the file to count them.
     sizes = read_layout(like).sample_sizes
     frames, bits = len(sizes), frame_budget(sizes, fps)
+    short = 0  # encodes that came out a few bytes short: each next one takes the next key frame quantiser
     for attempt in range(ATTEMPTS):
+        key_qp = KEY_QP[(short - 1) % len(KEY_QP)] if short else None
         try:
-            _reencode(src, dst, (w, h), fps, frames, None if seed is None else seed + attempt, bits)
-            if not filecmp.cmp(src, dst, shallow=False):
+            _reencode(src, dst, (w, h), fps, frames, None if seed is None else seed + attempt, bits, key_qp)
+            if read_layout(dst).sample_sizes != sizes:
+                short += 1
+            elif not filecmp.cmp(src, dst, shallow=False):
                 return
             dst.unlink()
         except BaseException:
             dst.unlink(missing_ok=True)
             dst.with_name(dst.stem + ".video.mp4").unlink(missing_ok=True)
             raise
+    if short == ATTEMPTS:
+        raise RenderError(f"{src}: encoded again {ATTEMPTS} times, its frames never came out the study's sizes")
     raise RenderError(f"{src}: encoded again {ATTEMPTS} times, it came out as submitted each time (a flat picture?)")
 
 
-def _reencode(src: Path, dst: Path, size: tuple, fps: float, frames: int, seed: int | None, bits: int) -> None:
+def _reencode(src: Path, dst: Path, size: tuple, fps: float, frames: int, seed: int | None, bits: int, key_qp) -> None:
     (w, h), src_fps, sound = _probe(src)
     if (w, h) != size or abs(src_fps - fps) > 1e-3:
         raise RenderError(f"{src}: {w}x{h} pixels at {src_fps:g} fps; the study's are {size[0]}x{size[1]} at {fps:g}")
@@ -116,7 +125,7 @@ def _reencode(src: Path, dst: Path, size: tuple, fps: float, frames: int, seed: 
     decode = [_ffmpeg(), "-v", "error", "-i", str(src), "-map", "0:v:0", "-frames:v", str(frames + 1)]
     decode += ["-f", "rawvideo", "-pix_fmt", "yuv420p", "-"]
     reader = subprocess.Popen(decode, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
-    writer = ffmpeg_writer(video, h, fps, frames=frames, seed=seed, width=w, bits=bits)
+    writer = ffmpeg_writer(video, h, fps, frames=frames, seed=seed, width=w, bits=bits, key_qp=key_qp)
     n = 0
     try:
         while chunk := reader.stdout.read(frame_bytes):

@@ -101,6 +101,9 @@ class RenderOptions:
         The default rate control's rate in bits per second per row of the frame's height (`encode.frame_bits`):
         None is encode.RATE_BITS_PER_ROW; a set that draws a mesh body in any of its styles takes
         `rate_for_set(styles)` for every video, whatever each one's style, so that they stay one size.
+    key_qp : int or None
+        The default rate control's quantiser for the key frame (`encode.ffmpeg_writer`): None, the rate control's
+        own, but one of `encode.KEY_QP` for a video encoded again because its key frame came out a few bytes short.
     """
 
     size: int = 640
@@ -118,6 +121,7 @@ class RenderOptions:
     rate_seed: int | None = None
     aspect: float = 1.0
     bits_per_row: int | None = None
+    key_qp: int | None = None
 
 
 def rate_for_set(styles):
@@ -207,6 +211,7 @@ def render_clip(clip_or_path, out_mp4, options=None, *, sheet=None, partner=None
         seed=o.rate_seed,
         width=frame[0],
         bits_per_row=o.bits_per_row,
+        key_qp=o.key_qp,
     )
     painted = _painted(people, [m if d.style.body == "mesh" else None for (d, _), m in zip(people, meshes)], targets)
     try:

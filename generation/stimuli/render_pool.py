@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 from rendering.audio import mux_audio
 from rendering.blinding import check_one_size, odd_ones, same_mtime
+from rendering.encode import KEY_QP
 from rendering.mesh import set_gl_environment
 from rendering.render import RenderOptions, frame_width, render_clip
 
@@ -30,7 +31,10 @@ from .build_index import job_key
 log = logging.getLogger(__name__)
 SETTINGS = frozenset(f.name for f in fields(RenderOptions))  # a job's keywords that are RenderOptions'
 PART = ".part"  # a file being written: VIDEO.part.mp4, SHEET.part.png, renamed when whole
-RETRIES = 3  # times a video that came out a size off is encoded again (each time with a fresh random rate dither)
+# A video that came out a size off is encoded again, each time with a fresh random rate dither and its key frame at
+# the next of the encoder's KEY_QP (a key frame x264 codes to within a filler unit of its budget comes out short,
+# which the dither of the frames after it cannot mend).
+RETRIES = len(KEY_QP)
 
 
 def _render_job(job):
@@ -142,10 +146,11 @@ def render_stimuli(jobs, workers, progress=True, groups=None, index=None, schedu
         odd = [ks[i] for ks in by_group.values() if len(ks) > 2 for i in odd_ones([jobs[k][1] for k in ks])]
         if not odd:
             break
-        # x264 can overshoot one frame's budget by a byte on a frame dense with edges (captions at a small size):
-        # another random share of the rate per frame puts the frames elsewhere, and the video comes out one size.
+        # x264 can overshoot one frame's budget by a byte on a frame dense with edges (captions at a small size), or
+        # code a key frame to within a filler unit of its budget: another random share of the rate per frame puts
+        # the frames elsewhere, a quantiser of its own leaves the key frame room, and the video comes out one size.
         log.info(f"render: {len(odd)} video(s) came out a frame size off the others of their item; encoding again")
-        again = [_with_seed(jobs[k], attempt) if index is not None else jobs[k] for k in odd]
+        again = [_again(jobs[k], attempt, seeded=index is not None) for k in odd]
         render_all(again, max(1, min(workers, len(odd))), progress=False, scheduler=scheduler)
     if index is not None:
         index.keep_only({keys[k]: Path(job[1]).stem for k, job in enumerate(jobs)})
@@ -157,9 +162,13 @@ def render_stimuli(jobs, workers, progress=True, groups=None, index=None, schedu
     log.info(f"render: done; every video is {what}, in frames of one size, stamped with the same time")
 
 
-def _with_seed(job, attempt):
-    """The job with its rate seed moved on by `attempt` (a seeded retry: the same in every build)."""
-    return (*job[:5], {**job[5], "rate_seed": job[5]["rate_seed"] + attempt})
+def _again(job, attempt, seeded):
+    """The job encoded again the `attempt`th time (from 1): its key frame at the quantiser KEY_QP gives that attempt,
+    and a seeded job's rate seed moved on by `attempt` (the same in every build); an unseeded one draws afresh."""
+    settings = {**(job[5] if len(job) > 5 else {}), "key_qp": KEY_QP[attempt - 1]}
+    if seeded:
+        settings["rate_seed"] += attempt
+    return (*job[:5], settings)
 
 
 def _reuse(jobs, keys, index) -> list[int]:

@@ -14,6 +14,7 @@ from helpers.paths import DATA, ROOT, TEST_DATA
 
 from generation import make_stimuli
 from generation.motion.features import root_trajectory
+from generation.stimuli import render_pool
 from moglow_eval.core.clip import load_clip
 
 CONDITION_NAMES = ("nat", "mg", "fl", "bad")
@@ -412,3 +413,14 @@ def test_refusing_to_replace_a_set_touches_nothing(tmp_path, capsys):
     before = _tree(out)
     assert "pass --force to replace it" in _fails(capsys, "--out", out)
     assert _tree(out) == before
+
+
+def test_a_video_encoded_again_takes_the_next_key_quantiser_and_rate_seed():
+    job = ("m.npz", "v.mp4", "", 64, "ultrafast", {"rate_seed": 7, "style": "stick"})
+    for attempt, key_qp in enumerate(render_pool.KEY_QP, start=1):
+        again = render_pool._again(job, attempt, seeded=True)
+        assert again[:5] == job[:5] and again[5] == {"rate_seed": 7 + attempt, "style": "stick", "key_qp": key_qp}
+    assert render_pool._again(job[:5], 1, seeded=False)[5] == {"key_qp": render_pool.KEY_QP[0]}
+    assert (
+        render_pool.RETRIES == len(render_pool.KEY_QP) and job[5]["rate_seed"] == 7
+    )  # the job itself is left as it was

@@ -3,10 +3,13 @@ encoder's finest step whatever its rates, so an encode can come out byte for byt
 seed the submitted file was made with, it does); such an encode is drawn again, and one that keeps coming out so
 is refused with one line and no file. The sizes a study's videos keep are tests/rendering/test_set_rate.py's."""
 
+import dataclasses
+
 import pytest
 from helpers.fake_stimuli import write_stimulus_mp4
 
 from rendering import reencode as reencode_module
+from rendering.encode import KEY_QP
 from rendering.errors import RenderError
 from rendering.mp4_layout import read_layout
 from rendering.reencode import reencode
@@ -33,4 +36,48 @@ def test_a_video_that_keeps_coming_out_as_submitted_is_refused(flat, tmp_path, m
     with pytest.raises(RenderError, match=r"src\.mp4: encoded again 1 times, it came out as submitted") as e:
         reencode(src, out, like, seed=1)
     assert "\n" not in str(e.value)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["like.mp4", "src.mp4"]
+
+
+def _short_first(monkeypatch, out, short_calls):
+    """Record each encode's key frame quantiser, and read the encodes numbered in `short_calls` (from 1) as x264
+    leaves a key frame that codes to within a filler unit of its budget: a byte short. x264 does that by chance at
+    a small size, on a picture no small input makes on demand, so the test reads it so."""
+    calls = []
+    real_encode, real_layout = reencode_module._reencode, reencode_module.read_layout
+
+    def encode(*args):
+        calls.append(args[-1])
+        return real_encode(*args)
+
+    def layout(path):
+        lay = real_layout(path)
+        if path == out and len(calls) in short_calls:
+            return dataclasses.replace(lay, sample_sizes=[lay.sample_sizes[0] - 1, *lay.sample_sizes[1:]])
+        return lay
+
+    monkeypatch.setattr(reencode_module, "_reencode", encode)
+    monkeypatch.setattr(reencode_module, "read_layout", layout)
+    return calls
+
+
+def test_an_encode_a_few_bytes_short_is_drawn_again_with_its_key_frame_at_its_own_quantiser(
+    flat, tmp_path, monkeypatch
+):
+    like, src = flat
+    out = tmp_path / "out.mp4"
+    calls = _short_first(monkeypatch, out, {1})
+    reencode(src, out, like, seed=2)
+    assert calls == [None, KEY_QP[0]]
+    assert read_layout(out).sample_sizes == read_layout(like).sample_sizes
+
+
+def test_a_video_that_never_comes_out_the_studys_sizes_is_refused(flat, tmp_path, monkeypatch):
+    like, src = flat
+    out = tmp_path / "out.mp4"
+    monkeypatch.setattr(reencode_module, "ATTEMPTS", 4)
+    calls = _short_first(monkeypatch, out, {1, 2, 3, 4})
+    with pytest.raises(RenderError, match=r"src\.mp4: encoded again 4 times, its frames never came out the study"):
+        reencode(src, out, like, seed=2)
+    assert calls == [None, *KEY_QP]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["like.mp4", "src.mp4"]
