@@ -23,6 +23,11 @@ from scipy import stats as sps
 from moglow_eval.core.blas import one_blas_thread
 
 BOUND_NEAR = 1e-3  # a relative SD this close to 0 sits at the bound, where the polish is needed
+# An eigenvalue of the REML deviance's Hessian in the variances at or below this share of the largest is taken as 0:
+# the criterion is flat along its direction (a variance the ratings do not identify), whose sampling variation the
+# Satterthwaite df then leave out, as lmerTest does, rather than dividing by round-off. The Hessian's central
+# differences leave such an eigenvalue at a few times 1e-8 of the largest, not at 0.
+FLAT_EIGENVALUE = 1e-6
 DENSE_MAX = 4_000_000  # raters x clips up to which the count table is held dense (32 MB)
 
 
@@ -135,7 +140,10 @@ def satterthwaite_df(s, varpar):
     A = 2 H^-1 their asymptotic covariance (H the Hessian of the REML deviance). Both derivatives are central
     differences with steps relative to each variance, Richardson-extrapolated. A variance estimated at 0 sits
     on the boundary and is held fixed there (no sampling variation to propagate). The df are invariant to how
-    the variances are parametrised, so (rater, clip, residual) variances give lmerTest's (theta, sigma) df."""
+    the variances are parametrised, so (rater, clip, residual) variances give lmerTest's (theta, sigma) df.
+    Where H has eigenvalues of about 0 (FLAT_EIGENVALUE) or below, A is its generalised inverse over the others.
+
+    Returns (df [p], the number of such flat directions)."""
     varpar = np.asarray(varpar, float)
     active = np.flatnonzero(varpar > 1e-10 * varpar[2])
     x0 = varpar[active]
@@ -176,17 +184,20 @@ def satterthwaite_df(s, varpar):
     h = 2e-3 * x0
     H = (4 * hessian(h / 2) - hessian(h)) / 3
     G = (4 * var_gradient(h / 2) - var_gradient(h)) / 3
-    A = 2 * linalg.inv(H)
+    values, vectors = linalg.eigh((H + H.T) / 2)
+    kept = values > FLAT_EIGENVALUE * max(np.abs(values).max(), np.finfo(float).tiny)
+    A = 2 * (vectors[:, kept] / values[kept]) @ vectors[:, kept].T
     cov = _beta_cov(s, varpar)
     denom = np.einsum("ip,ij,jp->p", G, A, G)
-    return 2 * np.diag(cov) ** 2 / denom
+    return 2 * np.diag(cov) ** 2 / denom, int(m - kept.sum())
 
 
 def fit_crossed(y, X, rater, clip, names, with_cov=False, tests=True, start=None):
     """REML fit. y float [n]; X [n, p] fixed-effects design (first column the intercept); rater, clip int codes.
 
     Returns dict: fixed_effects, std_errors, df (Satterthwaite), t, p_values (t tests on those df),
-    ci_low/ci_high (95%, t on those df),
+    ci_low/ci_high (95%, t on those df), flat_directions (how many directions of the variances the REML criterion
+    is flat along, left out of the df: 0 where the ratings identify them all),
     variance_components {rater, clip, residual}, reml_log_likelihood, converged; with `with_cov`, also
     "covariance": the fixed effects' covariance matrix [p, p] (for a joint Wald test of several effects).
     tests=False leaves out df, t, p_values and the intervals (their Satterthwaite df cost a fifth of a fit), for
@@ -244,7 +255,7 @@ def _fit(y, X, rater, clip, names, tests=True, start=None):
     varpar = np.array([sigma2 * x[0] ** 2, sigma2 * x[1] ** 2, sigma2])
     out = {"fixed_effects": dict(zip(names, b.tolist())), "std_errors": dict(zip(names, se.tolist()))}
     if tests:
-        df = satterthwaite_df(s, varpar)
+        df, flat = satterthwaite_df(s, varpar)
         t = b / se
         p = 2 * sps.t.sf(np.abs(t), df)
         q = sps.t.ppf(0.975, df)
@@ -254,6 +265,7 @@ def _fit(y, X, rater, clip, names, tests=True, start=None):
             p_values=dict(zip(names, p.tolist())),
             ci_low=dict(zip(names, (b - q * se).tolist())),
             ci_high=dict(zip(names, (b + q * se).tolist())),
+            flat_directions=flat,
         )
     out.update(
         variance_components={"rater": float(varpar[0]), "clip": float(varpar[1]), "residual": float(sigma2)},

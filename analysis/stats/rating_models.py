@@ -58,7 +58,7 @@ def mixed_model(df, dv="rating", between="condition", rater="rater_id", clip="cl
         formula, method, reference; fixed_effects {Intercept, condition[T.X]: estimate} (treatment coding),
         std_errors, df (Satterthwaite), t, p_values, ci_low and ci_high (95%) per fixed effect;
         variance_components {rater, clip, residual}; condition_means (model-based); reml_log_likelihood,
-        converged, n, n_raters, n_clips and warnings.
+        converged, n, n_raters, n_clips and warnings (the optimiser's, and variances the ratings do not identify).
 
     Raises
     ------
@@ -86,6 +86,7 @@ def mixed_model(df, dv="rating", between="condition", rater="rater_id", clip="cl
     rater_codes = pd.factorize(df[rater])[0]
     clip_codes = pd.factorize(df[clip])[0]
     fit = fit_crossed(df[dv].to_numpy(dtype=float), X, rater_codes, clip_codes, names)
+    flat = fit.pop("flat_directions")  # said in the warnings, as stats.json carries them
     fe = fit["fixed_effects"]
     means = {reference: fe["Intercept"], **{c: fe["Intercept"] + fe[f"{between}[T.{c}]"] for c in others}}
     return {
@@ -98,7 +99,15 @@ def mixed_model(df, dv="rating", between="condition", rater="rater_id", clip="cl
         "n": int(len(df)),
         "n_raters": int(rater_codes.max() + 1),
         "n_clips": int(clip_codes.max() + 1),
-        "warnings": [] if fit["converged"] else ["optimiser did not report convergence"],
+        "warnings": ([] if fit["converged"] else ["optimiser did not report convergence"])
+        + (
+            [
+                f"the REML criterion is flat along {flat} direction(s) of the variances (the ratings do not "
+                "identify them all); the Satterthwaite df leave those out"
+            ]
+            if flat
+            else []
+        ),
     }
 
 

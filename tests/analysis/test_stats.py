@@ -1,6 +1,7 @@
 """Regression tests of the statistics against certified and published reference values."""
 
 import re
+import warnings
 from decimal import Decimal
 
 import numpy as np
@@ -257,6 +258,27 @@ def test_mixed_model_recovers_simulated_variances():
     # complete balanced design: GLS fixed effects equal the raw condition mean differences
     means = df.groupby("condition")["rating"].mean()
     assert m["fixed_effects"]["condition[T.FL]"] == pytest.approx(means["FL"] - means["NAT"], abs=1e-9)
+
+
+def test_a_variance_the_ratings_do_not_identify_is_named_and_left_out_of_the_df():
+    """Each rater rates one clip of their own, twice: the rater and clip intercepts are one effect, so only the sum
+    of their variances is identified, and the REML criterion is flat along their split. The Satterthwaite df leave
+    that direction out (its Hessian inverted over the others: it was inverted whole, with an rcond near 1e-30 and a
+    LinAlgWarning) and the fit's warnings say so; a crossed design has no such direction."""
+    rng = np.random.default_rng(1)
+    n = 24
+    who = np.repeat(np.arange(n), 2)
+    cond = np.array(["NAT", "MG", "FL"])[who % 3]
+    y = np.array([4.0, 3.2, 2.6])[who % 3] + rng.normal(0, 0.6, n)[who] + rng.normal(0, 0.5, 2 * n)
+    df = pd.DataFrame({"rating": y, "condition": cond, "rater_id": who, "clip_id": who})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no LinAlgWarning, no division by round-off
+        m = rating_models.mixed_model(df)
+    assert any("flat along 1 direction" in w for w in m["warnings"]), m["warnings"]
+    # one random intercept per rater-and-clip unit: its df are the units' less the three fixed effects
+    assert m["df"] == pytest.approx(dict.fromkeys(m["df"], n - 3), rel=1e-6)
+    crossed = rating_models.mixed_model(df.assign(clip_id=np.tile(np.arange(2), n)))
+    assert not any("flat" in w for w in crossed["warnings"])
 
 
 def test_per_clip_means_sorted_worst_to_best(small_test_rows):
