@@ -71,7 +71,8 @@ def rate_dither(frames, seed=None, after_key="", key_qp=None):
     first frame, and stripped from it by the caller) are as long for every clip; a long clip gets its multiples
     in runs of frames, at most MAX_ZONES of them, so that they stay a small part of the first frame.
     after_key: x264 options for every frame after the first, which keeps the options it starts with (a zone
-    of its own at the mean rate, or at the quantiser `key_qp`); "" gives no such zone.
+    of its own at the mean rate, or at the quantiser `key_qp`: a zone a few characters shorter, in a video encoded
+    again, whose options the caller strips as it strips every video's); "" gives no such zone.
     """
     run = -(-frames // MAX_ZONES)
     starts = range(0, frames, run)
