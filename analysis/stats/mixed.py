@@ -189,7 +189,8 @@ def satterthwaite_df(s, varpar):
     A = 2 * (vectors[:, kept] / values[kept]) @ vectors[:, kept].T
     cov = _beta_cov(s, varpar)
     denom = np.einsum("ip,ij,jp->p", G, A, G)
-    return 2 * np.diag(cov) ** 2 / denom, int(m - kept.sum())
+    with np.errstate(divide="ignore"):  # no direction of curvature at all: nothing to propagate, df infinite
+        return 2 * np.diag(cov) ** 2 / denom, int(m - kept.sum())
 
 
 def fit_crossed(y, X, rater, clip, names, with_cov=False, tests=True, start=None):
