@@ -89,6 +89,12 @@ def mixed_model(df, dv="rating", between="condition", rater="rater_id", clip="cl
     flat = fit.pop("flat_directions")  # said in the warnings, as stats.json carries them
     fe = fit["fixed_effects"]
     means = {reference: fe["Intercept"], **{c: fe["Intercept"] + fe[f"{between}[T.{c}]"] for c in others}}
+    warnings = [] if fit["converged"] else ["optimiser did not report convergence"]
+    if flat:
+        warnings.append(
+            f"the REML criterion is flat along {flat} direction(s) of the variances (the ratings do not identify "
+            "them all); the Satterthwaite df leave those out"
+        )
     return {
         "formula": f"{dv} ~ {between} + (1|{rater}) + (1|{clip})",
         "method": "REML, crossed random intercepts (profiled criterion, L-BFGS-B then Nelder-Mead polish); "
@@ -99,15 +105,7 @@ def mixed_model(df, dv="rating", between="condition", rater="rater_id", clip="cl
         "n": int(len(df)),
         "n_raters": int(rater_codes.max() + 1),
         "n_clips": int(clip_codes.max() + 1),
-        "warnings": ([] if fit["converged"] else ["optimiser did not report convergence"])
-        + (
-            [
-                f"the REML criterion is flat along {flat} direction(s) of the variances (the ratings do not "
-                "identify them all); the Satterthwaite df leave those out"
-            ]
-            if flat
-            else []
-        ),
+        "warnings": warnings,
     }
 
 
