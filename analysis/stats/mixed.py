@@ -26,7 +26,8 @@ BOUND_NEAR = 1e-3  # a relative SD this close to 0 sits at the bound, where the 
 # An eigenvalue of the REML deviance's Hessian in the variances at or below this share of the largest is taken as 0:
 # the criterion is flat along its direction (a variance the ratings do not identify), whose sampling variation the
 # Satterthwaite df then leave out, as lmerTest does, rather than dividing by round-off. The Hessian's central
-# differences leave such an eigenvalue at a few times 1e-8 of the largest, not at 0.
+# differences leave such an eigenvalue at a few times 1e-8 of the largest, not at 0. The ordinal model's information
+# matrix, also by central differences, is held to the same rule (ordinal.py).
 FLAT_EIGENVALUE = 1e-6
 DENSE_MAX = 4_000_000  # raters x clips up to which the count table is held dense (32 MB)
 

@@ -96,6 +96,30 @@ def test_ordinal_recovers_a_known_model():
     assert m["sd_rater"] == pytest.approx(0.9, abs=0.2)
 
 
+def test_a_parameter_the_ratings_do_not_identify_leaves_the_standard_errors_undefined():
+    """Each rater rates one clip of their own, four times: the rater and clip intercepts are one effect, so only
+    the sum of their variances is identified and the information matrix is singular along their split. It was
+    inverted whole (a LinAlgWarning, standard errors of round-off); now they are undefined and the fit's warnings
+    say why, as clmm leaves them. A crossed design has them all."""
+    import warnings
+
+    rng = np.random.default_rng(2)
+    n = 30
+    who = np.repeat(np.arange(n), 4)
+    cond = np.array(["NAT", "MG", "FL"])[who % 3]
+    eta = np.array([0.0, -0.8, -1.6])[who % 3] + rng.normal(0, 0.8, n)[who]
+    y = 1 + (eta[:, None] + rng.logistic(size=len(who))[:, None] > np.array([-2, -0.7, 0.6, 2.0])).sum(1)
+    df = pd.DataFrame({"rating": y, "condition": cond, "rater_id": who, "clip_id": who})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no LinAlgWarning
+        m = rating_models.ordinal_model(df)
+    assert "the information matrix is singular: standard errors undefined" in m["warnings"], m["warnings"]
+    assert all(np.isnan(v) for v in m["std_errors"].values()) and not m["converged"]
+    crossed = rating_models.ordinal_model(df.assign(clip_id=np.tile(np.arange(4), n)))
+    assert crossed["converged"] and crossed["warnings"] == []
+    assert all(np.isfinite(v) for v in crossed["std_errors"].values())
+
+
 def test_unused_rating_level_has_no_threshold(rows):
     """As clmm: the thresholds are between adjacent observed levels."""
     t = rows.assign(rating=rows["rating"].replace({5: 4}))
