@@ -333,8 +333,9 @@ def test_stimuli_hostile_system_file_one_line(quick_stimuli, tmp_path, capsys, h
 
 @pytest.mark.parametrize("module", ["generation.stimuli.render_pool", "generation.make_stimuli"])
 def test_render_workers_load_no_torch(module):
-    """make_stimuli's render workers are spawned and import generation.stimuli.render_pool: that import must not load
-    torch (seconds and hundreds of MB per worker); nor must make_stimuli's own (--help, --export-items).
+    """make_stimuli's render workers start from a process that imports generation.stimuli.render_pool (the fork
+    server, or each spawned worker): that import must not load torch (seconds and hundreds of MB per worker); nor
+    must make_stimuli's own (--help, --export-items).
     Sampling and training import it where they run."""
     r = subprocess.run(
         [sys.executable, "-c", f"import sys, {module}; print('torch' in sys.modules)"],
@@ -345,9 +346,22 @@ def test_render_workers_load_no_torch(module):
     assert r.returncode == 0 and r.stdout.strip() == "False", r.stderr[-500:]
 
 
+def test_render_workers_are_forked_from_the_fork_server():
+    """The workers come from multiprocessing's fork server, which has rendering loaded, instead of each being a
+    fresh interpreter that imports it (about 0.6 s of CPU a worker): a worker's parent is the server, not the
+    process that builds, and a second pool's workers come from the same server."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    parents = []
+    for _ in range(2):
+        with ProcessPoolExecutor(1, mp_context=render_pool._workers_context()) as pool:
+            parents.append(pool.submit(os.getppid).result())
+    assert parents[0] != os.getpid() and parents[0] == parents[1]
+
+
 def test_render_workers_do_not_run_the_commands_main_module_again(tmp_path):
     """A command run as `python -m` hands render_all two jobs on two workers: the module's own lines run once, in
-    the command, not again in each spawned worker, and both videos are made."""
+    the command, not again in each worker, and both videos are made."""
     (tmp_path / "probe_main.py").write_text(
         "import os, sys\n"
         "import numpy as np\n"
