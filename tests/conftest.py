@@ -48,6 +48,13 @@ def pytest_configure(config):
     # caching in the user's cache folder. The suite samples in float32 on every host, as its figures were made, and
     # leaves that cache alone; tests/generation/test_sampler_precision.py tests the pick with measurements it gives it.
     os.environ.setdefault("MOGLOW_SAMPLER_PRECISION", "float32")
+    # One thread in each BLAS and OpenMP pool of the processes the suite starts (its workers, set here before xdist
+    # starts them, and every command they run): xdist already gives every core a worker (see
+    # pytest_xdist_auto_num_workers), so a pool's second thread only waits for a core another worker is using, and
+    # costs CPU doing so (bench/RESULTS.md, test-suite). What a command sets itself (--threads, training's free-core
+    # rule) it still sets; a user's own setting is kept.
+    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(name, "1")
     # The suite's process draws meshes as a command's does, so it sets what a command's main sets before its first GL
     # context (rendering.mesh.GL_ENVIRONMENT: the library sets no environment variable); without it llvmpipe's
     # rasteriser threads, which a forked child does not inherit, would leave tests/rendering/test_mesh_drawing.py's

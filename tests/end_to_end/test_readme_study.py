@@ -4,7 +4,9 @@ study and the report must count every rater it brought.
 
 The suite runs all five as written, the stimuli made by the README's first command (half a minute or more). The
 one liberty taken: when port 5000, which the README's commands use, is busy on this machine (another test run), the
-app gets a free port and the crowd's URL follows.
+app gets a free port and the crowd's URL follows. (The commands also inherit the suite's one thread per BLAS and
+OpenMP pool, tests/conftest.py, as every process the suite starts does: the checks below count raters and ratings,
+which the threads do not change.)
 """
 
 import csv
