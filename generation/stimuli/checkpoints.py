@@ -45,7 +45,7 @@ def checkpoints_in(folder):
 
 def ensure_model(kind, args, dataset):
     """(final, earliest) checkpoint of `kind`: from --{kind}-checkpoint, else trained into runs/."""
-    from ..training.train import train  # torch: only when a model is trained
+    from ..training.train import finished, train  # torch: only when a model is trained
 
     given = getattr(args, f"{kind}_checkpoint")
     if given:
@@ -58,6 +58,10 @@ def ensure_model(kind, args, dataset):
         return pretrained.CHECKPOINTS[kind], pretrained.CHECKPOINTS["bad"]
     run = Path(args.runs) / f"{kind}_{args.config}"
     resume = (run / "resume.pt").is_file()
+    if resume and finished(kind, args.config, run, args.train_steps, args.precision):
+        log.info(f"models: reusing {kind} (config {args.config}) in {run}, trained to its last step")
+        ckpts = checkpoints_in(run)
+        return ckpts[-1], ckpts[0]
     log.info(f"models: {'resuming' if resume else 'training'} {kind} (config {args.config}) in {run}")
     train(
         kind,

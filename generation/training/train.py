@@ -149,6 +149,24 @@ def train(
         return _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, threads == "auto", init)
 
 
+def finished(model, config, out_dir, steps=None, precision=None):
+    """Whether `out_dir` holds a run that train() with these arguments and `resume` would only load and return: its
+    resume state is there and its checkpoint at the config's last step was written by this model and config. A
+    caller that needs only the checkpoints (make_stimuli reusing its runs) asks first: resuming builds the
+    optimiser, and a process's first optimiser loads torch's compiler, more than a second of CPU for nothing."""
+    cfg = load_config(model, config)
+    if precision is not None:
+        cfg = with_changes(cfg, "--precision", precision=precision)
+    if steps is not None:
+        cfg = shortened(cfg, steps)
+    out = Path(out_dir)
+    last = out / "checkpoints" / f"step_{cfg.steps:07d}.pt"
+    if not ((out / "resume.pt").is_file() and last.is_file()):
+        return False
+    ck = load_torch_file(last, "cpu", TrainError)
+    return isinstance(ck, dict) and ck.get("kind") == model and ck.get("config") == as_dict(cfg)
+
+
 def _config_and_data(model, config, steps, data_path, precision=None):
     cfg = load_config(model, config)
     if precision is not None:

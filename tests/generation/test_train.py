@@ -510,3 +510,33 @@ def test_posture_by_category_reaches_the_loss(small_dataset, tmp_path):
     a, b = ([float(r["train_stance"]) for r in rows(run)] for run in (plain, by))
     assert a[:2] == b[:2] == [0.0, 0.0] and b[2] > a[2] > 0
     assert json.loads((by / "config.json").read_text())["posture_by_category"] is True
+
+
+def test_a_finished_run_is_reused_without_resuming_it(tiny_runs, tmp_path, monkeypatch):
+    """make_stimuli reusing its runs (--quick again, the demo's later runs) takes the checkpoints of a run trained to
+    its last step without resuming it: resuming builds the optimiser, whose first use in a process loads torch's
+    compiler. A run short of the steps asked, of another model or config, or without its last checkpoint is
+    resumed as before."""
+    import shutil
+    from types import SimpleNamespace
+
+    from generation.stimuli import checkpoints
+    from generation.training import train as train_module
+    from generation.training.train import finished
+
+    run = tmp_path / "mg_tiny"
+    shutil.copytree(tiny_runs["mg"], run)
+    assert finished("mg", "tiny", run, steps=150)
+    assert not finished("mg", "tiny", run, steps=200)
+    assert not finished("fl", "tiny", run, steps=150) and not finished("mg", "cpu", run, steps=150)
+    calls = []
+    monkeypatch.setattr(train_module, "train", lambda *a, **k: calls.append(a))
+    args = SimpleNamespace(
+        mg_checkpoint=None, shipped=False, runs=str(tmp_path), config="tiny", train_steps=150, precision=None
+    )
+    args.__dict__.update(seed=0, progress=False, device=None, threads=1)
+    final, first = checkpoints.ensure_model("mg", args, "unused.npz")
+    assert calls == [] and final.name == "step_0000150.pt" and first == checkpoints.checkpoints_in(run)[0]
+    (run / "checkpoints" / "step_0000150.pt").unlink()
+    checkpoints.ensure_model("mg", args, "unused.npz")
+    assert len(calls) == 1  # resumed, as before
