@@ -3,8 +3,8 @@
 The workers are not forked from the parent: it has loaded torch (sampling, training), whose thread pools make
 forked children hang. They are forked from multiprocessing's fork server, a fresh process that has imported this
 module and nothing else (`_workers_context`), so a worker starts with rendering loaded instead of importing it
-again (about 0.6 s of CPU a worker; a process that builds again, as the tests do, starts its next workers from the
-same server); where there is no fork server, they are spawned and import this module themselves. Either way this
+again, and a process that builds again (a notebook, the tests) starts its next workers from the same server; where
+there is no fork server, they are spawned and import this module themselves. Either way this
 module imports rendering and nothing that loads torch; keep it so (seconds and hundreds of MB per worker otherwise;
 tests/generation/test_stimuli.py checks the workers' imports). Nor does a worker run the command's main module
 again, as spawned children do by default (`_main_left_out`).
@@ -110,11 +110,10 @@ def _workers_context():
 
 @contextlib.contextmanager
 def _main_left_out():
-    """Workers started inside this block do not import the parent's main module. A spawned child (or one forked from
-    the fork server) runs it again
-    (multiprocessing's "safe importing of the main module") when `__main__` has a spec or a file: for `python -m
-    generation.make_stimuli` that is all of make_stimuli, about 0.4 s and 55 MB a worker that only needs this
-    module. A job holds data and `_render_job`, nothing defined in a main module, so the workers lose nothing."""
+    """Workers started inside this block do not import the parent's main module. A spawned child, or one forked
+    from the fork server, runs it again (multiprocessing's "safe importing of the main module") when `__main__` has
+    a spec or a file: for `python -m generation.make_stimuli` that is all of make_stimuli, which a worker does not
+    need. A job holds data and `_render_job`, nothing defined in a main module, so the workers lose nothing."""
     main = sys.modules["__main__"]
     saved = {k: main.__dict__[k] for k in ("__spec__", "__file__") if k in main.__dict__}
     main.__spec__ = None

@@ -153,7 +153,8 @@ def finished(model, config, out_dir, steps=None, precision=None):
     """Whether `out_dir` holds a run that train() with these arguments and `resume` would only load and return: its
     resume state is there and its checkpoint at the config's last step was written by this model and config. A
     caller that needs only the checkpoints (make_stimuli reusing its runs) asks first: resuming builds the
-    optimiser, and a process's first optimiser loads torch's compiler, more than a second of CPU for nothing."""
+    optimiser, and a process's first optimiser loads torch's compiler, which a run that only gives its checkpoints
+    does not need."""
     cfg = load_config(model, config)
     if precision is not None:
         cfg = with_changes(cfg, "--precision", precision=precision)
