@@ -149,17 +149,23 @@ def train(
         return _train(model, cfg, ds, data_path, out_dir, seed, progress, resume, device, threads == "auto", init)
 
 
+def _run_config(model, config, steps=None, precision=None):
+    """The config a run of `model` trains with: `config` with train()'s `steps` and `precision` overrides."""
+    cfg = load_config(model, config)
+    if precision is not None:
+        cfg = with_changes(cfg, "--precision", precision=precision)
+    if steps is not None:
+        cfg = shortened(cfg, steps)
+    return cfg
+
+
 def finished(model, config, out_dir, steps=None, precision=None):
     """Whether `out_dir` holds a run that train() with these arguments and `resume` would only load and return: its
     resume state is there and its checkpoint at the config's last step was written by this model and config. A
     caller that needs only the checkpoints (make_stimuli reusing its runs) asks first: resuming builds the
     optimiser, and a process's first optimiser loads torch's compiler, which a run that only gives its checkpoints
     does not need."""
-    cfg = load_config(model, config)
-    if precision is not None:
-        cfg = with_changes(cfg, "--precision", precision=precision)
-    if steps is not None:
-        cfg = shortened(cfg, steps)
+    cfg = _run_config(model, config, steps, precision)
     out = Path(out_dir)
     last = out / "checkpoints" / f"step_{cfg.steps:07d}.pt"
     if not ((out / "resume.pt").is_file() and last.is_file()):
@@ -169,11 +175,7 @@ def finished(model, config, out_dir, steps=None, precision=None):
 
 
 def _config_and_data(model, config, steps, data_path, precision=None):
-    cfg = load_config(model, config)
-    if precision is not None:
-        cfg = with_changes(cfg, "--precision", precision=precision)
-    if steps is not None:
-        cfg = shortened(cfg, steps)
+    cfg = _run_config(model, config, steps, precision)
     ds = load_dataset(data_path)
     if "valid" not in ds.splits or "train" not in ds.splits:
         raise TrainError(f"{data_path}: needs 'train' and 'valid' splits")
