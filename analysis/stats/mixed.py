@@ -135,6 +135,12 @@ def _beta_cov(s, varpar):
     return varpar[2] * linalg.inv(XVX)
 
 
+def curved(values):
+    """Which of a fit's Hessian eigenvalues `values` are above FLAT_EIGENVALUE of the largest: the others are the
+    directions the criterion is flat along (here and in ordinal.py)."""
+    return values > FLAT_EIGENVALUE * max(np.abs(values).max(), np.finfo(float).tiny)
+
+
 def satterthwaite_df(s, varpar):
     """Satterthwaite degrees of freedom of each fixed effect, as lmerTest computes them:
     df_k = 2 Var(b_k)^2 / (g_k' A g_k), with g_k the gradient of Var(b_k) in the variance parameters and
@@ -186,7 +192,7 @@ def satterthwaite_df(s, varpar):
     H = (4 * hessian(h / 2) - hessian(h)) / 3
     G = (4 * var_gradient(h / 2) - var_gradient(h)) / 3
     values, vectors = linalg.eigh((H + H.T) / 2)
-    kept = values > FLAT_EIGENVALUE * max(np.abs(values).max(), np.finfo(float).tiny)
+    kept = curved(values)
     A = 2 * (vectors[:, kept] / values[kept]) @ vectors[:, kept].T
     cov = _beta_cov(s, varpar)
     denom = np.einsum("ip,ij,jp->p", G, A, G)

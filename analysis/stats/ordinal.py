@@ -27,7 +27,7 @@ from scipy.special import expit
 
 from moglow_eval.core.blas import one_blas_thread
 
-from .mixed import FLAT_EIGENVALUE
+from .mixed import curved
 
 
 class OrdinalError(ValueError):
@@ -303,11 +303,11 @@ def _fit(y, X, rater, clip, names, K, level_names):
         hess[:, k] = (lap.value_and_grad(phi + e)[1] - lap.value_and_grad(phi - e)[1]) / (2 * step)
     hess = (hess + hess.T) / 2
     lap.mode(phi)  # leave the mode at the optimum
-    # Where the information has a direction of about no curvature (FLAT_EIGENVALUE: a parameter the ratings do not
+    # Where the information has a direction of about no curvature (mixed.curved: a parameter the ratings do not
     # identify, as when each rater rates a clip of their own), its inverse would be round-off: the standard errors
     # are then undefined, as clmm leaves them, and the fit is not called converged.
     values = np.linalg.eigvalsh(hess)
-    ok_hess = bool(values.min() > FLAT_EIGENVALUE * max(np.abs(values).max(), np.finfo(float).tiny))
+    ok_hess = bool(curved(values).all())
     cov = linalg.inv(hess) if ok_hess else np.full_like(hess, np.nan)
     se = np.sqrt(np.where(np.diag(cov) > 0, np.diag(cov), np.nan))
     th, beta, s_r, s_c = _unpack(d, phi)
