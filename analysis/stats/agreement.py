@@ -16,14 +16,12 @@
 
 import numpy as np
 import pandas as pd
-from scipy import linalg, sparse
 
 from ..data.filtering import only_test_rows
 from .mixed import fit_crossed
 
 FIT_ERRORS = (ValueError, ZeroDivisionError, FloatingPointError, np.linalg.LinAlgError)
 ICC_BOOT_MAX = 100  # REML refits of an incomplete table; each takes a few hundredths of a second
-EXACT_FIT = 1e-12  # residual sum of squares, as a share of the total, at which raters and clips fit every rating
 
 
 def _codes(series):
@@ -84,40 +82,11 @@ def krippendorff_alpha(df, unit="clip_id", value="rating", n_boot=1000, seed=0, 
     }
 
 
-def additive_rss(y, rater, clip):
-    """Residual sum of squares of y ~ rater + clip, both factors fixed (least squares; rater and clip int codes).
-
-    Solved from the normal equations as mixed.py solves its own: the larger factor's block is diagonal and is
-    eliminated, and the smaller one's Schur complement (singular by one, the shared intercept) is solved by least
-    squares, so the cost follows the number of raters and clips, not of ratings."""
-    y = np.asarray(y, float)
-    yc = y - y.mean()
-    R, C = int(rater.max()) + 1, int(clip.max()) + 1
-    n_r = np.bincount(rater, minlength=R).astype(float)
-    n_c = np.bincount(clip, minlength=C).astype(float)
-    z_r = np.bincount(rater, weights=yc, minlength=R)
-    z_c = np.bincount(clip, weights=yc, minlength=C)
-    N = sparse.csr_matrix((np.ones(len(y)), (rater, clip)), shape=(R, C))
-    if R >= C:  # eliminate the raters
-        A, n_big, z_big, n_small, z_small = N, n_r, z_r, n_c, z_c
-    else:
-        A, n_big, z_big, n_small, z_small = N.T.tocsr(), n_c, z_c, n_r, z_r
-    # A level with no rating (a bootstrap draws a rater whose clips were all left out) has no part in the fit.
-    inv_big = np.divide(1.0, n_big, out=np.zeros_like(n_big), where=n_big > 0)
-    schur = np.diag(n_small) - (A.T @ sparse.diags(inv_big) @ A).toarray()
-    b = linalg.lstsq(schur, z_small - A.T @ (z_big * inv_big), check_finite=False)[0]
-    a = (z_big - A @ b) * inv_big
-    return max(float(yc @ yc - a @ z_big - b @ z_small), 0.0)
-
-
 def _icc(y, rater, clip, k, start=None):
     """(ICC(A,1), ICC(A,k), the variance components); `start`: the components a resample's search begins from.
 
-    FloatingPointError where raters and clips fit every rating exactly (no residual left: a bootstrap resample of
-    a small study often is such a table). The REML criterion then falls without end as the residual variance goes
-    to 0, so there is no estimate, and the search would only wander off among ever larger variances."""
-    if additive_rss(y, rater, clip) <= EXACT_FIT * float(((y - y.mean()) ** 2).sum()):
-        raise FloatingPointError("raters and clips fit every rating exactly: no residual variance to estimate")
+    ModelUndefined (fit_crossed's) where raters and clips fit every rating exactly: a bootstrap resample of a small
+    study often is such a table."""
     if start is not None:  # as relative SDs, the model's own parameters
         start = [(start["rater"] / start["residual"]) ** 0.5, (start["clip"] / start["residual"]) ** 0.5]
     with np.errstate(

@@ -30,6 +30,44 @@ BOUND_NEAR = 1e-3  # a relative SD this close to 0 sits at the bound, where the 
 # matrix, also by central differences, is held to the same rule (ordinal.py).
 FLAT_EIGENVALUE = 1e-6
 DENSE_MAX = 4_000_000  # raters x clips up to which the count table is held dense (32 MB)
+EXACT_FIT = 1e-12  # residual sum of squares, as a share of the total, at which the effects fit every rating
+
+
+class ModelUndefined(ValueError):
+    """The data cannot identify the model (a statement for the report, not a failure)."""
+
+
+def additive_rss(y, rater, clip, X=None):
+    """Residual sum of squares of y ~ X + rater + clip with every effect fixed (least squares; rater and clip int
+    codes; X [n, p], or None for the intercept alone).
+
+    Solved from the normal equations as the fit solves its own: the larger factor's block is diagonal and is
+    eliminated, and the rest (the smaller factor's levels and X's columns, singular by the intercept they share and
+    by whatever else of X the levels span) is solved by least squares, so the cost follows the number of raters,
+    clips and fixed effects, not of ratings."""
+    y = np.asarray(y, float)
+    yc = y - y.mean()
+    X = np.zeros((len(y), 0)) if X is None else np.asarray(X, float)
+    R, C = int(rater.max()) + 1, int(clip.max()) + 1
+    (big, nb), (small, ns) = ((rater, R), (clip, C)) if R >= C else ((clip, C), (rater, R))
+
+    def sums(codes, n, values):  # [n levels, columns of values]: each level's sum of each column
+        return np.column_stack([np.zeros((n, 0)), *(np.bincount(codes, weights=v, minlength=n) for v in values.T)])
+
+    # The big factor's dummies against the rest (the small factor's dummies, then X), and the rest's own products
+    cross = sparse.hstack([sparse.csr_matrix((np.ones(len(y)), (big, small)), shape=(nb, ns)), sums(big, nb, X)])
+    cross = cross.tocsr()
+    small_x = sums(small, ns, X)
+    rest = np.block([[np.diag(np.bincount(small, minlength=ns).astype(float)), small_x], [small_x.T, X.T @ X]])
+    n_big = np.bincount(big, minlength=nb).astype(float)
+    z_big = np.bincount(big, weights=yc, minlength=nb)
+    z_rest = np.concatenate([np.bincount(small, weights=yc, minlength=ns), X.T @ yc])
+    # A level with no rating (a bootstrap draws a rater whose clips were all left out) has no part in the fit.
+    inv_big = np.divide(1.0, n_big, out=np.zeros_like(n_big), where=n_big > 0)
+    schur = rest - (cross.T @ sparse.diags(inv_big) @ cross).toarray()
+    b = linalg.lstsq(schur, z_rest - cross.T @ (z_big * inv_big), check_finite=False)[0]
+    a = (z_big - cross @ b) * inv_big
+    return max(float(yc @ yc - a @ z_big - b @ z_rest), 0.0)
 
 
 class _Suff:
@@ -212,13 +250,22 @@ def fit_crossed(y, X, rater, clip, names, with_cov=False, tests=True, start=None
     a caller that wants only the variances, as a bootstrap of them does. start: the random effects' SDs relative
     to the residual's where the search begins, for a refit near a known estimate (a bootstrap's resample starts
     at the whole sample's); such a refit skips the derivative-free polish unless an SD ends at 0.
+
+    ModelUndefined where the fixed effects with a level per rater and per clip fit every rating exactly.
     """
+    y, X, rater, clip = np.asarray(y, float), np.asarray(X, float), np.asarray(rater), np.asarray(clip)
     # One BLAS thread: the criterion is a chain of small factorisations, where thread hand-offs cost more than
     # they save (far slower on a busy 2-core machine), and the rounding is then identical from run to run.
     with one_blas_thread():
-        fit, cov = _fit(
-            np.asarray(y, float), np.asarray(X, float), np.asarray(rater), np.asarray(clip), names, tests, start
-        )
+        # Ratings that the fixed effects with a level per rater and per clip give exactly: the REML criterion falls
+        # without end as the residual variance goes to 0, so there is no estimate, and the search would stop
+        # wherever it wandered, among ever larger variances, or at a Hessian of round-off.
+        if additive_rss(y, rater, clip, X) <= EXACT_FIT * float(((y - y.mean()) ** 2).sum()):
+            raise ModelUndefined(
+                "the fixed effects with a level per rater and per clip fit every rating exactly: no residual "
+                "variance to estimate; model undefined"
+            )
+        fit, cov = _fit(y, X, rater, clip, names, tests, start)
     return {**fit, "covariance": cov} if with_cov else fit
 
 

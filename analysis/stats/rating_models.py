@@ -13,9 +13,7 @@ from scipy import stats as sps
 from moglow_eval.core import study
 from moglow_eval.core.study import condition_order
 
-
-class ModelUndefined(ValueError):
-    """The data cannot identify the model (a statement for the report, not a failure)."""
+from .mixed import ModelUndefined, fit_crossed
 
 
 def random_effects_problem(df, dv="rating", between="condition", rater="rater_id", clip="clip_id"):
@@ -71,8 +69,6 @@ def mixed_model(df, dv="rating", between="condition", rater="rater_id", clip="cl
     check it against statsmodels' MixedLM. The fixed effects are tested with t tests on Satterthwaite degrees of
     freedom.
     """
-    from .mixed import fit_crossed
-
     problem = random_effects_problem(df, dv, between, rater, clip)
     if problem:
         raise ModelUndefined(problem)

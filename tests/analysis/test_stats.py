@@ -13,7 +13,7 @@ from reference.anova_exact import one_way_anova_exact
 from analysis.data.filtering import exclude_raters, only_test_rows
 from analysis.data.load import load_ratings
 from analysis.stats import anova as stats
-from analysis.stats import bootstrap, rating_models
+from analysis.stats import bootstrap, mixed, rating_models
 
 DATA = TEST_DATA
 NIST = sorted((DATA / "nist_anova").glob("*.dat"))
@@ -279,6 +279,49 @@ def test_a_variance_the_ratings_do_not_identify_is_named_and_left_out_of_the_df(
     assert m["df"] == pytest.approx(dict.fromkeys(m["df"], n - 3), rel=1e-6)
     crossed = rating_models.mixed_model(df.assign(clip_id=np.tile(np.arange(2), n)))
     assert not any("flat" in w for w in crossed["warnings"])
+
+
+def test_ratings_the_effects_fit_exactly_leave_the_model_undefined_not_fitted_to_round_off():
+    """Every rater rates every clip by their condition plus a bias of their own, with nothing left over: the REML
+    criterion then has no minimum (it falls without end as the residual variance goes to 0). The fit stopped at
+    a residual variance of 1e-16 with df of 1e14, or, a rounding away, raised a LinAlgError from its Hessian's
+    probes. Now it is undefined, said in one line, and a rating off that pattern gives a fit again."""
+    rater, clip = np.meshgrid(np.arange(12), np.arange(9), indexing="ij")
+    rater, clip = rater.ravel(), clip.ravel()
+    cond = np.array(["NAT", "MG", "FL"])[clip % 3]
+    y = np.array([4.0, 3.0, 2.0])[clip % 3] + (rater % 2)
+    df = pd.DataFrame({"rating": y, "condition": cond, "rater_id": rater, "clip_id": clip})
+    for ratings in (y, y + 1e-9 * np.random.default_rng(0).standard_normal(len(y))):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            with pytest.raises(rating_models.ModelUndefined, match="fit every rating exactly"):
+                rating_models.mixed_model(df.assign(rating=ratings))
+    y[5] += 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m = rating_models.mixed_model(df.assign(rating=y))
+    assert m["converged"] and 0 < m["variance_components"]["residual"] < 0.1
+
+
+def test_the_fixed_effects_rss_is_least_squares_on_every_effect():
+    """mixed.additive_rss, the exact-fit check: the residual sum of squares of y ~ X + rater + clip, all fixed,
+    whichever factor it eliminates, with X's columns partly spanned by the levels."""
+    rng = np.random.default_rng(3)
+    for raters, clips in ((5, 9), (9, 5)):
+        rater, clip = rng.integers(0, raters, 80), rng.integers(0, clips, 80)
+        rater[:raters], clip[:clips] = np.arange(raters), np.arange(clips)
+        X = np.column_stack([np.ones(80), rng.integers(0, 2, 80), clip % 2]).astype(float)
+        y = rng.normal(size=80)
+        dummies = np.zeros((80, raters + clips))
+        dummies[np.arange(80), rater] = dummies[np.arange(80), raters + clip] = 1
+        for x, design in ((None, dummies), (X, np.column_stack([X, dummies]))):
+            fit = np.linalg.lstsq(design, y, rcond=None)[0]
+            want = ((design @ fit - y) ** 2).sum()
+            assert mixed.additive_rss(y, rater, clip, x) == pytest.approx(want, rel=1e-9)
+            # a level with no rating left (as a bootstrap resample can have) changes nothing, and warns of nothing
+            with np.errstate(all="raise"):
+                gap = mixed.additive_rss(y, np.where(rater == 0, raters, rater), clip, x)
+            assert gap == pytest.approx(want, rel=1e-9)
 
 
 def test_per_clip_means_sorted_worst_to_best(small_test_rows):

@@ -1,6 +1,8 @@
 """The style factor (analysis.stats.style): condition × style in a two-way ANOVA and a mixed model, a figure; the
 interaction is found where the data hold one and not where they do not."""
 
+import warnings
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -60,6 +62,20 @@ def test_an_empty_cell_leaves_the_interaction_undefined_not_fake():
     t = t[~((t["condition"] == "SYS") & (t["style"] == "solid"))]
     res = style.style_analysis(t, reference="REAL")
     assert "undefined" in res["anova"] and "undefined" in res["mixed_model"]
+
+
+def test_ratings_the_cells_and_raters_give_exactly_leave_the_mixed_model_undefined():
+    """A tiny study where each rating is its (condition, style) cell plus its rater's bias, nothing left over (the
+    two-style browser study's crowd, once the browser's rater fails a catch trial): the mixed model is undefined,
+    said in one line, not fitted to round-off with a LinAlgWarning; the ANOVA still reports the interaction."""
+    t = synthetic(0.0, n_raters=8, clips_per_cell=3)
+    rater = t["rater_id"].str[1:].astype(int)
+    t["rating"] = 2 + (t["condition"] == "REAL") + 2 * (t["style"] == "solid") + rater % 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = style.style_analysis(t, reference="REAL")
+    assert "fit every rating exactly" in res["mixed_model"]["undefined"]
+    assert "condition:style" in res["anova"]["terms"]
 
 
 def test_the_figure_draws_one_line_per_style(tmp_path):
