@@ -362,7 +362,10 @@ def _design_from_pilot(args):
     problem = rating_models.random_effects_problem(test)
     if problem:
         raise AnalysisError(f"{args.pilot}: the pilot cannot be fitted: {problem}")
-    design = pilot_design(test)
+    try:
+        design = pilot_design(test)
+    except rating_models.ModelUndefined as exc:
+        raise AnalysisError(f"{args.pilot}: the pilot cannot be fitted: {exc}") from None
     if args.clips_per_condition:
         design["clips_per_condition"] = args.clips_per_condition
     if args.clips_per_rater:

@@ -126,6 +126,17 @@ def test_plan_cli_errors_are_one_line(tmp_path, args, start, capsys):
     assert fails_with(plan.main, [*args, "--out", str(tmp_path), "--quiet"], capsys, "").startswith(start)
 
 
+def test_a_pilot_its_effects_fit_exactly_is_one_line(tmp_path, capsys):
+    """A pilot whose every rating is its condition plus its rater's bias, nothing left over: no mixed model to take
+    the variances from, said in one line (it was a ModelUndefined traceback)."""
+    df = pd.read_csv(DATA / "ratings_small.csv")
+    base = df["condition"].map({"NAT": 4, "MG": 3, "FL": 2}).fillna(1)
+    df["rating"] = (base + (df["condition"] != "BAD") * (df["rater_id"].str[-1].astype(int) % 2)).astype(int)
+    df.to_csv(tmp_path / "pilot.csv", index=False)
+    err = fails_with(plan.main, [str(tmp_path / "pilot.csv"), "--out", str(tmp_path), "--quiet"], capsys, "")
+    assert err.startswith("error: ") and "the pilot cannot be fitted" in err and "fit every rating exactly" in err
+
+
 def test_plan_help_says_acr_only(capsys):
     with pytest.raises(SystemExit) as e:
         plan.main(["--help"])
