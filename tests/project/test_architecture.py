@@ -5,6 +5,7 @@ hides a dependency from Python's import order, not from this test.
 """
 
 import ast
+import functools
 import sys
 
 import pytest
@@ -46,10 +47,20 @@ def part_files(part):
     return [p for p in sorted(folder.rglob("*.py")) if not any(p.is_relative_to(i) for i in inner)]
 
 
+@functools.lru_cache(maxsize=None)
+def _import_nodes(text, filename):
+    return tuple(n for n in ast.walk(ast.parse(text, filename)) if isinstance(n, (ast.Import, ast.ImportFrom)))
+
+
+def import_nodes(path):
+    """A file's import statements, lazy ones included, in ast.walk's order: parsed once a run for the same text, as
+    the checks below read each file's imports many times (every part's edges, every part's modules)."""
+    return _import_nodes(path.read_text(encoding="utf-8"), str(path))
+
+
 def imports_of(path):
     """(line, dotted module) for every absolute import statement in a file; relative imports stay in the part."""
-    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
-    for node in ast.walk(tree):
+    for node in import_nodes(path):
         if isinstance(node, ast.Import):
             for alias in node.names:
                 yield node.lineno, alias.name
@@ -140,19 +151,16 @@ def module_imports(path, known):
     each importing their base, is no cycle."""
     here = module_name(path)
     package = here if path.name == "__init__.py" else here.rpartition(".")[0]
-    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
-    for node in ast.walk(tree):
+    for node in import_nodes(path):
         if isinstance(node, ast.Import):
             targets = [alias.name for alias in node.names]
-        elif isinstance(node, ast.ImportFrom):
+        else:
             base = node.module or ""
             if node.level:
                 anchor = package.split(".")
                 anchor = anchor[: len(anchor) - (node.level - 1)]
                 base = ".".join(anchor + ([base] if base else []))
             targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in known else base for a in node.names]
-        else:
-            continue
         for name in targets:
             while name and name not in known:  # `import a.b.c` of a name inside c: the module c
                 name = name.rpartition(".")[0]
@@ -376,7 +384,7 @@ def unresolved_imports(paths, root=ROOT):
 
     found = []
     for path in paths:
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        for node in import_nodes(path):
             if not isinstance(node, ast.ImportFrom) or node.level or not node.module:
                 continue
             if node.module.split(".")[0] not in {p.split(".")[0] for p in PARTS}:
@@ -416,9 +424,7 @@ def imports_of_test_modules(paths, root=ROOT):
     twice or not at all."""
     found = []
     for path in paths:
-        tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
-        imports = [n for n in ast.walk(tree) if isinstance(n, (ast.Import, ast.ImportFrom))]
-        for node in sorted(imports, key=lambda n: n.lineno):
+        for node in sorted(import_nodes(path), key=lambda n: n.lineno):
             if isinstance(node, ast.ImportFrom) and node.module:
                 names = [node.module]
             else:  # `import test_x`, and `from . import test_x`, which names the module among the imported names
