@@ -359,10 +359,7 @@ def _design_from_pilot(args):
     test = only_test_rows(exclude_raters(df, args.threshold)[0])
     if test["condition"].nunique() < 2:
         raise AnalysisError(f"{args.pilot}: the pilot's kept test rows hold fewer than 2 conditions")
-    problem = rating_models.random_effects_problem(test)
-    if problem:
-        raise AnalysisError(f"{args.pilot}: the pilot cannot be fitted: {problem}")
-    try:
+    try:  # the mixed model says why a pilot cannot be fitted (rating_models.random_effects_problem, an exact fit)
         design = pilot_design(test)
     except rating_models.ModelUndefined as exc:
         raise AnalysisError(f"{args.pilot}: the pilot cannot be fitted: {exc}") from None

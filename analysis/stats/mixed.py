@@ -37,39 +37,6 @@ class ModelUndefined(ValueError):
     """The data cannot identify the model (a statement for the report, not a failure)."""
 
 
-def additive_rss(y, rater, clip, X=None):
-    """Residual sum of squares of y ~ X + rater + clip with every effect fixed (least squares; rater and clip int
-    codes; X [n, p], or None for the intercept alone).
-
-    Solved from the normal equations as the fit solves its own: the larger factor's block is diagonal and is
-    eliminated, and the rest (the smaller factor's levels and X's columns, singular by the intercept they share and
-    by whatever else of X the levels span) is solved by least squares, so the cost follows the number of raters,
-    clips and fixed effects, not of ratings."""
-    y = np.asarray(y, float)
-    yc = y - y.mean()
-    X = np.zeros((len(y), 0)) if X is None else np.asarray(X, float)
-    R, C = int(rater.max()) + 1, int(clip.max()) + 1
-    (big, nb), (small, ns) = ((rater, R), (clip, C)) if R >= C else ((clip, C), (rater, R))
-
-    def sums(codes, n, values):  # [n levels, columns of values]: each level's sum of each column
-        return np.column_stack([np.zeros((n, 0)), *(np.bincount(codes, weights=v, minlength=n) for v in values.T)])
-
-    # The big factor's dummies against the rest (the small factor's dummies, then X), and the rest's own products
-    cross = sparse.hstack([sparse.csr_matrix((np.ones(len(y)), (big, small)), shape=(nb, ns)), sums(big, nb, X)])
-    cross = cross.tocsr()
-    small_x = sums(small, ns, X)
-    rest = np.block([[np.diag(np.bincount(small, minlength=ns).astype(float)), small_x], [small_x.T, X.T @ X]])
-    n_big = np.bincount(big, minlength=nb).astype(float)
-    z_big = np.bincount(big, weights=yc, minlength=nb)
-    z_rest = np.concatenate([np.bincount(small, weights=yc, minlength=ns), X.T @ yc])
-    # A level with no rating (a bootstrap draws a rater whose clips were all left out) has no part in the fit.
-    inv_big = np.divide(1.0, n_big, out=np.zeros_like(n_big), where=n_big > 0)
-    schur = rest - (cross.T @ sparse.diags(inv_big) @ cross).toarray()
-    b = linalg.lstsq(schur, z_rest - cross.T @ (z_big * inv_big), check_finite=False)[0]
-    a = (z_big - cross @ b) * inv_big
-    return max(float(yc @ yc - a @ z_big - b @ z_rest), 0.0)
-
-
 class _Suff:
     """Sufficient statistics of the design: counts per level, the rater x clip count table, X'X, X'y, Z'X, Z'y."""
 
@@ -104,6 +71,26 @@ class _Suff:
         if len(counts) * small * small <= 40_000_000:
             self.gram_counts = counts
             self.gram = np.stack([(self.A[which == g].T @ self.A[which == g]).toarray() for g in range(len(counts))])
+
+
+def additive_rss(s):
+    """Residual sum of squares of y ~ X + rater + clip with every effect fixed (least squares), from the sufficient
+    statistics `s` (_Suff) the fit is built from: the larger factor's block of the normal equations is diagonal and
+    is eliminated, as in the fit, and the rest (the smaller factor's levels and X's columns, singular by the
+    intercept they share and by whatever else of X the levels span) is solved by least squares."""
+    if s.rater_big:
+        n_big, z_big, big_x, n_small, z_small, small_x = s.nr, s.Zry, s.ZrX, s.nc, s.Zcy, s.ZcX
+    else:
+        n_big, z_big, big_x, n_small, z_small, small_x = s.nc, s.Zcy, s.ZcX, s.nr, s.Zry, s.ZrX
+    cross = sparse.hstack([s.A, big_x]).tocsr()  # the big factor's dummies against the small one's, then X
+    rest = np.block([[np.diag(n_small), small_x], [small_x.T, s.XtX]])
+    z_rest = np.concatenate([z_small, s.Xty])
+    # A level with no rating (a bootstrap draws a rater whose clips were all left out) has no part in the fit.
+    inv_big = np.divide(1.0, n_big, out=np.zeros_like(n_big), where=n_big > 0)
+    schur = rest - (cross.T @ sparse.diags(inv_big) @ cross).toarray()
+    b = linalg.lstsq(schur, z_rest - cross.T @ (z_big * inv_big), check_finite=False)[0]
+    a = (z_big - cross @ b) * inv_big
+    return max(float(s.yty - a @ z_big - b @ z_rest), 0.0)
 
 
 def _solve_parts(s, tr, tc):
@@ -253,25 +240,24 @@ def fit_crossed(y, X, rater, clip, names, with_cov=False, tests=True, start=None
 
     ModelUndefined where the fixed effects with a level per rater and per clip fit every rating exactly.
     """
-    y, X, rater, clip = np.asarray(y, float), np.asarray(X, float), np.asarray(rater), np.asarray(clip)
     # One BLAS thread: the criterion is a chain of small factorisations, where thread hand-offs cost more than
     # they save (far slower on a busy 2-core machine), and the rounding is then identical from run to run.
     with one_blas_thread():
+        s = _Suff(np.asarray(y, float), np.asarray(X, float), np.asarray(rater), np.asarray(clip))
         # Ratings that the fixed effects with a level per rater and per clip give exactly: the REML criterion falls
         # without end as the residual variance goes to 0, so there is no estimate, and the search would stop
         # wherever it wandered, among ever larger variances, or at a Hessian of round-off.
-        if additive_rss(y, rater, clip, X) <= EXACT_FIT * float(((y - y.mean()) ** 2).sum()):
+        if additive_rss(s) <= EXACT_FIT * s.yty:
             raise ModelUndefined(
                 "the fixed effects with a level per rater and per clip fit every rating exactly: no residual "
                 "variance to estimate; model undefined"
             )
-        fit, cov = _fit(y, X, rater, clip, names, tests, start)
+        fit, cov = _fit(s, names, tests, start)
     return {**fit, "covariance": cov} if with_cov else fit
 
 
-def _fit(y, X, rater, clip, names, tests=True, start=None):
-    """(fit_crossed's dict, the fixed effects' covariance matrix)."""
-    s = _Suff(y, X, rater, clip)
+def _fit(s, names, tests=True, start=None):
+    """(fit_crossed's dict, the fixed effects' covariance matrix) from the sufficient statistics `s`."""
 
     def objective(rel_sd):  # lme4's parameters: random-effect SDs relative to the residual SD, >= 0
         try:

@@ -304,8 +304,9 @@ def test_ratings_the_effects_fit_exactly_leave_the_model_undefined_not_fitted_to
 
 
 def test_the_fixed_effects_rss_is_least_squares_on_every_effect():
-    """mixed.additive_rss, the exact-fit check: the residual sum of squares of y ~ X + rater + clip, all fixed,
-    whichever factor it eliminates, with X's columns partly spanned by the levels."""
+    """mixed.additive_rss, the exact-fit check: the residual sum of squares of y ~ X + rater + clip, all fixed, from
+    the fit's sufficient statistics, whichever factor it eliminates, with X the intercept alone or with columns
+    partly spanned by the levels."""
     rng = np.random.default_rng(3)
     for raters, clips in ((5, 9), (9, 5)):
         rater, clip = rng.integers(0, raters, 80), rng.integers(0, clips, 80)
@@ -314,13 +315,13 @@ def test_the_fixed_effects_rss_is_least_squares_on_every_effect():
         y = rng.normal(size=80)
         dummies = np.zeros((80, raters + clips))
         dummies[np.arange(80), rater] = dummies[np.arange(80), raters + clip] = 1
-        for x, design in ((None, dummies), (X, np.column_stack([X, dummies]))):
+        for x, design in ((X[:, :1], dummies), (X, np.column_stack([X, dummies]))):
             fit = np.linalg.lstsq(design, y, rcond=None)[0]
             want = ((design @ fit - y) ** 2).sum()
-            assert mixed.additive_rss(y, rater, clip, x) == pytest.approx(want, rel=1e-9)
+            assert mixed.additive_rss(mixed._Suff(y, x, rater, clip)) == pytest.approx(want, rel=1e-9)
             # a level with no rating left (as a bootstrap resample can have) changes nothing, and warns of nothing
             with np.errstate(all="raise"):
-                gap = mixed.additive_rss(y, np.where(rater == 0, raters, rater), clip, x)
+                gap = mixed.additive_rss(mixed._Suff(y, x, np.where(rater == 0, raters, rater), clip))
             assert gap == pytest.approx(want, rel=1e-9)
 
 
