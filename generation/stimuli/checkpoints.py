@@ -58,7 +58,7 @@ def ensure_model(kind, args, dataset):
         return pretrained.CHECKPOINTS[kind], pretrained.CHECKPOINTS["bad"]
     run = Path(args.runs) / f"{kind}_{args.config}"
     resume = (run / "resume.pt").is_file()
-    if resume and finished(kind, args.config, run, args.train_steps, args.precision):
+    if finished(kind, args.config, run, args.train_steps, args.precision):  # its resume state and last checkpoint
         log.info(f"models: reusing {kind} (config {args.config}) in {run}, trained to its last step")
         ckpts = checkpoints_in(run)
         return ckpts[-1], ckpts[0]
