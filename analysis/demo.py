@@ -159,14 +159,9 @@ def clear_earlier_run(out: Path, new_stimuli: bool) -> None:
             path.unlink()
 
 
-# The designs whose demo study is two people in conversation (generation.own_study.demo_dyad); the others with
-# sound get one person talking (demo_study).
-TWO_PERSON = ("dyadic", "semantic")
-
-
 def speech_items(design: str) -> tuple[tuple[int, int], str]:
     """The bounds of --items for the study with speech the demo makes for `design`, and who talks in it."""
-    if design in TWO_PERSON:
+    if design in study.TWO_PERSON_DEMO_DESIGNS:
         return study.TWO_PERSON_DEMO_ITEMS, "two people talking"
     return study.SPEECH_DEMO_ITEMS, "one person talking"
 
@@ -176,7 +171,7 @@ def make_stimuli(procs: "Processes", out: Path, s: dict) -> Path:
     --quick (its tiny models in `runs`, default out/runs, trained once and reused by later runs)."""
     seed, design, sound = s["seed"], s["design"], s["sound"]
     py, stimuli = sys.executable, out / "stimuli"
-    if design in TWO_PERSON:
+    if design in study.TWO_PERSON_DEMO_DESIGNS:
         _stage(f"1/5 a study of two people talking (generation.own_study.demo_dyad) → {stimuli}")
         cmd = ["--out", str(out / "study"), "--seed", str(seed), "--design", design]
         cmd += ["--items", str(s["items"])] if s["items"] else []

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from moglow_eval.core import cli
-from moglow_eval.core.study import TWO_PERSON_DEMO_ITEMS
+from moglow_eval.core.study import TWO_PERSON_DEMO_DESIGNS, TWO_PERSON_DEMO_ITEMS
 
 from ..data.motion_files import read_motion
 from ..data.transcripts import Transcript, Word, write_transcript
@@ -214,7 +214,7 @@ def build_parser():
     ap = cli.ArgumentParser(prog="python -m generation.own_study.demo_dyad", description=__doc__.split("\n")[0])
     ap.add_argument("--out", required=True, help="folder for the study file and its folders")
     ap.add_argument("--items", type=cli.number(int, *TWO_PERSON_DEMO_ITEMS), default=8, help="items (default 8)")
-    ap.add_argument("--design", choices=("dyadic", "semantic"), default="dyadic", help="the test (default dyadic)")
+    ap.add_argument("--design", choices=TWO_PERSON_DEMO_DESIGNS, default="dyadic", help="the test (default dyadic)")
     ap.add_argument("--seed", type=cli.number(int, 0), default=0)
     return ap
 

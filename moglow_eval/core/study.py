@@ -40,6 +40,9 @@ DEFAULT_DESIGN = "acr"  # the paper's design: a study, a database or a file that
 # it replaces an earlier run; the two commands take them as their own --items bounds.
 SPEECH_DEMO_ITEMS = (3, 60)
 TWO_PERSON_DEMO_ITEMS = (3, 30)
+# The designs whose demo study is two people in conversation (generation.own_study.demo_dyad builds it, analysis.demo
+# asks for it); the demo's other designs with sound get one person talking (generation.own_study.demo_study).
+TWO_PERSON_DEMO_DESIGNS = ("dyadic", "semantic")
 
 # Clip ids are random, so a file or URL name tells a rater nothing about the condition (CONTRACTS §4).
 CLIP_ID = re.compile(r"[a-z0-9]{12,64}")  # always fullmatch

@@ -4,15 +4,15 @@ make, nor clears an earlier run for one it cannot."""
 
 import pytest
 
-from analysis.demo import TWO_PERSON, DemoError, run_demo, speech_items
+from analysis.demo import DemoError, run_demo, speech_items
 from generation.own_study import demo_dyad, demo_study
-from moglow_eval.core.study import MISMATCH_COLUMN
+from moglow_eval.core.study import MISMATCH_COLUMN, TWO_PERSON_DEMO_DESIGNS
 
 
 @pytest.mark.parametrize("design", ["acr", *MISMATCH_COLUMN])
 def test_the_demos_items_bounds_are_its_study_commands_own(design, capsys):
     (low, high), _ = speech_items(design)
-    maker = demo_dyad if design in TWO_PERSON else demo_study
+    maker = demo_dyad if design in TWO_PERSON_DEMO_DESIGNS else demo_study
     for n in (low, high):
         assert maker.build_parser().parse_args(["--out", "x", "--items", str(n)]).items == n
     for n in (low - 1, high + 1):
