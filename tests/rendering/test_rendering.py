@@ -131,6 +131,22 @@ def test_render_frames_do_not_depend_on_the_frames_before():
     assert not used.rgba.any()
 
 
+def test_a_frame_from_the_look_at_point_before_is_the_frame_a_fresh_drawer_draws():
+    """The floor is drawn again only where the look-at point moved (a still camera's frames start from the last
+    floor): frames from the same point, from another and back, with the frame written over in between as captions
+    write over it, each equal the frame a fresh drawer draws."""
+    joints = load_take(WALK, 20.0)[:30].astype(np.float64)
+    targets = camera_targets(joints, 20.0)
+    still, moved = targets[0], targets[0] + np.array([0.37, 0.0, -0.21])
+    used = FrameDrawer(skeleton.PARENTS, skeleton.JOINT_NAMES, 200)
+    for t, target in enumerate((still,) * 3 + (moved,) * 3 + (still,) * 3):
+        frame = used.draw(joints[3 * t], target).copy()
+        fresh = FrameDrawer(skeleton.PARENTS, skeleton.JOINT_NAMES, 200)
+        assert np.array_equal(frame, fresh.draw(joints[3 * t], target)), t
+        used.frame[: 200 * 20] = 235  # a caption's band over the top rows
+    assert not np.array_equal(fresh.draw(joints[0], still).copy(), fresh.draw(joints[0], moved))  # the floor moved
+
+
 def test_render_colours_survive_the_yuv_path():
     """Frames are made as yuv420p directly; converted back, the background, floor and limbs have their colours."""
     joints = load_take(WALK, 20.0)[:1].astype(np.float64)
