@@ -228,7 +228,7 @@ class FrameDrawer:
         """The bones to draw (child, parent) grouped by (side, thin), each group one slice of self.bone_ends."""
         parents, names = self.parents, list(joint_names)
         hidden = {j for j, n in enumerate(names) if n in set(hide)}
-        hidden |= {j for j, p in enumerate(parents) if p < 0 and "root" in skeleton_names.tokens(names[j])}
+        hidden |= set(skeleton_names.root_markers(names, parents))
         child = np.array([j for j in np.nonzero(parents >= 0)[0] if j not in hidden and parents[j] not in hidden])
         child = child.astype(np.int64)
         sides = [skeleton_names.side(names[j]) for j in child]

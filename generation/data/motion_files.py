@@ -16,8 +16,10 @@ frame rate, resampled to the study's rate. Four formats:
 
 The up axis is read from the study file or detected (`detect_up`). Units are the study file's, or with "auto"
 the first that makes the standing body a person's height, the skeleton family's own unit tried first
-(generation.data.skeleton_families). Every file is read within bounds set by its header (frames, channels, array
-shapes) before anything is allocated. Every problem is a MotionError naming the file.
+(generation.data.skeleton_families); both measure the body without its root markers (`body_joints`: a
+Bandai-Namco `joint_Root` left at the scene's origin is none of the body). Every file is read within bounds set
+by its header (frames, channels, array shapes) before anything is allocated. Every problem is a MotionError
+naming the file.
 """
 
 from dataclasses import dataclass
@@ -25,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from moglow_eval.core import user_files
+from moglow_eval.core import skeleton_names, user_files
 from moglow_eval.core.cli import UserError
 from moglow_eval.core.clip import (
     MAX_FRAMES,
@@ -120,6 +122,14 @@ def motion_stem(path):
 
 
 # ---------------------------------------------------------------- units and axes
+def body_joints(joints, names, parents):
+    """joints [T, J, 3] without the root markers (core.skeleton_names.root_markers), which the measures of the body
+    below must not count: a marker left at the origin of a walk's scene would make the body metres deep and tall."""
+    markers = set(skeleton_names.root_markers(names, parents))
+    keep = [j for j in range(joints.shape[1]) if j not in markers]
+    return joints[:, keep] if keep else joints
+
+
 def detect_up(joints):
     """'y' or 'z': the axis along which the body is tallest, in the median frame (a standing, walking or
     dancing body is taller than it is deep; arms spread wide tie at worst with a T-pose, decided by y)."""
@@ -298,7 +308,7 @@ def _positions(path, fps, up, skeleton, source_fps, smpl):
             return joints, names, parents, 1.0, valid  # the body model's metres
         if is_smpl_file(path):
             joints, names, parents = _smpl_positions(path, fps, *smpl, source_fps)
-            return to_y_up(joints, detect_up(joints) if up == "auto" else up), names, parents, None, None
+            return _y_up(joints, names, parents, up), names, parents, None, None
         return (*_npz_positions(path, fps), 1.0, None)  # clips are in metres, Y up
     if path.name.endswith(".npy"):
         if source_fps is None:
@@ -306,7 +316,12 @@ def _positions(path, fps, up, skeleton, source_fps, smpl):
         joints, names, parents = _npy_positions(path, skeleton, source_fps, fps)
     else:
         joints, names, parents = _bvh_positions(path, fps)
-    return to_y_up(joints, detect_up(joints) if up == "auto" else up), names, parents, None, None
+    return _y_up(joints, names, parents, up), names, parents, None, None
+
+
+def _y_up(joints, names, parents, up):
+    """The joints turned Y up: `up` as given, or with "auto" the axis along which the body is tallest."""
+    return to_y_up(joints, detect_up(body_joints(joints, names, parents)) if up == "auto" else up)
 
 
 def read_motion(
@@ -374,9 +389,9 @@ def read_motion(
     if not np.isfinite(joints).all():
         raise MotionError(f"{path}: positions contain NaN or infinite values")
     if scale is None:
-        scale = _unit(joints, names, units, path)
+        scale = _unit(body_joints(joints, names, parents), names, units, path)
     joints = joints * float(scale)
-    check_height(joints, path)
+    check_height(body_joints(joints, names, parents), path)
     return Motion(joints.astype(np.float32), names, np.asarray(parents, np.int64), float(fps), str(path), valid)
 
 

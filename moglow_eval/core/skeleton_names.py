@@ -48,6 +48,13 @@ def side(name):
     return None
 
 
+def root_markers(names, parents):
+    """Indices of the top-level joints named like a root (`joint_Root`, `b_root`): a marker on the floor or at the
+    scene's origin, no part of the body. No bone is drawn from one, and the body's up axis and height are measured
+    without it: Bandai-Namco's `joint_Root` stays at the origin while the body walks metres away from it."""
+    return [j for j, p in enumerate(parents) if p < 0 and "root" in tokens(names[j])]
+
+
 def is_detail(name):
     """True for a finger or face joint (drawn thinner): a token of FINGER_WORDS or FACE_WORDS."""
     return any(w in FINGER_WORDS or w in FACE_WORDS for w in tokens(name))

@@ -12,6 +12,7 @@ import pytest
 from helpers import smpl_fixtures
 from helpers.bvh_fixtures import CMU_UNIT, FAMILIES, write_family, write_family_study, write_zeroeggs
 from helpers.cli import fails_with
+from helpers.paths import TEST_DATA
 
 from generation.data.motion_files import MotionError, read_motion
 from generation.data.skeleton_families import family
@@ -50,6 +51,22 @@ def test_each_family_is_named_and_read_in_metres(tmp_path, name):
     assert np.allclose(auto.joints, given.joints, atol=1e-5)
     height = np.median(auto.joints[..., 1].max(1) - auto.joints[..., 1].min(1))
     assert 1.6 < height < 1.8
+
+
+def test_a_bandai_walk_is_read_upright_in_centimetres_whatever_its_root_marker():
+    """A real Bandai-Namco walk (tests/data/bvh): its `joint_Root` stays at the scene's origin while the body walks
+    metres away, so counted as part of the body it made the body deeper than tall (Z taken for up, no unit giving a
+    person). Measured without it, the file is read as it is written: Y up, centimetres, the same joints as with
+    both given."""
+    walk = TEST_DATA / "bvh" / "bandai_walk_angry_002.bvh.gz"
+    auto = read_motion(walk, 30.0)
+    given = read_motion(walk, 30.0, units="cm", up="y")
+    assert np.array_equal(auto.joints, given.joints)
+    root = auto.names.index("joint_Root")
+    assert np.ptp(auto.joints[:, root], axis=0).max() == 0  # the marker never moves...
+    assert np.ptp(auto.joints[:, auto.names.index("Hips")], axis=0).max() > 1.0  # ...while the body walks
+    height = np.median(auto.joints[..., 1].max(1) - auto.joints[..., 1].min(1))
+    assert 1.2 < height < 1.9
 
 
 def test_zeroeggs_fixture_is_the_reported_take(tmp_path):
