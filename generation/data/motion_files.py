@@ -388,10 +388,11 @@ def read_motion(
         raise MotionError(f"{path}: the first joint ({names[0]}) must be the root (parent -1): the camera follows it")
     if not np.isfinite(joints).all():
         raise MotionError(f"{path}: positions contain NaN or infinite values")
+    body = body_joints(joints, names, parents)
     if scale is None:
-        scale = _unit(body_joints(joints, names, parents), names, units, path)
+        scale = _unit(body, names, units, path)
     joints = joints * float(scale)
-    check_height(body_joints(joints, names, parents), path)
+    check_height(body * float(scale), path)
     return Motion(joints.astype(np.float32), names, np.asarray(parents, np.int64), float(fps), str(path), valid)
 
 
