@@ -36,7 +36,7 @@ def main():
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         m = read_motion(write_zeroeggs(Path(tmp) / "take.bvh", args.frames, turns=SPEAKER), fps=30.0)
-        joints = place(m.joints, m.names)
+        joints = place(m.joints, m.names, m.parents)
         clip = dict(joints=joints, parents=m.parents, joint_names=m.names, fps=30.0)
         camera = item_camera([joints], list(m.names), np.asarray(m.parents), 30.0, "front", "upper")
         styles = {"stick": STYLES["stick"]}

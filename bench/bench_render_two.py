@@ -56,7 +56,7 @@ def main():
     a, b = _takes(args.frames)
     n = args.frames
     names, parents = list(a.names), np.asarray(a.parents)
-    alone = place(a.joints[:n], names)
+    alone = place(a.joints[:n], names, parents)
     one_camera = item_camera([alone], names, parents, 30.0, "three-quarter", "upper")
     (agents, partner) = place_pair([a.joints[:n]], names, b.joints[:n], list(b.names))
     people = [(names, parents, None), (list(b.names), b.parents, partner)]

@@ -28,8 +28,9 @@ HEAD_ROOM = 0.1  # metres above the highest joint: the head disc the renderer dr
 FILL = 0.7  # of the frame height that the tallest extent of a framed body takes (framing_camera)
 
 
-def framing_camera(clips, base=DEFAULT_CAMERA, fill=FILL):
-    """One camera set-up that frames every clip in `clips` (joints [T, J, 3], metres, Y up; root first) whole.
+def framing_camera(clips, base=DEFAULT_CAMERA, fill=FILL, root=0):
+    """One camera set-up that frames every clip in `clips` (joints [T, J, 3], metres, Y up) whole; `root` is the
+    body's root joint (core.skeleton_names.body_root), which the camera follows.
 
     The built-in study's camera is set for a walker of 1.7 m; a study of your own motion may show a child, a
     giant or a dancer with arms spread. Here the look-at height is the middle of the bodies' vertical span and
@@ -41,7 +42,7 @@ def framing_camera(clips, base=DEFAULT_CAMERA, fill=FILL):
         joints = np.asarray(joints, dtype=np.float64)
         top = max(top, float(joints[..., 1].max()) + HEAD_ROOM)
         bottom = min(bottom, float(joints[..., 1].min()))
-        around = joints[..., [0, 2]] - joints[:, :1, [0, 2]]
+        around = joints[..., [0, 2]] - joints[:, root : root + 1, [0, 2]]
         reach = max(reach, float(np.linalg.norm(around, axis=-1).max()))
     span = max(top - bottom, 2 * reach, 0.1)
     distance = span / (2 * np.tan(np.radians(base.fov) / 2) * fill)
@@ -58,14 +59,15 @@ def frame_size(size):
     return int(size), int(size)
 
 
-def camera_targets(joints, fps, camera=DEFAULT_CAMERA):
-    """Look-at point per frame [T, 3]: the smoothed floor projection of the root, held within max_lag of it."""
-    root = joints[:, 0, [0, 2]].astype(np.float64)
-    smooth = gaussian_filter1d(root, camera.follow_sigma * fps, axis=0, mode="nearest") if len(root) > 1 else root
-    lag = smooth - root
+def camera_targets(joints, fps, camera=DEFAULT_CAMERA, root=0):
+    """Look-at point per frame [T, 3]: the smoothed floor projection of the body's root joint `root`
+    (core.skeleton_names.body_root), held within max_lag of it."""
+    path = joints[:, root, [0, 2]].astype(np.float64)
+    smooth = gaussian_filter1d(path, camera.follow_sigma * fps, axis=0, mode="nearest") if len(path) > 1 else path
+    lag = smooth - path
     norm = np.linalg.norm(lag, axis=1, keepdims=True)
     lag *= np.minimum(1.0, camera.max_lag / np.maximum(norm, 1e-9))
-    xz = root + lag
+    xz = path + lag
     return np.stack([xz[:, 0], np.full(len(xz), camera.height), xz[:, 1]], axis=1)
 
 

@@ -97,7 +97,7 @@ def upper_camera(clips, names, parents, fps, base, room=0.0, aspect=1.0, reach=N
     points, pads = [], []
     for joints in clips:
         joints = np.asarray(joints, dtype=np.float64)
-        floor = camera_targets(joints, fps, base) * np.array([1.0, 0.0, 1.0])
+        floor = camera_targets(joints, fps, base, skeleton_names.body_root(names, parents)) * np.array([1.0, 0.0, 1.0])
         framed_points(joints - floor[:, None], names, parents, True, points, pads, reach)
     distance, height = _fit(np.concatenate(points), np.concatenate(pads), base, room, aspect)
     return replace(base, distance=distance, height=height)
@@ -108,11 +108,12 @@ def framed_points(rel, names, parents, upper, points, pads, reach=None):
     look-at point on the floor): every joint (upper: but the legs' and the hips' ancestors), each padded by what
     is drawn around it (BODY_PAD, DETAIL_PAD for fingers and face; or `reach` [J], metres a joint, where more is
     drawn around it: a mesh's surface, its fingertips beyond the last finger joint), and the drawn head as a ball
-    (HEAD_RADIUS around HEAD_CENTRE along the neck)."""
-    below = set()
+    (HEAD_RADIUS around HEAD_CENTRE along the neck). A root marker (core.skeleton_names.root_markers) is not drawn,
+    and not framed."""
+    below = set(skeleton_names.root_markers(names, parents))  # not drawn (raster)
     if upper:
         legs = set(leg_joints(names, parents))
-        below = legs | hips_ancestors(parents, legs)
+        below |= legs | hips_ancestors(parents, legs)
     keep = [j for j in range(len(names)) if j not in below] or list(range(len(names)))
     head = head_joint(names)
     if head is not None and parents[head] >= 0:
@@ -199,7 +200,11 @@ def item_camera(clips, names, parents, fps, view=None, framing="full", room=0.0,
         framing = "upper" if feet_still(clips, names, parents) else "full"
     if framing == "upper":
         return upper_camera(clips, names, parents, fps, base, room, aspect, reach)
-    return framing_camera(clips, base)
+    # Only what is drawn is framed: not a root marker left at the scene's origin (raster draws no bone from one).
+    markers = set(skeleton_names.root_markers(names, parents))
+    drawn = [j for j in range(len(names)) if j not in markers]
+    root = drawn.index(skeleton_names.body_root(names, parents))
+    return framing_camera([np.asarray(c)[:, drawn] for c in clips], base, root=root)
 
 
 # The steps a study's cameras are held to (steady): a system whose motion stays inside the frame leaves its item's
@@ -288,8 +293,9 @@ def pair_camera(clips, people, view=None, framing="upper", room=0.0, aspect=1.0,
     """
     (names, parents, _), (p_names, p_parents, partner) = people
     measured = clips if facing is None else facing
-    roots = np.mean([np.asarray(c)[:, 0, [0, 2]].mean(0) for c in measured], 0)
-    partner_root = np.asarray(partner)[:, 0, [0, 2]].mean(0)
+    root, p_root = skeleton_names.body_root(names, parents), skeleton_names.body_root(p_names, p_parents)
+    roots = np.mean([np.asarray(c)[:, root, [0, 2]].mean(0) for c in measured], 0)
+    partner_root = np.asarray(partner)[:, p_root, [0, 2]].mean(0)
     azimuth = pair_azimuth(roots, partner_root, mean_facing(measured, names), view)
     upper = framing != "full"
     fov, elevation = (PAIR_UPPER_FOV, UPPER_ELEVATION) if upper else (PAIR_FOV, PAIR_ELEVATION)

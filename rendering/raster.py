@@ -240,6 +240,8 @@ class FrameDrawer:
         group = 2 * (bone_side + 1) + bone_thin
         order = np.argsort(group, kind="stable")
         self.bone_ends = np.stack([child, parents[child]], 1).reshape(-1, 2)[order]
+        # The joints drawn, which must be in front of the camera: a hidden root marker may pass behind it.
+        self.drawn = np.unique(self.bone_ends)
         self.codes = np.tile(np.array([Path.MOVETO, Path.LINETO], dtype=Path.code_type), len(child))
         keys = [(s, t) for s in ("left", "centre", "right") for t in (False, True)]
         counts = [int((group == g).sum()) for g in range(6)]
@@ -275,15 +277,15 @@ class FrameDrawer:
         cam = self.proj.to_camera(joints, eye)
         scam = cam - self.proj.rot[:, 1] * joints[:, 1:2]  # the joints dropped onto the floor
         points, radius = [], 0.0
-        if (scam[:, 2] > NEAR).all():
+        if (scam[self.drawn, 2] > NEAR).all():
             seg = self.proj.to_screen(scam[self.bone_ends])
             r.draw_path(self.gcs["shadow"], Path(seg.reshape(-1, 2), self.codes), t)
             points.append(seg.reshape(-1, 2))
         if self.style.body == "mesh":
             return self._mesh_figure(vertices[0], eye, points)
-        if self.solid is not None and (cam[:, 2] > NEAR).all():
+        if self.solid is not None and (cam[self.drawn, 2] > NEAR).all():
             return self._solid_figure(joints, cam, eye, points)
-        if (cam[:, 2] > NEAR).all():
+        if (cam[self.drawn, 2] > NEAR).all():
             seg = self.proj.to_screen(cam[self.bone_ends])
             points.append(seg.reshape(-1, 2))
             depth = cam[self.bone_ends, 2]

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from moglow_eval.core import cli
+from moglow_eval.core import cli, skeleton_names
 from moglow_eval.core.blas import one_blas_thread
 from moglow_eval.core.clip import check_fps, check_joints, load_clip
 
@@ -73,7 +73,8 @@ class RenderOptions:
         A second person's drawing; None: `style` in one neutral colour (raster.one_colour).
     target : sequence of float or None
         A fixed look-at point [3] for every frame (a two-person video's camera stays put, so that the partner is
-        the same pixels in every condition's video); None: the camera follows the clip's root.
+        the same pixels in every condition's video); None: the camera follows the body's root
+        (core.skeleton_names.body_root).
     hide : sequence of str
         Joint names not drawn.
     thin : sequence of str or None
@@ -193,7 +194,7 @@ def render_clip(clip_or_path, out_mp4, options=None, *, sheet=None, partner=None
     people, meshes = _people(clip, joints, name, o, frame, partner, mesh, partner_mesh)
     drawer = people[0][0]
     if o.target is None:
-        targets = camera_targets(joints, fps, o.camera)
+        targets = camera_targets(joints, fps, o.camera, skeleton_names.body_root(clip["joint_names"], clip["parents"]))
     else:
         targets = np.tile(np.asarray(o.target, np.float64), (len(joints), 1))
     layer = CaptionLayer(captions, frame) if captions else None

@@ -27,29 +27,30 @@ def _floor(joints):
     return float(np.median(np.asarray(joints)[..., 1].min(axis=1)))
 
 
-def stand(joints, names, spot, azimuth):
+def stand(joints, names, spot, azimuth, root=0):
     """A clip (joints [T, J, 3], Y up) turned so that its mean facing is `azimuth` degrees (from +Z towards +X),
-    its mean root position on the floor moved to `spot` (x, z) and its lowest joint's median height to 0."""
+    its body's mean root position (joint `root`) on the floor moved to `spot` (x, z) and its lowest joint's median
+    height to 0."""
     out = np.asarray(joints, np.float64)
     out = rotate_y(out, np.radians(azimuth - mean_facing([out], names)))
-    out = out - np.array([*[out[:, 0, 0].mean()], _floor(out), out[:, 0, 2].mean()])
+    out = out - np.array([out[:, root, 0].mean(), _floor(out), out[:, root, 2].mean()])
     return (out + np.array([spot[0], 0.0, spot[1]])).astype(np.float32)
 
 
-def facing(agents, names, partner, partner_names, distance=DISTANCE, opened=OPEN):
+def facing(agents, names, partner, partner_names, distance=DISTANCE, opened=OPEN, roots=(0, 0)):
     """(agent clips, partner joints) standing face to face `distance` apart along X, the agent at -X, each turned
-    `opened` degrees from the other towards +Z."""
+    `opened` degrees from the other towards +Z; `roots`: the agent's and the partner's root joints."""
     half = distance / 2
-    placed = [stand(j, names, (-half, 0.0), 90.0 - opened) for j in agents]
-    return placed, stand(partner, partner_names, (half, 0.0), 270.0 + opened)
+    placed = [stand(j, names, (-half, 0.0), 90.0 - opened, roots[0]) for j in agents]
+    return placed, stand(partner, partner_names, (half, 0.0), 270.0 + opened, roots[1])
 
 
-def recorded(agents, partner, reference=0):
+def recorded(agents, partner, reference=0, roots=(0, 0)):
     """(agent clips, partner joints) as recorded, moved and turned as one: the midpoint of the real agent's
-    (agents[reference]) and the partner's mean root positions at the origin, the line from the agent to the
-    partner along +X, the floor under the lower of the two."""
-    a = np.asarray(agents[reference], np.float64)[:, 0, [0, 2]].mean(0)
-    b = np.asarray(partner, np.float64)[:, 0, [0, 2]].mean(0)
+    (agents[reference]) and the partner's mean root positions (`roots`: their root joints) at the origin, the line
+    from the agent to the partner along +X, the floor under the lower of the two."""
+    a = np.asarray(agents[reference], np.float64)[:, roots[0], [0, 2]].mean(0)
+    b = np.asarray(partner, np.float64)[:, roots[1], [0, 2]].mean(0)
     mid = (a + b) / 2
     line = np.degrees(np.arctan2(b[0] - a[0], b[1] - a[1]))  # its azimuth, from +Z towards +X
     turn = np.radians(90.0 - line)
@@ -62,9 +63,9 @@ def recorded(agents, partner, reference=0):
     return [move(j) for j in agents], move(partner)
 
 
-def place_pair(agents, names, partner, partner_names, placement="facing", distance=DISTANCE, opened=OPEN):
+def place_pair(agents, names, partner, partner_names, placement="facing", distance=DISTANCE, opened=OPEN, roots=(0, 0)):
     """An item's agent clips (every condition's, the real agent's first) and its partner, placed as the study
-    file says (PLACEMENTS)."""
+    file says (PLACEMENTS); `roots`: the agent's and the partner's root joints (core.skeleton_names.body_root)."""
     if placement == "recorded":
-        return recorded(agents, partner)
-    return facing(agents, names, partner, partner_names, distance, opened)
+        return recorded(agents, partner, roots=roots)
+    return facing(agents, names, partner, partner_names, distance, opened, roots)

@@ -16,6 +16,7 @@ import numpy as np
 
 from moglow_eval.core import study
 from moglow_eval.core.clip import save_clip
+from moglow_eval.core.skeleton_names import body_root
 from rendering.camera import Projector
 from rendering.framing import item_camera, pair_camera, steady
 from rendering.raster import PARTNER_COLOUR, STYLES, one_colour
@@ -24,13 +25,14 @@ from ..motion.features import rotate_y
 from .placing import place_pair
 
 
-def place(joints, names):
-    """A clip with its root at the origin on the floor at frame 0, turned to face +Z where the names tell the
-    left joints from the right (else only moved): no start position or heading tells a condition."""
+def place(joints, names, parents):
+    """A clip with its body's root (core.skeleton_names.body_root) at the origin on the floor at frame 0, turned to
+    face +Z where the names tell the left joints from the right (else only moved): no start position or heading
+    tells a condition."""
     from moglow_eval.core.skeleton_names import side
 
     out = np.asarray(joints, dtype=np.float64).copy()
-    out[..., [0, 2]] -= out[0, 0, [0, 2]]
+    out[..., [0, 2]] -= out[0, body_root(names, parents), [0, 2]]
     left = [j for j, n in enumerate(names) if side(n) == "left"]
     right = [j for j, n in enumerate(names) if side(n) == "right"]
     if left and right:
@@ -66,11 +68,11 @@ class Scene:
         return out
 
 
-def _screen_x(camera, target, joints, aspect=1.0):
-    """Where a body's mean root falls across the frame (`aspect` times as wide as high), -1 (left edge) .. 1
-    (right edge)."""
+def _screen_x(camera, target, joints, root, aspect=1.0):
+    """Where a body's mean root (joint `root`) falls across the frame (`aspect` times as wide as high), -1 (left
+    edge) .. 1 (right edge)."""
     proj = Projector(camera, 2 * aspect, 2)
-    cam = proj.to_camera(np.asarray(joints)[:, 0].mean(0), np.asarray(target) + proj.offset)
+    cam = proj.to_camera(np.asarray(joints)[:, root].mean(0), np.asarray(target) + proj.offset)
     return float(proj.to_screen(cam)[0] / aspect - 1.0)
 
 
@@ -102,7 +104,7 @@ def stage(clips, skeleton, spec, partners, folder, room=0.0, reach=None):
     for item, group in by_item.items():
         if not partners:
             for c in group:
-                c.joints = place(c.joints, names)
+                c.joints = place(c.joints, names, parents)
             # Facing measured from the reference's clips, and held to steps (framing.steady): a system that joins
             # the study changes its item's camera, and so the other clips' videos, only if it leaves the frame.
             facing = [c.joints for c in group if c.condition == study.NATURAL] or None
@@ -114,8 +116,9 @@ def stage(clips, skeleton, spec, partners, folder, room=0.0, reach=None):
             continue
         group = _reference_first(group)
         other = partners[item]
+        roots = (body_root(names, parents), body_root(other.names, other.parents))
         placed, partner = place_pair([c.joints for c in group], names, other.joints, other.names, spec.placement,
-                                     spec.distance, spec.opened)  # fmt: skip
+                                     spec.distance, spec.opened, roots)  # fmt: skip
         for c, joints in zip(group, placed):
             c.joints = joints
         people = [(names, parents, None), (other.names, other.parents, partner)]
@@ -129,5 +132,5 @@ def stage(clips, skeleton, spec, partners, folder, room=0.0, reach=None):
         scene.partners[item] = folder / f"partner_{len(scene.partners)}.npz"
         save_clip(scene.partners[item], partner, other.parents, other.names, spec.fps)
         scene.partner_sources[item], scene.partner_joints[item] = other.path, partner
-        scene.sides[item] = (_screen_x(camera, target, placed[0], aspect), _screen_x(camera, target, partner, aspect))
+        scene.sides[item] = tuple(_screen_x(camera, target, j, r, aspect) for j, r in zip((placed[0], partner), roots))
     return scene

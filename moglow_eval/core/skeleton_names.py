@@ -55,6 +55,17 @@ def root_markers(names, parents):
     return [j for j, p in enumerate(parents) if p < 0 and "root" in tokens(names[j])]
 
 
+def body_root(names, parents):
+    """Index of the joint the body hangs from: the first joint, or where that is a root marker (`root_markers`),
+    its first child that is not one (Bandai-Namco's `Hips` under `joint_Root`). The camera follows this joint and
+    a clip is placed by it: a marker left at the scene's origin would leave a walker metres from the look-at
+    point."""
+    markers = set(root_markers(names, parents))
+    if 0 not in markers:
+        return 0
+    return next((j for j, p in enumerate(parents) if p in markers and j not in markers), 0)
+
+
 def is_detail(name):
     """True for a finger or face joint (drawn thinner): a token of FINGER_WORDS or FACE_WORDS."""
     return any(w in FINGER_WORDS or w in FACE_WORDS for w in tokens(name))

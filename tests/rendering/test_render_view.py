@@ -4,14 +4,17 @@ auto) and the style keys, checked on the camera's projection of a ZeroEGGS-like 
 import numpy as np
 import pytest
 from helpers.bvh_fixtures import SPEAKER, write_family_study, write_zeroeggs
+from helpers.figure_pixels import classes, decode
 from helpers.paths import TEST_DATA
 
 from generation.data.motion_files import read_motion
 from generation.motion.features import rotate_y
 from generation.own_study.scene import place
 from generation.own_study.study_file import StudyFileError, read_study_file
+from moglow_eval.core.skeleton_names import body_root
 from rendering.camera import DEFAULT_CAMERA, Projector, camera_targets
 from rendering.framing import HEAD_TOP, hips_ancestors, item_camera, leg_joints, mean_facing
+from rendering.render import RenderOptions, render_clip
 
 
 @pytest.fixture(scope="module")
@@ -19,13 +22,14 @@ def speaker(tmp_path_factory):
     """(joints [T, J, 3] placed, names, parents) of a ZeroEGGS-like speaker, read with units = "auto"."""
     path = write_zeroeggs(tmp_path_factory.mktemp("z") / "take.bvh", frames=60, turns=SPEAKER, degrees=2.0)
     m = read_motion(path, fps=30.0)
-    return place(m.joints, m.names).astype(np.float64), list(m.names), np.asarray(m.parents)
+    return place(m.joints, m.names, m.parents).astype(np.float64), list(m.names), np.asarray(m.parents)
 
 
-def _screen(joints, camera, fps=30.0):
-    """Every joint's position on the frame [T, J, 2], in half-frames from the centre (y up)."""
+def _screen(joints, camera, fps=30.0, root=0):
+    """Every joint's position on the frame [T, J, 2], in half-frames from the centre (y up), the camera following
+    joint `root`."""
     proj = Projector(camera, 2, 2)
-    eye = camera_targets(joints, fps, camera) + proj.offset
+    eye = camera_targets(joints, fps, camera, root) + proj.offset
     cam = proj.to_camera(joints, eye[:, None])
     return cam[..., :2] / cam[..., 2:3] / np.tan(np.radians(camera.fov) / 2)
 
@@ -72,12 +76,44 @@ def test_upper_framing_leaves_out_a_root_on_the_floor():
     """Bandai-Namco's skeleton hangs the hips under `joint_Root`, a joint on the floor: it is no part of the upper
     body, so the upper framing's frame ends near the hips, not at the floor (the take of tests/data/bvh)."""
     m = read_motion(TEST_DATA / "bvh" / "bandai_dash_normal_001.bvh.gz", fps=30.0)
-    joints, names, parents = place(m.joints, m.names).astype(np.float64), list(m.names), np.asarray(m.parents)
+    names, parents = list(m.names), np.asarray(m.parents)
+    joints = place(m.joints, names, parents).astype(np.float64)
     assert hips_ancestors(parents, set(leg_joints(names, parents))) == {names.index("joint_Root")}
     upper = item_camera([joints], names, parents, 30.0, view="front", framing="upper")
-    s = _screen(joints, upper)
+    s = _screen(joints, upper, root=body_root(names, parents))
     assert s[:, names.index("joint_Root"), 1].max() < -1.0  # the floor below the frame
     assert np.abs(s[:, [names.index(n) for n in ("Hips", "Head", "Hand_L", "Hand_R")]]).max() <= 1.0
+
+
+def test_a_body_under_a_root_marker_is_followed_and_framed(tmp_path):
+    """Bandai-Namco's `joint_Root` follows the body on the floor in some takes (the dash of tests/data/bvh) and
+    stays at the scene's origin in others (dataset-2's: a walk goes metres away from it): the dash with its marker
+    held at the origin, as those store it. The camera frames and follows the body, not the marker: the cameras are
+    those of the dash with the marker under the hips, its video the same bytes wherever the marker is (it is not
+    drawn, and the body is drawn when it passes behind the camera), and the figure is in every frame, nearly as
+    large in each."""
+    m = read_motion(TEST_DATA / "bvh" / "bandai_dash_normal_001.bvh.gz", fps=30.0)
+    names, parents = list(m.names), np.asarray(m.parents)
+    hips = names.index("Hips")
+    at_origin = m.joints.copy()
+    at_origin[:, 0] = 0.0
+    joints = place(at_origin, names, parents).astype(np.float64)
+    assert body_root(names, parents) == hips
+    assert np.linalg.norm(joints[:, hips, [0, 2]] - joints[:, 0, [0, 2]], axis=1).max() > 2.0  # metres apart
+    under = joints.copy()
+    under[:, 0] = joints[:, hips] * [1.0, 0.0, 1.0]
+    for framing in ("full", "upper"):
+        camera = item_camera([joints], names, parents, 30.0, framing=framing)
+        assert camera == item_camera([under], names, parents, 30.0, framing=framing), framing
+    behind = joints.copy()  # the marker behind the camera in every frame
+    behind[:, 0] = camera_targets(joints, 30.0, camera, hips) + 1.5 * Projector(camera, 2, 2).offset
+    for name, clip in (("origin", joints), ("under", under), ("behind", behind)):
+        clip = {"joints": clip, "parents": parents, "joint_names": names, "fps": 30.0}
+        render_clip(clip, tmp_path / f"{name}.mp4", RenderOptions(size=96, camera=camera, rate_seed=0, threads=1))
+    videos = {(tmp_path / f"{name}.mp4").read_bytes() for name in ("origin", "under", "behind")}
+    assert len(videos) == 1
+    figure = [sum(c.sum() for c in classes(f)) for f in decode(tmp_path / "origin.mp4")[0]]
+    assert min(figure) > 0.5 * max(figure), figure
 
 
 def test_auto_framing_is_upper_for_a_speaker_and_full_for_a_walker(speaker):

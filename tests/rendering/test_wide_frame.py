@@ -77,7 +77,7 @@ def test_each_of_two_people_in_the_wide_frame_is_as_tall_as_one_person_in_an_upp
     twice) in the wide frame of a given height is as tall as that take alone in a square upper frame of that height,
     and the frame is 3:1 (GENEA 2026's 1536x512 at 512)."""
     take = bodies["calm"]
-    alone = place(take["joints"], take["names"]).astype(np.float64)
+    alone = place(take["joints"], take["names"], take["parents"]).astype(np.float64)
     camera = steady(item_camera([alone], take["names"], take["parents"], FPS, view="front", framing="upper"))
     drawer = FrameDrawer(take["parents"], take["names"], SIZE, camera)
     targets = camera_targets(alone, FPS, camera)
@@ -138,7 +138,7 @@ def test_one_person_stays_inside_the_upper_frame(bodies, tmp_path, style, take):
     """One person from the front, from the hips up: the spread arms' fingertips (the mesh's beyond the last finger
     joint) and the top of the head (the mesh's above HEAD_TOP, the neck bent) stay inside the frame."""
     m = bodies[take]
-    joints = place(m["joints"], m["names"]).astype(np.float64)
+    joints = place(m["joints"], m["names"], m["parents"]).astype(np.float64)
     reach = bodies["reach"] if style == "mesh" else None
     assert reach is None or reach.max() > HEAD_TOP  # the mesh's head reaches further than the stick's
     camera = item_camera([joints], m["names"], m["parents"], FPS, view="front", framing="upper", reach=reach)
