@@ -67,6 +67,37 @@ def test_placing_faces_the_two_towards_each_other_whatever_their_files_say(pair)
     assert abs((mean_facing([partner], pair["b"].names) - to_partner - 180 + 180) % 360 - 180) < 30
 
 
+@pytest.mark.parametrize("placement", ["facing", "recorded"])
+def test_two_bodies_under_root_markers_are_placed_by_their_hips(placement):
+    """Bandai-Namco's `joint_Root` may stay at the scene's origin while the body moves (tests/data/bvh's dash with its
+    marker held there, as dataset 2 stores it): two such people are placed by their bodies' roots, the hips
+    (core.skeleton_names.body_root), their mean hips 1.4 m apart (facing) or as far apart as recorded, on the line
+    along X through the origin; not by the markers, which sit metres from the bodies."""
+    from helpers.paths import TEST_DATA
+
+    from generation.own_study.placing import DISTANCE
+    from moglow_eval.core.skeleton_names import body_root
+
+    m = read_motion(TEST_DATA / "bvh" / "bandai_dash_normal_001.bvh.gz", 30.0)
+    names, parents = list(m.names), np.asarray(m.parents)
+    hips = body_root(names, parents)
+    agent = m.joints.copy()
+    agent[:, 0] = 0.0
+    partner = agent[::-1] + np.array([3.0, 0.0, 1.0], np.float32)  # its own way, 3 m along and 1 m across
+    partner[:, 0] = 0.0
+    (placed,), other = place_pair([agent], names, partner, names, placement, roots=(hips, hips))
+    a, b = placed[:, hips, [0, 2]].mean(0), other[:, hips, [0, 2]].mean(0)
+    apart = (
+        DISTANCE
+        if placement == "facing"
+        else np.linalg.norm(agent[:, hips, [0, 2]].mean(0) - partner[:, hips, [0, 2]].mean(0))
+    )
+    assert np.linalg.norm(a - b) == pytest.approx(apart, abs=1e-3)
+    assert a[1] == pytest.approx(0, abs=1e-3) and b[1] == pytest.approx(0, abs=1e-3)  # on the line along X
+    assert a[0] == pytest.approx(-b[0], abs=1e-3)  # either side of the origin
+    assert np.linalg.norm(placed[:, 0, [0, 2]].mean(0) - a) > 1.0  # the marker elsewhere
+
+
 @pytest.mark.parametrize("style", ["stick", "solid"])
 def test_two_figures_the_partner_the_same_in_both_videos(pair, tmp_path, style):
     first = _render(pair, 0, tmp_path / "a.mp4", style)
