@@ -38,6 +38,7 @@ from tqdm import tqdm
 
 from moglow_eval.core import colours, study
 from moglow_eval.core.clip import save_clip
+from moglow_eval.core.skeleton_names import body_root
 from moglow_eval.core.tables import C2ST_COLUMNS
 from rendering.captions import ROOM as CAPTION_ROOM
 from rendering.raster import PARTNER_COLOUR, STYLES
@@ -160,7 +161,8 @@ def catch_clips(spec, motions, catch_items, progress):
         return out
     for k, item in enumerate(catch_items):
         kind = spec.catch_make[k % len(spec.catch_make)]
-        out[item] = (make_catch(ref[item].joints, kind, spec.seed * 1000 + k), kind)
+        m = ref[item]
+        out[item] = (make_catch(m.joints, kind, spec.seed * 1000 + k, body_root(m.names, m.parents)), kind)
     return out
 
 

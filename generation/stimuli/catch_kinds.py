@@ -23,15 +23,15 @@ def _height(joints):
     return float(np.median(joints[..., 1].max(axis=1) - joints[..., 1].min(axis=1)))
 
 
-def jitter(joints, rng):
+def jitter(joints, rng, root=0):
     return joints + rng.normal(0.0, JITTER_SIGMA * _height(joints), joints.shape)
 
 
-def freeze(joints, rng):
+def freeze(joints, rng, root=0):
     out = joints.copy()
     t0 = max(1, int(round(FREEZE_AT * len(joints))))
-    root = joints[:, :1]
-    out[t0:] = joints[t0 - 1] - root[t0 - 1] + root[t0:]  # the pose at t0-1, carried along by the root
+    path = joints[:, root : root + 1]
+    out[t0:] = joints[t0 - 1] - path[t0 - 1] + path[t0:]  # the pose at t0-1, carried along by the root
     return out
 
 
@@ -41,19 +41,21 @@ def upper_body(joints):
     return height > 0.5 * (height.min() + height.max())
 
 
-def swap(joints, rng):
+def swap(joints, rng, root=0):
     out = joints.copy()
     up = upper_body(joints)
-    root = joints[:, :1]
-    shifted = np.roll(joints - root, len(joints) // 2, axis=0)  # half a clip away, wrapping round
-    out[:, up] = shifted[:, up] + root
+    path = joints[:, root : root + 1]
+    shifted = np.roll(joints - path, len(joints) // 2, axis=0)  # half a clip away, wrapping round
+    out[:, up] = shifted[:, up] + path
     return out
 
 
 KINDS = {"jitter": jitter, "freeze": freeze, "swap": swap}
 
 
-def make_catch(joints, kind, seed):
-    """A broken copy of joints [T, J, 3] (metres, Y up) of catch kind `kind`, seeded."""
+def make_catch(joints, kind, seed, root=0):
+    """A broken copy of joints [T, J, 3] (metres, Y up) of catch kind `kind`, seeded; `root` is the body's root
+    joint (core.skeleton_names.body_root), which carries a frozen pose and the swapped upper body along: not a
+    root marker left at the scene's origin, from which a walk's torso would be swapped in metres away."""
     rng = np.random.default_rng(seed)
-    return KINDS[kind](np.asarray(joints, dtype=np.float64), rng).astype(np.float32)
+    return KINDS[kind](np.asarray(joints, dtype=np.float64), rng, root).astype(np.float32)
