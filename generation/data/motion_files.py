@@ -125,9 +125,7 @@ def motion_stem(path):
 def body_joints(joints, names, parents):
     """joints [T, J, 3] without the root markers (core.skeleton_names.root_markers), which the measures of the body
     below must not count: a marker left at the origin of a walk's scene would make the body metres deep and tall."""
-    markers = set(skeleton_names.root_markers(names, parents))
-    keep = [j for j in range(joints.shape[1]) if j not in markers]
-    return joints[:, keep] if keep else joints
+    return joints[:, skeleton_names.body_skeleton(names, parents)[0]]
 
 
 def detect_up(joints):

@@ -38,7 +38,7 @@ from tqdm import tqdm
 
 from moglow_eval.core import colours, study
 from moglow_eval.core.clip import save_clip
-from moglow_eval.core.skeleton_names import body_root
+from moglow_eval.core.skeleton_names import body_root, body_skeleton
 from moglow_eval.core.tables import C2ST_COLUMNS
 from rendering.captions import ROOM as CAPTION_ROOM
 from rendering.raster import PARTNER_COLOUR, STYLES
@@ -282,6 +282,7 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
     (generation.own_study.scene.stage)."""
     rng = np.random.default_rng(spec.seed)
     names, parents = skeleton_of(motions)
+    body, _, body_parents = body_skeleton(names, parents)  # the C2ST's features: the body without its root markers
     feet = find_feet(names) if spec.feet == "auto" else [names.index(n) for n in spec.feet]
     if feet is not None and len(feet) == 2:  # one joint per foot: it is both the foot's ankle and its toe
         feet = [feet[0], feet[0], feet[1], feet[1]]
@@ -326,7 +327,7 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
         metrics_rows.append(dict(clip_id=cid, condition=cond, role=role, item=item, **m))
         if c.motion_item or style != spec.styles[0] or (c.sample and c.path):
             continue  # the figures are of each condition's own motion, once (its drawn sample's)
-        c2st.collect(feats, cond, role, item, joints, spec.fps, parents)
+        c2st.collect(feats, cond, role, item, joints[:, body], spec.fps, body_parents)
     return manifest, (metrics_rows, row_clips), jobs, groups, feats
 
 
@@ -418,7 +419,7 @@ def build_study(spec, out, size, preset, workers, force, progress, scheduler=Non
         render_stimuli(jobs, workers, progress, groups, index=BuildIndex(out), scheduler=scheduler)
         if sound:
             write_audio_check(out, spec)
-    c2st_table = c2st.c2st_table(feats), feature_table(feats, *skeleton_of(motions))
+    c2st_table = c2st.c2st_table(feats), feature_table(feats, *body_skeleton(*skeleton_of(motions))[1:])
     write_csv(out / "c2st.csv", C2ST_COLUMNS, c2st_table[0])
     write_csv(out / "c2st_features.csv", FEATURE_COLUMNS, c2st_table[1])
     write_csv(

@@ -14,6 +14,7 @@ import time
 import numpy as np
 
 from moglow_eval.core import study
+from moglow_eval.core.skeleton_names import body_skeleton
 from rendering.audio import RATE
 
 from ..data.skeleton_families import family
@@ -55,11 +56,14 @@ def study_measures(spec, clips, row_clips, metrics_rows, skeleton, lengths, out)
         row["foot_skating"] = float("nan")
     agent, other = read_voices(spec, lengths)
     voices = gesture.Voices(RATE, agent, other)
+    # Measured on the body: "about the root" is about the hips, not a root marker left at the scene's origin.
+    keep, names, parents = body_skeleton(names, parents)
     applies = gesture.plan(names, bool(agent), bool(other))
     measured = [
-        gesture.Clip(c.condition, c.role, c.item, not c.motion_item, np.asarray(c.joints, np.float64)) for c in clips
+        gesture.Clip(c.condition, c.role, c.item, not c.motion_item, np.asarray(c.joints, np.float64)[:, keep])
+        for c in clips
     ]
-    result = gesture.measure(measured, names, parents, spec.fps, voices, applies, seed=spec.seed)
+    result = gesture.measure(measured, names, np.asarray(parents), spec.fps, voices, applies, seed=spec.seed)
     for row, k in zip(metrics_rows, row_clips):
         row.update(result.clips[k])
     write_csv(out / study.GESTURE_FILE, GESTURE_COLUMNS, [_numbers(r) for r in result.conditions])

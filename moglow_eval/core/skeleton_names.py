@@ -55,6 +55,17 @@ def root_markers(names, parents):
     return [j for j, p in enumerate(parents) if p < 0 and "root" in tokens(names[j])]
 
 
+def body_skeleton(names, parents):
+    """(the kept joints' indices, their names, their parents renumbered) of the skeleton without its root markers
+    (`root_markers`), a marker's children made roots: what the measures of the body (its height and up axis, the
+    C2ST's features) are taken on, so that a marker left at the scene's origin does not carry a walk's path into
+    them."""
+    markers = set(root_markers(names, parents))
+    keep = [j for j in range(len(names)) if j not in markers] or list(range(len(names)))
+    renumber = {j: k for k, j in enumerate(keep)}
+    return keep, [names[j] for j in keep], [renumber.get(int(parents[j]), -1) for j in keep]
+
+
 def body_root(names, parents):
     """Index of the joint the body hangs from: the first joint, or where that is a root marker (`root_markers`),
     its first child that is not one (Bandai-Namco's `Hips` under `joint_Root`). The camera follows this joint and

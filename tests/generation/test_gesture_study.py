@@ -75,3 +75,44 @@ def test_a_study_with_speech_gets_the_gesture_measures(speech_study):
     assert notes["beat_align"]["status"] == "measured" and "sigma 0.3 s" in notes["beat_align"]["settings"]
     assert notes["listener_response"]["status"] == "skipped" and "two voices" in notes["listener_response"]["reason"]
     assert notes["jerk"]["status"] == "measured" and int(notes["jerk"]["clips"]) == len(metrics)
+
+
+def test_the_gesture_measures_are_taken_about_the_body_not_a_root_marker(tmp_path, monkeypatch):
+    """Bandai-Namco's `joint_Root` stays at the scene's origin while the body walks 8 m (tests/data/bvh's walk, from
+    dataset 2): a system whose clips are the reference's bodies 5 m further on, the marker left at the origin, moves
+    exactly as the reference does, and gets the reference's own values of every measure about the root (the FGD and
+    the motion histograms' distances): about the marker, the FGD saw where the body was."""
+    from types import SimpleNamespace
+
+    from helpers.paths import TEST_DATA
+
+    from generation.data.motion_files import read_motion
+    from generation.metrics import gesture_fgd
+    from generation.own_study.measures import study_measures
+
+    # A short training: the values differ from a build's, not whether one clip's equal another's.
+    train = gesture_fgd.GestureEncoder.train.__func__
+    monkeypatch.setattr(
+        gesture_fgd.GestureEncoder, "train", classmethod(lambda cls, *a, **k: train(cls, *a, steps=20, **k))
+    )
+
+    m = read_motion(TEST_DATA / "bvh" / "bandai_walk_angry_002.bvh.gz", fps=30.0)
+    at_origin = m.joints.astype(np.float64)
+    assert np.abs(at_origin[:, 0]).max() == 0.0  # the marker, as recorded
+    moved = at_origin + np.array([5.0, 0.0, 0.0])
+    moved[:, 0] = 0.0
+    takes = {f"item{i}": at_origin[i * 60 : i * 60 + 60] for i in range(4)}  # four 2-s items of one walk
+    clips = [
+        SimpleNamespace(condition=cond, role="test", item=item, motion_item="", joints=j + shift)
+        for cond, shift in ((study.NATURAL, 0.0), ("AHEAD", moved[0] - at_origin[0]))
+        for item, j in takes.items()
+    ]
+    spec = Spec(gesture=True)
+    spec.fps, spec.seed = 30.0, 0
+    rows = [dict(condition=c.condition) for c in clips]
+    study_measures(spec, clips, list(range(len(clips))), rows, (list(m.names), m.parents), {}, tmp_path)
+    by = {c: [r for r in rows if r["condition"] == c] for c in (study.NATURAL, "AHEAD")}
+    for name in ("fgd", *study.HELLINGER_METRICS):
+        ahead, own = ([r[name] for r in by[c]] for c in ("AHEAD", study.NATURAL))
+        assert np.isfinite(own).all(), name
+        np.testing.assert_allclose(ahead, own, rtol=1e-5, err_msg=name)

@@ -1,8 +1,10 @@
 """A study of your own whose catch clips the coded sizes give away is built, but with a warning naming the signal
-(CONTRACTS §4): `freeze` clips, whose still frames cost nearly nothing, among test clips that move throughout."""
+(CONTRACTS §4): the study's own catch clips of a body that stands still (its first pose held), whose still frames
+cost nearly nothing, among test clips that move throughout."""
 
 import csv
 
+import numpy as np
 import pytest
 from helpers.own_study_data import make_study
 
@@ -17,9 +19,14 @@ def test_auc_counts_ties_half():
 
 
 @pytest.mark.full  # make_study's takes are in ../shared
-def test_a_pool_of_freeze_clips_is_warned_about(tmp_path, capsys):
-    study = make_study(tmp_path / "in", n_items=8, n_catch=4)
-    text = study.read_text().replace('make = ["jitter", "freeze", "swap"]', 'make = ["freeze"]')
+def test_a_pool_of_still_catch_clips_is_warned_about(tmp_path, capsys):
+    study = make_study(tmp_path / "in", n_items=8)
+    (tmp_path / "in" / "still").mkdir()
+    for k in range(4):  # four catch items: each item's body, its first pose held (.npy as sys_a's, skeleton.json)
+        moving = np.load(tmp_path / "in" / "sys_a" / f"item{k:02d}.npy")
+        np.save(tmp_path / "in" / "still" / f"item{k:02d}.npy", np.repeat(moving[:1], len(moving), axis=0))
+    text = study.read_text().replace('make = ["jitter", "freeze", "swap"]', 'folder = "still"')
+    text = "\n".join(line for line in text.splitlines() if not line.startswith("n = "))
     study.write_text(text.replace("n_training = 1", "n_training = 0\nlength_s = 1.5"))
     assert make_stimuli(["--study", str(study), "--out", str(tmp_path / "out"), "--size", "64", "--quiet"]) == 0
     err = capsys.readouterr().err

@@ -69,8 +69,8 @@ def test_placing_faces_the_two_towards_each_other_whatever_their_files_say(pair)
 
 @pytest.mark.parametrize("placement", ["facing", "recorded"])
 def test_two_bodies_under_root_markers_are_placed_by_their_hips(placement):
-    """Bandai-Namco's `joint_Root` may stay at the scene's origin while the body moves (tests/data/bvh's dash with its
-    marker held there, as dataset 2 stores it): two such people are placed by their bodies' roots, the hips
+    """Bandai-Namco's `joint_Root` stays at the scene's origin in dataset 2 while the body walks away
+    (tests/data/bvh's walk): two such people are placed by their bodies' roots, the hips
     (core.skeleton_names.body_root), their mean hips 1.4 m apart (facing) or as far apart as recorded, on the line
     along X through the origin; not by the markers, which sit metres from the bodies."""
     from helpers.paths import TEST_DATA
@@ -78,12 +78,12 @@ def test_two_bodies_under_root_markers_are_placed_by_their_hips(placement):
     from generation.own_study.placing import DISTANCE
     from moglow_eval.core.skeleton_names import body_root
 
-    m = read_motion(TEST_DATA / "bvh" / "bandai_dash_normal_001.bvh.gz", 30.0)
+    m = read_motion(TEST_DATA / "bvh" / "bandai_walk_angry_002.bvh.gz", 30.0)
     names, parents = list(m.names), np.asarray(m.parents)
     hips = body_root(names, parents)
-    agent = m.joints.copy()
-    agent[:, 0] = 0.0
-    partner = agent[::-1] + np.array([3.0, 0.0, 1.0], np.float32)  # its own way, 3 m along and 1 m across
+    agent = m.joints[:120]
+    assert np.abs(agent[:, 0]).max() == 0.0  # the marker at the origin, as recorded
+    partner = m.joints[120:240][::-1] + np.array([3.0, 0.0, 1.0], np.float32)  # its own way, 3 m along, 1 m across
     partner[:, 0] = 0.0
     (placed,), other = place_pair([agent], names, partner, names, placement, roots=(hips, hips))
     a, b = placed[:, hips, [0, 2]].mean(0), other[:, hips, [0, 2]].mean(0)
