@@ -94,10 +94,10 @@ def upper_camera(clips, names, parents, fps, base, room=0.0, aspect=1.0, reach=N
     fingertip below: hands hanging below the hips extend the frame downwards, and the hips-to-head share of the
     frame is what is left above them."""
     base = replace(base, elevation=UPPER_ELEVATION, fov=UPPER_FOV)
-    points, pads = [], []
+    points, pads, root = [], [], skeleton_names.body_root(names, parents)
     for joints in clips:
         joints = np.asarray(joints, dtype=np.float64)
-        floor = camera_targets(joints, fps, base, skeleton_names.body_root(names, parents)) * np.array([1.0, 0.0, 1.0])
+        floor = camera_targets(joints, fps, base, root) * np.array([1.0, 0.0, 1.0])
         framed_points(joints - floor[:, None], names, parents, True, points, pads, reach)
     distance, height = _fit(np.concatenate(points), np.concatenate(pads), base, room, aspect)
     return replace(base, distance=distance, height=height)
@@ -201,8 +201,7 @@ def item_camera(clips, names, parents, fps, view=None, framing="full", room=0.0,
     if framing == "upper":
         return upper_camera(clips, names, parents, fps, base, room, aspect, reach)
     # Only what is drawn is framed: not a root marker left at the scene's origin (raster draws no bone from one).
-    markers = set(skeleton_names.root_markers(names, parents))
-    drawn = [j for j in range(len(names)) if j not in markers]
+    drawn = skeleton_names.body_skeleton(names, parents)[0]
     root = drawn.index(skeleton_names.body_root(names, parents))
     return framing_camera([np.asarray(c)[:, drawn] for c in clips], base, root=root)
 
