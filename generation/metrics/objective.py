@@ -33,6 +33,7 @@ Not in metrics.csv, for the models' own output (root-frame poses, generation.mot
 
 import numpy as np
 
+from moglow_eval.core.skeleton_names import body_skeleton, side
 from moglow_eval.core.study import METRIC_NAMES
 
 from ..motion import skeleton
@@ -186,8 +187,6 @@ def find_feet(names):
     """(ankle, toe) joint indices per side, [l_ankle, l_toe, r_ankle, r_toe], found from the joint names (a side
     as moglow_eval.core.skeleton_names.side tells it, and 'foot'/'ankle', 'toe' in the name); None when either foot is
     missing. A foot with only an ankle or only a toe joint uses that joint twice."""
-    from moglow_eval.core.skeleton_names import side
-
     feet = []
     for want in ("left", "right"):
         found = {}
@@ -204,18 +203,24 @@ def find_feet(names):
     return feet
 
 
-def any_clip_metrics(joints, fps, parents, feet=None):
+def any_clip_metrics(joints, fps, names, parents, feet=None):
     """metrics.csv's metrics of a clip of any skeleton (joints [T, J, 3], metres, Y up): jerk, acceleration and
-    bone-length variation always, foot skating where `feet` ([l_ankle, l_toe, r_ankle, r_toe]) are known, the
-    control metrics NaN (a study of your own motion has no control signal)."""
+    bone-length variation always, foot skating where `feet` ([l_ankle, l_toe, r_ankle, r_toe], indices into `names`)
+    are known, the control metrics NaN (a study of your own motion has no control signal).
+
+    Jerk, acceleration and bone-length variation are taken on the body without its root markers
+    (moglow_eval.core.skeleton_names.body_skeleton): a marker left at the scene's origin while the body walks is
+    no joint of the body, and its "bone" to the hips would stretch by metres."""
     joints = np.asarray(joints, dtype=np.float64)
+    keep, _, body_parents = body_skeleton(names, parents)
+    body = joints[:, keep]
     values = dict(
         foot_skating=foot_skating(joints, fps, feet=tuple(feet)) if feet is not None and len(joints) > 1 else np.nan,
-        bone_length_std=bone_length_std(joints, parents),
-        jerk=jerk(joints, fps),
+        bone_length_std=bone_length_std(body, body_parents),
+        jerk=jerk(body, fps),
         control_error=np.nan,
         control_following=np.nan,
-        acceleration=acceleration(joints, fps),
+        acceleration=acceleration(body, fps),
     )
     return {name: float(values[name]) for name in METRIC_NAMES}
 

@@ -323,7 +323,7 @@ def write_study_clips(out, clips, motions, spec, size, preset, progress, sound=N
         if sampled:
             row["sample"] = c.sample
         manifest.append(row)
-        m = any_clip_metrics(joints, spec.fps, parents, feet)
+        m = any_clip_metrics(joints, spec.fps, names, parents, feet)
         metrics_rows.append(dict(clip_id=cid, condition=cond, role=role, item=item, **m))
         if c.motion_item or style != spec.styles[0] or (c.sample and c.path):
             continue  # the figures are of each condition's own motion, once (its drawn sample's)
