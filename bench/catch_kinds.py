@@ -5,7 +5,9 @@
 On every real take of ../shared/data/bandai-namco-actions (not locomotion: bows, waves, guides, punches, a dance)
 with the common 22-joint skeleton: each kind of generation/stimuli/catch_kinds.py is applied to every take, and the
 median of each metric over takes is printed as a ratio to the real takes' median (bone-length variation, ~0 for
-rigid mocap, in millimetres), with the C2ST AUC of the kind's clips against the real ones (folds grouped by take).
+rigid mocap, in millimetres), how far its poses are from any pose of the take it was made from (about the body's
+root, the median over frames of the nearest real pose's mean joint distance, in cm: 0 for poses the take holds
+itself), and the C2ST AUC of the kind's clips against the real ones (folds grouped by take).
 """
 
 import argparse
@@ -30,6 +32,13 @@ ACTIONS = ROOT.parent / "shared" / "data" / "bandai-namco-actions" / "dataset-1"
 SHOWN = ("jerk", "acceleration", "foot_skating")  # as multiples of the real takes'; bone-length std in mm
 
 
+def unlike_any_pose(clip, real, root):
+    """Median over the frames of `clip` of the distance (m, mean over joints) from its pose about the root to the
+    nearest pose of `real`."""
+    a, b = (c - c[:, root : root + 1] for c in (clip, real))
+    return float(np.median(np.linalg.norm(a[:, None] - b[None], axis=-1).mean(-1).min(1)))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--fps", type=float, default=20.0)
@@ -44,18 +53,23 @@ def main():
     rows = {k: [any_clip_metrics(j, args.fps, names, parents, feet) for j in js] for k, js in clips.items()}
     med = {k: {m: float(np.median([r[m] for r in rs])) for m in SHOWN} for k, rs in rows.items()}
     body, _, body_parents = body_skeleton(names, parents)  # the C2ST's features, as a study takes them
+    at = body.index(root)
+    unlike = {
+        k: np.median([unlike_any_pose(j[:, body], m.joints[:, body], at) for j, m in zip(js, takes)])
+        for k, js in clips.items()
+    }
     feats = {
         k: {i: c2st.clip_features(j[:, body], args.fps, body_parents) for i, j in enumerate(js)}
         for k, js in clips.items()
     }
     print(f"{len(takes)} real action takes, {common} joints, {args.fps:g} fps; medians over takes as x real")
-    print(f"{'kind':8} " + " ".join(f"{m:>16}" for m in SHOWN) + "  bone-length std   C2ST AUC vs real")
+    print(f"{'kind':8} " + " ".join(f"{m:>16}" for m in SHOWN) + "  bone-length std  unlike real   C2ST AUC vs real")
     for k in clips:
         ratios = " ".join(f"{med[k][m] / med['real'][m]:>15.2f}x" for m in SHOWN)
         bones = np.median([r["bone_length_std"] for r in rows[k]]) * 1000
         auc = c2st.c2st_self(feats["real"])["auc"] if k == "real" else c2st.c2st(feats["real"], feats[k])["auc"]
         floor = " (real split in two: the floor)" if k == "real" else ""
-        print(f"{k:8} {ratios} {bones:>13.2f} mm   {auc:.3f}{floor}")
+        print(f"{k:8} {ratios} {bones:>13.2f} mm {unlike[k] * 100:>9.1f} cm   {auc:.3f}{floor}")
 
 
 if __name__ == "__main__":

@@ -6,17 +6,20 @@ clips' look and their encoded size on both sides of the test clips':
 
 - `jitter`: every joint shakes by independent noise of JITTER_SIGMA times the body's height, every frame;
 - `freeze`: the body stops dead a quarter of the way in and holds that pose to the end, its root still moving;
-- `swap`: the upper body plays half a clip out of step with the legs (and jumps where it wraps round), so the
-  trunk tears at the waist.
+- `swap`: the upper body plays half a clip out of step with the legs (and jumps where it wraps round), turning
+  round about the vertical through the root twice over the clip: a twist no spine makes, seen from every view.
+  Out of step alone, a calm take's upper body (a wave, a bow, over legs that hardly move) was the take played
+  later, which a rater could take for real motion.
 
 How bad each is, on the metrics of metrics.csv, is in bench/notes/2026-11-25-history.md ("Catch clips made by the
-tool").
+tool") and, for today's kinds, bench/notes/2026-12-02-results-details.md ("c2st").
 """
 
 import numpy as np
 
 JITTER_SIGMA = 0.03  # of the body's height per joint and frame: about 5 cm for an adult
 FREEZE_AT = 0.25  # of the clip's length
+SWAP_TURNS = 2  # full turns of the swapped upper body over the clip
 
 
 def _height(joints):
@@ -46,6 +49,12 @@ def swap(joints, rng, root=0):
     up = upper_body(joints)
     path = joints[:, root : root + 1]
     shifted = np.roll(joints - path, len(joints) // 2, axis=0)  # half a clip away, wrapping round
+    # Turned round about the vertical through the root, SWAP_TURNS times over the clip: a spine cannot, whatever the
+    # motion and from every view.
+    angle = 2.0 * np.pi * SWAP_TURNS * np.arange(len(joints)) / len(joints)
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    x, z = shifted[..., 0].copy(), shifted[..., 2].copy()
+    shifted[..., 0], shifted[..., 2] = c * x + s * z, c * z - s * x
     out[:, up] = shifted[:, up] + path
     return out
 
