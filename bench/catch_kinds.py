@@ -25,18 +25,11 @@ from generation.metrics.objective import (  # noqa: E402
     any_clip_metrics,
     find_feet,
 )
-from generation.stimuli.catch_kinds import KINDS, make_catch  # noqa: E402
+from generation.stimuli.catch_kinds import KINDS, make_catch, unlike_any_pose  # noqa: E402
 from moglow_eval.core.skeleton_names import body_root, body_skeleton  # noqa: E402
 
 ACTIONS = ROOT.parent / "shared" / "data" / "bandai-namco-actions" / "dataset-1" / "data"
 SHOWN = ("jerk", "acceleration", "foot_skating")  # as multiples of the real takes'; bone-length std in mm
-
-
-def unlike_any_pose(clip, real, root):
-    """Median over the frames of `clip` of the distance (m, mean over joints) from its pose about the root to the
-    nearest pose of `real`."""
-    a, b = (c - c[:, root : root + 1] for c in (clip, real))
-    return float(np.median(np.linalg.norm(a[:, None] - b[None], axis=-1).mean(-1).min(1)))
 
 
 def main():
@@ -55,7 +48,7 @@ def main():
     body, _, body_parents = body_skeleton(names, parents)  # the C2ST's features, as a study takes them
     at = body.index(root)
     unlike = {
-        k: np.median([unlike_any_pose(j[:, body], m.joints[:, body], at) for j, m in zip(js, takes)])
+        k: np.median([np.median(unlike_any_pose(j[:, body], m.joints[:, body], at)) for j, m in zip(js, takes)])
         for k, js in clips.items()
     }
     feats = {

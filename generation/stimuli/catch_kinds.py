@@ -62,6 +62,14 @@ def swap(joints, rng, root=0):
 KINDS = {"jitter": jitter, "freeze": freeze, "swap": swap}
 
 
+def unlike_any_pose(clip, real, root=0):
+    """Per frame of `clip` [T, J, 3], how far its pose about the root is from the nearest pose of `real` [T', J, 3]
+    (m, the mean over joints): 0 for a pose the real clip holds itself, as a calm take's time-shifted upper body
+    does. What tells a broken body from the take it was made from, whatever the camera (bench/catch_kinds.py)."""
+    a, b = (np.asarray(c, dtype=np.float64) - np.asarray(c, dtype=np.float64)[:, root : root + 1] for c in (clip, real))
+    return np.array([np.linalg.norm(frame - b, axis=-1).mean(-1).min() for frame in a])
+
+
 def make_catch(joints, kind, seed, root=0):
     """A broken copy of joints [T, J, 3] (metres, Y up) of catch kind `kind`, seeded; `root` is the body's root
     joint (core.skeleton_names.body_root), which carries a frozen pose and the swapped upper body along: not a

@@ -8,7 +8,7 @@ import pytest
 from helpers.paths import TEST_DATA
 
 from generation.data.motion_files import read_motion
-from generation.stimuli.catch_kinds import make_catch
+from generation.stimuli.catch_kinds import make_catch, unlike_any_pose
 from moglow_eval.core.skeleton_names import body_root
 
 
@@ -35,3 +35,10 @@ def test_a_broken_body_stays_together_and_walks_on_with_its_hips(walk, kind):
     if kind == "freeze":
         half = broken[len(broken) // 2 :, 1:] - broken[len(broken) // 2 :, hips : hips + 1]
         assert np.abs(np.diff(half, axis=0)).max() < 1e-5  # the pose held
+
+
+def test_poses_unlike_the_takes_own_tell_a_broken_body_from_the_take_played_otherwise(walk):
+    joints, hips = walk
+    body = joints[:, 1:]  # without the marker; the hips are body joint hips - 1
+    assert np.abs(unlike_any_pose(body[::-1], body, hips - 1)).max() < 1e-6  # its own poses, in another order
+    assert np.median(unlike_any_pose(make_catch(joints, "swap", 0, root=hips)[:, 1:], body, hips - 1)) > 0.05

@@ -20,7 +20,7 @@ from generation.data.motion_files import read_motion
 from generation.make_stimuli import main as make_stimuli
 from generation.metrics import c2st
 from generation.metrics.c2st_features import GROUPS
-from generation.stimuli.catch_kinds import make_catch
+from generation.stimuli.catch_kinds import make_catch, unlike_any_pose
 from moglow_eval.core.clip import load_clip
 from moglow_eval.core.skeleton_names import body_root, body_skeleton
 from rendering.camera import framing_camera
@@ -146,12 +146,6 @@ def test_c2st_near_one_for_catch_clips(action_features, kind):
     assert c2st.c2st(ref, bad)["auc"] >= 0.9
 
 
-def _unlike_any_pose(clip, real, root):
-    """Per frame of `clip`, how far (m, mean over joints) its pose about the root is from the nearest pose of `real`."""
-    a, b = (c - c[:, root : root + 1] for c in (clip, real))
-    return np.linalg.norm(a[:, None] - b[None], axis=-1).mean(-1).min(1)
-
-
 def test_catch_kinds_are_clearly_broken(action_features):
     from generation.metrics.objective import acceleration, jerk
 
@@ -165,7 +159,7 @@ def test_catch_kinds_are_clearly_broken(action_features):
     # On every take, calm ones too (a wave, a bow: legs that hardly move), the swapped body holds poses the take
     # never does, most of the time; out of step alone, a wave's upper body was the wave played later.
     for i, (j, _, _, r, _) in enumerate(action_features.values()):
-        unlike = _unlike_any_pose(make_catch(j, "swap", seed=i, root=r), j, r)
+        unlike = unlike_any_pose(make_catch(j, "swap", seed=i, root=r), j, r)
         assert np.median(unlike) > 0.05, i
 
 
