@@ -73,6 +73,10 @@ def same_mtime(paths, mtime):
 # How far from chance a size signal may tell catch clips from test clips (an AUC, CONTRACTS §4): what the
 # built-in study holds, and what a study of your own is checked against (`coded_tells`).
 SIZE_AUC_BAND = (0.25, 0.75)
+# A study of your own is warned only where relabelling its videos at random rarely (under CHANCE_P of
+# CHANCE_SHUFFLES draws) puts a signal as far out: else a small catch pool is warned about by chance.
+CHANCE_P = 0.05
+CHANCE_SHUFFLES = 2000
 
 
 def auc(a, b):
@@ -83,16 +87,54 @@ def auc(a, b):
     return float((ranks[: len(a)].sum() - len(a) * (len(a) + 1) / 2) / (len(a) * len(b)))
 
 
+def coded_sizes(videos):
+    """Each video's coded-size signals (the only sizes that follow the content): [{signal name: value}]."""
+    return [{k: v for k, v in size_signals(read_layout(p)).items() if content_signal(k)} for p in videos]
+
+
+def _ranks(catch, test):
+    """(signal names, ranks [n_catch + n_test, n_signals] of every video's value among all, ties averaged)."""
+    from scipy.stats import rankdata
+
+    names = list(catch[0])
+    values = np.array([[s.get(name, -1) for name in names] for s in [*catch, *test]], dtype=float)
+    return names, rankdata(values, axis=0)
+
+
+def _aucs(rank_sums, n_catch, n_test):
+    return (rank_sums - n_catch * (n_catch + 1) / 2) / (n_catch * n_test)
+
+
+def worst_signal(catch, test):
+    """The signal of coded_sizes' tables that best tells the catch videos from the test videos: (signal name,
+    AUC), the AUC furthest from 0.5 (the first such signal); (None, 0.5) with no catch or test videos."""
+    if not catch or not test or not catch[0]:
+        return None, 0.5
+    names, ranks = _ranks(catch, test)
+    aucs = _aucs(ranks[: len(catch)].sum(0), len(catch), len(test))
+    k = int(np.argmax(np.abs(aucs - 0.5)))
+    return (names[k], float(aucs[k])) if aucs[k] != 0.5 else (None, 0.5)
+
+
+def chance_of_worst(catch, test, shuffles=CHANCE_SHUFFLES, seed=0):
+    """How often chance alone tells the videos apart as well: the share of `shuffles` random relabellings of the
+    same videos (as many called catch) whose best signal's AUC is as far from 0.5 as worst_signal's, counting the
+    observed labelling once (so never 0). A few catch clips put some signal outside SIZE_AUC_BAND by chance, the
+    more so as there are several signals to look at."""
+    if not catch or not test or not catch[0]:
+        return 1.0
+    _, ranks = _ranks(catch, test)
+    n = len(catch) + len(test)
+    observed = np.abs(_aucs(ranks[: len(catch)].sum(0), len(catch), len(test)) - 0.5).max()
+    rng = np.random.default_rng(seed)
+    drawn = np.argsort(rng.random((shuffles, n)), axis=1)[:, : len(catch)]  # [shuffles, n_catch] video indices
+    far = np.abs(_aucs(ranks[drawn].sum(1), len(catch), len(test)) - 0.5).max(1)
+    return float((1 + np.count_nonzero(far >= observed - 1e-12)) / (shuffles + 1))
+
+
 def coded_tells(catch_videos, test_videos):
-    """The coded-size signal (the only sizes that follow the content) that best tells catch videos from test
-    videos: (signal name, AUC), the AUC furthest from 0.5; (None, 0.5) with no catch or test videos."""
+    """The coded-size signal that best tells catch videos from test videos: (signal name, AUC), the AUC furthest
+    from 0.5; (None, 0.5) with no catch or test videos."""
     if not catch_videos or not test_videos:
         return None, 0.5
-    signals = [{k: v for k, v in size_signals(read_layout(p)).items() if content_signal(k)} for p in catch_videos]
-    tests = [{k: v for k, v in size_signals(read_layout(p)).items() if content_signal(k)} for p in test_videos]
-    worst = (None, 0.5)
-    for name in signals[0]:
-        value = auc([s.get(name, -1) for s in signals], [t.get(name, -1) for t in tests])
-        if abs(value - 0.5) > abs(worst[1] - 0.5):
-            worst = (name, value)
-    return worst
+    return worst_signal(coded_sizes(catch_videos), coded_sizes(test_videos))

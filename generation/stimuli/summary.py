@@ -88,20 +88,27 @@ def _warn_if_bad_not_bad(rows):
 
 def blinding_warning(out, manifest):
     """A warning line when the videos' coded sizes (the only sizes that follow the content, CONTRACTS §4) tell the
-    catch clips from the test clips beyond SIZE_AUC_BAND, naming the signal and what to change; None otherwise.
+    catch clips from the test clips beyond SIZE_AUC_BAND, further than chance puts them for the numbers of clips
+    (rendering.blinding.chance_of_worst under CHANCE_P), naming the signal and what to change; None otherwise.
     A parser that sums each frame's coded NAL units could then find the catch trials, e.g. a `freeze` clip, whose
     still frames cost nearly nothing, among speakers who move little."""
-    from rendering.blinding import SIZE_AUC_BAND, coded_tells
+    from rendering.blinding import CHANCE_P, SIZE_AUC_BAND, chance_of_worst, coded_sizes, worst_signal
 
-    catch = [Path(out) / m["video"] for m in manifest if m["condition"] == study.CATCH and m["role"] == "catch"]
-    test = [Path(out) / m["video"] for m in manifest if m["role"] == "test"]
-    name, auc = coded_tells(catch, test)
+    catch = coded_sizes(
+        [Path(out) / m["video"] for m in manifest if m["condition"] == study.CATCH and m["role"] == "catch"]
+    )
+    test = coded_sizes([Path(out) / m["video"] for m in manifest if m["role"] == "test"])
+    name, auc = worst_signal(catch, test)
     lo, hi = SIZE_AUC_BAND
     if name is None or lo <= auc <= hi:
         return None
+    chance = chance_of_worst(catch, test)
+    if chance >= CHANCE_P:
+        return None  # as far out as a random split of these videos often is
     return (
         f"warning: the coded sizes tell the {len(catch)} catch clips from the {len(test)} test clips ({name}: AUC "
-        f"{auc:.2f}, outside [{lo}, {hi}]): a parser could find the catch trials. Mix catch kinds whose encoded "
-        'sizes fall on both sides of the test clips\' (e.g. [catch] make = ["jitter", "freeze", "swap"], or '
-        "fewer freeze clips), or use your own catch folder"
+        f"{auc:.3f}, outside [{lo}, {hi}]; a random split of the videos is as far out in {chance:.1%} of draws): a "
+        "parser could find the catch trials. Mix catch kinds whose encoded sizes fall on both sides of the test "
+        'clips\' (e.g. [catch] make = ["jitter", "freeze", "swap"], or fewer freeze clips), or use your own catch '
+        "folder"
     )
