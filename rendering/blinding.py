@@ -126,10 +126,13 @@ def chance_of_worst(catch, test, shuffles=CHANCE_SHUFFLES, seed=0):
     _, ranks = _ranks(catch, test)
     n = len(catch) + len(test)
     observed = np.abs(_aucs(ranks[: len(catch)].sum(0), len(catch), len(test)) - 0.5).max()
-    rng = np.random.default_rng(seed)
-    drawn = np.argsort(rng.random((shuffles, n)), axis=1)[:, : len(catch)]  # [shuffles, n_catch] video indices
-    far = np.abs(_aucs(ranks[drawn].sum(1), len(catch), len(test)) - 0.5).max(1)
-    return float((1 + np.count_nonzero(far >= observed - 1e-12)) / (shuffles + 1))
+    rng, as_far = np.random.default_rng(seed), 0
+    for start in range(0, shuffles, 100):  # a hundred splits at a time: memory stays small for a challenge's set
+        draws = min(100, shuffles - start)
+        drawn = np.argsort(rng.random((draws, n)), axis=1)[:, : len(catch)]  # [draws, n_catch] video indices
+        far = np.abs(_aucs(ranks[drawn].sum(1), len(catch), len(test)) - 0.5).max(1)
+        as_far += int(np.count_nonzero(far >= observed - 1e-12))
+    return float((1 + as_far) / (shuffles + 1))
 
 
 def coded_tells(catch_videos, test_videos):
