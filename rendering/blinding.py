@@ -84,7 +84,7 @@ def auc(a, b):
     from scipy.stats import rankdata
 
     ranks = rankdata(np.concatenate([np.asarray(a, float), np.asarray(b, float)]))
-    return float((ranks[: len(a)].sum() - len(a) * (len(a) + 1) / 2) / (len(a) * len(b)))
+    return float(_aucs(ranks[: len(a)].sum(), len(a), len(b)))
 
 
 def coded_sizes(videos):

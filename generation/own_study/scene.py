@@ -16,7 +16,7 @@ import numpy as np
 
 from moglow_eval.core import study
 from moglow_eval.core.clip import save_clip
-from moglow_eval.core.skeleton_names import body_root
+from moglow_eval.core.skeleton_names import body_root, side
 from rendering.camera import Projector
 from rendering.framing import item_camera, pair_camera, steady
 from rendering.raster import PARTNER_COLOUR, STYLES, one_colour
@@ -29,8 +29,6 @@ def place(joints, names, parents):
     """A clip with its body's root (core.skeleton_names.body_root) at the origin on the floor at frame 0, turned to
     face +Z where the names tell the left joints from the right (else only moved): no start position or heading
     tells a condition."""
-    from moglow_eval.core.skeleton_names import side
-
     out = np.asarray(joints, dtype=np.float64).copy()
     out[..., [0, 2]] -= out[0, body_root(names, parents), [0, 2]]
     left = [j for j, n in enumerate(names) if side(n) == "left"]

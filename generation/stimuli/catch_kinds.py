@@ -17,6 +17,8 @@ tool") and, for today's kinds, bench/notes/2026-12-02-results-details.md ("c2st"
 
 import numpy as np
 
+from ..motion.features import rotate_y
+
 JITTER_SIGMA = 0.03  # of the body's height per joint and frame: about 5 cm for an adult
 FREEZE_AT = 0.25  # of the clip's length
 SWAP_TURNS = 2  # full turns of the swapped upper body over the clip
@@ -52,10 +54,7 @@ def swap(joints, rng, root=0):
     # Turned round about the vertical through the root, SWAP_TURNS times over the clip: a spine cannot, whatever the
     # motion and from every view.
     angle = 2.0 * np.pi * SWAP_TURNS * np.arange(len(joints)) / len(joints)
-    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
-    x, z = shifted[..., 0].copy(), shifted[..., 2].copy()
-    shifted[..., 0], shifted[..., 2] = c * x + s * z, c * z - s * x
-    out[:, up] = shifted[:, up] + path
+    out[:, up] = rotate_y(shifted, angle[:, None])[:, up] + path
     return out
 
 
