@@ -31,3 +31,14 @@ def test_a_taken_port_is_never_given(monkeypatch):
         port = ports.free_port()
     assert port != taken and len(calls) >= 3
     assert ports.LOWEST <= port < ports._ephemeral_start()
+
+
+def test_a_port_is_given_once_in_a_process(monkeypatch):
+    """A caller that takes an app's port and its proxy's before starting either gets two ports, even where the
+    draw repeats itself."""
+    draw = ports.random.randrange
+    first = ports.free_port()
+    repeats = iter([first, first])
+    monkeypatch.setattr(ports.random, "randrange", lambda a, b: next(repeats, None) or draw(a, b))
+    second = ports.free_port()
+    assert second != first

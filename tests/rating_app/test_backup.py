@@ -68,12 +68,14 @@ def test_a_backup_of_a_running_study_restores_to_the_same_export(databases, tmp_
     app = create_app(manifest=manifest, db_url=live, ratings_per_clip=4, min_view=0.1, sessions_per_client=0)
     server = make_server("127.0.0.1", 0, app, threaded=True)
     threading.Thread(target=server.serve_forever, daemon=True).start()
-    acked, halfway = [], threading.Event()
+    acked, halfway, backed_up = [], threading.Event(), threading.Event()
 
     def on_ack(record):
         acked.append(record)
         if len(acked) >= 15:
             halfway.set()
+        if len(acked) >= 30:  # the crowd answers on while the backup runs, and outlasts it however slow its start
+            backed_up.wait(120)
 
     summary = {}
     crowd = threading.Thread(
@@ -95,7 +97,8 @@ def test_a_backup_of_a_running_study_restores_to_the_same_export(databases, tmp_
         assert halfway.wait(120), "the crowd did not get going"
         r = cli("backup", "--db", live, "--out", tmp_path / "mid.bak")  # while the crowd answers
         assert r.returncode == 0, r.stderr
-        assert crowd.is_alive(), "the crowd finished before the backup: make it longer"
+        assert crowd.is_alive()
+        backed_up.set()
         crowd.join(300)
         assert not crowd.is_alive() and summary["errors"] == []
 
@@ -115,6 +118,7 @@ def test_a_backup_of_a_running_study_restores_to_the_same_export(databases, tmp_
         assert want.count(b"\n") == len(summary["ratings"]) + 1
         assert export(end, tmp_path / "end.csv") == want
     finally:
+        backed_up.set()
         server.shutdown()
         app_engine(app).dispose()
 
