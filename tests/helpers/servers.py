@@ -15,8 +15,10 @@ import requests
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def wait_for(url, proc, what, timeout_s=30.0):
-    """Return once `url` answers 200; AssertionError (naming `what`) if `proc` exits or `timeout_s` passes first."""
+def wait_for(url, proc, what, timeout_s=120.0):
+    """Return once `url` answers 200; AssertionError (naming `what`) if `proc` exits or `timeout_s` passes first.
+    A deadline, not a wait: generous, as a server's start (its imports, its workers' imports beside the rest of the
+    suite) can take tens of seconds on a slow, loaded 2-core machine."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if proc.poll() is not None:

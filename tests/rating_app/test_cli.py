@@ -7,12 +7,12 @@ import os
 import subprocess
 import sys
 import threading
-import time
 
 import numpy as np
 import pytest
 import requests
 from helpers.paths import ROOT
+from helpers.servers import wait_for
 
 from moglow_eval.core.ports import free_port
 from moglow_eval.core.tables import read_metrics
@@ -157,12 +157,7 @@ def test_serve_cli(app_stimuli, tmp_path):
         stderr=subprocess.DEVNULL,
     )
     try:
-        for _ in range(100):
-            try:
-                if requests.get(f"http://127.0.0.1:{port}/healthz", timeout=1).status_code == 200:
-                    break
-            except requests.RequestException:
-                time.sleep(0.1)
+        wait_for(f"http://127.0.0.1:{port}/healthz", proc, "rating_app serve")
         r = requests.post(f"http://127.0.0.1:{port}/api/sessions", json={}, timeout=5)
         assert r.status_code == 201 and r.json()["n_trials"] == 17
     finally:

@@ -107,12 +107,15 @@ def proxy(kind, tmp_path, a, b, stimuli):
     url = f"https://127.0.0.1:{port}"
     ca = tmp_path / ("cert.pem" if kind == "nginx" else "data/caddy/pki/authorities/local/root.crt")
     try:
-        for _ in range(300):
+        deadline = time.monotonic() + 120  # a deadline, not a wait: Caddy makes its local CA first
+        while True:
             if p.poll() is not None:
                 raise AssertionError(f"{kind} exited with {p.returncode}")
             with contextlib.suppress(requests.RequestException, OSError):  # OSError: Caddy's CA not written yet
                 if requests.get(url + "/healthz", timeout=1, verify=str(ca)).ok:
                     break
+            if time.monotonic() > deadline:
+                raise AssertionError(f"{kind} did not come up (see {kind}.log)")
             time.sleep(0.1)
         yield url, str(ca)
     finally:
