@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from moglow_eval.core import skeleton_names
+
 from ..data import seamless_files
 from ..data.motion_files import MotionError, native_fps, read_motion
 from ..data.smpl_files import is_smpl_file
@@ -114,11 +116,17 @@ def _body(m, valid, fmt, rules, add) -> None:
         if speed[t, j] > rules.max_speed:
             add("speed", f"{m.names[j]} moves at {speed[t, j]:.1f} m/s between frames {t} and {t + 1} (at most "
                 f"{rules.max_speed:g} m/s for a person): look for a jump there, or the wrong units")  # fmt: skip
-    if fmt in POSITIONS and (np.asarray(m.parents) > 0).any():
-        # Bones below the root: many skeletons' root is a point on the floor under the hips, whose link to the
-        # hips moves as the body does; the rest are a body's bones.
-        child = np.flatnonzero(np.asarray(m.parents) > 0)
-        length = np.linalg.norm(m.joints[valid][:, child] - m.joints[valid][:, m.parents[child]], axis=-1)
+    parents = np.asarray(m.parents)
+    # A point on the floor or at the scene's origin is no part of the body, and its link to the hips moves as the
+    # body does: links from a root marker (`joint_Root`) are left out, and so are those from a first joint not named
+    # as the hips or pelvis (`Reference`, `world`), often such a point. A first joint named `Hips` or `pelvis` is the
+    # body's, and its bones (to the spine and thighs) are checked.
+    floor = set(skeleton_names.root_markers(m.names, parents))
+    if len(parents) and not skeleton_names.is_hips(m.names[0]):
+        floor.add(0)
+    child = np.flatnonzero((parents >= 0) & ~np.isin(parents, list(floor)))
+    if fmt in POSITIONS and len(child):
+        length = np.linalg.norm(m.joints[valid][:, child] - m.joints[valid][:, parents[child]], axis=-1)
         median = np.median(length, axis=0)
         change = np.max(np.abs(length / np.where(median > 0, median, 1.0) - 1.0), axis=0)
         change[median <= 1e-6] = 0.0  # a bone of no length (a joint on its parent) has no length to keep

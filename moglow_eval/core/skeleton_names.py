@@ -66,6 +66,12 @@ def body_skeleton(names, parents):
     return keep, [names[j] for j in keep], [renumber.get(int(parents[j]), -1) for j in keep]
 
 
+def is_hips(name):
+    """Whether a joint is named as the body's hips or pelvis (`Hips`, `pelvis`, `b_hips`), not one side's hip."""
+    words = tokens(name)
+    return side(name) is None and any(w in ("hips", "hip", "pelvis") for w in words)
+
+
 def body_root(names, parents):
     """Index of the joint the body hangs from: the first joint, or where that is a root marker (`root_markers`),
     its first child that is not one (Bandai-Namco's `Hips` under `joint_Root`). The camera follows this joint and

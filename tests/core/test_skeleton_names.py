@@ -7,7 +7,7 @@ from helpers.paths import TEST_DATA
 
 from generation.data.motion_files import read_motion
 from generation.metrics import c2st
-from moglow_eval.core.skeleton_names import body_root, body_skeleton, root_markers
+from moglow_eval.core.skeleton_names import body_root, body_skeleton, is_hips, root_markers
 
 
 @pytest.fixture(scope="module")
@@ -45,3 +45,8 @@ def test_the_c2st_features_of_the_body_leave_out_where_it_walks(walk):
     np.testing.assert_allclose(on_body[0], on_body[1], atol=1e-9)
     everything = [c2st.clip_features(j, 20.0, parents) for j in (here, there)]
     assert np.abs(everything[0] - everything[1]).max() > 1.0
+
+
+def test_the_hips_are_told_from_one_sides_hip():
+    assert all(is_hips(n) for n in ("Hips", "pelvis", "Pelvis", "b_hips", "mixamorig:Hips", "Hip"))
+    assert not any(is_hips(n) for n in ("LeftHip", "RHip", "hip_L", "Spine", "joint_Root", "world"))

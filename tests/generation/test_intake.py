@@ -137,6 +137,44 @@ def test_each_problem_is_found_and_named(tmp_path, take, edit, check, needle):
     assert needle in found[0]["problem"] and ":" in found[0]["problem"], found  # what, then what to do
 
 
+def _first_joint(take, kind):
+    """The take as a skeleton whose first joint is the hips (its root marker dropped), or whose first joint is a
+    floor point named otherwise than a root (`Reference`)."""
+    from types import SimpleNamespace
+
+    from moglow_eval.core.skeleton_names import body_skeleton
+
+    if kind == "hips":
+        keep, names, parents = body_skeleton(take.names, take.parents)
+        return SimpleNamespace(joints=take.joints[:, keep], names=names, parents=np.asarray(parents))
+    return SimpleNamespace(joints=take.joints, names=["Reference", *take.names[1:]], parents=take.parents)
+
+
+def test_a_hips_first_skeletons_hip_bones_are_checked_and_a_floor_points_link_is_not(tmp_path, take):
+    """The hips' bones to the spine and thighs are a body's, checked where the hips are the first joint; a floor
+    point's link to the hips moves as the body walks (here about 8 m), named as a root or not."""
+    hips = _first_joint(take, "hips")
+    assert hips.names[0] == "Hips"
+    code, out = run(tmp_path / "good", [write_team(tmp_path / "good", hips)])
+    assert code == 0 and problems(out) == []
+
+    def lift_hips(folder):  # the hips alone 15 cm up for five frames: only their own bones change
+        _resave("item02", lambda j, fps: (_lift(j, 0, 0.15), fps))(folder)
+
+    code, out = run(tmp_path / "bad", [write_team(tmp_path / "bad", hips, lift_hips)])
+    found = problems(out)
+    assert code == 1 and [p["check"] for p in found] == ["bones"], found
+    assert "the bone Hips-" in found[0]["problem"], found
+    floor = _first_joint(take, "reference")
+    code, out = run(tmp_path / "floor", [write_team(tmp_path / "floor", floor)])
+    assert code == 0 and problems(out) == []
+
+
+def _lift(j, joint, metres):
+    j[20:25, joint, 1] += metres
+    return j
+
+
 def test_every_problem_at_once_and_one_format(tmp_path, take):
     def spoil(folder):
         _resave("item01", lambda j, fps: (j[:50], 25.0))(folder)
