@@ -101,8 +101,9 @@ TABLE = (
         flag="--design",
         choices=tuple(study.DESIGNS),
         help="acr (one clip, 1-5), pairwise (two clips, a preference), parallel (every condition of an item on one "
-        "page, 0-100) or appropriateness (motion for the speech heard against another item's); stored with the "
-        "study: a database holds one design",
+        "page, 0-100), appropriateness (motion for the speech heard against another item's), dyadic (the agent "
+        "beside its interlocutor against another interlocutor's) or semantic (motion for the words said against "
+        "another utterance's); stored with the study: a database holds one design",
     ),
     Setting(
         "STUDY_QUESTION",
