@@ -392,9 +392,10 @@ def _output_flags(ap):
 
 
 def parse_args(argv):
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     if args.study:
-        return _study_args(args, argv)
+        return _study_args(args, parser)
     if args.length_s is not None:
         raise StimuliError("--length-s: only with --study (the built-in study's clips are 4-s windows)")
     args.seed = 0 if args.seed is None else args.seed
@@ -424,7 +425,7 @@ def parse_args(argv):
 
 
 # Flags of the built-in study that a study from folders has no use for: given with --study, they are an error.
-_BUILTIN_ONLY = (
+_BUILTIN_ONLY = (  # the built-in study's flags; a study file sets its own (catch kinds: [catch] make)
     "--quick",
     "--retrain",
     "--data",
@@ -444,14 +445,18 @@ _BUILTIN_ONLY = (
     "--device",
     "--threads",
     "--runs",
+    "--catch-kinds",
 )
 
 
-def _study_args(args, argv):
+def _study_args(args, parser):
     """args for a study from folders: the study file read, with the flags given overriding its keys."""
     from .own_study.study_file import read_study_file
 
-    given = [a for a in _BUILTIN_ONLY if any(x == a or x.startswith(a + "=") for x in argv or [])]
+    # A flag counts as given where its value is not its default, however it was written (`--retr`, `--n-items=5`)
+    # and whether the command line came as argv or from `python -m` (sys.argv).
+    action = {flag: a for a in parser._actions for flag in a.option_strings}
+    given = [f for f in _BUILTIN_ONLY if getattr(args, action[f].dest) != action[f].default]
     if given:
         raise StimuliError(f"{given[0]}: not used by a study from folders (--study); set it in the study file")
     spec = read_study_file(args.study)

@@ -37,10 +37,19 @@ def build_parser():
 def _main(argv):
     args = build_parser().parse_args(argv)
     if not Path(args.clip).is_file():
-        raise RenderError(f"{args.clip}: no such file")
+        raise RenderError(f"{args.clip}: {'not a file' if Path(args.clip).exists() else 'no such file'}")
+    # Every output path checked before the first frame: a bad one would otherwise fail after the video is written.
     for flag, path in (("OUT", args.out), ("--sheet", args.sheet)):
-        if path is not None and not Path(path).parent.is_dir():
+        if path is None:
+            continue
+        if not Path(path).parent.is_dir():
             raise RenderError(f"{flag} {path}: folder {Path(path).parent} does not exist")
+        if Path(path).is_dir():
+            raise RenderError(f"{flag} {path}: is a folder; give a file name")
+        if Path(path).exists() and Path(path).samefile(args.clip):
+            raise RenderError(f"{flag} {path}: is the clip itself")
+    if args.sheet is not None and Path(args.sheet).suffix.lower() != ".png":
+        raise RenderError(f"--sheet {args.sheet}: a contact sheet is a PNG file; give a name ending in .png")
     options = RenderOptions(size=args.size, preset=args.preset, qp=args.qp, crf=args.crf)
     n = render_clip(args.clip, args.out, options, sheet=args.sheet)
     print(f"wrote {args.out} ({n} frames, {args.size}x{args.size})")

@@ -135,11 +135,49 @@ def test_render_refuses_files_that_are_not_clips(tmp_path, capsys):
             ["--sheet", "/nonexistent/dir/s.png"],
             "--sheet /nonexistent/dir/s.png: folder /nonexistent/dir does not exist",
         ),
+        (["--sheet", "{tmp}/s.txt"], "a contact sheet is a PNG file"),
+        (["--sheet", "{tmp}"], "is a folder"),
     ],
 )
 def test_render_bad_flags(real_clip, tmp_path, capsys, flags, says):
+    """Refused before the first frame: no video is left behind."""
+    flags = [f.replace("{tmp}", str(tmp_path)) for f in flags]
     code, line = one_line_error(render_cli.main, [str(real_clip), str(tmp_path / "o.mp4"), *flags], capsys)
     assert code == 2 and says in line
+    assert not (tmp_path / "o.mp4").exists()
+
+
+@pytest.mark.parametrize("out, says", [("{tmp}", "OUT {tmp}: is a folder"), ("{clip}", "is the clip itself")])
+def test_render_refuses_an_output_that_is_a_folder_or_the_clip(real_clip, tmp_path, capsys, out, says):
+    out, says = (x.replace("{tmp}", str(tmp_path)).replace("{clip}", str(real_clip)) for x in (out, says))
+    code, line = one_line_error(render_cli.main, [str(real_clip), out], capsys)
+    assert code == 2 and says in line
+    assert real_clip.is_file() and load_clip(real_clip)["joints"].size
+
+
+def test_make_stimuli_refuses_the_built_in_studys_flags_with_a_study(tmp_path, capsys):
+    """However the flag is written, and from `python -m` (whose argv is sys.argv) too."""
+    import subprocess
+    import sys
+
+    from generation.make_stimuli import main as make_stimuli
+
+    study = str(tmp_path / "study.toml")
+    for flags, says in (
+        (["--retrain"], "--retrain: not used by a study from folders"),
+        (["--retr"], "--retrain: not used by a study from folders"),
+        (["--n-items=5"], "--n-items: not used"),
+        (["--catch-kinds", "mg-early"], "--catch-kinds: not used"),
+    ):
+        code, line = one_line_error(make_stimuli, ["--study", study, *flags], capsys)
+        assert code == 2 and says in line, line
+    r = subprocess.run(
+        [sys.executable, "-m", "generation.make_stimuli", "--study", study, "--temperature", "0.9"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
+    assert r.returncode == 2 and "--temperature: not used by a study from folders" in r.stderr, r.stderr
 
 
 def test_cli_entry_point_prints_one_line(tmp_path):
