@@ -36,7 +36,7 @@ from rendering.errors import RenderError
 from ..data.motion_files import Skeleton
 from . import intake_page
 from .checks import FORMATS, Rules, check_file, file_format
-from .layout import Problem, Submission, plain_name, read_submission
+from .layout import Problem, Submission, plain_name, read_submission, shown
 
 SPEECH_EXTENSIONS = (".wav", ".flac")
 PROBLEM_COLUMNS = ("team", "file", "item", "sample", "check", "problem")
@@ -52,12 +52,21 @@ def read_inputs(folder) -> dict[str, float | None]:
     items = {}
     for entry in sorted(os.scandir(folder), key=lambda e: e.name):
         name = entry.name
-        if not name.endswith(SPEECH_EXTENSIONS) or not plain_name(name):
+        # Hidden files (.DS_Store, macOS's ._ copies) and files that are not speech (a readme, transcripts) are not
+        # items; a speech file that cannot name an item is refused, as a skipped one would leave its item unchecked.
+        if name.startswith(".") or not name.lower().endswith(SPEECH_EXTENSIONS):
             continue
+        if not plain_name(name):
+            raise UserError(f"{folder}/{shown(name)}: a speech file's name is its item's: rename it to print as itself")
+        if not name.endswith(SPEECH_EXTENSIONS):
+            raise UserError(f"{folder / name}: name speech files ITEM.wav or ITEM.flac, the extension in lower case")
         if not stat.S_ISREG(entry.stat(follow_symlinks=False).st_mode):
             raise UserError(f"{folder / name}: not a regular file (a link or a special file): give the speech itself")
+        item = name.rsplit(".", 1)[0]
+        if item in items:
+            raise UserError(f"{folder}: two speech files for item {item} (.wav and .flac): give one")
         try:
-            items[name.rsplit(".", 1)[0]] = audio_seconds(folder / name)
+            items[item] = audio_seconds(folder / name)
         except RenderError as e:
             raise UserError(str(e)) from None
     if not items:

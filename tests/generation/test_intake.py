@@ -258,6 +258,31 @@ def test_unusable_inputs_exit_2_with_one_line(tmp_path, take, capsys):
     assert code == 2 and "not a folder" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    "extra, says",
+    [
+        (b"item\xff4.wav", "a speech file's name is its item's"),
+        (b"ITEM04.WAV", "the extension in lower case"),
+        (b"item01.flac", "two speech files for item item01"),
+    ],
+    ids=["not-printable", "upper-case", "wav-and-flac"],
+)
+def test_a_speech_file_that_names_no_item_plainly_is_refused(tmp_path, take, capsys, extra, says):
+    """A released item's speech is never skipped (its item would go unchecked, and a team without it accepted);
+    hidden files and other files beside the speech are not items."""
+    speech = write_speech(tmp_path / "speech", {i: FRAMES / FPS for i in ITEMS})
+    (speech / ".DS_Store").write_bytes(b"\0")
+    (speech / "README.txt").write_text("the test items' speech")
+    team = write_team(tmp_path, take)
+    argv = ["--inputs", str(speech), "--fps", "30", "--out", str(tmp_path / "out"), "--quiet", str(team)]
+    assert intake(argv) == 0
+    (speech / os.fsdecode(extra)).write_bytes((speech / "item01.wav").read_bytes())
+    capsys.readouterr()
+    assert intake(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: ") and says in err and "\n" not in err, err
+
+
 def test_seamless_and_amass_layout_submissions_with_their_body_model(tmp_path):
     """GENEA 2026's formats: Seamless Interaction's smplh:* files (is_valid respected: an invalid frame is a problem)
     and the AMASS/BEAT2 layout (poses, trans, betas), each read through the SMPL-H body model."""
