@@ -194,6 +194,11 @@ def build_parser():
 
 def _main(argv):
     args = build_parser().parse_args(argv)
+    out = Path(args.out)
+    if out.is_dir():
+        raise UserError(f"--out {args.out}: is a folder; give the pairs.csv to write")
+    if out.exists() and Path(args.battles).exists() and out.samefile(args.battles):
+        raise UserError(f"--out {args.out}: is the battle file itself; write the pairs elsewhere")
     s = import_votes(args.battles, args.out)
     print(
         f"{args.out}: {s['n_votes']} votes from {s['n_raters']} raters on {len(s['conditions'])} conditions "

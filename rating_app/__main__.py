@@ -7,6 +7,7 @@ import json
 import logging
 import os
 import sys
+from pathlib import Path
 
 from moglow_eval.core import cli
 from moglow_eval.core.study import DESIGNS
@@ -111,6 +112,8 @@ def _restore(a):
 def _simulate(a):
     from .simulate import parse_quality, run_simulation, shortfall, write_summary
 
+    if a.summary and (Path(a.summary).is_dir() or not Path(a.summary).parent.is_dir()):  # before any rater answers
+        raise AppError(f"--summary {a.summary}: not a file in an existing folder")
     summary = run_simulation(
         a.url,
         a.raters,

@@ -110,8 +110,8 @@ def clip_from_row(row: dict, where: str, base: Path, check_files: bool) -> Manif
         role=role,
         item=(row["item"] or "").strip()[:128],
         video=video,
-        frames=_number(row.get("frames"), int, where, "frames"),
-        fps=_number(row.get("fps"), float, where, "fps"),
+        frames=_positive(row.get("frames"), int, where, "frames"),
+        fps=_positive(row.get("fps"), float, where, "fps"),
         motion_item=(row.get("motion_item") or "").strip()[:128],
         audio=(row.get("audio") or "").strip() == "1",
         style=(row.get("style") or "").strip()[:16],
@@ -119,6 +119,15 @@ def clip_from_row(row: dict, where: str, base: Path, check_files: bool) -> Manif
         width=_side(row.get("width"), where, "width"),
         height=_side(row.get("height"), where, "height"),
     )
+
+
+def _positive(value, kind, where, field):
+    """A clip's frames or fps: above 0, or None where not given. The viewing rule takes a clip's length from them,
+    and a negative one would shorten it (or a pair's), a zero one drop it."""
+    x = _number(value, kind, where, field)
+    if x is not None and not x > 0:
+        raise AppError(f"{where}: field '{field}' must be above 0, got {value!r}")
+    return x
 
 
 def _side(value, where, field):

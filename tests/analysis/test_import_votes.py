@@ -86,6 +86,16 @@ def test_bad_battle_files_are_one_line_and_write_nothing(tmp_path, capsys, body,
     assert not out.exists() and not list(tmp_path.glob("*.part"))
 
 
+@pytest.mark.parametrize("out", ["battles.csv", "."], ids=["the-input", "a-folder"])
+def test_an_output_that_is_the_battle_file_or_a_folder_is_refused(tmp_path, capsys, out):
+    path = write(tmp_path, "u1,i1,A,B,model_a,True,{},\n")
+    before = path.read_bytes()
+    assert iv.main([str(path), "--out", str(tmp_path / out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: --out") and len(err.splitlines()) == 1, err
+    assert path.read_bytes() == before  # the votes are still there
+
+
 def test_not_a_battle_file(tmp_path, capsys):
     path = tmp_path / "other.csv"
     path.write_text("a,b\n1,2\n")

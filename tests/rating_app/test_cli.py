@@ -175,6 +175,8 @@ def test_serve_cli(app_stimuli, tmp_path):
         (lambda rows: rows[1].__setitem__("role", "bonus"), ":3: role"),
         (lambda rows: rows[1].__setitem__("video", "videos/none.mp4"), ":3: video"),
         (lambda rows: rows[1].__setitem__("fps", "fast"), ":3: field 'fps'"),
+        (lambda rows: rows[1].__setitem__("fps", "-20"), ":3: field 'fps' must be above 0"),  # the viewing rule's
+        (lambda rows: rows[2].__setitem__("frames", "0"), ":4: field 'frames' must be above 0"),
         (lambda rows: [r.pop("condition") for r in rows], ":1: missing column(s) condition"),
     ],
 )

@@ -147,3 +147,14 @@ def test_no_server_is_said_within_seconds_not_at_the_time_limit(app_stimuli, des
     line = one_error_line(r)
     assert f"{url}: no rating app answers" in line and "rating_app serve" in line, line
     assert r.stdout == ""  # nothing ran, so there is no summary
+
+
+def test_a_summary_that_cannot_be_written_stops_the_crowd_before_it_answers(app_stimuli, tmp_path):
+    import requests
+
+    db = f"sqlite:///{tmp_path}/r.sqlite"
+    with served(app_stimuli, db, ratings_per_clip=50, min_view=0, sessions_per_client=0) as url:
+        r = simulate("--url", url, "--raters", 2, "--manifest", app_stimuli, "--summary", tmp_path)
+        progress = requests.get(f"{url}/admin/progress.json", headers={"Authorization": "Bearer t"}, timeout=30)
+    assert "--summary" in one_error_line(r)
+    assert progress.json()["raters"] == []  # no rater started: nothing was written to the study first
