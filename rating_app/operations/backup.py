@@ -20,7 +20,7 @@ from sqlalchemy import inspect
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import SQLAlchemyError
 
-from ..store.db import check_url, make_engine
+from ..store.db import Clip, Rater, Trial, check_url, make_engine
 from ..store.manifest import AppError
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -54,7 +54,14 @@ def restore(backup_file, db_url: str | None) -> str:
         target = _sqlite_path(url)
         if target.exists() and target.stat().st_size:
             raise AppError(f"--db {target}: exists already; restore into a new file")
-        _sqlite_copy(backup_file, target)
+        if not target.parent.is_dir():
+            raise AppError(f"--db {target}: folder {target.parent} does not exist")
+
+        def write(tmp):  # checked before it is renamed into place: a bad backup leaves no database behind
+            _sqlite_copy(backup_file, tmp)
+            _check_rating_database(tmp, backup_file)
+
+        _atomic(target, write)
         return "sqlite"
     if not head.startswith(PG_DUMP_MAGIC):
         raise AppError(f"{backup_file}: not a pg_dump custom-format backup (restore an SQLite backup into SQLite)")
@@ -87,6 +94,19 @@ def _sqlite_copy(source: Path, target: Path) -> None:
                 src.backup(dst, pages=1024)
     except sqlite3.DatabaseError as e:
         raise AppError(f"{source}: cannot copy the database: {e}") from None
+
+
+def _check_rating_database(copy: Path, backup_file: Path) -> None:
+    """AppError unless `copy` (of `backup_file`) is whole and a rating study's: SQLite's integrity check, and the
+    app's core tables (an SQLite file of something else would restore, and fail only at the next export)."""
+    with contextlib.closing(sqlite3.connect(copy)) as conn:
+        ok = conn.execute("PRAGMA integrity_check").fetchone()[0]
+        tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    if ok != "ok":
+        raise AppError(f"{backup_file}: a damaged database ({ok.splitlines()[0]}); restore an intact backup")
+    missing = sorted({Clip.__tablename__, Rater.__tablename__, Trial.__tablename__} - tables)  # any version's
+    if missing:
+        raise AppError(f"{backup_file}: not a rating study's database (no table {missing[0]})")
 
 
 def _atomic(out: Path, write) -> None:

@@ -5,6 +5,7 @@ the crowd stopped, the export from the restored database is the live export, byt
 import contextlib
 import csv
 import secrets
+import sqlite3
 import subprocess
 import sys
 import threading
@@ -138,6 +139,9 @@ def test_backup_and_restore_refuse_bad_input_with_one_line(tmp_path, app_stimuli
     app_engine(create_app(manifest=app_stimuli, db_url=live)).dispose()
     (tmp_path / "not_a_backup").write_text("hello")
     assert cli("backup", "--db", live, "--out", tmp_path / "ok.bak").returncode == 0
+    (tmp_path / "cut.bak").write_bytes((tmp_path / "ok.bak").read_bytes()[:20000])  # a copy cut short
+    with contextlib.closing(sqlite3.connect(tmp_path / "other.sqlite")) as other:
+        other.execute("CREATE TABLE foo (x)")
     with pg_databases(1) as (pg,):
         cases = [
             (("backup", "--db", f"sqlite:///{tmp_path}/none.sqlite", "--out", tmp_path / "x"), "none.sqlite: no such"),
@@ -147,9 +151,14 @@ def test_backup_and_restore_refuse_bad_input_with_one_line(tmp_path, app_stimuli
             (("restore", tmp_path / "not_a_backup", "--db", f"sqlite:///{tmp_path}/n.sqlite"), "not an SQLite backup"),
             (("restore", tmp_path / "ok.bak", "--db", pg), "not a pg_dump custom-format backup"),
             (("restore", tmp_path / "missing.bak", "--db", pg), "missing.bak: No such file"),
+            (("restore", tmp_path / "cut.bak", "--db", f"sqlite:///{tmp_path}/cut.sqlite"), "cut.bak: "),
+            (("restore", tmp_path / "other.sqlite", "--db", f"sqlite:///{tmp_path}/o.sqlite"), "not a rating study"),
+            (("restore", tmp_path / "ok.bak", "--db", f"sqlite:///{tmp_path}/no/r.sqlite"), "folder"),
         ]
         for args, message in cases:
             command_fails(*args, needle=message)
+        # a refused restore leaves no database behind, so the next one, of a good backup, is not refused as existing
+        assert not (tmp_path / "cut.sqlite").exists() and not (tmp_path / "o.sqlite").exists()
         # a non-empty PostgreSQL database is refused, never merged into
         assert cli("restore", tmp_path / "ok.bak", "--db", f"sqlite:///{tmp_path}/copy.sqlite").returncode == 0
         app_engine(create_app(manifest=app_stimuli, db_url=pg)).dispose()
