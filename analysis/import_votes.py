@@ -173,6 +173,10 @@ def import_votes(path, out_path) -> dict:
         False, reasons that are not a JSON list of ids (or nest too deep), a mismatch file pairing other systems.
     """
     path, out_path = Path(path), Path(out_path)
+    if out_path.is_dir():
+        raise VotesFileError(f"--out {out_path}: is a folder; give the pairs.csv to write")
+    if out_path.exists() and path.exists() and out_path.samefile(path):  # it would replace the votes it reads
+        raise VotesFileError(f"--out {out_path}: is the battle file itself; write the pairs elsewhere")
     tmp = out_path.with_name(out_path.name + ".part")
     try:
         with _rows(path) as rows, open(tmp, "w", newline="", encoding="utf-8") as fh:
@@ -194,11 +198,6 @@ def build_parser():
 
 def _main(argv):
     args = build_parser().parse_args(argv)
-    out = Path(args.out)
-    if out.is_dir():
-        raise UserError(f"--out {args.out}: is a folder; give the pairs.csv to write")
-    if out.exists() and Path(args.battles).exists() and out.samefile(args.battles):
-        raise UserError(f"--out {args.out}: is the battle file itself; write the pairs elsewhere")
     s = import_votes(args.battles, args.out)
     print(
         f"{args.out}: {s['n_votes']} votes from {s['n_raters']} raters on {len(s['conditions'])} conditions "

@@ -48,8 +48,6 @@ def _main(argv):
             raise RenderError(f"{flag} {path}: is a folder; give a file name")
         if Path(path).exists() and Path(path).samefile(args.clip):
             raise RenderError(f"{flag} {path}: is the clip itself")
-    if args.sheet is not None and Path(args.sheet).suffix.lower() != ".png":
-        raise RenderError(f"--sheet {args.sheet}: a contact sheet is a PNG file; give a name ending in .png")
     options = RenderOptions(size=args.size, preset=args.preset, qp=args.qp, crf=args.crf)
     n = render_clip(args.clip, args.out, options, sheet=args.sheet)
     print(f"wrote {args.out} ({n} frames, {args.size}x{args.size})")

@@ -165,7 +165,8 @@ def render_clip(clip_or_path, out_mp4, options=None, *, sheet=None, partner=None
     Raises
     ------
     RenderError
-        One line naming the file: a bad size, joints that are not [T >= 1, J, 3], or ffmpeg failing.
+        One line naming the file: a bad size, a sheet not named .png, joints that are not [T >= 1, J, 3], or
+        ffmpeg failing.
     ClipError
         An unreadable clip file, or implausible joints or frame rate.
 
@@ -175,6 +176,7 @@ def render_clip(clip_or_path, out_mp4, options=None, *, sheet=None, partner=None
     >>> RenderOptions(size=480).preset
     'ultrafast'
     """
+    _check_sheet_name(sheet)  # before the video, not after it
     o = RenderOptions() if options is None else options
     size = o.size
     clip = _as_clip(clip_or_path)
@@ -233,6 +235,12 @@ def render_clip(clip_or_path, out_mp4, options=None, *, sheet=None, partner=None
     if sheet:
         contact_sheet(kept, fps, sheet)
     return len(joints)
+
+
+def _check_sheet_name(sheet):
+    """RenderError unless the contact sheet `sheet` (or None: no sheet) is named as the PNG it will be."""
+    if sheet is not None and os.path.splitext(sheet)[1].lower() != ".png":
+        raise RenderError(f"{sheet}: a contact sheet is a PNG file; give a name ending in .png")
 
 
 def _people(clip, joints, name, o, frame, partner, mesh, partner_mesh):

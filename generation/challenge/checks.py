@@ -116,6 +116,8 @@ def _body(m, valid, fmt, rules, add) -> None:
         if speed[t, j] > rules.max_speed:
             add("speed", f"{m.names[j]} moves at {speed[t, j]:.1f} m/s between frames {t} and {t + 1} (at most "
                 f"{rules.max_speed:g} m/s for a person): look for a jump there, or the wrong units")  # fmt: skip
+    if fmt not in POSITIONS:  # rotations keep their bones by construction
+        return
     parents = np.asarray(m.parents)
     # A point on the floor or at the scene's origin is no part of the body, and its link to the hips moves as the
     # body does: links from a root marker (`joint_Root`) are left out, and so are those from a first joint not named
@@ -125,7 +127,7 @@ def _body(m, valid, fmt, rules, add) -> None:
     if len(parents) and not skeleton_names.is_hips(m.names[0]):
         floor.add(0)
     child = np.flatnonzero((parents >= 0) & ~np.isin(parents, list(floor)))
-    if fmt in POSITIONS and len(child):
+    if len(child):
         length = np.linalg.norm(m.joints[valid][:, child] - m.joints[valid][:, parents[child]], axis=-1)
         median = np.median(length, axis=0)
         change = np.max(np.abs(length / np.where(median > 0, median, 1.0) - 1.0), axis=0)
@@ -134,5 +136,5 @@ def _body(m, valid, fmt, rules, add) -> None:
         if change[worst] > rules.max_bone_change:
             c = child[worst]
             bound = 100 * rules.max_bone_change
-            add("bones", f"the bone {m.names[m.parents[c]]}-{m.names[c]} changes its length by "
+            add("bones", f"the bone {m.names[parents[c]]}-{m.names[c]} changes its length by "
                 f"{100 * change[worst]:.0f}% (at most {bound:g}%): keep every bone's length")  # fmt: skip

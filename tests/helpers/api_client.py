@@ -1,6 +1,7 @@
 """The rater API's steps for an ACR study, as the tests drive it through Flask's test client (CONTRACTS §5-6):
 start a session, fetch the next trial, answer it, run a whole session, read the export; and a session made idle."""
 
+import contextlib
 import csv
 import io
 
@@ -66,6 +67,24 @@ def idle(app, token, hours=2):
     with app_engine(app).begin() as conn:
         past = utcnow() - dt.timedelta(hours=hours)
         conn.execute(update(Rater).where(Rater.token == token).values(last_progress=past, last_seen=past))
+
+
+@contextlib.contextmanager
+def answered_after(app, trial_id, ms, monkeypatch):
+    """Within it, the app's answer clock reads `ms` milliseconds after trial `trial_id` was served: a viewing check's
+    wait is then exact, however busy the machine (an answer's real delay can be a second under load)."""
+    import datetime as dt
+
+    from sqlalchemy import select
+
+    from rating_app.store.db import Trial, app_engine
+    from rating_app.trials import answers
+
+    with app_engine(app).connect() as conn:
+        served = conn.execute(select(Trial.served_at).where(Trial.id == trial_id)).scalar_one()
+    with monkeypatch.context() as m:
+        m.setattr(answers, "utcnow", lambda: served + dt.timedelta(milliseconds=ms))
+        yield
 
 
 def rate_everything(client):

@@ -13,7 +13,7 @@ import threading
 from types import SimpleNamespace
 
 import pytest
-from helpers.api_client import TOKEN_HDR
+from helpers.api_client import TOKEN_HDR, answered_after
 from helpers.design_checks import (
     an_idle_session_gives_its_pair_back,
     pairwise_bad_input_and_training,
@@ -52,10 +52,6 @@ def test_viewing_rule_counts_every_clip(make, stimuli, design, monkeypatch):
     """pairwise: both clips can play at once (the longer one's time); parallel: one after another (the sum). The
     answer comes 40 ms after the trial was served by the app's clock, fixed here: the wait it is told is then exact,
     however busy the machine."""
-    from sqlalchemy import select
-
-    from rating_app.trials import answers
-
     clips = clips_of(stimuli)
     dur = next(iter(clips.values())).duration_ms
     need = dur - 250 if design == "pairwise" else None
@@ -64,10 +60,7 @@ def test_viewing_rule_counts_every_clip(make, stimuli, design, monkeypatch):
         c = app.test_client()
         token = start(c)
         t = c.get(f"/api/sessions/{token}/next").json["trial"]
-        with app_engine(app).connect() as conn:
-            served = conn.execute(select(Trial.served_at).where(Trial.id == t["trial_id"])).scalar_one()
-        with monkeypatch.context() as m:
-            m.setattr(answers, "utcnow", lambda: served + dt.timedelta(milliseconds=40))
+        with answered_after(app, t["trial_id"], 40, monkeypatch):
             r = post(c, token, t)
         assert r.status_code == 425 and r.json["too_early"], r.json
         n = len(shown(t))

@@ -9,7 +9,17 @@ import io
 import os
 
 import pytest
-from helpers.api_client import TOKEN_HDR, answer, clips_by_role, complete, export_rows, idle, nxt, start
+from helpers.api_client import (
+    TOKEN_HDR,
+    answer,
+    answered_after,
+    clips_by_role,
+    complete,
+    export_rows,
+    idle,
+    nxt,
+    start,
+)
 from helpers.concurrent_raters import run_raters
 from helpers.fake_stimuli import write_fake_stimuli
 from helpers.flags import video_flags
@@ -150,20 +160,13 @@ def test_sessions_per_client_and_only_same_site_json(make_app):
 
 # 3 ---------------------------------------------------------------------------------------- viewing enforced
 def test_answer_before_the_clip_could_play_is_refused_and_flagged(make_app, app_stimuli, monkeypatch):
-    from sqlalchemy import select
-
-    from rating_app.trials import answers
-
     app = make_app(ratings_per_clip=3)  # MIN_VIEW: the default, the whole clip
     c = app.test_client()
     token = start(c, external_id="fast")
     t = nxt(c, token)["trial"]
-    with app_engine(app).connect() as conn:
-        served = conn.execute(select(Trial.served_at).where(Trial.id == t["trial_id"])).scalar_one()
-    # 8 ms after the trial was served, by the app's clock, fixed here: a loaded machine could otherwise take the
-    # clip's 0.55 s between serving it and the answer, which would then be in time.
-    with monkeypatch.context() as m:
-        m.setattr(answers, "utcnow", lambda: served + dt.timedelta(milliseconds=8))
+    # 8 ms after the trial was served, by the app's clock: a loaded machine could otherwise take the clip's 0.55 s
+    # between serving it and the answer, which would then be in time.
+    with answered_after(app, t["trial_id"], 8, monkeypatch):
         r = answer(c, token, t)  # watched_ms claimed
     assert r.status_code == 425 and r.json["too_early"] is True
     clip = {x.clip_id: x for x in load_manifest(app_stimuli)}[t["clip_id"]]
