@@ -19,7 +19,7 @@ from moglow_eval.core import cli, study, tables, user_files
 
 from .data.filtering import DEFAULT_THRESHOLD
 from .data.load import AnalysisError, load_measure_clips, load_measure_notes
-from .designs import Options, design_of
+from .designs import Options, check_design_options, design_of
 from .designs.base import MIXED_MAX_LEVELS, ORDINAL_MAX_RATINGS
 from .page import report_html
 from .page.measures_text import measures_console, measures_html, measures_sentence
@@ -143,6 +143,7 @@ def build_report(ratings_path, out_dir="report", options: Options | None = None,
     t0 = time.perf_counter()
     options = options or Options()
     design = design_of(ratings_path)
+    check_design_options(design, options, ratings_path)
     data = design.prepare(ratings_path, options)
     target = study_target(ratings_path)  # before any work: a bad value is the file's problem
     out = Path(out_dir)

@@ -54,12 +54,12 @@ def _export(a):
     from .designs import get
     from .operations.battles import export_battles
     from .operations.export import export_csv
-    from .store.db import check_url, make_engine, study_design
+    from .store.db import check_url, make_engine, require_sqlite_file, study_design
 
     url = check_url(a.db)
     parsed = make_url(url)
-    if parsed.drivername.startswith("sqlite") and not os.path.isfile(parsed.database or ""):
-        raise AppError(f"{parsed.database}: no such database file")
+    if parsed.drivername.startswith("sqlite"):
+        require_sqlite_file(parsed.database or "")
     engine = make_engine(url)
     try:
         if "ratings" not in inspect(engine).get_table_names():
@@ -159,12 +159,12 @@ def _open_db(db_url):
     from sqlalchemy import inspect
     from sqlalchemy.engine import make_url
 
-    from .store.db import check_url, make_engine
+    from .store.db import check_url, make_engine, require_sqlite_file
 
     url = check_url(db_url)
     parsed = make_url(url)
-    if parsed.drivername.startswith("sqlite") and not os.path.isfile(parsed.database or ""):
-        raise AppError(f"{parsed.database}: no such database file")
+    if parsed.drivername.startswith("sqlite"):
+        require_sqlite_file(parsed.database or "")
     engine = make_engine(url)
     if "study_conditions" not in inspect(engine).get_table_names():
         engine.dispose()

@@ -162,6 +162,11 @@ def _date(text):
 def _title(text):
     if not text.strip() or len(text) > 200:
         raise argparse.ArgumentTypeError("expected a title of 1-200 characters")
+    odd = next((c for c in text.strip() if not c.isprintable()), None)
+    if odd is not None:  # a terminal's escape or a bell would reach every visitor's page and the board's file
+        raise argparse.ArgumentTypeError(
+            f"expected one line of printable text, got the control character U+{ord(odd):04X}"
+        )
     return text.strip()
 
 

@@ -11,7 +11,7 @@ from moglow_eval.core import study, tables, user_files
 from ..data.load import AnalysisError
 from .acr.design import Acr
 from .appropriateness.design import Appropriateness
-from .base import Design, Options
+from .base import DESIGN_OPTIONS, Design, Options
 from .dyadic.design import Dyadic
 from .pairwise.design import Pairwise
 from .parallel.design import Parallel
@@ -22,7 +22,7 @@ DESIGNS: dict[str, Design] = {
 }
 assert tuple(DESIGNS) == study.DESIGNS, "moglow_eval.core.study.DESIGNS and the registry list the same designs"
 
-__all__ = ["DESIGNS", "Design", "Options", "design_of", "detect_design"]
+__all__ = ["DESIGNS", "Design", "Options", "check_design_options", "design_of", "detect_design"]
 
 
 def design_of(path) -> Design:
@@ -41,3 +41,12 @@ def design_of(path) -> Design:
 def detect_design(path) -> str:
     """The name of the design of the CSV file at `path`."""
     return design_of(path).name
+
+
+def check_design_options(design: Design, options: Options, path) -> None:
+    """AnalysisError, one line, for an option given (not at its default) that `design` does not read
+    (base.DESIGN_OPTIONS), naming the designs that do."""
+    for field, flag in DESIGN_OPTIONS.items():
+        if field not in design.reads and getattr(options, field) != Options.__dataclass_fields__[field].default:
+            readers = ", ".join(d.name for d in DESIGNS.values() if field in d.reads)
+            raise AnalysisError(f"{flag}: {path} holds {design.name} answers; {flag} is for {readers} exports only")

@@ -92,9 +92,15 @@ def ranked(rows, better) -> list[dict]:
     return out
 
 
+# The Options fields only some designs read, and their flags: a design that does not read one refuses it where it
+# is given (unchanged from its default, it is not given), as a flag without effect would otherwise pass unsaid.
+DESIGN_OPTIONS = {"reference": "--reference", "indifference": "--indifference"}
+
+
 class Design:
     name = ""  # as moglow_eval.core.study.DESIGNS spells it
     steps = 0  # progress-bar steps of one report (0: no bar)
+    reads = frozenset()  # which of DESIGN_OPTIONS this design reads
     # The methods paragraph's words for this design (analysis.page.methods): what a rater did ("Raters ..."), what
     # failing a catch trial means ("excluded because they ..."; {threshold}: the report's), and the statistics.
     methods_task = ""

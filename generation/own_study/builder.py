@@ -50,7 +50,16 @@ from ..metrics.c2st_features import FEATURE_COLUMNS, feature_table, feature_text
 from ..metrics.objective import any_clip_metrics, find_feet
 from ..stimuli.build_index import BuildIndex, keyed_id
 from ..stimuli.catch_kinds import make_catch
-from ..stimuli.files import StimuliError, clip_files, manifest_row, prepare_out, summary_text, write_csv, write_tables
+from ..stimuli.files import (
+    StimuliError,
+    clip_files,
+    manifest_row,
+    prepare_out,
+    refuse_existing,
+    summary_text,
+    write_csv,
+    write_tables,
+)
 from ..stimuli.render_pool import render_stimuli
 from ..stimuli.summary import blinding_warning
 from . import designs
@@ -377,6 +386,7 @@ def build_study(spec, out, size, preset, workers, force, progress, scheduler=Non
         A sound file that cannot be read or muxed, or a render that fails.
     """
     t0 = time.perf_counter()
+    refuse_existing(out, force)  # before any motion is read
     files, sampled = match_items(spec)
     spec = with_study_fps(spec, files)
     n_catch, own_catch = _catch_items(spec, files[spec.reference])

@@ -44,8 +44,13 @@ class StimuliError(UserError):
 
 
 def refuse_existing(out, force):
-    """StimuliError when `out` holds a stimulus set and `force` is not given."""
-    if (Path(out) / "manifest.csv").exists() and not force:
+    """StimuliError when `out` holds a stimulus set and `force` is not given, or when it, or the nearest of its
+    folders that exists, is a file (the set's first file would be refused only after the work)."""
+    out = Path(out)
+    there = next((p for p in (out, *out.parents) if p.exists()), None)
+    if there is not None and not there.is_dir():
+        raise StimuliError(f"--out {out}: " + ("a file, not a folder" if there == out else f"{there} is a file"))
+    if (out / "manifest.csv").exists() and not force:
         raise StimuliError(f"{out}: already holds a stimulus set (manifest.csv); pass --force to replace it")
 
 

@@ -175,10 +175,29 @@ def npz_headers(path, limit=MAX_NPZ_BYTES):
     return out
 
 
+def _not_npz(path):
+    """ClipError for a file that is neither a zip archive nor an .npy array, said as such: numpy's own message for
+    it is about pickled data, which tells a user who gave a BVH or CSV file nothing."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(64)
+    except OSError:
+        return  # np.load names the error
+    if head.startswith((b"\x93NUMPY", b"PK")):  # an .npy array, or a zip archive too broken to be found as one
+        return
+    if head.lstrip().upper().startswith(b"HIERARCHY") or str(path).lower().endswith((".bvh", ".bvh.gz")):
+        raise ClipError(
+            f"{path}: a BVH file, not an .npz clip (python -m generation.data.import_motion turns it into one)"
+        )
+    raise ClipError(f"{path}: not an .npz clip (a clip is a NumPy .npz archive: docs/CONTRACTS.md §1)")
+
+
 def load_clip(path):
     """Read and check a clip .npz; returns a dict with at least joints, parents, joint_names, fps."""
     if zipfile.is_zipfile(path):
         npz_headers(path)
+    else:
+        _not_npz(path)
     try:
         f = np.load(path, allow_pickle=False)
     except NPZ_READ_ERRORS as e:

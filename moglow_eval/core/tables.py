@@ -88,14 +88,21 @@ def read_metrics(path, error=TableError, keys=False):
 
 
 def _numbers(path, df, col, error):
-    """Column `col` as floats: an empty cell or `nan` is NaN (not measured), anything else not a number is one
-    error naming the file and line."""
+    """Column `col` as floats: an empty cell or `nan` is NaN (not measured), anything else not a finite number is
+    one error naming the file and line (an infinite value would drop its clip from every correlation unsaid)."""
     text = df[col].str.strip()
     values = pd.to_numeric(text.replace("", np.nan).replace("nan", np.nan), errors="coerce")
     bad = values.isna() & ~text.isin(["", "nan"])
     if bad.any():
         line = first_line(bad)
         raise error(f"{path}:{line}: {col} {df.at[line, col]!r} is not a number")
+    infinite = pd.Series(np.isinf(values.to_numpy(dtype=float)), index=values.index)
+    if infinite.any():
+        line = first_line(infinite)
+        raise error(
+            f"{path}:{line}: {col} {df.at[line, col]!r} is not a finite number "
+            "(leave the cell empty or write nan where a clip was not measured)"
+        )
     return values.to_numpy(dtype=float)
 
 

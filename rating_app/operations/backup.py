@@ -20,7 +20,7 @@ from sqlalchemy import inspect
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import SQLAlchemyError
 
-from ..store.db import Clip, Rater, Trial, check_url, make_engine
+from ..store.db import Clip, Rater, Trial, check_url, make_engine, require_sqlite_file
 from ..store.manifest import AppError
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -81,8 +81,8 @@ def _sqlite_path(url, must_exist=False) -> Path:
     if not url.database or url.database == ":memory:":
         raise AppError(f"--db {url}: an SQLite database in a file is needed")
     path = Path(url.database)
-    if must_exist and not path.is_file():
-        raise AppError(f"{path}: no such database file")
+    if must_exist:
+        require_sqlite_file(str(path))
     return path
 
 

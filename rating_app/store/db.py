@@ -336,6 +336,16 @@ def check_url(url: str | None) -> str:
     return url
 
 
+def require_sqlite_file(path: str) -> None:
+    """AppError unless `path` is a file with something in it: a command that reads a study (export, backup, adding
+    a condition) would otherwise open a missing or empty file as a new database and write SQLite's header into
+    the user's file."""
+    if not os.path.isfile(path):
+        raise AppError(f"{path}: no such database file")
+    if os.path.getsize(path) == 0:
+        raise AppError(f"{path}: an empty file, not a rating app database")
+
+
 def is_sqlite(engine: Engine) -> bool:
     return engine.dialect.name == "sqlite"
 

@@ -101,6 +101,8 @@ def clip_from_row(row: dict, where: str, base: Path, check_files: bool) -> Manif
         raise AppError(f"{where}: video {row['video']!r} leaves the stimulus folder {base}")
     if check_files and not video.is_file():
         raise AppError(f"{where}: video {row['video']!r} not found ({video})")
+    if check_files and not _is_mp4(video):  # else any file in the folder (a CSV, a key) is sent to raters as video
+        raise AppError(f"{where}: video {row['video']!r} is not an MP4 file ({video})")
     sample = (row.get("sample") or "").strip()
     if sample and not study.SAMPLE_NAME.fullmatch(sample):
         raise AppError(f"{where}: sample {sample!r} is not a sample name {study.SAMPLE_NAME.pattern}")
@@ -136,6 +138,16 @@ def _side(value, where, field):
     if x is not None and not 0 < x <= MAX_SIDE:
         raise AppError(f"{where}: field '{field}' must be 1-{MAX_SIDE} pixels, got {value!r}")
     return x
+
+
+def _is_mp4(path: Path) -> bool:
+    """Whether `path` starts as an MP4 (ISO base media) file does: a box whose type is `ftyp`."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(12)
+    except OSError:
+        return False
+    return len(head) == 12 and head[4:8] == b"ftyp"
 
 
 def video_size(clips) -> tuple[int, int] | None:

@@ -127,6 +127,17 @@ def test_bad_options_exit_2(tmp_path, capsys, args):
     assert info.value.code == 2
 
 
+@pytest.mark.parametrize("args", [["--reference", "MG"], ["--indifference", "25"]])
+def test_a_flag_the_design_does_not_read_is_refused(tmp_path, capsys, args):
+    """--reference and --indifference steer the pairwise analysis alone: on another design's export they were
+    dropped without a word (the report read as if the anchor had been set)."""
+    path = _write(tmp_path, "acr", HEADER + GOOD)
+    assert main([str(path), "--quiet", "--out", str(tmp_path / "rep"), *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"error: {args[0]}: {path} holds acr answers; {args[0]} is for pairwise exports only", err
+    assert not (tmp_path / "rep").exists()
+
+
 METRICS_HEADER = "clip_id,condition,role,item,foot_skating,jerk\n"
 
 
@@ -138,6 +149,8 @@ METRICS_HEADER = "clip_id,condition,role,item,foot_skating,jerk\n"
         (METRICS_HEADER, r"no rows"),
         (METRICS_HEADER + "a1,NAT,test,1,0.1,2\na1,NAT,test,1,0.2,3\n", r":3: duplicate clip_id a1"),
         (METRICS_HEADER + "a1,NAT,test,1,fast,2\n", r":2: foot_skating 'fast' is not a number"),
+        (METRICS_HEADER + "a1,NAT,test,1,0.1,2\nb1,MG,test,1,inf,2\n", r":3: foot_skating 'inf' is not a finite"),
+        (METRICS_HEADER + "a1,NAT,test,1,0.1,-1e999\n", r":2: jerk '-1e999' is not a finite number"),
         ("clip_id,condition,role,item\na1,NAT,test,1\n", r"no metric columns"),
     ],
 )

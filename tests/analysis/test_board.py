@@ -314,6 +314,10 @@ BAD = {
         "no --task b",
     ),
     "a bad date": (lambda r, t: ["--task", f"a={r / 'report_acr'}", "--date", "2026-13-01"], "expected a date"),
+    "a title with a terminal's escape": (
+        lambda r, t: ["--task", f"a={r / 'report_acr'}", "--title", "Results\x1b[31m"],
+        "--title: expected one line of printable text, got the control character U+001B",
+    ),
     "no stimulus folder": (
         lambda r, t: ["--task", f"a={r / 'report_acr'}", "--stimuli", f"a={t}"],
         "no stimulus manifest; give --stimuli a=FOLDER",

@@ -114,13 +114,22 @@ def test_render_refuses_files_that_are_not_clips(tmp_path, capsys):
     (tmp_path / "junk.npz").write_bytes(b"PK\x03\x04" + b"junk" * 50)
     np.save(tmp_path / "array.npy", np.zeros(4))
     (tmp_path / "array.npy").rename(tmp_path / "array.npz")
+    # Not archives at all: numpy's own words for these are about pickled data.
+    (tmp_path / "take.bvh").write_text("HIERARCHY\nROOT Hips\n{\n")
+    (tmp_path / "take.txt").write_text("HIERARCHY\nROOT Hips\n{\n")
+    (tmp_path / "manifest.csv").write_text("clip_id,condition\na,NAT\n")
+    (tmp_path / "touched.npz").touch()
     for name, says in (
         ("empty.npz", "missing key 'joints'"),
         ("junk.npz", "not a readable .npz"),
         ("array.npz", "a single .npy array"),
+        ("take.bvh", "a BVH file, not an .npz clip (python -m generation.data.import_motion"),
+        ("take.txt", "a BVH file, not an .npz clip"),
+        ("manifest.csv", "not an .npz clip (a clip is a NumPy .npz archive"),
+        ("touched.npz", "not an .npz clip"),
     ):
         code, line = one_line_error(render_cli.main, [str(tmp_path / name), str(tmp_path / "o.mp4")], capsys)
-        assert code == 2 and says in line and name in line
+        assert code == 2 and says in line and name in line and "pickle" not in line
 
 
 @pytest.mark.parametrize(

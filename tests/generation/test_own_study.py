@@ -227,6 +227,11 @@ def test_bad_study_input_is_one_line_and_leaves_no_manifest(tmp_path, capsys):
     # a clip too short for length_s
     _fails([*base, "--length-s", "60"], capsys, "shorter than the study's length_s 60")
     assert not (tmp_path / "out" / "manifest.csv").exists()
+    # an --out that is a file: said before any motion is read (a broken file above would be named otherwise)
+    np.save(root / "sys_a" / "item02.npy", bad)
+    (tmp_path / "taken.csv").write_text("x\n")
+    line = _fails(["--study", str(study), "--out", str(tmp_path / "taken.csv"), "--quiet"], capsys, "a file")
+    assert line == f"error: --out {tmp_path / 'taken.csv'}: a file, not a folder", line
 
 
 def test_skeleton_mismatch_names_both_files(tmp_path, capsys):

@@ -429,6 +429,17 @@ def test_refusing_to_replace_a_set_touches_nothing(tmp_path, capsys):
     assert _tree(out) == before
 
 
+def test_an_out_that_is_a_file_is_refused_before_any_work(tmp_path, capsys):
+    """`--out ratings.csv` (a file given where the set's folder goes) said `ratings.csv/manifest.csv: Not a
+    directory`, and only after the data was read; a file further up the path alike."""
+    (tmp_path / "ratings.csv").write_text("clip_id\n")
+    line = _fails(capsys, "--out", tmp_path / "ratings.csv")
+    assert line == f"error: --out {tmp_path / 'ratings.csv'}: a file, not a folder", line
+    line = _fails(capsys, "--out", tmp_path / "ratings.csv" / "set")
+    assert line == f"error: --out {tmp_path / 'ratings.csv' / 'set'}: {tmp_path / 'ratings.csv'} is a file", line
+    assert (tmp_path / "ratings.csv").read_text() == "clip_id\n" and capsys.readouterr().err == ""
+
+
 def test_a_video_encoded_again_takes_the_next_key_quantiser_and_rate_seed():
     job = ("m.npz", "v.mp4", "", 64, "ultrafast", {"rate_seed": 7, "style": "stick"})
     for attempt, key_qp in enumerate(render_pool.KEY_QP, start=1):

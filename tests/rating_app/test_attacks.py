@@ -337,6 +337,24 @@ def test_events_are_escaped_and_limited(client, caplog):
     assert codes.count(201) == 29 and codes[-1] == 429
 
 
+def test_a_video_that_is_not_an_mp4_is_refused(tmp_path):
+    """A manifest whose video names another file of the folder (its metrics.csv, a study key, an empty file) was
+    served to raters as video; the app now stops at the manifest, naming the line."""
+    manifest = write_fake_stimuli(tmp_path / "stimuli")
+    rows = list(csv.DictReader(open(manifest, encoding="utf-8")))
+    (tmp_path / "stimuli" / "videos" / "empty.mp4").touch()
+    for edit in ("metrics.csv", "videos/empty.mp4"):
+        bad = tmp_path / "stimuli" / "bad.csv"
+        with open(bad, "w", newline="", encoding="utf-8") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows[:2] + [dict(rows[2], video=edit)] + rows[3:])
+        with pytest.raises(AppError) as e:
+            load_manifest(bad)
+        assert str(e.value).startswith(f"{bad}:4: video {edit!r} is not an MP4 file"), str(e.value)
+    assert len(load_manifest(manifest)) == len(rows)  # the real videos pass
+
+
 def test_videos_outside_the_stimulus_folder_are_refused(tmp_path, make_app):
     manifest = write_fake_stimuli(tmp_path / "stimuli")
     outside = tmp_path / "secret.mp4"

@@ -273,6 +273,20 @@ def test_bad_database_is_one_line(app_stimuli, tmp_path, db, needle, command_fai
     command_fails("export", "--db", db, "--out", tmp_path / "x.csv", needle=needle)
 
 
+def test_an_empty_database_file_is_refused_and_left_empty(app_stimuli, tmp_path, command_fails):
+    """A command that reads a study, given an empty file (a `touch`ed name, a failed copy), says so and leaves it
+    empty: opening it as SQLite wrote a database header into the user's file before the refusal."""
+    empty = tmp_path / "ratings.sqlite"
+    empty.touch()
+    db = f"sqlite:///{empty}"
+    needle = f"{empty}: an empty file, not a rating app database"
+    command_fails("export", "--db", db, "--out", tmp_path / "x.csv", needle=needle)
+    command_fails("backup", "--db", db, "--out", tmp_path / "copy.sqlite", needle=needle)
+    command_fails("add-condition", "--db", db, "--manifest", app_stimuli, needle=needle)
+    assert empty.stat().st_size == 0
+    assert not (tmp_path / "x.csv").exists() and not (tmp_path / "copy.sqlite").exists()
+
+
 @pytest.mark.parametrize(
     "args,env,needle",
     [

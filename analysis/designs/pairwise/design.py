@@ -22,6 +22,7 @@ def _renamed_nat(df, name):
 
 class Pairwise(FailedCatchDesign):
     name = "pairwise"
+    reads = frozenset({"reference", "indifference"})
     methods_task = (
         "watched two clips of the same item from two conditions and chose the one that looked more natural on a "
         "five-level scale (clearly, slightly, no preference)"
