@@ -141,9 +141,10 @@ def test_a_metric_that_is_not_a_number_is_refused(study_app, app_db_url, capsys)
 def test_a_refused_add_leaves_no_file_and_no_folder(study_app, app_db_url, capsys):
     _, study, new = study_app
     shutil.rmtree(study.parent / "clips")  # the study keeps no motion files yet: the add would make the folder
-    # The last video cannot be taken (it is no video): every file before it was made, then all are undone.
+    # The last video cannot be taken (an MP4's first box, then nothing ffmpeg can read): every file before it was
+    # made, then all are undone.
     size = (new.parent / sys_rows(new)[0]["video"]).stat().st_size
-    (new.parent / sys_rows(new)[-1]["video"]).write_bytes(b"\0" * size)
+    (new.parent / sys_rows(new)[-1]["video"]).write_bytes(b"\0\0\0\x18ftypisom" + b"\0" * (size - 12))
     refused(study_app, app_db_url, capsys, new, "not taken")
     assert not (study.parent / "clips").exists() and not list(study.parent.glob(".adding-*"))
     # The database refuses after every file was moved into place (a condition of that name joined meanwhile):
