@@ -140,14 +140,19 @@ def _side(value, where, field):
     return x
 
 
+# The types an MP4 (ISO base media, QuickTime) file's first box has: `ftyp` as ffmpeg writes it, the others as older
+# muxers may put them first.
+MP4_FIRST_BOXES = (b"ftyp", b"free", b"skip", b"wide", b"moov", b"mdat", b"pnot")
+
+
 def _is_mp4(path: Path) -> bool:
-    """Whether `path` starts as an MP4 (ISO base media) file does: a box whose type is `ftyp`."""
+    """Whether `path` starts as an MP4 file does: a first box of one of MP4_FIRST_BOXES' types."""
     try:
         with open(path, "rb") as fh:
             head = fh.read(12)
     except OSError:
         return False
-    return len(head) == 12 and head[4:8] == b"ftyp"
+    return len(head) == 12 and head[4:8] in MP4_FIRST_BOXES
 
 
 def video_size(clips) -> tuple[int, int] | None:
