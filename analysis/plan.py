@@ -15,7 +15,10 @@ and the same random numbers serve every design size, so the power curve is smoot
 
 Caveat printed with every plan: Tukey HSD treats ratings as independent, while clips vary. The table also gives
 the false-positive rate of that decision at the planned size (difference 0); with many raters per clip it can
-exceed alpha, and then the mixed model's test in the report (Satterthwaite df) is the one to trust.
+exceed alpha, and then the mixed model's test in the report (Satterthwaite df) is the one to trust. So every plan
+also gives the power of a decision that counts the clips as the sample they are (Tukey HSD on the clips' mean
+ratings, whose false-positive rate stays at alpha): the raters it needs, or, where the clips' own spread keeps it
+from the target however many raters come, that more clips are needed.
 """
 
 import json
@@ -32,7 +35,8 @@ from moglow_eval.core import cli
 from .data.filtering import DEFAULT_THRESHOLD, exclude_raters, only_test_rows
 from .data.load import AnalysisError, load_ratings
 from .page import figures
-from .stats import anova, rating_models
+from .stats import rating_models
+from .stats.power import simulate_power, with_difference
 
 MAX_RATERS = 5000
 
@@ -71,99 +75,10 @@ def pilot_design(test):
     }
 
 
-def simulate_power(design, pair, n_raters, n_sim=1000, alpha=0.05, seed=0, chunk=100, progress=None):
-    """The share of simulated studies with `n_raters` raters in which Tukey's HSD separates the two conditions of
-    `pair`.
-
-    Parameters
-    ----------
-    design : dict
-        As from `pilot_design`.
-    pair : tuple of str
-        The two conditions compared.
-    n_raters : int
-        The raters of each simulated study.
-    n_sim : int
-        The number of studies simulated.
-    alpha : float
-        The family-wise error rate of the test.
-    seed : int
-        The seed of the simulation.
-    chunk : int
-        The studies simulated at once.
-    progress : tqdm or None
-        A progress bar updated by the studies simulated.
-
-    Returns
-    -------
-    power : float
-        The share of studies in which the pair differs.
-    low, high : float
-        Its 95% Monte Carlo (Wilson) interval.
-
-    Notes
-    -----
-    Tukey's decision for a pair (p_adj < alpha) is q > the studentized-range quantile at 1 - alpha, with
-    q = |mean difference| / sqrt(MSE / 2 (1/n_i + 1/n_j)) and MSE the pooled within-condition variance,
-    computed here from group sums for a whole chunk of studies at once.
-    """
-    conds = design["conditions"]
-    K, C, m = len(conds), design["clips_per_condition"], design["clips_per_rater"]
-    n_clips = K * C
-    m = min(m, n_clips)
-    mu = np.array([design["means"][c] for c in conds])
-    a, b = conds.index(pair[0]), conds.index(pair[1])
-    clip_cond = np.repeat(np.arange(K), C)
-    N = n_raters * m
-    df_w = N - K
-    if df_w < 1:
-        return 0.0, 0.0, 1.0
-    qcrit = anova.tukey_qcrit(alpha, K, df_w)
-    rng = np.random.default_rng(seed)
-    rejected = 0
-    for start in range(0, n_sim, chunk):
-        S = min(chunk, n_sim - start)
-        # each rater's clips: the first m of a random permutation (all clips when m = n_clips)
-        keys = rng.random((S, n_raters, n_clips))
-        clips = (
-            np.argpartition(keys, m - 1, axis=2)[:, :, :m]
-            if m < n_clips
-            else np.broadcast_to(np.arange(n_clips), (S, n_raters, n_clips))
-        )
-        u_r = rng.normal(0, design["sd_rater"], (S, n_raters, 1))
-        u_c = rng.normal(0, design["sd_clip"], (S, n_clips))
-        e = rng.normal(0, design["sd_residual"], (S, n_raters, m))
-        cond = clip_cond[clips]
-        y = mu[cond] + u_r + np.take_along_axis(u_c[:, None, :].repeat(n_raters, 1), clips, axis=2) + e
-        idx = (np.arange(S)[:, None, None] * K + cond).ravel()
-        yv = y.ravel()
-        n = np.bincount(idx, minlength=S * K).reshape(S, K)
-        s1 = np.bincount(idx, yv, minlength=S * K).reshape(S, K)
-        s2 = np.bincount(idx, yv * yv, minlength=S * K).reshape(S, K)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            means = s1 / n
-            ssw = np.nansum(s2 - s1 * means, axis=1)
-            mse = ssw / df_w
-            se = np.sqrt(mse / 2 * (1 / n[:, a] + 1 / n[:, b]))
-            q = np.abs(means[:, b] - means[:, a]) / se
-        rejected += int(np.sum(q > qcrit))
-        if progress is not None:
-            progress.update(S)
-    p = rejected / n_sim
-    z = 1.959963984540054
-    centre = (p + z * z / (2 * n_sim)) / (1 + z * z / n_sim)
-    half = z * math.sqrt(p * (1 - p) / n_sim + z * z / (4 * n_sim**2)) / (1 + z * z / n_sim)
-    return p, max(0.0, centre - half), min(1.0, centre + half)
-
-
-def with_difference(design, pair, difference):
-    """The design with the pair's means set `difference` apart (second minus first), others unchanged."""
-    means = dict(design["means"])
-    means[pair[1]] = means[pair[0]] + difference
-    return {**design, "means": means}
-
-
-def plan(design, pair, target=0.8, n_sim=1000, alpha=0.05, seed=0, raters=None, max_raters=MAX_RATERS, progress=True):
+def plan(
+    design, pair, target=0.8, n_sim=1000, alpha=0.05, seed=0, raters=None, max_raters=MAX_RATERS, progress=True,
+    clip_test=True,
+):  # fmt: skip
     """The power curve over the number of raters, and the smallest number that reaches `target`.
 
     Parameters
@@ -186,6 +101,8 @@ def plan(design, pair, target=0.8, n_sim=1000, alpha=0.05, seed=0, raters=None, 
         The search stops here.
     progress : bool
         Show a progress bar on stderr.
+    clip_test : bool
+        Also plan the decision on the clips' mean ratings (the result's clip_test; None without it).
 
     Returns
     -------
@@ -193,7 +110,10 @@ def plan(design, pair, target=0.8, n_sim=1000, alpha=0.05, seed=0, raters=None, 
         curve, a DataFrame (raters, ratings_per_clip, power, low, high) with a row per size evaluated;
         planned_raters (None when `max_raters` does not reach the target) and planned_power; power_at
         {raters: power} for `raters`; false_positive_rate, the power with a difference of 0 at the planned size
-        (or at `raters`).
+        (or at `raters`); clip_test, the same for Tukey's HSD on the clips' mean ratings (simulate_power's
+        `unit="clip"`): {"max_power" (with every clip rated by endless raters: the clips' own spread alone),
+        "planned_raters" (None where max_power falls short of `target`), "power_at_check" (its power at the
+        planned size, or at `raters`)}.
 
     Notes
     -----
@@ -201,26 +121,20 @@ def plan(design, pair, target=0.8, n_sim=1000, alpha=0.05, seed=0, raters=None, 
     sizes; every size evaluated is a row of the curve.
     """
     per_clip_per_rater = design["clips_per_rater"] / (len(design["conditions"]) * design["clips_per_condition"])
-    rows = {}
     bar = tqdm(desc="simulated studies", unit="study", disable=not progress, file=sys.stderr, leave=False)
 
-    def power(r):
-        if r not in rows:
-            rows[r] = simulate_power(design, pair, r, n_sim, alpha, seed, progress=bar)
-        return rows[r][0]
+    def power_of(unit, rows):
+        def power(r):
+            if r not in rows:
+                rows[r] = simulate_power(design, pair, r, n_sim, alpha, seed, progress=bar, unit=unit)
+            return rows[r][0]
 
-    lo_r, hi_r = 1, 2
-    while power(hi_r) < target and hi_r < max_raters:
-        lo_r, hi_r = hi_r, min(2 * hi_r, max_raters)
-    planned = None
-    if power(hi_r) >= target:
-        while hi_r - lo_r > 1:
-            mid = (lo_r + hi_r) // 2
-            if power(mid) >= target:
-                hi_r = mid
-            else:
-                lo_r = mid
-        planned = hi_r
+        return power
+
+    rows = {}
+    power = power_of("rating", rows)
+    planned = _fewest_raters(power, target, max_raters)
+    if planned:
         for r in np.unique(np.linspace(2, max(4, int(planned * 1.5)), 10).astype(int)):  # a readable curve
             power(int(r))
     if raters is not None:
@@ -236,6 +150,9 @@ def plan(design, pair, target=0.8, n_sim=1000, alpha=0.05, seed=0, raters=None, 
         out["false_positive_rate"] = simulate_power(
             null_design, pair, int(check), n_sim, alpha, seed + 1, progress=bar
         )[0]
+    out["clip_test"] = (
+        _clip_test(design, pair, target, n_sim, alpha, seed, check, max_raters, power_of, bar) if clip_test else None
+    )
     bar.close()
     curve = pd.DataFrame(
         [(r, r * per_clip_per_rater, *v) for r, v in sorted(rows.items())],
@@ -372,6 +289,55 @@ def _design_from_pilot(args):
     return design, source, pair
 
 
+def _fewest_raters(power, target, max_raters):
+    """The fewest raters whose `power(raters)` reaches `target` (None within `max_raters`): doubling until it is
+    reached, then bisecting between the last two sizes."""
+    lo_r, hi_r = 1, 2
+    while power(hi_r) < target and hi_r < max_raters:
+        lo_r, hi_r = hi_r, min(2 * hi_r, max_raters)
+    if power(hi_r) < target:
+        return None
+    while hi_r - lo_r > 1:
+        mid = (lo_r + hi_r) // 2
+        if power(mid) >= target:
+            hi_r = mid
+        else:
+            lo_r = mid
+    return hi_r
+
+
+def _clip_test(design, pair, target, n_sim, alpha, seed, check, max_raters, power_of, bar):
+    """plan's clip_test: the decision on the clips' mean ratings, whose power more raters raise only up to what
+    the clips' own spread allows (max_power: one study of the clips alone, every clip rated once and exactly)."""
+    every_clip = len(design["conditions"]) * design["clips_per_condition"]
+    alone = {**design, "sd_rater": 0.0, "sd_residual": 0.0, "clips_per_rater": every_clip}
+    max_power = simulate_power(alone, pair, 1, n_sim, alpha, seed, progress=bar, unit="clip")[0]
+    rows = {}
+    power = power_of("clip", rows)
+    planned = _fewest_raters(power, target, max_raters) if max_power >= target else None
+    return {
+        "max_power": max_power,
+        "planned_raters": planned,
+        "power_at_check": power(int(check)) if check else None,
+    }
+
+
+def _clip_test_text(clip, target, clips, check) -> str:
+    """The console's paragraph on plan's clip_test."""
+    text = (
+        "Counting the clips as the sample they are (Tukey HSD on the clips' mean ratings; the report's mixed model "
+        "counts them too): "
+    )
+    if check:
+        text += f"power {clip['power_at_check']:.3f} at {check} raters; "
+    if clip["planned_raters"]:
+        return text + f"power {target:g} needs {clip['planned_raters']} raters."
+    return text + (
+        f"power {target:g} is out of reach with {clips} clips per condition, however many raters (about "
+        f"{clip['max_power']:.2f} with endless raters): more clips per condition are needed."
+    )
+
+
 def _main(argv):
     args = build_parser().parse_args(argv)
     design, source, pair = (_design_from_flags if args.no_pilot else _design_from_pilot)(args)
@@ -439,6 +405,8 @@ def _main(argv):
         )
     for r, p in res["power_at"].items():
         print(f"A study with {r} raters has power {p:.3f}.")
+    check = res["planned_raters"] or args.raters
+    print(_clip_test_text(res["clip_test"], args.power, design["clips_per_condition"], check))
     print(f"\nPower curve: {out / 'power_curve.png'}; table: {out / 'plan.json'}")
     return 0
 

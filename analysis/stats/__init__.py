@@ -1,3 +1,3 @@
 """Statistics as pure functions on DataFrames: ANOVA and Tukey HSD, bootstrap, mixed and ordinal models, agreement, the
-style factor.
+style factor, the power of a planned study.
 """

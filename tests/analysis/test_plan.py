@@ -11,6 +11,7 @@ from helpers.paths import ROOT
 
 from analysis import plan
 from analysis.stats import anova as stats
+from analysis.stats import power
 
 DATA = ROOT / "tests" / "data" / "analysis"
 TRUE = {"means": {"NAT": 3.3, "MG": 3.0, "FL": 2.4}, "sd_rater": 0.5, "sd_clip": 0.3, "sd_residual": 1.05}
@@ -44,7 +45,7 @@ def check_planner(n_studies, n_sim, bound):
     assert (design["clips_per_condition"], design["clips_per_rater"]) == (CLIPS_PER_CONDITION, CLIPS_PER_RATER)
     pair = ("NAT", "MG")
     design = plan.with_difference(design, pair, TRUE["means"]["MG"] - TRUE["means"]["NAT"])
-    res = plan.plan(design, pair, target=0.8, n_sim=n_sim, seed=5, progress=False)
+    res = plan.plan(design, pair, target=0.8, n_sim=n_sim, seed=5, progress=False, clip_test=False)
     n_raters, estimated = res["planned_raters"], res["planned_power"]
     assert n_raters is not None and 0.8 <= estimated < 0.9
     rejected = 0
@@ -76,8 +77,8 @@ def test_clip_variance_matters():
         "clips_per_condition": 30,
         "clips_per_rater": 45,
     }
-    with_clips = plan.simulate_power(design, ("NAT", "MG"), 20, n_sim=2000, seed=1)[0]
-    without = plan.simulate_power({**design, "sd_clip": 0.0}, ("NAT", "MG"), 20, n_sim=2000, seed=1)[0]
+    with_clips = power.simulate_power(design, ("NAT", "MG"), 20, n_sim=2000, seed=1)[0]
+    without = power.simulate_power({**design, "sd_clip": 0.0}, ("NAT", "MG"), 20, n_sim=2000, seed=1)[0]
     assert without > with_clips + 0.05
 
 
@@ -93,8 +94,64 @@ def test_null_rejection_rate_is_alpha_where_tukey_is_exact():
         "clips_per_condition": 10,
         "clips_per_rater": 5,
     }
-    p, low, high = plan.simulate_power(design, ("A", "B"), 6, n_sim=4000, seed=2)
+    p, low, high = power.simulate_power(design, ("A", "B"), 6, n_sim=4000, seed=2)
     assert abs(p - 0.05) < 0.012 and low < p < high
+
+
+def test_the_clip_decision_keeps_its_false_positive_rate_where_the_ratings_lose_theirs():
+    """Two conditions, clips that vary, 60 raters a study: the ratings' Tukey (a t test on ratings that share their
+    clip's effect) rejects a zero difference far more often than alpha; on the clips' mean ratings it stays at
+    alpha (SD 0.005 with 2000 studies)."""
+    design = {
+        "conditions": ["A", "B"],
+        "means": {"A": 3.0, "B": 3.0},
+        "sd_rater": 0.5,
+        "sd_clip": 0.3,
+        "sd_residual": 1.0,
+        "clips_per_condition": 30,
+        "clips_per_rater": 45,
+    }
+    on_ratings = power.simulate_power(design, ("A", "B"), 60, n_sim=2000, seed=3)[0]
+    on_clips = power.simulate_power(design, ("A", "B"), 60, n_sim=2000, seed=3, unit="clip")[0]
+    assert on_ratings > 0.15 and abs(on_clips - 0.05) < 0.017, (on_ratings, on_clips)
+
+
+@pytest.mark.full  # the full tier: a power simulation against simulated studies
+def test_the_clip_decision_matches_tukey_on_clip_means_of_independent_studies():
+    """simulate_power(unit="clip") against the report's own Tukey HSD run on the clips' mean ratings of studies
+    drawn independently (simulate_study): 200 studies (Monte Carlo SD ~0.035), bound +-0.10."""
+    rng = np.random.default_rng(7)
+    design = {"conditions": list(TRUE["means"]), **TRUE, "clips_per_condition": 30, "clips_per_rater": 45}
+    n_raters = 12
+    estimated = power.simulate_power(design, ("NAT", "MG"), n_raters, n_sim=2000, seed=4, unit="clip")[0]
+    rejected = 0
+    for _ in range(200):
+        study = simulate_study(rng, n_raters)
+        means = study.groupby("clip_id").agg(condition=("condition", "first"), rating=("rating", "mean"))
+        t = stats.tukey_hsd(means)
+        rejected += bool(t[(t.group1 == "MG") & (t.group2 == "NAT")].iloc[0].reject)
+    assert 0.2 < estimated < 0.95 and abs(estimated - rejected / 200) <= 0.10, (estimated, rejected / 200)
+
+
+def test_a_plan_says_when_only_more_clips_would_do():
+    """A difference the clips' own spread hides (0.2 against a clip SD of 0.5, 10 clips a condition): the ratings'
+    Tukey reaches power 0.8 with enough raters, but that is its false positives; the clip decision says no number
+    of raters reaches it."""
+    design = {
+        "conditions": ["A", "B", "C"],
+        "means": {"A": 3.0, "B": 3.2, "C": 3.6},
+        "sd_rater": 0.3,
+        "sd_clip": 0.5,
+        "sd_residual": 0.6,
+        "clips_per_condition": 10,
+        "clips_per_rater": 30,
+    }
+    res = plan.plan(design, ("A", "B"), target=0.8, n_sim=100, seed=1, progress=False)
+    clip = res["clip_test"]
+    assert res["planned_raters"] and res["false_positive_rate"] > 0.3, res
+    assert clip["planned_raters"] is None and clip["max_power"] < 0.3 and clip["power_at_check"] < 0.3, clip
+    text = plan._clip_test_text(clip, 0.8, 30, res["planned_raters"])
+    assert "more clips per condition are needed" in text and f"at {res['planned_raters']} raters" in text
 
 
 def test_plan_cli_writes_curve_and_table(tmp_path, capsys):
@@ -107,6 +164,9 @@ def test_plan_cli_writes_curve_and_table(tmp_path, capsys):
     assert doc["planned_raters"] >= 2 and doc["planned_power"] >= 0.8 and "6" in doc["power_at"]
     assert (tmp_path / "power_curve.png").read_bytes()[:4] == b"\x89PNG"
     assert "Power 0.8 needs" in out and "ratings per clip" in out
+    clip = doc["clip_test"]  # the decision on the clips' means: the raters it needs, or that clips are short
+    assert 0 < clip["max_power"] <= 1 and "Counting the clips as the sample they are" in out
+    assert (clip["planned_raters"] is None) == ("more clips per condition are needed" in out)
 
 
 @pytest.mark.parametrize(
