@@ -346,9 +346,13 @@ def _main(argv):
     if not diff > 0:
         raise AnalysisError("the pilot shows no difference for the pair: give --difference")
     design = with_difference(design, pair, diff)
-    design["clips_per_rater"] = min(
-        design["clips_per_rater"], len(design["conditions"]) * design["clips_per_condition"]
-    )
+    every_clip = len(design["conditions"]) * design["clips_per_condition"]
+    if args.clips_per_rater and args.clips_per_rater > every_clip:  # a pilot's own count is capped, a flag's said
+        raise AnalysisError(
+            f"--clips-per-rater {args.clips_per_rater}: the study has {every_clip} test clips "
+            f"({len(design['conditions'])} conditions x {design['clips_per_condition']})"
+        )
+    design["clips_per_rater"] = min(design["clips_per_rater"], every_clip)
     res = plan(design, pair, args.power, args.n_sim, args.alpha, args.seed, args.raters, progress=not args.quiet)
     out = Path(args.out)
     if out.exists() and not out.is_dir():

@@ -178,6 +178,7 @@ def test_plan_cli_writes_curve_and_table(tmp_path, capsys):
         ),
         ([str(DATA / "ratings_small.csv"), "--pair", "NAT", "XX"], "error: --pair: condition 'XX'"),
         ([str(DATA / "ratings_small.csv"), "--power", "2"], "error: python -m analysis.plan: argument --power"),
+        ([str(DATA / "ratings_small.csv"), "--clips-per-rater", "1000"], "error: --clips-per-rater 1000: the study"),
         ([], "error: give a pilot ratings file"),
     ],
 )
