@@ -107,7 +107,8 @@ def plan(
     Returns
     -------
     dict
-        curve, a DataFrame (raters, ratings_per_clip, power, low, high) with a row per size evaluated;
+        curve, a DataFrame (raters, ratings_per_clip, power, low, high; with `clip_test` also clip_power,
+        clip_low, clip_high) with a row per size evaluated;
         planned_raters (None when `max_raters` does not reach the target) and planned_power; power_at
         {raters: power} for `raters`; false_positive_rate, the power with a difference of 0 at the planned size
         (or at `raters`); clip_test, the same for Tukey's HSD on the clips' mean ratings (simulate_power's
@@ -150,13 +151,19 @@ def plan(
         out["false_positive_rate"] = simulate_power(
             null_design, pair, int(check), n_sim, alpha, seed + 1, progress=bar
         )[0]
-    out["clip_test"] = (
-        _clip_test(design, pair, target, n_sim, alpha, seed, check, max_raters, power_of, bar) if clip_test else None
-    )
+    clip_rows = {}
+    columns = ["raters", "ratings_per_clip", "power", "low", "high"]
+    if clip_test:
+        clip_power = power_of("clip", clip_rows)
+        out["clip_test"] = _clip_test(design, pair, target, n_sim, alpha, seed, check, max_raters, clip_power, bar)
+        for r in rows:  # the clips' decision at every size of the curve, for the figure
+            clip_power(r)
+        columns += ["clip_power", "clip_low", "clip_high"]
+    else:
+        out["clip_test"] = None
     bar.close()
     curve = pd.DataFrame(
-        [(r, r * per_clip_per_rater, *v) for r, v in sorted(rows.items())],
-        columns=["raters", "ratings_per_clip", "power", "low", "high"],
+        [(r, r * per_clip_per_rater, *v, *clip_rows.get(r, ())) for r, v in sorted(rows.items())], columns=columns
     )
     curve.attrs["per_clip_per_rater"] = per_clip_per_rater
     out["curve"] = curve
@@ -306,14 +313,12 @@ def _fewest_raters(power, target, max_raters):
     return hi_r
 
 
-def _clip_test(design, pair, target, n_sim, alpha, seed, check, max_raters, power_of, bar):
+def _clip_test(design, pair, target, n_sim, alpha, seed, check, max_raters, power, bar):
     """plan's clip_test: the decision on the clips' mean ratings, whose power more raters raise only up to what
     the clips' own spread allows (max_power: one study of the clips alone, every clip rated once and exactly)."""
     every_clip = len(design["conditions"]) * design["clips_per_condition"]
     alone = {**design, "sd_rater": 0.0, "sd_residual": 0.0, "clips_per_rater": every_clip}
     max_power = simulate_power(alone, pair, 1, n_sim, alpha, seed, progress=bar, unit="clip")[0]
-    rows = {}
-    power = power_of("clip", rows)
     planned = _fewest_raters(power, target, max_raters) if max_power >= target else None
     return {
         "max_power": max_power,

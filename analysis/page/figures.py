@@ -239,7 +239,8 @@ def ordinal_fit(model, path):
 
 
 def power_curve(curve, target, path, title=None):
-    """curve: plan.power_curve() table (raters, raters_per_clip, power, low, high); target: the power asked."""
+    """curve: analysis.plan.plan()'s table (raters, ratings_per_clip, power, low, high, and where planned the clips'
+    decision's clip_power, clip_low, clip_high); target: the power asked."""
     with matplotlib.rc_context(STYLE):
         fig, ax = subplots(figsize=(6.0, 3.4))
         ax.fill_between(
@@ -251,7 +252,14 @@ def power_curve(curve, target, path, title=None):
             lw=0,
             label="95% Monte Carlo interval",
         )
-        ax.plot(curve["raters"], curve["power"], "o-", color="#0072B2", ms=3.5, lw=1.4, label="estimated power")
+        on_ratings = "Tukey HSD on the ratings (the report's)" if "clip_power" in curve else "estimated power"
+        ax.plot(curve["raters"], curve["power"], "o-", color="#0072B2", ms=3.5, lw=1.4, label=on_ratings)
+        if "clip_power" in curve:  # the decision that counts the clips: more raters lift it only so far
+            ax.fill_between(curve["raters"], curve["clip_low"], curve["clip_high"], color="#009E73", alpha=0.18, lw=0)
+            ax.plot(
+                curve["raters"], curve["clip_power"], "s-", color="#009E73", ms=3, lw=1.4,
+                label="Tukey HSD on the clips' means",
+            )  # fmt: skip
         ax.axhline(target, color="#D55E00", ls="--", lw=1, label=f"target {target:g}")
         ax.set_xlabel("Raters in total")
         ax.set_ylabel("Power")
@@ -265,7 +273,7 @@ def power_curve(curve, target, path, title=None):
             ),
         )
         top.set_xlabel("Ratings per clip")
-        ax.legend(frameon=False, loc="lower right")
+        ax.legend(frameon=False, loc="best")  # the clips' curve can lie flat along the bottom
         if title:
             ax.set_title(text(title), loc="left", fontsize=9)
         return _save(fig, path)

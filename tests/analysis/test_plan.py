@@ -165,6 +165,10 @@ def test_plan_cli_writes_curve_and_table(tmp_path, capsys):
     assert (tmp_path / "power_curve.png").read_bytes()[:4] == b"\x89PNG"
     assert "Power 0.8 needs" in out and "ratings per clip" in out
     clip = doc["clip_test"]  # the decision on the clips' means: the raters it needs, or that clips are short
+    rows = doc["curve"]
+    assert all(0 <= r["clip_low"] <= r["clip_power"] <= r["clip_high"] <= 1 for r in rows)
+    # beside the ratings' decision at every size, never above it by more than chance: the clips' means are less sure
+    assert all(r["clip_power"] <= r["power"] + 0.1 for r in rows), rows
     assert 0 < clip["max_power"] <= 1 and "Counting the clips as the sample they are" in out
     assert (clip["planned_raters"] is None) == ("more clips per condition are needed" in out)
 
