@@ -134,23 +134,23 @@ def test_the_clip_decision_matches_tukey_on_clip_means_of_independent_studies():
 
 
 def test_a_plan_says_when_only_more_clips_would_do():
-    """A difference the clips' own spread hides (0.2 against a clip SD of 0.5, 10 clips a condition): the ratings'
+    """A difference the clips' own spread hides (0.4 against a clip SD of 1.0, 5 clips a condition): the ratings'
     Tukey reaches power 0.8 with enough raters, but that is its false positives; the clip decision says no number
     of raters reaches it."""
     design = {
         "conditions": ["A", "B", "C"],
-        "means": {"A": 3.0, "B": 3.2, "C": 3.6},
+        "means": {"A": 3.0, "B": 3.4, "C": 3.6},
         "sd_rater": 0.3,
-        "sd_clip": 0.5,
+        "sd_clip": 1.0,
         "sd_residual": 0.6,
-        "clips_per_condition": 10,
-        "clips_per_rater": 30,
+        "clips_per_condition": 5,
+        "clips_per_rater": 15,
     }
     res = plan.plan(design, ("A", "B"), target=0.8, n_sim=100, seed=1, progress=False)
     clip = res["clip_test"]
     assert res["planned_raters"] and res["false_positive_rate"] > 0.3, res
     assert clip["planned_raters"] is None and clip["max_power"] < 0.3 and clip["power_at_check"] < 0.3, clip
-    text = plan._clip_test_text(clip, 0.8, 30, res["planned_raters"])
+    text = plan._clip_test_text(clip, 0.8, 5, res["planned_raters"])
     assert "more clips per condition are needed" in text and f"at {res['planned_raters']} raters" in text
 
 
