@@ -3,6 +3,7 @@ of each)."""
 
 from __future__ import annotations
 
+import argparse
 import json
 import logging
 import os
@@ -261,9 +262,30 @@ def _serve_parser(sub):
     s.set_defaults(fn=_serve)
 
 
+def _app_url(text):
+    """--url: the app's http(s) address (any other would be tried for seconds before a bare connection error)."""
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(text)
+    if parts.scheme not in ("http", "https") or not parts.netloc:
+        raise argparse.ArgumentTypeError(f"expected the app's address, http://HOST:PORT or https://HOST, got {text!r}")
+    return text
+
+
+def _rater_prefix(text):
+    """--prefix: what the app takes as the start of an id (guard.bodies.EXTERNAL), room left for -NNNNNN."""
+    from .guard.bodies import EXTERNAL
+
+    if len(text) > 120 or not EXTERNAL.fullmatch(text):
+        raise argparse.ArgumentTypeError(
+            f"expected 1-120 letters, digits and _.:@- (each rater's id is PREFIX-NNNNN), got {text[:40]!r}"
+        )
+    return text
+
+
 def _simulate_parser(sub):
     m = sub.add_parser("simulate", help="a simulated crowd rating through the public API")
-    m.add_argument("--url", required=True, help="base URL of the running app")
+    m.add_argument("--url", required=True, type=_app_url, help="base URL of the running app")
     m.add_argument(
         "--raters",
         type=cli.number(int, 1, 1_000_000),
@@ -294,7 +316,7 @@ def _simulate_parser(sub):
     m.add_argument(
         "--think", type=cli.number(float, 0, 3600), default=0.0, help="mean pause before each answer, seconds"
     )
-    m.add_argument("--prefix", default=None, help="external id prefix (default sim{seed})")
+    m.add_argument("--prefix", default=None, type=_rater_prefix, help="external id prefix (default sim{seed})")
     m.add_argument("--summary", default=None, help="write the full summary (raters, ratings) as JSON here")
     m.add_argument("--quiet", action="store_true", help="no progress bar")
     m.set_defaults(fn=_simulate)

@@ -125,6 +125,14 @@ def test_simulate_arg_errors(app_stimuli, tmp_path, command_fails):
         (("--raters", 2, "--manifest", bad_metrics / "manifest.csv"), "metrics.csv:2: jerk 'fast' is not a number"),
     ):
         command_fails("simulate", "--url", url, *args, needle=needle)
+    # an address that is none (it was tried for 5 s), and ids the app would refuse for every rater
+    for url_, args, needle in (
+        ("127.0.0.1:5000", (), "--url: expected the app's address, http://HOST:PORT or https://HOST"),
+        ("ftp://127.0.0.1", (), "--url: expected the app's address"),
+        (url, ("--prefix", "lab/run1"), "--prefix: expected 1-120 letters, digits and _.:@-"),
+        (url, ("--prefix", "x" * 121), "--prefix: expected 1-120"),
+    ):
+        command_fails("simulate", "--url", url_, "--raters", 2, "--manifest", app_stimuli, *args, needle=needle)
 
 
 def test_export_cli_errors(tmp_path):
