@@ -79,6 +79,8 @@ def _vote(path, line, r):
     for name, value in (("user", user), ("input_code", item), ("model_a", a), ("model_b", b)):
         if not value:
             raise VotesFileError(f"{where}: empty {name}")
+        if not value.isprintable():  # a terminal's escape in a name would reach the report's console and page
+            raise VotesFileError(f"{where}: {name} {value[:40]!r} holds a control character")
     if a == b:
         raise VotesFileError(f"{where}: model {a} on both sides of a vote")
     try:
@@ -199,8 +201,9 @@ def build_parser():
 def _main(argv):
     args = build_parser().parse_args(argv)
     s = import_votes(args.battles, args.out)
+    votes_, raters = (f"{k} {w}{'' if k == 1 else 's'}" for k, w in ((s["n_votes"], "vote"), (s["n_raters"], "rater")))
     print(
-        f"{args.out}: {s['n_votes']} votes from {s['n_raters']} raters on {len(s['conditions'])} conditions "
+        f"{args.out}: {votes_} from {raters} on {len(s['conditions'])} conditions "
         f"({s['design']}); next: python -m analysis.report {args.out}"
     )
     return 0

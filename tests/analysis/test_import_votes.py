@@ -73,6 +73,8 @@ def write(tmp_path, body):
         ("u1,i1,A,B,model_a,True,[oops,\n", "battles.csv:2: juiceOptions"),
         ("u1,i1,A,A,model_a,True,{},\n", "battles.csv:2: model A on both sides"),
         (",i1,A,B,model_a,True,{},\n", "battles.csv:2: empty user"),
+        # a name with a terminal's escape, which would reach the report's console and page
+        ("u1,i1,A\x1b[2J,B,model_a,True,{},\n", "battles.csv:2: model_a 'A\\x1b[2J' holds a control character"),
         ("u1,i1,A,A_Mismatched,model_a,True,{},\nu1,i2,A,B,tie,,{},\n", "battles.csv:3: A against B"),
         ("", "no votes"),
     ],
