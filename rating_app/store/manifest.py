@@ -94,8 +94,8 @@ def clip_from_row(row: dict, where: str, base: Path, check_files: bool) -> Manif
     if role not in study.ROLES:
         raise AppError(f"{where}: role {role!r} must be one of {', '.join(study.ROLES)}")
     condition = (row["condition"] or "").strip()
-    if not condition or len(condition) > 64:
-        raise AppError(f"{where}: condition must be 1-64 characters")
+    if not condition or len(condition) > 64 or not condition.isprintable():  # it reaches the report's console
+        raise AppError(f"{where}: condition must be 1-64 printable characters, got {condition[:64]!r}")
     video = (base / (row["video"] or "").strip()).resolve()
     if not video.is_relative_to(base):  # '..', an absolute path or a symlink leading out
         raise AppError(f"{where}: video {row['video']!r} leaves the stimulus folder {base}")

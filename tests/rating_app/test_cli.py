@@ -181,6 +181,7 @@ def test_serve_cli(app_stimuli, tmp_path):
         (lambda rows: rows[1].__setitem__("clip_id", "NAT_clip_1"), ":3: clip_id"),
         (lambda rows: rows[2].__setitem__("clip_id", rows[1]["clip_id"]), ":4: duplicate clip_id"),
         (lambda rows: rows[1].__setitem__("role", "bonus"), ":3: role"),
+        (lambda rows: rows[1].__setitem__("condition", "MG\x1b[2J"), ":3: condition must be 1-64 printable"),
         (lambda rows: rows[1].__setitem__("video", "videos/none.mp4"), ":3: video"),
         (lambda rows: rows[1].__setitem__("fps", "fast"), ":3: field 'fps'"),
         (lambda rows: rows[1].__setitem__("fps", "-20"), ":3: field 'fps' must be above 0"),  # the viewing rule's
