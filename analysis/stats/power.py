@@ -64,7 +64,6 @@ def simulate_power(design, pair, n_raters, n_sim=1000, alpha=0.05, seed=0, chunk
     df_w = N - K
     if df_w < 1 or (unit == "clip" and n_raters * m <= K):
         return 0.0, 0.0, 1.0
-    qcrit = anova.tukey_qcrit(alpha, K, df_w) if unit == "rating" else None
     rng = np.random.default_rng(seed)
     rejected = 0
     for start in range(0, n_sim, chunk):
@@ -81,23 +80,16 @@ def simulate_power(design, pair, n_raters, n_sim=1000, alpha=0.05, seed=0, chunk
         e = rng.normal(0, design["sd_residual"], (S, n_raters, m))
         cond = clip_cond[clips]
         y = mu[cond] + u_r + np.take_along_axis(u_c[:, None, :].repeat(n_raters, 1), clips, axis=2) + e
-        if unit == "clip":
-            rejected += _clip_decisions(y, clips, clip_cond, K, a, b, alpha)
-            if progress is not None:
-                progress.update(S)
-            continue
-        idx = (np.arange(S)[:, None, None] * K + cond).ravel()
-        yv = y.ravel()
-        n = np.bincount(idx, minlength=S * K).reshape(S, K)
-        s1 = np.bincount(idx, yv, minlength=S * K).reshape(S, K)
-        s2 = np.bincount(idx, yv * yv, minlength=S * K).reshape(S, K)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            means = s1 / n
-            ssw = np.nansum(s2 - s1 * means, axis=1)
-            mse = ssw / df_w
-            se = np.sqrt(mse / 2 * (1 / n[:, a] + 1 / n[:, b]))
-            q = np.abs(means[:, b] - means[:, a]) / se
-        rejected += int(np.sum(q > qcrit))
+        if unit == "rating":
+            idx = (np.arange(S)[:, None, None] * K + cond).ravel()
+            yv = y.ravel()
+            n = np.bincount(idx, minlength=S * K).reshape(S, K)
+            s1 = np.bincount(idx, yv, minlength=S * K).reshape(S, K)
+            s2 = np.bincount(idx, yv * yv, minlength=S * K).reshape(S, K)
+            df = np.full(S, df_w)
+        else:
+            n, s1, s2, df = _clip_mean_sums(y, clips, clip_cond, K)
+        rejected += _tukey_rejections(n, s1, s2, df, a, b, alpha)
         if progress is not None:
             progress.update(S)
     p = rejected / n_sim
@@ -114,9 +106,10 @@ def with_difference(design, pair, difference):
     return {**design, "means": means}
 
 
-def _clip_decisions(y, clips, clip_cond, K, a, b, alpha):
-    """How many of a chunk's studies (y, clips: [S, raters, m]) Tukey's HSD on the clips' mean ratings separates
-    conditions a and b in (simulate_power's `unit="clip"`)."""
+def _clip_mean_sums(y, clips, clip_cond, K):
+    """A chunk's studies (y, clips: [S, raters, m]) as Tukey's HSD on the clips' mean ratings sees them: per study
+    and condition the rated clips, the sum and the sum of squares of their means [S, K], and the error's degrees of
+    freedom [S] (the rated clips less K)."""
     S, n_clips = y.shape[0], len(clip_cond)
     at = (np.arange(S)[:, None, None] * n_clips + clips).ravel()
     count = np.bincount(at, minlength=S * n_clips).reshape(S, n_clips)
@@ -124,16 +117,19 @@ def _clip_decisions(y, clips, clip_cond, K, a, b, alpha):
     rated = count > 0
     clip_mean = np.where(rated, total / np.maximum(count, 1), 0.0)
     one_hot = clip_cond[None, :] == np.arange(K)[:, None]  # [K, clips]
-    n = rated.astype(float) @ one_hot.T  # [S, K]: rated clips per condition
-    s1 = clip_mean @ one_hot.T
-    s2 = (clip_mean**2) @ one_hot.T
-    df = rated.sum(1) - K
+    return rated.astype(float) @ one_hot.T, clip_mean @ one_hot.T, (clip_mean**2) @ one_hot.T, rated.sum(1) - K
+
+
+def _tukey_rejections(n, s1, s2, df, a, b, alpha):
+    """How many studies Tukey's HSD separates conditions a and b in, from each study's per-condition counts, sums
+    and sums of squares [S, K] and its error's degrees of freedom [S]: q = |mean difference| / sqrt(MSE / 2
+    (1/n_a + 1/n_b)) against the studentized-range quantile, one quantile per distinct df."""
+    K = n.shape[1]
     with np.errstate(invalid="ignore", divide="ignore"):
         means = s1 / n
         mse = np.nansum(s2 - s1 * means, axis=1) / df
         q = np.abs(means[:, b] - means[:, a]) / np.sqrt(mse / 2 * (1 / n[:, a] + 1 / n[:, b]))
     rejected = 0
-    for d in np.unique(df[df >= 1]):  # every clip is rated but in the smallest studies: one df, one quantile
-        here = df == d
-        rejected += int(np.sum(q[here] > anova.tukey_qcrit(alpha, K, int(d))))
+    for d in np.unique(df[df >= 1]):  # the ratings' one df; the clips' differ only where a clip went unrated
+        rejected += int(np.sum(q[df == d] > anova.tukey_qcrit(alpha, K, int(d))))
     return rejected
