@@ -36,6 +36,14 @@ def simulate_study(rng, n_raters, model=TRUE):
     return pd.DataFrame({"rater_id": rater, "clip_id": clips, "condition": clip_cond[clips], "rating": y})
 
 
+def design_with(means, sd, clips):
+    """A planner's design (analysis.plan.pilot_design's dict) with these condition means, the SDs (rater, clip,
+    residual) and the clips (per condition, per rater)."""
+    (sd_rater, sd_clip, sd_residual), (per_condition, per_rater) = sd, clips
+    return {"conditions": list(means), "means": means, "sd_rater": sd_rater, "sd_clip": sd_clip,
+            "sd_residual": sd_residual, "clips_per_condition": per_condition, "clips_per_rater": per_rater}  # fmt: skip
+
+
 def check_planner(n_studies, n_sim, bound):
     """Pilot of 60 raters from the true model -> plan for MG vs NAT at the true difference -> the rejection
     rate of stats.tukey_hsd over n_studies new studies of the planned size must match the estimated power."""
@@ -68,33 +76,17 @@ def test_planned_power_matches_observed_rejection_rate_short():
 
 def test_clip_variance_matters():
     """Same design, no clip variance: higher power. A planner that left out the clips would promise too much."""
-    design = {
-        "conditions": ["NAT", "MG", "FL"],
-        "means": TRUE["means"],
-        "sd_rater": 0.5,
-        "sd_clip": 0.3,
-        "sd_residual": 1.05,
-        "clips_per_condition": 30,
-        "clips_per_rater": 45,
-    }
-    with_clips = power.simulate_power(design, ("NAT", "MG"), 20, n_sim=2000, seed=1)[0]
-    without = power.simulate_power({**design, "sd_clip": 0.0}, ("NAT", "MG"), 20, n_sim=2000, seed=1)[0]
+    d = design_with(TRUE["means"], sd=(0.5, 0.3, 1.05), clips=(30, 45))
+    with_clips = power.simulate_power(d, ("NAT", "MG"), 20, n_sim=2000, seed=1)[0]
+    without = power.simulate_power({**d, "sd_clip": 0.0}, ("NAT", "MG"), 20, n_sim=2000, seed=1)[0]
     assert without > with_clips + 0.05
 
 
 def test_null_rejection_rate_is_alpha_where_tukey_is_exact():
     """Two conditions, no rater or clip variance: Tukey HSD is the two-sample t test, so the simulated
     rejection rate under no difference must be alpha (SD 0.0034 with 4000 studies)."""
-    design = {
-        "conditions": ["A", "B"],
-        "means": {"A": 3.0, "B": 3.0},
-        "sd_rater": 0.0,
-        "sd_clip": 0.0,
-        "sd_residual": 1.0,
-        "clips_per_condition": 10,
-        "clips_per_rater": 5,
-    }
-    p, low, high = power.simulate_power(design, ("A", "B"), 6, n_sim=4000, seed=2)
+    d = design_with({"A": 3.0, "B": 3.0}, sd=(0.0, 0.0, 1.0), clips=(10, 5))
+    p, low, high = power.simulate_power(d, ("A", "B"), 6, n_sim=4000, seed=2)
     assert abs(p - 0.05) < 0.012 and low < p < high
 
 
@@ -102,17 +94,9 @@ def test_the_clip_decision_keeps_its_false_positive_rate_where_the_ratings_lose_
     """Two conditions, clips that vary, 60 raters a study: the ratings' Tukey (a t test on ratings that share their
     clip's effect) rejects a zero difference far more often than alpha; on the clips' mean ratings it stays at
     alpha (SD 0.005 with 2000 studies)."""
-    design = {
-        "conditions": ["A", "B"],
-        "means": {"A": 3.0, "B": 3.0},
-        "sd_rater": 0.5,
-        "sd_clip": 0.3,
-        "sd_residual": 1.0,
-        "clips_per_condition": 30,
-        "clips_per_rater": 45,
-    }
-    on_ratings = power.simulate_power(design, ("A", "B"), 60, n_sim=2000, seed=3)[0]
-    on_clips = power.simulate_power(design, ("A", "B"), 60, n_sim=2000, seed=3, unit="clip")[0]
+    d = design_with({"A": 3.0, "B": 3.0}, sd=(0.5, 0.3, 1.0), clips=(30, 45))
+    on_ratings = power.simulate_power(d, ("A", "B"), 60, n_sim=2000, seed=3)[0]
+    on_clips = power.simulate_power(d, ("A", "B"), 60, n_sim=2000, seed=3, unit="clip")[0]
     assert on_ratings > 0.15 and abs(on_clips - 0.05) < 0.017, (on_ratings, on_clips)
 
 
@@ -121,9 +105,9 @@ def test_the_clip_decision_matches_tukey_on_clip_means_of_independent_studies():
     """simulate_power(unit="clip") against the report's own Tukey HSD run on the clips' mean ratings of studies
     drawn independently (simulate_study): 200 studies (Monte Carlo SD ~0.035), bound +-0.10."""
     rng = np.random.default_rng(7)
-    design = {"conditions": list(TRUE["means"]), **TRUE, "clips_per_condition": 30, "clips_per_rater": 45}
+    d = design_with(TRUE["means"], sd=(TRUE["sd_rater"], TRUE["sd_clip"], TRUE["sd_residual"]), clips=(30, 45))
     n_raters = 12
-    estimated = power.simulate_power(design, ("NAT", "MG"), n_raters, n_sim=2000, seed=4, unit="clip")[0]
+    estimated = power.simulate_power(d, ("NAT", "MG"), n_raters, n_sim=2000, seed=4, unit="clip")[0]
     rejected = 0
     for _ in range(200):
         study = simulate_study(rng, n_raters)
@@ -137,16 +121,8 @@ def test_a_plan_says_when_only_more_clips_would_do():
     """A difference the clips' own spread hides (0.4 against a clip SD of 1.0, 5 clips a condition): the ratings'
     Tukey reaches power 0.8 with enough raters, but that is its false positives; the clip decision says no number
     of raters reaches it."""
-    design = {
-        "conditions": ["A", "B", "C"],
-        "means": {"A": 3.0, "B": 3.4, "C": 3.6},
-        "sd_rater": 0.3,
-        "sd_clip": 1.0,
-        "sd_residual": 0.6,
-        "clips_per_condition": 5,
-        "clips_per_rater": 15,
-    }
-    res = plan.plan(design, ("A", "B"), target=0.8, n_sim=100, seed=1, progress=False)
+    d = design_with({"A": 3.0, "B": 3.4, "C": 3.6}, sd=(0.3, 1.0, 0.6), clips=(5, 15))
+    res = plan.plan(d, ("A", "B"), target=0.8, n_sim=100, seed=1, progress=False)
     clip = res["clip_test"]
     assert res["planned_raters"] and res["false_positive_rate"] > 0.3, res
     assert clip["planned_raters"] is None and clip["max_power"] < 0.3 and clip["power_at_check"] < 0.3, clip
