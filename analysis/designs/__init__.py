@@ -46,7 +46,8 @@ def detect_design(path) -> str:
 def check_design_options(design: Design, options: Options, path) -> None:
     """AnalysisError, one line, for an option given (not at its default) that `design` does not read
     (base.DESIGN_OPTIONS), naming the designs that do."""
+    defaults = Options()
     for field, flag in DESIGN_OPTIONS.items():
-        if field not in design.reads and getattr(options, field) != Options.__dataclass_fields__[field].default:
+        if field not in design.reads and getattr(options, field) != getattr(defaults, field):
             readers = ", ".join(d.name for d in DESIGNS.values() if field in d.reads)
             raise AnalysisError(f"{flag}: {path} holds {design.name} answers; {flag} is for {readers} exports only")
