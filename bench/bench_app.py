@@ -2,7 +2,8 @@
 
     python bench/bench_app.py [--behind caddy --hosts 2] [--design acr|pairwise|parallel|appropriateness]
         [--pace app|stress] [--raters 200]
-        [--duration 30] [--think S] [--db sqlite|postgres|URL] [--workers 4] [--threads 16] [--json out.json]
+        [--duration 30] [--think S] [--db sqlite|postgres|URL] [--workers 4] [--threads 16] [--no-preload]
+        [--json out.json]
         [--pairing balanced|active] [--stop-when never|settled]
 
 A real gunicorn process (gthread workers) serves a paper-sized study (30 items x NAT/MG/FL + 4 catch + 4
@@ -60,7 +61,7 @@ from moglow_eval.core.ports import free_port  # noqa: E402
 from moglow_eval.core.study import DESIGNS  # noqa: E402
 
 
-def start_server(port, env, workers, threads, log):
+def start_server(port, env, workers, threads, log, preload=True):
     cmd = [
         sys.executable,
         "-m",
@@ -75,6 +76,7 @@ def start_server(port, env, workers, threads, log):
         "2048",
         "--keep-alive",
         "75",
+        *(["--preload"] if preload else []),  # as docs/hosting.md starts it
         "-b",
         f"127.0.0.1:{port}",
         "rating_app.wsgi:app",
@@ -290,6 +292,9 @@ def main():
     p.add_argument("--db", default="postgres", help="postgres (fresh schema at 127.0.0.1), sqlite, or a URL")
     p.add_argument("--workers", type=int, default=4)
     p.add_argument("--threads", type=int, default=16)
+    p.add_argument(
+        "--preload", action=argparse.BooleanOptionalAction, default=True, help="gunicorn --preload (docs/hosting.md)"
+    )
     p.add_argument("--json", default=None)
     p.add_argument("--stimuli", default=None, help="reuse (or create) the benchmark's stimulus folder here")
     p.add_argument(
@@ -339,11 +344,11 @@ def main():
     if a.behind == "caddy":
         env["RATING_VIDEO_ACCEL"], env["RATING_PROXY_COUNT"] = "caddy", "1"
         ports = [free_port() for _ in range(a.hosts)]
-        procs = [start_server(q, env, a.workers, a.threads, log) for q in ports]
+        procs = [start_server(q, env, a.workers, a.threads, log, a.preload) for q in ports]
         caddy, tls = start_caddy(port, ports, stim, tmp, log)
         procs.append(caddy)
     else:
-        procs = [start_server(port, env, a.workers, a.threads, log)]
+        procs = [start_server(port, env, a.workers, a.threads, log, a.preload)]
     rec = {"session": [], "next": [], "rating": [], "training_ack": [], "video": []}
     clip_s = a.clip_frames / 20 if a.pace == "app" else None
     errors, lock = [], threading.Lock()

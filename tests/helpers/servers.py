@@ -30,10 +30,12 @@ def wait_for(url, proc, what, timeout_s=120.0):
     raise AssertionError(f"{what} did not come up")
 
 
-def start_gunicorn(port, env, log, workers=3, threads=16):
+def start_gunicorn(port, env, log, workers=3, threads=16, preload=True):
     """gunicorn serving rating_app.wsgi:app on 127.0.0.1:port in a process group of its own (see kill9), once its
-    /healthz answers; its output goes to the open file `log`."""
+    /healthz answers; its output goes to the open file `log`. `preload`: with `--preload`, as docs/hosting.md
+    starts it (the app built once in the master, the workers forked from it)."""
     cmd = [sys.executable, "-m", "gunicorn", "-w", str(workers), "-k", "gthread", "--threads", str(threads)]
+    cmd += ["--preload"] if preload else []
     cmd += ["--backlog", "2048", "-b", f"127.0.0.1:{port}", "rating_app.wsgi:app"]
     proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
     wait_for(f"http://127.0.0.1:{port}/healthz", proc, f"gunicorn (see {log.name})")

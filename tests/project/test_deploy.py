@@ -2,6 +2,8 @@
 Caddyfile (validated by Debian's caddy) and the study file the app container reads. Building the image itself takes
 minutes and tools the suite's machine lacks (podman, runc, debootstrap): `python deploy/check_image.py` does it."""
 
+import json
+import re
 import shutil
 import subprocess
 
@@ -47,6 +49,22 @@ def test_containerfile_has_no_torch_and_a_health_check():
     text = (DEPLOY / "Containerfile").read_text()
     assert "torch" not in text.replace("without torch", "").replace("no torch", "")
     assert "HEALTHCHECK" in text and "rating_app.wsgi:app" in text and "USER rater" in text
+
+
+def test_the_container_starts_gunicorn_as_the_hosting_page_does():
+    """The image's gunicorn command is docs/hosting.md's production command, less the address it binds (all of the
+    container's, where the page binds loopback behind its proxy)."""
+    cmd = re.search(r"^CMD (\[.*?\])$", (DEPLOY / "Containerfile").read_text(), re.M | re.S).group(1)
+    image = json.loads(cmd.replace("\\\n", ""))
+    page = next(
+        line.split()
+        for line in (ROOT / "docs" / "hosting.md").read_text().splitlines()
+        if line.startswith("gunicorn ") and "rating_app.wsgi:app" in line
+    )
+    bind = image.index("-b")
+    assert image[bind + 1] == "0.0.0.0:8000" and page[page.index("-b") + 1] == "127.0.0.1:8000"
+    assert image[:bind] + image[bind + 2 :] == page[: page.index("-b")] + page[page.index("-b") + 2 :]
+    assert "--preload" in image  # one copy of the videos for all the workers
 
 
 def test_caddyfile_is_valid():

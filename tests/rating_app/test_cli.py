@@ -320,22 +320,26 @@ def test_bad_settings_stop_the_start(app_stimuli, tmp_path, args, env, needle, c
 
 
 @pytest.mark.parametrize(
-    "env,needle",
+    "env,needle,preload",
     [
-        ({"RATING_MANIFEST": ""}, "no stimulus manifest"),
-        ({"RATING_SLOT_TIMEOUT": "nan"}, "RATING_SLOT_TIMEOUT"),
+        ({"RATING_MANIFEST": ""}, "no stimulus manifest", False),
+        ({"RATING_SLOT_TIMEOUT": "nan"}, "RATING_SLOT_TIMEOUT", False),
         (
             {"ADMIN_TOKEN": "x", "SECRET_KEY": "y"},
             "ADMIN_TOKEN, SECRET_KEY are set, but the app reads RATING_ADMIN_TOKEN",
+            False,
         ),
+        ({"RATING_SLOT_TIMEOUT": "nan"}, "RATING_SLOT_TIMEOUT", True),  # the master builds the app (docs/hosting.md)
     ],
 )
-def test_gunicorn_with_a_bad_environment_stops(app_stimuli, tmp_path, env, needle):
+def test_gunicorn_with_a_bad_environment_stops(app_stimuli, tmp_path, env, needle, preload):
     base = dict(os.environ, RATING_MANIFEST=str(app_stimuli), RATING_DATABASE_URL=f"sqlite:///{tmp_path}/r.sqlite")
-    # One worker: with two, gunicorn halting on the first one's load error may interrupt the second one's import,
-    # and that interrupted import's traceback is gunicorn's shutdown, not our error line.
+    # Without --preload, one worker: with two, gunicorn halting on the first one's load error may interrupt the
+    # second one's import, and that interrupted import's traceback is gunicorn's shutdown, not our error line. With
+    # it, the master builds the app before any worker starts: four workers, as the docs start it.
+    workers = ["-w", "4", "--preload"] if preload else ["-w", "1"]
     r = subprocess.run(
-        [sys.executable, "-m", "gunicorn", "-w", "1", "-b", f"127.0.0.1:{free_port()}", "rating_app.wsgi:app"],
+        [sys.executable, "-m", "gunicorn", *workers, "-b", f"127.0.0.1:{free_port()}", "rating_app.wsgi:app"],
         cwd=ROOT,
         env=dict(base, **env),
         capture_output=True,
@@ -344,6 +348,8 @@ def test_gunicorn_with_a_bad_environment_stops(app_stimuli, tmp_path, env, needl
     )  # respawning forever would run into the timeout
     assert r.returncode != 0 and f"error: {needle}" in r.stderr and needle in r.stderr
     assert "Traceback" not in r.stderr
+    if preload:  # the master stops with gunicorn's "app failed to load" code, and our line is all it says
+        assert r.returncode == 4 and len(r.stderr.strip().splitlines()) == 1, r.stderr
 
 
 def test_a_stale_database_variable_is_refused_by_the_commands_that_default_to_it(tmp_path, command_fails, monkeypatch):

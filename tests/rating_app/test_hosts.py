@@ -1,6 +1,7 @@
 """Several app hosts, one database (issue 33 items 4-5): two gunicorn processes on their own ports behind one
 reverse proxy over HTTPS (Debian's nginx with a certificate made here, Caddy with its own CA), sharing one
-PostgreSQL database, the proxy sending the videos' bytes (VIDEO_ACCEL). A simulated crowd answers through the
+PostgreSQL database (one started with gunicorn's --preload, one without), the proxy sending the videos' bytes
+(VIDEO_ACCEL). A simulated crowd answers through the
 proxy; one host is killed with SIGKILL a third of the way through, the proxy sends the rest to the other. Every
 acknowledged answer is stored once, the running counts agree with the trials, the test units stay balanced, every
 rater completes, and what the client receives of a video is blind (its bytes; no date, no redirect, no path)."""
@@ -132,7 +133,8 @@ def test_two_hosts_one_database_and_a_kill(kind, tmp_path, pg_database, monkeypa
     env = crowd_env(stimuli, db, "hosts-token", PROXY_COUNT="1", VIDEO_ACCEL=kind)
     a, b = free_port(), free_port()
     log = open(tmp_path / "gunicorn.log", "w")
-    hosts = [start_gunicorn(a, env, log), start_gunicorn(b, env, log)]
+    # one host as docs/hosting.md starts it (--preload), the other with every worker building its own app
+    hosts = [start_gunicorn(a, env, log), start_gunicorn(b, env, log, preload=False)]
     acks, summary = [0], {}
     try:
         with proxy(kind, tmp_path, a, b, stimuli.parent) as (url, ca):
