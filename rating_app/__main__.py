@@ -255,7 +255,7 @@ def build_parser():
 
 def _serve_parser(sub):
     """serve: a flag per setting of the settings table (settings.TABLE), and where to listen."""
-    s = sub.add_parser("serve", help="run the app (local use; production: gunicorn rating_app.wsgi:app)")
+    s = sub.add_parser("serve", help="run the app (local use; production: gunicorn --preload, docs/hosting.md)")
     add_flags(s)
     s.add_argument("--host", default="127.0.0.1")
     s.add_argument("--port", type=cli.number(int, 1, 65535), default=5000)
