@@ -67,12 +67,12 @@ def find_system_files(folder, items):
                 raise SystemError_(f"{folder}: two files for item {item}: {found[item].name} and {p.name}")
             found[item] = p
     missing = [i for i in items if i not in found]
+    expected = "(expected ITEM.bvh, ITEM.bvh.gz or ITEM.npz; see items.csv)"
+    if missing and not found:  # a wrong folder, or names unlike the items': naming each item would say less
+        raise SystemError_(f"{folder}: no motion file for any of the {len(items)} items {expected}")
     if missing:
         more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
-        raise SystemError_(
-            f"{folder}: no motion file for item(s) {', '.join(missing[:5])}{more} "
-            f"(expected ITEM.bvh, ITEM.bvh.gz or ITEM.npz; see items.csv)"
-        )
+        raise SystemError_(f"{folder}: no motion file for item(s) {', '.join(missing[:5])}{more} {expected}")
     return found
 
 

@@ -303,3 +303,19 @@ def test_zip_member_corruption_is_one_line(real_clip, tmp_path):
     with pytest.raises(ClipError) as e:
         load_clip(tmp_path / "c.npz")
     assert _is_one_line(e.value)
+
+
+def test_a_system_folder_names_its_missing_items_or_says_it_has_none(tmp_path):
+    """--system NAME=DIR: a folder lacking some items names the first five of them and how many more; a folder
+    holding none of them says so in a line, not the whole list."""
+    from generation.data.systems import SystemError_, find_system_files
+
+    items = [f"item{i:02d}" for i in range(8)]
+    with pytest.raises(SystemError_, match=r"no motion file for any of the 8 items \(expected ITEM\.bvh"):
+        find_system_files(tmp_path, items)
+    (tmp_path / "item00.npz").write_bytes(b"")
+    (tmp_path / "notes.txt").write_text("not an item")
+    with pytest.raises(SystemError_) as e:
+        find_system_files(tmp_path, items)
+    assert "item(s) item01, item02, item03, item04, item05 and 2 more (expected" in str(e.value)
+    assert "\n" not in str(e.value)

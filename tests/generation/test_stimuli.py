@@ -268,7 +268,7 @@ def test_stimuli_bad_input_one_line_errors(quick_stimuli, tmp_path, capsys):
     sysdir = tmp_path / "sys"
     sysdir.mkdir()
     code, err = _error(base + ["--system", f"S={sysdir}"], capsys)
-    assert code == 2 and "no motion file for item" in err
+    assert code == 2 and "no motion file for any of the" in err
     make_stimuli.main(base[:-2] + ["--export-items", str(tmp_path / "ask")])
     items = [r["item"] for r in read_csv(tmp_path / "ask" / "items.csv")]
     good = TEST_DATA / "bvh" / "bandai_walk_angry_002.bvh.gz"
