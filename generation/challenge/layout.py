@@ -109,13 +109,25 @@ def read_submission(team: str, folder, items, samples: int) -> Submission:
         elif samples > 1:
             sub.add(where, "samples", f"one file for {item}, where the rules ask for {samples} samples in a folder "
                     f"{item}/ (1{_ext(name)} .. {samples}{_ext(name)})", item)  # fmt: skip
-            sub.files.setdefault(item, {})["1"] = where
+            _claim(sub, item, "1", where)
         else:
-            sub.files.setdefault(item, {})[""] = where
+            _claim(sub, item, "", where)
     for item in sorted(items - set(sub.files)):
         sub.add(folder / item, "missing", f"no motion for test item {item}: add {item}{'/' if samples > 1 else '.EXT'}",
                 item)  # fmt: skip
     return sub
+
+
+def _claim(sub, item, sample, where) -> None:
+    """`where` as `item`'s `sample` ("" where the layout has one file an item), or a problem naming both files where
+    another file is that sample already (ITEM.bvh beside ITEM.npz, 1.bvh beside 1.npz, ITEM.npz beside ITEM/):
+    which of them the team meant is the team's to say."""
+    taken = sub.files.setdefault(item, {})
+    if sample in taken:
+        sub.add(where, "entry", f"two files for {item}{'/' + sample if sample else ''}: {taken[sample].name} and "
+                f"{where.name}: keep one", item, sample)  # fmt: skip
+        return
+    taken[sample] = where
 
 
 def _ext(name):
@@ -144,9 +156,8 @@ def _item_folder(sub, path: Path, item: str, items, samples: int, budget):
         if sample is None:
             sub.add(where, "entry", "not a motion file: remove it", item)
             continue
+        _claim(sub, item, sample, where)
         found[sample] = where
-    if found:
-        sub.files[item] = found
     if samples > 1 and len(found) != samples:
         sub.add(path, "samples", f"{len(found)} samples of {item}, where the rules ask for {samples}: "
                 f"{'add' if len(found) < samples else 'remove'} {abs(samples - len(found))}", item)  # fmt: skip

@@ -294,7 +294,10 @@ def _npz_fps(path, source_fps):
     if key is None:
         return source_fps
     with np.load(path, allow_pickle=False) as f:
-        return check_fps(np.asarray(f[key]).reshape(-1)[0], path)
+        value = np.asarray(f[key]).reshape(-1)
+    if value.size != 1 or value.dtype.kind not in "iuf":  # a complex fps would lose its imaginary part with a warning
+        raise MotionError(f"{path}: {key} must be one real number, got {value.size} value(s) of type {value.dtype}")
+    return check_fps(value[0], path)
 
 
 def _positions(path, fps, up, skeleton, source_fps, smpl):

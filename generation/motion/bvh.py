@@ -84,7 +84,10 @@ def _read_bytes(path):
 
 
 _MOTION = re.compile(rb"^[ \t]*MOTION(?![^\s])", re.M)
-_CHANNELS = re.compile(rb"\bCHANNELS\s+(\d+)")
+_CHANNELS = re.compile(rb"\bCHANNELS\s+(\d{1,12})\b")  # a longer count is the parser's to refuse
+# A count as BVH writes it: ASCII digits (str.isdigit also takes "²" and other digits int() refuses), and few enough
+# of them that int() reads it (Python refuses over 4300 digits) and any limit can be checked against it.
+_WHOLE = re.compile(r"[0-9]{1,12}")
 
 
 def _read_bounded(f, name):
@@ -294,8 +297,8 @@ class _Hierarchy:
         if not self.stack or self.stack[-1] is None:
             raise BvhError(f"{where}: CHANNELS outside a joint")
         n_str, _ = self._take("a channel count")
-        if not n_str.isdigit():
-            raise BvhError(f"{where}: channel count must be an integer, got {n_str!r}")
+        if not _WHOLE.fullmatch(n_str) or int(n_str) > len(CHANNEL_NAMES):
+            raise BvhError(f"{where}: channel count must be a whole number 0-{len(CHANNEL_NAMES)}, got {n_str[:20]!r}")
         chans = []
         for _ in range(int(n_str)):
             ch, cl = self._take("a channel name")
@@ -347,8 +350,8 @@ def _motion_header(raw, start, line_no, name):
 def _motion_header_line(parts, text, header, where, line_no):
     """One non-blank MOTION header line into `header` ("frames": (N, line), then "dt")."""
     if parts[0] == "Frames:" and len(parts) == 2 and "frames" not in header:
-        if not parts[1].isdigit():
-            raise BvhError(f"{where}: Frames must be a non-negative integer, got {parts[1]!r}")
+        if not _WHOLE.fullmatch(parts[1]):
+            raise BvhError(f"{where}: Frames must be a non-negative integer (12 digits at most), got {parts[1][:20]!r}")
         header["frames"] = (int(parts[1]), line_no)
     elif parts[:2] == ["Frame", "Time:"] and len(parts) == 3 and "frames" in header:
         dt = _number(parts[2], where)

@@ -132,6 +132,9 @@ def _edit_motion(kind, lines):
     if kind == "frames_too_many":  # Frames says more than the data holds
         lines[FRAMES_LINE - 1] = f"Frames: {N_FRAMES + 3}"
         return "\n".join(lines), FRAMES_LINE, "Frames says 10"
+    if kind in ("frames_superscript", "frames_5000_digits"):  # str.isdigit takes both, int() refuses them
+        lines[FRAMES_LINE - 1] = "Frames: " + ("12\u00b2" if kind == "frames_superscript" else "7" * 5000)
+        return "\n".join(lines), FRAMES_LINE, "Frames must be a non-negative integer"
     return None
 
 
@@ -141,6 +144,11 @@ def _edit_header(kind, lines):
         i = next(k for k, line in enumerate(lines) if "CHANNELS 3 Yrotation" in line)
         lines[i] = lines[i].replace("Zrotation", "Wrotation")
         return "\n".join(lines), i + 1, "unknown channel name 'Wrotation'"
+    if kind in ("channels_superscript", "channels_5000_digits", "channels_seven"):
+        i = next(k for k, line in enumerate(lines) if "CHANNELS 3 Yrotation" in line)
+        count = {"channels_superscript": "\u00b2", "channels_5000_digits": "3" * 5000, "channels_seven": "7"}[kind]
+        lines[i] = lines[i].replace("CHANNELS 3", f"CHANNELS {count}")
+        return "\n".join(lines), i + 1, "channel count must be a whole number 0-6"
     if kind == "no_motion":
         return "\n".join(lines[:HEADER_LINES]) + "\n", HEADER_LINES, "no MOTION"
     if kind == "bad_offset":
@@ -167,6 +175,11 @@ CASES = [
     "non_numeric",
     "frames_too_few",
     "frames_too_many",
+    "frames_superscript",
+    "frames_5000_digits",
+    "channels_superscript",
+    "channels_5000_digits",
+    "channels_seven",
     "no_motion",
     "bad_offset",
     "unclosed",

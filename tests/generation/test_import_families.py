@@ -283,3 +283,21 @@ def test_smplx_expressions_shape_the_heads_rest_joints(tmp_path):
         want = (shape + dirs[:, :, 10:20] @ expr[t])[:n]
         assert np.allclose(face[t], want, atol=1e-6)
     assert np.abs(face - plain).max() > 1e-3
+
+
+FPS_VALUES = {"empty": np.zeros(0), "two": np.array([30.0, 30.0]), "complex": np.array(30 + 1j), "text": np.array("30")}
+
+
+@pytest.mark.parametrize("kind", FPS_VALUES)
+def test_a_clip_whose_fps_is_not_one_real_number_is_refused_naming_it(tmp_path, kind):
+    """A clip's fps key that is empty, several numbers, complex or text: one line naming the file and the key, before
+    any frame is read (it was an IndexError from the empty one, a warning and the real part from the complex one)."""
+    from generation.data.motion_files import native_fps
+
+    path = tmp_path / "item00.npz"
+    joints = np.zeros((4, 2, 3), np.float32)
+    np.savez(
+        path, joints=joints, parents=np.array([-1, 0]), joint_names=np.array(["Hips", "Spine"]), fps=FPS_VALUES[kind]
+    )
+    with pytest.raises(MotionError, match=r"item00\.npz: fps must be one real number"):
+        native_fps(path)

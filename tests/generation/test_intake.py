@@ -209,6 +209,27 @@ def test_samples_per_item(tmp_path, take):
     assert code == 1 and [p["check"] for p in problems(out)] == ["samples"]
 
 
+def test_two_files_for_one_item_or_sample_are_refused_naming_both(tmp_path, take):
+    """Which of two files for one item (or one sample) the team meant is the team's to say: the intake read one of
+    them and said nothing of the other, and a team with a broken ITEM.bvh beside its ITEM.npz was accepted."""
+
+    def beside(folder):
+        (folder / "item01.bvh").write_text("not a BVH")
+
+    code, out = run(tmp_path, [write_team(tmp_path, take, beside)])
+    two = [p for p in problems(out) if "two files" in p["problem"]]
+    assert code == 1 and len(two) == 1 and "two files for item01: item01.bvh and item01.npz: keep" in two[0]["problem"]
+
+    def samples_twice(folder):
+        (folder / "item02" / "1.bvh").write_text("not a BVH")
+        (folder / "item03.npz").write_bytes((folder / "item03" / "1.npz").read_bytes())
+
+    code, out = run(tmp_path / "k", [write_team(tmp_path / "k", take, samples_twice, samples=3)], samples=3)
+    found = [p["problem"] for p in problems(out)]
+    assert code == 1 and any("two files for item02/1: 1.bvh and 1.npz" in p for p in found), found
+    assert any("two files for item03/1: 1.npz and item03.npz" in p for p in found), found
+
+
 def test_hostile_entries_are_one_line_each(tmp_path, take):
     def hostile(folder):
         os.symlink("/etc/passwd", folder / "item04.npz")
