@@ -21,6 +21,7 @@ MAX_FRAMES = 500_000  # about 7 hours at 20 fps
 MAX_JOINTS = 1000
 MAX_COORD_M = 1e5  # |coordinate| in metres
 MAX_NPZ_BYTES = 1 << 30  # what the arrays of one .npz (or one .npy) may hold, 1 GiB, judged from their headers
+MAX_NPZ_MEMBERS = 4096  # a clip has a handful, an SMPL-family or Seamless file a few dozen
 # One person's mesh for the mesh style (SMPL-X has 10,475 vertices): its body model is refused beyond it when read
 # (generation.data) and its mesh when drawn (rendering.mesh), one line each.
 MAX_MESH_VERTICES = 200_000
@@ -152,21 +153,30 @@ _HEADER_READERS = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.f
 
 def npz_headers(path, limit=MAX_NPZ_BYTES):
     """{name: (shape, dtype)} of the arrays of an .npz, from each member's .npy header alone; ClipError naming the
-    file when they would hold more than `limit` bytes in all (None: no limit, for a look at the names). numpy
+    file when they would hold more than `limit` bytes in all (None: no limit, for a look at the names), a member
+    that is not an array counting its inflated size, or when it has more than MAX_NPZ_MEMBERS members. numpy
     allocates an array whole from its header before it inflates the data, so a small archive with a hostile header
     would otherwise ask for any amount of memory."""
     out, total = {}, 0
     try:
         with zipfile.ZipFile(path) as z:
-            for info in z.infolist():
-                if not info.filename.endswith(".npy"):
-                    continue
+            infos = z.infolist()
+            if len(infos) > MAX_NPZ_MEMBERS:  # numpy lists every member: a hostile archive takes minutes to open
+                raise ClipError(f"{path}: {len(infos)} members, more than the limit of {MAX_NPZ_MEMBERS}")
+            for info in infos:
                 with z.open(info) as f:
+                    npy = info.filename.endswith(".npy")
+                    # numpy reads a member not named .npy as an array too when it starts as one, else as bytes
+                    if not npy and f.read(len(np.lib.format.MAGIC_PREFIX)) != np.lib.format.MAGIC_PREFIX:
+                        total += info.file_size
+                        continue
+                    if not npy:
+                        f.seek(0)
                     version = np.lib.format.read_magic(f)
                     if version not in _HEADER_READERS:
                         raise ClipError(f"{path}: member {info.filename} has .npy format version {version}")
                     shape, _, dtype = _HEADER_READERS[version](f)
-                out[info.filename[:-4]] = (shape, dtype)
+                out[info.filename[:-4] if npy else info.filename] = (shape, dtype)
                 total += int(np.prod(shape, dtype=object)) * dtype.itemsize
     except NPZ_READ_ERRORS as e:
         raise ClipError(f"{path}: not a readable .npz file ({first_line(e)})") from None

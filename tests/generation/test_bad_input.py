@@ -3,6 +3,7 @@ traceback or a runaway allocation (issue 11, finding 10); and property-based fuz
 on random corruptions of real files."""
 
 import gzip
+import io
 import zipfile
 
 import numpy as np
@@ -303,6 +304,39 @@ def test_zip_member_corruption_is_one_line(real_clip, tmp_path):
     with pytest.raises(ClipError) as e:
         load_clip(tmp_path / "c.npz")
     assert _is_one_line(e.value)
+
+
+def _with_member(real_clip, out, name, data=b"", count=1):
+    """The clip `real_clip` with `count` more members called `name` (numbered after the first) holding `data`."""
+    out.write_bytes(real_clip.read_bytes())
+    with zipfile.ZipFile(out, "a", zipfile.ZIP_DEFLATED) as z:
+        for k in range(count):
+            z.writestr(name if k == 0 else f"{name}{k}", data)
+    return out
+
+
+def test_an_archives_other_members_are_bounded_before_numpy_reads_them(real_clip, tmp_path):
+    """numpy reads every member of an .npz: one not named .npy is read as an array when it starts as one (its header
+    can ask for any amount of memory), else as bytes (a small deflated member can inflate to gigabytes), and an
+    archive of many members takes minutes to list. All three are refused from the archive's directory and headers,
+    before a byte of them is read (they were a machine-wide "out of memory" naming no file, gigabytes accepted, and
+    minutes)."""
+    from moglow_eval.core.clip import MAX_NPZ_MEMBERS, npz_headers
+
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False, "shape": (25 * 10**9,)})
+    big = _with_member(real_clip, tmp_path / "declared.npz", "extra", header.getvalue())
+    with pytest.raises(ClipError, match=r"declared\.npz: its arrays would take \d+ MiB, over the limit"):
+        load_clip(big)
+    arrays = sum(int(np.prod(shape)) * dtype.itemsize for shape, dtype in npz_headers(real_clip).values())
+    raw = _with_member(real_clip, tmp_path / "raw.npz", "readme", bytes(4096))
+    assert "readme" not in npz_headers(raw, limit=arrays + 4096)  # bytes, not an array: counted by their size
+    with pytest.raises(ClipError, match="over the limit"):
+        npz_headers(raw, limit=arrays + 2048)
+    many = _with_member(real_clip, tmp_path / "many.npz", "m", b"x", count=MAX_NPZ_MEMBERS)
+    with pytest.raises(ClipError, match=rf"many\.npz: \d+ members, more than the limit of {MAX_NPZ_MEMBERS}"):
+        load_clip(many)
+    assert load_clip(_with_member(real_clip, tmp_path / "fine.npz", "notes", b"a note"))["fps"] > 0
 
 
 def test_a_system_folder_names_its_missing_items_or_says_it_has_none(tmp_path):
