@@ -36,7 +36,7 @@ from rendering.errors import RenderError
 from ..data.motion_files import Skeleton
 from . import intake_page
 from .checks import FORMATS, Rules, check_file, file_format
-from .layout import Problem, Submission, plain_name, read_submission, shown
+from .layout import NAME_MAX, Problem, Submission, plain_name, read_submission, shown
 
 SPEECH_EXTENSIONS = (".wav", ".flac")
 PROBLEM_COLUMNS = ("team", "file", "item", "sample", "check", "problem")
@@ -149,13 +149,15 @@ def problem_rows(sub: Submission) -> list[dict]:
 
 def team_folders(args) -> dict[str, Path]:
     """{team: folder} from the positional folders or --teams; UserError for a folder that is not one."""
+    if args.teams and args.folders:
+        raise UserError("give TEAM folders or --teams with a folder of them, not both")
     if args.teams:
         parent = Path(args.teams)
         if not parent.is_dir():
             raise UserError(f"{parent}: not a folder of teams' submissions")
-        folders = [
-            parent / e.name for e in sorted(os.scandir(parent), key=lambda e: e.name) if e.is_dir(follow_symlinks=False)
-        ]
+        # Every entry is a team, a file or a link too (judged unusable below, never skipped unsaid), but for hidden
+        # ones: an organiser's .git or .DS_Store is no submission.
+        folders = [parent / e.name for e in sorted(os.scandir(parent), key=lambda e: e.name) if e.name[:1] != "."]
     else:
         folders = [Path(f) for f in args.folders]
     if not folders:
@@ -164,11 +166,30 @@ def team_folders(args) -> dict[str, Path]:
     for folder in folders:
         team = folder.resolve().name if folder.name in ("", ".", "..") else folder.name
         if not plain_name(team):
-            raise UserError(f"{ascii(str(folder))}: a team folder's name must be plain printable text")
+            raise UserError(
+                f"{ascii(str(folder))}: a team folder's name must be plain printable text, not hidden, at most "
+                f"{NAME_MAX} characters (it names the team's report folder)"
+            )
         if team in out:
             raise UserError(f"{folder}: two submissions for team {team} ({out[team]} and {folder})")
         out[team] = folder
     return out
+
+
+def out_folder(out: str, teams: dict) -> Path:
+    """--out as a folder the reports may go to: not empty, not a file, not inside a submission, and no team's report
+    folder (OUT/TEAM) its submission, as with --out set to the --teams folder: the reports would become part of the
+    teams' folders, and the next intake would refuse each team for them."""
+    if not out:
+        raise UserError("--out: empty; give the reports' folder")
+    path = Path(out)
+    if path.exists() and not path.is_dir():
+        raise UserError(f"--out {out}: a file, not a folder")
+    for team, folder in teams.items():
+        there = Path(folder).resolve()
+        if path.resolve().is_relative_to(there) or (path / team).resolve() == there:
+            raise UserError(f"--out {out}: the reports would be written into the submission {folder}")
+    return path
 
 
 def build_parser():
@@ -205,11 +226,13 @@ def _main(argv):
         raise UserError(f"--units must be auto, m, cm or mm, got {args.units!r}")
     inputs = read_inputs(args.inputs)
     teams = team_folders(args)
+    if args.smpl_model is not None and not Path(args.smpl_model).is_file():
+        raise UserError(f"--smpl-model {args.smpl_model}: no such file (the body model's .npz)")
+    out = out_folder(args.out, teams)
     read = dict(units=args.units, up=args.up, source_fps=args.source_fps, smpl_model=args.smpl_model)
     if args.skeleton:
         read["skeleton"] = Skeleton.load(args.skeleton)
     rules = Rules(args.fps, args.samples, args.max_speed, args.max_bone_change, read, args.or_one)
-    out = Path(args.out)
     rows, unusable = [], []
     total = len(inputs) * args.samples * len(teams)
     with tqdm(total=total, desc="intake", unit="file", file=sys.stderr, disable=args.quiet) as bar:

@@ -260,7 +260,7 @@ def test_a_whole_challenge_in_one_run(tmp_path, take):
     bad = write_team(tmp_path / "b", take, lambda f: (f / "item03.npz").unlink())
     good.rename(teams / "alpha") if teams.exists() else (teams.mkdir(), good.rename(teams / "alpha"))
     bad.rename(teams / "beta")
-    (teams / "gamma").write_text("not a folder")  # left out: teams are folders
+    (teams / ".git").mkdir()  # hidden: the organiser's, no team
     code, out = run(tmp_path, [], extra=["--teams", str(teams)])
     with open(out / "teams.csv", newline="") as f:
         rows = {r["team"]: r for r in csv.DictReader(f)}
@@ -268,6 +268,39 @@ def test_a_whole_challenge_in_one_run(tmp_path, take):
     assert rows["alpha"]["verdict"] == "accepted" and rows["beta"]["verdict"] == "refused"
     index = (out / "index.html").read_text()
     assert 'href="alpha/intake.html"' in index and 'href="beta/intake.html"' in index
+    # A team that sent an archive, or a link, is judged unusable and named, never left out unsaid (exit 2).
+    (teams / "gamma.zip").write_text("an archive, not a folder")
+    (teams / "delta").symlink_to(teams / "alpha")
+    code, out = run(tmp_path / "again", [], extra=["--teams", str(teams)])
+    with open(out / "teams.csv", newline="") as f:
+        rows = {r["team"]: r["verdict"] for r in csv.DictReader(f)}
+    assert code == 2 and rows == {"alpha": "accepted", "beta": "refused", "delta": "unusable", "gamma.zip": "unusable"}
+
+
+def test_the_reports_folder_and_the_organisers_flags_are_checked_first(tmp_path, take, capsys):
+    """Mistakes of the organiser's command stop it at once with one line naming the flag, before any team is read:
+    the reports written into the submissions (--out as the --teams folder), over a file or into the current folder
+    (an empty --out), team folders given twice over, or a body model that is not there (each team was refused for
+    it, told to export its files again)."""
+    teams = tmp_path / "teams"
+    teams.mkdir()
+    write_team(tmp_path, take).rename(teams / "alpha")
+    (tmp_path / "afile").write_text("x")
+    cases = [
+        (["--teams", str(teams), "--out", str(teams)], "--out"),
+        (["--teams", str(teams), "--out", str(teams / "alpha" / "reports")], "--out"),
+        (["--teams", str(teams), "--out", str(tmp_path / "afile")], "--out"),
+        (["--teams", str(teams), "--out", ""], "--out: empty"),
+        (["--teams", str(teams), str(teams / "alpha")], "not both"),
+        (["--teams", str(teams), "--smpl-model", str(tmp_path / "no.npz")], "--smpl-model"),
+    ]
+    speech = write_speech(tmp_path / "speech", {i: FRAMES / FPS for i in ITEMS})
+    for extra, says in cases:
+        code = intake(["--inputs", str(speech), "--fps", "30", "--quiet", "--out", str(tmp_path / "out"), *extra])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert code == 2 and len(err) == 1 and err[0].startswith("error: ") and says in err[0], (extra, err)
+    assert sorted(p.name for p in (teams / "alpha").iterdir()) == [f"{i}.npz" for i in ITEMS]  # nothing written
+    assert not (tmp_path / "out").exists()
 
 
 def test_unusable_inputs_exit_2_with_one_line(tmp_path, take, capsys):
