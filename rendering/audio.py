@@ -10,6 +10,7 @@
   which players honour), so sound and motion stay in sync to well within a frame.
 """
 
+import os
 import struct
 import subprocess
 from pathlib import Path
@@ -66,8 +67,9 @@ def _header(path, head=None):
 
 
 def audio_seconds(path):
-    """The length of a WAV or FLAC file in seconds, from its header alone (None where the header does not say:
-    a streamed WAV, a FLAC without its sample count); RenderError naming the file for anything else."""
+    """The length of a WAV or FLAC file in seconds, from its header and, for a WAV, its size (None where they do not
+    say: a FLAC without its sample count, a WAV whose data chunk lies beyond the first 64 KB); RenderError naming
+    the file for anything else."""
     head = _head(path)
     _header(path, head)
     if head[:4] == b"fLaC":
@@ -79,7 +81,12 @@ def audio_seconds(path):
         if cid == b"fmt " and at + 12 <= len(head):
             byte_rate = struct.unpack("<I", head[at + 8 : at + 12])[0]
         if cid == b"data":
-            return size / byte_rate if byte_rate and size != 0xFFFFFFFF else None
+            if not byte_rate:
+                raise RenderError(f"{path}: the WAV header's byte rate is 0: write the file again")
+            # What plays is the data the file holds: a streamed WAV declares 0xFFFFFFFF bytes, a cut file more
+            # than it has. A header alone could make a short file hours long, or turn a length check off.
+            held = max(os.path.getsize(path) - at, 0)
+            return (held if size == 0xFFFFFFFF else min(size, held)) / byte_rate
     return None
 
 

@@ -44,7 +44,7 @@ TEAM_COLUMNS = ("team", "verdict", "items", "items_given", "samples_per_item", "
 EXIT_REFUSED = 1
 
 
-def read_inputs(folder) -> dict[str, float | None]:
+def read_inputs(folder) -> dict[str, float]:
     """{item: seconds of its speech} of the released inputs' speech folder; UserError naming what is wrong."""
     folder = Path(folder)
     if not folder.is_dir():
@@ -66,9 +66,17 @@ def read_inputs(folder) -> dict[str, float | None]:
         if item in items:
             raise UserError(f"{folder}: two speech files for item {item} (.wav and .flac): give one")
         try:
-            items[item] = audio_seconds(folder / name)
+            seconds = audio_seconds(folder / name)
         except RenderError as e:
             raise UserError(str(e)) from None
+        # Each item's length is what every team's motion is checked against: one the file does not tell, or no
+        # sound at all, would leave the item unchecked or refuse every team.
+        if seconds is None:
+            raise UserError(f"{folder / name}: its length is not in its header: write it again (a FLAC with its "
+                            "sample count, or a WAV)")  # fmt: skip
+        if seconds <= 0:
+            raise UserError(f"{folder / name}: holds no sound: give the item's speech")
+        items[item] = seconds
     if not items:
         raise UserError(f"{folder}: no speech files (ITEM.wav or ITEM.flac): the test items are named by them")
     return items

@@ -312,6 +312,46 @@ def test_unusable_inputs_exit_2_with_one_line(tmp_path, take, capsys):
     assert code == 2 and "not a folder" in capsys.readouterr().err
 
 
+def _wav_field(path: Path, at: int, value: int):
+    """The WAV written by write_speech with the 4 bytes at `at` (28: the byte rate, 40: the data's size) set."""
+    raw = bytearray(path.read_bytes())
+    raw[at : at + 4] = value.to_bytes(4, "little")
+    path.write_bytes(bytes(raw))
+
+
+@pytest.mark.parametrize(
+    "at, value, code, says",
+    [
+        (40, 0xFFFFFFFF, 1, "give 60 frames"),  # streamed: the data the file holds, so the length is still checked
+        (40, 0xFFFFFFF0, 1, "give 60 frames"),  # more than the file holds: hours long by the header alone
+        (40, 0, 2, "holds no sound"),
+        (28, 0, 2, "byte rate is 0"),
+    ],
+    ids=["streamed", "over-long", "empty", "no-byte-rate"],
+)
+def test_a_speech_header_neither_turns_the_length_check_off_nor_misstates_it(tmp_path, take, capsys, at, value,
+                                                                              code, says):  # fmt: skip
+    """The speech's WAV header gives each item its length, which every team's motion is checked against: a
+    streamed WAV's size or a byte rate of 0 turned the check off (a motion a second short was accepted), a size the
+    file does not hold made the item a day long, and an empty data chunk refused every team."""
+
+    def short(folder):  # item01's motion a second short of its speech
+        m = read_motion(folder / "item01.npz", FPS)
+        save_clip(folder / "item01.npz", m.joints[: FRAMES - 30], take.parents, take.names, FPS)
+
+    team = write_team(tmp_path, take, short)
+    speech = write_speech(tmp_path / "speech", {i: FRAMES / FPS for i in ITEMS})
+    _wav_field(speech / "item01.wav", at, value)
+    argv = ["--inputs", str(speech), "--fps", "30", "--out", str(tmp_path / "out"), "--quiet", str(team)]
+    assert intake(argv) == code
+    if code == 1:
+        found = problems(tmp_path / "out")
+        assert [(p["item"], p["check"]) for p in found] == [("item01", "length")] and says in found[0]["problem"]
+    else:
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "item01.wav" in err[0] and says in err[0], err
+
+
 @pytest.mark.parametrize(
     "extra, says",
     [
