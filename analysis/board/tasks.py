@@ -8,7 +8,8 @@ the board writes a byte; each problem is one line naming the file and the flag t
   to the folder the board is built from, else to the report folder's parent), or `--export TASK=FILE`. Its rows must
   be as many as the report counted, so that a board never publishes another study's answers beside these results.
 - The stimuli (the videos, the manifest): `--stimuli TASK=FOLDER`, else the `stimuli/` folder beside the export, as
-  `make_stimuli --out stimuli/` and the demo leave it.
+  `make_stimuli --out stimuli/` and the demo leave it. Every test clip the export shows must be in its manifest, of
+  the same condition.
 """
 
 from __future__ import annotations
@@ -117,15 +118,39 @@ def find_export(spec: TaskSpec, doc: dict, stats: Path) -> Path:
     )
 
 
-def check_export(path: Path, doc: dict, stats: Path, task: str) -> None:
-    """The export holds the rows the report counted (CONTRACTS §7 n_ratings_total), read as a user's CSV."""
-    with user_files.csv_rows(path, tables.MAX_BYTES, AnalysisError, "export") as (_, rows):
-        n = sum(1 for _ in rows)
+# An export's columns that name a clip shown and its condition, in every design (CONTRACTS §7, §8).
+EXPORT_CLIPS = (("clip_id", "condition"), ("clip_a", "condition_a"), ("clip_b", "condition_b"))
+
+
+def check_export(path: Path, doc: dict, stats: Path, task: str) -> dict[str, str]:
+    """The export holds the rows the report counted (CONTRACTS §7 n_ratings_total), read as a user's CSV; returns
+    {clip_id: condition} of the test clips its rows show."""
+    shown, n = {}, 0
+    with user_files.csv_rows(path, tables.MAX_BYTES, AnalysisError, "export") as (header, rows):
+        pairs = [(clip, cond) for clip, cond in EXPORT_CLIPS if clip in header and cond in header]
+        for _, row in rows:
+            n += 1
+            if row.get("role", "test") == "test":
+                shown.update((row[clip], row[cond]) for clip, cond in pairs if row[clip])
     if n != doc["n_ratings_total"]:
         raise AnalysisError(
             f"{path}: {n} rows, but {stats} counts {doc['n_ratings_total']}: not the export this report was made "
             f"from (--export {task}=FILE)"
         )
+    return shown
+
+
+def check_stimuli(shown: dict, rows: list[dict], manifest: Path, export: Path, task: str) -> None:
+    """Every test clip the export shows is in the manifest, of the same condition: a stimulus folder of another
+    study (another task's, whose clip ids a seed can share) would publish its videos as this task's."""
+    theirs = {r["clip_id"]: r["condition"] for r in rows}
+    for clip, condition in shown.items():
+        if theirs.get(clip) != condition:
+            where = "not there" if clip not in theirs else f"of {theirs[clip]} there"
+            raise AnalysisError(
+                f"{manifest}: not the stimuli of {export}: its clip {clip} of {condition} is {where} "
+                f"(--stimuli {task}=FOLDER, the study's stimulus folder)"
+            )
 
 
 def find_manifest(spec: TaskSpec, export: Path) -> Path:
@@ -144,11 +169,12 @@ def read_task(spec: TaskSpec, n_videos: int) -> Task:
     stats, doc, design = read_stats(spec)
     standings = standings_of(stats, doc, design)
     export = find_export(spec, doc, stats)
-    check_export(export, doc, stats, spec.name)
+    shown = check_export(export, doc, stats, spec.name)
     manifest = find_manifest(spec, export)
     rows = clips.read_manifest(manifest)
     systems = [r["system"] for r in standings.rows]
     conditions = clips.condition_of(systems, rows, manifest, stats)
+    check_stimuli(shown, rows, manifest, export, spec.name)
     videos = clips.pick_clips(rows, conditions, n_videos)
     for clip in (c for picked in videos.values() for c in picked):
         if not clip.source.is_file():

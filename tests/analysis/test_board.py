@@ -335,6 +335,15 @@ BAD = {
         ],
         "no test clips of SysAlpha",
     ),  # fmt: skip
+    "another study's stimuli of the same systems": (  # its clip ids are its own, so the videos would be another's
+        lambda r, t: [
+            "--task",
+            f"a={r / 'report_acr'}",
+            "--stimuli",
+            f"a={write_fake_stimuli(t / 'other', n_items=4, conditions=SYSTEMS, metrics=False, n_training=0).parent}",
+        ],
+        "not the stimuli of",
+    ),  # fmt: skip
 }
 
 
