@@ -15,7 +15,7 @@ import numpy as np
 from moglow_eval.core import skeleton_names
 
 from ..data import seamless_files
-from ..data.motion_files import MotionError, native_fps, read_motion
+from ..data.motion_files import MotionError, header_frames, native_fps, read_motion
 from ..data.smpl_files import is_smpl_file
 from .layout import Problem
 
@@ -88,15 +88,25 @@ def check_file(path, item: str, sample: str, seconds: float | None, rules: Rules
         return [_refused(path, e, item, sample)]
     if abs(fps - rules.fps) > 1e-3 * rules.fps:
         add("fps", f"{fps:g} fps, where the dataset is {rules.fps:g} fps: export it at {rules.fps:g} fps")
+
+    def length(n):
+        if seconds is not None and abs(n / fps - seconds) > 1.0 / fps + 1e-9:
+            want = round(seconds * fps)
+            add("length", f"{n} frames ({n / fps:.2f} s), where the item's speech is {seconds:.2f} s: give {want} "
+                f"frames at {fps:g} fps")  # fmt: skip
+
+    # A file far longer than its item (its header says so) is refused for that alone, unread: within the reader's
+    # bounds it could still take gigabytes and minutes, for a file that is wrong whatever else it holds.
+    declared = header_frames(path)
+    if declared is not None and seconds is not None and declared > 2 * seconds * fps + fps:
+        length(declared)
+        return out
     try:
         m = read_motion(path, fps, **rules.read)
     except MotionError as e:
         return out + [_refused(path, e, item, sample)]
     n = len(m.joints)
-    if seconds is not None and abs(n / fps - seconds) > 1.0 / fps + 1e-9:
-        want = round(seconds * fps)
-        add("length", f"{n} frames ({n / fps:.2f} s), where the item's speech is {seconds:.2f} s: give {want} "
-            f"frames at {fps:g} fps")  # fmt: skip
+    length(n)
     valid = np.ones(n, bool) if m.valid is None else np.asarray(m.valid, bool)
     if not valid.all():
         spans = seamless_files.invalid_spans(valid)

@@ -40,7 +40,7 @@ from moglow_eval.core.clip import (
     npz_headers,
 )
 
-from ..motion.bvh import BvhError, forward_kinematics, header_fps, read_bvh
+from ..motion.bvh import BvhError, forward_kinematics, header_fps, header_timing, read_bvh
 from ..motion.resample import clean_fps, lerp_indices, local_quaternions, quat_to_matrix, resample_local, resample_times
 from . import seamless_files
 from .skeleton_families import UnitError, choose_unit
@@ -283,6 +283,21 @@ def native_fps(path, source_fps=None):
     if fps is None:
         raise MotionError(f"{path}: no frame rate in the file: set [skeleton] fps in the study file")
     return float(fps)
+
+
+def header_frames(path):
+    """How many frames a BVH file or a clip .npz holds, from its header alone (None for other formats and where the
+    header cannot be read: the full reader then names what is wrong)."""
+    path = Path(path)
+    try:
+        if path.name.endswith((".bvh", ".bvh.gz")):
+            return header_timing(path)[1]
+        if path.name.endswith(".npz") and not is_smpl_file(path) and not seamless_files.is_seamless_file(path):
+            shape = npz_headers(path).get("joints", ((),))[0]
+            return int(shape[0]) if len(shape) == 3 else None
+    except (BvhError, ClipError, SmplError):
+        return None
+    return None
 
 
 def _npz_fps(path, source_fps):

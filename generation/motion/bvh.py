@@ -107,7 +107,8 @@ def _read_bounded(f, name):
 
 
 def _read_head(f, name):
-    """(bytes read, (byte budget, frame time) or None at the end of the file before the MOTION header is whole)."""
+    """(bytes read, (byte budget, frame time, frames) or None at the end of the file before the MOTION header is
+    whole)."""
     head, seen, motion = bytearray(), 0, None  # `seen`: the start of the last line searched, which may go on
     while True:
         chunk = f.read(_CHUNK)
@@ -138,6 +139,12 @@ def _find_motion(head, seen):
 
 def header_fps(path):
     """A BVH file's frame rate, from its header alone (plain or gzip); BvhError naming the file otherwise."""
+    return header_timing(path)[0]
+
+
+def header_timing(path):
+    """(frame rate, frames) of a BVH file, from its header alone (plain or gzip): what a length check needs before
+    the frames are read; BvhError naming the file otherwise."""
     path = Path(path)
     try:
         with open(path, "rb") as f:
@@ -147,8 +154,9 @@ def header_fps(path):
     except (OSError, EOFError, zlib.error) as e:
         raise BvhError(f"{path}:0: cannot read file ({getattr(e, 'strerror', None) or e})") from None
     if found is None:
-        return read_bvh(path).fps  # a malformed file: the full reader names what is wrong
-    return 1.0 / found[1]
+        bvh = read_bvh(path)  # a malformed file: the full reader names what is wrong
+        return bvh.fps, bvh.n_frames
+    return 1.0 / found[1], found[2]
 
 
 def _budget(head, name, m):
@@ -169,7 +177,7 @@ def _budget(head, name, m):
             f"{name}:{frames_line}: {n_frames} frames of {n_channels} channels is more than the limit of "
             f"{MAX_MOTION_VALUES} values"
         )
-    return cursor + 1 + n_frames * (n_channels * MAX_BYTES_PER_VALUE + 2) + _CHUNK, dt
+    return cursor + 1 + n_frames * (n_channels * MAX_BYTES_PER_VALUE + 2) + _CHUNK, dt, n_frames
 
 
 def _number(tok, where):

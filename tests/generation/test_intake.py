@@ -312,6 +312,48 @@ def test_unusable_inputs_exit_2_with_one_line(tmp_path, take, capsys):
     assert code == 2 and "not a folder" in capsys.readouterr().err
 
 
+def _declares_450000_frames(folder: Path, take):
+    """item01 as a clip whose joints' header declares 450,000 frames (its data a few bytes), and item02 as a BVH
+    whose Frames line does (its frames a handful): each a small file that says it is hours long."""
+    import gzip
+    import io
+    import zipfile
+
+    header = io.BytesIO()
+    shape = (450_000, take.joints.shape[1], 3)
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f4", "fortran_order": False, "shape": shape})
+    good = dict(np.load(folder / "item01.npz"))
+    (folder / "item01.npz").unlink()
+    with zipfile.ZipFile(folder / "item01.npz", "w") as z:
+        z.writestr("joints.npy", np.lib.format.MAGIC_PREFIX + b"\x01\x00" + header.getvalue()[8:] + bytes(64))
+        for key in ("parents", "joint_names", "fps"):
+            buf = io.BytesIO()
+            np.save(buf, good[key])
+            z.writestr(f"{key}.npy", buf.getvalue())
+    (folder / "item02.npz").unlink()
+    head, frames = gzip.decompress(TAKE.read_bytes()).decode().split("MOTION", 1)
+    lines = frames.strip().splitlines()
+    frame_lines = "\n".join(lines[2:12])  # ten frames of the take
+    (folder / "item02.bvh").write_text(head + "MOTION\nFrames: 450000\nFrame Time: 0.0333333\n" + frame_lines + "\n")
+
+
+def test_a_file_whose_header_says_hours_is_refused_for_its_length_unread(tmp_path, take):
+    """A file whose header declares far more frames than its item has is refused for its length from the header
+    alone: read, such a file (within the reader's bounds) took gigabytes and half a minute, and the truncated ones
+    here would have been refused as unreadable instead, hiding what is wrong with them."""
+    from generation.challenge.checks import Rules, check_file
+
+    team = write_team(tmp_path, take, lambda f: _declares_450000_frames(f, take))
+    bvh = team / "item02.bvh"
+    bvh.rename(tmp_path / "item02.bvh")  # the team's files in one format; the BVH is checked on its own below
+    save_clip(team / "item02.npz", clip(take, 1), take.parents, take.names, FPS)
+    code, out = run(tmp_path, [team])
+    found = [(p["item"], p["check"], p["problem"]) for p in problems(out)]
+    assert code == 1 and [f[:2] for f in found] == [("item01", "length")] and "450000 frames" in found[0][2], found
+    alone = check_file(tmp_path / "item02.bvh", "item02", "", FRAMES / FPS, Rules(FPS, read={"up": "y"}), "bvh")
+    assert [(p.check, "450000 frames" in p.text) for p in alone] == [("length", True)], alone
+
+
 def _wav_field(path: Path, at: int, value: int):
     """The WAV written by write_speech with the 4 bytes at `at` (28: the byte rate, 40: the data's size) set."""
     raw = bytearray(path.read_bytes())
