@@ -164,6 +164,11 @@ def _bvh_positions(path, fps):
     bvh = read_bvh(path)
     if bvh.n_frames < 2:
         raise MotionError(f"{path}: {bvh.n_frames} frame(s); a clip needs at least 2")
+    if len(bvh.names) + len(bvh.end_sites) > MAX_JOINTS:  # what a clip may hold, checked before the kinematics
+        raise MotionError(
+            f"{path}: {len(bvh.names)} joints and {len(bvh.end_sites)} End Sites, more than a clip's limit of "
+            f"{MAX_JOINTS} joints"
+        )
     q, trans = local_quaternions(bvh)
     q, trans = resample_local(q, trans, clean_fps(bvh.fps), fps)
     pos, rot = forward_kinematics(bvh.parents, quat_to_matrix(q), trans)

@@ -353,3 +353,20 @@ def test_a_system_folder_names_its_missing_items_or_says_it_has_none(tmp_path):
         find_system_files(tmp_path, items)
     assert "item(s) item01, item02, item03, item04, item05 and 2 more (expected" in str(e.value)
     assert "\n" not in str(e.value)
+
+
+def test_a_bvh_of_more_joints_than_a_clip_holds_is_refused_before_its_kinematics(tmp_path):
+    """A BVH is read into a clip, which holds at most MAX_JOINTS joints: a file of more (a chain of 1,001 here,
+    20,000 in the intake's probe) is refused naming the file, before forward kinematics over all of them."""
+    from generation.data.motion_files import MotionError, read_motion
+    from moglow_eval.core.clip import MAX_JOINTS
+
+    n = MAX_JOINTS + 1
+    lines = ["HIERARCHY", "ROOT Hips", "{", "OFFSET 0 0 0", "CHANNELS 6 Xposition Yposition Zposition Zrotation "
+             "Xrotation Yrotation"]  # fmt: skip
+    for i in range(1, n):
+        lines += [f"JOINT J{i}", "{", "OFFSET 0 0.001 0", "CHANNELS 3 Zrotation Xrotation Yrotation"]
+    lines += ["}"] * n + ["MOTION", "Frames: 2", "Frame Time: 0.0333333"] + [" ".join(["0"] * (3 * n + 3))] * 2
+    (tmp_path / "deep.bvh").write_text("\n".join(lines) + "\n")
+    with pytest.raises(MotionError, match=rf"deep\.bvh: {n} joints and 0 End Sites, more than a clip's limit"):
+        read_motion(tmp_path / "deep.bvh", 30.0, up="y")
