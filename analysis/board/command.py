@@ -119,6 +119,8 @@ def build_board(specs, out="board", mode=None, publish=False, date=None, title=N
     own, else per mode). `n_videos`: videos per system and task. Returns the top's board.json document. Raises
     AnalysisError, one line, for bad input; every input is checked before anything is written.
     """
+    if not str(out).strip():  # Path("") is the current folder, which a build cannot move into place
+        raise AnalysisError("--out: empty; give the board's folder")
     out = Path(out)
     board = folder.inspect(out)
     mode = mode or (board.mode if board is not None else "challenge")

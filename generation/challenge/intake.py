@@ -258,8 +258,9 @@ def _main(argv):
     write_csv(out / "teams.csv", TEAM_COLUMNS, rows)
     write_text(out / "index.html", intake_page.challenge_page(rows, rules))
     for row in rows:
+        page = f" ({out / row['team'] / 'intake.html'})" if row["verdict"] != "unusable" else ""  # none is written
         print(f"{row['team']}: {row['verdict']}, {row['problems']} problem(s) in {row['files']} file(s) "
-              f"for {row['items']} items ({out / row['team'] / 'intake.html'})")  # fmt: skip
+              f"for {row['items']} items{page}")  # fmt: skip
     if unusable:
         raise UserError(unusable[0] + (f" (and {len(unusable) - 1} more)" if len(unusable) > 1 else ""))
     return EXIT_REFUSED if any(r["verdict"] == "refused" for r in rows) else 0

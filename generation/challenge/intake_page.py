@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import html
 import time
+from urllib.parse import quote
 
 from moglow_eval.core.cli import version
 
@@ -82,7 +83,7 @@ def challenge_page(rows: list[dict], rules) -> str:
     for r in rows:
         team = html.escape(r["team"])
         link = (
-            f'<a href="{html.escape(r["team"], quote=True)}/intake.html">{team}</a>'
+            f'<a href="{html.escape(quote(r["team"]), quote=True)}/intake.html">{team}</a>'
             if r["verdict"] != "unusable"
             else team
         )

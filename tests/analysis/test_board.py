@@ -347,6 +347,11 @@ BAD = {
 }
 
 
+def test_an_empty_out_is_refused_naming_the_flag(reports, capsys):
+    code, err = run(["--task", f"a={reports / 'report_acr'}", "--out", ""], capsys)
+    assert code == 2 and err == "error: --out: empty; give the board's folder\n", err
+
+
 @pytest.mark.parametrize("case", BAD)
 def test_bad_input_is_one_line_and_exit_2(case, reports, tmp_path, capsys):
     argv, message = BAD[case]

@@ -268,6 +268,11 @@ def test_a_whole_challenge_in_one_run(tmp_path, take):
     assert rows["alpha"]["verdict"] == "accepted" and rows["beta"]["verdict"] == "refused"
     index = (out / "index.html").read_text()
     assert 'href="alpha/intake.html"' in index and 'href="beta/intake.html"' in index
+    hashed = teams / "T#1"  # a name a URL reads otherwise: its link is encoded
+    write_team(tmp_path / "h", take).rename(hashed)
+    code, out = run(tmp_path / "hash", [hashed])
+    assert code == 0 and 'href="T%231/intake.html"' in (out / "index.html").read_text()
+    hashed.rename(tmp_path / "T#1")
     # A team that sent an archive, or a link, is judged unusable and named, never left out unsaid (exit 2).
     (teams / "gamma.zip").write_text("an archive, not a folder")
     (teams / "delta").symlink_to(teams / "alpha")
