@@ -130,6 +130,7 @@ def write_text(path: Path, text: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.NamedTemporaryFile("w", dir=path.parent, suffix=".tmp", delete=False, encoding="utf-8") as f:
         f.write(text)
+    os.chmod(f.name, 0o644)  # a report to pass on, as the board's pages are (a temporary file is the owner's alone)
     os.replace(f.name, path)
 
 
@@ -142,6 +143,9 @@ def relative(path, folder) -> str:
 
 
 def problem_rows(sub: Submission) -> list[dict]:
+    # A reader's message names the file by the path the intake gave it: the team reads it inside its own folder,
+    # without the organiser's folders (which the team's page would otherwise show it).
+    inside = f"{sub.folder}{os.sep}"
     return [
         {
             "team": sub.team,
@@ -149,7 +153,7 @@ def problem_rows(sub: Submission) -> list[dict]:
             "item": p.item,
             "sample": p.sample,
             "check": p.check,
-            "problem": p.text,
+            "problem": p.text.replace(inside, ""),
         }  # fmt: skip
         for p in sub.problems
     ]

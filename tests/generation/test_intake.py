@@ -135,6 +135,8 @@ def test_each_problem_is_found_and_named(tmp_path, take, edit, check, needle):
     assert code == 1, found
     assert [p["check"] for p in found] == [check], found
     assert needle in found[0]["problem"] and ":" in found[0]["problem"], found  # what, then what to do
+    assert str(tmp_path) not in found[0]["problem"], found  # the file as the team knows it, not the organiser's path
+    assert (out / "team" / "intake.html").stat().st_mode & 0o777 == 0o644  # a page to pass on
 
 
 def _first_joint(take, kind):
