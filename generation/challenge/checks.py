@@ -14,7 +14,7 @@ import numpy as np
 
 from moglow_eval.core import skeleton_names
 
-from ..data import seamless_files
+from ..data import motion_files, seamless_files
 from ..data.motion_files import MotionError, header_frames, native_fps, read_motion
 from ..data.smpl_files import is_smpl_file
 from .layout import Problem
@@ -117,8 +117,23 @@ def check_file(path, item: str, sample: str, seconds: float | None, rules: Rules
 
 
 def _body(m, valid, fmt, rules, add) -> None:
-    """A body's checks, each problem given to `add`: no joint faster than the bound between two valid frames, and
-    (joint positions) no bone stretching beyond its bound."""
+    """A body's checks, each problem given to `add`: upright along Y, no joint faster than the bound between two
+    valid frames, and (joint positions) no bone stretching beyond its bound."""
+    parents = np.asarray(m.parents)
+    # A point on the floor or at the scene's origin is no part of the body, and its link to the hips moves as the
+    # body does: links from a root marker (`joint_Root`) are left out, and so are those from a first joint not named
+    # as the hips or pelvis (`Reference`, `world`), often such a point. A first joint named `Hips` or `pelvis` is the
+    # body's, and its bones (to the spine and thighs) are checked.
+    floor = set(skeleton_names.root_markers(m.names, parents))
+    if len(parents) and not skeleton_names.is_hips(m.names[0]):
+        floor.add(0)
+    # The reader checks the body's height along Y, which a body lying along Z can pass by its depth (a clip is Y up
+    # by contract, and is not turned): taller along Z than along Y, as the reader's up detection decides, it lies.
+    body = m.joints[valid][:, [j for j in range(len(parents)) if j not in floor]]
+    if body.size and motion_files.detect_up(body) == "z":
+        extent = np.median(body.max(axis=1) - body.min(axis=1), axis=0)
+        add("height", f"the body is {extent[2]:.2f} m along Z and {extent[1]:.2f} m along Y, the up axis: export it "
+            "with Y up (or give --up z)")  # fmt: skip
     if len(m.joints) >= 2:
         speed = np.linalg.norm(np.diff(m.joints, axis=0), axis=-1) * m.fps  # [T-1, J] m/s
         speed[~(valid[1:] & valid[:-1])] = 0.0
@@ -128,14 +143,6 @@ def _body(m, valid, fmt, rules, add) -> None:
                 f"{rules.max_speed:g} m/s for a person): look for a jump there, or the wrong units")  # fmt: skip
     if fmt not in POSITIONS:  # rotations keep their bones by construction
         return
-    parents = np.asarray(m.parents)
-    # A point on the floor or at the scene's origin is no part of the body, and its link to the hips moves as the
-    # body does: links from a root marker (`joint_Root`) are left out, and so are those from a first joint not named
-    # as the hips or pelvis (`Reference`, `world`), often such a point. A first joint named `Hips` or `pelvis` is the
-    # body's, and its bones (to the spine and thighs) are checked.
-    floor = set(skeleton_names.root_markers(m.names, parents))
-    if len(parents) and not skeleton_names.is_hips(m.names[0]):
-        floor.add(0)
     child = np.flatnonzero((parents >= 0) & ~np.isin(parents, list(floor)))
     if len(child):
         length = np.linalg.norm(m.joints[valid][:, child] - m.joints[valid][:, parents[child]], axis=-1)

@@ -105,6 +105,10 @@ def _jump(j, fps):
     return j, fps
 
 
+def _z_up(j, fps):
+    return np.stack([j[..., 0], -j[..., 2], j[..., 1]], axis=-1), fps  # turned to stand along Z
+
+
 def _stretch(j, fps):
     j[20:25, 5] += (j[20:25, 5] - j[20:25, 4]) * 0.5  # one bone half as long again for five frames
     return j, fps
@@ -126,8 +130,9 @@ def _stretch(j, fps):
         (_resave("item01", _jump), "speed", "m/s between frames 29 and 30"),
         (_resave("item02", _stretch), "bones", "changes its length by"),
         (_resave("item03", lambda j, fps: (j * 100, fps)), "height", "tall"),
+        (_resave("item02", _z_up), "height", "m along Z and"),  # its depth passes for a height along Y
     ],
-    ids=["missing", "extra", "not-motion", "fps", "length", "nan", "speed", "bones", "height"],
+    ids=["missing", "extra", "not-motion", "fps", "length", "nan", "speed", "bones", "height", "z-up"],
 )
 def test_each_problem_is_found_and_named(tmp_path, take, edit, check, needle):
     code, out = run(tmp_path, [write_team(tmp_path, take, edit)])
