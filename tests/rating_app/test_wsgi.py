@@ -25,14 +25,16 @@ def worker_memory_mb(master):
     return out
 
 
-def all_workers_hold(master, workers, size, timeout_s=120.0):
-    """The workers' memory once `workers` of them run and each holds `size` MiB (its cache filled: a worker
-    answers once it has built its app, and gunicorn starts them one after another), or the last seen at the
-    deadline."""
+def all_workers_hold(master, workers, size, own, timeout_s=120.0):
+    """The workers' memory once `workers` of them run and each holds `size` MiB, in its resident memory, or (`own`)
+    in its private memory: gunicorn starts them one after another, and one answers a request while the next still
+    reads its videos. The last seen at the deadline."""
     deadline = time.monotonic() + timeout_s
     while True:
         held = worker_memory_mb(master)
-        if len(held) == workers and all(rss >= size for rss, _ in held) or time.monotonic() > deadline:
+        if len(held) == workers and all((private if own else rss) >= size for rss, private in held):
+            return held
+        if time.monotonic() > deadline:
             return held
         time.sleep(0.2)
 
@@ -51,7 +53,7 @@ def test_the_workers_share_the_videos_the_master_read(tmp_path):
             proc = start_gunicorn(port, crowd_env(manifest, db, "tok"), log, workers=3, threads=4, preload=preload)
             try:
                 warm_up(f"http://127.0.0.1:{port}", 12)
-                held[preload] = all_workers_hold(proc.pid, 3, size)
+                held[preload] = all_workers_hold(proc.pid, 3, size, own=not preload)
             finally:
                 stop([proc])
     for preload, workers in held.items():
