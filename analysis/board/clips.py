@@ -33,7 +33,7 @@ def read_manifest(path) -> list[dict]:
     naming the file and line, for a manifest that is not one."""
     path = Path(path)
     base = path.resolve().parent
-    out = []
+    out, lines = [], {}
     with user_files.csv_rows(path, MAX_MANIFEST_BYTES, AnalysisError, "manifest") as (header, rows):
         missing = [c for c in REQUIRED if c not in header]
         if missing:
@@ -43,6 +43,9 @@ def read_manifest(path) -> list[dict]:
                 continue
             if not study.CLIP_ID.fullmatch(row["clip_id"]):
                 raise AnalysisError(f"{path}:{line}: clip_id {row['clip_id'][:40]!r} is not a clip id")
+            if row["clip_id"] in lines:  # a clip id names one clip (CONTRACTS §2): which video would be whose?
+                raise AnalysisError(f"{path}:{line}: clip_id {row['clip_id']} again (line {lines[row['clip_id']]})")
+            lines[row["clip_id"]] = line
             video = (base / row["video"]).resolve()
             if not row["video"] or not video.is_relative_to(base):  # '..', an absolute path or a link leading out
                 raise AnalysisError(f"{path}:{line}: video {row['video'][:80]!r} leaves the stimulus folder {base}")

@@ -129,6 +129,11 @@ def build_board(specs, out="board", mode=None, publish=False, date=None, title=N
     _check_mode(out, board, mode)
     tasks = [read_task(s, n_videos) for s in specs]
     date = date or time.strftime("%Y-%m-%d", time.gmtime())
+    last = max(board.releases, key=lambda r: r["date"], default=None) if board is not None else None
+    if last is not None and date < last["date"]:  # YYYY-MM-DD, as --date takes and a release writes: strings in order
+        raise AnalysisError(
+            f"--date {date}: before release {last['release']}'s date {last['date']}; a board's releases go forward"
+        )
     title = title or (board.title if board is not None and board.title else TITLES[mode])
     if mode == "challenge" and not publish:
         return _preview(out, board, tasks, title, date)

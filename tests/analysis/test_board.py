@@ -261,6 +261,12 @@ def test_a_leaderboard_keeps_every_release(reports, tmp_path, capsys):
         for page in (out / "releases" / str(k)).rglob("*.html"):
             assert f"release {k} of {date} · made with moglow-eval {tool_version()}" in page.read_text(), page
     assert f"release 2 of 2026-12-03 · made with moglow-eval {tool_version()}" in index
+    # a release dated before the one before is refused, the board left as it was
+    before = files_of(out)
+    code, err = run([*second, "--out", out, "--date", "2026-12-02"], capsys)
+    assert code == 2 and err == "error: --date 2026-12-02: before release 2's date 2026-12-03; a board's releases go "\
+        "forward\n", err  # fmt: skip
+    assert files_of(out) == before
 
 
 # ------------------------------------------------------------------------------------------- bad input
@@ -286,6 +292,20 @@ def _with_design(name):
         return json.dumps({**json.loads(text), "design": name})
 
     return edit
+
+
+def _manifest_repeating_a_clip(reports, tmp_path):
+    """The study's stimulus folder with its first test clip's row repeated under another condition."""
+    import shutil
+
+    folder = tmp_path / "repeated"
+    shutil.copytree(reports / "stimuli", folder)
+    text = (folder / "manifest.csv").read_text()
+    first = next(line for line in text.splitlines()[1:] if ",test," in line)
+    other = next(c for c in SYSTEMS if f",{c}," not in first)
+    condition = next(c for c in SYSTEMS if f",{c}," in first)
+    (folder / "manifest.csv").write_text(text + first.replace(f",{condition},", f",{other},") + "\n")
+    return folder
 
 
 BAD = {
@@ -321,6 +341,10 @@ BAD = {
     "no stimulus folder": (
         lambda r, t: ["--task", f"a={r / 'report_acr'}", "--stimuli", f"a={t}"],
         "no stimulus manifest; give --stimuli a=FOLDER",
+    ),
+    "a manifest repeating a clip": (
+        lambda r, t: ["--task", f"a={r / 'report_acr'}", "--stimuli", f"a={_manifest_repeating_a_clip(r, t)}"],
+        "again (line",
     ),
     "another study's export": (
         lambda r, t: ["--task", f"a={r / 'report_acr'}", "--export", f"a={r / 'pairwise.csv'}"],
