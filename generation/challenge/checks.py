@@ -66,8 +66,22 @@ READ_KINDS = (
 )
 
 
+# The study reader's advice names what a study's author sets (its study file, import_motion's flags); on the
+# intake's page it says what the intake takes instead, or nothing where the intake's own words follow (READ_KINDS,
+# "export it").
+STUDY_ADVICE = {
+    "; check [skeleton] units": "",
+    "; set [skeleton] units in the study file": "",
+    " (wrong --scale?)": "",
+    "set [skeleton] fps in the study file": "the intake's --source-fps gives it",
+    "set [skeleton] file in the study file": "the intake's --skeleton gives it",
+}
+
+
 def _refused(path, e: MotionError, item, sample) -> Problem:
     text = str(e)
+    for advice, instead in STUDY_ADVICE.items():
+        text = text.replace(advice, instead)
     for words, check, todo in READ_KINDS:
         if words in text:
             return Problem(str(path), item, sample, check, f"{text}: {todo}")

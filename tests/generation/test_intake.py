@@ -141,6 +141,7 @@ def test_each_problem_is_found_and_named(tmp_path, take, edit, check, needle):
     assert [p["check"] for p in found] == [check], found
     assert needle in found[0]["problem"] and ":" in found[0]["problem"], found  # what, then what to do
     assert str(tmp_path) not in found[0]["problem"], found  # the file as the team knows it, not the organiser's path
+    assert "[skeleton]" not in found[0]["problem"] and "study file" not in found[0]["problem"], found  # a study's
     assert (out / "team" / "intake.html").stat().st_mode & 0o777 == 0o644  # a page to pass on
 
 
@@ -214,6 +215,20 @@ def test_samples_per_item(tmp_path, take):
     code, out = run(tmp_path / "or3", [write_team(tmp_path / "or3", take, drop, samples=3)], samples=3,
                     extra=["--or-one"])  # fmt: skip
     assert code == 1 and [p["check"] for p in problems(out)] == ["samples"]
+
+
+def test_npy_files_without_their_frame_rate_name_the_intakes_flag(tmp_path, take):
+    """A .npy file stores no frame rate, which the intake's --source-fps gives (the study reader's words name a study
+    file's setting, which neither the organiser nor the team has here)."""
+
+    def as_npy(folder):
+        for item in ITEMS:
+            np.save(folder / f"{item}.npy", np.load(folder / f"{item}.npz")["joints"])
+            (folder / f"{item}.npz").unlink()
+
+    code, out = run(tmp_path, [write_team(tmp_path, take, as_npy)])
+    found = problems(out)
+    assert code == 1 and all("--source-fps" in p["problem"] and "study file" not in p["problem"] for p in found)
 
 
 def test_two_files_for_one_item_or_sample_are_refused_naming_both(tmp_path, take):
