@@ -103,11 +103,11 @@ def check_file(path, item: str, sample: str, seconds: float | None, rules: Rules
     if abs(fps - rules.fps) > 1e-3 * rules.fps:
         add("fps", f"{fps:g} fps, where the dataset is {rules.fps:g} fps: export it at {rules.fps:g} fps")
 
-    def length(n):
+    def length(n):  # the advice at the dataset's rate, which the fps problem (if any) asks for too
         if seconds is not None and abs(n / fps - seconds) > 1.0 / fps + 1e-9:
-            want = round(seconds * fps)
+            want = round(seconds * rules.fps)
             add("length", f"{n} frames ({n / fps:.2f} s), where the item's speech is {seconds:.2f} s: give {want} "
-                f"frames at {fps:g} fps")  # fmt: skip
+                f"frames at {rules.fps:g} fps")  # fmt: skip
 
     # A file far longer than its item (its header says so) is refused for that alone, unread: within the reader's
     # bounds it could still take gigabytes and minutes, for a file that is wrong whatever else it holds.

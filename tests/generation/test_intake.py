@@ -217,6 +217,15 @@ def test_samples_per_item(tmp_path, take):
     assert code == 1 and [p["check"] for p in problems(out)] == ["samples"]
 
 
+def test_a_file_at_another_rate_and_length_is_told_one_rate(tmp_path, take):
+    """A 25-fps file a little short: its fps problem asks for the dataset's 30 fps, and its length problem gives
+    the frames at that rate (it said "give 50 frames at 25 fps" beside "export it at 30 fps")."""
+    code, out = run(tmp_path, [write_team(tmp_path, take, _resave("item01", lambda j, fps: (j[:40], 25.0)))])
+    found = {p["check"]: p["problem"] for p in problems(out)}
+    assert code == 1 and set(found) == {"fps", "length"}, found
+    assert "export it at 30 fps" in found["fps"] and found["length"].endswith("give 60 frames at 30 fps"), found
+
+
 def test_npy_files_without_their_frame_rate_name_the_intakes_flag(tmp_path, take):
     """A .npy file stores no frame rate, which the intake's --source-fps gives (the study reader's words name a study
     file's setting, which neither the organiser nor the team has here)."""
