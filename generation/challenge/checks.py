@@ -40,9 +40,12 @@ class Rules:
     # team whose folder holds no item folder is checked as one sample per item.
     or_one: bool = False
 
-    def samples_of(self, folder) -> int:
-        """The samples per item a team's folder must hold."""
-        if self.or_one and not any(p.is_dir() and not p.is_symlink() for p in Path(folder).iterdir()):
+    def samples_of(self, folder, items) -> int:
+        """The samples per item a team's folder must hold: with `or_one`, one where no folder is named as an item
+        (a stray folder, such as an archive's __MACOSX/, is an entry to remove, not a sign of samples)."""
+        if self.or_one and not any(
+            p.name in items and p.is_dir() and not p.is_symlink() for p in Path(folder).iterdir()
+        ):
             return 1
         return self.samples
 

@@ -85,7 +85,7 @@ def read_inputs(folder) -> dict[str, float]:
 def check_team(team: str, folder, inputs: dict, rules: Rules, bar=None) -> tuple[Submission, dict]:
     """A team's submission and its row of the table (TEAM_COLUMNS): every problem of its layout and of its files."""
     folder = Path(folder)
-    samples = rules.samples_of(folder)
+    samples = rules.samples_of(folder, inputs)
     sub = read_submission(team, folder, inputs, samples)
     formats = {}
     for item, by_sample in sorted(sub.files.items()):

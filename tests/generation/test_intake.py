@@ -215,6 +215,13 @@ def test_samples_per_item(tmp_path, take):
     code, out = run(tmp_path / "or3", [write_team(tmp_path / "or3", take, drop, samples=3)], samples=3,
                     extra=["--or-one"])  # fmt: skip
     assert code == 1 and [p["check"] for p in problems(out)] == ["samples"]
+    # an archive's stray folder beside one file per item: the folder is an entry to remove, the team deterministic
+    code, out = run(tmp_path / "mac", [write_team(tmp_path / "mac", take, lambda f: (f / "__MACOSX").mkdir())],
+                    samples=3, extra=["--or-one"])  # fmt: skip
+    found = problems(out)
+    assert code == 1 and [(p["check"], "__MACOSX is not a test item" in p["problem"]) for p in found] == [
+        ("entry", True)
+    ], found
 
 
 def test_a_file_at_another_rate_and_length_is_told_one_rate(tmp_path, take):
