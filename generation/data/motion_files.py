@@ -405,6 +405,9 @@ def read_motion(
         )
     except (BvhError, ClipError, SmplError) as e:
         raise MotionError(str(e)) from None
+    odd = next((str(n) for n in names if not str(n).isprintable() or not str(n)), None)
+    if odd is not None:  # names go into every message, table and page about the motion
+        raise MotionError(f"{path}: a joint name must be printable text, got {ascii(odd)[:60]}")
     if parents[0] != -1:
         raise MotionError(f"{path}: the first joint ({names[0]}) must be the root (parent -1): the camera follows it")
     if not np.isfinite(joints).all():

@@ -233,6 +233,20 @@ def test_a_file_at_another_rate_and_length_is_told_one_rate(tmp_path, take):
     assert "export it at 30 fps" in found["fps"] and found["length"].endswith("give 60 frames at 30 fps"), found
 
 
+def test_a_joint_name_with_a_terminals_escape_is_refused(tmp_path, take):
+    """Joint names go into every problem's text, the team's CSV among them, which a terminal would obey."""
+
+    def escape(folder):
+        c = dict(np.load(folder / "item01.npz"))
+        c["joint_names"] = np.array([*c["joint_names"][:-1], "Head\x1b[31m"])
+        np.savez(folder / "item01.npz", **c)
+
+    code, out = run(tmp_path, [write_team(tmp_path, take, escape)])
+    found = problems(out)
+    assert code == 1 and [p["check"] for p in found] == ["read"], found
+    assert "joint name must be printable text" in found[0]["problem"] and "\x1b" not in found[0]["problem"]
+
+
 def test_npy_files_without_their_frame_rate_name_the_intakes_flag(tmp_path, take):
     """A .npy file stores no frame rate, which the intake's --source-fps gives (the study reader's words name a study
     file's setting, which neither the organiser nor the team has here)."""
