@@ -90,9 +90,14 @@ def _open_up(folder: Path) -> None:
 
 @contextlib.contextmanager
 def staged(parent: Path, name: str):
-    """A hidden folder in `parent` to build in, removed unless the block renamed it away."""
-    parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{name}.building-", dir=parent))
+    """A hidden folder in `parent` to build in, removed unless the block renamed it away; AnalysisError naming the
+    folder that was asked for (not the hidden one) where it cannot be made."""
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{name}.building-", dir=parent))
+    except OSError as exc:
+        where = f"{exc.filename}: " if exc.filename and Path(exc.filename).name[:1] != "." else ""
+        raise AnalysisError(f"{parent / name}: cannot be made there ({where}{exc.strerror or exc})") from None
     try:
         yield tmp
     finally:

@@ -376,6 +376,15 @@ def test_an_empty_out_is_refused_naming_the_flag(reports, capsys):
     assert code == 2 and err == "error: --out: empty; give the board's folder\n", err
 
 
+def test_an_out_under_a_file_names_the_board_and_the_file(reports, tmp_path, capsys):
+    """The build's hidden folder is the board's business: a board that cannot be made names the folder asked for
+    and what is in its way (it said "afile: File exists", or named the hidden folder)."""
+    (tmp_path / "afile").write_text("x")
+    code, err = run(["--task", f"a={reports / 'report_acr'}", "--out", tmp_path / "afile" / "board"], capsys)
+    assert code == 2 and err.startswith(f"error: {tmp_path / 'afile' / 'board'}: cannot be made there"), err
+    assert ".building" not in err and err.count("\n") == 1, err
+
+
 @pytest.mark.parametrize("case", BAD)
 def test_bad_input_is_one_line_and_exit_2(case, reports, tmp_path, capsys):
     argv, message = BAD[case]
