@@ -146,9 +146,10 @@ def _body(m, valid, fmt, rules, add) -> None:
         floor.add(0)
     # The reader checks the body's height along Y, which a body lying along Z can pass by its depth (a clip is Y up
     # by contract, and is not turned): taller along Z than along Y, as the reader's up detection decides, it lies.
-    body = m.joints[valid][:, [j for j in range(len(parents)) if j not in floor]]
+    moving = m.joints[valid]  # the frames every check of the body reads
+    body = moving[:, [j for j in range(len(parents)) if j not in floor]]
     if body.size and motion_files.detect_up(body) == "z":
-        extent = np.median(body.max(axis=1) - body.min(axis=1), axis=0)
+        extent = motion_files.median_extent(body)
         add("height", f"the body is {extent[2]:.2f} m along Z and {extent[1]:.2f} m along Y, the up axis: export it "
             "with Y up (or give --up z)")  # fmt: skip
     if len(m.joints) >= 2:
@@ -162,7 +163,7 @@ def _body(m, valid, fmt, rules, add) -> None:
         return
     child = np.flatnonzero((parents >= 0) & ~np.isin(parents, list(floor)))
     if len(child):
-        length = np.linalg.norm(m.joints[valid][:, child] - m.joints[valid][:, parents[child]], axis=-1)
+        length = np.linalg.norm(moving[:, child] - moving[:, parents[child]], axis=-1)
         median = np.median(length, axis=0)
         change = np.max(np.abs(length / np.where(median > 0, median, 1.0) - 1.0), axis=0)
         change[median <= 1e-6] = 0.0  # a bone of no length (a joint on its parent) has no length to keep

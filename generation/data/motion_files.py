@@ -128,10 +128,15 @@ def body_joints(joints, names, parents):
     return joints[:, skeleton_names.body_skeleton(names, parents)[0]]
 
 
+def median_extent(joints):
+    """[3]: the body's extent along x, y and z in its median frame (joints [T, J, 3])."""
+    return np.median(joints.max(axis=1) - joints.min(axis=1), axis=0)
+
+
 def detect_up(joints):
     """'y' or 'z': the axis along which the body is tallest, in the median frame (a standing, walking or
     dancing body is taller than it is deep; arms spread wide tie at worst with a T-pose, decided by y)."""
-    extent = np.median(joints.max(axis=1) - joints.min(axis=1), axis=0)  # [3]
+    extent = median_extent(joints)
     return "z" if extent[2] > 1.2 * extent[1] else "y"
 
 
@@ -297,10 +302,10 @@ def header_frames(path):
     try:
         if path.name.endswith((".bvh", ".bvh.gz")):
             return header_timing(path)[1]
-        if path.name.endswith(".npz") and not is_smpl_file(path) and not seamless_files.is_seamless_file(path):
+        if path.name.endswith(".npz"):  # a clip's joints (SMPL-family and Seamless files hold none)
             shape = npz_headers(path).get("joints", ((),))[0]
             return int(shape[0]) if len(shape) == 3 else None
-    except (BvhError, ClipError, SmplError):
+    except (BvhError, ClipError):
         return None
     return None
 
