@@ -17,6 +17,7 @@ tool") and, for today's kinds, bench/notes/2026-12-02-results-details.md ("c2st"
 
 import numpy as np
 
+from ..data.motion_files import body_height
 from ..motion.features import rotate_y
 
 JITTER_SIGMA = 0.03  # of the body's height per joint and frame: about 5 cm for an adult
@@ -24,12 +25,8 @@ FREEZE_AT = 0.25  # of the clip's length
 SWAP_TURNS = 2  # full turns of the swapped upper body over the clip
 
 
-def _height(joints):
-    return float(np.median(joints[..., 1].max(axis=1) - joints[..., 1].min(axis=1)))
-
-
 def jitter(joints, rng, root=0):
-    return joints + rng.normal(0.0, JITTER_SIGMA * _height(joints), joints.shape)
+    return joints + rng.normal(0.0, JITTER_SIGMA * body_height(joints), joints.shape)
 
 
 def freeze(joints, rng, root=0):
