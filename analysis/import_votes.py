@@ -17,11 +17,10 @@ carry no catch trials.
 import contextlib
 import csv
 import hashlib
-import os
 import sys
 from pathlib import Path
 
-from moglow_eval.core import cli, user_files, votes
+from moglow_eval.core import cli, user_files, votes, whole_files
 from moglow_eval.core.cli import UserError
 
 REQUIRED = ("user", "input_code", "model_a", "model_b", "winner")
@@ -179,15 +178,15 @@ def import_votes(path, out_path) -> dict:
         raise VotesFileError(f"--out {out_path}: is a folder; give the pairs.csv to write")
     if out_path.exists() and path.exists() and out_path.samefile(path):  # it would replace the votes it reads
         raise VotesFileError(f"--out {out_path}: is the battle file itself; write the pairs elsewhere")
-    tmp = out_path.with_name(out_path.name + ".part")
     try:
-        with _rows(path) as rows, open(tmp, "w", newline="", encoding="utf-8") as fh:
+        with (
+            whole_files.writing(out_path) as tmp,
+            _rows(path) as rows,
+            open(tmp, "x", newline="", encoding="utf-8") as fh,
+        ):
             summary = _convert(path, rows, fh)
-        os.replace(tmp, out_path)
     except OSError as exc:
         raise VotesFileError(f"{out_path}: cannot be written ({exc.strerror or exc})") from None
-    finally:
-        tmp.unlink(missing_ok=True)
     return summary
 
 

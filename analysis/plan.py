@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from moglow_eval.core import cli
+from moglow_eval.core import cli, whole_files
 
 from .data.filtering import DEFAULT_THRESHOLD, exclude_raters, only_test_rows
 from .data.load import AnalysisError, load_ratings
@@ -382,7 +382,7 @@ def _main(argv):
         **{k: v for k, v in res.items() if k != "curve"},
         "curve": curve.to_dict(orient="records"),
     }
-    (out / "plan.json").write_text(json.dumps(doc, indent=1), encoding="utf-8")
+    whole_files.write_whole(out / "plan.json", json.dumps(doc, indent=1))
     d = design
     print(
         f"Plan from {source}: {len(d['conditions'])} conditions x {d['clips_per_condition']} clips, each rater "

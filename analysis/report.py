@@ -15,7 +15,7 @@ from pathlib import Path
 import pandas as pd
 from tqdm import tqdm
 
-from moglow_eval.core import cli, study, tables, user_files
+from moglow_eval.core import cli, study, tables, user_files, whole_files
 
 from .data.filtering import DEFAULT_THRESHOLD
 from .data.load import AnalysisError, load_measure_clips, load_measure_notes
@@ -193,10 +193,10 @@ def build_report(ratings_path, out_dir="report", options: Options | None = None,
         doc["measures"] = report_html.clean(
             {"score": score, "values": report_html.records(values), "agreement": report_html.records(agreement)}
         )
-    (out / "methods.txt").write_text(methods + "\n", encoding="utf-8")
+    whole_files.write_whole(out / "methods.txt", methods + "\n")
     body.append(f"<h2>Methods, for a paper</h2><p class=methods>{html.escape(methods)}</p>")
-    (out / "report.html").write_text(report_html.page(body), encoding="utf-8")
-    (out / "stats.json").write_text(json.dumps(doc, indent=1, allow_nan=False), encoding="utf-8")
+    whole_files.write_whole(out / "report.html", report_html.page(body))
+    whole_files.write_whole(out / "stats.json", json.dumps(doc, indent=1, allow_nan=False))
     bar.update(bar.total - bar.n)
     bar.close()
     if not quiet:

@@ -6,11 +6,10 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import os
 import sys
 from pathlib import Path
 
-from moglow_eval.core import cli
+from moglow_eval.core import cli, whole_files
 from moglow_eval.core.study import DESIGNS
 
 from .store.config import environment
@@ -73,17 +72,12 @@ def _export(a):
         if a.out == "-":
             n = write(engine, sys.stdout)
         else:
-            # Into a file beside the output, renamed over it once written: a refusal leaves no half-written file.
-            tmp = a.out + ".partial"
+            # Written whole or not at all: a refusal half-way leaves no half-written file.
             try:
-                with open(tmp, "w", newline="", encoding="utf-8") as fh:
+                with whole_files.writing(a.out) as tmp, open(tmp, "x", newline="", encoding="utf-8") as fh:
                     n = write(engine, fh)
-                os.replace(tmp, a.out)
             except OSError as e:
                 raise AppError(f"{a.out}: {e.strerror}") from None
-            finally:
-                if os.path.exists(tmp):
-                    os.unlink(tmp)
     except SQLAlchemyError as e:
         first = str(getattr(e, "orig", None) or e).strip().splitlines()
         raise AppError(f"cannot read the database: {first[0] if first else e.__class__.__name__}") from None

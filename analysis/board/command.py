@@ -30,7 +30,7 @@ import sys
 import time
 from pathlib import Path
 
-from moglow_eval.core import cli
+from moglow_eval.core import cli, whole_files
 
 from ..data.load import AnalysisError
 from ..page.methods import methods_outline, tool_version
@@ -82,7 +82,7 @@ def _preview(out: Path, board, tasks, title: str, date: str) -> dict:
             folder.move_into_place(tmp, out)
     else:
         for name, text in files.items():
-            folder.replace_file(out / name, text)
+            whole_files.write_whole(out / name, text)
     return doc
 
 
@@ -106,8 +106,8 @@ def _publish(out: Path, board, tasks, head: dict) -> dict:
         release = write_release(tmp, tasks, head)
         folder.move_into_place(tmp, out / folder.RELEASES / str(number))
     top = _top(release, releases)
-    folder.replace_file(out / folder.BOARD_FILE, dumps(top))
-    folder.replace_file(out / "index.html", pages.results_page(release, f"releases/{number}/", "", releases))
+    whole_files.write_whole(out / folder.BOARD_FILE, dumps(top))
+    whole_files.write_whole(out / "index.html", pages.results_page(release, f"releases/{number}/", "", releases))
     return top
 
 

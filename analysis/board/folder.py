@@ -112,13 +112,3 @@ def move_into_place(tmp: Path, target: Path) -> None:
         os.rename(tmp, target)
     except OSError as exc:
         raise AnalysisError(f"{target}: could not be put in place ({exc.strerror or exc}); was it written meanwhile?")
-
-
-def replace_file(path: Path, text: str) -> None:
-    """A file written whole or not at all: a temporary file beside it, then renamed over it."""
-    with tempfile.NamedTemporaryFile(
-        "w", dir=path.parent, prefix=".", suffix=".tmp", delete=False, encoding="utf-8"
-    ) as fh:
-        fh.write(text)
-    os.chmod(fh.name, 0o644)
-    os.replace(fh.name, path)

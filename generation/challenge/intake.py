@@ -22,13 +22,12 @@ import io
 import os
 import stat
 import sys
-import tempfile
 from collections import Counter
 from pathlib import Path
 
 from tqdm import tqdm
 
-from moglow_eval.core import cli
+from moglow_eval.core import cli, whole_files
 from moglow_eval.core.cli import UserError
 from rendering.audio import audio_seconds
 from rendering.errors import RenderError
@@ -126,12 +125,9 @@ def write_csv(path: Path, columns, rows) -> None:
 
 
 def write_text(path: Path, text: str) -> None:
-    """A file written whole or not at all: a temporary file beside it, then renamed over it."""
+    """A report written whole or not at all (core.whole_files), its folder made first."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile("w", dir=path.parent, suffix=".tmp", delete=False, encoding="utf-8") as f:
-        f.write(text)
-    os.chmod(f.name, 0o644)  # a report to pass on, as the board's pages are (a temporary file is the owner's alone)
-    os.replace(f.name, path)
+    whole_files.write_whole(path, text)
 
 
 def relative(path, folder) -> str:

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from moglow_eval.core import cli
+from moglow_eval.core import cli, whole_files
 from moglow_eval.core.cli import UserError
 from moglow_eval.core.clip import MAX_FPS, MIN_FPS
 
@@ -192,9 +192,8 @@ def prepare(
     )
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out_path.with_name(out_path.name + ".tmp.npz")
-    np.savez(tmp, **arrays)  # uncompressed: mocap floats barely compress and saving stays fast
-    os.replace(tmp, out_path)
+    with whole_files.writing(out_path, suffix=".npz") as tmp:
+        np.savez(tmp, **arrays)  # uncompressed: mocap floats barely compress and saving stays fast
     return dict(
         out=str(out_path),
         n_takes=len(files),

@@ -13,7 +13,6 @@ A proposal is kept only where both people's motion is valid over the item and `m
 the recording. The best are taken first, at most N an interaction, none overlapping another in time.
 """
 
-import csv
 import math
 import re
 from dataclasses import dataclass
@@ -22,6 +21,8 @@ import numpy as np
 
 from moglow_eval.core.cli import UserError
 from moglow_eval.core.tables import read_csv
+
+from ..stimuli.files import write_csv
 
 MODES = ("speaking", "listening", "keyword")
 SPEAK_SHARE = 0.5  # speaking: the least share of the item the agent speaks
@@ -83,10 +84,7 @@ def source_row(item, mode, interaction, people, span, keyword="", keyword_span=(
 
 def write_sources(path, rows):
     """sources.csv at `path`, rows from source_row."""
-    with open(path, "w", newline="", encoding="utf-8") as f:
-        w = csv.DictWriter(f, SOURCE_COLUMNS)
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(path, SOURCE_COLUMNS, rows)
 
 
 def share(intervals, a, b):

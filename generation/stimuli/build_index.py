@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from moglow_eval.core import study
+from moglow_eval.core import study, whole_files
 
 INDEX = ".build.csv"
 KEY_LENGTH = 64  # hex digits of a SHA-256
@@ -134,7 +134,5 @@ class BuildIndex:
 
     def keep_only(self, live: dict[str, str]) -> None:
         """Rewrite the index as `live` {key: clip_id} (atomically: a new file renamed over the old)."""
-        tmp = self.path.with_name(self.path.name + ".tmp")
-        tmp.write_text("".join(f"{k},{c}\n" for k, c in sorted(live.items())), encoding="ascii")
-        os.replace(tmp, self.path)
+        whole_files.write_whole(self.path, "".join(f"{k},{c}\n" for k, c in sorted(live.items())).encode("ascii"))
         self.done = dict(live)

@@ -3,13 +3,14 @@ items.csv and items/ITEM.npz. What goes into them is decided by make_stimuli; th
 
 import contextlib
 import csv
+import io
 import logging
 import shutil
 from pathlib import Path
 
 import numpy as np
 
-from moglow_eval.core import study
+from moglow_eval.core import study, whole_files
 from moglow_eval.core.cli import UserError
 
 from ..data.systems import canonical_placement
@@ -131,10 +132,13 @@ def manifest_row(cid, condition, item, seed, frames, fps, size):
 
 
 def write_csv(path, columns, rows):
-    with open(path, "w", newline="", encoding="utf-8") as f:
-        w = csv.DictWriter(f, fieldnames=columns)
-        w.writeheader()
-        w.writerows(rows)
+    """A table of the stimulus folder in the csv module's dialect (its CRLF line ends), written whole or not at all:
+    a build killed while writing its manifest leaves the earlier one, not half of a new one."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=columns)
+    w.writeheader()
+    w.writerows(rows)
+    whole_files.write_whole(path, buf.getvalue())
 
 
 def write_tables(out, manifest, metrics_rows, fmd, extra_metrics=()):

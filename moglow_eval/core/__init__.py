@@ -13,6 +13,7 @@
 - `colours`: a person's drawing colour as the files carry it and as the rater's page names it.
 - `blas`: one BLAS thread around small, repeated fits (the report's models, the two-sample tests, mesh skinning).
 - `ports`: a free loopback port below the kernel's ephemeral range, for a server started for a moment.
+- `whole_files`: an output written whole or not at all (a hidden temporary file beside it, renamed over it).
 
 `core` imports nothing from the four parts (generation, rendering, rating_app, analysis); they import it.
 """

@@ -10,7 +10,6 @@ committed before the next trial is served, so a backup never holds half an answe
 from __future__ import annotations
 
 import contextlib
-import os
 import shutil
 import sqlite3
 import subprocess
@@ -19,6 +18,8 @@ from pathlib import Path
 from sqlalchemy import inspect
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import SQLAlchemyError
+
+from moglow_eval.core import whole_files
 
 from ..store.db import Clip, Rater, Trial, check_url, make_engine, require_sqlite_file
 from ..store.manifest import AppError
@@ -35,10 +36,12 @@ def backup(db_url: str | None, out) -> str:
         raise AppError(f"--out {out}: is a folder; give the backup file's name")
     if url.get_backend_name() == "sqlite":
         _require_study(url, _sqlite_path(url, must_exist=True))
-        _atomic(out, lambda tmp: _sqlite_copy(_sqlite_path(url), tmp))
+        with whole_files.writing(out) as tmp:
+            _sqlite_copy(_sqlite_path(url), tmp)
         return "sqlite"
     _require_study(url)
-    _atomic(out, lambda tmp: _pg_tool("pg_dump", "--format=custom", "--no-owner", f"--file={tmp}", _libpq(url)))
+    with whole_files.writing(out) as tmp:
+        _pg_tool("pg_dump", "--format=custom", "--no-owner", f"--file={tmp}", _libpq(url))
     return "pg_dump"
 
 
@@ -56,12 +59,9 @@ def restore(backup_file, db_url: str | None) -> str:
             raise AppError(f"--db {target}: exists already; restore into a new file")
         if not target.parent.is_dir():
             raise AppError(f"--db {target}: folder {target.parent} does not exist")
-
-        def write(tmp):  # checked before it is renamed into place: a bad backup leaves no database behind
+        with whole_files.writing(target) as tmp:  # checked before it is renamed into place: a bad backup leaves none
             _sqlite_copy(backup_file, tmp)
             _check_rating_database(tmp, backup_file)
-
-        _atomic(target, write)
         return "sqlite"
     if not head.startswith(PG_DUMP_MAGIC):
         raise AppError(f"{backup_file}: not a pg_dump custom-format backup (restore an SQLite backup into SQLite)")
@@ -107,17 +107,6 @@ def _check_rating_database(copy: Path, backup_file: Path) -> None:
     missing = sorted({Clip.__tablename__, Rater.__tablename__, Trial.__tablename__} - tables)  # any version's
     if missing:
         raise AppError(f"{backup_file}: not a rating study's database (no table {missing[0]})")
-
-
-def _atomic(out: Path, write) -> None:
-    """Write through `write(tmp)` and rename into place, so `out` is never a half-written backup."""
-    tmp = out.with_name(f".{out.name}.partial")
-    tmp.unlink(missing_ok=True)
-    try:
-        write(tmp)
-        os.replace(tmp, out)
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 def _libpq(url) -> str:

@@ -13,6 +13,8 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from moglow_eval.core import whole_files
+
 from ..store.manifest import AppError
 from .client import Client, Refused, Visit, check_design, probe
 from .raters import ClipInfo, Rater, duration_ms, load_audio_answers, load_clips, make_raters, set_qualities
@@ -116,8 +118,7 @@ def _check_arguments(n_raters, careless, concurrency, timeout_s):
 
 def write_summary(summary: dict, path) -> None:
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", encoding="utf-8") as fh:
-        json.dump(summary, fh, indent=1)
+    whole_files.write_whole(path, json.dumps(summary, indent=1))
 
 
 class _Crowd:

@@ -85,7 +85,7 @@ def test_bad_battle_files_are_one_line_and_write_nothing(tmp_path, capsys, body,
     assert iv.main([str(path), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert needle in err and len(err.splitlines()) == 1
-    assert not out.exists() and not list(tmp_path.glob("*.part"))
+    assert not out.exists() and sorted(tmp_path.iterdir()) == [path]  # nor a partial file beside it
 
 
 @pytest.mark.parametrize("out", ["battles.csv", "."], ids=["the-input", "a-folder"])

@@ -449,3 +449,18 @@ def test_a_video_encoded_again_takes_the_next_key_quantiser_and_rate_seed():
     assert (
         render_pool.RETRIES == len(render_pool.KEY_QP) and job[5]["rate_seed"] == 7
     )  # the job itself is left as it was
+
+
+def test_a_table_that_fails_half_way_leaves_the_folders_earlier_one(tmp_path):
+    """A build stopped while it writes manifest.csv (here a row the columns cannot hold, the tenth) leaves the
+    earlier manifest as it was, not its first rows under the new header, and nothing beside it."""
+    from generation.stimuli.files import write_csv
+
+    path = tmp_path / "manifest.csv"
+    write_csv(path, ["clip_id", "condition"], [{"clip_id": "a", "condition": "NAT"}])
+    before = path.read_bytes()
+    rows = [{"clip_id": f"c{i}", "condition": "MG"} for i in range(9)] + [{"clip_id": "x", "role": "test"}]
+    with pytest.raises(ValueError):
+        write_csv(path, ["clip_id", "condition"], rows)
+    assert path.read_bytes() == before == b"clip_id,condition\r\na,NAT\r\n"
+    assert os.listdir(tmp_path) == ["manifest.csv"]
