@@ -175,14 +175,15 @@ def _bvh_positions(path, fps):
             f"{MAX_JOINTS} joints"
         )
     q, trans = local_quaternions(bvh)
-    q, trans = resample_local(q, trans, clean_fps(bvh.fps), fps)
-    pos, rot = forward_kinematics(bvh.parents, quat_to_matrix(q), trans)
-    names, parents = list(bvh.names), list(bvh.parents)
+    names, parents, fps_in = list(bvh.names), list(bvh.parents), clean_fps(bvh.fps)
     ends = [(p, off) for p, off in bvh.end_sites if np.linalg.norm(off) > END_SITE_MIN]
+    del bvh  # its channels' values, a copy of the take the steps below no longer need
+    q, trans = resample_local(q, trans, fps_in, fps)
+    pos, rot = forward_kinematics(np.array(parents), quat_to_matrix(q), trans)
     if ends:
         tips = np.stack([pos[:, p] + np.einsum("tab,b->ta", rot[:, p], off) for p, off in ends], axis=1)
         pos = np.concatenate([pos, tips], axis=1)
-        names += [f"{bvh.names[p]}_end" for p, _ in ends]
+        names += [f"{names[p]}_end" for p, _ in ends]
         parents += [p for p, _ in ends]
     return pos, names, np.array(parents, dtype=np.int64)
 

@@ -204,6 +204,7 @@ def read_bvh(path):
     n_channels = sum(len(c) for c in h.channels)
     cursor, line_no, n_frames, frames_line, dt = _motion_header(raw, m.end(), motion_line + 1, name)
     block = raw[cursor + 1 :] if cursor >= 0 else b""
+    del raw, m  # the block is a copy (and the match holds the file): one copy of the frames' text at a time
     motion = _parse_motion(block, line_no + 1, n_frames, n_channels, frames_line, name)
     return Bvh(
         names=h.names,
@@ -381,15 +382,19 @@ def _parse_motion(block, first, n_frames, n_channels, frames_line, name):
     a line-by-line walk happens only to name the line of a non-numeric value.
     """
     b = np.frombuffer(block, dtype=np.uint8)
-    # A token starts at a non-space byte after a space byte (all bytes <= 32 count as space).
+    # A token starts at a non-space byte after a space byte or at the block's start (all bytes <= 32 count as
+    # space). The tokens of a line are counted from the starts' positions (8 bytes a value), not summed from a
+    # per-byte integer array, which held 8 bytes a byte of text: ten times the file at the parse's peak.
     space = b <= 32
-    starts = np.empty(len(b), dtype=np.uint8)
-    if len(b):
-        starts[0] = not space[0]
-        np.greater(space[:-1], space[1:], out=starts[1:].view(bool))
+    starts = np.logical_not(space)
+    np.logical_and(starts[1:], space[:-1], out=starts[1:])
+    del space
+    tokens = np.flatnonzero(starts)
+    del starts
     line_begin = np.concatenate([[0], np.flatnonzero(b == 10) + 1])
     line_begin = line_begin[line_begin < len(b)]
-    per_line = np.add.reduceat(starts, line_begin, dtype=np.int64) if len(b) else np.zeros(0, np.int64)
+    per_line = np.diff(np.searchsorted(tokens, line_begin), append=len(tokens))
+    del tokens
     nonempty = np.flatnonzero(per_line)
     bad = nonempty[per_line[nonempty] != n_channels]
     if len(bad):

@@ -11,6 +11,8 @@ from scipy.ndimage import gaussian_filter1d
 
 from .bvh import AXIS
 
+CHUNK_FRAMES = 4096  # frames worked on at a time where a whole take would need several copies of itself
+
 
 def quat_mul(a, b):
     """Hamilton product a * b, broadcasting over leading axes."""
@@ -55,31 +57,39 @@ def local_quaternions(bvh, frames=None):
     groups = {}
     for j, (chans, col) in enumerate(zip(bvh.channels, bvh.channel_columns())):
         groups.setdefault(tuple(chans), []).append((j, col))
-    for chans, members in groups.items():
-        js = np.array([j for j, _ in members])
-        cols = np.array([col for _, col in members])
-        qg = None
-        for k, ch in enumerate(chans):
-            axis = AXIS[ch[0]]
-            values = motion[:, cols + k]  # [T, G]
-            if ch.endswith("position"):
-                trans[:, js, axis] = values
-                continue
-            half = np.radians(values) / 2
-            qa = np.zeros(values.shape + (4,))
-            qa[..., 0] = np.cos(half)
-            qa[..., 1 + axis] = np.sin(half)
-            qg = qa if qg is None else quat_mul(qg, qa)
-        if qg is not None:
-            q[:, js] = qg
+    groups = [(chans, np.array([j for j, _ in m]), np.array([c for _, c in m])) for chans, m in groups.items()]
+    # A block of frames at a time: the products' temporaries, several times the result's size when made for every
+    # frame at once, stay a few megabytes however long the take (the same arithmetic, frame by frame).
+    for part in _blocks(T):
+        for chans, js, cols in groups:
+            qg = None
+            for k, ch in enumerate(chans):
+                axis = AXIS[ch[0]]
+                values = motion[part, cols + k]  # [frames, G]
+                if ch.endswith("position"):
+                    trans[part, js, axis] = values
+                    continue
+                half = np.radians(values) / 2
+                qa = np.zeros(values.shape + (4,))
+                qa[..., 0] = np.cos(half)
+                qa[..., 1 + axis] = np.sin(half)
+                qg = qa if qg is None else quat_mul(qg, qa)
+            if qg is not None:
+                q[part, js] = qg
     return q, trans
 
 
 def make_continuous(q):
     """Flip signs along time (axis 0) so consecutive quaternions lie in the same hemisphere."""
-    dots = np.sum(q[1:] * q[:-1], axis=-1)
-    flips = np.concatenate([np.zeros((1,) + dots.shape[1:], dtype=np.int64), np.cumsum(dots < 0, axis=0)])
-    return np.where((flips % 2 == 1)[..., None], -q, q)
+    # The dot products summed in np.sum's order over the last axis, a component at a time: no [T, J, 4] product.
+    a, b = q[1:], q[:-1]
+    dots = a[..., 0] * b[..., 0]
+    for i in (1, 2, 3):
+        dots += a[..., i] * b[..., i]
+    odd = np.logical_xor.accumulate(dots < 0, axis=0)  # an odd number of sign changes up to each frame
+    out = q.copy()
+    out[1:][odd] *= -1
+    return out
 
 
 def slerp(q0, q1, w):
@@ -127,13 +137,22 @@ def resample_local(q, trans, fps_in, fps_out):
     if ratio >= 2:
         sigma = ratio / 2
         q = gaussian_filter1d(q, sigma, axis=0, mode="nearest")
-        q /= np.linalg.norm(q, axis=-1, keepdims=True)
+        for part in _blocks(q.shape[0]):  # renormalised a block of frames at a time: no [T, J, 4] temporary
+            q[part] /= np.linalg.norm(q[part], axis=-1, keepdims=True)
         trans = gaussian_filter1d(trans, sigma, axis=0, mode="nearest")
     i0, i1, w = lerp_indices(q.shape[0], fps_in, fps_out)
-    w = w[:, None]
-    q_out = slerp(q[i0], q[i1], np.broadcast_to(w, (len(i0),) + q.shape[1:-1]))
-    t_out = trans[i0] * (1 - w[..., None]) + trans[i1] * w[..., None]
+    q_out = np.empty((len(i0),) + q.shape[1:])
+    t_out = np.empty((len(i0),) + trans.shape[1:])
+    for part in _blocks(len(i0)):  # the same arithmetic a block of output frames at a time
+        a, b, wp = i0[part], i1[part], w[part, None]
+        q_out[part] = slerp(q[a], q[b], np.broadcast_to(wp, (len(a),) + q.shape[1:-1]))
+        t_out[part] = trans[a] * (1 - wp[..., None]) + trans[b] * wp[..., None]
     return q_out, t_out
+
+
+def _blocks(n):
+    """Slices of CHUNK_FRAMES frames covering n frames."""
+    return (slice(start, start + CHUNK_FRAMES) for start in range(0, n, CHUNK_FRAMES))
 
 
 def clean_fps(fps):
