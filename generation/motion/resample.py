@@ -81,7 +81,7 @@ def local_quaternions(bvh, frames=None):
 
 def make_continuous(q):
     """Flip signs along time (axis 0) so consecutive quaternions lie in the same hemisphere."""
-    # The dot products summed in np.sum's order over the last axis, a component at a time: no [T, J, 4] product.
+    # The dot products a component at a time (no [T, J, 4] product); only their signs are used.
     a, b = q[1:], q[:-1]
     dots = a[..., 0] * b[..., 0]
     for i in (1, 2, 3):
