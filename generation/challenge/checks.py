@@ -43,11 +43,11 @@ class Rules:
     def samples_of(self, folder, items) -> int:
         """The samples per item a team's folder must hold: with `or_one`, one where no folder is named as an item
         (a stray folder, such as an archive's __MACOSX/, is an entry to remove, not a sign of samples)."""
-        if self.or_one and not any(
-            p.name in items and p.is_dir() and not p.is_symlink() for p in Path(folder).iterdir()
-        ):
-            return 1
-        return self.samples
+        try:
+            named = any(p.name in items and p.is_dir() and not p.is_symlink() for p in Path(folder).iterdir())
+        except OSError:  # a folder that cannot be listed: its report says so (layout.read_submission)
+            named = True
+        return 1 if self.or_one and not named else self.samples
 
 
 def file_format(path) -> str:

@@ -35,7 +35,7 @@ from rendering.errors import RenderError
 from ..data.motion_files import Skeleton
 from . import intake_page
 from .checks import FORMATS, Rules, check_file, file_format
-from .layout import NAME_MAX, Problem, Submission, plain_name, read_submission, shown
+from .layout import NAME_MAX, UNREADABLE, Problem, Submission, plain_name, read_submission, shown, unreadable
 
 SPEECH_EXTENSIONS = (".wav", ".flac")
 PROBLEM_COLUMNS = ("team", "file", "item", "sample", "check", "problem")
@@ -89,11 +89,17 @@ def check_team(team: str, folder, inputs: dict, rules: Rules, bar=None) -> tuple
     formats = {}
     for item, by_sample in sorted(sub.files.items()):
         for sample, path in sorted(by_sample.items()):
-            formats[path] = file_format(path)
+            why = unreadable(path)
+            if why is None:
+                formats[path] = file_format(path)
+            else:  # said as what it is, not as a file in no format the study reader takes
+                sub.problems.append(Problem(str(path), item, sample, "read", f"cannot be read ({why}): {UNREADABLE}"))
     counts = Counter(formats.values())
     usual = counts.most_common(1)[0][0] if counts else ""
     for item, by_sample in sorted(sub.files.items()):
         for sample, path in sorted(by_sample.items()):
+            if path not in formats:
+                continue
             if formats[path] != usual:
                 sub.problems.append(Problem(str(path), item, sample, "format", f"{FORMATS[formats[path]]}, where the "
                                             f"rest are {FORMATS[usual]}: give every file in one format"))  # fmt: skip
@@ -131,11 +137,12 @@ def write_text(path: Path, text: str) -> None:
 
 
 def relative(path, folder) -> str:
-    """A problem's file as the team knows it: its path inside the team's folder."""
+    """A problem's file as the team knows it: its path inside the team's folder (the folder itself as NAME/)."""
     try:
-        return str(Path(path).relative_to(folder))
+        inside = Path(path).relative_to(folder)
     except ValueError:
         return str(path)
+    return str(inside) if inside.parts else f"{Path(folder).name}/"
 
 
 def problem_rows(sub: Submission) -> list[dict]:

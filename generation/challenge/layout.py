@@ -47,6 +47,11 @@ class Submission:
         self.problems.append(Problem(str(where), item, sample, check, text))
 
 
+# What a team's report says of a file or folder that cannot be read: the organiser's permissions (an archive unpacked
+# with its own), or the team's, are to be mended before the intake can read what it holds.
+UNREADABLE = "make it readable (chmod a+rX), or send it again"
+
+
 def plain_name(name: str) -> bool:
     """A name that prints as itself: printable, not hidden, at most NAME_MAX characters."""
     return name.isprintable() and not name.startswith(".") and 0 < len(name) <= NAME_MAX
@@ -57,18 +62,32 @@ def shown(name) -> str:
     return name if plain_name(name) else ascii(name)
 
 
-def _entries(folder: Path, sub: Submission, budget: list):
-    """The entries of `folder` (name, lstat) in name order, at most what is left of the budget of MAX_ENTRIES."""
+def _entries(folder: Path, sub: Submission, budget: list, item=""):
+    """The entries of `folder` (name, lstat) in name order, at most what is left of the budget of MAX_ENTRIES; None,
+    and the problem said, where the folder cannot be listed."""
     out = []
-    with os.scandir(folder) as it:
-        for entry in it:
-            budget[0] -= 1
-            if budget[0] < 0:
-                sub.add(folder, "entry", f"more than {MAX_ENTRIES} entries: not a submission folder; send the motion "
-                        "files alone")  # fmt: skip
-                break
-            out.append((entry.name, entry.stat(follow_symlinks=False)))
+    try:
+        with os.scandir(folder) as it:
+            for entry in it:
+                budget[0] -= 1
+                if budget[0] < 0:
+                    sub.add(folder, "entry", f"more than {MAX_ENTRIES} entries: not a submission folder; send the "
+                            "motion files alone")  # fmt: skip
+                    break
+                out.append((entry.name, entry.stat(follow_symlinks=False)))
+    except OSError as e:  # one team's folder that cannot be listed is that team's problem, not every team's stop
+        sub.add(folder, "read", f"the folder cannot be read ({e.strerror or e}): {UNREADABLE}", item)
+        return None
     return sorted(out, key=lambda e: e[0])
+
+
+def unreadable(path) -> str | None:
+    """Why a file cannot be opened for reading (its error's words), or None where it can."""
+    try:
+        with open(path, "rb"):
+            return None
+    except OSError as e:
+        return e.strerror or str(e)
 
 
 def _regular(where, st, sub, item="", sample="") -> bool:
@@ -91,7 +110,10 @@ def read_submission(team: str, folder, items, samples: int) -> Submission:
     sub = Submission(team, folder)
     items = set(items)
     budget = [MAX_ENTRIES]
-    for name, st in _entries(folder, sub, budget):
+    entries = _entries(folder, sub, budget)
+    if entries is None:  # nothing in it can be told apart: that one problem, not one an item
+        return sub
+    for name, st in entries:
         where = folder / name if plain_name(name) else folder / shown(name)
         if not plain_name(name):
             sub.add(where, "entry", "a name that is not plain printable text: name each file ITEM.EXT")
@@ -141,8 +163,12 @@ def _item_folder(sub, path: Path, item: str, items, samples: int, budget):
     if samples == 1:
         sub.add(path, "samples", f"a folder, where the rules ask for one file {item}.EXT: give one sample, as a "
                 "file", item)  # fmt: skip
+    entries = _entries(path, sub, budget, item)
+    if entries is None:  # given, but unread: its one problem says so (not "0 samples", not "missing")
+        sub.files.setdefault(item, {})
+        return
     found = {}
-    for name, st in _entries(path, sub, budget):
+    for name, st in entries:
         where = path / name if plain_name(name) else path / shown(name)
         if not plain_name(name):
             sub.add(where, "entry", "a name that is not plain printable text: name each sample SAMPLE.EXT", item)

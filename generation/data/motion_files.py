@@ -36,6 +36,7 @@ from moglow_eval.core.clip import (
     ClipError,
     check_fps,
     check_skeleton,
+    first_line,
     load_clip,
     npz_headers,
 )
@@ -194,7 +195,7 @@ def _npy_positions(path, skeleton, source_fps, fps):
     try:
         arr = np.load(path, allow_pickle=False, mmap_mode="r")  # mapped: nothing is read before the checks below
     except (OSError, ValueError) as e:
-        raise MotionError(f"{path}: not a readable .npy array ({e})") from None
+        raise MotionError(f"{path}: not a readable .npy array ({first_line(e)})") from None
     if not isinstance(arr, np.ndarray) or arr.ndim != 3 or arr.shape[2] != 3:
         raise MotionError(f"{path}: expected joint positions [T, J, 3], got shape {getattr(arr, 'shape', '?')}")
     if arr.shape[1] != len(skeleton.names):

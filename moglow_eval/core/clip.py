@@ -143,7 +143,10 @@ def save_clip(path, joints, parents, joint_names, fps, control=None, **extra):
 
 
 def first_line(exc):
-    """The first line of an exception's message (its type's name where it has none), for one-line errors."""
+    """The first line of an exception's message (its type's name where it has none), for one-line errors; of an
+    OSError its words alone ("Permission denied"), not its errno and the path the message names already."""
+    if isinstance(exc, OSError) and exc.strerror:
+        return exc.strerror
     text = str(exc).strip()
     return text.splitlines()[0] if text else type(exc).__name__
 

@@ -101,8 +101,13 @@ def clip_from_row(row: dict, where: str, base: Path, check_files: bool) -> Manif
         raise AppError(f"{where}: video {row['video']!r} leaves the stimulus folder {base}")
     if check_files and not video.is_file():
         raise AppError(f"{where}: video {row['video']!r} not found ({video})")
-    if check_files and not _is_mp4(video):  # else any file in the folder (a CSV, a key) is sent to raters as video
-        raise AppError(f"{where}: video {row['video']!r} is not an MP4 file ({video})")
+    if check_files:  # else any file in the folder (a CSV, a key) is sent to raters as video
+        try:
+            mp4 = _is_mp4(video)
+        except OSError as e:  # said as what it is: the server could not send it either
+            raise AppError(f"{where}: video {row['video']!r} cannot be read ({e.strerror or e}): {video}") from None
+        if not mp4:
+            raise AppError(f"{where}: video {row['video']!r} is not an MP4 file ({video})")
     sample = (row.get("sample") or "").strip()
     if sample and not study.SAMPLE_NAME.fullmatch(sample):
         raise AppError(f"{where}: sample {sample!r} is not a sample name {study.SAMPLE_NAME.pattern}")
@@ -146,12 +151,10 @@ MP4_FIRST_BOXES = (b"ftyp", b"free", b"skip", b"wide", b"moov", b"mdat", b"pnot"
 
 
 def _is_mp4(path: Path) -> bool:
-    """Whether `path` starts as an MP4 file does: a first box of one of MP4_FIRST_BOXES' types."""
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(12)
-    except OSError:
-        return False
+    """Whether `path` starts as an MP4 file does: a first box of one of MP4_FIRST_BOXES' types (OSError where it cannot
+    be read)."""
+    with open(path, "rb") as fh:
+        head = fh.read(12)
     return len(head) == 12 and head[4:8] in MP4_FIRST_BOXES
 
 

@@ -228,3 +228,40 @@ def test_a_wav_header_with_an_absurd_sample_rate_is_refused(tmp_path):
     (tmp_path / "fast.wav").write_bytes(bytes(raw))
     with pytest.raises(RenderError, match="fast.wav: the sample rate is 4000000000 Hz, more than the limit"):
         audio.read_audio(tmp_path / "fast.wav")
+
+
+def test_a_motion_file_that_cannot_be_read_is_said_in_its_own_words(tmp_path):
+    """A clip or .npy file of mode 000 is "not a readable ... (Permission denied)", not numpy's "[Errno 13] Permission
+    denied: 'PATH'" repeating the path the line names already (without root's reading rights, in a process of its
+    own)."""
+    import sys
+
+    from helpers.cli import without_reading_rights
+    from helpers.paths import ROOT
+
+    clip, array = tmp_path / "a.npz", tmp_path / "a.npy"
+    np.savez(clip, joints=np.zeros((4, 2, 3), np.float32))
+    np.save(array, np.zeros((4, 2, 3), np.float32))
+    code = """
+import sys
+from generation.data.motion_files import MotionError, Skeleton, read_motion
+import numpy as np
+for path in sys.argv[1:]:
+    try:
+        read_motion(path, 30.0, skeleton=Skeleton(["root", "head"], np.array([-1, 0])), source_fps=30.0)
+    except MotionError as e:
+        print(e)
+"""
+    for path in (clip, array):
+        path.chmod(0)
+    try:
+        r = subprocess.run(without_reading_rights([sys.executable, "-c", code, str(clip), str(array)]),
+                           capture_output=True, text=True, cwd=ROOT)  # fmt: skip
+    finally:
+        for path in (clip, array):
+            path.chmod(0o644)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines() == [
+        f"{clip}: not a readable .npz clip (Permission denied)",
+        f"{array}: not a readable .npy array (Permission denied)",
+    ]

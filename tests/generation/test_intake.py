@@ -501,3 +501,43 @@ def test_seamless_and_amass_layout_submissions_with_their_body_model(tmp_path):
     assert rows["seamless"]["format"].startswith("Seamless") and rows["amass"]["format"].startswith("SMPL-family")
     (found,) = problems(out, "seamless")
     assert found["check"] == "valid" and found["item"] == "item02" and "frames 10-14" in found["problem"]
+
+
+def test_what_cannot_be_read_is_its_teams_problem_and_every_team_is_checked(tmp_path, take):
+    """A file, a sample folder or a whole team folder the intake may not read (an archive unpacked with its own
+    permissions) is one problem in its team's report, said as such; it stopped the whole intake (a folder), or was
+    called a file in no format the reader takes (a file)."""
+    import subprocess
+    import sys
+
+    from helpers.cli import without_reading_rights
+    from helpers.paths import ROOT
+
+    teams = tmp_path / "teams"
+    teams.mkdir()
+    for name, samples in (("alpha", 1), ("file", 1), ("folder", 2), ("whole", 1)):
+        write_team(tmp_path / name, take, samples=samples).rename(teams / name)
+    (teams / "file" / "item02.npz").chmod(0)
+    (teams / "folder" / "item02").chmod(0)
+    (teams / "whole").chmod(0)
+    speech = write_speech(tmp_path / "speech", {i: FRAMES / FPS for i in ITEMS})
+    out = tmp_path / "out"
+    argv = ["--inputs", str(speech), "--fps", "30", "--samples", "2", "--or-one", "--teams", str(teams)]
+    cmd = [sys.executable, "-m", "generation.challenge.intake", *argv, "--out", str(out), "--quiet"]
+    try:
+        r = subprocess.run(without_reading_rights(cmd), capture_output=True, text=True, cwd=ROOT)
+    finally:
+        for path in (teams / "whole", teams / "folder" / "item02", teams / "file" / "item02.npz"):
+            path.chmod(0o755)  # so that the test's folder can be removed
+    assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
+    with open(out / "teams.csv", newline="") as f:
+        assert {r["team"]: r["verdict"] for r in csv.DictReader(f)} == {
+            "alpha": "accepted",
+            "file": "refused",
+            "folder": "refused",
+            "whole": "refused",
+        }
+    for team, where in (("file", "item02.npz"), ("folder", "item02"), ("whole", "whole/")):
+        found = problems(out, team)
+        assert [(p["file"], p["check"]) for p in found] == [(where, "read")], found
+        assert "cannot be read (Permission denied)" in found[0]["problem"]

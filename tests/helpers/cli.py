@@ -21,3 +21,19 @@ def fails_with(main, argv, capsys, needle):
     code, line = one_line_error(main, argv, capsys)
     assert code == 2 and needle in line, line
     return line
+
+
+def without_reading_rights(argv: list[str]) -> list[str]:
+    """`argv` run as a user who cannot read what is not theirs to read: as root, with the capabilities that let root
+    read any file dropped (util-linux's setpriv), so that a file of mode 000 is unreadable as it is to a user."""
+    import os
+    import shutil
+
+    import pytest
+
+    if os.geteuid() != 0:
+        return argv
+    if not shutil.which("setpriv"):
+        pytest.fail("setpriv (util-linux) is needed to run a command without root's reading rights")
+    drop = "-dac_override,-dac_read_search"
+    return ["setpriv", f"--bounding-set={drop}", f"--inh-caps={drop}", *argv]

@@ -355,6 +355,30 @@ def test_a_video_that_is_not_an_mp4_is_refused(tmp_path):
     assert len(load_manifest(manifest)) == len(rows)  # the real videos pass
 
 
+def test_a_video_the_server_may_not_read_is_said_so(tmp_path):
+    """A video of mode 000 (copied in with the wrong owner) was called "not an MP4 file"; it is named as unreadable.
+    Run without root's reading rights, in a process of its own (helpers.cli.without_reading_rights)."""
+    import subprocess
+    import sys
+
+    from helpers.cli import without_reading_rights
+    from helpers.paths import ROOT
+
+    manifest = write_fake_stimuli(tmp_path / "stimuli")
+    video = tmp_path / "stimuli" / list(csv.DictReader(open(manifest, encoding="utf-8")))[2]["video"]
+    video.chmod(0)
+    code = f"from rating_app.store.manifest import load_manifest; load_manifest({str(manifest)!r})"
+    try:
+        r = subprocess.run(
+            without_reading_rights([sys.executable, "-c", code]), capture_output=True, text=True, cwd=ROOT
+        )
+    finally:
+        video.chmod(0o644)
+    last = r.stderr.strip().splitlines()[-1]
+    assert r.returncode == 1 and f"{manifest}:4: video" in last, r.stderr
+    assert "cannot be read (Permission denied)" in last and "not an MP4" not in last
+
+
 def test_videos_outside_the_stimulus_folder_are_refused(tmp_path, make_app):
     manifest = write_fake_stimuli(tmp_path / "stimuli")
     outside = tmp_path / "secret.mp4"
