@@ -37,10 +37,12 @@ def backup(db_url: str | None, out) -> str:
     if url.get_backend_name() == "sqlite":
         _require_study(url, _sqlite_path(url, must_exist=True))
         with whole_files.writing(out) as tmp:
+            _made(tmp, "--out", out)
             _sqlite_copy(_sqlite_path(url), tmp)
         return "sqlite"
     _require_study(url)
     with whole_files.writing(out) as tmp:
+        _made(tmp, "--out", out)
         _pg_tool("pg_dump", "--format=custom", "--no-owner", f"--file={tmp}", _libpq(url))
     return "pg_dump"
 
@@ -60,6 +62,7 @@ def restore(backup_file, db_url: str | None) -> str:
         if not target.parent.is_dir():
             raise AppError(f"--db {target}: folder {target.parent} does not exist")
         with whole_files.writing(target) as tmp:  # checked before it is renamed into place: a bad backup leaves none
+            _made(tmp, "--db", target)
             _sqlite_copy(backup_file, tmp)
             _check_rating_database(tmp, backup_file)
         return "sqlite"
@@ -84,6 +87,15 @@ def _sqlite_path(url, must_exist=False) -> Path:
     if must_exist:
         require_sqlite_file(str(path))
     return path
+
+
+def _made(tmp: Path, flag: str, out: Path) -> None:
+    """The temporary file of `out` made empty at once: a folder the command may not write in is named as such, not as
+    a database SQLite could not open (the one copied from, by its message)."""
+    try:
+        tmp.touch(exist_ok=False)
+    except OSError as e:
+        raise AppError(f"{flag} {out}: cannot be written there ({e.strerror or e})") from None
 
 
 def _sqlite_copy(source: Path, target: Path) -> None:

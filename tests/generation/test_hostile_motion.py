@@ -232,11 +232,11 @@ def test_a_wav_header_with_an_absurd_sample_rate_is_refused(tmp_path):
 
 def test_a_motion_file_that_cannot_be_read_is_said_in_its_own_words(tmp_path):
     """A clip or .npy file of mode 000 is "not a readable ... (Permission denied)", not numpy's "[Errno 13] Permission
-    denied: 'PATH'" repeating the path the line names already (without root's reading rights, in a process of its
+    denied: 'PATH'" repeating the path the line names already (without root's rights over files, in a process of its
     own)."""
     import sys
 
-    from helpers.cli import without_reading_rights
+    from helpers.cli import as_a_plain_user
     from helpers.paths import ROOT
 
     clip, array = tmp_path / "a.npz", tmp_path / "a.npy"
@@ -255,7 +255,7 @@ for path in sys.argv[1:]:
     for path in (clip, array):
         path.chmod(0)
     try:
-        r = subprocess.run(without_reading_rights([sys.executable, "-c", code, str(clip), str(array)]),
+        r = subprocess.run(as_a_plain_user([sys.executable, "-c", code, str(clip), str(array)]),
                            capture_output=True, text=True, cwd=ROOT)  # fmt: skip
     finally:
         for path in (clip, array):

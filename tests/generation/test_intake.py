@@ -510,7 +510,7 @@ def test_what_cannot_be_read_is_its_teams_problem_and_every_team_is_checked(tmp_
     import subprocess
     import sys
 
-    from helpers.cli import without_reading_rights
+    from helpers.cli import as_a_plain_user
     from helpers.paths import ROOT
 
     teams = tmp_path / "teams"
@@ -525,7 +525,7 @@ def test_what_cannot_be_read_is_its_teams_problem_and_every_team_is_checked(tmp_
     argv = ["--inputs", str(speech), "--fps", "30", "--samples", "2", "--or-one", "--teams", str(teams)]
     cmd = [sys.executable, "-m", "generation.challenge.intake", *argv, "--out", str(out), "--quiet"]
     try:
-        r = subprocess.run(without_reading_rights(cmd), capture_output=True, text=True, cwd=ROOT)
+        r = subprocess.run(as_a_plain_user(cmd), capture_output=True, text=True, cwd=ROOT)
     finally:
         for path in (teams / "whole", teams / "folder" / "item02", teams / "file" / "item02.npz"):
             path.chmod(0o755)  # so that the test's folder can be removed

@@ -23,9 +23,10 @@ def fails_with(main, argv, capsys, needle):
     return line
 
 
-def without_reading_rights(argv: list[str]) -> list[str]:
-    """`argv` run as a user who cannot read what is not theirs to read: as root, with the capabilities that let root
-    read any file dropped (util-linux's setpriv), so that a file of mode 000 is unreadable as it is to a user."""
+def as_a_plain_user(argv: list[str]) -> list[str]:
+    """`argv` run with a plain user's rights over files: as root, without the capabilities that let root read and
+    write any file (util-linux's setpriv drops them), so that a file of mode 000 cannot be read, nor a folder of mode
+    555 written in, as for any user."""
     import os
     import shutil
 
@@ -34,6 +35,6 @@ def without_reading_rights(argv: list[str]) -> list[str]:
     if os.geteuid() != 0:
         return argv
     if not shutil.which("setpriv"):
-        pytest.fail("setpriv (util-linux) is needed to run a command without root's reading rights")
+        pytest.fail("setpriv (util-linux) is needed to run a command without root's rights over files")
     drop = "-dac_override,-dac_read_search"
     return ["setpriv", f"--bounding-set={drop}", f"--inh-caps={drop}", *argv]

@@ -357,11 +357,11 @@ def test_a_video_that_is_not_an_mp4_is_refused(tmp_path):
 
 def test_a_video_the_server_may_not_read_is_said_so(tmp_path):
     """A video of mode 000 (copied in with the wrong owner) was called "not an MP4 file"; it is named as unreadable.
-    Run without root's reading rights, in a process of its own (helpers.cli.without_reading_rights)."""
+    Run without root's rights over files, in a process of its own (helpers.cli.as_a_plain_user)."""
     import subprocess
     import sys
 
-    from helpers.cli import without_reading_rights
+    from helpers.cli import as_a_plain_user
     from helpers.paths import ROOT
 
     manifest = write_fake_stimuli(tmp_path / "stimuli")
@@ -369,9 +369,7 @@ def test_a_video_the_server_may_not_read_is_said_so(tmp_path):
     video.chmod(0)
     code = f"from rating_app.store.manifest import load_manifest; load_manifest({str(manifest)!r})"
     try:
-        r = subprocess.run(
-            without_reading_rights([sys.executable, "-c", code]), capture_output=True, text=True, cwd=ROOT
-        )
+        r = subprocess.run(as_a_plain_user([sys.executable, "-c", code]), capture_output=True, text=True, cwd=ROOT)
     finally:
         video.chmod(0o644)
     last = r.stderr.strip().splitlines()[-1]

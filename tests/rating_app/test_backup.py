@@ -165,3 +165,26 @@ def test_backup_and_restore_refuse_bad_input_with_one_line(tmp_path, app_stimuli
         assert cli("backup", "--db", pg, "--out", tmp_path / "pg.bak").returncode == 0
         not_empty = "not empty; restore into a new, empty database"
         command_fails("restore", tmp_path / "pg.bak", "--db", pg, needle=not_empty)
+
+
+def test_a_folder_the_command_may_not_write_in_is_named(tmp_path, app_stimuli):
+    """A backup into a folder the user may not write in, or a restore there, named the database it copies from as
+    one SQLite could not open; now the flag and the file it could not write (run without root's rights to write
+    anywhere: helpers.cli.as_a_plain_user)."""
+    from helpers.cli import as_a_plain_user
+
+    live = f"sqlite:///{tmp_path}/live.sqlite"
+    app_engine(create_app(manifest=app_stimuli, db_url=live)).dispose()
+    assert cli("backup", "--db", live, "--out", tmp_path / "ok.bak").returncode == 0
+    shut = tmp_path / "shut"
+    shut.mkdir(mode=0o555)
+    cases = [
+        (("backup", "--db", live, "--out", shut / "b.bak"), f"--out {shut / 'b.bak'}: cannot be written there"),
+        (("restore", tmp_path / "ok.bak", "--db", f"sqlite:///{shut}/r.sqlite"), f"--db {shut}/r.sqlite: cannot be"),
+    ]
+    for args, needle in cases:
+        cmd = [sys.executable, "-m", "rating_app", *map(str, args)]
+        r = subprocess.run(as_a_plain_user(cmd), cwd=ROOT, capture_output=True, text=True, timeout=300)
+        lines = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and len(lines) == 1 and needle in lines[0] and "(Permission denied)" in lines[0], lines
+    assert list(shut.iterdir()) == []
