@@ -34,6 +34,7 @@ MAX_HEADER_BYTES = 16 << 20
 MAX_MOTION_VALUES = 60_000_000
 MAX_BYTES_PER_VALUE = 64
 _CHUNK = 1 << 20
+_READ_CHUNK = 16 << 20  # the frames' text is read this much at a time, up to the header's budget
 
 
 class BvhError(UserError):
@@ -97,7 +98,13 @@ def _read_bounded(f, name):
     head, found = _read_head(f, name)
     if found is not None:
         budget = found[0]
-        head += f.read(max(budget - len(head), 0) + 1)
+        # In chunks, to the end or one byte past the budget: one read of the budget would ask the allocator for all
+        # of it at once (the header's declared size, up to gigabytes), which a host that does not overcommit refuses.
+        while len(head) <= budget:
+            chunk = f.read(min(_READ_CHUNK, budget + 1 - len(head)))
+            if not chunk:
+                break
+            head += chunk
         if len(head) > budget:
             raise BvhError(
                 f"{name}:0: more data than its header's frames and channels can hold "
