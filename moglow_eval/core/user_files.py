@@ -29,6 +29,7 @@ from pathlib import Path
 
 from .cli import UserError
 
+READ_CHUNK = 16 << 20  # bytes a whole-file read asks for at a time
 MAX_LINE = 1 << 20  # bytes in one line of a user's CSV: a vote or a clip is a few hundred
 MAX_CELL = 64 * 1024  # characters in one cell, below csv's own limit (128 KB), so this message comes first
 MAX_JSON_DEPTH = 8  # a list of reason ids is depth 1; nothing a user gives us nests deeper than a few levels
@@ -184,10 +185,23 @@ def json_value(text: str, where: str, error=UserError, max_depth: int = MAX_JSON
         raise error(message) from None
 
 
+def _read_at_most(fh, n: int) -> bytes:
+    """Up to `n` bytes of `fh`, to its end: in chunks, as one read of `n` asks the allocator for all `n` at once
+    (a cap of hundreds of MB for a file of a few KB)."""
+    chunks, got = [], 0
+    while got < n:
+        chunk = fh.read(min(READ_CHUNK, n - got))
+        if not chunk:
+            break
+        chunks.append(chunk)
+        got += len(chunk)
+    return b"".join(chunks)
+
+
 def read_text(path, max_bytes: int, error=UserError, what: str = "file") -> str:
     """The whole of a small user's file as UTF-8 text (open_regular's checks); `error`, one line, otherwise."""
     with open_regular(path, max_bytes, error, what) as fh:
-        data = fh.read(max_bytes + 1)
+        data = _read_at_most(fh, max_bytes + 1)
     if len(data) > max_bytes:
         raise error(f"{path}: grew past {_size(max_bytes)} while it was read")
     try:
