@@ -8,6 +8,7 @@ import sys
 
 import pytest
 from helpers.cli import fails_with
+from helpers.memory import run_under_address_cap
 from helpers.paths import ROOT
 
 from analysis import report
@@ -117,20 +118,14 @@ def test_a_manifest_that_is_not_a_regular_file_is_one_line(tmp_path, fifo):
         load_manifest(fifo)
 
 
-READ_UNDER_A_CAP = """
-import re, resource, sys
-from moglow_eval.core import user_files
-size = int(re.search(r"VmSize:\\s*(\\d+) kB", open("/proc/self/status").read()).group(1)) * 1024
-resource.setrlimit(resource.RLIMIT_AS, (size + (128 << 20), resource.RLIM_INFINITY))
-print(user_files.read_json(sys.argv[1], 256 << 20))
-"""
-
-
 def test_a_small_file_under_a_large_cap_is_read_without_reserving_the_cap(tmp_path):
     """A few bytes of JSON under a cap of 256 MB (the board's for a report's stats.json): one read of the cap asked the
     allocator for all of it, which a host that does not overcommit memory refuses (here an address-space cap 128 MB
     above the process's imports, in a process of its own); it reads in chunks."""
     path = tmp_path / "stats.json"
     path.write_text('{"design": "acr"}')
-    r = subprocess.run([sys.executable, "-c", READ_UNDER_A_CAP, str(path)], capture_output=True, text=True, cwd=ROOT)
+    r = run_under_address_cap(
+        "import sys\nfrom moglow_eval.core import user_files", "print(user_files.read_json(sys.argv[1], 256 << 20))",
+        128 << 20, path,
+    )  # fmt: skip
     assert r.returncode == 0 and r.stdout.strip() == "{'design': 'acr'}", r.stderr[-2000:]

@@ -267,29 +267,17 @@ for path in sys.argv[1:]:
     ]
 
 
-READ_UNDER_A_CAP = """
-import re, resource, sys
-from generation.data.motion_files import MotionError, read_motion
-size = int(re.search(r"VmSize:\\s*(\\d+) kB", open("/proc/self/status").read()).group(1)) * 1024
-resource.setrlimit(resource.RLIMIT_AS, (size + (512 << 20), resource.RLIM_INFINITY))
-try:
-    read_motion(sys.argv[1], 30.0, units=0.05)
-except MotionError as e:
-    print(e)
-"""
-
-
 def test_a_header_declaring_many_frames_is_read_without_reserving_them(tmp_path):
     """A BVH whose header declares 900,000 frames (1.4 GB of text by the reader's bound) and holds ten: the reader
     asked for the whole bound in one read, which a host that does not overcommit memory refuses (here an address-space
     cap 512 MB above the process's imports, in a process of its own); it reads in chunks and names the short file."""
-    import sys
-
-    from helpers.paths import ROOT
+    from helpers.memory import run_under_address_cap
     from helpers.small_bvh import bvh_text, motion_values
 
     path = tmp_path / "claims.bvh"
     path.write_text(bvh_text(motion_values(), frames=900_000, crlf=False))
-    r = subprocess.run([sys.executable, "-c", READ_UNDER_A_CAP, str(path)], capture_output=True, text=True, cwd=ROOT)
+    work = "try:\n    read_motion(sys.argv[1], 30.0, units=0.05)\nexcept MotionError as e:\n    print(e)"
+    r = run_under_address_cap("import sys\nfrom generation.data.motion_files import MotionError, read_motion", work,
+                              512 << 20, path)  # fmt: skip
     assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr[-2000:]
     assert r.stdout.startswith(f"{path}:") and "MOTION block truncated: Frames says 900000" in r.stdout, r.stdout
