@@ -93,7 +93,7 @@ def check_team(team: str, folder, inputs: dict, rules: Rules, bar=None) -> tuple
             if why is None:
                 formats[path] = file_format(path)
             else:  # said as what it is, not as a file in no format the study reader takes
-                sub.problems.append(Problem(str(path), item, sample, "read", f"cannot be read ({why}): {UNREADABLE}"))
+                sub.add(path, "read", f"cannot be read ({why}): {UNREADABLE}", item, sample)
     counts = Counter(formats.values())
     usual = counts.most_common(1)[0][0] if counts else ""
     for item, by_sample in sorted(sub.files.items()):

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from moglow_eval.core import user_files
 from moglow_eval.core.cli import UserError
 from moglow_eval.core.clip import MAX_FPS, MIN_FPS
 
@@ -34,7 +35,6 @@ MAX_HEADER_BYTES = 16 << 20
 MAX_MOTION_VALUES = 60_000_000
 MAX_BYTES_PER_VALUE = 64
 _CHUNK = 1 << 20
-_READ_CHUNK = 16 << 20  # the frames' text is read this much at a time, up to the header's budget
 
 
 class BvhError(UserError):
@@ -98,13 +98,9 @@ def _read_bounded(f, name):
     head, found = _read_head(f, name)
     if found is not None:
         budget = found[0]
-        # In chunks, to the end or one byte past the budget: one read of the budget would ask the allocator for all
+        # To the end or one byte past the budget, in chunks: one read of the budget would ask the allocator for all
         # of it at once (the header's declared size, up to gigabytes), which a host that does not overcommit refuses.
-        while len(head) <= budget:
-            chunk = f.read(min(_READ_CHUNK, budget + 1 - len(head)))
-            if not chunk:
-                break
-            head += chunk
+        user_files.read_at_most(f, max(budget + 1 - len(head), 0), into=head)
         if len(head) > budget:
             raise BvhError(
                 f"{name}:0: more data than its header's frames and channels can hold "

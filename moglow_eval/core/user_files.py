@@ -185,23 +185,23 @@ def json_value(text: str, where: str, error=UserError, max_depth: int = MAX_JSON
         raise error(message) from None
 
 
-def _read_at_most(fh, n: int) -> bytes:
-    """Up to `n` bytes of `fh`, to its end: in chunks, as one read of `n` asks the allocator for all `n` at once
-    (a cap of hundreds of MB for a file of a few KB)."""
-    chunks, got = [], 0
-    while got < n:
-        chunk = fh.read(min(READ_CHUNK, n - got))
+def read_at_most(fh, n: int, into: bytearray | None = None) -> bytearray:
+    """`into` (a new bytearray where None) with up to `n` more bytes of `fh` appended, to its end: read in chunks, as
+    one read of `n` asks the allocator for all `n` at once (a cap of hundreds of MB for a file of a few KB)."""
+    out = bytearray() if into is None else into
+    stop = len(out) + n
+    while len(out) < stop:
+        chunk = fh.read(min(READ_CHUNK, stop - len(out)))
         if not chunk:
             break
-        chunks.append(chunk)
-        got += len(chunk)
-    return b"".join(chunks)
+        out += chunk
+    return out
 
 
 def read_text(path, max_bytes: int, error=UserError, what: str = "file") -> str:
     """The whole of a small user's file as UTF-8 text (open_regular's checks); `error`, one line, otherwise."""
     with open_regular(path, max_bytes, error, what) as fh:
-        data = _read_at_most(fh, max_bytes + 1)
+        data = read_at_most(fh, max_bytes + 1)
     if len(data) > max_bytes:
         raise error(f"{path}: grew past {_size(max_bytes)} while it was read")
     try:
