@@ -17,8 +17,6 @@ organiser's steps.
 
 from __future__ import annotations
 
-import csv
-import io
 import os
 import stat
 import sys
@@ -33,6 +31,7 @@ from rendering.audio import audio_seconds
 from rendering.errors import RenderError
 
 from ..data.motion_files import Skeleton
+from ..stimuli import files
 from . import intake_page
 from .checks import FORMATS, Rules, check_file, file_format
 from .layout import NAME_MAX, UNREADABLE, Problem, Submission, plain_name, read_submission, shown, unreadable
@@ -122,12 +121,9 @@ def check_team(team: str, folder, inputs: dict, rules: Rules, bar=None) -> tuple
 
 
 def write_csv(path: Path, columns, rows) -> None:
-    """A CSV written whole or not at all (write_text)."""
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(columns), lineterminator="\n")
-    w.writeheader()
-    w.writerows(rows)
-    write_text(path, buf.getvalue())
+    """A table of the intake written whole or not at all, with LF line ends (stimuli.files.write_csv)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    files.write_csv(path, columns, rows, line_end="\n")
 
 
 def write_text(path: Path, text: str) -> None:

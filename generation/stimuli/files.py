@@ -131,11 +131,12 @@ def manifest_row(cid, condition, item, seed, frames, fps, size):
     )
 
 
-def write_csv(path, columns, rows):
-    """A table of the stimulus folder in the csv module's dialect (its CRLF line ends), written whole or not at all:
-    a build killed while writing its manifest leaves the earlier one, not half of a new one."""
+def write_csv(path, columns, rows, *, line_end="\r\n"):
+    """A table written whole or not at all: a build killed while writing its manifest leaves the earlier one, not
+    half of a new one. The stimulus folder's tables keep the csv module's dialect (CRLF line ends), so a rebuild's
+    files stay byte-identical to earlier builds'; newer tables (the intake's) take the project's LF."""
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=columns)
+    w = csv.DictWriter(buf, fieldnames=list(columns), lineterminator=line_end)
     w.writeheader()
     w.writerows(rows)
     whole_files.write_whole(path, buf.getvalue())

@@ -75,6 +75,7 @@ def test_a_good_submission_is_accepted_with_its_report(tmp_path, take):
     with open(out / "teams.csv", newline="") as f:
         (row,) = list(csv.DictReader(f))
     assert row["verdict"] == "accepted" and row["files"] == "3" and row["items_given"] == "3"
+    assert b"\r" not in (out / "teams.csv").read_bytes()  # the project's LF, as its other new tables
     page = (out / "team" / "intake.html").read_text()
     assert "accepted" in page and "<script" not in page and 'name="viewport"' in page
 
