@@ -3,7 +3,8 @@ and random training batches.
 
 Every reader of a dataset (training, sampling, the stimulus pipeline, the shipped held-out set, the benches)
 goes through `read_arrays`, so a broken or foreign file fails the same way everywhere: one DatasetError line
-naming the file and the key.
+naming the file and the key. (The invariants check of generation.motion, a room below this one, reads its one
+array after core.clip.npz_headers has checked the archive.)
 
 torch is imported inside the two functions that make tensors, not at module level: make_stimuli reads the
 held-out windows through this module, and `import generation.make_stimuli` must stay torch-free (its --help,
@@ -29,6 +30,7 @@ HELD_OUT = ("valid", "test")
 # What each held-out window carries: the window, its control, category, take, first frame, and the tau real
 # frames (and their control) before it, which MG is seeded with.
 WINDOW_KEYS = ("x", "c", "labels", "take", "start", "hist", "hist_c")
+ZIP_MAGIC = b"PK\x03\x04"  # how an .npz (a zip archive) begins
 
 
 class DatasetError(UserError):
@@ -40,13 +42,16 @@ def read_arrays(path, keys=None):
     array (the training split is most of the file). Callers check for the keys they need with `require`."""
     path = Path(path)
     try:
-        f = np.load(path, allow_pickle=False)
-        if not isinstance(f, np.lib.npyio.NpzFile):
-            raise ValueError("a single .npy array, not an .npz")
-        with f:
-            return {k: f[k] for k in (f.files if keys is None else keys) if k in f.files}
+        with open(path, "rb") as fh:
+            head = fh.read(len(ZIP_MAGIC))
+        if head == ZIP_MAGIC:
+            f = np.load(path, allow_pickle=False)
+            with f:
+                return {k: f[k] for k in (f.files if keys is None else keys) if k in f.files}
     except NPZ_READ_ERRORS as e:
         raise DatasetError(f"{path}: not a readable prepared dataset .npz ({first_line(e)})") from None
+    # numpy's own message for a BVH, a CSV or an .npy file is about pickled data, which tells the user nothing
+    raise DatasetError(f"{path}: not an .npz archive, as a prepared dataset is (generation.data.prepare makes one)")
 
 
 def require(arrays, keys, path, why="see CONTRACTS.md §2"):

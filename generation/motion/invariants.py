@@ -28,6 +28,7 @@ import sys
 import numpy as np
 
 from moglow_eval.core import cli
+from moglow_eval.core.clip import NPZ_READ_ERRORS, first_line, npz_headers
 
 from . import rigid, skeleton
 
@@ -77,10 +78,18 @@ def build_parser():
 
 def _main(argv):
     path = build_parser().parse_args(argv).dataset
-    with np.load(path) as d:
-        if "train_x" not in d.files:
-            raise cli.UserError(f"{path}: no train_x (a dataset of generation.data.prepare, CONTRACTS §2)")
-        x = d["train_x"]
+    # This floor room may not import the dataset reader (generation.data.dataset): the archive's headers are read
+    # first, so a file that is no .npz, or holds no training windows of the features, is one line before any load.
+    shape = npz_headers(path, limit=None).get("train_x", (None,))[0]
+    if shape is None:
+        raise cli.UserError(f"{path}: missing key 'train_x' (a dataset of generation.data.prepare, CONTRACTS §2)")
+    if len(shape) != 3 or shape[2] != skeleton.POSE_DIM:
+        raise cli.UserError(f"{path}: 'train_x' {tuple(shape)} is not [N, T, {skeleton.POSE_DIM}] (CONTRACTS §2)")
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            x = d["train_x"]
+    except NPZ_READ_ERRORS as e:
+        raise cli.UserError(f"{path}: 'train_x' cannot be read ({first_line(e)})") from None
     print(f"{path}: {len(x)} training windows; the features held at one value (to {TOLERANCE:g} m):")
     for dim, value in constant_dims(x).items():
         print(f"  {dim}: {skeleton.JOINT_NAMES[dim // 3]} {'xyz'[dim % 3]} = {value:g}")

@@ -68,4 +68,27 @@ def test_the_command_names_the_invariants_of_a_dataset_and_refuses_one_without_t
     assert invariants.main([str(data)]) == 0
     assert capsys.readouterr().out.splitlines()[1:] == ["  0: Hips x = 0", "  2: Hips z = 0"]
     assert invariants.main([str(pretrained.HELDOUT)]) == 2
-    assert "no train_x" in capsys.readouterr().err
+    assert "missing key 'train_x'" in capsys.readouterr().err
+
+
+def test_the_command_says_in_one_line_what_is_wrong_with_a_file_that_is_not_a_dataset(heldout, tmp_path, capsys):
+    """numpy's own words for a text file or a lone array are about pickled data, and the command used to stop on
+    them, and on a truncated archive, with a traceback."""
+    bvh = tmp_path / "take.bvh"
+    bvh.write_text("HIERARCHY\nROOT Hips\n")
+    np.save(tmp_path / "lone.npy", heldout[0][:2])
+    good = tmp_path / "good.npz"
+    np.savez(good, train_x=heldout[0][:2])
+    (tmp_path / "cut.npz").write_bytes(good.read_bytes()[:300])
+    np.savez(tmp_path / "narrow.npz", train_x=heldout[0][:2, :, :6])
+    cases = {
+        "take.bvh": "take.bvh: not a readable .npz file (File is not a zip file)",
+        "lone.npy": "lone.npy: not a readable .npz file (File is not a zip file)",
+        "cut.npz": "cut.npz: not a readable .npz file (",
+        "narrow.npz": f"narrow.npz: 'train_x' (2, {heldout[0].shape[1]}, 6) is not [N, T, 63]",
+        "absent.npz": "absent.npz: not a readable .npz file (No such file or directory)",
+    }
+    for name, message in cases.items():
+        assert invariants.main([str(tmp_path / name)]) == 2, name
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err, (name, err)

@@ -321,6 +321,12 @@ def test_cli_errors_are_one_line(tmp_path, small_dataset, capsys):
     )
     err = capsys.readouterr().err
     assert err.startswith("error: config 'nosuch' not found") and len(err.strip().splitlines()) == 1
+    # a take or a table given as the dataset: said as such (numpy's own words are about pickled data)
+    take = tmp_path / "take.bvh"
+    take.write_text("HIERARCHY\nROOT Hips\n")
+    assert main(["--model", "mg", "--config", "tiny", "--data", str(take), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{take}: not an .npz archive, as a prepared dataset is" in err and len(err.strip().splitlines()) == 1
 
 
 def test_ddp_two_cpu_processes_match_one(small_dataset, tmp_path):
