@@ -142,6 +142,7 @@ def build_parser():
 
 def _main(argv) -> int:
     a = build_parser().parse_args(argv)
+    cli.folder_to_write(a.out, "the demo's folder")
     try:
         run_challenge(Path(a.out), a.items, a.raters, a.seed, a.db, a.ratings_per_clip)
     except KeyboardInterrupt:

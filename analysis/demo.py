@@ -389,6 +389,7 @@ def build_parser():
 
 def _main(argv) -> int:
     a = build_parser().parse_args(argv)
+    cli.folder_to_write(a.out, "the demo's folder")
     try:
         run_demo(
             Path(a.out),

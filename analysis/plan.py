@@ -345,6 +345,7 @@ def _clip_test_text(clip, target, clips, check) -> str:
 
 def _main(argv):
     args = build_parser().parse_args(argv)
+    cli.folder_to_write(args.out, "the plan's folder")  # before the simulation, not after it
     design, source, pair = (_design_from_flags if args.no_pilot else _design_from_pilot)(args)
     pilot_diff = design["means"][pair[1]] - design["means"][pair[0]]
     diff = args.difference if args.difference is not None else abs(pilot_diff)
@@ -360,8 +361,6 @@ def _main(argv):
     design["clips_per_rater"] = min(design["clips_per_rater"], every_clip)
     res = plan(design, pair, args.power, args.n_sim, args.alpha, args.seed, args.raters, progress=not args.quiet)
     out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise AnalysisError(f"--out {out}: is a file, not a folder")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

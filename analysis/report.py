@@ -32,8 +32,6 @@ from .stats.samples import sample_scores, sample_spread
 
 def _prepare_out(out):
     """The report folder, created; a file in the way or a place we cannot write is the --out flag's problem."""
-    if out.exists() and not out.is_dir():
-        raise AnalysisError(f"--out {out}: is a file, not a folder")
     try:
         (out / "figures").mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -146,7 +144,7 @@ def build_report(ratings_path, out_dir="report", options: Options | None = None,
     check_design_options(design, options, ratings_path)
     data = design.prepare(ratings_path, options)
     target = study_target(ratings_path)  # before any work: a bad value is the file's problem
-    out = Path(out_dir)
+    out = cli.folder_to_write(out_dir, "the report's folder")  # a file in the way, or "" (the current folder)
     _prepare_out(out)
     bar = tqdm(
         total=design.steps,

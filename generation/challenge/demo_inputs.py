@@ -165,6 +165,7 @@ def build_parser():
 
 def _main(argv):
     args = build_parser().parse_args(argv)
+    cli.folder_to_write(args.out, "the challenge's folder")
     out = Path(args.out)
     if out.exists() and any(out.iterdir()):
         raise cli.UserError(f"--out {out}: not empty; give a new folder")

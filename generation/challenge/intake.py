@@ -191,11 +191,7 @@ def out_folder(out: str, teams: dict) -> Path:
     """--out as a folder the reports may go to: not empty, not a file, not inside a submission, and no team's report
     folder (OUT/TEAM) its submission, as with --out set to the --teams folder: the reports would become part of the
     teams' folders, and the next intake would refuse each team for them."""
-    if not out:
-        raise UserError("--out: empty; give the reports' folder")
-    path = Path(out)
-    if path.exists() and not path.is_dir():
-        raise UserError(f"--out {out}: a file, not a folder")
+    path = cli.folder_to_write(out, "the reports' folder")
     for team, folder in teams.items():
         there = Path(folder).resolve()
         if path.resolve().is_relative_to(there) or (path / team).resolve() == there:

@@ -364,6 +364,7 @@ def build_parser():
 
 def _main(argv):
     args = build_parser().parse_args(argv)
+    cli.file_to_write(args.out, "the dataset file to write")  # before the takes are read, not after
     data = args.data
     if data is None:
         data = default_data_dir()

@@ -210,6 +210,7 @@ def build_parser():
 
 def _main(argv):
     args = build_parser().parse_args(argv)
+    cli.folder_to_write(args.out, "the items' folder")
     cli.log_to_stderr(args.quiet)
     items = cut_conversations(
         args.folders, args.out, args.mode, args.length_s, args.margin_s, args.min_valid, args.per_interaction,

@@ -147,6 +147,7 @@ def build_parser():
 
 def _main(argv):
     args = build_parser().parse_args(argv)
+    cli.folder_to_write(args.out, "the study's folder")
     print(build(args.out, args.items, args.appropriateness, args.seed))
     return 0
 

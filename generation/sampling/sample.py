@@ -175,6 +175,7 @@ def build_parser():
 
 def _main(argv):
     a = build_parser().parse_args(argv)
+    cli.folder_to_write(a.out, "the clips' folder")
     model = load_model(a.checkpoint, a.device)
     x, c = sample_split(model, a.data, a.split, a.n, a.temperature, a.seed, a.precision)
     require_finite(x, a.checkpoint)

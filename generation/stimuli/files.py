@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from moglow_eval.core import study, whole_files
+from moglow_eval.core import cli, study, whole_files
 from moglow_eval.core.cli import UserError
 
 from ..data.systems import canonical_placement
@@ -45,12 +45,10 @@ class StimuliError(UserError):
 
 
 def refuse_existing(out, force):
-    """StimuliError when `out` holds a stimulus set and `force` is not given, or when it, or the nearest of its
-    folders that exists, is a file (the set's first file would be refused only after the work)."""
-    out = Path(out)
-    there = next((p for p in (out, *out.parents) if p.exists()), None)
-    if there is not None and not there.is_dir():
-        raise StimuliError(f"--out {out}: " + ("a file, not a folder" if there == out else f"{there} is a file"))
+    """StimuliError when `out` holds a stimulus set and `force` is not given; a UserError when it is empty, or it
+    or the nearest of its folders that exists is a file (cli.folder_to_write: else the set's first file would be
+    refused only after the work)."""
+    out = cli.folder_to_write(out, "the stimulus folder")
     if (out / "manifest.csv").exists() and not force:
         raise StimuliError(f"{out}: already holds a stimulus set (manifest.csv); pass --force to replace it")
 

@@ -464,6 +464,7 @@ def build_parser():
 
 def _main(argv):
     a = build_parser().parse_args(argv)
+    cli.folder_to_write(a.out, "the run's folder")
     out = train(
         a.model,
         a.config,

@@ -16,6 +16,7 @@ import logging
 import math
 import sys
 from importlib import metadata
+from pathlib import Path
 
 EXIT_USAGE = 2
 DIST = "moglow-eval"
@@ -84,6 +85,33 @@ def number(kind=float, lo=None, hi=None, lo_open=False):
         return value
 
     return parse
+
+
+def folder_to_write(out, what: str, flag: str = "--out") -> Path:
+    """`out` as the folder a command writes in, checked before any work so a long run does not end on it: not empty
+    (that would be the current folder), and neither it nor the nearest of its folders that exists a file.
+    `what` names the folder in the message ("the report's folder"). UserError naming the flag, else the path."""
+    if not str(out).strip():
+        raise UserError(f"{flag}: empty; give {what}")
+    out = Path(out)
+    there = next((p for p in (out, *out.parents) if p.exists()), None)
+    if there is not None and not there.is_dir():
+        raise UserError(f"{flag} {out}: " + ("a file, not a folder" if there == out else f"{there} is a file"))
+    return out
+
+
+def file_to_write(out, what: str, flag: str = "--out") -> Path:
+    """`out` as the file a command writes, checked before any work (a training, a dataset's preparation): not
+    empty, not a folder, and no file where one of its folders would be. UserError naming the flag."""
+    if not str(out).strip():
+        raise UserError(f"{flag}: empty; give {what}")
+    out = Path(out)
+    if out.is_dir():
+        raise UserError(f"{flag} {out}: a folder; give {what}")
+    there = next((p for p in out.parents if p.exists()), None)
+    if there is not None and not there.is_dir():
+        raise UserError(f"{flag} {out}: {there} is a file")
+    return out
 
 
 def run(main, argv=None):

@@ -167,6 +167,14 @@ def test_plan_cli_errors_are_one_line(tmp_path, args, start, capsys):
     assert fails_with(plan.main, [*args, "--out", str(tmp_path), "--quiet"], capsys, "").startswith(start)
 
 
+def test_an_out_in_the_way_is_refused_before_the_simulation(tmp_path, capsys):
+    """It was checked only after the simulation (minutes at the default --n-sim); "" is refused too."""
+    (tmp_path / "afile").write_text("x")
+    pilot = [str(DATA / "ratings_small.csv"), "--quiet"]
+    for out, says in (("", "error: --out: empty"), (str(tmp_path / "afile"), f"error: --out {tmp_path / 'afile'}: a")):
+        assert fails_with(plan.main, [*pilot, "--out", out], capsys, "").startswith(says)
+
+
 def test_a_pilot_its_effects_fit_exactly_is_one_line(tmp_path, capsys):
     """A pilot whose every rating is its condition plus its rater's bias, nothing left over: no mixed model to take
     the variances from, said in one line (it was a ModelUndefined traceback)."""

@@ -313,8 +313,9 @@ def test_too_few_ratings_and_bad_out_are_one_line_errors(tmp_path, capsys):
     a_file.write_text("not a folder")
     cases = [
         ([str(two)], f"{two}: 2 test ratings in 2 conditions"),
-        ([str(DATA / "exclusion.csv"), "--out", str(a_file)], f"--out {a_file}: is a file"),
-        ([str(DATA / "exclusion.csv"), "--out", str(a_file / "sub")], f"--out {a_file / 'sub'}: cannot create"),
+        ([str(DATA / "exclusion.csv"), "--out", str(a_file)], f"--out {a_file}: a file, not a folder"),
+        ([str(DATA / "exclusion.csv"), "--out", ""], "--out: empty; give the report's folder"),
+        ([str(DATA / "exclusion.csv"), "--out", str(a_file / "sub")], f"--out {a_file / 'sub'}: {a_file} is a file"),
     ]
     for args, start in cases:
         argv = [*args, "--quiet", "--n-boot", "20"] + ([] if "--out" in args else ["--out", str(tmp_path / "rep")])

@@ -370,3 +370,38 @@ def test_a_bvh_of_more_joints_than_a_clip_holds_is_refused_before_its_kinematics
     (tmp_path / "deep.bvh").write_text("\n".join(lines) + "\n")
     with pytest.raises(MotionError, match=rf"deep\.bvh: {n} joints and 0 End Sites, more than a clip's limit"):
         read_motion(tmp_path / "deep.bvh", 30.0, up="y")
+
+
+# ------------------------------------------------------------------ --out, before any work
+def test_an_empty_out_or_one_in_the_way_is_refused_before_any_work(tmp_path, monkeypatch, capsys):
+    """`--out ""` is the current folder to Python: training and sampling wrote there, and the built-in study was
+    built into it; preparing a dataset or training the motion encoder read and trained first, then stopped on an
+    --out that was a folder (with a traceback, or naming the hidden temporary file). Each command now says so at
+    once: the inputs named here do not exist, so any work before the check would be the error instead."""
+    from generation import make_stimuli
+    from generation.data import prepare
+    from generation.metrics import fmd
+    from generation.own_study import demo_study
+    from generation.sampling import sample
+    from generation.training import train
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "afile").write_text("x")
+    (tmp_path / "afolder").mkdir()
+    none = str(tmp_path / "none.npz")
+    commands = {
+        "make_stimuli": (make_stimuli.main, [], "folder"),
+        "train": (train.main, ["--model", "mg", "--config", "tiny", "--data", none], "folder"),
+        "sample": (sample.main, ["--checkpoint", none, "--data", none], "folder"),
+        "demo_study": (demo_study.main, [], "folder"),
+        "prepare": (prepare.main, ["--data", str(tmp_path / "no-takes")], "file"),
+        "fmd": (fmd.main, ["--data", none], "file"),
+    }
+    for name, (main, argv, kind) in commands.items():
+        in_the_way = "afile" if kind == "folder" else "afolder"
+        for out, says in (("", "--out: empty; give the"), (in_the_way, f"--out {in_the_way}: a f")):
+            code, line = one_line_error(main, [*argv, "--out", out], capsys)
+            assert code == 2 and line.startswith(f"error: {says}"), (name, out, line)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile", "afolder"] and not any(
+        (tmp_path / "afolder").iterdir()
+    )
