@@ -56,6 +56,8 @@ def _export(a):
     from .operations.export import export_csv
     from .store.db import check_url, make_engine, require_sqlite_file, study_design
 
+    if a.out != "-":
+        cli.file_to_write(a.out, "the file to write, or - for the standard output")
     url = check_url(a.db)
     parsed = make_url(url)
     if parsed.drivername.startswith("sqlite"):

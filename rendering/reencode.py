@@ -90,6 +90,9 @@ def reencode(src, dst, like, seed: int | None = None) -> None:
     encode.KEY_QP); RenderError, one line, when `src` differs in any, keeps coming out as it went in or ffmpeg
     fails, and then no `dst`."""
     src, dst = Path(src), Path(dst)
+    for given, name in ((src, "the video to encode"), (Path(like), "the study's video (--like)")):
+        if dst.exists() and given.exists() and dst.samefile(given):  # a failed encode removes dst: it would be lost
+            raise RenderError(f"{dst}: is {name}; write the new encode elsewhere")
     (w, h), fps, _ = _probe(Path(like))
     if w % 2 or h % 2:
         raise RenderError(f"{like}: {w}x{h} pixels; a stimulus video's sides are even (yuv420p)")
@@ -166,6 +169,7 @@ def build_parser():
 
 def _main(argv):
     args = build_parser().parse_args(argv)
+    cli.file_to_write(args.out, "the video to write", flag="OUT")
     reencode(args.video, args.out, args.like)
     return 0
 

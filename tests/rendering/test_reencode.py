@@ -81,3 +81,18 @@ def test_a_video_that_never_comes_out_the_studys_sizes_is_refused(flat, tmp_path
         reencode(src, out, like, seed=2)
     assert calls == [None, *KEY_QP]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["like.mp4", "src.mp4"]
+
+
+def test_the_video_itself_or_the_studys_as_out_is_refused_and_left_as_it_was(flat, tmp_path, capsys):
+    """An encode that fails removes its output: with OUT the video given (or --like's), that removed the video."""
+    from helpers.cli import one_line_error
+
+    like, src = flat
+    before = {p: p.read_bytes() for p in (like, src)}
+    for out, name in ((src, "the video to encode"), (like, "the study's video")):
+        with pytest.raises(RenderError, match=f"{out}: is {name}"):
+            reencode(src, out, like)
+    for out, says in (("", "OUT: empty"), (str(tmp_path), f"OUT {tmp_path}: a folder")):
+        code, line = one_line_error(reencode_module.main, [str(src), out, "--like", str(like)], capsys)
+        assert code == 2 and line.startswith(f"error: {says}"), line
+    assert {p: p.read_bytes() for p in (like, src)} == before
