@@ -35,7 +35,10 @@ def backup(db_url: str | None, out) -> str:
     if out.is_dir():
         raise AppError(f"--out {out}: is a folder; give the backup file's name")
     if url.get_backend_name() == "sqlite":
-        _require_study(url, _sqlite_path(url, must_exist=True))
+        db = _sqlite_path(url, must_exist=True)
+        _require_study(url, db)
+        if out.exists() and out.samefile(db):  # renamed over the live study, a running app would write on unseen
+            raise AppError(f"--out {out}: is the study's database itself; write the backup elsewhere")
         with whole_files.writing(out) as tmp:
             _made(tmp, "--out", out)
             _sqlite_copy(_sqlite_path(url), tmp)

@@ -137,6 +137,7 @@ def test_backup_and_restore_refuse_bad_input_with_one_line(tmp_path, app_stimuli
     """The refusals in-process (the conftest's command_fails); the backups and restores that succeed, as processes."""
     live = f"sqlite:///{tmp_path}/live.sqlite"
     app_engine(create_app(manifest=app_stimuli, db_url=live)).dispose()
+    live_file = (tmp_path / "live.sqlite").stat()
     (tmp_path / "not_a_backup").write_text("hello")
     assert cli("backup", "--db", live, "--out", tmp_path / "ok.bak").returncode == 0
     (tmp_path / "cut.bak").write_bytes((tmp_path / "ok.bak").read_bytes()[:20000])  # a copy cut short
@@ -146,6 +147,7 @@ def test_backup_and_restore_refuse_bad_input_with_one_line(tmp_path, app_stimuli
         cases = [
             (("backup", "--db", f"sqlite:///{tmp_path}/none.sqlite", "--out", tmp_path / "x"), "none.sqlite: no such"),
             (("backup", "--db", live, "--out", tmp_path), "is a folder"),
+            (("backup", "--db", live, "--out", tmp_path / "live.sqlite"), "is the study's database itself"),
             (("backup", "--db", pg, "--out", tmp_path / "x"), "no ratings table (not a rating app database)"),
             (("restore", tmp_path / "ok.bak", "--db", live), "exists already; restore into a new file"),
             (("restore", tmp_path / "not_a_backup", "--db", f"sqlite:///{tmp_path}/n.sqlite"), "not an SQLite backup"),
@@ -157,6 +159,7 @@ def test_backup_and_restore_refuse_bad_input_with_one_line(tmp_path, app_stimuli
         ]
         for args, message in cases:
             command_fails(*args, needle=message)
+        assert (tmp_path / "live.sqlite").stat().st_ino == live_file.st_ino  # not renamed over by its own backup
         # a refused restore leaves no database behind, so the next one, of a good backup, is not refused as existing
         assert not (tmp_path / "cut.sqlite").exists() and not (tmp_path / "o.sqlite").exists()
         # a non-empty PostgreSQL database is refused, never merged into
