@@ -56,12 +56,13 @@ def _export(a):
     from .operations.export import export_csv
     from .store.db import check_url, make_engine, require_sqlite_file, study_design
 
-    if a.out != "-":
-        cli.file_to_write(a.out, "the file to write, or - for the standard output")
     url = check_url(a.db)
     parsed = make_url(url)
-    if parsed.drivername.startswith("sqlite"):
-        require_sqlite_file(parsed.database or "")
+    sqlite_file = parsed.database if parsed.drivername.startswith("sqlite") else None
+    if a.out != "-":  # the study's own SQLite file as --out would be replaced by its export
+        cli.file_to_write(a.out, "the file to write, or - for the standard output", reads=[("--db", sqlite_file)])
+    if sqlite_file is not None:
+        require_sqlite_file(sqlite_file or "")
     engine = make_engine(url)
     try:
         if "ratings" not in inspect(engine).get_table_names():

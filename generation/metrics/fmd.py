@@ -207,7 +207,7 @@ def _main(argv):
     ap.add_argument("--seed", type=cli.number(int, 0), default=0)
     ap.add_argument("--quiet", action="store_true")
     a = ap.parse_args(argv)
-    cli.file_to_write(a.out, "the encoder file to write")  # before the training, not after it
+    cli.file_to_write(a.out, "the encoder file to write", reads=[("--data", a.data)])  # before the training
     state = train_encoder(a.data, a.steps, seed=a.seed, progress=not a.quiet)
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)
     torch.save(state, a.out)

@@ -100,9 +100,11 @@ def folder_to_write(out, what: str, flag: str = "--out") -> Path:
     return out
 
 
-def file_to_write(out, what: str, flag: str = "--out") -> Path:
+def file_to_write(out, what: str, flag: str = "--out", reads=()) -> Path:
     """`out` as the file a command writes, checked before any work (a training, a dataset's preparation): not
-    empty, not a folder, and no file where one of its folders would be. UserError naming the flag."""
+    empty, not a folder, no file where one of its folders would be, and none of the files the command reads
+    (`reads`: (flag, path) pairs; None paths skipped), which the written file would replace. UserError naming the
+    flag."""
     if not str(out).strip():
         raise UserError(f"{flag}: empty; give {what}")
     out = Path(out)
@@ -111,6 +113,9 @@ def file_to_write(out, what: str, flag: str = "--out") -> Path:
     there = next((p for p in out.parents if p.exists()), None)
     if there is not None and not there.is_dir():
         raise UserError(f"{flag} {out}: {there} is a file")
+    for source, path in reads:
+        if path is not None and out.exists() and Path(path).exists() and out.samefile(path):
+            raise UserError(f"{flag} {out}: is the file {source} names, which it would replace; write elsewhere")
     return out
 
 

@@ -405,3 +405,6 @@ def test_an_empty_out_or_one_in_the_way_is_refused_before_any_work(tmp_path, mon
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile", "afolder"] and not any(
         (tmp_path / "afolder").iterdir()
     )
+    # the encoder written over the dataset it trains on (after the training, which read it whole)
+    code, line = one_line_error(fmd.main, ["--data", "afile", "--out", str(tmp_path / "afile")], capsys)
+    assert code == 2 and "is the file --data names" in line and (tmp_path / "afile").read_text() == "x", line

@@ -142,8 +142,14 @@ def test_export_cli_errors(tmp_path):
     r = cli("export", "--db", "postgresql://postgres@127.0.0.1:5432/no_such_db_here", "--out", tmp_path / "x.csv")
     assert r.returncode == 2 and r.stderr.startswith("error:") and "Traceback" not in r.stderr
     # the --out before the database: "" (a traceback) or a folder (its hidden temporary file was named)
-    for out, says in (("", "error: --out: empty"), (tmp_path, f"error: --out {tmp_path}: a folder")):
-        r = cli("export", "--db", f"sqlite:///{tmp_path}/missing.sqlite", "--out", out)
+    db = tmp_path / "study.sqlite"
+    db.write_bytes(b"")  # the study's own file as --out: its export would have replaced it
+    for out, says in (
+        ("", "error: --out: empty"),
+        (tmp_path, f"error: --out {tmp_path}: a folder"),
+        (db, f"error: --out {db}: is the file --db names"),
+    ):
+        r = cli("export", "--db", f"sqlite:///{db}", "--out", out)
         assert r.returncode == 2 and r.stderr.startswith(says) and len(r.stderr.strip().splitlines()) == 1, r.stderr
 
 
