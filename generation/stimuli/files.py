@@ -38,6 +38,9 @@ METRICS_COLUMNS = [*study.METRIC_KEYS, *study.METRIC_NAMES]
 ITEMS_COLUMNS = ["item", "role", "category", "take", "start_frame", "frames", "fps", "control"]
 FMD_COLUMNS = ["condition", "n_windows", "fmd"]
 SUBFOLDERS = ("videos", "motion", "sheets")  # one file per clip in each, named by its clip id
+# What a stimulus set holds at its top, which a new build replaces: its folders, then its tables.
+SET_ENTRIES = (*SUBFOLDERS, "items", "audio_check", "manifest.csv", "metrics.csv", "items.csv", "c2st.csv",
+               "c2st_features.csv", "audio_check.csv", study.MEASURES_FILE, study.GESTURE_FILE)  # fmt: skip
 
 
 class StimuliError(UserError):
@@ -51,6 +54,15 @@ def refuse_existing(out, force):
     out = cli.folder_to_write(out, "the stimulus folder")
     if (out / "manifest.csv").exists() and not force:
         raise StimuliError(f"{out}: already holds a stimulus set (manifest.csv); pass --force to replace it")
+    # A folder of the user's own (their study's items/ or motion/, beside --out .) has the name of one a set
+    # holds: it is replaced only when asked, not taken for a set's and removed. A killed build's are its index's.
+    theirs = next((n for n in SET_ENTRIES if (out / n).exists()), None)
+    if theirs and not force and not (out / INDEX).exists() and not (out / "manifest.csv").exists():
+        shown = f"{theirs}/" if (out / theirs).is_dir() else theirs
+        raise StimuliError(
+            f"--out {out}: holds {shown}, which is no stimulus set's (there is no manifest.csv); a build would "
+            "replace it: give another folder, or pass --force to replace it"
+        )
 
 
 def prepare_out(out, force, keep_videos=False):
@@ -60,12 +72,11 @@ def prepare_out(out, force, keep_videos=False):
     out = Path(out)
     refuse_existing(out, force)
     kept = ("videos", "sheets") if keep_videos else ()
-    for sub in (*SUBFOLDERS, "items", "audio_check"):
-        if (out / sub).exists() and sub not in kept:
-            shutil.rmtree(out / sub)
-    for name in ("manifest.csv", "metrics.csv", "items.csv", "c2st.csv", "c2st_features.csv", "audio_check.csv",
-                 study.MEASURES_FILE, study.GESTURE_FILE):  # fmt: skip
-        (out / name).unlink(missing_ok=True)
+    for name in SET_ENTRIES:
+        if (out / name).is_dir() and name not in kept:
+            shutil.rmtree(out / name)
+        elif name.endswith(".csv"):
+            (out / name).unlink(missing_ok=True)
     for sub in SUBFOLDERS:
         (out / sub).mkdir(parents=True, exist_ok=True)
     return out
