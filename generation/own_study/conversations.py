@@ -157,8 +157,16 @@ def cut_conversations(folders, out, mode, length_s, margin_s=0.5, min_valid=0.9,
                       keywords=None, mismatched=False, seed=0, force=False, progress=True):  # fmt: skip
     """Cut items from conversations into `out` (see the module's docstring); returns the items (cuts.Cut)."""
     out = Path(out)
-    if out.exists() and not force and not (out.is_dir() and not any(out.iterdir())):
-        raise ConversationError(f"{out}: already exists; give --force to replace it")
+    if out.exists() and not (out.is_dir() and not any(out.iterdir())):
+        if not force:
+            raise ConversationError(f"{out}: already exists; give --force to replace it")
+        # --force replaces a folder of items this command wrote, never another (`--out .`, the recordings' own)
+        if not out.is_dir() or not (out / "sources.csv").is_file():
+            raise ConversationError(f"--out {out}: not a folder of items this command wrote (no sources.csv), so "
+                                    "--force does not replace it: give another --out")  # fmt: skip
+        inside = next((f for f in folders if Path(f).resolve().is_relative_to(out.resolve())), None)
+        if inside is not None:
+            raise ConversationError(f"--out {out}: holds the recordings' folder {inside}, which --force would remove")
     found = find_interactions(folders)
     wanted = keyword_table(keywords) if mode == "keyword" else None
     if mode == "keyword" and wanted is None:

@@ -153,8 +153,19 @@ def test_an_existing_item_folder_is_replaced_only_with_force(raw, tmp_path, caps
     (tmp_path / "items" / "keep.txt").write_text("mine")
     argv = [str(raw.folder), "--out", str(tmp_path / "items"), "--mode", "listening", "--quiet"]
     fails_with(conversations, argv, capsys, "already exists; give --force")
-    assert (tmp_path / "items" / "keep.txt").exists()
-    assert conversations([*argv, "--force"]) == 0 and not (tmp_path / "items" / "keep.txt").exists()
+    # a folder this command did not write is not its to remove, --force or not (it removed `--out .` whole)
+    fails_with(conversations, [*argv, "--force"], capsys, "not a folder of items this command wrote")
+    assert (tmp_path / "items" / "keep.txt").read_text() == "mine"
+    ours = [str(raw.folder), "--out", str(tmp_path / "ours"), "--mode", "listening", "--quiet"]
+    assert conversations(ours) == 0
+    (tmp_path / "ours" / "stale.txt").write_text("an earlier cut's")
+    fails_with(conversations, ours, capsys, "already exists; give --force")
+    assert conversations([*ours, "--force"]) == 0 and not (tmp_path / "ours" / "stale.txt").exists()
+    # nor the folder that holds the recordings, though it has a sources.csv
+    shutil.copytree(raw.folder, tmp_path / "ours" / "raw")
+    inner = [str(tmp_path / "ours" / "raw"), "--out", str(tmp_path / "ours"), "--mode", "listening", "--quiet"]
+    fails_with(conversations, [*inner, "--force"], capsys, "holds the recordings' folder")
+    assert (tmp_path / "ours" / "raw").is_dir()
 
 
 def test_a_keyword_said_with_punctuation_is_written_as_the_keyword_file_names_it():
