@@ -54,14 +54,14 @@ def refuse_existing(out, force):
     out = cli.folder_to_write(out, "the stimulus folder")
     if (out / "manifest.csv").exists() and not force:
         raise StimuliError(f"{out}: already holds a stimulus set (manifest.csv); pass --force to replace it")
-    # A folder of the user's own (their study's items/ or motion/, beside --out .) has the name of one a set
-    # holds: it is replaced only when asked, not taken for a set's and removed. A killed build's are its index's.
+    # A folder of the user's own (their study's items/ or motion/, beside --out .) with the name of one a set
+    # holds is not a set's to replace, --force or not (--force replaces a set). A killed build's are its index's.
     theirs = next((n for n in SET_ENTRIES if (out / n).exists()), None)
-    if theirs and not force and not (out / INDEX).exists() and not (out / "manifest.csv").exists():
+    if theirs and not (out / INDEX).exists() and not (out / "manifest.csv").exists():
         shown = f"{theirs}/" if (out / theirs).is_dir() else theirs
         raise StimuliError(
-            f"--out {out}: holds {shown}, which is no stimulus set's (there is no manifest.csv); a build would "
-            "replace it: give another folder, or pass --force to replace it"
+            f"--out {out}: holds {shown}, which is no stimulus set's (there is no manifest.csv) and a build would "
+            "replace: give another folder"
         )
 
 

@@ -431,7 +431,7 @@ def test_refusing_to_replace_a_set_touches_nothing(tmp_path, capsys):
 
 def test_a_folder_of_the_users_own_named_as_a_sets_is_not_removed(tmp_path, capsys):
     """--out a study's own folder, whose items/ (or motion/, items.csv) is the user's: the build removed it as a
-    set's, without --force; now it is refused at once and the folder left as it was."""
+    set's, without --force; now it is refused at once, with --force too, and the folder left as it was."""
     for name in ("items", "motion", "items.csv"):
         out = tmp_path / name.replace(".", "_")
         (out / name / "take.bvh" if "." not in name else out / name).parent.mkdir(parents=True, exist_ok=True)
@@ -440,7 +440,9 @@ def test_a_folder_of_the_users_own_named_as_a_sets_is_not_removed(tmp_path, caps
         line = _fails(capsys, "--out", out)
         slash = "" if "." in name else "/"
         assert line.startswith(f"error: --out {out}: holds {name}{slash}, which is no stimulus set's"), line
-        assert "--force" in line and _tree(out) == before
+        assert "give another folder" in line and _tree(out) == before
+        line = _fails(capsys, "--out", out, "--force")  # --force replaces a stimulus set, not what is no set's
+        assert "which is no stimulus set's" in line and _tree(out) == before
 
 
 def test_an_out_that_is_a_file_is_refused_before_any_work(tmp_path, capsys):
