@@ -38,6 +38,9 @@ METRICS_COLUMNS = [*study.METRIC_KEYS, *study.METRIC_NAMES]
 ITEMS_COLUMNS = ["item", "role", "category", "take", "start_frame", "frames", "fps", "control"]
 FMD_COLUMNS = ["condition", "n_windows", "fmd"]
 SUBFOLDERS = ("videos", "motion", "sheets")  # one file per clip in each, named by its clip id
+# Made before a build's first folder and removed once its tables are written: the folders a killed build leaves
+# (no manifest, and no build index before a study's render) are its own, for the next build to replace.
+BUILDING = ".stimuli-building"
 # What a stimulus set holds at its top, which a new build replaces: its folders, then its tables.
 SET_ENTRIES = (*SUBFOLDERS, "items", "audio_check", "manifest.csv", "metrics.csv", "items.csv", "c2st.csv",
                "c2st_features.csv", "audio_check.csv", study.MEASURES_FILE, study.GESTURE_FILE)  # fmt: skip
@@ -55,9 +58,9 @@ def refuse_existing(out, force):
     if (out / "manifest.csv").exists() and not force:
         raise StimuliError(f"{out}: already holds a stimulus set (manifest.csv); pass --force to replace it")
     # A folder of the user's own (their study's items/ or motion/, beside --out .) with the name of one a set
-    # holds is not a set's to replace, --force or not (--force replaces a set). A killed build's are its index's.
+    # holds is not a set's to replace, --force or not (--force replaces a set). A killed build's are marked.
     theirs = next((n for n in SET_ENTRIES if (out / n).exists()), None)
-    if theirs and not (out / INDEX).exists() and not (out / "manifest.csv").exists():
+    if theirs and not any((out / n).exists() for n in ("manifest.csv", INDEX, BUILDING)):
         shown = f"{theirs}/" if (out / theirs).is_dir() else theirs
         raise StimuliError(
             f"--out {out}: holds {shown}, which is no stimulus set's (there is no manifest.csv) and a build would "
@@ -71,6 +74,8 @@ def prepare_out(out, force, keep_videos=False):
     those no clip names any more)."""
     out = Path(out)
     refuse_existing(out, force)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / BUILDING).touch()
     kept = ("videos", "sheets") if keep_videos else ()
     for name in SET_ENTRIES:
         if (out / name).is_dir() and name not in kept:
@@ -168,6 +173,7 @@ def write_tables(out, manifest, metrics_rows, fmd, extra_metrics=()):
     )
     if fmd:
         write_csv(out / "fmd.csv", FMD_COLUMNS, fmd)
+    (out / BUILDING).unlink(missing_ok=True)  # a stimulus set now: its manifest says so
 
 
 def summary_text(metrics_rows):

@@ -14,7 +14,7 @@ from helpers.paths import DATA, ROOT, TEST_DATA
 
 from generation import make_stimuli
 from generation.motion.features import root_trajectory
-from generation.stimuli import render_pool
+from generation.stimuli import files, render_pool
 from moglow_eval.core.clip import load_clip
 
 CONDITION_NAMES = ("nat", "mg", "fl", "bad")
@@ -62,6 +62,7 @@ def test_stimuli_quick_run_counts_and_columns(manifest, quick_stimuli):
     for m in manifest:
         count[m["role"], m["condition"]] = count.get((m["role"], m["condition"]), 0) + 1
     assert count["test", "NAT"] == count["test", "MG"] == count["test", "FL"] == 30
+    assert not (quick_stimuli / files.BUILDING).exists()  # a finished set carries no mark of a build under way
     assert count["catch", "BAD"] == count["catch", "NAT"] == 4  # NAT: the reference of pairwise/parallel catches
     assert sum(v for (r, _), v in count.items() if r == "catch") == 16  # BAD, and NAT, MG, FL of each catch item
     training = {c for (r, c) in count if r == "training"}
@@ -443,6 +444,15 @@ def test_a_folder_of_the_users_own_named_as_a_sets_is_not_removed(tmp_path, caps
         assert "give another folder" in line and _tree(out) == before
         line = _fails(capsys, "--out", out, "--force")  # --force replaces a stimulus set, not what is no set's
         assert "which is no stimulus set's" in line and _tree(out) == before
+    # what a killed build left (its folders, no manifest) is its own: marked when it began, replaced by the next
+    killed = tmp_path / "killed"
+    (killed / "videos").mkdir(parents=True)
+    (killed / "videos" / "ab12.part.mp4").write_bytes(b"")
+    with pytest.raises(files.StimuliError, match="no stimulus set's"):
+        files.refuse_existing(killed, force=False)
+    (killed / files.BUILDING).touch()
+    files.prepare_out(killed, force=False)
+    assert not any((killed / "videos").iterdir()) and (killed / files.BUILDING).exists()
 
 
 def test_an_out_that_is_a_file_is_refused_before_any_work(tmp_path, capsys):
