@@ -58,11 +58,12 @@ def _export(a):
 
     url = check_url(a.db)
     parsed = make_url(url)
-    sqlite_file = parsed.database if parsed.drivername.startswith("sqlite") else None
+    sqlite = parsed.drivername.startswith("sqlite")
     if a.out != "-":  # the study's own SQLite file as --out would be replaced by its export
-        cli.file_to_write(a.out, "the file to write, or - for the standard output", reads=[("--db", sqlite_file)])
-    if sqlite_file is not None:
-        require_sqlite_file(sqlite_file or "")
+        reads = [("--db", parsed.database or None if sqlite else None)]
+        cli.file_to_write(a.out, "the file to write, or - for the standard output", reads=reads)
+    if sqlite:
+        require_sqlite_file(parsed.database or "")
     engine = make_engine(url)
     try:
         if "ratings" not in inspect(engine).get_table_names():

@@ -340,6 +340,8 @@ def require_sqlite_file(path: str) -> None:
     """AppError unless `path` is a file with something in it: a command that reads a study (export, backup, adding
     a condition) would otherwise open a missing or empty file as a new database and write SQLite's header into
     the user's file."""
+    if not path or path == ":memory:":  # sqlite:// is a database in memory, with no study in it
+        raise AppError("--db: an SQLite database in a file is needed (sqlite:///FILE), not one in memory")
     if not os.path.isfile(path):
         raise AppError(f"{path}: no such database file")
     if os.path.getsize(path) == 0:

@@ -141,6 +141,11 @@ def test_export_cli_errors(tmp_path):
     assert len(r.stderr.strip().splitlines()) == 1
     r = cli("export", "--db", "postgresql://postgres@127.0.0.1:5432/no_such_db_here", "--out", tmp_path / "x.csv")
     assert r.returncode == 2 and r.stderr.startswith("error:") and "Traceback" not in r.stderr
+    r = cli("export", "--db", "sqlite://", "--out", tmp_path / "x.csv")  # in memory: no study to export
+    assert (
+        r.returncode == 2
+        and r.stderr == "error: --db: an SQLite database in a file is needed (sqlite:///FILE), not one in memory\n"
+    )
     # the --out before the database: "" (a traceback) or a folder (its hidden temporary file was named)
     db = tmp_path / "study.sqlite"
     db.write_bytes(b"")  # the study's own file as --out: its export would have replaced it
