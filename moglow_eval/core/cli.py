@@ -119,6 +119,15 @@ def file_to_write(out, what: str, flag: str = "--out", reads=()) -> Path:
     return out
 
 
+def refuse_empty(args, but=()) -> None:
+    """UserError naming the first flag of parsed `args` given an empty value (`--study "$STUDY"` with the variable
+    unset), which a command would otherwise read as the flag left out and run on its defaults; the flags in `but`
+    are checked by the command itself."""
+    for name, value in vars(args).items():
+        if isinstance(value, str) and not value.strip() and name not in but:
+            raise UserError(f"--{name.replace('_', '-')}: empty; give a value, or leave the flag out")
+
+
 def run(main, argv=None):
     """Call ``main(argv)`` and return its exit code; a `UserError` or an OS error becomes one line and 2."""
     try:

@@ -455,6 +455,15 @@ def test_a_folder_of_the_users_own_named_as_a_sets_is_not_removed(tmp_path, caps
     assert not any((killed / "videos").iterdir()) and (killed / files.BUILDING).exists()
 
 
+def test_an_empty_flag_is_refused_not_read_as_left_out(tmp_path, capsys):
+    """`--study "$STUDY"` with the variable unset built the built-in study in place of the user's (and an empty
+    --data, --config or checkpoint ran on the shipped data and models)."""
+    for flag in ("--study", "--data", "--config", "--mg-checkpoint", "--dataset"):
+        line = _fails(capsys, flag, "", "--out", tmp_path / "set")
+        assert line == f"error: {flag}: empty; give a value, or leave the flag out", line
+    assert not (tmp_path / "set").exists()
+
+
 def test_an_out_that_is_a_file_is_refused_before_any_work(tmp_path, capsys):
     """`--out ratings.csv` (a file given where the set's folder goes) said `ratings.csv/manifest.csv: Not a
     directory`, and only after the data was read; a file further up the path alike."""

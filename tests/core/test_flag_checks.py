@@ -1,8 +1,11 @@
-"""moglow_eval.core.cli: the checks of an output path (--out) that every command makes before its work."""
+"""moglow_eval.core.cli: the checks of an output path (--out) that every command makes before its work, and of a flag
+given an empty value."""
+
+import argparse
 
 import pytest
 
-from moglow_eval.core.cli import UserError, file_to_write, folder_to_write
+from moglow_eval.core.cli import UserError, file_to_write, folder_to_write, refuse_empty
 
 
 def test_a_folder_to_write_is_refused_when_empty_or_a_file_is_in_its_way(tmp_path):
@@ -35,3 +38,14 @@ def test_a_file_to_write_is_refused_when_empty_a_folder_or_under_a_file(tmp_path
         with pytest.raises(UserError) as e:
             file_to_write(out, "the file", flag="--data-out")
         assert str(e.value) == message
+
+
+def test_a_flag_given_an_empty_value_is_named_not_read_as_left_out():
+    args = argparse.Namespace(study=" ", out="", seed=0, data=None, mg_checkpoint="")
+    with pytest.raises(UserError, match="^--study: empty; give a value, or leave the flag out$"):
+        refuse_empty(args, but=("out",))
+    args.study = "study.toml"
+    with pytest.raises(UserError, match="^--mg-checkpoint: empty"):
+        refuse_empty(args, but=("out",))
+    args.mg_checkpoint = "mg.pt"
+    refuse_empty(args, but=("out",))  # None (left out), numbers and the command's own "out" pass
