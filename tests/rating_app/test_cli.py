@@ -141,6 +141,9 @@ def test_export_cli_errors(tmp_path):
     assert len(r.stderr.strip().splitlines()) == 1
     r = cli("export", "--db", "postgresql://postgres@127.0.0.1:5432/no_such_db_here", "--out", tmp_path / "x.csv")
     assert r.returncode == 2 and r.stderr.startswith("error:") and "Traceback" not in r.stderr
+    for command in (("export",), ("serve", "--manifest", tmp_path / "m.csv")):  # "$DATABASE_URL", unset
+        r = cli(*command, "--db", "")
+        assert r.returncode == 2 and r.stderr.startswith("error: --db: empty; give a database URL"), r.stderr
     r = cli("export", "--db", "sqlite://", "--out", tmp_path / "x.csv")  # in memory: no study to export
     assert (
         r.returncode == 2
