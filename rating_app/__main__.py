@@ -60,8 +60,8 @@ def _export(a):
     parsed = make_url(url)
     sqlite = parsed.drivername.startswith("sqlite")
     if a.out != "-":  # the study's own SQLite file as --out would be replaced by its export
-        reads = [("--db", parsed.database or None if sqlite else None)]
-        cli.file_to_write(a.out, "the file to write, or - for the standard output", reads=reads)
+        db_file = (parsed.database or None) if sqlite else None
+        cli.file_to_write(a.out, "the file to write, or - for the standard output", reads=[("--db", db_file)])
     if sqlite:
         require_sqlite_file(parsed.database or "")
     engine = make_engine(url)

@@ -169,7 +169,7 @@ def build_parser():
 
 def _main(argv):
     args = build_parser().parse_args(argv)
-    cli.file_to_write(args.out, "the video to write", flag="OUT", reads=[("VIDEO", args.video), ("--like", args.like)])
+    cli.file_to_write(args.out, "the video to write", flag="OUT")  # the video read as OUT: reencode's own check
     reencode(args.video, args.out, args.like)
     return 0
 
