@@ -12,6 +12,7 @@ from scipy.ndimage import gaussian_filter1d
 from .bvh import AXIS
 
 CHUNK_FRAMES = 4096  # frames worked on at a time where a whole take would need several copies of itself
+FILTER_TRUNCATE = 4.0  # the anti-aliasing Gaussian's reach, in sigmas (scipy's default, named to bound a block)
 
 
 def quat_mul(a, b):
@@ -81,15 +82,25 @@ def local_quaternions(bvh, frames=None):
 
 def make_continuous(q):
     """Flip signs along time (axis 0) so consecutive quaternions lie in the same hemisphere."""
-    # The dot products a component at a time (no [T, J, 4] product); only their signs are used.
-    a, b = q[1:], q[:-1]
-    dots = a[..., 0] * b[..., 0]
-    for i in (1, 2, 3):
-        dots += a[..., i] * b[..., i]
-    odd = np.logical_xor.accumulate(dots < 0, axis=0)  # an odd number of sign changes up to each frame
     out = q.copy()
-    out[1:][odd] *= -1
+    out[continuity_flips(q)] *= -1
     return out
+
+
+def continuity_flips(q):
+    """[T, J] booleans: the quaternions make_continuous negates, those after an odd number of sign changes.
+
+    Worked a block of frames at a time (the dot products a component at a time, only their signs used), so a long
+    take's flips cost an eighth of its quaternions and no copy of them."""
+    flips = np.zeros(q.shape[:-1], dtype=bool)
+    for part in _blocks(q.shape[0] - 1):
+        a, b = q[1:][part], q[:-1][part]
+        dots = a[..., 0] * b[..., 0]
+        for i in (1, 2, 3):
+            dots += a[..., i] * b[..., i]
+        odd = np.logical_xor.accumulate(dots < 0, axis=0)
+        flips[1:][part] = odd ^ flips[part.start]  # carried on from the block before
+    return flips
 
 
 def slerp(q0, q1, w):
@@ -129,24 +140,33 @@ def resample_local(q, trans, fps_in, fps_out):
     Decimating by a factor r >= 2 first low-passes both with a Gaussian of sigma r/2 input frames
     (anti-aliasing); the quaternions are then renormalised. Any ratio is then sampled by slerp/lerp
     at the exact output times (30 -> 20 fps interpolates between frames instead of dropping any).
+
+    A block of output frames at a time, from the input frames it needs and the filter's reach either side: the
+    values are those of the whole take filtered at once (the filter's sums see the same frames in the same order),
+    and a long take is never held again at its input rate, signs flipped or filtered.
     """
     if abs(fps_in - fps_out) < 1e-9 * fps_out:
         return q, trans
-    q = make_continuous(q)
+    n = q.shape[0]
+    flips = continuity_flips(q)
     ratio = fps_in / fps_out
-    if ratio >= 2:
-        sigma = ratio / 2
-        q = gaussian_filter1d(q, sigma, axis=0, mode="nearest")
-        for part in _blocks(q.shape[0]):  # renormalised a block of frames at a time: no [T, J, 4] temporary
-            q[part] /= np.linalg.norm(q[part], axis=-1, keepdims=True)
-        trans = gaussian_filter1d(trans, sigma, axis=0, mode="nearest")
-    i0, i1, w = lerp_indices(q.shape[0], fps_in, fps_out)
+    sigma = ratio / 2 if ratio >= 2 else None
+    reach = int(FILTER_TRUNCATE * sigma + 0.5) if sigma else 0  # gaussian_filter1d's own radius
+    i0, i1, w = lerp_indices(n, fps_in, fps_out)
     q_out = np.empty((len(i0),) + q.shape[1:])
     t_out = np.empty((len(i0),) + trans.shape[1:])
-    for part in _blocks(len(i0)):  # the same arithmetic a block of output frames at a time
+    for part in _blocks(len(i0)):
         a, b, wp = i0[part], i1[part], w[part, None]
-        q_out[part] = slerp(q[a], q[b], np.broadcast_to(wp, (len(a),) + q.shape[1:-1]))
-        t_out[part] = trans[a] * (1 - wp[..., None]) + trans[b] * wp[..., None]
+        lo, hi = max(int(a[0]) - reach, 0), min(int(b[-1]) + 1 + reach, n)  # a take's own ends: "nearest" there
+        qb, tb = q[lo:hi].copy(), trans[lo:hi]
+        qb[flips[lo:hi]] *= -1
+        if sigma:
+            qb = gaussian_filter1d(qb, sigma, axis=0, mode="nearest", truncate=FILTER_TRUNCATE)
+            qb /= np.linalg.norm(qb, axis=-1, keepdims=True)
+            tb = gaussian_filter1d(tb, sigma, axis=0, mode="nearest", truncate=FILTER_TRUNCATE)
+        a, b = a - lo, b - lo
+        q_out[part] = slerp(qb[a], qb[b], np.broadcast_to(wp, (len(a),) + q.shape[1:-1]))
+        t_out[part] = tb[a] * (1 - wp[..., None]) + tb[b] * wp[..., None]
     return q_out, t_out
 
 
