@@ -42,7 +42,7 @@ from moglow_eval.core.clip import (
 )
 
 from ..motion.bvh import BvhError, forward_kinematics, header_fps, header_timing, read_bvh
-from ..motion.resample import clean_fps, lerp_indices, local_quaternions, quat_to_matrix, resample_local, resample_times
+from ..motion.resample import clean_fps, lerp_indices, local_quaternions_at, quat_to_matrix, resample_times
 from . import seamless_files
 from .skeleton_families import UnitError, choose_unit
 from .smpl_files import FPS_KEYS, WHERE_TO_GET, SmplError, apply_hand_mean, is_smpl_file, pose_joints, smpl_positions
@@ -175,11 +175,10 @@ def _bvh_positions(path, fps):
             f"{path}: {len(bvh.names)} joints and {len(bvh.end_sites)} End Sites, more than a clip's limit of "
             f"{MAX_JOINTS} joints"
         )
-    q, trans = local_quaternions(bvh)
     names, parents, fps_in = list(bvh.names), list(bvh.parents), clean_fps(bvh.fps)
     ends = [(p, off) for p, off in bvh.end_sites if np.linalg.norm(off) > END_SITE_MIN]
+    q, trans = local_quaternions_at(bvh, fps_in, fps)
     del bvh  # its channels' values, a copy of the take the steps below no longer need
-    q, trans = resample_local(q, trans, fps_in, fps)
     pos, rot = forward_kinematics(np.array(parents), quat_to_matrix(q), trans)
     if ends:
         tips = np.stack([pos[:, p] + np.einsum("tab,b->ta", rot[:, p], off) for p, off in ends], axis=1)

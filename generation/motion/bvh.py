@@ -35,6 +35,7 @@ MAX_HEADER_BYTES = 16 << 20
 MAX_MOTION_VALUES = 60_000_000
 MAX_BYTES_PER_VALUE = 64
 _CHUNK = 1 << 20
+PARSE_SPAN = 1 << 20  # bytes of frame text, or values, worked on at a time
 
 
 class BvhError(UserError):
@@ -206,7 +207,9 @@ def read_bvh(path):
     h = _Hierarchy(lines[:motion_line], motion_line, name)
     n_channels = sum(len(c) for c in h.channels)
     cursor, line_no, n_frames, frames_line, dt = _motion_header(raw, m.end(), motion_line + 1, name)
-    block = raw[cursor + 1 :] if cursor >= 0 else b""
+    # bytes, not a slice of the bytearray read: np.loadtxt reads the block through io.BytesIO, which shares bytes
+    # but copies anything else (a second copy of the frames' text while their values were made)
+    block = bytes(memoryview(raw)[cursor + 1 :]) if cursor >= 0 else b""
     del raw, m  # the block is a copy (and the match holds the file): one copy of the frames' text at a time
     motion = _parse_motion(block, line_no + 1, n_frames, n_channels, frames_line, name)
     return Bvh(
@@ -385,19 +388,9 @@ def _parse_motion(block, first, n_frames, n_channels, frames_line, name):
     a line-by-line walk happens only to name the line of a non-numeric value.
     """
     b = np.frombuffer(block, dtype=np.uint8)
-    # A token starts at a non-space byte after a space byte or at the block's start (all bytes <= 32 count as
-    # space). The tokens of a line are counted from the starts' positions (8 bytes a value), not summed from a
-    # per-byte integer array, which held 8 bytes a byte of text: ten times the file at the parse's peak.
-    space = b <= 32
-    starts = np.logical_not(space)
-    np.logical_and(starts[1:], space[:-1], out=starts[1:])
-    del space
-    tokens = np.flatnonzero(starts)
-    del starts
-    line_begin = np.concatenate([[0], np.flatnonzero(b == 10) + 1])
+    line_begin = np.concatenate([[0], *(np.flatnonzero(b[part] == 10) + part.start + 1 for part in _spans(len(b)))])
     line_begin = line_begin[line_begin < len(b)]
-    per_line = np.diff(np.searchsorted(tokens, line_begin), append=len(tokens))
-    del tokens
+    per_line = _tokens_per_line(b, line_begin)
     nonempty = np.flatnonzero(per_line)
     bad = nonempty[per_line[nonempty] != n_channels]
     if len(bad):
@@ -425,12 +418,39 @@ def _parse_motion(block, first, n_frames, n_channels, frames_line, name):
     if values is None or values.size != n_frames * n_channels:
         _find_bad_number(block.decode("utf-8", errors="replace").split("\n"), first, name)
         raise BvhError(f"{name}:{first}: MOTION block could not be parsed as numbers")
-    if not np.all(np.abs(values) <= MAX_VALUE):  # also catches nan and inf
-        k = int(np.flatnonzero(~(np.abs(values) <= MAX_VALUE))[0]) // n_channels
-        raise BvhError(
-            f"{name}:{first + nonempty[k]}: value out of range (non-finite or beyond ±{MAX_VALUE:g}) in frame {k}"
-        )
+    for part in _spans(values.size):  # a span at a time: |values| whole would be one more copy of them
+        out = np.flatnonzero(~(np.abs(values[part]) <= MAX_VALUE))  # also catches nan and inf
+        if len(out):
+            k = (part.start + int(out[0])) // n_channels
+            raise BvhError(
+                f"{name}:{first + nonempty[k]}: value out of range (non-finite or beyond ±{MAX_VALUE:g}) in frame {k}"
+            )
     return values.reshape(n_frames, n_channels)
+
+
+def _spans(n):
+    """Slices of PARSE_SPAN elements (bytes of text, or values) covering n."""
+    return (slice(start, min(start + PARSE_SPAN, n)) for start in range(0, n, PARSE_SPAN))
+
+
+def _tokens_per_line(b, line_begin):
+    """The number of values on each line of the text `b` (bytes) whose lines begin at `line_begin`.
+
+    A value starts at a byte above 32 (not space) after one at or below it, or at the text's start. Counted a span
+    of the text at a time: the byte classes of the whole text at once were twice its size again at the parse's peak
+    (and, summed through an integer a byte, ten times it before that)."""
+    per_line = np.zeros(len(line_begin), dtype=np.int64)
+    for part in _spans(len(b)):
+        text = b[part]
+        before = np.empty(len(text), dtype=bool)  # whether the byte before each is a space
+        before[0] = part.start == 0 or b[part.start - 1] <= 32
+        np.less_equal(text[:-1], 32, out=before[1:])
+        starts = np.flatnonzero(before & (text > 32)) + part.start
+        if len(starts):
+            lines = np.searchsorted(line_begin, starts, side="right") - 1  # ascending: the span's lines only
+            counts = np.bincount(lines - lines[0])
+            per_line[lines[0] : lines[0] + len(counts)] += counts
+    return per_line
 
 
 def _find_bad_number(lines, first, name):

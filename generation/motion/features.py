@@ -19,7 +19,7 @@ from moglow_eval.core.clip import check_frames
 
 from . import skeleton
 from .bvh import BvhError, forward_kinematics, read_bvh
-from .resample import clean_fps, local_quaternions, quat_to_matrix, resample_local, resample_times
+from .resample import clean_fps, local_quaternions, local_quaternions_at, quat_to_matrix, resample_times
 
 FACING_SMOOTH_S = 0.25  # sigma of the Gaussian smoothing the facing direction (s)
 
@@ -99,9 +99,7 @@ def bvh_world_positions(bvh, fps=None):
     fps_in = clean_fps(bvh.fps)
     if fps is not None:
         check_frames(len(resample_times(bvh.n_frames, fps_in, float(fps))), f"{bvh.path}: resampled to {fps:g} fps")
-    q, trans = local_quaternions(bvh)
-    if fps is not None:
-        q, trans = resample_local(q, trans, fps_in, float(fps))
+    q, trans = local_quaternions(bvh) if fps is None else local_quaternions_at(bvh, fps_in, float(fps))
     pos, _ = forward_kinematics(bvh.parents, quat_to_matrix(q), trans)
     return pos
 

@@ -80,15 +80,9 @@ def local_quaternions(bvh, frames=None):
     return q, trans
 
 
-def make_continuous(q):
-    """Flip signs along time (axis 0) so consecutive quaternions lie in the same hemisphere."""
-    out = q.copy()
-    out[continuity_flips(q)] *= -1
-    return out
-
-
 def continuity_flips(q):
-    """[T, J] booleans: the quaternions make_continuous negates, those after an odd number of sign changes.
+    """[T, J] booleans: the quaternions to negate so that each lies in the hemisphere of the one before it in time
+    (axis 0), those after an odd number of sign changes.
 
     Worked a block of frames at a time (the dot products a component at a time, only their signs used), so a long
     take's flips cost an eighth of its quaternions and no copy of them."""
@@ -140,32 +134,50 @@ def resample_local(q, trans, fps_in, fps_out):
     Decimating by a factor r >= 2 first low-passes both with a Gaussian of sigma r/2 input frames
     (anti-aliasing); the quaternions are then renormalised. Any ratio is then sampled by slerp/lerp
     at the exact output times (30 -> 20 fps interpolates between frames instead of dropping any).
-
-    A block of output frames at a time, from the input frames it needs and the filter's reach either side: the
-    values are those of the whole take filtered at once (the filter's sums see the same frames in the same order),
-    and a long take is never held again at its input rate, signs flipped or filtered.
     """
     if abs(fps_in - fps_out) < 1e-9 * fps_out:
         return q, trans
-    n = q.shape[0]
-    flips = continuity_flips(q)
+    return _resample_blocks(q.shape[0], lambda lo, hi: (q[lo:hi], trans[lo:hi]), fps_in, fps_out)
+
+
+def local_quaternions_at(bvh, fps_in, fps_out):
+    """local_quaternions of a `bvh.Bvh` resampled from fps_in to fps_out (resample_local), made a block of frames
+    at a time: a long take's rotations are never held whole at the file's rate, only at the output's."""
+    if abs(fps_in - fps_out) < 1e-9 * fps_out:
+        return local_quaternions(bvh)
+    return _resample_blocks(bvh.n_frames, lambda lo, hi: local_quaternions(bvh, slice(lo, hi)), fps_in, fps_out)
+
+
+def _resample_blocks(n, frames, fps_in, fps_out):
+    """resample_local of a take of n frames that `frames(lo, hi)` gives as (q, trans) of its frames lo..hi-1.
+
+    A block of output frames at a time, from the input frames it needs and the filter's reach either side: the
+    values are those of the whole take done at once (each frame's sign follows the one before it, carried from
+    block to block, and the filter's sums see the same frames in the same order)."""
     ratio = fps_in / fps_out
     sigma = ratio / 2 if ratio >= 2 else None
     reach = int(FILTER_TRUNCATE * sigma + 0.5) if sigma else 0  # gaussian_filter1d's own radius
     i0, i1, w = lerp_indices(n, fps_in, fps_out)
-    q_out = np.empty((len(i0),) + q.shape[1:])
-    t_out = np.empty((len(i0),) + trans.shape[1:])
+    flips = None  # [n, J]: each input frame's continuity_flips, once a block has reached the frame
+    q_out = t_out = None
     for part in _blocks(len(i0)):
         a, b, wp = i0[part], i1[part], w[part, None]
         lo, hi = max(int(a[0]) - reach, 0), min(int(b[-1]) + 1 + reach, n)  # a take's own ends: "nearest" there
-        qb, tb = q[lo:hi].copy(), trans[lo:hi]
+        start = max(lo - 1, 0)  # the frame before the block, whose sign the block's first frame follows
+        qb, tb = frames(start, hi)
+        if flips is None:
+            flips = np.zeros((n, qb.shape[1]), dtype=bool)
+            q_out = np.empty((len(i0),) + qb.shape[1:])
+            t_out = np.empty((len(i0),) + tb.shape[1:])
+        flips[start + 1 : hi] = continuity_flips(qb)[1:] ^ flips[start]
+        qb, tb = qb[lo - start :].copy(), tb[lo - start :]
         qb[flips[lo:hi]] *= -1
         if sigma:
             qb = gaussian_filter1d(qb, sigma, axis=0, mode="nearest", truncate=FILTER_TRUNCATE)
             qb /= np.linalg.norm(qb, axis=-1, keepdims=True)
             tb = gaussian_filter1d(tb, sigma, axis=0, mode="nearest", truncate=FILTER_TRUNCATE)
         a, b = a - lo, b - lo
-        q_out[part] = slerp(qb[a], qb[b], np.broadcast_to(wp, (len(a),) + q.shape[1:-1]))
+        q_out[part] = slerp(qb[a], qb[b], np.broadcast_to(wp, (len(a),) + qb.shape[1:-1]))
         t_out[part] = tb[a] * (1 - wp[..., None]) + tb[b] * wp[..., None]
     return q_out, t_out
 

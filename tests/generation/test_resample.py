@@ -3,9 +3,11 @@ of the whole take done at once, at every block's edge and the take's own ends.""
 
 import numpy as np
 import pytest
+from helpers.paths import TEST_DATA
 from scipy.ndimage import gaussian_filter1d
 
 from generation.motion import resample
+from generation.motion.bvh import read_bvh
 
 
 def unit_quaternions(rng, frames, joints):
@@ -50,7 +52,22 @@ def test_signs_are_made_continuous_across_blocks(monkeypatch):
     rng = np.random.default_rng(3)
     q = unit_quaternions(rng, 50, 4)
     monkeypatch.setattr(resample, "CHUNK_FRAMES", 5)
-    out = resample.make_continuous(q)
+    flips = resample.continuity_flips(q)
+    out = np.where(flips[..., None], -q, q)
     assert np.all(np.sum(out[1:] * out[:-1], axis=-1) >= 0)  # each frame in the hemisphere of the one before
-    assert np.array_equal(np.abs(out), np.abs(q)) and np.array_equal(out[0], q[0])  # only signs changed
-    assert np.array_equal(resample.continuity_flips(q), np.any(out != q, axis=-1))
+    assert not flips[0].any() and flips.any()  # the first frame as it is; random rotations change sign somewhere
+
+
+def test_a_bvh_take_is_resampled_a_block_at_a_time_as_its_whole_rotations_are(monkeypatch):
+    """local_quaternions_at, which reads a take's rotations a block at a time, gives resample_local's values on the
+    whole take's rotations, on a real take at 120 fps decimated and at 30 fps interpolated."""
+    takes = [("pfnn_locomotion_flat04_head.bvh.gz", (30.0, 7.0)), ("bandai_walk_angry_002.bvh.gz", (20.0, 50.0))]
+    monkeypatch.setattr(resample, "CHUNK_FRAMES", 8)  # several blocks in each take
+    for name, rates in takes:
+        bvh = read_bvh(TEST_DATA / "bvh" / name)
+        q, trans = resample.local_quaternions(bvh)
+        fps_in = resample.clean_fps(bvh.fps)
+        for fps in rates:
+            want = resample.resample_local(q, trans, fps_in, fps)
+            got = resample.local_quaternions_at(bvh, fps_in, fps)
+            assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1]), (name, fps)
