@@ -69,10 +69,15 @@ def methods_paragraph(design, rows, kept, counts, options) -> str:
     unit, lo, hi, med = answers_per_unit(design, test)
     n_items = test["item"].nunique() if "item" in test.columns else 0
     conds = [c for c in conditions if c != study.CATCH]
+    n_kept = counts["n_raters_kept"]
+    # A rater whose session came when every unit had its answers saw only catch trials: kept, but in no test
+    # answer, so the sections' rater counts are smaller than this one. Said here, where a reader compares the two.
+    idle = n_kept - test["rater_id"].nunique() if "rater_id" in test.columns else 0
+    kept = f"{n_kept} raters" + (f" ({idle} of them answered no test trial)" if idle > 0 else "")
     if counts.get("n_catch_ratings", 1):
         excluded = (
             f"{n_excl} {'was' if n_excl == 1 else 'were'} excluded because they {catch} in at least one catch "
-            f"trial, leaving {counts['n_raters_kept']} raters and {len(test)} test answers."
+            f"trial, leaving {kept} and {len(test)} test answers."
         )
     else:  # e.g. votes imported from another tool
         excluded = f"The answers hold no catch trials, so no rater was excluded; {len(test)} test answers."

@@ -98,3 +98,20 @@ def test_the_acr_report_has_agreement_and_a_methods_paragraph(tmp_path):
     assert "2 conditions (NAT, SYS) on 6 items" in text and "seed 7" in text and "100 resamples" in text
     assert methods.clip_set_hash(pd.read_csv(path))[:16] in text
     assert f"moglow-eval {methods.tool_version()}" in text
+
+
+def test_kept_raters_without_a_test_answer_are_counted_in_the_methods(tmp_path):
+    """A rater kept who answered only catch trials (their session came when every clip had its answers) is in the
+    kept count but in no statistic: the paragraph says so, where the sections count only the raters they use."""
+    df = panel(raters=6, clips=8)
+    df["condition"] = np.where(df["clip_id"].str[1:].astype(int) < 4, "NAT", "SYS")
+    df["item"] = "it" + (df["clip_id"].str[1:].astype(int) % 4).astype(str)
+    late = [f"late{i}" for i in range(2)]
+    bad = pd.DataFrame({"rater_id": [f"r{i}" for i in range(6)] + late, "clip_id": "bad0", "rating": 1})
+    bad = bad.assign(role="catch", condition="BAD", item="b0")
+    path = tmp_path / "ratings.csv"
+    pd.concat([df, bad]).astype({"rating": int}).to_csv(path, index=False)
+    doc = report.build_report(path, tmp_path / "rep", Options(n_boot=50, seed=1), progress=False, quiet=True)
+    assert "8 raters took part. 0 were excluded" in doc["methods"]
+    assert "leaving 8 raters (2 of them answered no test trial) and 48 test answers" in doc["methods"]
+    assert "48 test ratings from 6 raters" in (tmp_path / "rep" / "report.html").read_text()
