@@ -135,9 +135,17 @@ def read_submission(team: str, folder, items, samples: int) -> Submission:
         else:
             _claim(sub, item, "", where)
     for item in sorted(items - set(sub.files)):
-        sub.add(folder / item, "missing", f"no motion for test item {item}: add {item}{'/' if samples > 1 else '.EXT'}",
-                item)  # fmt: skip
+        sub.add(folder / item, "missing", f"no motion for test item {item}: add {_missing(sub, item, samples)}", item)
     return sub
+
+
+def _missing(sub, item, samples) -> str:
+    """What to add for a missing item, in the format of the team's other files where they share one."""
+    used = {_ext(path.name) for by_sample in sub.files.values() for path in by_sample.values()}
+    ext = used.pop() if len(used) == 1 else None
+    if samples > 1:
+        return f"a folder {item}/ of {samples} samples ({f'1{ext} .. {samples}{ext}' if ext else 'SAMPLE.EXT'})"
+    return f"{item}{ext}, as the other items" if ext else f"{item}.EXT, EXT one of {', '.join(EXTENSIONS)}"
 
 
 def _claim(sub, item, sample, where) -> None:

@@ -5,6 +5,7 @@ find it, so none passes without its check."""
 
 import csv
 import os
+import shutil
 import wave
 from pathlib import Path
 
@@ -118,7 +119,7 @@ def _stretch(j, fps):
 @pytest.mark.parametrize(
     "edit, check, needle",
     [
-        (lambda f: (f / "item02.npz").unlink(), "missing", "no motion for test item item02"),
+        (lambda f: (f / "item02.npz").unlink(), "missing", "no motion for test item item02: add item02.npz, as the"),
         (
             lambda f: (f / "item09.npz").write_bytes((f / "item01.npz").read_bytes()),
             "entry",
@@ -205,6 +206,10 @@ def test_samples_per_item(tmp_path, take):
     assert code == 1 and [p["check"] for p in found] == ["samples"] and "2 samples of item02" in found[0]["problem"]
     code, out = run(tmp_path / "again", [write_team(tmp_path / "again", take, samples=3)], samples=3)
     assert code == 0
+    gone = write_team(tmp_path / "gone", take, lambda f: shutil.rmtree(f / "item02"), samples=3)
+    found = problems(run(tmp_path / "gone", [gone], samples=3)[1])
+    assert [p["problem"] for p in found] == ["no motion for test item item02: add a folder item02/ of 3 samples "
+                                             "(1.npz .. 3.npz)"], found  # fmt: skip
     code, out = run(tmp_path / "one", [write_team(tmp_path / "one", take)], samples=3)  # one file each: 3 asked
     assert code == 1 and {p["check"] for p in problems(out)} == {"samples"}
     # GENEA 2026's rule (--or-one): a deterministic system's one file per item is accepted; a stochastic one's
