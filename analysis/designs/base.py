@@ -215,8 +215,9 @@ class FailedCatchDesign(Design):
         return [
             f"<h1>Perceptual test report ({self.name})</h1><p class=note>{html.escape(meta['input'])} · generated "
             f"{html.escape(meta['generated_at'])} · bootstrap seed {meta['seed']}</p>",
-            f"<h2>Summary</h2><p>{counts['n_ratings_total']} rows from {counts['n_raters_total']} raters. "
-            f"{counts['n_raters_excluded']} raters failed a catch trial and were excluded, removing "
+            f"<h2>Summary</h2><p>{counts['n_ratings_total']} rows from "
+            f"{report_html.count(counts['n_raters_total'], 'rater')}. "
+            f"{report_html.excluded_text(counts, 'failed a catch trial')}, removing "
             f"{counts['n_ratings_removed']} rows; {counts['n_ratings_kept']} were kept.</p>",
             *[f"<p>{report_html.img(f)}</p>" for f in figs.values()],
             section(kept, "With the rater exclusion (primary analysis)"),

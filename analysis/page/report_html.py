@@ -31,6 +31,17 @@ def records(df):
     return df.to_dict(orient="records")
 
 
+def count(n, noun):
+    """`n` and the noun, plural unless n is 1: "1 rater", "2 raters"."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
+def excluded_text(counts, reason):
+    """The summary's sentence of the raters excluded: "N rater(s) REASON and was/were excluded"."""
+    n = counts["n_raters_excluded"]
+    return f"{count(n, 'rater')} {reason} and {'was' if n == 1 else 'were'} excluded"
+
+
 def p_text(p, bound=False):
     """A p-value as text; `bound`: p is an upper bound (a Tukey tail beyond what can be computed), "< 2e-40"."""
     if p is None or not np.isfinite(p):

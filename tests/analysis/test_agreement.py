@@ -98,6 +98,8 @@ def test_the_acr_report_has_agreement_and_a_methods_paragraph(tmp_path):
     assert "2 conditions (NAT, SYS) on 6 items" in text and "seed 7" in text and "100 resamples" in text
     assert methods.clip_set_hash(pd.read_csv(path))[:16] in text
     assert f"moglow-eval {methods.tool_version()}" in text
+    summary = (tmp_path / "rep" / "report.html").read_text()  # one rater excluded: singular, as a paper would say
+    assert "from 10 raters. 1 rater gave a catch (bad-example) clip a rating ≥ 3 and was excluded, removing" in summary
 
 
 def test_kept_raters_without_a_test_answer_are_counted_in_the_methods(tmp_path):

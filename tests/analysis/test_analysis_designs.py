@@ -87,6 +87,10 @@ def test_pairwise_counts_by_hand_and_sign_test(tmp_path):
     f = write(tmp_path / "pairs.csv", PAIR_COLS, data)
     doc = build_report(f, tmp_path / "rep", Options(n_boot=20), quiet=True)
     assert doc["design"] == "pairwise" and doc["excluded_raters"] == ["r2"] and doc["n_raters_excluded"] == 1
+    assert (
+        "rows from 5 raters. 1 rater failed a catch trial and was excluded"
+        in (tmp_path / "rep/report.html").read_text()
+    )
     kept = {(p["condition_a"], p["condition_b"]): p for p in doc["pairwise"]}
     everyone = {(p["condition_a"], p["condition_b"]): p for p in doc["without_exclusion"]["pairwise"]}
     # by hand, all raters: FL-MG: MG wins r4 (A, 2) and r5 (B, -1), FL wins r1 (B, -1); FL-NAT: NAT r1, ties r2 r3;

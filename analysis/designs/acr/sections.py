@@ -7,7 +7,7 @@ import html
 
 import pandas as pd
 
-from ...page.report_html import img, mixed_html, p_equals, p_text, table, why_not
+from ...page.report_html import count, excluded_text, img, mixed_html, p_equals, p_text, table, why_not
 from ...page.study_text import C2ST_LOW_AUC, C2ST_MIN_ITEMS, c2st_with_notes, captions
 from ...stats.agreement import agreement_text
 
@@ -233,13 +233,14 @@ def html_parts(meta, counts, kept, everyone, fig_paths) -> list[str]:
         if "tukey" in kept["undefined"]
         else f"Tukey HSD pairs differing at the 0.05 family-wise level: {', '.join(sig) if sig else 'none'}."
     )
+    catch = f"gave a catch (bad-example) clip a rating ≥ {counts['threshold']}"
     return [
         f"<h1>Perceptual test report</h1><p class=note>{html.escape(meta['input'])} · generated "
         f"{html.escape(meta['generated_at'])} · bootstrap seed {meta['seed']}</p>",
         "<h2>Summary</h2>",
-        f"<p>{counts['n_ratings_total']} responses from {counts['n_raters_total']} raters. "
-        f"{counts['n_raters_excluded']} raters gave a catch (bad-example) clip a rating ≥ {counts['threshold']} and "
-        f"were excluded, removing {counts['n_ratings_removed']} responses; {counts['n_ratings_kept']} were kept "
+        f"<p>{counts['n_ratings_total']} responses from {count(counts['n_raters_total'], 'rater')}. "
+        f"{excluded_text(counts, catch)}, removing {counts['n_ratings_removed']} responses; "
+        f"{counts['n_ratings_kept']} were kept "
         f"({counts['n_test_ratings_kept']} test ratings). Mean ratings: {means}. "
         f"{_anova_text(kept, 2)[0]} {tukey}</p>",
         f"<p>{img(fig_paths['ratings_histogram'])}</p>",
