@@ -58,6 +58,12 @@ def _save(fig, path):
     return path
 
 
+def legend_beside(ax, title):
+    """The axes' legend outside them, to their right, top-aligned: it covers no data however the data fall."""
+    ax.legend(frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0), title=title, title_fontsize=8,
+              alignment="left")  # fmt: skip
+
+
 def ratings_histogram(hist, means, path, title=None):
     """hist: rating_histogram() table (rows conditions, columns 1..5); means: {condition: mean}."""
     conds = list(hist.index)
@@ -97,15 +103,7 @@ def ratings_histogram(hist, means, path, title=None):
         ax.set_ylim(0, top * (1.1 + 0.07 * len(conds)))
         ax.set_xlim(scale[0] - 0.6, scale[-1] + 0.6)
         ax.grid(axis="y", color="0.9", lw=0.6, zorder=0)
-        # Beside the axes: inside, it would cover the mean lines and their labels.
-        ax.legend(
-            frameon=False,
-            loc="upper left",
-            bbox_to_anchor=(1.01, 1.0),
-            title="Condition (dashed: mean)",
-            title_fontsize=8,
-            alignment="left",
-        )
+        legend_beside(ax, "Condition (dashed: mean)")  # inside, it would cover the mean lines and their labels
         if title:
             ax.set_title(title, loc="left")
         return _save(fig, path)
@@ -140,16 +138,9 @@ def per_clip_means(clips, path, title=None):
         ax.set_yticks([1, 2, 3, 4, 5])
         ax.set_xlim(0.5, most + 0.5)
         ax.grid(axis="y", color="0.9", lw=0.6, zorder=0)
-        # Beside the axes, as the histogram's: inside, the corner left empty by rising lines is where a condition
-        # rated low on every clip draws its own (a weak system, or a stochastic one with many samples).
-        ax.legend(
-            frameon=False,
-            loc="upper left",
-            bbox_to_anchor=(1.01, 1.0),
-            title="Shaded: 95% t interval per clip",
-            title_fontsize=8,
-            alignment="left",
-        )
+        # Inside, the corner left empty by rising lines is where a condition rated low on every clip draws its own
+        # (a weak system, or a stochastic one with many samples).
+        legend_beside(ax, "Shaded: 95% t interval per clip")
         if title:
             ax.set_title(title, loc="left")
         return _save(fig, path)
