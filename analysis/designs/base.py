@@ -106,6 +106,7 @@ class Design:
     methods_task = ""
     methods_catch = "preferred a deliberately broken clip (BAD) to the real motion"
     methods_stats = ""
+    methods_resamples = True  # whether those statistics resample (Options.n_boot, seed): counted and seeded then
 
     def answers_per_unit(self, test) -> tuple[str, pd.Series]:
         """(what a unit of the methods paragraph's count is, the kept test answers per unit): ratings per clip

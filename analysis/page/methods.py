@@ -73,6 +73,7 @@ def methods_paragraph(design, rows, kept, counts, options) -> str:
     # A rater whose session came when every unit had its answers saw only catch trials: kept, but in no test
     # answer, so the sections' rater counts are smaller than this one. Said here, where a reader compares the two.
     idle = n_kept - test["rater_id"].nunique() if "rater_id" in test.columns else 0
+    resamples = f"{options.n_boot} resamples, seed {options.seed}; " if design.methods_resamples else ""
     kept = f"{n_kept} raters" + (f" ({idle} of them answered no test trial)" if idle > 0 else "")
     if counts.get("n_catch_ratings", 1):
         excluded = (
@@ -88,8 +89,7 @@ def methods_paragraph(design, rows, kept, counts, options) -> str:
         f"there were {lo}-{hi} {unit} (median {med:g})."
         if lo != hi
         else f"The study compared {len(conds)} conditions ({', '.join(conds)}) on {n_items} items, {lo} {unit}.",
-        f"The statistics are {design.methods_stats} ({options.n_boot} resamples, seed {options.seed}; "
-        f"family-wise error rate {options.alpha:g}).",
+        f"The statistics are {design.methods_stats} ({resamples}family-wise error rate {options.alpha:g}).",
         f"Stimuli: SHA-256 of the clip ids {clip_set_hash(rows)[:16]}",
     ]
     mh = manifest_hash(options.metrics_path)

@@ -235,6 +235,9 @@ def test_parallel_statistics_against_scipy(tmp_path):
     f = write(tmp_path / "ratings.csv", PAGE_COLS, rows)
     doc = build_report(f, tmp_path / "rep", Options(n_boot=50), quiet=True)
     assert doc["design"] == "parallel" and doc["excluded_raters"] == ["r3"]
+    # the methods paragraph names what the report computed: the mixed model and the bootstrap, with its count
+    assert "a linear mixed model with crossed random intercepts for raters and items" in doc["methods"]
+    assert "a bootstrap over raters (50 resamples, seed 0;" in doc["methods"]
     df = pd.DataFrame(rows, columns=PAGE_COLS)
     kept = df[(df["role"] == "test") & (df["rater_id"] != "r3")]
     for c, m in doc["condition_means"].items():

@@ -101,3 +101,25 @@ def test_the_two_panels_labels_do_not_run_into_each_other(tmp_path, monkeypatch)
     design_figures.mas_bars(table, tmp_path / "mas.png", score=Dyadic.score)
     left, right = seen["labels"]
     assert left.x1 < right.x0  # side by side, apart
+
+
+def test_the_methods_paragraph_gives_no_resamples_where_none_were_drawn(tmp_path):
+    """The appropriateness statistics are t intervals and sign tests: the paragraph a paper takes gives the error
+    rate, and no count or seed of resamples the report never drew (it said "2000 resamples, seed 0")."""
+    from analysis.designs import Options
+    from analysis.report import build_report
+
+    path = tmp_path / "a.csv"
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(COLUMNS)
+        for r in range(6):
+            for i in range(4):
+                for system in ("S", "T"):
+                    w.writerow([f"r{r}", f"i{i}", f"{system}{i}m", f"{system}{i}x", system, system,
+                                (r + i) % 4 - 1, "test", "a"])  # fmt: skip
+            w.writerow([f"r{r}", "k", "n1", "b1", "NAT", "BAD", 2, "catch", ""])
+    doc = build_report(path, tmp_path / "rep", Options(n_boot=123, seed=4), quiet=True)
+    assert doc["design"] == "appropriateness"
+    assert "sign tests against chance, Holm-adjusted (family-wise error rate 0.05)." in doc["methods"]
+    assert "resamples" not in doc["methods"].split("The statistics are")[1].split(".")[0]

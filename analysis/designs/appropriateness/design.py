@@ -23,6 +23,7 @@ class Appropriateness(FailedCatchDesign):
     methods_stats = (
         "the mean appropriateness score with Student-t intervals and sign tests against chance, Holm-adjusted"
     )
+    methods_resamples = False  # t intervals and sign tests (and the dyadic and semantic designs'): none resampled
 
     def answers_per_unit(self, test):
         return "votes per system", test.groupby("condition_a").size()

@@ -14,7 +14,10 @@ class Parallel(FailedCatchDesign):
     name = "parallel"
     methods_task = "rated every condition of an item on one page, side by side, on a 0-100 scale (MUSHRA-like)"
     methods_catch = "rated a deliberately broken clip (BAD) at or above the real motion on the same page"
-    methods_stats = "Wilcoxon signed-rank tests on page-paired ratings, Holm-adjusted"
+    methods_stats = (
+        "Wilcoxon signed-rank tests on page-paired ratings (Holm-adjusted), a linear mixed model with crossed random "
+        "intercepts for raters and items, and intervals of each condition's mean from a bootstrap over raters"
+    )
 
     def detects(self, columns):
         return "page_id" in columns and "preference" not in columns  # both: a pairs.csv (pairwise's)
