@@ -170,7 +170,7 @@ def build_report(ratings_path, out_dir="report", options: Options | None = None,
         "figures": {k: str(Path(v).relative_to(out)) for k, v in figs.items()},
     }
     note = shortfall_note(data.counts["n_raters_total"], target)
-    methods = methods_paragraph(design, data.rows, data.kept, data.counts, options)
+    methods = methods_paragraph(design, data.rows, data.kept, data.counts, options, design.statistics_text(kept))
     methods = " ".join(filter(None, [methods, samples_sentence(spread)]))
     body = design.html(meta, data.counts, kept, everyone, figs)
     if not spread.empty:

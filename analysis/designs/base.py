@@ -107,6 +107,13 @@ class Design:
     methods_catch = "preferred a deliberately broken clip (BAD) to the real motion"
     methods_stats = ""
     methods_resamples = True  # whether those statistics resample (Options.n_boot, seed): counted and seeded then
+    methods_mixed = ""  # the clause of methods_stats naming its mixed model: said only where one was fitted
+
+    def statistics_text(self, result) -> str:
+        """methods_stats as the report computed them: without the mixed model's clause where the primary analysis
+        `result` holds no fitted model (--no-mixed, more levels than --mixed-max-levels, a model undefined)."""
+        fitted = bool((result.get("mixed") or {}).get("fixed_effects"))
+        return self.methods_stats if fitted else self.methods_stats.replace(self.methods_mixed, "")
 
     def answers_per_unit(self, test) -> tuple[str, pd.Series]:
         """(what a unit of the methods paragraph's count is, the kept test answers per unit): ratings per clip

@@ -57,11 +57,12 @@ def conditions_of(rows) -> list[str]:
     return study.condition_order(np.concatenate([test[c].astype(str).to_numpy() for c in cols]))
 
 
-def methods_paragraph(design, rows, kept, counts, options) -> str:
+def methods_paragraph(design, rows, kept, counts, options, statistics=None) -> str:
     """The paragraph (see the module's docstring): `rows` every answer, `kept` those of the raters kept,
     `counts` the exclusion's counts, `options` the report's settings (analysis.designs.Options), `design` the
     study's analysis design (analysis.designs.base.Design), whose words for its task, catch rule and statistics the
-    paragraph joins: it names no design itself."""
+    paragraph joins: it names no design itself. `statistics`: the design's statistics as the report computed them
+    (Design.statistics_text of its primary analysis); the design's full list where None."""
     conditions = conditions_of(rows)
     n_total, n_excl = counts["n_raters_total"], counts["n_raters_excluded"]
     catch = design.methods_catch.format(threshold=options.threshold)
@@ -89,7 +90,8 @@ def methods_paragraph(design, rows, kept, counts, options) -> str:
         f"there were {lo}-{hi} {unit} (median {med:g})."
         if lo != hi
         else f"The study compared {len(conds)} conditions ({', '.join(conds)}) on {n_items} items, {lo} {unit}.",
-        f"The statistics are {design.methods_stats} ({resamples}family-wise error rate {options.alpha:g}).",
+        f"The statistics are {statistics or design.methods_stats} ({resamples}family-wise error rate "
+        f"{options.alpha:g}).",
         f"Stimuli: SHA-256 of the clip ids {clip_set_hash(rows)[:16]}",
     ]
     mh = manifest_hash(options.metrics_path)

@@ -117,3 +117,21 @@ def test_kept_raters_without_a_test_answer_are_counted_in_the_methods(tmp_path):
     assert "8 raters took part. 0 were excluded" in doc["methods"]
     assert "leaving 8 raters (2 of them answered no test trial) and 48 test answers" in doc["methods"]
     assert "48 test ratings from 6 raters" in (tmp_path / "rep" / "report.html").read_text()
+
+
+def test_the_methods_paragraph_names_a_mixed_model_only_where_one_was_fitted(tmp_path):
+    """--no-mixed (or a study past --mixed-max-levels) fits no mixed model, and the paragraph a paper takes then
+    names none: it named one whatever the report computed."""
+    from analysis.designs import DESIGNS
+
+    assert all(d.methods_mixed in d.methods_stats for d in DESIGNS.values())  # each clause is its design's own
+    df = panel(raters=6, clips=8)
+    df["condition"] = np.where(df["clip_id"].str[1:].astype(int) < 4, "NAT", "SYS")
+    df["item"] = "it" + (df["clip_id"].str[1:].astype(int) % 4).astype(str)
+    path = tmp_path / "ratings.csv"
+    df.astype({"rating": int}).to_csv(path, index=False)
+    fitted = report.build_report(path, tmp_path / "a", Options(n_boot=20), progress=False, quiet=True)
+    assert "a one-way ANOVA with Tukey's HSD, a linear mixed model with crossed random" in fitted["methods"]
+    plain = report.build_report(path, tmp_path / "b", Options(n_boot=20, mixed=False), progress=False, quiet=True)
+    assert "mixed" not in plain["methods"]
+    assert "a one-way ANOVA with Tukey's HSD and cluster-bootstrap intervals resampling raters" in plain["methods"]

@@ -194,6 +194,7 @@ class Acr(Design):
         "a one-way ANOVA with Tukey's HSD, a linear mixed model with crossed random intercepts for raters and "
         "clips, and cluster-bootstrap intervals resampling raters and clips"
     )
+    methods_mixed = ", a linear mixed model with crossed random intercepts for raters and clips,"
     steps = 14  # five per analysis of two, three for the figures, one for the files
 
     def detects(self, columns):

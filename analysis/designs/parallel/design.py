@@ -18,6 +18,7 @@ class Parallel(FailedCatchDesign):
         "Wilcoxon signed-rank tests on page-paired ratings (Holm-adjusted), a linear mixed model with crossed random "
         "intercepts for raters and items, and intervals of each condition's mean from a bootstrap over raters"
     )
+    methods_mixed = ", a linear mixed model with crossed random intercepts for raters and items,"
 
     def detects(self, columns):
         return "page_id" in columns and "preference" not in columns  # both: a pairs.csv (pairwise's)
