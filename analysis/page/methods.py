@@ -76,7 +76,9 @@ def methods_paragraph(design, rows, kept, counts, options, statistics=None) -> s
     idle = n_kept - test["rater_id"].nunique() if "rater_id" in test.columns else 0
     resamples = f"{options.n_boot} resamples, seed {options.seed}; " if design.methods_resamples else ""
     kept = f"{n_kept} raters" + (f" ({idle} of them answered no test trial)" if idle > 0 else "")
-    if counts.get("n_catch_ratings", 1):
+    if counts.get("n_catch_ratings", 1) and n_excl == 0:
+        excluded = f"None {catch} in a catch trial, so none was excluded: {kept} and {len(test)} test answers."
+    elif counts.get("n_catch_ratings", 1):
         excluded = (
             f"{n_excl} {'was' if n_excl == 1 else 'were'} excluded because they {catch} in at least one catch "
             f"trial, leaving {kept} and {len(test)} test answers."
