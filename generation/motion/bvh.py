@@ -388,7 +388,8 @@ def _parse_motion(block, first, n_frames, n_channels, frames_line, name):
     a line-by-line walk happens only to name the line of a non-numeric value.
     """
     b = np.frombuffer(block, dtype=np.uint8)
-    line_begin = np.concatenate([[0], *(np.flatnonzero(b[part] == 10) + part.start + 1 for part in _spans(len(b)))])
+    newlines = (np.flatnonzero(b[part] == 10) + part.start + 1 for part in spans(len(b), PARSE_SPAN))
+    line_begin = np.concatenate([[0], *newlines])
     line_begin = line_begin[line_begin < len(b)]
     per_line = _tokens_per_line(b, line_begin)
     nonempty = np.flatnonzero(per_line)
@@ -418,7 +419,7 @@ def _parse_motion(block, first, n_frames, n_channels, frames_line, name):
     if values is None or values.size != n_frames * n_channels:
         _find_bad_number(block.decode("utf-8", errors="replace").split("\n"), first, name)
         raise BvhError(f"{name}:{first}: MOTION block could not be parsed as numbers")
-    for part in _spans(values.size):  # a span at a time: |values| whole would be one more copy of them
+    for part in spans(values.size, PARSE_SPAN):  # a span at a time: |values| whole would be one more copy of them
         out = np.flatnonzero(~(np.abs(values[part]) <= MAX_VALUE))  # also catches nan and inf
         if len(out):
             k = (part.start + int(out[0])) // n_channels
@@ -428,9 +429,9 @@ def _parse_motion(block, first, n_frames, n_channels, frames_line, name):
     return values.reshape(n_frames, n_channels)
 
 
-def _spans(n):
-    """Slices of PARSE_SPAN elements (bytes of text, or values) covering n."""
-    return (slice(start, min(start + PARSE_SPAN, n)) for start in range(0, n, PARSE_SPAN))
+def spans(n, size):
+    """Slices of `size` elements covering n, the last one shorter: a long take worked a part at a time."""
+    return (slice(start, min(start + size, n)) for start in range(0, n, size))
 
 
 def _tokens_per_line(b, line_begin):
@@ -440,7 +441,7 @@ def _tokens_per_line(b, line_begin):
     of the text at a time: the byte classes of the whole text at once were twice its size again at the parse's peak
     (and, summed through an integer a byte, ten times it before that)."""
     per_line = np.zeros(len(line_begin), dtype=np.int64)
-    for part in _spans(len(b)):
+    for part in spans(len(b), PARSE_SPAN):
         text = b[part]
         before = np.empty(len(text), dtype=bool)  # whether the byte before each is a space
         before[0] = part.start == 0 or b[part.start - 1] <= 32

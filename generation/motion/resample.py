@@ -9,7 +9,7 @@ Quaternions are (w, x, y, z) numpy arrays in the last axis.
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from .bvh import AXIS
+from .bvh import AXIS, spans
 
 CHUNK_FRAMES = 4096  # frames worked on at a time where a whole take would need several copies of itself
 FILTER_TRUNCATE = 4.0  # the anti-aliasing Gaussian's reach, in sigmas (scipy's default, named to bound a block)
@@ -61,7 +61,7 @@ def local_quaternions(bvh, frames=None):
     groups = [(chans, np.array([j for j, _ in m]), np.array([c for _, c in m])) for chans, m in groups.items()]
     # A block of frames at a time: the products' temporaries, several times the result's size when made for every
     # frame at once, stay a few megabytes however long the take (the same arithmetic, frame by frame).
-    for part in _blocks(T):
+    for part in spans(T, CHUNK_FRAMES):
         for chans, js, cols in groups:
             qg = None
             for k, ch in enumerate(chans):
@@ -87,7 +87,7 @@ def continuity_flips(q):
     Worked a block of frames at a time (the dot products a component at a time, only their signs used), so a long
     take's flips cost an eighth of its quaternions and no copy of them."""
     flips = np.zeros(q.shape[:-1], dtype=bool)
-    for part in _blocks(q.shape[0] - 1):
+    for part in spans(q.shape[0] - 1, CHUNK_FRAMES):
         a, b = q[1:][part], q[:-1][part]
         dots = a[..., 0] * b[..., 0]
         for i in (1, 2, 3):
@@ -160,7 +160,7 @@ def _resample_blocks(n, frames, fps_in, fps_out):
     i0, i1, w = lerp_indices(n, fps_in, fps_out)
     flips = None  # [n, J]: each input frame's continuity_flips, once a block has reached the frame
     q_out = t_out = None
-    for part in _blocks(len(i0)):
+    for part in spans(len(i0), CHUNK_FRAMES):
         a, b, wp = i0[part], i1[part], w[part, None]
         lo, hi = max(int(a[0]) - reach, 0), min(int(b[-1]) + 1 + reach, n)  # a take's own ends: "nearest" there
         start = max(lo - 1, 0)  # the frame before the block, whose sign the block's first frame follows
@@ -180,11 +180,6 @@ def _resample_blocks(n, frames, fps_in, fps_out):
         q_out[part] = slerp(qb[a], qb[b], np.broadcast_to(wp, (len(a),) + qb.shape[1:-1]))
         t_out[part] = tb[a] * (1 - wp[..., None]) + tb[b] * wp[..., None]
     return q_out, t_out
-
-
-def _blocks(n):
-    """Slices of CHUNK_FRAMES frames covering n frames."""
-    return (slice(start, start + CHUNK_FRAMES) for start in range(0, n, CHUNK_FRAMES))
 
 
 def clean_fps(fps):
