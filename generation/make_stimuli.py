@@ -394,7 +394,6 @@ def _output_flags(ap):
 def parse_args(argv):
     parser = build_parser()
     args = parser.parse_args(argv)
-    cli.refuse_empty(args, but=("out",))  # --study "" built the built-in study in place of the user's
     if args.study:
         return _study_args(args, parser)
     if args.length_s is not None:

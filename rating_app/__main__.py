@@ -322,9 +322,6 @@ def _simulate_parser(sub):
 
 def _main(argv):
     a = build_parser().parse_args(argv)
-    db = getattr(a, "db", getattr(a, "db_url", None))  # serve's setting is db_url
-    if db is not None and not db.strip():  # `--db "$DATABASE_URL"`, unset: it served the default SQLite file instead
-        raise AppError("--db: empty; give a database URL, or leave the flag out")
     if getattr(a, "db", "") is None:  # export, backup and the rounds' commands without --db: the study's variable
         a.db = environment().get("DATABASE_URL")
     return a.fn(a)

@@ -3,8 +3,8 @@
 A problem with what the user gave (a file, a line in it, a flag) ends the run with one line on stderr,
 ``error: WHERE: WHAT``, and exit code 2; never a traceback. Library code raises `UserError` (or a
 subclass, e.g. ``BvhError``) with a message that already names the file, line or field; flags are
-checked by the argparse types below; `run` turns both into that one line. Anything else is a bug and
-keeps its traceback.
+checked by the argparse types below, and a flag or argument given an empty value by the parser itself; `run`
+turns both into that one line. Anything else is a bug and keeps its traceback.
 
     def main(argv=None):
         return cli.run(_main, argv)
@@ -63,6 +63,17 @@ class ArgumentParser(argparse.ArgumentParser):
     def error(self, message):
         self.exit(EXIT_USAGE, f"error: {self.prog}: {message} (see --help)\n")
 
+    def _get_value(self, action, arg_string):
+        # An empty value (`--out "$DIR"` with the variable unset) would be read as the current folder once a type made
+        # it a Path, or as the flag left out by a command testing for a value: refused for every flag and argument
+        # of every command, before its type sees it. argparse has no public hook before the type conversion. A
+        # subcommand's strings pass through its parent's action (nargs PARSER) to the subcommand's parser, which checks.
+        passed_on = action.nargs in (argparse.PARSER, argparse.REMAINDER)
+        if isinstance(arg_string, str) and not arg_string.strip() and not passed_on:
+            leave = ", or leave the flag out" if action.option_strings and not action.required else ""
+            raise argparse.ArgumentError(action, f"empty; give a value{leave}")
+        return super()._get_value(action, arg_string)
+
 
 def number(kind=float, lo=None, hi=None, lo_open=False):
     """An argparse type: a finite `kind` (int or float) in [lo, hi] ((lo, hi] with lo_open).
@@ -117,15 +128,6 @@ def file_to_write(out, what: str, flag: str = "--out", reads=()) -> Path:
         if path is not None and out.exists() and Path(path).exists() and out.samefile(path):
             raise UserError(f"{flag} {out}: is the file {source} names, which it would replace; write elsewhere")
     return out
-
-
-def refuse_empty(args, but=()) -> None:
-    """UserError naming the first flag of parsed `args` given an empty value (`--study "$STUDY"` with the variable
-    unset), which a command would otherwise read as the flag left out and run on its defaults; the flags in `but`
-    are checked by the command itself."""
-    for name, value in vars(args).items():
-        if isinstance(value, str) and not value.strip() and name not in but:
-            raise UserError(f"--{name.replace('_', '-')}: empty; give a value, or leave the flag out")
 
 
 def run(main, argv=None):

@@ -373,7 +373,9 @@ BAD = {
 
 def test_an_empty_out_is_refused_naming_the_flag(reports, capsys):
     code, err = run(["--task", f"a={reports / 'report_acr'}", "--out", ""], capsys)
-    assert code == 2 and err == "error: --out: empty; give the board's folder\n", err
+    assert code == 2 and err == (
+        "error: python -m analysis.board: argument --out: empty; give a value, or leave the flag out (see --help)\n"
+    ), err
 
 
 def test_an_out_under_a_file_names_the_board_and_the_file(reports, tmp_path, capsys):

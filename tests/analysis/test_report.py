@@ -314,7 +314,7 @@ def test_too_few_ratings_and_bad_out_are_one_line_errors(tmp_path, capsys):
     cases = [
         ([str(two)], f"{two}: 2 test ratings in 2 conditions"),
         ([str(DATA / "exclusion.csv"), "--out", str(a_file)], f"--out {a_file}: a file, not a folder"),
-        ([str(DATA / "exclusion.csv"), "--out", ""], "--out: empty; give the report's folder"),
+        ([str(DATA / "exclusion.csv"), "--out", ""], "python -m analysis.report: argument --out: empty; give a"),
         ([str(DATA / "exclusion.csv"), "--out", str(a_file / "sub")], f"--out {a_file / 'sub'}: {a_file} is a file"),
     ]
     for args, start in cases:

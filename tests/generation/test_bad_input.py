@@ -399,9 +399,10 @@ def test_an_empty_out_or_one_in_the_way_is_refused_before_any_work(tmp_path, mon
     }
     for name, (main, argv, kind) in commands.items():
         in_the_way = "afile" if kind == "folder" else "afolder"
-        for out, says in (("", "--out: empty; give the"), (in_the_way, f"--out {in_the_way}: a f")):
-            code, line = one_line_error(main, [*argv, "--out", out], capsys)
-            assert code == 2 and line.startswith(f"error: {says}"), (name, out, line)
+        code, line = one_line_error(main, [*argv, "--out", ""], capsys)  # by the parser every command uses
+        assert code == 2 and "argument --out: empty; give a value" in line, (name, line)
+        code, line = one_line_error(main, [*argv, "--out", in_the_way], capsys)
+        assert code == 2 and line.startswith(f"error: --out {in_the_way}: a f"), (name, line)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile", "afolder"] and not any(
         (tmp_path / "afolder").iterdir()
     )

@@ -92,7 +92,10 @@ def test_the_video_itself_or_the_studys_as_out_is_refused_and_left_as_it_was(fla
     for out, name in ((src, "the video to encode"), (like, "the study's video")):
         with pytest.raises(RenderError, match=f"{out}: is {name}"):
             reencode(src, out, like)
-    for out, says in (("", "OUT: empty"), (str(tmp_path), f"OUT {tmp_path}: a folder")):
+    for out, says in (
+        ("", "python -m rendering.reencode: argument out: empty"),
+        (str(tmp_path), f"OUT {tmp_path}: a folder"),
+    ):
         code, line = one_line_error(reencode_module.main, [str(src), out, "--like", str(like)], capsys)
         assert code == 2 and line.startswith(f"error: {says}"), line
     assert {p: p.read_bytes() for p in (like, src)} == before
