@@ -1,6 +1,7 @@
 """The console command (pyproject [project.scripts]) and --version on every command (issue 33, item 2)."""
 
 import importlib
+import re
 import subprocess
 import sys
 import tomllib
@@ -77,20 +78,33 @@ def test_python_m_keeps_working_and_answers_version(module):
     assert (r.returncode, r.stdout.strip()) == (0, f"moglow-eval {VERSION}")
 
 
-COMMAND_MODULES = [
-    "generation.make_stimuli",
-    "generation.training.train",
-    "generation.data.prepare",
-    "generation.data.import_motion",
-    "generation.sampling.sample",
-    "generation.sampling.pretrained",
-    "generation.own_study.demo_study",
-    "rendering.__main__",
-    "rating_app.__main__",
-    "analysis.report",
-    "analysis.plan",
-    "analysis.demo",
-]
+PACKAGES = ("generation", "rendering", "analysis", "rating_app")
+
+
+def command_modules():
+    """Every module of the product with a `main`: each a `python -m` command (a list kept by hand missed ten)."""
+    found = []
+    for package in PACKAGES:
+        for path in sorted((ROOT / package).rglob("*.py")):
+            if re.search(r"^def main\(", path.read_text(encoding="utf-8"), re.M):
+                found.append(".".join(path.relative_to(ROOT).with_suffix("").parts))
+    return found
+
+
+COMMAND_MODULES = command_modules()
+
+
+def test_every_command_parses_with_the_projects_parser():
+    """cli.ArgumentParser gives every command its one-line errors, --version and the refusal of an empty value; a
+    command built on argparse's own parser would have none of them."""
+    assert len(COMMAND_MODULES) >= 20, COMMAND_MODULES
+    own = [
+        str(path.relative_to(ROOT))
+        for package in PACKAGES
+        for path in (ROOT / package).rglob("*.py")
+        if "argparse.ArgumentParser(" in path.read_text(encoding="utf-8")
+    ]
+    assert own == [], own
 
 
 @pytest.mark.parametrize("module", COMMAND_MODULES)
