@@ -7,7 +7,8 @@ with the common 22-joint skeleton: each kind of generation/stimuli/catch_kinds.p
 median of each metric over takes is printed as a ratio to the real takes' median (bone-length variation, ~0 for
 rigid mocap, in millimetres), how far its poses are from any pose of the take it was made from (about the body's
 root, the median over frames of the nearest real pose's mean joint distance, in cm: 0 for poses the take holds
-itself), and the C2ST AUC of the kind's clips against the real ones (folds grouped by take).
+itself), how many takes the kind fails to break visibly (`strays` under VISIBLE: what a study's build then
+replaces by its next kind), and the C2ST AUC of the kind's clips against the real ones (folds grouped by take).
 """
 
 import argparse
@@ -25,7 +26,7 @@ from generation.metrics.objective import (  # noqa: E402
     any_clip_metrics,
     find_feet,
 )
-from generation.stimuli.catch_kinds import KINDS, make_catch, unlike_any_pose  # noqa: E402
+from generation.stimuli.catch_kinds import KINDS, VISIBLE, make_catch, strays, unlike_any_pose  # noqa: E402
 from moglow_eval.core.skeleton_names import body_root, body_skeleton  # noqa: E402
 
 ACTIONS = ROOT.parent / "shared" / "data" / "bandai-namco-actions" / "dataset-1" / "data"
@@ -51,18 +52,24 @@ def main():
         k: np.median([np.median(unlike_any_pose(j[:, body], m.joints[:, body], at)) for j, m in zip(js, takes)])
         for k, js in clips.items()
     }
+    unseen = {k: sum(strays(j, m.joints, root) < VISIBLE for j, m in zip(js, takes)) for k, js in clips.items()}
     feats = {
         k: {i: c2st.clip_features(j[:, body], args.fps, body_parents) for i, j in enumerate(js)}
         for k, js in clips.items()
     }
     print(f"{len(takes)} real action takes, {common} joints, {args.fps:g} fps; medians over takes as x real")
-    print(f"{'kind':8} " + " ".join(f"{m:>16}" for m in SHOWN) + "  bone-length std  unlike real   C2ST AUC vs real")
+    print(
+        f"{'kind':8} "
+        + " ".join(f"{m:>16}" for m in SHOWN)
+        + "  bone-length std  unlike real  unseen   C2ST AUC vs real"
+    )
     for k in clips:
         ratios = " ".join(f"{med[k][m] / med['real'][m]:>15.2f}x" for m in SHOWN)
         bones = np.median([r["bone_length_std"] for r in rows[k]]) * 1000
         auc = c2st.c2st_self(feats["real"])["auc"] if k == "real" else c2st.c2st(feats["real"], feats[k])["auc"]
         floor = " (real split in two: the floor)" if k == "real" else ""
-        print(f"{k:8} {ratios} {bones:>13.2f} mm {unlike[k] * 100:>9.1f} cm   {auc:.3f}{floor}")
+        seen = f"{unseen[k]:>3}/{len(takes)}" if k != "real" else "      "
+        print(f"{k:8} {ratios} {bones:>13.2f} mm {unlike[k] * 100:>9.1f} cm  {seen}   {auc:.3f}{floor}")
 
 
 if __name__ == "__main__":

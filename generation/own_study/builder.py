@@ -49,7 +49,7 @@ from ..metrics import c2st
 from ..metrics.c2st_features import FEATURE_COLUMNS, feature_table, feature_text
 from ..metrics.objective import any_clip_metrics, find_feet
 from ..stimuli.build_index import BuildIndex, keyed_id
-from ..stimuli.catch_kinds import make_catch
+from ..stimuli.catch_kinds import VISIBLE, make_visible_catch
 from ..stimuli.files import (
     StimuliError,
     clip_files,
@@ -169,9 +169,17 @@ def catch_clips(spec, motions, catch_items, progress):
             out[item] = (m.joints[:n], "own")
         return out
     for k, item in enumerate(catch_items):
-        kind = spec.catch_make[k % len(spec.catch_make)]
-        m = ref[item]
-        out[item] = (make_catch(m.joints, kind, spec.seed * 1000 + k, body_root(m.names, m.parents)), kind)
+        m, j = ref[item], k % len(spec.catch_make)
+        kinds = spec.catch_make[j:] + spec.catch_make[:j]  # the item's kind in the mix, then the mix's others
+        out[item] = make_visible_catch(m.joints, kinds, spec.seed * 1000 + k, body_root(m.names, m.parents))
+        if out[item] is None:
+            raise StimuliError(
+                f"{m.path}: catch item {item}: a {' or '.join(kinds)} of it would look like the motion itself (no "
+                f"joint strays {VISIBLE * 100:g} cm from it); add jitter or swap to [catch] make, or give the catch "
+                "clips yourself ([catch] folder)"
+            )
+        if out[item][1] != kinds[0]:
+            log.info(f"catch item {item}: a {out[item][1]}, as a {kinds[0]} of it would look like the motion itself")
     return out
 
 

@@ -11,6 +11,10 @@ clips' look and their encoded size on both sides of the test clips':
   Out of step alone, a calm take's upper body (a wave, a bow, over legs that hardly move) was the take played
   later, which a rater could take for real motion.
 
+A kind can fail on a take: a freeze of one that hardly moves after its freeze point is the take itself to a rater,
+who would then be excluded for rating it as real. `make_visible_catch` makes the next kind of a study's mix where
+the first would not stray VISIBLE from the take.
+
 How bad each is, on the metrics of metrics.csv, is in bench/notes/2026-11-25-history.md ("Catch clips made by the
 tool") and, for today's kinds, bench/notes/2026-12-02-results-details.md ("c2st").
 """
@@ -23,6 +27,10 @@ from ..motion.features import rotate_y
 JITTER_SIGMA = 0.03  # of the body's height per joint and frame: about 5 cm for an adult
 FREEZE_AT = 0.25  # of the clip's length
 SWAP_TURNS = 2  # full turns of the swapped upper body over the clip
+# How far a catch clip's most-moved joint must stray from the take's (about the root; the 90th percentile over frames)
+# for its break to be seen: a judgement, not measured with raters. A freeze of a take still after its first quarter
+# (a short goodbye) strays less; bench/catch_kinds.py counts the takes each kind leaves unseen.
+VISIBLE = 0.05  # m
 
 
 def jitter(joints, rng, root=0):
@@ -58,12 +66,34 @@ def swap(joints, rng, root=0):
 KINDS = {"jitter": jitter, "freeze": freeze, "swap": swap}
 
 
+def _about_root(clip, root):
+    clip = np.asarray(clip, dtype=np.float64)
+    return clip - clip[:, root : root + 1]
+
+
 def unlike_any_pose(clip, real, root=0):
     """Per frame of `clip` [T, J, 3], how far its pose about the root is from the nearest pose of `real` [T', J, 3]
     (m, the mean over joints): 0 for a pose the real clip holds itself, as a calm take's time-shifted upper body
     does. What tells a broken body from the take it was made from, whatever the camera (bench/catch_kinds.py)."""
-    a, b = (np.asarray(c, dtype=np.float64) - np.asarray(c, dtype=np.float64)[:, root : root + 1] for c in (clip, real))
+    a, b = _about_root(clip, root), _about_root(real, root)
     return np.array([np.linalg.norm(frame - b, axis=-1).mean(-1).min() for frame in a])
+
+
+def strays(broken, real, root=0):
+    """How far the most-moved joint of `broken` [T, J, 3] is from `real`'s, each about its root, at the 90th
+    percentile over frames (m): whether a rater can see what was broken (VISIBLE), whatever the camera."""
+    a, b = _about_root(broken, root), _about_root(real, root)
+    return float(np.percentile(np.linalg.norm(a - b, axis=-1).max(-1), 90))
+
+
+def make_visible_catch(joints, kinds, seed, root=0):
+    """(broken copy, kind) of `joints` by the first of `kinds` whose clip strays at least VISIBLE from them
+    (make_catch, `seed`, `root`); None where no kind of `kinds` does."""
+    for kind in kinds:
+        broken = make_catch(joints, kind, seed, root)
+        if strays(broken, joints, root) >= VISIBLE:
+            return broken, kind
+    return None
 
 
 def make_catch(joints, kind, seed, root=0):

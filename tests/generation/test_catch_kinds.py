@@ -1,15 +1,25 @@
 """The catch clips the tool makes (generation.stimuli.catch_kinds) on a body whose first joint is a root marker:
 Bandai-Namco's `joint_Root`, left at the scene's origin in dataset 2 while the walk of tests/data/bvh goes 8 m.
 A frozen pose and a swapped upper body are carried along by the body's root, the hips, not by the marker: else a
-frozen walker stands still and a swapped torso floats metres from its legs (the camera then frames both)."""
+frozen walker stands still and a swapped torso floats metres from its legs (the camera then frames both). A kind that
+would not be seen on a take (a freeze of one still after its first quarter) gives way to the study's next kind."""
+
+import logging
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from helpers.own_study_data import ACTIONS
 from helpers.paths import TEST_DATA
 
 from generation.data.motion_files import read_motion
-from generation.stimuli.catch_kinds import make_catch, unlike_any_pose
+from generation.own_study.builder import catch_clips
+from generation.stimuli.catch_kinds import VISIBLE, make_catch, make_visible_catch, strays, unlike_any_pose
+from moglow_eval.core import study
+from moglow_eval.core.cli import UserError
 from moglow_eval.core.skeleton_names import body_root
+
+STILL = "dataset-1_byebye_not-confident_001.bvh.gz"  # a wave goodbye, still after its first quarter
 
 
 @pytest.fixture(scope="module")
@@ -42,3 +52,26 @@ def test_poses_unlike_the_takes_own_tell_a_broken_body_from_the_take_played_othe
     body = joints[:, 1:]  # without the marker; the hips are body joint hips - 1
     assert np.abs(unlike_any_pose(body[::-1], body, hips - 1)).max() < 1e-6  # its own poses, in another order
     assert np.median(unlike_any_pose(make_catch(joints, "swap", 0, root=hips)[:, 1:], body, hips - 1)) > 0.05
+
+
+def test_a_freeze_that_would_look_like_the_take_gives_way_to_the_studys_next_kind(walk, caplog):
+    """A rater who rated such a freeze as real would be excluded for seeing rightly; so the study's next kind breaks
+    the take, the manifest records the kind made, and a study whose kinds none break it stops with one line."""
+    still = read_motion(ACTIONS / STILL, fps=20.0)
+    root = body_root(still.names, still.parents)
+    assert strays(make_catch(still.joints, "freeze", 0, root), still.joints, root) < VISIBLE
+    joints, hips = walk
+    assert strays(make_catch(joints, "freeze", 0, hips), joints, hips) > 2 * VISIBLE  # a walk frozen: seen
+    assert make_visible_catch(joints, ["freeze", "swap"], 0, hips)[1] == "freeze"
+    broken, kind = make_visible_catch(still.joints, ["freeze", "swap"], 0, root)
+    assert kind == "swap" and strays(broken, still.joints, root) >= VISIBLE
+    assert make_visible_catch(still.joints, ["freeze"], 0, root) is None
+
+    motions = {study.NATURAL: {"bye": still}}
+    spec = SimpleNamespace(catch_folder=None, catch_make=["freeze", "jitter"], seed=0)
+    with caplog.at_level(logging.INFO):
+        assert catch_clips(spec, motions, ["bye"], progress=False)["bye"][1] == "jitter"
+    assert "catch item bye: a jitter, as a freeze of it would look like the motion itself" in caplog.text
+    spec.catch_make = ["freeze"]
+    with pytest.raises(UserError, match=f"^{still.path}: catch item bye: a freeze of it would look like the motion"):
+        catch_clips(spec, motions, ["bye"], progress=False)
