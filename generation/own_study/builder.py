@@ -179,7 +179,9 @@ def catch_clips(spec, motions, catch_items, progress):
                 "clips yourself ([catch] folder)"
             )
         if out[item][1] != kinds[0]:
-            log.info(f"catch item {item}: a {out[item][1]}, as a {kinds[0]} of it would look like the motion itself")
+            log.info(
+                f"catch item {item}: made a {out[item][1]}, as a {kinds[0]} of it would look like the motion itself"
+            )
     return out
 
 

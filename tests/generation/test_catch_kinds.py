@@ -71,7 +71,7 @@ def test_a_freeze_that_would_look_like_the_take_gives_way_to_the_studys_next_kin
     spec = SimpleNamespace(catch_folder=None, catch_make=["freeze", "jitter"], seed=0)
     with caplog.at_level(logging.INFO):
         assert catch_clips(spec, motions, ["bye"], progress=False)["bye"][1] == "jitter"
-    assert "catch item bye: a jitter, as a freeze of it would look like the motion itself" in caplog.text
+    assert "catch item bye: made a jitter, as a freeze of it would look like the motion itself" in caplog.text
     spec.catch_make = ["freeze"]
     with pytest.raises(UserError, match=f"^{still.path}: catch item bye: a freeze of it would look like the motion"):
         catch_clips(spec, motions, ["bye"], progress=False)
