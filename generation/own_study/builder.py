@@ -49,7 +49,7 @@ from ..metrics import c2st
 from ..metrics.c2st_features import FEATURE_COLUMNS, feature_table, feature_text
 from ..metrics.objective import any_clip_metrics, find_feet
 from ..stimuli.build_index import BuildIndex, keyed_id
-from ..stimuli.catch_kinds import VISIBLE, make_visible_catch
+from ..stimuli.catch_kinds import VISIBLE, make_visible_catch, strays
 from ..stimuli.files import (
     StimuliError,
     clip_files,
@@ -167,6 +167,11 @@ def catch_clips(spec, motions, catch_items, progress):
             if len(m.joints) < n:
                 raise StimuliError(f"{m.path}: {seconds_text(m.seconds)} long, shorter than the item's other clips")
             out[item] = (m.joints[:n], "own")
+            if strays(out[item][0], ref[item].joints, body_root(m.names, m.parents)) < VISIBLE:  # the user's choice
+                log.warning(
+                    f"{m.path}: catch clip of item {item} strays under {VISIBLE * 100:g} cm from its reference "
+                    "clip: raters may take it for the real motion, and be excluded for it"
+                )
         return out
     for k, item in enumerate(catch_items):
         m, j = ref[item], k % len(spec.catch_make)

@@ -5,6 +5,7 @@ frozen walker stands still and a swapped torso floats metres from its legs (the 
 would not be seen on a take (a freeze of one still after its first quarter) gives way to the study's next kind."""
 
 import logging
+import shutil
 from types import SimpleNamespace
 
 import numpy as np
@@ -14,6 +15,8 @@ from helpers.paths import TEST_DATA
 
 from generation.data.motion_files import read_motion
 from generation.own_study.builder import catch_clips
+from generation.own_study.inputs import read_options
+from generation.own_study.study_file import read_study_file
 from generation.stimuli.catch_kinds import VISIBLE, make_catch, make_visible_catch, strays, unlike_any_pose
 from moglow_eval.core import study
 from moglow_eval.core.cli import UserError
@@ -75,3 +78,23 @@ def test_a_freeze_that_would_look_like_the_take_gives_way_to_the_studys_next_kin
     spec.catch_make = ["freeze"]
     with pytest.raises(UserError, match=f"^{still.path}: catch item bye: a freeze of it would look like the motion"):
         catch_clips(spec, motions, ["bye"], progress=False)
+
+
+def test_a_studys_own_catch_clip_that_barely_differs_from_the_reference_is_warned_of(tmp_path, caplog):
+    """A catch folder holding the reference's own file (a copy made by mistake) would exclude attentive raters; the
+    build keeps the user's choice and says so. A clip of another take passes without a word."""
+    for folder in ("real", "sys", "bad"):
+        (tmp_path / folder).mkdir()
+    shutil.copy(ACTIONS / STILL, tmp_path / "real" / "bye.bvh.gz")
+    study_toml = tmp_path / "study.toml"
+    conditions = '[conditions]\nreal = "real"\nSYS = "sys"\n'
+    study_toml.write_text(f'reference = "real"\nfps = 20\n{conditions}[catch]\nfolder = "bad"\n')
+    spec = read_study_file(study_toml)
+    motions = {study.NATURAL: {"bye": read_motion(tmp_path / "real" / "bye.bvh.gz", **read_options(spec))}}
+    for source, warned in ((ACTIONS / STILL, True), (ACTIONS / "dataset-1_punch_normal_001.bvh.gz", False)):
+        shutil.copy(source, tmp_path / "bad" / "bye.bvh.gz")
+        caplog.clear()
+        with caplog.at_level(logging.WARNING):
+            assert catch_clips(spec, motions, ["bye"], progress=False)["bye"][1] == "own"
+        said = f"bye.bvh.gz: catch clip of item bye strays under {VISIBLE * 100:g} cm from its reference clip"
+        assert (said in caplog.text) == warned, caplog.text
