@@ -16,6 +16,7 @@ import numpy as np
 from moglow_eval.core import study
 
 from ..data.filtering import only_test_rows
+from .report_html import was
 
 
 def tool_version() -> str:
@@ -80,7 +81,7 @@ def methods_paragraph(design, rows, kept, counts, options, statistics=None) -> s
         excluded = f"None {catch} in a catch trial, so none was excluded: {kept} and {len(test)} test answers."
     elif counts.get("n_catch_ratings", 1):
         excluded = (
-            f"{n_excl} {'was' if n_excl == 1 else 'were'} excluded because they {catch} in at least one catch "
+            f"{n_excl} {was(n_excl)} excluded because they {catch} in at least one catch "
             f"trial, leaving {kept} and {len(test)} test answers."
         )
     else:  # e.g. votes imported from another tool

@@ -36,10 +36,15 @@ def count(n, noun):
     return f"{n} {noun}{'' if n == 1 else 's'}"
 
 
+def was(n):
+    """The verb for `n` things: "was" for one, "were" for any other number (none included)."""
+    return "was" if n == 1 else "were"
+
+
 def excluded_text(counts, reason):
     """The summary's sentence of the raters excluded: "N rater(s) REASON and was/were excluded"."""
     n = counts["n_raters_excluded"]
-    return f"{count(n, 'rater')} {reason} and {'was' if n == 1 else 'were'} excluded"
+    return f"{count(n, 'rater')} {reason} and {was(n)} excluded"
 
 
 def p_text(p, bound=False):
