@@ -49,6 +49,7 @@ from ..metrics import c2st
 from ..metrics.c2st_features import FEATURE_COLUMNS, feature_table, feature_text
 from ..metrics.objective import any_clip_metrics, find_feet
 from ..stimuli.build_index import BuildIndex, keyed_id
+from ..stimuli.catch_kinds import KINDS as CATCH_KINDS
 from ..stimuli.catch_kinds import VISIBLE, make_visible_catch, strays
 from ..stimuli.files import (
     StimuliError,
@@ -178,10 +179,11 @@ def catch_clips(spec, motions, catch_items, progress):
         kinds = spec.catch_make[j:] + spec.catch_make[:j]  # the item's kind in the mix, then the mix's others
         out[item] = make_visible_catch(m.joints, kinds, spec.seed * 1000 + k, body_root(m.names, m.parents))
         if out[item] is None:
+            others = " or ".join(kind for kind in CATCH_KINDS if kind not in kinds)  # the kinds the study left out
             raise StimuliError(
                 f"{m.path}: catch item {item}: a {' or '.join(kinds)} of it would look like the motion itself (no "
-                f"joint strays {VISIBLE * 100:g} cm from it); add jitter or swap to [catch] make, or give the catch "
-                "clips yourself ([catch] folder)"
+                f"joint strays {VISIBLE * 100:g} cm from it); {f'add {others} to [catch] make, or ' if others else ''}"
+                "give the catch clips yourself ([catch] folder)"
             )
         if out[item][1] != kinds[0]:
             log.info(

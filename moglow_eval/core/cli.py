@@ -68,6 +68,7 @@ class ArgumentParser(argparse.ArgumentParser):
         # it a Path, or as the flag left out by a command testing for a value: refused for every flag and argument
         # of every command, before its type sees it. argparse has no public hook before the type conversion. A
         # subcommand's strings pass through its parent's action (nargs PARSER) to the subcommand's parser, which checks.
+        # argparse also passes a string default through here, so a blank default would refuse every run: none has one.
         passed_on = action.nargs in (argparse.PARSER, argparse.REMAINDER)
         if isinstance(arg_string, str) and not arg_string.strip() and not passed_on:
             leave = ", or leave the flag out" if action.option_strings and not action.required else ""

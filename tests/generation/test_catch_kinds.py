@@ -78,6 +78,13 @@ def test_a_freeze_that_would_look_like_the_take_gives_way_to_the_studys_next_kin
     spec.catch_make = ["freeze"]
     with pytest.raises(UserError, match=f"^{still.path}: catch item bye: a freeze of it would look like the motion"):
         catch_clips(spec, motions, ["bye"], progress=False)
+    # the advice names the kinds the study left out: a pose held two frames, which neither a freeze nor a swap moves
+    held = SimpleNamespace(
+        joints=still.joints[:1].repeat(2, axis=0), names=still.names, parents=still.parents, path="h"
+    )
+    spec.catch_make = ["freeze", "swap"]
+    with pytest.raises(UserError, match="; add jitter to \\[catch\\] make, or give the catch clips yourself"):
+        catch_clips(spec, {study.NATURAL: {"bye": held}}, ["bye"], progress=False)
 
 
 def test_a_studys_own_catch_clip_that_barely_differs_from_the_reference_is_warned_of(tmp_path, caplog):
