@@ -24,7 +24,7 @@ from moglow_eval.core.study import CONDITION_NAME, RESERVED
 from ..motion import skeleton
 from ..motion.bvh import BvhError
 from ..motion.features import detect_skeleton, load_take, map_joints, root_trajectory, rotate_y
-from ..motion.resample import lerp_indices
+from ..motion.resample import lerp_indices, same_rate
 
 EXTENSIONS = (".bvh.gz", ".bvh", ".npz")
 
@@ -78,7 +78,7 @@ def find_system_files(folder, items):
 
 def resample_positions(joints, fps_in, fps_out):
     """Linear resampling of positions [T, J, 3] to fps_out over the same time span."""
-    if abs(fps_in - fps_out) < 1e-9 * fps_out:
+    if same_rate(fps_in, fps_out):
         return joints
     i0, i1, w = lerp_indices(len(joints), fps_in, fps_out)
     w = w[:, None, None]

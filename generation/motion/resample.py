@@ -112,6 +112,11 @@ def slerp(q0, q1, w):
     return out / np.linalg.norm(out, axis=-1, keepdims=True)
 
 
+def same_rate(fps_in, fps_out):
+    """Whether two frame rates are one: equal to a billionth, so a resampling would only copy the frames."""
+    return abs(fps_in - fps_out) < 1e-9 * fps_out
+
+
 def resample_times(n_frames, fps_in, fps_out):
     """Fractional input-frame positions of the output frames (covering the same time span)."""
     duration = (n_frames - 1) / fps_in
@@ -135,7 +140,7 @@ def resample_local(q, trans, fps_in, fps_out):
     (anti-aliasing); the quaternions are then renormalised. Any ratio is then sampled by slerp/lerp
     at the exact output times (30 -> 20 fps interpolates between frames instead of dropping any).
     """
-    if abs(fps_in - fps_out) < 1e-9 * fps_out:
+    if same_rate(fps_in, fps_out):
         return q, trans
     return _resample_blocks(q.shape[0], lambda lo, hi: (q[lo:hi], trans[lo:hi]), fps_in, fps_out)
 
@@ -143,7 +148,7 @@ def resample_local(q, trans, fps_in, fps_out):
 def local_quaternions_at(bvh, fps_in, fps_out):
     """local_quaternions of a `bvh.Bvh` resampled from fps_in to fps_out (resample_local), made a block of frames
     at a time: a long take's rotations are never held whole at the file's rate, only at the output's."""
-    if abs(fps_in - fps_out) < 1e-9 * fps_out:
+    if same_rate(fps_in, fps_out):
         return local_quaternions(bvh)
     return _resample_blocks(bvh.n_frames, lambda lo, hi: local_quaternions(bvh, slice(lo, hi)), fps_in, fps_out)
 
