@@ -134,15 +134,16 @@ def read_submission(team: str, folder, items, samples: int) -> Submission:
             _claim(sub, item, "1", where)
         else:
             _claim(sub, item, "", where)
+    used = {_ext(path.name) for by_sample in sub.files.values() for path in by_sample.values()}
+    ext = used.pop() if len(used) == 1 else None  # the format the team's files share, if they share one
     for item in sorted(items - set(sub.files)):
-        sub.add(folder / item, "missing", f"no motion for test item {item}: add {_missing(sub, item, samples)}", item)
+        sub.add(folder / item, "missing", f"no motion for test item {item}: add {_missing(item, samples, ext)}", item)
     return sub
 
 
-def _missing(sub, item, samples) -> str:
-    """What to add for a missing item, in the format of the team's other files where they share one."""
-    used = {_ext(path.name) for by_sample in sub.files.values() for path in by_sample.values()}
-    ext = used.pop() if len(used) == 1 else None
+def _missing(item, samples, ext) -> str:
+    """What to add for a missing item, in the format `ext` of the team's other files where they share one (else
+    None)."""
     if samples > 1:
         return f"a folder {item}/ of {samples} samples ({f'1{ext} .. {samples}{ext}' if ext else 'SAMPLE.EXT'})"
     return f"{item}{ext}, as the other items" if ext else f"{item}.EXT, EXT one of {', '.join(EXTENSIONS)}"
