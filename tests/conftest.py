@@ -328,26 +328,18 @@ def make(app_db_url):
 def live_server(app_stimuli, app_db_url):
     """The URL of the app serving `app_stimuli` over HTTP (a module may give its own `app_stimuli`);
     helpers.browser.live_server_manifest holds its manifest and app meanwhile."""
-    import threading
-
     from helpers.browser import live_server_manifest
-    from werkzeug.serving import make_server
+    from helpers.servers import in_thread
 
     from rating_app import create_app
-    from rating_app.store.db import app_engine
 
     manifest = os.environ.get("SCREENSHOT_MANIFEST") or app_stimuli
     app = create_app(
         manifest=manifest, db_url=app_db_url, admin_token="browser-token", ratings_per_clip=5, clips_per_rater=3
     )
-    server = make_server("127.0.0.1", 0, app, threaded=True)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
     live_server_manifest[:] = [manifest, app]
-    yield f"http://127.0.0.1:{server.server_port}"
-    server.shutdown()
-    thread.join(5)
-    app_engine(app).dispose()
+    with in_thread(app) as url:
+        yield url
 
 
 @pytest.fixture

@@ -8,7 +8,6 @@ then fills the study through the API and the report of the export is the design'
 
 import csv
 import io
-import threading
 
 import numpy as np
 import pytest
@@ -16,6 +15,7 @@ import requests
 from helpers import figure_pixels, seamless_fixtures
 from helpers.browser import STATE, chrome
 from helpers.design_client import complete
+from helpers.servers import in_thread
 from helpers.sound_check import pass_sound_check, sample_of
 from helpers.voices import decoded_audio, ffmpeg_loudness, voice_energy
 
@@ -43,17 +43,10 @@ def study_app(out, design, db, **settings):
 
 @pytest.fixture
 def served(built, tmp_path):
-    from werkzeug.serving import make_server
-
     design, out, sources = built
     app = study_app(out, design, tmp_path / "r.sqlite", clips_per_rater=3, min_view=0.5)
-    server = make_server("127.0.0.1", 0, app, threaded=True)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    yield design, app, f"http://127.0.0.1:{server.server_port}", sources
-    server.shutdown()
-    thread.join(5)
-    app_engine(app).dispose()
+    with in_thread(app) as url:
+        yield design, app, url, sources
 
 
 LAYOUT = """

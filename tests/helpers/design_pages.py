@@ -2,10 +2,10 @@
 test_browser_reasons.py): the app served over HTTP in a design, the page's state as a script reads it, a rater
 through the whole flow, and what the export and the database then hold."""
 
+import contextlib
 import csv
 import io
 import os
-import threading
 
 import requests
 from sqlalchemy import select
@@ -14,11 +14,13 @@ from rating_app import create_app
 from rating_app.store.db import TrialClip, app_engine
 
 from .paths import ROOT
+from .servers import in_thread
 
 
+@contextlib.contextmanager
 def serve(manifest, db_url, design):
-    from werkzeug.serving import make_server
-
+    """The app in `design` on `manifest` and `db_url`, served from a thread (helpers.servers.in_thread): yields
+    (app, its URL)."""
     app = create_app(
         manifest=manifest,
         db_url=db_url,
@@ -27,10 +29,8 @@ def serve(manifest, db_url, design):
         clips_per_rater=3,
         design=design,
     )
-    server = make_server("127.0.0.1", 0, app, threaded=True)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    return app, server, thread
+    with in_thread(app) as url:
+        yield app, url
 
 
 # A video's `src` (the address the page set, in the same task as the trial's label and count), never `currentSrc`:

@@ -1,6 +1,6 @@
-"""The app as a real server for the tests: gunicorn started and waited for, killed without a clean shutdown, and
-the settings of a crowd run (tests/rating_app/test_app_load.py, test_hosts.py, test_outage.py, test_proxy.py,
-test_accel.py)."""
+"""The app as a real server for the tests: served over HTTP from a thread of the test's own process; gunicorn
+started and waited for, killed without a clean shutdown; and the settings of a crowd run (tests/rating_app/
+test_app_load.py, test_hosts.py, test_outage.py, test_proxy.py, test_accel.py)."""
 
 import contextlib
 import os
@@ -13,6 +13,27 @@ from pathlib import Path
 import requests
 
 ROOT = Path(__file__).resolve().parents[2]
+
+
+@contextlib.contextmanager
+def in_thread(app):
+    """`app` on werkzeug's threaded HTTP server on a free port of 127.0.0.1, served from a daemon thread; yields its
+    URL, and stops the server and closes the app's database connections on leaving."""
+    import threading
+
+    from werkzeug.serving import make_server
+
+    from rating_app.store.db import app_engine
+
+    server = make_server("127.0.0.1", 0, app, threaded=True)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{server.server_port}"
+    finally:
+        server.shutdown()
+        thread.join(5)
+        app_engine(app).dispose()
 
 
 def wait_for(url, proc, what, timeout_s=120.0):

@@ -9,7 +9,6 @@ import datetime as dt
 import random
 import subprocess
 import sys
-import threading
 from types import SimpleNamespace
 
 import pytest
@@ -252,7 +251,7 @@ def test_acr_never_serves_the_nat_reference_of_a_catch_item(make, stimuli):
 def test_simulated_crowd_answers_each_design_as_the_page_does(stimuli, app_db_url, tmp_path, design):
     """The crowd fetches every clip, waits as the server requires (10% here) and answers the design; what it
     was acknowledged is what the export holds, careless raters fail catch trials and attentive ones never do."""
-    from werkzeug.serving import make_server
+    from helpers.servers import in_thread
 
     from rating_app.simulate import run_simulation
 
@@ -269,11 +268,7 @@ def test_simulated_crowd_answers_each_design_as_the_page_does(stimuli, app_db_ur
         sessions_per_client=0,
         design=design,
     )
-    server = make_server("127.0.0.1", 0, app, threaded=True)
-    th = threading.Thread(target=server.serve_forever, daemon=True)
-    th.start()
-    url = f"http://127.0.0.1:{server.server_port}"
-    try:
+    with in_thread(app) as url:
         other = "parallel" if design == "pairwise" else "pairwise"
         with pytest.raises(AppError, match=f"--design {other}: the server at .* runs a {design} study"):
             run_simulation(url, 2, design=other, manifest=stimuli, progress=False)
@@ -283,10 +278,6 @@ def test_simulated_crowd_answers_each_design_as_the_page_does(stimuli, app_db_ur
         c = app.test_client()
         rows, _ = export(c)
         p = c.get("/admin/progress.json", headers=TOKEN_HDR).json
-    finally:
-        server.shutdown()
-        th.join(5)
-        app_engine(app).dispose()
     assert summary["errors"] == [] and summary["study_full"]
     key = (
         ("rater_id", "clip_a", "clip_b", "preference")

@@ -11,7 +11,6 @@ from helpers.design_pages import STATE_JS, play_page, rater_export, run_flow, sc
 from helpers.fake_stimuli import write_fake_stimuli
 
 from moglow_eval.core import study
-from rating_app.store.db import app_engine
 from rating_app.store.manifest import load_manifest
 
 pytestmark = pytest.mark.browser
@@ -28,11 +27,9 @@ def design_stimuli(tmp_path_factory):
 def test_pairwise_flow_in_a_real_browser(design_stimuli, app_db_url, browser):
     from selenium.webdriver.common.by import By
 
-    app, server, thread = serve(design_stimuli, app_db_url, "pairwise")
-    url = f"http://127.0.0.1:{server.server_port}"
     levels = [2, 1, 0, -1, -2]
     layouts = []
-    try:
+    with serve(design_stimuli, app_db_url, "pairwise") as (app, url):
 
         def answer(s, wait):
             from selenium.webdriver.support import expected_conditions as EC
@@ -54,10 +51,6 @@ def test_pairwise_flow_in_a_real_browser(design_stimuli, app_db_url, browser):
         given, n_training, code = run_flow(browser, url, "pairwise", answer)
         rows, resp = rater_export(url, "pairwisepid")
         shown = shown_clips(app)
-    finally:
-        server.shutdown()
-        thread.join(5)
-        app_engine(app).dispose()
     assert code and n_training >= 1
     assert "pairs.csv" in resp.headers["Content-Disposition"]
     n_catch_pairs = sum(c.role == "catch" and c.condition == "BAD" for c in load_manifest(design_stimuli))
@@ -85,9 +78,7 @@ def test_pairwise_flow_in_a_real_browser(design_stimuli, app_db_url, browser):
 def test_parallel_flow_in_a_real_browser(design_stimuli, app_db_url, browser):
     from selenium.webdriver.common.by import By
 
-    app, server, thread = serve(design_stimuli, app_db_url, "parallel")
-    url = f"http://127.0.0.1:{server.server_port}"
-    try:
+    with serve(design_stimuli, app_db_url, "parallel") as (app, url):
 
         def answer(s, wait):
             from selenium.webdriver.support import expected_conditions as EC
@@ -114,10 +105,6 @@ def test_parallel_flow_in_a_real_browser(design_stimuli, app_db_url, browser):
 
         given, n_training, code = run_flow(browser, url, "parallel", answer)
         rows, resp = rater_export(url, "parallelpid")
-    finally:
-        server.shutdown()
-        thread.join(5)
-        app_engine(app).dispose()
     assert code and n_training >= 1
     n_catch_pages = len({c.item for c in load_manifest(design_stimuli) if c.role == "catch"})
     assert len(given) == 3 + n_catch_pages

@@ -13,7 +13,6 @@ import requests
 from helpers.design_pages import rater_export, run_flow, screenshot, serve, shown_clips, trial_of
 
 from moglow_eval.core import votes
-from rating_app.store.db import app_engine
 
 pytestmark = pytest.mark.browser
 
@@ -46,11 +45,9 @@ def test_reasons_reach_the_export_intact_and_are_shown_escaped(reason_stimuli, a
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
 
-    app, server, thread = serve(reason_stimuli, app_db_url, "pairwise")
-    url = f"http://127.0.0.1:{server.server_port}"
     ids = [rid for rid, _ in votes.REALISM_REASONS]
     typed = {}
-    try:
+    with serve(reason_stimuli, app_db_url, "pairwise") as (app, url):
 
         def answer(s, wait):
             index = int(s["count"].split()[0])
@@ -93,10 +90,6 @@ def test_reasons_reach_the_export_intact_and_are_shown_escaped(reason_stimuli, a
         browser.find_element(By.CSS_SELECTOR, "form button").click()
         table = waiting(browser, 20).until(EC.presence_of_element_located((By.ID, "reason-texts"))).text
         title = browser.title
-    finally:
-        server.shutdown()
-        thread.join(5)
-        app_engine(app).dispose()
     assert code and n_training >= 1 and len(typed) >= 4
     by_pair = {(r["clip_a"], r["clip_b"]): r for r in rows}
     for trial, (reasons, text, pref) in typed.items():

@@ -4,7 +4,6 @@ started by a tap, with their audio decoded. SAVE_SCREENSHOTS=1 writes docs/img/s
 docs/img/sound_trial_*.png."""
 
 import os
-import threading
 
 import pytest
 from helpers.browser import STATE, chrome
@@ -14,7 +13,6 @@ from helpers.sound_check import pass_sound_check
 
 from generation.make_stimuli import main as make_stimuli
 from rating_app import create_app
-from rating_app.store.db import app_engine
 
 pytestmark = pytest.mark.browser
 IMG = ROOT / "docs" / "img"  # SAVE_SCREENSHOTS=1 writes the pages there
@@ -34,7 +32,7 @@ def sound_study(tmp_path_factory):
 
 @pytest.fixture
 def served(request, sound_study, tmp_path):
-    from werkzeug.serving import make_server
+    from helpers.servers import in_thread
 
     design = request.param
     app = create_app(
@@ -46,13 +44,8 @@ def served(request, sound_study, tmp_path):
         clips_per_rater=2,
         min_view=0.5,
     )
-    server = make_server("127.0.0.1", 0, app, threaded=True)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    yield app, f"http://127.0.0.1:{server.server_port}"
-    server.shutdown()
-    thread.join(5)
-    app_engine(app).dispose()
+    with in_thread(app) as url:
+        yield app, url
 
 
 @pytest.mark.parametrize(

@@ -6,19 +6,17 @@ import json
 import os
 import subprocess
 import sys
-import threading
 
 import numpy as np
 import pytest
 import requests
 from helpers.paths import ROOT
-from helpers.servers import wait_for
+from helpers.servers import in_thread, wait_for
 
 from moglow_eval.core.ports import free_port
 from moglow_eval.core.tables import read_metrics
 from rating_app import create_app
 from rating_app.simulate.raters import ClipInfo, load_clips, parse_quality, quality_from_metrics
-from rating_app.store.db import app_engine
 from rating_app.store.manifest import AppError, load_manifest
 
 
@@ -35,8 +33,6 @@ def cli(*args, timeout=120, **kw):
 
 @pytest.fixture
 def live(app_stimuli, app_db_url):
-    from werkzeug.serving import make_server
-
     # The crowd waits as the server requires: 10% of each clip here, so that the test stays short.
     app = create_app(
         manifest=app_stimuli,
@@ -46,13 +42,8 @@ def live(app_stimuli, app_db_url):
         min_view=0.1,
         sessions_per_client=0,
     )
-    server = make_server("127.0.0.1", 0, app, threaded=True)
-    th = threading.Thread(target=server.serve_forever, daemon=True)
-    th.start()
-    yield f"http://127.0.0.1:{server.server_port}", app_db_url
-    server.shutdown()
-    th.join(5)
-    app_engine(app).dispose()
+    with in_thread(app) as url:
+        yield url, app_db_url
 
 
 @pytest.mark.full  # the full tier: a crowd against a served app

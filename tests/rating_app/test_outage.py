@@ -20,7 +20,7 @@ from helpers.concurrent_raters import cover_mismatches
 from helpers.crowd_records import DESIGNS
 from helpers.fake_stimuli import write_fake_stimuli
 from helpers.pg_server import Cluster, ServerError
-from helpers.servers import crowd_env, start_gunicorn
+from helpers.servers import crowd_env, in_thread, start_gunicorn
 
 from moglow_eval.core.ports import free_port
 from rating_app.simulate import run_simulation
@@ -125,18 +125,13 @@ def test_the_page_retries_an_answer_through_a_database_restart(cluster, app_stim
     from helpers.browser import waiting
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
-    from werkzeug.serving import make_server
 
     from rating_app import create_app
-    from rating_app.store.db import app_engine
 
     app = create_app(manifest=app_stimuli, db_url=cluster.url, admin_token="outage-token", clips_per_rater=2)
-    server = make_server("127.0.0.1", 0, app, threaded=True)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
-    url = f"http://127.0.0.1:{server.server_port}"
-    wait = waiting(browser, 30)
-    state = lambda: browser.execute_script(PAGE_JS)  # noqa: E731
-    try:
+    with in_thread(app) as url:
+        wait = waiting(browser, 30)
+        state = lambda: browser.execute_script(PAGE_JS)  # noqa: E731
         browser.get(url + "/?PROLIFIC_PID=outage1&SESSION_ID=se1")
         browser.find_element(By.ID, "consent").click()
         wait.until(EC.element_to_be_clickable((By.ID, "start"))).click()
@@ -176,9 +171,6 @@ def test_the_page_retries_an_answer_through_a_database_restart(cluster, app_stim
         rows = list(csv.DictReader(io.StringIO(r.text)))
         assert len(rows) == 4 and {row["rating"] for row in rows} == {"2"}  # 2 test + 2 catch, each once
         assert len({row["clip_id"] for row in rows}) == 4
-    finally:
-        server.shutdown()
-        app_engine(app).dispose()
 
 
 def export_rows(c):

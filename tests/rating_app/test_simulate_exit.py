@@ -5,14 +5,12 @@ import contextlib
 import json
 import subprocess
 import sys
-import threading
 
 import pytest
 from helpers.paths import ROOT
 
 from moglow_eval.core.ports import free_port
 from rating_app import create_app
-from rating_app.store.db import app_engine
 
 pytestmark = pytest.mark.full  # the full tier: served apps and crowds that fall short
 
@@ -30,18 +28,10 @@ def simulate(*args, timeout=120):
 @contextlib.contextmanager
 def served(stimuli, db, **settings):
     """The app on a real threaded HTTP server on a free port, with `settings`; yields its URL."""
-    from werkzeug.serving import make_server
+    from helpers.servers import in_thread
 
-    app = create_app(manifest=stimuli, db_url=db, admin_token="t", **settings)
-    server = make_server("127.0.0.1", 0, app, threaded=True)
-    th = threading.Thread(target=server.serve_forever, daemon=True)
-    th.start()
-    try:
-        yield f"http://127.0.0.1:{server.server_port}"
-    finally:
-        server.shutdown()
-        th.join(5)
-        app_engine(app).dispose()
+    with in_thread(create_app(manifest=stimuli, db_url=db, admin_token="t", **settings)) as url:
+        yield url
 
 
 def one_error_line(r):

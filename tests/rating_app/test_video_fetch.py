@@ -136,21 +136,16 @@ if (!v.countsPlays) { v.countsPlays = true; v.addEventListener('play', function 
 def test_the_page_is_never_flagged_with_replays_and_a_reload(app_stimuli, app_db_url, browser):
     """The real page in chromium: every rating trial is replayed once (from the browser's cache), and the page is
     reloaded in the middle of one trial (it resumes the same trial and plays it again); no answer is flagged."""
-    import threading
-
     import requests
     from helpers.browser import waiting
+    from helpers.servers import in_thread
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
-    from werkzeug.serving import make_server
 
     from rating_app import create_app
 
     app = create_app(manifest=app_stimuli, db_url=app_db_url, admin_token="browser-token", clips_per_rater=3)
-    server = make_server("127.0.0.1", 0, app, threaded=True)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
-    url = f"http://127.0.0.1:{server.server_port}"
-    try:
+    with in_thread(app) as url:
         wait = waiting(browser, 30)
         browser.get(url + "/?PROLIFIC_PID=replayer&SESSION_ID=se1")
         browser.find_element(By.ID, "consent").click()
@@ -193,6 +188,3 @@ def test_the_page_is_never_flagged_with_replays_and_a_reload(app_stimuli, app_db
         rows = list(csv.DictReader(io.StringIO(r.text)))
         assert reloads == 1 and replays == len(rows) >= 4
         assert [video_flags(row["flags"]) for row in rows] == [""] * len(rows)
-    finally:
-        server.shutdown()
-        app_engine(app).dispose()

@@ -270,14 +270,13 @@ def test_a_stick_and_mesh_study_in_a_real_browser_reports_the_style(two_style_se
     SAVE_SCREENSHOTS=1 writes docs/img/mesh_trial.png (the page showing a mesh clip)."""
     import os
     import shutil
-    import threading
 
     from helpers.browser import STATE, chrome, waiting
     from helpers.design_client import post
+    from helpers.servers import in_thread
     from PIL import Image
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as EC
-    from werkzeug.serving import make_server
 
     from analysis.report import build_report
     from rating_app import create_app
@@ -287,47 +286,46 @@ def test_a_stick_and_mesh_study_in_a_real_browser_reports_the_style(two_style_se
     db = f"sqlite:///{tmp_path / 'r.sqlite'}"
     settings = dict(admin_token="t", design="acr", ratings_per_clip=2, clips_per_rater=6, sessions_per_client=0)
     app = create_app(manifest=two_style_set, db_url=db, min_view=0.3, **settings)
-    server = make_server("127.0.0.1", 0, app, threaded=True)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
-    url = f"http://127.0.0.1:{server.server_port}"
-    browser = chrome(tmp_path, "1280,900")
-    seen, meshes = set(), 0
-    try:
-        wait = waiting(browser, 60)
-        browser.get(url + "/?PROLIFIC_PID=meshpid1")
-        browser.find_element(By.ID, "consent").click()
-        wait.until(EC.element_to_be_clickable((By.ID, "start"))).click()
-        wait.until(EC.visibility_of_element_located((By.ID, "intro")))
-        browser.find_element(By.ID, "intro-go").click()
-        for _ in range(14):
-            wait.until(lambda d: d.execute_script(STATE)["section"] in ("trial", "rating-intro", "done"))
-            s = browser.execute_script(STATE)
-            if s["section"] == "done":
-                break
-            if s["section"] == "rating-intro":
-                browser.find_element(By.ID, "rating-go").click()
-                wait.until(lambda d: d.execute_script(STATE)["section"] != "rating-intro")
-                continue
-            wait.until(lambda d: all(d.execute_script(STATE)["ended"]))
-            seen.add(browser.find_element(By.CSS_SELECTOR, "#trial video").get_attribute("src"))
-            shot = tmp_path / f"shot{len(seen)}.png"
-            browser.save_screenshot(str(shot))
-            body, mask = body_pixels(np.asarray(Image.open(shot).convert("RGB")))
-            meshes += body.mean() > 0.01 and mask.sum() > 20  # a skinned body, masked, on the page
-            if meshes == 1 and os.environ.get("SAVE_SCREENSHOTS") == "1":
-                shutil.copy(shot, ROOT / "docs" / "img" / "mesh_trial.png")
-            button = (
-                (By.ID, "continue") if s["label"] == "Example" else (By.CSS_SELECTOR, "button.rate[data-rating='4']")
-            )
-            wait.until(EC.element_to_be_clickable(button)).click()
-            key = (s["section"], s["label"], s["count"])
-            wait.until(lambda d: (lambda t: (t["section"], t["label"], t["count"]) != key)(d.execute_script(STATE)))
-        assert len(seen) >= 3 and meshes >= 1
-        assert not [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
-    finally:
-        browser.quit()
-        server.shutdown()
-    app_engine(app).dispose()
+    with in_thread(app) as url:
+        browser = chrome(tmp_path, "1280,900")
+        seen, meshes = set(), 0
+        try:
+            wait = waiting(browser, 60)
+            browser.get(url + "/?PROLIFIC_PID=meshpid1")
+            browser.find_element(By.ID, "consent").click()
+            wait.until(EC.element_to_be_clickable((By.ID, "start"))).click()
+            wait.until(EC.visibility_of_element_located((By.ID, "intro")))
+            browser.find_element(By.ID, "intro-go").click()
+            for _ in range(14):
+                wait.until(lambda d: d.execute_script(STATE)["section"] in ("trial", "rating-intro", "done"))
+                s = browser.execute_script(STATE)
+                if s["section"] == "done":
+                    break
+                if s["section"] == "rating-intro":
+                    browser.find_element(By.ID, "rating-go").click()
+                    wait.until(lambda d: d.execute_script(STATE)["section"] != "rating-intro")
+                    continue
+                wait.until(lambda d: all(d.execute_script(STATE)["ended"]))
+                seen.add(browser.find_element(By.CSS_SELECTOR, "#trial video").get_attribute("src"))
+                shot = tmp_path / f"shot{len(seen)}.png"
+                browser.save_screenshot(str(shot))
+                body, mask = body_pixels(np.asarray(Image.open(shot).convert("RGB")))
+                meshes += body.mean() > 0.01 and mask.sum() > 20  # a skinned body, masked, on the page
+                if meshes == 1 and os.environ.get("SAVE_SCREENSHOTS") == "1":
+                    shutil.copy(shot, ROOT / "docs" / "img" / "mesh_trial.png")
+                button = (
+                    (By.ID, "continue")
+                    if s["label"] == "Example"
+                    else (By.CSS_SELECTOR, "button.rate[data-rating='4']")
+                )
+                wait.until(EC.element_to_be_clickable(button)).click()
+                key = (s["section"], s["label"], s["count"])
+                wait.until(lambda d: (lambda t: (t["section"], t["label"], t["count"]) != key)(d.execute_script(STATE)))
+            assert len(seen) >= 3 and meshes >= 1
+            assert not [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+        finally:
+            browser.quit()
+
     app = create_app(manifest=two_style_set, db_url=db, min_view=0, **settings)  # the API crowd waits for nothing
     client = app.test_client()
     bad = {cid for cid, r in ((r["clip_id"], r) for r in _rows(two_style_set)) if r["condition"] == "BAD"}
