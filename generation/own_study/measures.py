@@ -18,7 +18,6 @@ from moglow_eval.core.skeleton_names import body_skeleton
 from rendering.audio import RATE
 
 from ..data.skeleton_families import family
-from ..metrics import gesture
 from ..stimuli.files import write_csv
 from .speech import read_voices
 
@@ -50,8 +49,10 @@ def study_measures(spec, clips, row_clips, metrics_rows, skeleton, lengths, out)
     names, parents = skeleton
     on, why = gesture_study(spec, names)
     if not on:
-        write_csv(out / study.MEASURES_FILE, study.MEASURES_COLUMNS, _rows(metrics_rows, {}, why, {}))
+        write_csv(out / study.MEASURES_FILE, study.MEASURES_COLUMNS, _rows(metrics_rows, {}, why, {}, {}))
         return [], None
+    from ..metrics import gesture  # brings torch (the FGD's encoder): a study without the measures does not wait for it
+
     for row in metrics_rows:
         row["foot_skating"] = float("nan")
     agent, other = read_voices(spec, lengths)
@@ -68,7 +69,8 @@ def study_measures(spec, clips, row_clips, metrics_rows, skeleton, lengths, out)
         row.update(result.clips[k])
     write_csv(out / study.GESTURE_FILE, GESTURE_COLUMNS, [_numbers(r) for r in result.conditions])
     skipped = {**applies, **{m: why for m in study.LOCOMOTION_METRICS}}
-    write_csv(out / study.MEASURES_FILE, study.MEASURES_COLUMNS, _rows(metrics_rows, skipped, why, result.reasons))
+    rows = _rows(metrics_rows, skipped, why, result.reasons, gesture.SETTINGS)
+    write_csv(out / study.MEASURES_FILE, study.MEASURES_COLUMNS, rows)
     return list(study.GESTURE_METRIC_NAMES), gesture_text(result.conditions, time.perf_counter() - t0)
 
 
@@ -76,8 +78,8 @@ def _numbers(row):
     return {k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()}
 
 
-def _rows(metrics_rows, skipped, why, reasons):
-    """measures.csv's rows: every metric of the rows, its status, count, reasons and settings."""
+def _rows(metrics_rows, skipped, why, reasons, settings):
+    """measures.csv's rows: every metric of the rows, its status, count, reasons and `settings` (by measure)."""
     names = [*study.METRIC_NAMES, *(study.GESTURE_METRIC_NAMES if skipped else [])]
     out = []
     for name in names:
@@ -89,7 +91,7 @@ def _rows(metrics_rows, skipped, why, reasons):
             status = study.MEASURE_STATUS[0 if n == len(metrics_rows) else (1 if n else 2)]
             none = WHY_NONE.get(name, "not defined for every clip (docs/metrics.md)")
             reason = detail or ("" if n == len(metrics_rows) else none)
-        out.append(dict(measure=name, status=status, clips=n, reason=reason, settings=gesture.SETTINGS.get(name, "")))
+        out.append(dict(measure=name, status=status, clips=n, reason=reason, settings=settings.get(name, "")))
     if not skipped:  # a study without the gesture measures says so of each
         out += [
             dict(measure=name, status=study.MEASURE_STATUS[2], clips=0, reason=why, settings="")

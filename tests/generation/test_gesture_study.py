@@ -3,11 +3,14 @@ measures in metrics.csv and gesture.csv, drops foot skating, and says so in meas
 sound keeps foot skating and says the gesture measures were skipped, and why."""
 
 import csv
+import subprocess
+import sys
 from dataclasses import dataclass
 
 import numpy as np
 import pytest
 from helpers.own_study_data import make_study
+from helpers.paths import ROOT
 
 from generation.make_stimuli import main as make_stimuli
 from generation.own_study.measures import gesture_study
@@ -116,3 +119,19 @@ def test_the_gesture_measures_are_taken_about_the_body_not_a_root_marker(tmp_pat
         ahead, own = ([r[name] for r in by[c]] for c in ("AHEAD", study.NATURAL))
         assert np.isfinite(own).all(), name
         np.testing.assert_allclose(ahead, own, rtol=1e-5, err_msg=name)
+
+
+@pytest.mark.full  # make_study's takes are in ../shared
+def test_a_study_without_the_gesture_measures_is_built_without_torch(tmp_path):
+    """The gesture measures' encoder needs torch, whose import takes a second and more memory than the rest of a
+    build's: a study that does not get the measures is built without ever importing it."""
+    spec = make_study(tmp_path / "in", n_items=2, n_catch=1)
+    run = (
+        "import sys\nfrom generation.make_stimuli import main\n"
+        "code = main(sys.argv[1:])\nprint('torch' in sys.modules)\nsys.exit(code)"
+    )
+    argv = ["--study", spec, "--out", tmp_path / "out", "--size", "32", "--length-s", "1", "--quiet", "--workers", "1"]
+    r = subprocess.run([sys.executable, "-c", run, *map(str, argv)], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0 and r.stdout.split()[-1:] == ["False"], (r.stdout[-500:], r.stderr[-2000:])
+    measures = {row["measure"]: row["status"] for row in _rows(tmp_path / "out" / study.MEASURES_FILE)}
+    assert measures["fgd"] == study.MEASURE_STATUS[2] and measures["jerk"] == study.MEASURE_STATUS[0]
