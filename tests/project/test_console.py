@@ -81,14 +81,20 @@ def test_python_m_keeps_working_and_answers_version(module):
 PACKAGES = ("generation", "rendering", "analysis", "rating_app")
 
 
-def command_modules():
-    """Every module of the product with a `main`: each a `python -m` command (a list kept by hand missed ten)."""
-    found = []
+def product_sources():
+    """(path, text) of every Python file of the product's parts, in a stable order."""
     for package in PACKAGES:
         for path in sorted((ROOT / package).rglob("*.py")):
-            if re.search(r"^def main\(", path.read_text(encoding="utf-8"), re.M):
-                found.append(".".join(path.relative_to(ROOT).with_suffix("").parts))
-    return found
+            yield path, path.read_text(encoding="utf-8")
+
+
+def command_modules():
+    """Every module of the product with a `main`: each a `python -m` command (a list kept by hand missed ten)."""
+    return [
+        ".".join(path.relative_to(ROOT).with_suffix("").parts)
+        for path, text in product_sources()
+        if re.search(r"^def main\(", text, re.M)
+    ]
 
 
 COMMAND_MODULES = command_modules()
@@ -98,12 +104,7 @@ def test_every_command_parses_with_the_projects_parser():
     """cli.ArgumentParser gives every command its one-line errors, --version and the refusal of an empty value; a
     command built on argparse's own parser would have none of them."""
     assert len(COMMAND_MODULES) >= 20, COMMAND_MODULES
-    own = [
-        str(path.relative_to(ROOT))
-        for package in PACKAGES
-        for path in (ROOT / package).rglob("*.py")
-        if "argparse.ArgumentParser(" in path.read_text(encoding="utf-8")
-    ]
+    own = [str(path.relative_to(ROOT)) for path, text in product_sources() if "argparse.ArgumentParser(" in text]
     assert own == [], own
 
 
