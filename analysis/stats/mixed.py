@@ -70,7 +70,17 @@ class _Suff:
         self.gram = None
         if len(counts) * small * small <= 40_000_000:
             self.gram_counts = counts
-            self.gram = np.stack([(self.A[which == g].T @ self.A[which == g]).toarray() for g in range(len(counts))])
+            if isinstance(self.A_op, np.ndarray):
+                # Dense rows grouped by their count, one product per contiguous group: a bootstrap resample has
+                # dozens of distinct counts, where selecting each group's rows of the sparse table cost more than
+                # the fit. The entries are counts, so the sums are exact in any order.
+                rows = self.A_op[np.argsort(which, kind="stable")]
+                sizes = np.bincount(which, minlength=len(counts))
+                self.gram = np.stack([rows[e - n : e].T @ rows[e - n : e] for n, e in zip(sizes, np.cumsum(sizes))])
+            else:
+                self.gram = np.stack(
+                    [(self.A[which == g].T @ self.A[which == g]).toarray() for g in range(len(counts))]
+                )
 
 
 def additive_rss(s):
@@ -82,12 +92,17 @@ def additive_rss(s):
         n_big, z_big, big_x, n_small, z_small, small_x = s.nr, s.Zry, s.ZrX, s.nc, s.Zcy, s.ZcX
     else:
         n_big, z_big, big_x, n_small, z_small, small_x = s.nc, s.Zcy, s.ZcX, s.nr, s.Zry, s.ZrX
-    cross = sparse.hstack([s.A, big_x]).tocsr()  # the big factor's dummies against the small one's, then X
     rest = np.block([[np.diag(n_small), small_x], [small_x.T, s.XtX]])
     z_rest = np.concatenate([z_small, s.Xty])
     # A level with no rating (a bootstrap draws a rater whose clips were all left out) has no part in the fit.
     inv_big = np.divide(1.0, n_big, out=np.zeros_like(n_big), where=n_big > 0)
-    schur = rest - (cross.T @ sparse.diags(inv_big) @ cross).toarray()
+    # The big factor's dummies against the small one's, then X; dense where the count table is (see _Suff).
+    if isinstance(s.A_op, np.ndarray):
+        cross = np.hstack([s.A_op, big_x])
+        schur = rest - (cross.T * inv_big) @ cross
+    else:
+        cross = sparse.hstack([s.A, big_x]).tocsr()
+        schur = rest - (cross.T @ sparse.diags(inv_big) @ cross).toarray()
     b = linalg.lstsq(schur, z_rest - cross.T @ (z_big * inv_big), check_finite=False)[0]
     a = (z_big - cross @ b) * inv_big
     return max(float(s.yty - a @ z_big - b @ z_rest), 0.0)

@@ -303,10 +303,12 @@ def test_ratings_the_effects_fit_exactly_leave_the_model_undefined_not_fitted_to
     assert m["converged"] and 0 < m["variance_components"]["residual"] < 0.1
 
 
-def test_the_fixed_effects_rss_is_least_squares_on_every_effect():
+@pytest.mark.parametrize("dense_max", [mixed.DENSE_MAX, 0], ids=["dense", "sparse"])
+def test_the_fixed_effects_rss_is_least_squares_on_every_effect(dense_max, monkeypatch):
     """mixed.additive_rss, the exact-fit check: the residual sum of squares of y ~ X + rater + clip, all fixed, from
     the fit's sufficient statistics, whichever factor it eliminates, with X the intercept alone or with columns
-    partly spanned by the levels."""
+    partly spanned by the levels; with the count table held dense and sparse."""
+    monkeypatch.setattr(mixed, "DENSE_MAX", dense_max)
     rng = np.random.default_rng(3)
     for raters, clips in ((5, 9), (9, 5)):
         rater, clip = rng.integers(0, raters, 80), rng.integers(0, clips, 80)
@@ -323,6 +325,29 @@ def test_the_fixed_effects_rss_is_least_squares_on_every_effect():
             with np.errstate(all="raise"):
                 gap = mixed.additive_rss(mixed._Suff(y, x, np.where(rater == 0, raters, rater), clip))
             assert gap == pytest.approx(want, rel=1e-9)
+
+
+def test_a_dense_and_a_sparse_count_table_give_one_fit(monkeypatch):
+    """_Suff holds a panel's rater x clip counts dense and a large one's sparse: on an incomplete table whose clips
+    have many distinct counts (as a bootstrap resample's do), both give the same per-count Gram matrices, exactly
+    (they sum counts), and the same fit."""
+    rng = np.random.default_rng(5)
+    rater, clip = rng.integers(0, 12, 300), rng.integers(0, 20, 300) ** 2 // 20  # clips 0-18, skewed counts
+    y = rng.normal(size=300) + 0.5 * rng.normal(size=12)[rater] + 0.7 * rng.normal(size=19)[clip]
+    X = np.ones((300, 1))
+    dense = mixed._Suff(y, X, rater, clip)
+    monkeypatch.setattr(mixed, "DENSE_MAX", 0)
+    sparse = mixed._Suff(y, X, rater, clip)
+    assert isinstance(dense.A_op, np.ndarray) and not isinstance(sparse.A_op, np.ndarray)
+    assert len(dense.gram_counts) > 5 and (dense.gram == sparse.gram).all()
+    fits = []
+    for limit in (10**9, 0):
+        monkeypatch.setattr(mixed, "DENSE_MAX", limit)
+        fits.append(mixed.fit_crossed(y, X, rater, clip, ["(Intercept)"]))
+    # The same optimum: the criterion to round-off, the variances to the search's tolerance (it is flat there).
+    assert fits[0]["reml_log_likelihood"] == pytest.approx(fits[1]["reml_log_likelihood"], rel=1e-12)
+    for key in ("variance_components", "fixed_effects"):
+        assert fits[0][key] == pytest.approx(fits[1][key], rel=1e-5), key
 
 
 def test_per_clip_means_sorted_worst_to_best(small_test_rows):
