@@ -332,7 +332,8 @@ def test_a_dense_and_a_sparse_count_table_give_one_fit(monkeypatch):
     have many distinct counts (as a bootstrap resample's do), both give the same per-count Gram matrices, exactly
     (they sum counts), and the same fit."""
     rng = np.random.default_rng(5)
-    rater, clip = rng.integers(0, 12, 300), rng.integers(0, 20, 300) ** 2 // 20  # clips 0-18, skewed counts
+    # 15 clips of codes 0-18 (the others rated by no one), with skewed counts
+    rater, clip = rng.integers(0, 12, 300), rng.integers(0, 20, 300) ** 2 // 20
     y = rng.normal(size=300) + 0.5 * rng.normal(size=12)[rater] + 0.7 * rng.normal(size=19)[clip]
     X = np.ones((300, 1))
     dense = mixed._Suff(y, X, rater, clip)
