@@ -54,26 +54,25 @@ def test_viewing_rule_counts_every_clip(make, stimuli, design, monkeypatch):
     clips = clips_of(stimuli)
     dur = next(iter(clips.values())).duration_ms
     need = dur - 250 if design == "pairwise" else None
-    if True:
-        app = make(stimuli, design, min_view=1)
-        c = app.test_client()
-        token = start(c)
-        t = c.get(f"/api/sessions/{token}/next").json["trial"]
-        with answered_after(app, t["trial_id"], 40, monkeypatch):
-            r = post(c, token, t)
-        assert r.status_code == 425 and r.json["too_early"], r.json
-        n = len(shown(t))
-        want = need if need is not None else n * dur - 250
-        assert r.json["retry_after_ms"] == want - 40
-        with app_engine(app).begin() as conn:
-            conn.execute(
-                update(Trial)
-                .where(Trial.id == t["trial_id"])
-                .values(served_at=utcnow() - dt.timedelta(milliseconds=want + 50))
-            )
-        assert post(c, token, t).status_code == 201
-        p = c.get("/admin/progress.json", headers=TOKEN_HDR).json
-        assert p["raters"][-1]["early_answers"] == 1 and "too_fast" in p["raters"][-1]["flags"]
+    app = make(stimuli, design, min_view=1)
+    c = app.test_client()
+    token = start(c)
+    t = c.get(f"/api/sessions/{token}/next").json["trial"]
+    with answered_after(app, t["trial_id"], 40, monkeypatch):
+        r = post(c, token, t)
+    assert r.status_code == 425 and r.json["too_early"], r.json
+    n = len(shown(t))
+    want = need if need is not None else n * dur - 250
+    assert r.json["retry_after_ms"] == want - 40
+    with app_engine(app).begin() as conn:
+        conn.execute(
+            update(Trial)
+            .where(Trial.id == t["trial_id"])
+            .values(served_at=utcnow() - dt.timedelta(milliseconds=want + 50))
+        )
+    assert post(c, token, t).status_code == 201
+    p = c.get("/admin/progress.json", headers=TOKEN_HDR).json
+    assert p["raters"][-1]["early_answers"] == 1 and "too_fast" in p["raters"][-1]["flags"]
 
 
 # ------------------------------------------------------------------------------------------------- parallel
