@@ -37,6 +37,8 @@ framing = "upper"
 style = ["stick", "solid"]
 [audio]
 folder = "audio"
+[metrics]
+gesture = false  # not this study's subject: no gesture encoder to train
 """
 
 

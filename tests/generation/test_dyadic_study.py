@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from helpers import figure_pixels, seamless_fixtures
 from helpers.cli import fails_with
+from helpers.own_study_data import NO_GESTURE_MEASURES
 from helpers.voices import decoded_audio, ffmpeg_loudness, voice_energy
 
 from generation.make_stimuli import main as make_stimuli
@@ -234,6 +235,7 @@ def test_a_genea_2023_pair_of_bvh_files_builds(tmp_path):
         'reference = "NA"\ndesign = "dyadic"\nn_training = 1\n[conditions]\nNA = "main"\nSYS = "sys"\n'
         '[mismatched]\nSYS = "sys_mis"\n[interlocutor]\nfolder = "inter"\n[catch]\nn = 1\n'
         '[audio]\nfolder = "audio_main"\ninterlocutor = "audio_inter"\n[captions]\nfolder = "tsv"\n'
+        + NO_GESTURE_MEASURES  # the layout is the subject; the two-person demo's builds measure
     )
     argv = ["--study", str(tmp_path / "study.toml"), "--out", str(tmp_path / "out"), "--size", "192", "--quiet"]
     assert make_stimuli([*argv, "--workers", "1"]) == 0

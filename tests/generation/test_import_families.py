@@ -12,6 +12,7 @@ import pytest
 from helpers import smpl_fixtures
 from helpers.bvh_fixtures import CMU_UNIT, FAMILIES, write_family, write_family_study, write_zeroeggs
 from helpers.cli import fails_with
+from helpers.own_study_data import NO_GESTURE_MEASURES
 from helpers.paths import TEST_DATA
 
 from generation.data.motion_files import MotionError, read_motion
@@ -113,7 +114,7 @@ def test_units_in_the_study_file_still_rule(tmp_path):
 # ---------------------------------------------------------------- the study's frame rate
 @pytest.mark.full  # a study built: the full tier (the fast tier stays short)
 def test_a_study_keeps_the_reference_frame_rate(tmp_path):
-    study = write_family_study(tmp_path / "s", "zeroeggs", n_items=3, frames=45, fps=30.0)
+    study = write_family_study(tmp_path / "s", "zeroeggs", n_items=3, frames=45, fps=30.0, tables=NO_GESTURE_MEASURES)
     assert make_stimuli(["--study", str(study), "--out", str(tmp_path / "out"), "--size", "64", "--quiet"]) == 0
     assert {r["fps"] for r in _rows(tmp_path / "out" / "manifest.csv")} == {"30"}
     assert {r["fps"] for r in _rows(tmp_path / "out" / "items.csv")} == {"30"}
@@ -196,7 +197,7 @@ def test_an_smpl_study_builds_with_the_model_named_in_the_study_file(tmp_path, c
     (root / "study.toml").write_text(text)
     _fails(["--study", str(root / "study.toml"), "--out", str(tmp_path / "o"), "--quiet"], capsys, "smpl-x.is.tue.mpg")
     (root / "study.toml").write_text(
-        text + '[skeleton]\nsmpl_model = "models/SMPLX_NEUTRAL.npz"\nsmpl_type = "smplx"\n'
+        text + '[skeleton]\nsmpl_model = "models/SMPLX_NEUTRAL.npz"\nsmpl_type = "smplx"\n' + NO_GESTURE_MEASURES
     )
     assert (
         make_stimuli(["--study", str(root / "study.toml"), "--out", str(tmp_path / "o"), "--size", "64", "--quiet"])

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from helpers import seamless_fixtures, smpl_fixtures
 from helpers.memory import peak as _peak
+from helpers.own_study_data import NO_GESTURE_MEASURES
 
 from generation.data import transcripts
 from generation.data.motion_files import MotionError, read_motion
@@ -250,7 +251,7 @@ def test_a_study_refuses_a_clip_with_invalid_frames_naming_them(conversation, tm
             shutil.copy(conversation.files[participant]["motion"], tmp_path / sub / f"item{k}.npz")
     (tmp_path / "study.toml").write_text(
         f'reference = "real"\nn_training = 0\n[conditions]\nreal = "real"\nSYS = "sys"\n[catch]\nn = 1\n'
-        f'[skeleton]\nsmpl_model = "{conversation.model}"\n'
+        f'[skeleton]\nsmpl_model = "{conversation.model}"\n' + NO_GESTURE_MEASURES
     )
     a, b = conversation.invalid[0]
     argv = ["--study", str(tmp_path / "study.toml"), "--out", str(tmp_path / "o"), "--quiet", "--size", "64"]

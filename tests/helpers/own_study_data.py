@@ -140,6 +140,12 @@ def speech(path, text, seconds, rate=22050):
 NUMBERS = ("zero", "one", "two", "three", "four", "five", "six", "seven", "eight", "nine")
 
 
+# A study file's table that turns the gesture measures off, for a test whose subject they are not: a study with
+# speech, an SMPL-family body or a speech-gesture skeleton measures them by default (docs/metrics.md), and so trains
+# an encoder on its reference, seconds of CPU wherever the user's encoder cache does not hold it yet.
+NO_GESTURE_MEASURES = "[metrics]\ngesture = false\n"
+
+
 def make_study(root, n_items=8, n_catch=3, fps=20, extra_toml="", audio=False, samples=0):
     """A study from folders at `root`: real/ (70-joint BVH), sys_a/ (.npy, Z-up cm, + skeleton.json), sys_b/
     (BVH), and study.toml; with `audio`, audio/ITEM.wav (one .flac) of synthesised speech and an [audio] table;

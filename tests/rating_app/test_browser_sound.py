@@ -7,7 +7,7 @@ import os
 
 import pytest
 from helpers.browser import STATE, chrome
-from helpers.own_study_data import make_study
+from helpers.own_study_data import NO_GESTURE_MEASURES, make_study
 from helpers.paths import ROOT
 from helpers.sound_check import pass_sound_check
 
@@ -21,7 +21,7 @@ IMG = ROOT / "docs" / "img"  # SAVE_SCREENSHOTS=1 writes the pages there
 @pytest.fixture(scope="module")
 def sound_study(tmp_path_factory):
     root = tmp_path_factory.mktemp("browser_sound")
-    study = make_study(root / "in", n_items=3, n_catch=1, audio=True)
+    study = make_study(root / "in", n_items=3, n_catch=1, audio=True, extra_toml=NO_GESTURE_MEASURES)
     # 2-s clips: the browser plays them in real time
     study.write_text(
         study.read_text().replace("n_training = 1", 'n_training = 1\nlength_s = 2\ndesign = "appropriateness"')

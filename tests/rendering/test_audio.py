@@ -9,7 +9,7 @@ import wave
 import imageio_ffmpeg
 import numpy as np
 import pytest
-from helpers.own_study_data import action_takes, make_study, speech
+from helpers.own_study_data import NO_GESTURE_MEASURES, action_takes, make_study, speech
 
 from generation.data.motion_files import read_motion
 from generation.make_stimuli import main as make_stimuli
@@ -65,7 +65,8 @@ def test_click_at_a_known_frame_is_heard_at_that_frame(tmp_path):
 @pytest.fixture(scope="module")
 def sound_study(tmp_path_factory):
     root = tmp_path_factory.mktemp("sound")
-    study = make_study(root / "in", n_items=4, n_catch=2, audio=True)
+    # The gesture measures are not this module's subject: no gesture encoder to train.
+    study = make_study(root / "in", n_items=4, n_catch=2, audio=True, extra_toml=NO_GESTURE_MEASURES)
     assert make_stimuli(["--study", str(study), "--out", str(root / "out"), "--size", "96", "--quiet"]) == 0
     with open(root / "out" / "manifest.csv", newline="") as f:
         return root / "out", list(csv.DictReader(f))

@@ -10,6 +10,7 @@ import pytest
 from helpers import smpl_fixtures
 from helpers.bvh_fixtures import write_zeroeggs
 from helpers.figure_pixels import decode
+from helpers.own_study_data import NO_GESTURE_MEASURES
 from helpers.paths import ROOT
 
 from analysis.designs import Options
@@ -134,7 +135,8 @@ def _rows(path):
 
 
 def smpl_study(root, style='["stick", "mesh"]', model_kind="smplh"):
-    """A study of two conditions of three SMPL-H items each, the body model named in the study file."""
+    """A study of two conditions of three SMPL-H items each, the body model named in the study file (the gesture
+    measures off: drawing is this module's subject)."""
     for sub, seed in (("real", 0), ("sys", 1)):
         (root / sub).mkdir(parents=True)
         for k in range(3):
@@ -144,7 +146,7 @@ def smpl_study(root, style='["stick", "mesh"]', model_kind="smplh"):
     (root / "study.toml").write_text(
         'reference = "real"\nn_training = 1\n[conditions]\nreal = "real"\nSYS = "sys"\n[catch]\nn = 1\n'
         '[skeleton]\nsmpl_model = "models/SMPLH_NEUTRAL.npz"\n'
-        f'[render]\nview = "front"\nframing = "upper"\nstyle = {style}\n'
+        f'[render]\nview = "front"\nframing = "upper"\nstyle = {style}\n' + NO_GESTURE_MEASURES
     )
     return root / "study.toml"
 
