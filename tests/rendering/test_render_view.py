@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from helpers.bvh_fixtures import SPEAKER, write_family_study, write_zeroeggs
 from helpers.figure_pixels import classes, decode
+from helpers.own_study_data import NO_GESTURE_MEASURES
 from helpers.paths import TEST_DATA
 
 from generation.data.motion_files import read_motion
@@ -172,7 +173,7 @@ def test_two_styles_each_clip_its_own_stimulus_on_pixels(tmp_path):
     study.write_text(
         'reference = "speaker"\nseed = 1\nn_training = 0\n[conditions]\nspeaker = "real"\nSYS_A = "sys_a"\n'
         '[catch]\nn = 0\n[skeleton]\nunits = "auto"\n'
-        '[render]\nview = "front"\nframing = "upper"\nstyle = ["stick", "solid"]\n'
+        '[render]\nview = "front"\nframing = "upper"\nstyle = ["stick", "solid"]\n' + NO_GESTURE_MEASURES
     )
     out = tmp_path / "out"
     assert make_stimuli(["--study", str(study), "--out", str(out), "--size", "240", "--quiet", "--workers", "1"]) == 0
