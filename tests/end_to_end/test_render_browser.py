@@ -14,14 +14,15 @@ import requests
 from helpers.browser import live_server_manifest
 from helpers.bvh_fixtures import SPEAKER, write_zeroeggs
 from helpers.figure_pixels import classes, decode, height_share, touches_edge
-from helpers.own_study_data import speech
+from helpers.own_study_data import NO_GESTURE_MEASURES, speech
 from helpers.sound_check import pass_sound_check
 
 from generation.make_stimuli import main as make_stimuli
 
 pytestmark = pytest.mark.browser
 
-STUDY = """reference = "speaker"
+STUDY = (
+    """reference = "speaker"
 seed = 1
 n_training = 0
 [conditions]
@@ -37,9 +38,9 @@ framing = "upper"
 style = ["stick", "solid"]
 [audio]
 folder = "audio"
-[metrics]
-gesture = false  # not this study's subject: no gesture encoder to train
 """
+    + NO_GESTURE_MEASURES
+)  # the gesture measures are not this study's subject
 
 
 @pytest.fixture(scope="module")
