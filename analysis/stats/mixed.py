@@ -78,9 +78,8 @@ class _Suff:
                 sizes = np.bincount(which, minlength=len(counts))
                 self.gram = np.stack([rows[e - n : e].T @ rows[e - n : e] for n, e in zip(sizes, np.cumsum(sizes))])
             else:
-                self.gram = np.stack(
-                    [(self.A[which == g].T @ self.A[which == g]).toarray() for g in range(len(counts))]
-                )
+                groups = (self.A[which == g] for g in range(len(counts)))  # each group's rows selected once
+                self.gram = np.stack([(rows.T @ rows).toarray() for rows in groups])
 
 
 def additive_rss(s):
