@@ -30,7 +30,8 @@ import numpy as np  # noqa: E402
 
 from moglow_eval.core import study  # noqa: E402
 from moglow_eval.core.clip import load_clip  # noqa: E402
-from rendering.blinding import SIZE_AUC_BAND, auc  # noqa: E402
+from moglow_eval.core.ranks import auc  # noqa: E402
+from rendering.blinding import SIZE_AUC_BAND  # noqa: E402
 from rendering.camera import camera_targets  # noqa: E402
 from rendering.encode import ffmpeg_writer  # noqa: E402
 from rendering.mp4_layout import content_signal, read_layout, size_signals  # noqa: E402

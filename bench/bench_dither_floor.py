@@ -10,7 +10,7 @@ bench/RESULTS.md#blinded-sizes): every BAD and test clip is drawn once as a stic
 bench_blind_sizes draws for its quality part) and encoded with the default rate control at each floor under the
 same --seeds seeds (one set per clip, shared by the floors, so a frame's draw differs only where a floor clips it).
 Of each encoding every size a parser reads (`rendering.mp4_layout.size_signals`) is taken, and each signal gives
-an AUC (`rendering.blinding.auc`) of every comparison of bench_blind_sizes (BAD against test, each pair of
+an AUC (`moglow_eval.core.ranks.auc`) of every comparison of bench_blind_sizes (BAD against test, each pair of
 conditions, matched against mismatched where the set has them) over all encodings, a clip's seeds pooled. Per
 family of signals the worst AUC (furthest from 0.5) is printed with its signal and a 95% bootstrap interval over
 clips (each group's clips resampled, a clip's encodings together), then the paired bootstrap of the change in the
@@ -40,8 +40,9 @@ import numpy as np  # noqa: E402
 from bench_blind_sizes import _drawn, _encode, comparisons, family, groups  # noqa: E402
 
 from moglow_eval.core.clip import load_clip  # noqa: E402
+from moglow_eval.core.ranks import auc  # noqa: E402
 from rendering import encode  # noqa: E402
-from rendering.blinding import SIZE_AUC_BAND, auc  # noqa: E402
+from rendering.blinding import SIZE_AUC_BAND  # noqa: E402
 from rendering.mp4_layout import read_layout, size_signals  # noqa: E402
 
 

@@ -19,6 +19,8 @@ import os
 
 import numpy as np
 
+from moglow_eval.core.ranks import auc_of_rank_sums, average_ranks
+
 from .errors import RenderError
 from .mp4_layout import content_signal, read_layout, size_signals
 
@@ -79,14 +81,6 @@ CHANCE_P = 0.05
 CHANCE_SHUFFLES = 2000
 
 
-def auc(a, b):
-    """P(a value of `a` > one of `b`), ties counted half (the Mann-Whitney U over n_a n_b)."""
-    from scipy.stats import rankdata
-
-    ranks = rankdata(np.concatenate([np.asarray(a, float), np.asarray(b, float)]))
-    return float(_aucs(ranks[: len(a)].sum(), len(a), len(b)))
-
-
 def coded_sizes(videos):
     """Each video's coded-size signals (the only sizes that follow the content): [{signal name: value}]."""
     return [{k: v for k, v in size_signals(read_layout(p)).items() if content_signal(k)} for p in videos]
@@ -94,15 +88,9 @@ def coded_sizes(videos):
 
 def _ranks(catch, test):
     """(signal names, ranks [n_catch + n_test, n_signals] of every video's value among all, ties averaged)."""
-    from scipy.stats import rankdata
-
     names = list(catch[0])
     values = np.array([[s.get(name, -1) for name in names] for s in [*catch, *test]], dtype=float)
-    return names, rankdata(values, axis=0)
-
-
-def _aucs(rank_sums, n_catch, n_test):
-    return (rank_sums - n_catch * (n_catch + 1) / 2) / (n_catch * n_test)
+    return names, average_ranks(values, axis=0)
 
 
 def worst_signal(catch, test):
@@ -111,7 +99,7 @@ def worst_signal(catch, test):
     if not catch or not test or not catch[0]:
         return None, 0.5
     names, ranks = _ranks(catch, test)
-    aucs = _aucs(ranks[: len(catch)].sum(0), len(catch), len(test))
+    aucs = auc_of_rank_sums(ranks[: len(catch)].sum(0), len(catch), len(test))
     k = int(np.argmax(np.abs(aucs - 0.5)))
     return (names[k], float(aucs[k])) if aucs[k] != 0.5 else (None, 0.5)
 
@@ -125,12 +113,12 @@ def chance_of_worst(catch, test, shuffles=CHANCE_SHUFFLES, seed=0):
         return 1.0
     _, ranks = _ranks(catch, test)
     n = len(catch) + len(test)
-    observed = np.abs(_aucs(ranks[: len(catch)].sum(0), len(catch), len(test)) - 0.5).max()
+    observed = np.abs(auc_of_rank_sums(ranks[: len(catch)].sum(0), len(catch), len(test)) - 0.5).max()
     rng, as_far = np.random.default_rng(seed), 0
     for start in range(0, shuffles, 100):  # a hundred splits at a time: memory stays small for a challenge's set
         draws = min(100, shuffles - start)
         drawn = np.argsort(rng.random((draws, n)), axis=1)[:, : len(catch)]  # [draws, n_catch] video indices
-        far = np.abs(_aucs(ranks[drawn].sum(1), len(catch), len(test)) - 0.5).max(1)
+        far = np.abs(auc_of_rank_sums(ranks[drawn].sum(1), len(catch), len(test)) - 0.5).max(1)
         as_far += int(np.count_nonzero(far >= observed - 1e-12))
     return float((1 + as_far) / (shuffles + 1))
 

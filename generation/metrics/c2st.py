@@ -21,7 +21,7 @@ import numpy as np
 from scipy.optimize import minimize
 from scipy.special import expit
 
-from moglow_eval.core import study
+from moglow_eval.core import ranks, study
 from moglow_eval.core.blas import one_blas_thread
 
 CATCH_ROLE = study.ROLES[1]
@@ -70,14 +70,8 @@ def _fit_logistic(x, y, l2=L2):
 
 def auc(scores, labels):
     """Area under the ROC curve: the chance that a random positive scores above a random negative (ties half)."""
-    from scipy.stats import rankdata
-
     scores, labels = np.asarray(scores, float), np.asarray(labels, bool)
-    n1, n0 = labels.sum(), (~labels).sum()
-    if n1 == 0 or n0 == 0:
-        return float("nan")
-    ranks = rankdata(scores)
-    return float((ranks[labels].sum() - n1 * (n1 + 1) / 2) / (n1 * n0))
+    return ranks.auc(scores[labels], scores[~labels])
 
 
 def grouped_cv(x, y, groups, seed=0, folds=MAX_FOLDS):

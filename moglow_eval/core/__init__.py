@@ -12,6 +12,8 @@
 - `pair_posterior`: the Bradley-Terry posterior of a growing pairwise study, a pair's information, the stopping rule.
 - `colours`: a person's drawing colour as the files carry it and as the rater's page names it.
 - `blas`: one BLAS thread around small, repeated fits (the report's models, the two-sample tests, mesh skinning).
+- `ranks`: ranks with ties averaged, and the AUC they give (the two-sample tests, the blinding check, the simulated
+  raters), in numpy alone.
 - `ports`: a free loopback port below the kernel's ephemeral range, for a server started for a moment.
 - `whole_files`: an output written whole or not at all (a hidden temporary file beside it, renamed over it).
 

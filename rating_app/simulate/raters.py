@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from moglow_eval.core import study
+from moglow_eval.core.ranks import average_ranks
 from moglow_eval.core.tables import read_metrics
 
 from ..store.manifest import AppError, load_manifest
@@ -139,8 +140,6 @@ def quality_from_metrics(clips: dict[str, ClipInfo]) -> dict[str, float]:
     into a percentile rank over all clips (0 = nearest the reference, 1 = farthest; ranks, so one extreme
     condition does not squash the others together); a clip's badness is its mean rank. Conditions are placed
     linearly between QUALITY_HIGH (least bad) and QUALITY_LOW (most bad) by mean badness."""
-    from scipy.stats import rankdata
-
     have = [c for c in clips.values() if any(np.isfinite(c.metrics.get(m, np.nan)) for m in study.METRIC_NAMES)]
     if not have:
         return {}
@@ -151,7 +150,7 @@ def quality_from_metrics(clips: dict[str, ClipInfo]) -> dict[str, float]:
         ok = np.isfinite(vals)
         if ok.sum() < 2 or np.ptp(vals[ok]) == 0:
             continue
-        total[ok] += (rankdata(vals[ok], method="average") - 1) / (ok.sum() - 1)
+        total[ok] += (average_ranks(vals[ok]) - 1) / (ok.sum() - 1)
         n[ok] += 1
     badness = np.where(n > 0, total / np.maximum(n, 1), 0.5)
     by_cond: dict[str, list[float]] = {}

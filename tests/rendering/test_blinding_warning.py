@@ -10,12 +10,9 @@ from helpers.own_study_data import make_study
 
 from generation.make_stimuli import main as make_stimuli
 from generation.stimuli.summary import blinding_warning
-from rendering.blinding import CHANCE_P, SIZE_AUC_BAND, auc, chance_of_worst, coded_tells, worst_signal
+from moglow_eval.core.ranks import auc
+from rendering.blinding import CHANCE_P, SIZE_AUC_BAND, chance_of_worst, coded_tells, worst_signal
 from rendering.mp4_layout import content_signal
-
-
-def test_auc_counts_ties_half():
-    assert auc([1, 2], [0, 0]) == 1.0 and auc([0], [0]) == 0.5 and auc([0, 3], [1, 2]) == 0.5
 
 
 def _sizes(pairs):
