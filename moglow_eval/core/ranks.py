@@ -12,29 +12,22 @@ import numpy as np
 def average_ranks(values, axis=0):
     """Ranks 1..n of `values` along `axis`, tied values given the mean of their ranks, as float64 (scipy.stats.rankdata
     with method="average"); a slice holding a NaN is all NaN, as scipy's default nan_policy gives."""
-    x = np.moveaxis(np.asarray(values, dtype=float), axis, -1)
-    if not x.size:
-        return np.moveaxis(x.copy(), -1, axis)
-    flat = x.reshape(-1, x.shape[-1]) if x.ndim else x.reshape(1, 1)
-    ranks = np.empty(flat.shape)
-    for row, out in zip(flat, ranks):
-        out[:] = _ranks_1d(row)
-    return np.moveaxis(ranks.reshape(x.shape), -1, axis) if x.ndim else ranks[0, 0]
+    x = np.moveaxis(np.atleast_1d(np.asarray(values, dtype=float)), axis, -1)
+    ranks = np.empty(x.shape)
+    for index in np.ndindex(x.shape[:-1]):  # each slice along `axis` on its own
+        ranks[index] = _ranks_1d(x[index])
+    return np.moveaxis(ranks, -1, axis)
 
 
 def _ranks_1d(x):
-    n = len(x)
-    if n == 0:
-        return x.copy()
     if np.isnan(x).any():
-        return np.full(n, np.nan)
+        return np.full(len(x), np.nan)
     order = np.argsort(x, kind="stable")
     ordered = x[order]
     starts = np.flatnonzero(np.r_[True, ordered[1:] != ordered[:-1]])  # where each run of equal values begins
-    ends = np.r_[starts[1:], n]
-    run = np.repeat(np.arange(len(starts)), ends - starts)
-    ranks = np.empty(n)
-    ranks[order] = ((starts + 1 + ends) / 2)[run]  # the mean of the ranks start+1 .. end
+    ends = np.r_[starts[1:], len(x)]
+    ranks = np.empty(len(x))
+    ranks[order] = np.repeat((starts + 1 + ends) / 2, ends - starts)  # each run: the mean of its ranks start+1 .. end
     return ranks
 
 
