@@ -21,10 +21,10 @@ def test_ranks_are_scipys_average_ranks_bit_for_bit(values):
 
 
 @given(st.integers(1, 6), st.integers(1, 4), st.integers(0, 2**32 - 1))
-def test_ranks_along_an_axis_rank_each_column_alone(rows, cols, seed):
+def test_ranks_along_an_axis_rank_each_slice_alone(rows, cols, seed):
     x = np.random.default_rng(seed).integers(0, 4, (rows, cols)).astype(float)
     if seed % 3 == 0:
-        x[seed % rows, seed % cols] = np.nan  # one column all NaN, the others ranked
+        x[seed % rows, seed % cols] = np.nan  # its column (axis 0) or row (axis 1) all NaN, the others ranked
     assert np.array_equal(average_ranks(x, axis=0), rankdata(x, axis=0), equal_nan=True)
     assert np.array_equal(average_ranks(x, axis=1), rankdata(x, axis=1), equal_nan=True)
 
