@@ -31,7 +31,7 @@ import threading
 import time
 
 import numpy as np
-from sqlalchemy import case, func, select
+from sqlalchemy import bindparam, case, func, select
 from sqlalchemy.orm import aliased
 
 from moglow_eval.core import pair_posterior, study
@@ -41,6 +41,30 @@ from .assign import claim
 
 REFRESH_S = 1.0
 TRIES = 3  # pairs tried in pick_order's order before the balanced claim
+
+# The refit's queries, built once: a statement built per call costs more CPU in SQLAlchemy's construction and cache
+# key than its execution does, and a refit runs at every vote when REFRESH_S is 0.
+_A, _B = aliased(Clip), aliased(Clip)  # a vote's two clips
+_SIDE = case((Preference.preference > 0, 1), (Preference.preference < 0, -1), else_=0)
+
+
+def _votes(kind, *columns):
+    return (
+        select(*columns)
+        .join(Trial, Trial.id == Preference.trial_pk)
+        .join(_A, _A.clip_id == Preference.clip_a)
+        .join(_B, _B.clip_id == Preference.clip_b)
+        .where(Trial.kind == kind)
+    )
+
+
+_LAST_VOTE = select(func.max(Preference.id))
+_HELD = select(Cover.key, Cover.held).where(Cover.held > 0)
+_CATCH_VOTES = _votes("catch", Preference.rater_pk, _A.condition, _B.condition, Preference.preference)
+_PAIR_KEYS = (_A.condition, _B.condition, _SIDE)
+_TEST_WINS = _votes("test", func.count(), *_PAIR_KEYS).group_by(*_PAIR_KEYS)
+_FLAGGED = Preference.rater_pk.in_(bindparam("excluded", expanding=True))
+_TEST_WINS_FLAGGED = _votes("test", func.count(), *_PAIR_KEYS, _FLAGGED).group_by(*_PAIR_KEYS, _FLAGGED)
 
 
 class ActivePairing:
@@ -72,7 +96,7 @@ class ActivePairing:
         t = time.monotonic()
         if not now and t - self.checked < REFRESH_S:
             return
-        top = conn.execute(select(func.max(Preference.id))).scalar()
+        top = conn.execute(_LAST_VOTE).scalar()
         self.checked = t
         if top == self.top_id:
             return
@@ -87,21 +111,10 @@ class ActivePairing:
     def _wins(self, conn, excluded):
         """(the win matrix of the trusted answered test votes (ties half to each side), their number, the number
         of test votes of the `excluded` raters)."""
-        ca, cb = aliased(Clip), aliased(Clip)
-        sign = case((Preference.preference > 0, 1), (Preference.preference < 0, -1), else_=0)
-        keys = [ca.condition, cb.condition, sign]
-        keys += [Preference.rater_pk.in_(excluded)] if excluded else []
-        q = (
-            select(func.count(), *keys)
-            .join(Trial, Trial.id == Preference.trial_pk)
-            .join(ca, ca.clip_id == Preference.clip_a)
-            .join(cb, cb.clip_id == Preference.clip_b)
-            .where(Trial.kind == "test")
-            .group_by(*keys)
-        )
         idx = {c: i for i, c in enumerate(self.conds)}
         w, votes, untrusted = np.zeros((len(idx), len(idx))), 0, 0
-        for n, a, b, s, *out in conn.execute(q):
+        rows = conn.execute(_TEST_WINS_FLAGGED, {"excluded": excluded}) if excluded else conn.execute(_TEST_WINS)
+        for n, a, b, s, *out in rows:
             if out and out[0]:
                 untrusted += n
             elif a in idx and b in idx:
@@ -114,7 +127,7 @@ class ActivePairing:
         """Slots held now (served, not yet answered) per pair of conditions, from the test units' Cover rows."""
         k = len(self.conds)
         n = np.zeros((k, k))
-        for key, held in conn.execute(select(Cover.key, Cover.held).where(Cover.held > 0)):
+        for key, held in conn.execute(_HELD):
             p = self.pair_of.get(key)
             if p is not None:
                 i, j = self.pr[p]
@@ -192,15 +205,7 @@ class ActivePairing:
 
 def excluded_raters(conn) -> list[int]:
     """The rater pks the exclusion rule (moglow_eval.core.study.excluded_raters) excludes, from their catch votes."""
-    ca, cb = aliased(Clip), aliased(Clip)
-    q = (
-        select(Preference.rater_pk, ca.condition, cb.condition, Preference.preference)
-        .join(Trial, Trial.id == Preference.trial_pk)
-        .join(ca, ca.clip_id == Preference.clip_a)
-        .join(cb, cb.clip_id == Preference.clip_b)
-        .where(Trial.kind == "catch")
-    )
-    return study.excluded_raters((r, study.pair_catch_failed(a, b, p)) for r, a, b, p in conn.execute(q))
+    return study.excluded_raters((r, study.pair_catch_failed(a, b, p)) for r, a, b, p in conn.execute(_CATCH_VOTES))
 
 
 def of_app(app):
