@@ -84,9 +84,8 @@ class Acr(Design):
 
     def assign(self, conn, rng, rater_pk, kind, target, units, wait=False):
         """Both kinds run the same statements, so their timing does not tell them apart."""
-        had = select(Trial.clip_id).where(Trial.rater_pk == rater_pk, Trial.clip_id.is_not(None))
-        keys = _ROLE_CLIPS.params(role=kind)
-        return claim(conn, keys, had, target if kind == "test" else NO_TARGET, wait)
+        target = target if kind == "test" else NO_TARGET
+        return claim(conn, _ROLE_CLIPS, "clip_id", rater_pk, target, wait, params={"role": kind})
 
     # ----------------------------------------------------------------------------------- a trial, its answer
     def required_ms(self, durations):

@@ -125,9 +125,8 @@ class UnitDesign(Design):
 
     def assign(self, conn, rng, rater_pk, kind, target, units, wait=False):
         """As acr's assignment, whose rules it follows; both kinds run the same statements."""
-        had = select(Trial.unit).where(Trial.rater_pk == rater_pk, Trial.unit.is_not(None))
         keys = sorted(k for k, u in units.items() if u.role == kind)
-        key = claim(conn, keys, had, target if kind == "test" else NO_TARGET, wait)
+        key = claim(conn, keys, "unit", rater_pk, target if kind == "test" else NO_TARGET, wait)
         return units[key] if key is not None else None
 
     def payload(self, clips):

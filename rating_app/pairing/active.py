@@ -148,9 +148,8 @@ class ActivePairing:
         )
         if order is None:
             return None
-        had = select(Trial.unit).where(Trial.rater_pk == rater_pk, Trial.unit.is_not(None))
         for p in order[:TRIES]:
-            key = claim(conn, self.keys_of[p], had, target, wait) if self.keys_of[p] else None
+            key = claim(conn, self.keys_of[p], "unit", rater_pk, target, wait) if self.keys_of[p] else None
             if key is not None:
                 i, j = self.pr[p]
                 with self.lock:  # counts at once, before the next fit: the next slot moves on

@@ -24,8 +24,9 @@ unanswered slots are released and can never be answered, so no clip ever exceeds
 from __future__ import annotations
 
 import datetime as dt
+import functools
 
-from sqlalchemy import func, select, update
+from sqlalchemy import bindparam, func, select, update
 
 from ..store.db import COVER_KEY, COVERED_KINDS, Cover, Lock, Rater, Trial
 
@@ -76,14 +77,22 @@ def cover(conn, *where) -> dict[str, tuple[int, int]]:
     return {k: (a, h) for k, a, h in conn.execute(select(Cover.key, Cover.answered, Cover.held).where(*where))}
 
 
+# The statements of every slot given and answered, built once: building one costs more of SQLAlchemy's CPU than
+# running it does.
+_ONE_COVER = Cover.key == bindparam("cover_key")
+_HOLD = update(Cover).where(_ONE_COVER).values(held=Cover.held + 1)
+_ANSWER = update(Cover).where(_ONE_COVER).values(held=Cover.held - 1, answered=Cover.answered + 1)
+_COVERED = Cover.answered + Cover.held  # a key's cover
+
+
 def hold(conn, key: str) -> None:
     """A slot for `key` was just assigned (in the assigning transaction)."""
-    conn.execute(update(Cover).where(Cover.key == key).values(held=Cover.held + 1))
+    conn.execute(_HOLD, {"cover_key": key})
 
 
 def answer(conn, key: str) -> None:
     """A held slot for `key` was just answered (in the answering transaction)."""
-    conn.execute(update(Cover).where(Cover.key == key).values(held=Cover.held - 1, answered=Cover.answered + 1))
+    conn.execute(_ANSWER, {"cover_key": key})
 
 
 def short_or_full(cov, target, unit, answers, answered):
@@ -111,17 +120,30 @@ def slots(rng, n_test: int, n_catch: int) -> list[tuple[str, None]]:
     return rating
 
 
-def claim(conn, keys, had, target: int, wait: bool):
-    """The least-covered key among `keys` still short of `target` and not in `had`, ties at random, with its
-    Cover row locked for this transaction; None when there is none. Without `wait`, rows that other servers are
-    claiming at this moment are skipped (PostgreSQL's SKIP LOCKED), so concurrent servers claim different rows
-    instead of queueing on one lock. The row's counts are checked again once it is locked, so no key is ever
-    handed out beyond its target."""
-    cover = Cover.answered + Cover.held
-    q = (
+def claim(conn, keys, had: str, rater_pk: int, target: int, wait: bool, params=None):
+    """The least-covered key among `keys` still short of `target` and not in what the rater `rater_pk` has had
+    (the Trial column named `had`), ties at random, with its Cover row locked for this transaction; None when
+    there is none. `keys`: a list, or a select of the keys whose parameters are `params`. Without `wait`, rows that
+    other servers are claiming at this moment are skipped (PostgreSQL's SKIP LOCKED), so concurrent servers claim
+    different rows instead of queueing on one lock. The row's counts are checked again once it is locked, so no key
+    is ever handed out beyond its target."""
+    listed = isinstance(keys, (list, tuple))
+    stmt = _claim_statement(None if listed else keys, had, wait)
+    values = {"rater_pk": rater_pk, "target": target, **({"keys": list(keys)} if listed else params or {})}
+    return conn.execute(stmt, values).scalar()
+
+
+@functools.cache
+def _claim_statement(keys_from, had: str, wait: bool):
+    """claim's statement, built once for each select of keys (None: a list, the parameter "keys"), Trial column
+    and way of locking."""
+    column = getattr(Trial, had)
+    keys = bindparam("keys", expanding=True) if keys_from is None else keys_from
+    done = select(column).where(Trial.rater_pk == bindparam("rater_pk"), column.is_not(None))
+    return (
         select(Cover.key)
-        .where(Cover.key.in_(keys), cover < target, Cover.key.not_in(had))
-        .order_by(cover, func.random())
+        .where(Cover.key.in_(keys), _COVERED < bindparam("target"), Cover.key.not_in(done))
+        .order_by(_COVERED, func.random())
         .limit(1)
+        .with_for_update(skip_locked=not wait)
     )
-    return conn.execute(q.with_for_update(skip_locked=not wait)).scalar()
