@@ -1,13 +1,16 @@
-"""What giving a rater a slot costs in SQLAlchemy: the claim and hold statements built at every call, as the app
-did before a slot's statements were built once, against the app's own `claim` and `hold` (rating_app.pairing.assign).
+"""What giving a rater a slot and storing an answer cost in SQLAlchemy: their statements built at every call, as
+the app did before they were built once, against the app's own (rating_app.pairing.assign's `claim`, `hold` and
+`answer`, rating_app.trials.answers' writes).
 
     python bench/bench_slot_statements.py [--rounds 30] [--calls 100]
 
 One acr study on SQLite (30 items x NAT/MG/FL, 4 catch, 4 training clips, the fake stimuli of the app's tests), one
-connection; each call claims a test clip for a rater and holds it, in a transaction rolled back after it, so every
-call sees the same rows. The two ways alternate round by round in one process (the first of each pair switching), so
-the host's drift falls on both alike; it prints the median CPU milliseconds a call of each over the rounds. The
-database's own work is the same in both: the difference is the statements' building and their cache keys.
+connection; a slot claims a test clip for a rater and holds it, an answer runs the three writes of an answer (the
+rater's progress, the trial, the clip's cover) on rows that are not there, each in a transaction rolled back after
+it, so every call sees the same rows. The two ways alternate round by round in one process (the first of each pair
+switching), so the host's drift falls on both alike; it prints the median CPU milliseconds a call of each over the
+rounds. The database's own work is the same in both: the difference is the statements' building and their cache
+keys.
 """
 
 from __future__ import annotations
@@ -30,7 +33,9 @@ from moglow_eval.core import cli  # noqa: E402
 from rating_app import create_app  # noqa: E402
 from rating_app.designs.acr import _ROLE_CLIPS  # noqa: E402
 from rating_app.pairing import assign  # noqa: E402
-from rating_app.store.db import Cover, Trial, app_engine  # noqa: E402
+from rating_app.store.db import Cover, Rater, Trial, app_engine, utcnow  # noqa: E402
+from rating_app.trials import answers  # noqa: E402
+from rating_app.trials.sessions import is_open  # noqa: E402
 
 RATER, TARGET = 1, 20
 
@@ -57,6 +62,28 @@ def built_once(conn):
     return key
 
 
+def answer_built_per_call(conn):
+    """An answer's writes as the app built them before."""
+    now = utcnow()
+    rows = conn.execute(
+        update(Rater)
+        .where(Rater.id == 0, Rater.expired_at.is_(None), Rater.last_progress >= now)
+        .values(last_progress=now, last_seen=now)
+    ).rowcount
+    rows += conn.execute(update(Trial).where(Trial.id == 0, is_open()).values(answered_at=now)).rowcount
+    conn.execute(update(Cover).where(Cover.key == "none").values(held=Cover.held - 1, answered=Cover.answered + 1))
+    return rows == 0
+
+
+def answer_built_once(conn):
+    """The app's."""
+    now = utcnow()
+    rows = conn.execute(answers._PROGRESS, {"rater_pk": 0, "cutoff": now, "now": now}).rowcount
+    rows += conn.execute(answers._ANSWERED, {"trial_pk": 0, "now": now}).rowcount
+    assign.answer(conn, "none")
+    return rows == 0
+
+
 def main():
     p = cli.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--rounds", type=int, default=30)
@@ -65,27 +92,31 @@ def main():
     tmp = Path(tempfile.mkdtemp(prefix="slot_statements_"))
     manifest = write_fake_stimuli(tmp / "stimuli", n_items=30, n_catch=4, n_training=4, n_frames=20, catch_nat=True)
     app = create_app(manifest=manifest, db_url=f"sqlite:///{tmp}/r.sqlite", design="acr", admin_token="bench")
-    ways = {"built per call": built_per_call, "built once": built_once}
-    ms = {name: [] for name in ways}
+    ops = {
+        "claim and hold of one slot": {"built per call": built_per_call, "built once": built_once},
+        "an answer's writes": {"built per call": answer_built_per_call, "built once": answer_built_once},
+    }
     with app_engine(app).connect() as conn:
 
         def calls(fn, n):
             for _ in range(n):
                 with conn.begin() as tr:
-                    if fn(conn) is None:
-                        raise SystemExit("bench_slot_statements: no clip was claimed")
+                    if not fn(conn):
+                        raise SystemExit(f"bench_slot_statements: {fn.__name__} did not do its work")
                     tr.rollback()
 
-        for fn in ways.values():  # warm: SQLAlchemy's compiled cache, SQLite's pages
-            calls(fn, 5)
-        for r in range(a.rounds):
-            for name in ways if r % 2 else reversed(ways):
-                t0 = time.process_time()
-                calls(ways[name], a.calls)
-                ms[name].append((time.process_time() - t0) / a.calls * 1000)
-    before, after = (statistics.median(ms[n]) for n in ways)
-    print(f"claim and hold of one slot, CPU ms (median of {a.rounds} rounds of {a.calls}):")
-    print(f"  built per call {before:.3f}, built once {after:.3f}: {after / before:.2f}x, {before - after:.3f} ms less")
+        for op, ways in ops.items():
+            ms = {name: [] for name in ways}
+            for fn in ways.values():  # warm: SQLAlchemy's compiled cache, SQLite's pages
+                calls(fn, 5)
+            for r in range(a.rounds):
+                for name in ways if r % 2 else reversed(ways):
+                    t0 = time.process_time()
+                    calls(ways[name], a.calls)
+                    ms[name].append((time.process_time() - t0) / a.calls * 1000)
+            before, after = (statistics.median(ms[n]) for n in ways)
+            print(f"{op}, CPU ms (median of {a.rounds} rounds of {a.calls}): built per call {before:.3f}, built once")
+            print(f"  {after:.3f}: {after / before:.2f}x, {before - after:.3f} ms less")
 
 
 if __name__ == "__main__":

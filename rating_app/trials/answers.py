@@ -54,6 +54,16 @@ _ANSWERED_TRIAL = select(
 ).where(Trial.id == bindparam("trial_id"), Trial.rater_pk == bindparam("rater_pk"))
 
 
+# An answer's two writes, built once: the rater's progress, only while the session is live, and the trial, only
+# while it is open. (Typed as their columns, so a time is written as the columns write it.)
+_NOW = bindparam("now", type_=Rater.last_progress.type)
+_PROGRESS = (
+    update(Rater)
+    .where(Rater.id == bindparam("rater_pk"), Rater.expired_at.is_(None), Rater.last_progress >= bindparam("cutoff"))
+    .values(last_progress=_NOW, last_seen=_NOW)
+)
+_ANSWERED = update(Trial).where(Trial.id == bindparam("trial_pk"), is_open()).values(answered_at=_NOW)
+
 # ... and, for a design whose trial shows several clips, with one row per clip of the trial, in the order shown.
 _ANSWERED_TRIAL_CLIPS = (
     _ANSWERED_TRIAL.add_columns(
@@ -150,14 +160,10 @@ def accept(token):
         # Take the rater row first (as expire_idle does), then the trial: an answer and the expiry or a
         # concurrent duplicate of it can never both succeed.
         cutoff = now - dt.timedelta(seconds=cfg["SLOT_TIMEOUT_S"])
-        ok = conn.execute(
-            update(Rater)
-            .where(Rater.id == rater.id, Rater.expired_at.is_(None), Rater.last_progress >= cutoff)
-            .values(last_progress=now, last_seen=now)
-        ).rowcount
+        ok = conn.execute(_PROGRESS, {"rater_pk": rater.id, "cutoff": cutoff, "now": now}).rowcount
         if ok != 1:
             return sessions.expired_reply()
-        claimed = conn.execute(update(Trial).where(Trial.id == trial.id, is_open()).values(answered_at=now)).rowcount
+        claimed = conn.execute(_ANSWERED, {"trial_pk": trial.id, "now": now}).rowcount
         if claimed != 1:
             return _duplicate(conn, trial.id, training)
         if not training:
