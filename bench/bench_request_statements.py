@@ -1,16 +1,16 @@
-"""What giving a rater a slot and storing an answer cost in SQLAlchemy: their statements built at every call, as
-the app did before they were built once, against the app's own (rating_app.pairing.assign's `claim`, `hold` and
-`answer`, rating_app.trials.answers' writes).
+"""What a rater's requests cost in SQLAlchemy: giving a slot, storing an answer and recording a video's bytes, their
+statements built at every call, as the app did before they were built once, against the app's own
+(rating_app.pairing.assign's `claim`, `hold` and `answer`, rating_app.trials.answers' and trial_videos' writes).
 
-    python bench/bench_slot_statements.py [--rounds 30] [--calls 100]
+    python bench/bench_request_statements.py [--rounds 30] [--calls 100]
 
 One acr study on SQLite (30 items x NAT/MG/FL, 4 catch, 4 training clips, the fake stimuli of the app's tests), one
 connection; a slot claims a test clip for a rater and holds it, an answer runs the three writes of an answer (the
-rater's progress, the trial, the clip's cover) on rows that are not there, each in a transaction rolled back after
-it, so every call sees the same rows. The two ways alternate round by round in one process (the first of each pair
-switching), so the host's drift falls on both alike; it prints the median CPU milliseconds a call of each over the
-rounds. The database's own work is the same in both: the difference is the statements' building and their cache
-keys.
+rater's progress, the trial, the clip's cover) and a video's the write of its byte ranges, on rows that are not
+there, each in a transaction rolled back after it, so every call sees the same rows. The two ways alternate round by
+round in one process (the first of each pair switching), so the host's drift falls on both alike; it prints the
+median CPU milliseconds a call of each over the rounds. The database's own work is the same in both: the difference
+is the statements' building and their cache keys.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from rating_app import create_app  # noqa: E402
 from rating_app.designs.acr import _ROLE_CLIPS  # noqa: E402
 from rating_app.pairing import assign  # noqa: E402
 from rating_app.store.db import Cover, Rater, Trial, app_engine, utcnow  # noqa: E402
-from rating_app.trials import answers  # noqa: E402
+from rating_app.trials import answers, trial_videos  # noqa: E402
 from rating_app.trials.sessions import is_open  # noqa: E402
 
 RATER, TARGET = 1, 20
@@ -84,6 +84,22 @@ def answer_built_once(conn):
     return rows == 0
 
 
+def video_built_per_call(conn):
+    """A video's ranges write as the app built it before."""
+    write = (
+        update(Trial)
+        .where(Trial.id == 0, Trial.video_ranges.is_not_distinct_from("0-99"))
+        .values(video_ranges="0-199", video_at=func.coalesce(Trial.video_at, utcnow()))
+    )
+    return conn.execute(write).rowcount == 0
+
+
+def video_built_once(conn):
+    """The app's."""
+    values = {"row_pk": 0, "have": "0-99", "merged": "0-199", "now": utcnow()}
+    return conn.execute(trial_videos._ranges_write(Trial), values).rowcount == 0
+
+
 def main():
     p = cli.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--rounds", type=int, default=30)
@@ -95,6 +111,7 @@ def main():
     ops = {
         "claim and hold of one slot": {"built per call": built_per_call, "built once": built_once},
         "an answer's writes": {"built per call": answer_built_per_call, "built once": answer_built_once},
+        "a video's ranges write": {"built per call": video_built_per_call, "built once": video_built_once},
     }
     with app_engine(app).connect() as conn:
 
@@ -102,7 +119,7 @@ def main():
             for _ in range(n):
                 with conn.begin() as tr:
                     if not fn(conn):
-                        raise SystemExit(f"bench_slot_statements: {fn.__name__} did not do its work")
+                        raise SystemExit(f"bench_request_statements: {fn.__name__} did not do its work")
                     tr.rollback()
 
         for op, ways in ops.items():
