@@ -61,10 +61,9 @@ def _votes(kind, *columns):
 _LAST_VOTE = select(func.max(Preference.id))
 _HELD = select(Cover.key, Cover.held).where(Cover.held > 0)
 _CATCH_VOTES = _votes("catch", Preference.rater_pk, _A.condition, _B.condition, Preference.preference)
-_PAIR_KEYS = (_A.condition, _B.condition, _SIDE)
+# The test votes per pair of conditions and side, each group flagged when its votes are of excluded raters.
+_PAIR_KEYS = (_A.condition, _B.condition, _SIDE, Preference.rater_pk.in_(bindparam("excluded", expanding=True)))
 _TEST_WINS = _votes("test", func.count(), *_PAIR_KEYS).group_by(*_PAIR_KEYS)
-_FLAGGED = Preference.rater_pk.in_(bindparam("excluded", expanding=True))
-_TEST_WINS_FLAGGED = _votes("test", func.count(), *_PAIR_KEYS, _FLAGGED).group_by(*_PAIR_KEYS, _FLAGGED)
 
 
 class ActivePairing:
@@ -113,9 +112,8 @@ class ActivePairing:
         of test votes of the `excluded` raters)."""
         idx = {c: i for i, c in enumerate(self.conds)}
         w, votes, untrusted = np.zeros((len(idx), len(idx))), 0, 0
-        rows = conn.execute(_TEST_WINS_FLAGGED, {"excluded": excluded}) if excluded else conn.execute(_TEST_WINS)
-        for n, a, b, s, *out in rows:
-            if out and out[0]:
+        for n, a, b, s, flagged in conn.execute(_TEST_WINS, {"excluded": excluded}):
+            if flagged:
                 untrusted += n
             elif a in idx and b in idx:
                 w[idx[a], idx[b]] += n * (1.0 if s > 0 else 0.0 if s < 0 else 0.5)
