@@ -189,7 +189,7 @@ def test_an_interlocutor_with_invalid_frames_is_refused_naming_them(tmp_path, ca
 def test_the_two_person_demo_builds_with_speech_on_both_tracks(tmp_path, design):
     from generation.own_study.demo_dyad import build
 
-    study = build(tmp_path / "demo", n_items=3, design=design)
+    study = build(tmp_path / "demo", n_items=2, design=design)  # a training item and a test item
     argv = ["--study", str(study), "--out", str(tmp_path / "out"), "--size", "192", "--quiet", "--workers", "1"]
     assert make_stimuli(argv) == 0
     with open(tmp_path / "out" / "manifest.csv", newline="") as f:
