@@ -75,8 +75,7 @@ def pytest_collection_finish(session):
     # What collection left in memory (the test modules, and torch, pandas, SQLAlchemy and the rest they import) stays
     # for the whole run: frozen out of the cyclic collector's reach, each of its full collections walks only what the
     # tests have made since. The crowds and servers the tests run in-process allocate all the time, and those full
-    # collections took about a twentieth of a crowd test's CPU (tests/rating_app/test_app_designs.py: 2.7 s of 45,
-    # 1.5 s frozen).
+    # collections were a measurable share of a crowd test's CPU (bench/notes/2026-12-02-results-details.md, test-suite).
     import gc
 
     gc.collect()
