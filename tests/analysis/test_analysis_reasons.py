@@ -41,9 +41,9 @@ def test_shares_by_hand():
     assert reasons.when_lost(df.assign(reasons="", reason_text="")) is None
 
 
-def leaderboard_pairs():
-    if not VOTES.is_file():
-        pytest.skip(f"{VOTES} is absent")
+@pytest.fixture
+def leaderboard(shared_dir):
+    """(the leaderboard's released rows, those votes as a pairwise export's rows): real data, so the full tier."""
     with open(VOTES, newline="", encoding="utf-8") as fh:
         rows = list(csv.DictReader(fh))
     out = []
@@ -66,8 +66,8 @@ def leaderboard_pairs():
     return rows, out
 
 
-def test_shares_on_the_leaderboard_votes_match_a_plain_count():
-    rows, pairs = leaderboard_pairs()
+def test_shares_on_the_leaderboard_votes_match_a_plain_count(leaderboard):
+    rows, pairs = leaderboard
     lost, ticked = Counter(), Counter()
     for r in rows:
         if r["winner"] == "tie":
@@ -86,8 +86,8 @@ def test_shares_on_the_leaderboard_votes_match_a_plain_count():
             assert t.loc[cond, rid] == pytest.approx(ticked[(cond, rid)] / n)
 
 
-def test_the_report_gives_the_table(tmp_path):
-    _, pairs = leaderboard_pairs()
+def test_the_report_gives_the_table(tmp_path, leaderboard):
+    _, pairs = leaderboard
     pairs[0]["reasons"] += ";<i>odd</i>"  # an id from a file of another tool: shown as text
     path = tmp_path / "pairs.csv"
     pd.DataFrame(pairs).to_csv(path, index=False)
@@ -104,7 +104,7 @@ def test_the_report_gives_the_table(tmp_path):
     assert "Why a system lost" in page and "&lt;i&gt;odd&lt;/i&gt;" in page and "<i>odd" not in page
 
 
-def test_votes_per_round(tmp_path):
+def test_votes_per_round(tmp_path, leaderboard):
     df = pd.DataFrame(
         {
             "condition_a": ["MG", "NAT", "SYS", "NAT", "MG", "NAT", "BAD"],
@@ -120,7 +120,7 @@ def test_votes_per_round(tmp_path):
     ]
     assert rounds.per_round(df.drop(columns="round")) is None
     # Through the report: a pairs.csv with rounds (the leaderboard's votes, their last rater's as a second round).
-    _, pairs = leaderboard_pairs()
+    _, pairs = leaderboard
     last = pairs[-1]["rater_id"]
     for p in pairs:
         p["round"] = 2 if p["rater_id"] == last else 1

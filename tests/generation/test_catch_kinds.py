@@ -57,7 +57,7 @@ def test_poses_unlike_the_takes_own_tell_a_broken_body_from_the_take_played_othe
     assert np.median(unlike_any_pose(make_catch(joints, "swap", 0, root=hips)[:, 1:], body, hips - 1)) > 0.05
 
 
-def test_a_freeze_that_would_look_like_the_take_gives_way_to_the_studys_next_kind(walk, caplog):
+def test_a_freeze_that_would_look_like_the_take_gives_way_to_the_studys_next_kind(walk, caplog, shared_dir):
     """A rater who rated such a freeze as real would be excluded for seeing rightly; so the study's next kind breaks
     the take, the manifest records the kind made, and a study whose kinds none break it stops with one line."""
     still = read_motion(ACTIONS / STILL, fps=20.0)
@@ -87,7 +87,7 @@ def test_a_freeze_that_would_look_like_the_take_gives_way_to_the_studys_next_kin
         catch_clips(spec, {study.NATURAL: {"bye": held}}, ["bye"], progress=False)
 
 
-def test_a_studys_own_catch_clip_that_barely_differs_from_the_reference_is_warned_of(tmp_path, caplog):
+def test_a_studys_own_catch_clip_that_barely_differs_from_the_reference_is_warned_of(tmp_path, caplog, shared_dir):
     """A catch folder holding the reference's own file (a copy made by mistake) would exclude attentive raters; the
     build keeps the user's choice and says so. A clip of another take passes without a word."""
     for folder in ("real", "sys", "bad"):

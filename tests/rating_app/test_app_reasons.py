@@ -161,15 +161,13 @@ LEADERBOARD = DATA / "genea-leaderboard-votes"
 
 
 @pytest.mark.parametrize("name", ["battles_elo.csv", "battles_mismatch.csv"])
-def test_our_battle_rows_write_a_vote_as_the_leaderboard_does(name):
+def test_our_battle_rows_write_a_vote_as_the_leaderboard_does(name, shared_dir):
     """Each of the leaderboard's released votes, read into (preference, reasons, text) and written back by the
     export's battle_row, gives its own row: the same winner, strength, JSON reason list and JSON-quoted text. The
     only differences: one `[]` for no reasons (we write `{}`, as its other rows) and one `""` for no text (we
     write an empty cell, as its other rows), and the mismatch file's ties, whose strength is `False` there (empty
     in the realism file and here), as its README says."""
     path = LEADERBOARD / name
-    if not path.is_file():
-        pytest.skip(f"{path} is absent")
     from rating_app.operations.battles import battle_row
 
     with open(path, newline="", encoding="utf-8") as fh:
