@@ -14,7 +14,7 @@ import sys
 
 import psycopg
 import pytest
-from helpers import shared_reads
+from helpers import fast_tier
 from helpers.once import built_once
 from helpers.paths import BANDAI, PARTS, ROOT, SHARED, small_take_names
 
@@ -34,17 +34,17 @@ def shared_dir():
 
 
 @pytest.fixture(autouse=True)
-def _fast_tier_reads_nothing_beside(request):
-    # A test in the fast tier must run on a bare clone; one that reads ../shared belongs to the full tier
-    # (helpers/shared_reads.py says why this is watched rather than trusted).
+def _fast_tier_needs_nothing_beside(request):
+    # A test in the fast tier must run on a bare machine; one that reads ../shared or starts PostgreSQL or a browser
+    # belongs to the full tier (helpers/fast_tier.py says why this is watched rather than trusted).
     if request.node.get_closest_marker("full"):
         yield
         return
-    shared_reads.watch()
+    fast_tier.watch()
     yield
-    path = shared_reads.stop()
-    if path is not None:
-        pytest.fail(f"a fast-tier test read {path}: ask for the shared_dir fixture (or mark the test full)")
+    used = fast_tier.stop()
+    if used is not None:
+        pytest.fail(f"a fast-tier test used {used}: ask for its fixture (shared_dir, pg_server) or mark the test full")
 
 
 @pytest.fixture(autouse=True)
@@ -75,7 +75,7 @@ def pytest_configure(config):
     # rasteriser threads, which a forked child does not inherit, would leave tests/rendering/test_mesh_drawing.py's
     # child waiting for ever.
     set_gl_environment()
-    shared_reads.install()
+    fast_tier.install()
     if sys.dont_write_bytecode and not hasattr(config, "workerinput"):
         # Where PYTHONDONTWRITEBYTECODE is set, as on some CI machines, each of the several hundred processes the
         # suite starts (servers and their workers, commands, render workers) would compile the product's modules

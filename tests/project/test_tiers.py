@@ -1,40 +1,57 @@
-"""The fast tier's promise, that it needs nothing beside the checkout, is watched (helpers/shared_reads.py)."""
+"""The fast tier's promise, that it needs nothing beside the checkout, is watched (helpers/fast_tier.py)."""
 
 import os
 
-from helpers import shared_reads
+from helpers import fast_tier
 from helpers.paths import ACTIONS, ROOT, SHARED
 
 
 def test_a_read_under_shared_is_seen_and_one_beside_it_is_not():
     # The paths need not exist: the audit event comes before the open, so this holds on a bare clone too.
-    shared_reads.watch()
+    fast_tier.watch()
     for path in (ROOT / "README.md", ROOT.parent / "shared-not", ROOT / "tests"):
         try:
             open(path).close() if path.suffix else os.listdir(path)
         except OSError:
             pass
-    assert shared_reads.stop() is None
+    assert fast_tier.stop() is None
     for read in (lambda p: open(p), os.listdir, os.scandir):
-        shared_reads.watch()
+        fast_tier.watch()
         try:
             read(ACTIONS / "absent.bvh")
         except OSError:
             pass
-        assert shared_reads.stop() == str(ACTIONS / "absent.bvh")
-    shared_reads.watch()
+        assert fast_tier.stop() == str(ACTIONS / "absent.bvh")
+    fast_tier.watch()
     try:
         os.listdir(SHARED)
     except OSError:
         pass
-    assert shared_reads.stop() == str(SHARED)
+    assert fast_tier.stop() == str(SHARED)
 
 
 def test_nothing_is_seen_when_not_watched():
-    shared_reads.stop()
+    fast_tier.stop()
     try:
         open(ACTIONS / "absent.bvh")
     except OSError:
         pass
-    shared_reads.watch()
-    assert shared_reads.stop() is None
+    fast_tier.watch()
+    assert fast_tier.stop() is None
+
+
+def test_a_browser_or_postgresql_started_is_seen_and_ffmpeg_is_not():
+    import subprocess
+
+    for argv, seen in (
+        (["ffmpeg", "-version"], None),
+        (["/usr/bin/chromedriver", "--version"], "the program chromedriver"),
+        (["pg_ctl", "--version"], "the program pg_ctl"),
+        (["chromium", "--version"], "the program chromium"),
+    ):
+        fast_tier.watch()
+        try:
+            subprocess.run(argv, capture_output=True, timeout=60, stdin=subprocess.DEVNULL)
+        except OSError:
+            pass  # not installed here: the event came before the start
+        assert fast_tier.stop() == seen, argv
