@@ -6,7 +6,8 @@ PostgreSQL and Chromium, so a test that uses one of them without saying so (a fi
 runs the suite often. An audit hook (PEP 578) sees every file and folder the worker's main thread opens or lists,
 and every program it starts, while a fast-tier test runs; the test then fails naming the first such path or
 program. Only the main thread is watched: a server thread that a full-tier fixture left running is not the test's
-doing. What a command the test starts does in its own process is not seen.
+doing. What a command the test starts does in its own process is not seen, nor a connection to a PostgreSQL server
+already running (libpq opens it, out of the hook's sight); the tests learn its address only from `pg_server`.
 """
 
 import os
