@@ -18,7 +18,7 @@ from helpers.paths import SHARED
 
 # Programs of the full tier's parts: the browser and its driver, and PostgreSQL's server and clients.
 FULL_PROGRAMS = {"chromium", "chromedriver", "chrome", "postgres", "pg_ctl", "initdb", "psql", "pg_dump"}
-_READS = {"open", "os.listdir", "os.scandir"}
+_EVENTS = frozenset({"open", "os.listdir", "os.scandir", "subprocess.Popen"})
 _PREFIX = str(SHARED) + os.sep
 _MAIN = threading.main_thread().ident
 
@@ -38,14 +38,15 @@ def _program(args):
 
 
 def _hook(event, args):
-    if not _Watch.on or _Watch.seen is not None or threading.get_ident() != _MAIN:
+    # Called for every audited event of the process (id(), imports, sockets...): the event is checked first.
+    if event not in _EVENTS or not _Watch.on or _Watch.seen is not None or threading.get_ident() != _MAIN:
         return
     if event == "subprocess.Popen":
         name = _program(args)
         if name:
             _Watch.seen = f"the program {name}"
         return
-    if event not in _READS or not args or args[0] is None or isinstance(args[0], int):
+    if not args or args[0] is None or isinstance(args[0], int):
         return
     path = os.fsdecode(os.fspath(args[0]))
     if path.startswith(_PREFIX) or path == str(SHARED):
