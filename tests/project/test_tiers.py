@@ -47,6 +47,8 @@ def test_a_browser_or_postgresql_started_is_seen_and_ffmpeg_is_not():
         (["ffmpeg", "-version"], None),
         (["/usr/bin/chromedriver", "--version"], "the program chromedriver"),
         (["pg_ctl", "--version"], "the program pg_ctl"),
+        (["env", "--", "initdb", "--version"], "the program initdb"),
+        (["env", "PGUSER=postgres", "ffmpeg", "-version"], None),
         (["chromium", "--version"], "the program chromium"),
     ):
         fast_tier.watch()
@@ -55,3 +57,22 @@ def test_a_browser_or_postgresql_started_is_seen_and_ffmpeg_is_not():
         except OSError:
             pass  # not installed here: the event came before the start
         assert fast_tier.stop() == seen, argv
+
+
+def test_a_read_by_another_thread_is_not_the_tests():
+    import threading
+
+    def read():
+        try:
+            open(ACTIONS / "absent.bvh")
+        except OSError:
+            pass
+
+    fast_tier.watch()
+    other = threading.Thread(target=read)
+    other.start()
+    other.join()
+    assert fast_tier.stop() is None
+    fast_tier.watch()
+    read()
+    assert fast_tier.stop() == str(ACTIONS / "absent.bvh")
