@@ -48,7 +48,7 @@ def test_a_browser_or_postgresql_started_is_seen_and_ffmpeg_is_not():
         (["/usr/bin/chromedriver", "--version"], "the program chromedriver"),
         (["pg_ctl", "--version"], "the program pg_ctl"),
         (["env", "--", "initdb", "--version"], "the program initdb"),
-        (["env", "PGUSER=postgres", "ffmpeg", "-version"], None),
+        (["env", "-u", "postgres", "ffmpeg", "-version"], None),
         (["chromium", "--version"], "the program chromium"),
     ):
         fast_tier.watch()
