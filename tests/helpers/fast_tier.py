@@ -3,8 +3,8 @@
 The fast tier needs nothing beside the checkout (tests/conftest.py, docs/setup.md), but CI always has ../shared,
 PostgreSQL and Chromium, so a test that uses one of them without saying so (a fixture such as `shared_dir` or
 `pg_server`, or a `full`, `postgres` or `browser` mark) passes there and fails only on a bare machine, where nobody
-runs the suite often. An audit hook (PEP 578) sees every file and folder the worker's main thread opens or lists,
-and every program it starts, while a fast-tier test runs; the test then fails naming the first such path or
+runs the suite often. An audit hook (PEP 578) sees every file and folder the test's thread opens or lists, and every
+program it starts, while a fast-tier test runs; the test then fails naming the first such path or
 program. Only the thread that runs the test is watched: a server thread that a full-tier fixture left running is not
 the test's doing. What a command the test starts does in its own process is not seen, nor a connection to a PostgreSQL
 server already running (libpq opens it, out of the hook's sight); the tests learn its address only from `pg_server`.
@@ -21,13 +21,14 @@ FULL_PROGRAMS = frozenset(
     {"chromium", "chromedriver", "chrome", "postgres", "pg_ctl", "pg_ctlcluster", "initdb", "psql", "pg_dump"}
 )
 _EVENTS = frozenset({"open", "os.listdir", "os.scandir", "subprocess.Popen"})
-_PREFIX = str(SHARED) + os.sep
+_SHARED = str(SHARED)
+_PREFIX = _SHARED + os.sep
 
 
 class _Watch:
     installed = False
     on = False
-    thread = None  # the ident of the thread running the test (xdist's may not be the main thread)
+    thread = None  # the ident of the thread running the test (an older execnet's is not the main thread)
     seen = None
 
 
@@ -58,7 +59,7 @@ def _hook(event, args):
     if not args or args[0] is None or isinstance(args[0], int):
         return
     path = os.fsdecode(os.fspath(args[0]))
-    if path.startswith(_PREFIX) or path == str(SHARED):
+    if path.startswith(_PREFIX) or path == _SHARED:
         _Watch.seen = path
 
 
