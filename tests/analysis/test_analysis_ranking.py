@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import statsmodels.api as sm
-from helpers.paths import SHARED
+from helpers.paths import LEADERBOARD
 
 from analysis import report
 from analysis.designs import Options
@@ -19,7 +19,7 @@ from analysis.designs.pairwise import elo_ranks, partisans
 from analysis.designs.pairwise import preference as pairwise
 from analysis.import_votes import import_votes
 
-BATTLES = SHARED / "data" / "genea-leaderboard-votes" / "battles_elo.csv"
+BATTLES = LEADERBOARD / "battles_elo.csv"
 
 
 def simulated_pairs(path, strengths, n_raters=30, votes=40, seed=0, tie_band=0.0):

@@ -10,13 +10,13 @@ from collections import Counter
 
 import pandas as pd
 import pytest
-from helpers.paths import DATA
+from helpers.paths import LEADERBOARD
 
 from analysis.designs.pairwise import reasons, rounds
 from analysis.report import main as report_main
 from moglow_eval.core import votes
 
-VOTES = DATA / "genea-leaderboard-votes" / "battles_elo.csv"
+VOTES = LEADERBOARD / "battles_elo.csv"
 
 
 def test_shares_by_hand():

@@ -6,13 +6,13 @@ import csv
 import math
 
 import pytest
-from helpers.paths import DATA
+from helpers.paths import LEADERBOARD
 from scipy import stats as sps
 
 from analysis.designs.appropriateness.mas import analyse, load_answers
 from analysis.designs.pairwise.preference import failed_raters
 
-VOTES = DATA / "genea-leaderboard-votes" / "battles_mismatch.csv"
+VOTES = LEADERBOARD / "battles_mismatch.csv"
 COLUMNS = ["rater_id", "item", "clip_a", "clip_b", "condition_a", "condition_b", "preference", "role", "matched"]
 
 

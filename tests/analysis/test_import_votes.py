@@ -9,14 +9,13 @@ import sys
 import tracemalloc
 
 import pytest
-from helpers.paths import ROOT, SHARED
+from helpers.paths import LEADERBOARD, ROOT
 
 from analysis import import_votes as iv
 from analysis import report
 from analysis.designs import Options
 from moglow_eval.core import votes
 
-LB = SHARED / "data" / "genea-leaderboard-votes"
 HEAD = "user,input_code,model_a,model_b,winner,is_strong,juiceOptions,juiceOtherReason\n"
 
 
@@ -27,9 +26,9 @@ def rows(path):
 @pytest.mark.full
 def test_the_realism_votes_keep_levels_reasons_and_text(tmp_path):
     out = tmp_path / "pairs.csv"
-    summary = iv.import_votes(LB / "battles_elo.csv", out)
+    summary = iv.import_votes(LEADERBOARD / "battles_elo.csv", out)
     assert summary["design"] == "pairwise" and summary["n_votes"] == 500 and summary["n_raters"] == 20
-    got, src = rows(out), rows(LB / "battles_elo.csv")
+    got, src = rows(out), rows(LEADERBOARD / "battles_elo.csv")
     assert len(got) == len(src) == 500
     prefs = [int(r["preference"]) for r in got]
     # the counts README.md gives: model_a 203, model_b 197, tie 100; strong/slight 179/221
@@ -50,7 +49,7 @@ def test_the_realism_votes_keep_levels_reasons_and_text(tmp_path):
 @pytest.mark.full
 def test_the_mismatch_votes_become_an_appropriateness_export(tmp_path):
     out = tmp_path / "pairs.csv"
-    assert iv.import_votes(LB / "battles_mismatch.csv", out)["design"] == "appropriateness"
+    assert iv.import_votes(LEADERBOARD / "battles_mismatch.csv", out)["design"] == "appropriateness"
     got = rows(out)
     assert all(r["condition_a"] == r["condition_b"] and r["matched"] in "ab" for r in got)
     assert sum(r["matched"] == "b" for r in got) == 22  # README: the mismatched clip is on the left in 22 rows

@@ -13,6 +13,7 @@ DATA = SHARED / "data"
 BANDAI = DATA / "bandai-namco-locomotion"
 PFNN = DATA / "pfnn-holden"
 ACTIONS = DATA / "bandai-namco-actions"
+LEADERBOARD = DATA / "genea-leaderboard-votes"  # another lab's released pairwise votes
 TEST_DATA = ROOT / "tests" / "data"
 
 

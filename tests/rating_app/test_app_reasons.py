@@ -8,7 +8,7 @@ import json
 
 import pytest
 from helpers.fake_stimuli import write_fake_stimuli
-from helpers.paths import DATA
+from helpers.paths import LEADERBOARD
 
 from moglow_eval.core import votes
 from rating_app import AppError, create_app
@@ -155,9 +155,6 @@ def test_the_battle_export_of_another_design_is_refused(make, stimuli, app_db_ur
     out = tmp_path / "battles.csv"
     fails_with(main, ["export", "--db", app_db_url, "--format", "battles", "--out", str(out)], capsys, "is acr")
     assert not out.exists() and not [p for p in tmp_path.iterdir() if "battles" in p.name]  # nor a partial one
-
-
-LEADERBOARD = DATA / "genea-leaderboard-votes"
 
 
 @pytest.mark.parametrize("name", ["battles_elo.csv", "battles_mismatch.csv"])
