@@ -25,6 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
 from helpers import smpl_fixtures  # noqa: E402
+from helpers.own_study_data import ACTIONS  # noqa: E402
 
 from generation.data.skinning import smpl_mesh  # noqa: E402
 from generation.data.smpl_files import smpl_positions  # noqa: E402
@@ -36,7 +37,6 @@ from rendering.framing import item_camera  # noqa: E402
 from rendering.raster import STYLES, FrameDrawer  # noqa: E402
 from rendering.render import rate_for_set  # noqa: E402
 
-ACTIONS = ROOT.parent / "shared" / "data" / "bandai-namco-actions" / "dataset-1" / "data"
 TAKES = ("dataset-1_punch_normal_001", "dataset-1_dance-short_normal_001", "dataset-1_bow_active_001")
 FPS = 30.0
 

@@ -18,7 +18,11 @@ import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-TAKE = ROOT.parent / "shared" / "data" / "pfnn-holden" / "animations" / "LocomotionFlat04_000.bvh.gz"
+sys.path.insert(0, str(ROOT / "tests"))
+
+from helpers.paths import PFNN  # noqa: E402
+
+TAKE = PFNN / "animations" / "LocomotionFlat04_000.bvh.gz"
 
 MEASURE = """
 import re, sys, time

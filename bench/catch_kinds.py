@@ -19,6 +19,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+
+from helpers.own_study_data import ACTIONS  # noqa: E402
 
 from generation.data.motion_files import read_motion  # noqa: E402
 from generation.metrics import c2st  # noqa: E402
@@ -29,7 +32,6 @@ from generation.metrics.objective import (  # noqa: E402
 from generation.stimuli.catch_kinds import KINDS, VISIBLE, make_catch, strays, unlike_any_pose  # noqa: E402
 from moglow_eval.core.skeleton_names import body_root, body_skeleton  # noqa: E402
 
-ACTIONS = ROOT.parent / "shared" / "data" / "bandai-namco-actions" / "dataset-1" / "data"
 SHOWN = ("jerk", "acceleration", "foot_skating")  # as multiples of the real takes'; bone-length std in mm
 
 

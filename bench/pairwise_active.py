@@ -39,11 +39,14 @@ from scipy.stats import kendalltau
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+
+from helpers.paths import LEADERBOARD  # noqa: E402
 
 from moglow_eval.core import pair_posterior  # noqa: E402
 from moglow_eval.core.votes import battle_to_preference  # noqa: E402
 
-VOTES = ROOT.parent / "shared" / "data" / "genea-leaderboard-votes" / "battles_elo.csv"
+VOTES = LEADERBOARD / "battles_elo.csv"
 SCHEMES = ("balanced", "active")
 
 

@@ -19,16 +19,17 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
+sys.path.insert(0, str(ROOT / "tests"))
 
 import numpy as np  # noqa: E402
 from bench_blind_sizes import _drawn, _encode, _psnr_ssim  # noqa: E402
+from helpers.own_study_data import ACTIONS  # noqa: E402
 
 from generation.data.motion_files import read_motion  # noqa: E402
 from moglow_eval.core.clip import load_clip  # noqa: E402
 from rendering import encode  # noqa: E402
 
 BEFORE = 320  # bits per row of frame height per frame: the rate control before the rate became per second
-ACTIONS = ROOT.parent / "shared" / "data" / "bandai-namco-actions" / "dataset-1" / "data"
 
 
 def clips(stimuli, n, n_gestures):
