@@ -92,6 +92,7 @@ def _usage() -> str:
 
 
 def main(argv=None) -> int:
+    from_process = argv is None  # the console script itself, not a call in-process (cli.run, imports_done)
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] in ("-h", "--help"):
         print(__doc__ if argv else _usage())
@@ -105,5 +106,5 @@ def main(argv=None) -> int:
     # Usage and error lines name the command as typed (`moglow-eval report`), not the `python -m` it stands for;
     # the app's subcommands add their own name to it.
     name = "moglow-eval" if argv[0] in APP_COMMANDS else f"moglow-eval {argv[0]}"
-    with cli.invoked_as(name):
+    with cli.invoked_as(name, process=from_process):
         return COMMANDS[argv[0]](argv[1:]) or 0

@@ -17,6 +17,8 @@ import sys
 
 from gunicorn.arbiter import Arbiter
 
+from moglow_eval.core.cli import imports_done
+
 from . import AppError, create_app
 
 try:
@@ -24,3 +26,6 @@ try:
 except AppError as e:  # a clear line in the server log instead of a traceback
     print(f"error: {e}", file=sys.stderr, flush=True)
     raise SystemExit(Arbiter.APP_LOAD_ERROR) from None
+# The app and its imports live as long as the server: frozen, the workers' collections neither walk them nor, with
+# --preload, write to the pages each worker shares with the master that built them.
+imports_done()

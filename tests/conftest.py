@@ -8,6 +8,7 @@ lands in the right tier by itself (a long test without such a fixture says `@pyt
 Torch and PostgreSQL start only in the fixtures and tests that need them. Shared helpers: tests/helpers/.
 """
 
+import gc
 import os
 import secrets
 import sys
@@ -87,15 +88,21 @@ def pytest_configure(config):
             compileall.compile_dir(ROOT / part, quiet=1)
 
 
-def pytest_collection_finish(session):
-    # What collection left in memory (the test modules, and torch, pandas, SQLAlchemy and the rest they import) stays
-    # for the whole run: frozen out of the cyclic collector's reach, each of its full collections walks only what the
-    # tests have made since. The crowds and servers the tests run in-process allocate all the time, and those full
-    # collections were a measurable share of a crowd test's CPU (bench/notes/2026-12-02-results-details.md, test-suite).
-    import gc
-
-    gc.collect()
-    gc.freeze()
+@pytest.hookimpl(wrapper=True)
+def pytest_collection(session):
+    # Collection imports every test module, and through them torch, pandas, SQLAlchemy and the rest: some 450,000
+    # objects that stay for the whole run. The cyclic collector, on, walks them again and again as they pile up (about
+    # twenty full collections, a fifth of a worker's collection CPU), so it is off until collection is done; then what
+    # collection left is frozen out of its reach, and each of its full collections walks only what the tests have made
+    # since. The crowds and servers the tests run in-process allocate all the time, and those full collections were a
+    # measurable share of a crowd test's CPU (bench/notes/2026-12-02-results-details.md, test-suite).
+    gc.disable()
+    try:
+        return (yield)
+    finally:
+        gc.collect()
+        gc.freeze()
+        gc.enable()
 
 
 def pytest_xdist_auto_num_workers(config):

@@ -12,6 +12,7 @@ turns both into that one line. Anything else is a bug and keeps its traceback.
 
 import argparse
 import contextlib
+import gc
 import logging
 import math
 import sys
@@ -35,18 +36,37 @@ class UserError(ValueError):
 
 
 _invoked_as: str | None = None  # the name a command was run by, when not `python -m ...` (see `invoked_as`)
+_as_process = False  # the console script runs a command as its process's own program (see `invoked_as`)
+_frozen = False  # whether `imports_done` has run in this process
 
 
 @contextlib.contextmanager
-def invoked_as(name: str):
+def invoked_as(name: str, process: bool = False):
     """Within the block, a command's parser calls itself `name` (e.g. ``moglow-eval report``) in its usage, help
-    and error lines instead of the ``python -m ...`` it was built with. Only a console command's main uses it."""
-    global _invoked_as
-    before, _invoked_as = _invoked_as, name
+    and error lines instead of the ``python -m ...`` it was built with, and, with `process`, the command is the
+    process's own program, as a ``python -m`` run is (see `run`). Only a console command's main uses it."""
+    global _invoked_as, _as_process
+    before = _invoked_as, _as_process
+    _invoked_as, _as_process = name, process
     try:
         yield
     finally:
-        _invoked_as = before
+        _invoked_as, _as_process = before
+
+
+def imports_done():
+    """Once a process, when its imports are done: what they made (modules, classes, functions; some hundred thousand
+    objects where torch, scipy or pandas is loaded) lives as long as the process, so it is frozen out of the cyclic
+    garbage collector's reach (`gc.freeze`), and each full collection after walks only what the process makes
+    itself. Unfrozen, every full collection walked it all again: about a tenth of a command's CPU, and, in a server's
+    forked workers, a write to each page the workers share with their parent (bench/RESULTS.md, "Commands' garbage
+    collection"). Only a program's own start calls this (`run` for a ``python -m`` command, the WSGI entry point),
+    never a library function: frozen objects are never collected, so a long-lived process calling it again and
+    again (a test run calling mains in-process) would keep what was garbage at each call."""
+    global _frozen
+    if not _frozen:
+        _frozen = True
+        gc.freeze()
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -132,7 +152,13 @@ def file_to_write(out, what: str, flag: str = "--out", reads=()) -> Path:
 
 
 def run(main, argv=None):
-    """Call ``main(argv)`` and return its exit code; a `UserError` or an OS error becomes one line and 2."""
+    """Call ``main(argv)`` and return its exit code; a `UserError` or an OS error becomes one line and 2.
+
+    With no `argv` (the command reads the process's own: ``python -m ...``), or under the console script, the
+    command is the process's program, and its imports are done: `imports_done` first. A test or another command
+    calling a main in-process always passes `argv`."""
+    if argv is None or _as_process:
+        imports_done()
     try:
         return main(argv) or 0
     except UserError as e:
