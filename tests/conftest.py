@@ -90,9 +90,9 @@ def pytest_configure(config):
 
 @pytest.hookimpl(wrapper=True)
 def pytest_collection(session):
-    # Collection imports every test module, and through them torch, pandas, SQLAlchemy and the rest: some 450,000
-    # objects that stay for the whole run. The cyclic collector, on, walks them again and again as they pile up (about
-    # twenty full collections, a fifth of a worker's collection CPU), so it is off until collection is done; then what
+    # Collection imports every test module, and through them torch, pandas, SQLAlchemy and the rest: hundreds of
+    # thousands of objects that stay for the whole run. The cyclic collector, on, walks them again and again as they
+    # pile up (a full collection at each quarter's growth), so it is off until collection is done; then what
     # collection left is frozen out of its reach, and each of its full collections walks only what the tests have made
     # since. The crowds and servers the tests run in-process allocate all the time, and those full collections were a
     # measurable share of a crowd test's CPU (bench/notes/2026-12-02-results-details.md, test-suite).

@@ -58,9 +58,9 @@ def imports_done():
     """Once a process, when its imports are done: what they made (modules, classes, functions; some hundred thousand
     objects where torch, scipy or pandas is loaded) lives as long as the process, so it is frozen out of the cyclic
     garbage collector's reach (`gc.freeze`), and each full collection after walks only what the process makes
-    itself. Unfrozen, every full collection walked it all again: about a tenth of a command's CPU, and, in a server's
-    forked workers, a write to each page the workers share with their parent (bench/RESULTS.md, "Commands' garbage
-    collection"). Only a program's own start calls this (`run` for a ``python -m`` command, the WSGI entry point),
+    itself. Unfrozen, every full collection walked it all again (a measurable share of a command's CPU:
+    bench/RESULTS.md, test-suite) and, in a server's forked workers, wrote to each page they share with their
+    parent. Only a program's own start calls this (`run` for a ``python -m`` command, the WSGI entry point),
     never a library function: frozen objects are never collected, so a long-lived process calling it again and
     again (a test run calling mains in-process) would keep what was garbage at each call."""
     global _frozen
