@@ -10,9 +10,8 @@ from helpers.paths import ROOT
 # `main` prints the freeze count the collector had before `cli.run` and while main runs; run twice, the second
 # call's count shows whether a second freeze moved the lists made in between.
 PROBE = """
-import gc, sys
+import gc
 from moglow_eval.core import cli
-from moglow_eval import console
 before = gc.get_freeze_count()
 def main(argv):
     print(before, gc.get_freeze_count())
@@ -22,9 +21,9 @@ cli.run(main{args})
 """
 
 
-def counts(args="", argv=()):
+def counts(args=""):
     code = PROBE.format(args=args)
-    r = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert r.returncode == 0, r.stderr
     return [tuple(map(int, line.split())) for line in r.stdout.splitlines()]
 
